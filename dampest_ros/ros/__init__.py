@@ -1,0 +1,1 @@
+"""ROS 2 nodes (rclpy): message and parameter conversion only, one node per module."""

@@ -1,0 +1,59 @@
+"""Build script for dampest_ros (colcon/ament_python and pip share it)."""
+
+import os
+
+from setuptools import find_packages, setup
+
+PACKAGE_NAME = "dampest_ros"
+
+# The single list of ROS 2 node executables: script name -> "module:function".
+# Each becomes a console script (installed to lib/dampest_ros for `ros2 run`).
+# test/test_package.py reads this dict with `ast`, so keep it a plain literal.
+NODE_SCRIPTS: dict[str, str] = {}
+
+
+def config_data_files(root="config"):
+    """Everything under config/, installed to share/dampest_ros/config/... ."""
+    entries = []
+    for dirpath, dirnames, filenames in os.walk(root):
+        dirnames.sort()
+        files = sorted(os.path.join(dirpath, f) for f in filenames)
+        if files:
+            entries.append((os.path.join("share", PACKAGE_NAME, dirpath), files))
+    return entries
+
+
+setup(
+    name=PACKAGE_NAME,
+    version="0.1.0",
+    packages=find_packages(exclude=["test*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE_NAME]),
+        ("share/" + PACKAGE_NAME, ["package.xml"]),
+        *config_data_files(),
+    ],
+    python_requires=">=3.11",
+    # Pure-Python dependencies only. rclpy and the message packages come from the ROS 2
+    # install (package.xml) or, for the pip-only venv, from requirements/lock.txt.
+    install_requires=[
+        "numpy",
+        "scipy",
+        "filterpy",
+        "rosbags",
+        "mcap",
+        "mcap-ros2-support",
+        "matplotlib",
+        "PyYAML",
+    ],
+    zip_safe=True,
+    maintainer="dampest_ros maintainers",
+    maintainer_email="dampest@example.com",
+    description="Identification of underwater-vehicle hydrodynamic damping for ROS 2",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "dampest = dampest_ros.cli.main:main",
+            *(f"{name} = {target}" for name, target in NODE_SCRIPTS.items()),
+        ],
+    },
+)
