@@ -1,0 +1,409 @@
+"""6-DOF vehicle simulator: fixed-step RK4 of Fossen's model with thrusters, current,
+fluid memory and switchable hidden effects.
+
+Equations (FRD body, NED world, ν_r = ν − ν_c the velocity relative to the water):
+
+    M_RB ν̇ + C_RB(ν)ν + M_A ν̇_r + C_A(ν_r)ν_r + D(ν_r)ν_r + g(η) = τ
+    ṗ = R(q) ν_1,   q̇ = ½ q ⊗ (0, ν_2),   ż = −λ z + ν_r[dof],   ṅ = (n_cmd − n)/T_m
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.control import VelocityPI
+from dampest_ros.core.damping import CrossSpec, DampingModel, cross_term, memory_term
+from dampest_ros.core.excitation import Excitation
+from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
+from dampest_ros.core.trajectory import Trajectory
+from dampest_ros.core.vehicle import Vehicle
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Effects:
+    """Physical effects that can be hidden in simulated data; all off by default.
+
+    Attributes
+    ----------
+    current : tuple of 3 float
+        Ocean current in NED (m/s), constant in the world frame.
+    current_variation : float
+        Amplitude (m/s) of a slow horizontal rotation of the current vector.
+    current_period : float
+        Period of that variation (s).
+    thruster_deadzone : float
+        Rotor speeds below this (rev/s) give no thrust; the logged thrust does not know it.
+    thrust_gain_error : float
+        Actual thrust = (1 + error) × the nominal curve that the logs use.
+    buoyancy_offset : float
+        Extra buoyancy (N), positive = lighter in water than the nominal model.
+    cg_offset : tuple of 3 float
+        Centre of gravity shift (m, FRD) from the nominal model.
+    added_mass_error : float
+        True M_A = (1 + error) × nominal M_A.
+    extra_cross : tuple of dict
+        Extra cross-coupling coefficients, each ``{row, col, alpha, value}`` (see CrossSpec).
+    memory : tuple of dict
+        Fluid memory states, each ``{dof, rate, c}`` (K(t) = c e^{−rate t}).
+    gyro_bias, accel_bias, dvl_bias : tuple of 3 float
+        Constant sensor biases (FRD), applied by the sensor models.
+    delay : float
+        Transport delay (s) between the logged thruster state and the force on the vehicle.
+    damping_change_time : float
+        Time (s) at which the quadratic damping is multiplied by ``damping_change_factor``
+        (negative: never).
+    damping_change_factor : float
+    """
+
+    current: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    current_variation: float = 0.0
+    current_period: float = 600.0
+    thruster_deadzone: float = 0.0
+    thrust_gain_error: float = 0.0
+    buoyancy_offset: float = 0.0
+    cg_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    added_mass_error: float = 0.0
+    extra_cross: tuple[dict[str, Any], ...] = ()
+    memory: tuple[dict[str, Any], ...] = ()
+    gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    accel_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    dvl_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    delay: float = 0.0
+    damping_change_time: float = -1.0
+    damping_change_factor: float = 1.0
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Effects:
+        """From a mapping; unknown keys raise ConfigError naming them."""
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ConfigError("effects", f"unknown effect(s) {sorted(unknown)}; known: "
+                              f"{sorted(known)}")
+        kw: dict[str, Any] = {}
+        for k, v in d.items():
+            if k in ("extra_cross", "memory"):
+                kw[k] = tuple(dict(x) for x in v)
+            elif isinstance(v, (list, tuple)):
+                kw[k] = tuple(float(x) for x in v)
+            else:
+                kw[k] = float(v)
+        return cls(**kw)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The effects that differ from the defaults."""
+        default = Effects()
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if getattr(self, f.name) != getattr(default, f.name)}
+
+
+def true_vehicle(vehicle: Vehicle, effects: Effects) -> Vehicle:
+    """The vehicle as the physics sees it: nominal model plus the hidden effects.
+
+    Body effects (CG offset, buoyancy offset, added-mass error) change the rigid body;
+    extra cross-coupling and fluid memory add damping terms (merged into existing terms of
+    the same kind).
+    """
+    b = vehicle.body
+    body = RigidBody(
+        mass=b.mass,
+        inertia=b.inertia,
+        r_g=b.r_g + np.asarray(effects.cg_offset),
+        r_b=b.r_b,
+        volume=b.volume + effects.buoyancy_offset / (b.rho * b.gravity),
+        added_mass=b.added_mass * (1.0 + effects.added_mass_error),
+        rho=b.rho,
+        gravity=b.gravity,
+    )
+    values = dict(zip(vehicle.damping.parameter_names, vehicle.theta, strict=True))
+    terms = {t.kind: t for t in vehicle.damping.terms}
+    if effects.extra_cross:
+        specs = [CrossSpec.from_dict(c) for c in effects.extra_cross]
+        extra = cross_term(specs)
+        old = terms.get("cross")
+        terms["cross"] = replace(extra, bases=(old.bases if old else []) + extra.bases)
+        values.update({s.label: float(c.get("value", 0.0))
+                       for s, c in zip(specs, effects.extra_cross, strict=True)})
+    if effects.memory:
+        if "freq" in terms:
+            raise ConfigError("effects.memory", "the nominal model already has a memory term")
+        rates: dict[str | int, list[float]] = {}
+        for m in effects.memory:
+            rates.setdefault(str(m["dof"]), []).append(float(m["rate"]))
+        mem = memory_term(rates)
+        cs = {(str(m["dof"]), float(m["rate"])): float(m["c"]) for m in effects.memory}
+        terms["freq"] = mem
+        values.update({n: cs[(DOF_NAMES[int(d)], float(r))] for n, d, r in
+                       zip(mem.parameter_names, mem.state_dofs, mem.rates, strict=True)})
+    model = DampingModel(list(terms.values()))
+    return replace(vehicle, body=body, damping=model, theta=model.theta_from_dict(values))
+
+
+def _cross(a: list[float], b: list[float]) -> list[float]:
+    # a × b on Python floats: cheaper than numpy for single 3-vectors
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+class Simulator:
+    """Fixed-step RK4 integration of the true vehicle, one step at a time.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        The nominal vehicle (what a user's model says).
+    effects : Effects
+        Hidden effects switched on in the physics.
+    dt : float
+        Integration step (s).
+    position : ndarray, shape (3,), optional
+        Initial NED position (m); default 5 m deep.
+    quaternion : ndarray, shape (4,), optional
+        Initial attitude [w, x, y, z] (FRD → NED); default level, heading north.
+    record : bool
+        Keep the ground truth of every step for :meth:`trajectory`.
+    """
+
+    def __init__(self, vehicle: Vehicle, effects: Effects | None = None, dt: float = 0.02,
+                 position: FloatArray | None = None, quaternion: FloatArray | None = None,
+                 record: bool = True) -> None:
+        if not np.isfinite(dt) or dt <= 0:
+            raise ConfigError("dt", f"must be > 0, got {dt}")
+        self.nominal = vehicle
+        self.effects = effects if effects is not None else Effects()
+        self.truth = true_vehicle(vehicle, self.effects)
+        self.dt = float(dt)
+        body = self.truth.body
+        self._M_RB = body.M_RB
+        self._M_A = body.added_mass
+        self._M_inv = np.linalg.inv(body.M)
+        self._W, self._B = body.weight, body.buoyancy
+        self._r_g, self._r_b = body.r_g, body.r_b
+        self._model: DampingModel = self.truth.damping
+        self._theta = self.truth.theta
+        self._theta_changed = self._theta.copy()
+        if self._model.term("quadratic") is not None:
+            self._theta_changed[self._model.slice("quadratic")] *= self.effects.damping_change_factor
+        self._r_g_l, self._r_b_l = body.r_g.tolist(), body.r_b.tolist()
+        self._gain = (self._model.static_gain(self._theta), self._model.memory_gain(self._theta))
+        self._gain_changed = (self._model.static_gain(self._theta_changed),
+                              self._model.memory_gain(self._theta_changed))
+        self._mem_rates = self._model.memory_rates
+        self._mem_dofs = self._model.memory_dofs
+        self._has_current = bool(np.any(self.effects.current) or self.effects.current_variation)
+        self._thr = vehicle.thrusters
+        self._thrust_gain = self._thr.gain * (1.0 + self.effects.thrust_gain_error)
+        self._deadzone = max(self._thr.deadzone, self.effects.thruster_deadzone)
+        tm = self._thr.time_constant
+        self._inv_tm = 1.0 / tm if tm > 0 else 0.0
+        self._alloc = self._thr.allocation
+        self._n_mem = len(self._model.memory_rates)
+        self._n_thr = self._thr.count
+        self._delay_steps = int(round(self.effects.delay / self.dt))
+        self._cmd_queue: deque[FloatArray] = deque(
+            [np.zeros(self._n_thr)] * self._delay_steps)
+        self.t = 0.0
+        p0 = np.array([0.0, 0.0, 5.0]) if position is None else np.asarray(position, float)
+        q0 = np.array([1.0, 0.0, 0.0, 0.0]) if quaternion is None else np.asarray(quaternion,
+                                                                                   float)
+        # state x = [p (3), q (4), ν (6), z (n_mem), n_physical (n_thr)]
+        self.x = np.concatenate([p0, q0 / np.linalg.norm(q0), np.zeros(6),
+                                 np.zeros(self._n_mem), np.zeros(self._n_thr)])
+        self.rotor = np.zeros(self._n_thr)  # what the vehicle logs (undelayed)
+        self._record = record
+        self._log: list[FloatArray] = []
+        self._last_tau = np.zeros(6)
+
+    # --- state access ------------------------------------------------------------------
+
+    @property
+    def position(self) -> FloatArray:
+        """NED position (m), shape (3,)."""
+        return self.x[0:3]
+
+    @property
+    def quaternion(self) -> FloatArray:
+        """Attitude [w, x, y, z], FRD → NED, shape (4,)."""
+        return self.x[3:7]
+
+    @property
+    def nu(self) -> FloatArray:
+        """Body velocity over ground (FRD), shape (6,)."""
+        return self.x[7:13]
+
+    def current_ned(self, t: float) -> FloatArray:
+        """Water current in NED at time t (m/s), shape (3,)."""
+        e = self.effects
+        c = np.asarray(e.current, dtype=float)
+        if e.current_variation:
+            w = 2 * np.pi / e.current_period
+            c = c + e.current_variation * np.array([np.sin(w * t), np.cos(w * t), 0.0])
+        return c
+
+    def _current_rate(self, t: float) -> FloatArray:
+        e = self.effects
+        if not e.current_variation:
+            return np.zeros(3)
+        w = 2 * np.pi / e.current_period
+        return e.current_variation * w * np.array([np.cos(w * t), -np.sin(w * t), 0.0])
+
+    # --- dynamics ----------------------------------------------------------------------
+
+    def _rhs(self, t: float, x: FloatArray, n_cmd: FloatArray) -> FloatArray:
+        nm = self._n_mem
+        w, qx, qy, qz = x[3:7].tolist()
+        s = 1.0 / (w * w + qx * qx + qy * qy + qz * qz) ** 0.5
+        w, qx, qy, qz = w * s, qx * s, qy * s, qz * s
+        R = [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - w * qz), 2 * (qx * qz + w * qy)],
+             [2 * (qx * qy + w * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - w * qx)],
+             [2 * (qx * qz - w * qy), 2 * (qy * qz + w * qx), 1 - 2 * (qx * qx + qy * qy)]]
+        nu = x[7:13]
+        v, om = nu[:3].tolist(), nu[3:].tolist()
+        e = self.effects
+        nu_r = nu
+        nu_c_dot = None
+        if self._has_current:
+            # current in the body frame and its derivative: ν̇_c = −ω × v_c + Rᵀ v̇_c
+            c, c_dot = self.current_ned(t).tolist(), self._current_rate(t).tolist()
+            vc = [R[0][i] * c[0] + R[1][i] * c[1] + R[2][i] * c[2] for i in range(3)]
+            vc_dot = [R[0][i] * c_dot[0] + R[1][i] * c_dot[1] + R[2][i] * c_dot[2]
+                      for i in range(3)]
+            wxv = _cross(om, vc)
+            nu_r = nu - np.array([*vc, 0.0, 0.0, 0.0])
+            nu_c_dot = np.array([vc_dot[i] - wxv[i] for i in range(3)] + [0.0, 0.0, 0.0])
+        # thrust of the physical rotors (with the hidden gain error and dead-zone)
+        n = x[13 + nm:]
+        f = self._thrust_gain * n * np.abs(n)
+        if self._deadzone > 0:
+            f[np.abs(n) < self._deadzone] = 0.0
+        tau = self._alloc @ f
+        self._last_tau = tau
+        # C_RB(ν)ν + C_A(ν_r)ν_r, with C(ν)ν = [ν2 × a1, ν1 × a1 + ν2 × a2], a = M ν
+        a = (self._M_RB @ nu).tolist()
+        ar = (self._M_A @ nu_r).tolist()
+        vr, omr = nu_r[:3].tolist(), nu_r[3:].tolist()
+        c1, c2, c3 = _cross(om, a[:3]), _cross(v, a[:3]), _cross(om, a[3:])
+        a1, a2, a3 = _cross(omr, ar[:3]), _cross(vr, ar[:3]), _cross(omr, ar[3:])
+        cor = np.array([c1[0] + a1[0], c1[1] + a1[1], c1[2] + a1[2],
+                        c2[0] + c3[0] + a2[0] + a3[0], c2[1] + c3[1] + a2[1] + a3[1],
+                        c2[2] + c3[2] + a2[2] + a3[2]])
+        # D(ν_r)ν_r = (α(ν_r) K) ν_r plus the memory force Σ c_m z_m
+        K, c_mem = (self._gain_changed if 0 <= e.damping_change_time <= t else self._gain)
+        d = (self._model.alphas(nu_r[None, :]) @ K).reshape(6, 6) @ nu_r
+        z = x[13:13 + nm]
+        if nm:
+            np.add.at(d, self._mem_dofs, c_mem * z)
+        # g(η) = −[f_g + f_b ; r_g × f_g + r_b × f_b] with f = (W, −B) · Rᵀ e_z
+        down = R[2]
+        fg, fb = [self._W * d_ for d_ in down], [-self._B * d_ for d_ in down]
+        mg, mb = _cross(self._r_g_l, fg), _cross(self._r_b_l, fb)
+        g = np.array([fg[0] + fb[0], fg[1] + fb[1], fg[2] + fb[2],
+                      mg[0] + mb[0], mg[1] + mb[1], mg[2] + mb[2]])
+        # (M_RB + M_A) ν̇ = τ − C_RB ν − C_A ν_r − D ν_r − g + M_A ν̇_c   (g enters as −g(η))
+        rhs = tau - cor - d + g
+        if nu_c_dot is not None:
+            rhs += self._M_A @ nu_c_dot
+        nu_dot = self._M_inv @ rhs
+        # kinematics: ṗ = R v, q̇ = ½ q ⊗ (0, ω)
+        p_dot = [R[i][0] * v[0] + R[i][1] * v[1] + R[i][2] * v[2] for i in range(3)]
+        q_dot = [0.5 * (-qx * om[0] - qy * om[1] - qz * om[2]),
+                 0.5 * (w * om[0] + qy * om[2] - qz * om[1]),
+                 0.5 * (w * om[1] + qz * om[0] - qx * om[2]),
+                 0.5 * (w * om[2] + qx * om[1] - qy * om[0])]
+        out = np.empty_like(x)
+        out[0:3] = p_dot
+        out[3:7] = q_dot
+        out[7:13] = nu_dot
+        # memory ż = −λ z + ν_r[dof]; motor lag ṅ = (n_cmd − n)/T_m
+        if nm:
+            out[13:13 + nm] = -self._mem_rates * z + nu_r[self._mem_dofs]
+        out[13 + nm:] = (n_cmd - n) * self._inv_tm
+        return out
+
+    def step(self, rotor_command: FloatArray) -> None:
+        """Advance one step ``dt`` with the rotor speed command held (rev/s).
+
+        Parameters
+        ----------
+        rotor_command : ndarray, shape (n_thrusters,)
+        """
+        cmd = np.clip(np.asarray(rotor_command, dtype=float), -self._thr.n_max, self._thr.n_max)
+        tm = self._thr.time_constant
+        if self._delay_steps:
+            self._cmd_queue.append(cmd)
+            phys_cmd = self._cmd_queue.popleft()
+        else:
+            phys_cmd = cmd
+        if tm <= 0:
+            self.x[13 + self._n_mem:] = phys_cmd
+        h, t, x = self.dt, self.t, self.x
+        k1 = self._rhs(t, x, phys_cmd)
+        tau0 = self._last_tau
+        if self._record:
+            self._log.append(np.concatenate([[t], x[:13], k1[7:13], tau0, self.rotor,
+                                             self.current_ned(t), x[13:13 + self._n_mem]]))
+        k2 = self._rhs(t + h / 2, x + h / 2 * k1, phys_cmd)
+        k3 = self._rhs(t + h / 2, x + h / 2 * k2, phys_cmd)
+        k4 = self._rhs(t + h, x + h * k3, phys_cmd)
+        # RK4: x_{k+1} = x_k + h/6 (k1 + 2 k2 + 2 k3 + k4)
+        self.x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        self.x[3:7] /= np.linalg.norm(self.x[3:7])
+        # the logged rotor speed follows the undelayed command exactly: n ← c + (n − c)e^{−h/T}
+        self.rotor = cmd + (self.rotor - cmd) * (np.exp(-h / tm) if tm > 0 else 0.0)
+        self.t = t + h
+
+    def wrench_to_command(self, tau: FloatArray) -> FloatArray:
+        """Rotor speeds (rev/s) that produce τ with the nominal thrusters, saturated."""
+        return self._thr.speed_for_thrust(self._thr.allocate(tau))
+
+    def trajectory(self) -> Trajectory:
+        """Ground truth of every recorded step."""
+        nt, nm = self._n_thr, self._n_mem
+        log = np.array(self._log) if self._log else np.zeros((0, 26 + nt + 3 + nm))
+        cols = np.cumsum([1, 3, 4, 6, 6, 6, nt, 3])
+        t, pos, quat, nu, nu_dot, tau, rotor, cur, mem = np.split(log, cols, axis=1)
+        return Trajectory(t=t[:, 0], position=pos, quaternion=quat, nu=nu, nu_dot=nu_dot,
+                          tau=tau, rotor_speed=rotor, thrust=self._thr.thrust(rotor),
+                          current=cur, memory=mem, thruster_names=self._thr.names)
+
+
+def run(vehicle: Vehicle, excitation: Excitation, effects: Effects | None = None,
+        dt: float = 0.02) -> Trajectory:
+    """Fly ``excitation`` with the velocity PI controller and return the ground truth.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        Nominal vehicle (the controller and the logs use it).
+    excitation : Excitation
+        Sampled protocol; its grid sets the control rate (a multiple of ``dt``).
+    effects : Effects, optional
+        Hidden effects in the physics.
+    dt : float
+        Integration step (s).
+
+    Returns
+    -------
+    Trajectory
+    """
+    sim = Simulator(vehicle, effects, dt=dt, position=np.array([0.0, 0.0,
+                                                                excitation.depth_ref[0]]))
+    dt_c = float(excitation.t[1] - excitation.t[0])
+    sub = max(1, int(round(dt_c / dt)))
+    ctrl = VelocityPI(np.diag(vehicle.body.M), 0.9 * vehicle.thrusters.max_wrench,
+                      excitation.bandwidth)
+    for k in range(len(excitation.t)):
+        roll, pitch, _ = euler_from_matrix(quat_to_matrix(sim.quaternion))
+        cmd = excitation.command(k, sim.nu, float(roll), float(pitch), float(sim.position[2]))
+        tau = ctrl(cmd, sim.nu, dt_c) + excitation.tau_ff[k]
+        rotor = sim.wrench_to_command(tau)
+        for _ in range(sub):
+            sim.step(rotor)
+    return sim.trajectory()

@@ -1,0 +1,200 @@
+"""A vehicle: rigid body + added mass, damping model with its coefficients, thrusters.
+
+Built from a preset mapping (``config/vehicles/*.yaml`` loaded by :mod:`dampest_ros.io`).
+The ``damping`` section names coefficients by SNAME names, stored positive when dissipative::
+
+    damping:
+      linear: {X_u: 13.7, Y_v: 0.0, ...}          # X_u … N_r, off-diagonal like Y_r
+      quadratic: {X_uu: 141.0, ...}               # X_{u|u|} …
+      cross: [{row: Y, col: v, alpha: "|r|", value: 2.0}]
+      freq: [{dof: u, rate: 2.0, c: 5.0}]
+      added: {added.N_uv: 0.0}
+      residual: {modes: [[...6...], ...], values: [...]}
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.damping import (
+    CrossSpec,
+    DampingModel,
+    DampingTerm,
+    added_mass_term,
+    cross_term,
+    linear_term,
+    memory_term,
+    quadratic_term,
+    residual_term,
+)
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
+from dampest_ros.core.thrusters import Thrusters
+
+FloatArray = NDArray[np.float64]
+
+
+def _letters(name: str, section: str) -> tuple[int, int]:
+    """(row, col) of an SNAME name like ``X_u``, ``Y_r`` or ``X_uu``."""
+    try:
+        force, vel = name.split("_", 1)
+        return FORCE_NAMES.index(force), DOF_NAMES.index(vel[0])
+    except ValueError:
+        raise ConfigError(f"damping.{section}", f"bad coefficient name {name!r}") from None
+
+
+def _values(section: str, d: Any) -> dict[str, float]:
+    if not isinstance(d, dict):
+        raise ConfigError(f"damping.{section}", "must be a mapping of name: value")
+    out = {}
+    for k, v in d.items():
+        try:
+            out[str(k)] = float(v)
+        except (TypeError, ValueError):
+            raise ConfigError(f"damping.{section}.{k}", f"not a number: {v!r}") from None
+        if not np.isfinite(out[str(k)]):
+            raise ConfigError(f"damping.{section}.{k}", "is NaN or Inf")
+    return out
+
+
+def damping_from_spec(spec: dict[str, Any]) -> tuple[DampingModel, FloatArray]:
+    """Damping model and its θ from a preset's ``damping`` mapping.
+
+    Returns
+    -------
+    model : DampingModel
+    theta : ndarray, shape (p,)
+    """
+    terms: list[DampingTerm] = []
+    values: dict[str, float] = {}
+    if "linear" in spec:
+        lin = _values("linear", spec["linear"])
+        diag, off = [], []
+        for name in lin:
+            r, c = _letters(name, "linear")
+            (diag if r == c else off).append((r, c))
+        terms.append(linear_term([r for r, _ in diag], off))
+        values.update(lin)
+    if "quadratic" in spec:
+        quad = _values("quadratic", spec["quadratic"])
+        dofs = []
+        for name in quad:
+            r, c = _letters(name, "quadratic")
+            if r != c or name[2:] != DOF_NAMES[c] * 2:
+                raise ConfigError("damping.quadratic", f"{name!r} is not X_uu … N_rr")
+            dofs.append(r)
+        terms.append(quadratic_term(dofs))
+        values.update(quad)
+    if spec.get("cross"):
+        specs = [CrossSpec.from_dict(c) for c in spec["cross"]]
+        terms.append(cross_term(specs))
+        values.update({s.label: float(c.get("value", 0.0)) for s, c in zip(specs, spec["cross"],
+                                                                              strict=True)})
+    if spec.get("freq"):
+        rates: dict[str | int, list[float]] = {}
+        cs: list[float] = []
+        for item in spec["freq"]:
+            rates.setdefault(str(item["dof"]), []).append(float(item["rate"]))
+        mem = memory_term(rates)
+        # order of states follows the dict grouping; match c values by (dof, rate)
+        by_key = {(str(i["dof"]), float(i["rate"])): float(i.get("c", 0.0)) for i in spec["freq"]}
+        for d, lam in zip(mem.state_dofs, mem.rates, strict=True):
+            cs.append(by_key[(DOF_NAMES[int(d)], float(lam))])
+        terms.append(mem)
+        values.update(dict(zip(mem.parameter_names, cs, strict=True)))
+    if "added" in spec:
+        terms.append(added_mass_term())
+        values.update(_values("added", spec["added"] or {}))
+    if "residual" in spec:
+        res = spec["residual"] or {}
+        term = residual_term(np.asarray(res["modes"], dtype=float).T if "modes" in res else None)
+        terms.append(term)
+        vals = list(res.get("values", [0.0] * term.n_params))
+        values.update(dict(zip(term.parameter_names, map(float, vals), strict=True)))
+    model = DampingModel(terms)
+    return model, model.theta_from_dict(values)
+
+
+@dataclass
+class Vehicle:
+    """Everything the simulator and the identification need to know about a vehicle.
+
+    Parameters
+    ----------
+    name : str
+    body : RigidBody
+        Mass, inertia, added mass, restoring data.
+    damping : DampingModel
+        The term structure of D(ν).
+    theta : ndarray, shape (p,)
+        Damping coefficients (truth for a simulator, nominal/prior for identification).
+    thrusters : Thrusters
+    length : float
+        Reference length L (m) for nondimensionalisation.
+    """
+
+    name: str
+    body: RigidBody
+    damping: DampingModel
+    theta: FloatArray
+    thrusters: Thrusters
+    length: float = 1.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Vehicle:
+        """Build from a preset mapping with sections ``vehicle``, ``damping``, ``thrusters``."""
+        for key in ("vehicle", "damping", "thrusters"):
+            if key not in d:
+                raise ConfigError(key, "missing section")
+        body = RigidBody.from_dict(d["vehicle"])
+        damping, theta = damping_from_spec(d["damping"])
+        thrusters = Thrusters.from_dict(d["thrusters"], rho=body.rho)
+        length = float(d["vehicle"].get("length", 1.0))
+        if not np.isfinite(length) or length <= 0:
+            raise ConfigError("vehicle.length", f"must be > 0, got {length}")
+        return cls(str(d["vehicle"].get("name", "vehicle")), body, damping, theta, thrusters,
+                   length, {k: v for k, v in d.items()
+                            if k not in ("vehicle", "damping", "thrusters")})
+
+    def reference_scales(self, v_ref: float) -> tuple[FloatArray, FloatArray]:
+        """Velocity and force scales for nondimensionalisation (prime system).
+
+        Linear velocities by v_ref, angular by v_ref/L; forces by ½ρL²v_ref², moments by
+        ½ρL³v_ref².
+
+        Returns
+        -------
+        nu_scale, force_scale : ndarray, shape (6,)
+        """
+        return nondim_scales(v_ref, self.length, self.body.rho)
+
+
+def nondim_scales(v_ref: float, L_ref: float, rho: float) -> tuple[FloatArray, FloatArray]:
+    """Velocity and force scales of the prime system for reference speed and length.
+
+    Parameters
+    ----------
+    v_ref : float
+        Reference speed (m/s), > 0.
+    L_ref : float
+        Reference length (m), > 0.
+    rho : float
+        Water density (kg/m³).
+
+    Returns
+    -------
+    nu_scale : ndarray, shape (6,)
+        [v, v, v, v/L, v/L, v/L].
+    force_scale : ndarray, shape (6,)
+        [F, F, F, F L, F L, F L] with F = ½ ρ L² v².
+    """
+    if v_ref <= 0 or L_ref <= 0:
+        raise ConfigError("v_ref/L_ref", "must be > 0")
+    F = 0.5 * rho * L_ref**2 * v_ref**2
+    nu_scale = np.array([v_ref] * 3 + [v_ref / L_ref] * 3)
+    force_scale = np.array([F] * 3 + [F * L_ref] * 3)
+    return nu_scale, force_scale
