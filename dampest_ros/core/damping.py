@@ -74,6 +74,26 @@ class Alpha:
             return np.abs(nu @ np.asarray(self.w))
         raise ConfigError("alpha", f"unknown kind {k!r}")
 
+    def scale(self, nu_scale: FloatArray) -> float:
+        """Factor c with α(ν_s ⊙ ν') = c α(ν') for velocity scales ν_s, shape (6,).
+
+        Exact for ``one, abs, lin, prod, absprod``; for ``norm`` and ``absproj`` exact when
+        the velocities inside α share one scale (the largest is used).
+        """
+        s = np.asarray(nu_scale, dtype=float)
+        k = self.kind
+        if k == "one":
+            return 1.0
+        if k in ("abs", "lin"):
+            return float(s[self.i])
+        if k in ("prod", "absprod"):
+            return float(s[self.i] * s[self.j])
+        if k == "norm":
+            return float(s[:3].max())
+        if k == "absproj":
+            return float(s[np.abs(np.asarray(self.w)) > 0].max())
+        raise ConfigError("alpha", f"unknown kind {k!r}")
+
     def label(self) -> str:
         """Short text form, e.g. ``|r|``, ``u``, ``‖v‖``."""
         n = DOF_NAMES
@@ -242,8 +262,11 @@ class DampingTerm:
             return nu_scale[d] / self.rates / force_scale[d]
         out = np.empty(len(self.bases))
         for j, b in enumerate(self.bases):
-            a = float(np.abs(b.alpha(nu_scale[None, :]))[0])
-            ratio = np.abs(b.B) * nu_scale[None, :] / force_scale[:, None]
+            # θ_j α_j(ν) (B_j ν)_a = F_a θ'_j α_j(ν') (B_j ν')_a with ν = ν_s ⊙ ν': the scale
+            # of α (its homogeneity, not its value at ν_s: ‖ν_s[:3]‖ = √3 v) times
+            # ν_s,b / F_a over the entries of B_j (their pattern; a mode's entries are < 1)
+            a = b.alpha.scale(nu_scale)
+            ratio = (b.B != 0) * nu_scale[None, :] / force_scale[:, None]
             out[j] = a * ratio.max()
         return out
 
@@ -259,10 +282,30 @@ class DampingTerm:
         if self.kind == "freq":
             return np.maximum(theta, 0.0)
         if self.kind == "linear":
-            D = np.einsum("j,jab->ab", theta, np.stack([b.B for b in self.bases]))
+            Bs = np.stack([b.B for b in self.bases])
+            D = np.einsum("j,jab->ab", theta, Bs)
             sym = psd_project(0.5 * (D + D.T))
             D_proj = sym + 0.5 * (D - D.T)
-            return np.array([float(np.sum(b.B * D_proj)) for b in self.bases])
+            out = np.array([float(np.sum(b.B * D_proj)) for b in self.bases])
+            # The bases need not span D_proj (e.g. Y_r without N_v): reading θ back then drops
+            # entries and can leave the symmetric part indefinite. Shrink the off-diagonal
+            # coefficients by the largest factor s in [0, 1] that keeps it PSD: s = 0 always
+            # does (the diagonal of a PSD matrix is ≥ 0), s = 1 when nothing was dropped.
+            diag = np.array([bool(np.any(np.diag(b.B))) for b in self.bases])
+            out[diag] = np.maximum(out[diag], 0.0)
+
+            def min_eig(s: float) -> float:
+                A = np.einsum("j,jab->ab", np.where(diag, out, s * out), Bs)
+                return float(np.linalg.eigvalsh(0.5 * (A + A.T)).min())
+
+            if min_eig(1.0) < 0.0:
+                # the smallest eigenvalue is concave in s, so {s : min_eig(s) ≥ 0} is [0, s*]
+                lo, hi = 0.0, 1.0
+                for _ in range(60):
+                    mid = 0.5 * (lo + hi)
+                    lo, hi = (mid, hi) if min_eig(mid) >= 0.0 else (lo, mid)
+                out = np.where(diag, out, lo * out)
+            return out
         if self.kind in ("quadratic", "residual"):
             psd = np.array([np.linalg.eigvalsh(0.5 * (b.B + b.B.T)).min() >= -1e-12
                             for b in self.bases])
@@ -581,6 +624,20 @@ class DampingModel:
             s = self.slice(t.kind)
             out[s] = t.project(out[s])
         return out
+
+    def lower_bounds(self) -> FloatArray:
+        """Physical lower bounds: 0 for the weights of PSD bases and memory gains, else −∞."""
+        lo = np.full(self.n_params, -np.inf)
+        for t in self.terms:
+            s = self.slice(t.kind)
+            if t.kind == "freq":
+                lo[s] = 0.0
+            else:
+                psd = [np.linalg.eigvalsh(0.5 * (b.B + b.B.T)).min() >= -1e-12 and
+                       b.alpha.kind in ("one", "abs", "absprod", "absproj", "norm")
+                       for b in t.bases]
+                lo[s] = np.where(psd, 0.0, -np.inf)
+        return lo
 
     def param_scales(self, nu_scale: FloatArray, force_scale: FloatArray) -> FloatArray:
         """Per-parameter factor s with θ' = s θ dimensionless, shape (p,)."""

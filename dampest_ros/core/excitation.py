@@ -100,8 +100,8 @@ def _levels(t: FloatArray, rng: np.random.Generator, amp: float, hold: tuple[flo
 def _smooth(x: FloatArray, dt: float, tau: float) -> FloatArray:
     """Critically damped second-order low-pass (two first-order stages, time constant tau)."""
     a = np.exp(-dt / tau)
-    y = signal.lfilter([1 - a], [1, -a], x - x[0]) + x[0]
-    return np.asarray(signal.lfilter([1 - a], [1, -a], y - y[0]) + y[0], dtype=float)
+    y = signal.lfilter([1 - a], [1, -a], x - x[0], axis=0) + x[0]
+    return np.asarray(signal.lfilter([1 - a], [1, -a], y - y[0], axis=0) + y[0], dtype=float)
 
 
 def _smooth_random(t: FloatArray, rng: np.random.Generator, amp: float,
@@ -183,6 +183,9 @@ def make_excitation(name: str, vehicle: Vehicle, duration: float, seed: int = 0,
             ang, rate = _smooth_random(t, rng, max_angle, (0.8, 2.5), 0.15)
             att[:, j] = ang
             nu_ref[:, i] = rate
+        # band-limit the steps (time constant 0.15 s): thrust content stays below ~3 Hz,
+        # where the identification looks, instead of jumping at every level change
+        nu_ref[:, [0, 1, 5]] = _smooth(nu_ref[:, [0, 1, 5]], dt, 0.15)
         bw[:] = 3.0
     elif name == "C":
         # Schroeder-phased multisine 0.1–10 Hz, interleaved frequency lines per DOF

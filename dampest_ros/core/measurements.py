@@ -40,17 +40,21 @@ class Series:
         return {f.name: getattr(self, f.name) for f in fields(self)
                 if isinstance(getattr(self, f.name), np.ndarray)}
 
+    def per_message(self) -> dict[str, FloatArray]:
+        """The array fields with one row per message: all but the shared ``*covariance``."""
+        return {k: a for k, a in self.arrays().items() if not k.endswith("covariance")}
+
     def select(self, mask: NDArray[np.bool_] | NDArray[np.int64]) -> Series:
         """A copy keeping the rows in ``mask`` (boolean or index array)."""
         kw = {f.name: getattr(self, f.name) for f in fields(self)}
-        for name, arr in self.arrays().items():
+        for name, arr in self.per_message().items():
             if arr.ndim >= 1 and arr.shape[0] == len(self):
                 kw[name] = arr[mask]
         return type(self)(**kw)
 
     def validate(self) -> None:
         """Raise ValueError if the array lengths disagree."""
-        _rows(*[a for a in self.arrays().values() if a.ndim >= 1 and a.shape[0] != 0]
+        _rows(*[a for a in self.per_message().values() if a.ndim >= 1 and a.shape[0] != 0]
               or [self.stamp])
 
 

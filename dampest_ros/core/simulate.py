@@ -342,21 +342,36 @@ class Simulator:
         else:
             phys_cmd = cmd
         if tm <= 0:
+            # no motor lag: the rotors turn at the command during this whole step, and the
+            # logged speed (undelayed) already shows it in this step's record
             self.x[13 + self._n_mem:] = phys_cmd
+            self.rotor = cmd
         h, t, x = self.dt, self.t, self.x
         k1 = self._rhs(t, x, phys_cmd)
-        tau0 = self._last_tau
-        if self._record:
-            self._log.append(np.concatenate([[t], x[:13], k1[7:13], tau0, self.rotor,
-                                             self.current_ned(t), x[13:13 + self._n_mem]]))
+        tau1 = self._last_tau
         k2 = self._rhs(t + h / 2, x + h / 2 * k1, phys_cmd)
+        tau2 = self._last_tau
         k3 = self._rhs(t + h / 2, x + h / 2 * k2, phys_cmd)
+        tau3 = self._last_tau
         k4 = self._rhs(t + h, x + h * k3, phys_cmd)
-        # RK4: x_{k+1} = x_k + h/6 (k1 + 2 k2 + 2 k3 + k4)
+        # RK4: x_{k+1} = x_k + h/6 (k1 + 2 k2 + 2 k3 + k4); the same weights give the mean τ
+        # that the step applied
         self.x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
         self.x[3:7] /= np.linalg.norm(self.x[3:7])
-        # the logged rotor speed follows the undelayed command exactly: n ← c + (n − c)e^{−h/T}
-        self.rotor = cmd + (self.rotor - cmd) * (np.exp(-h / tm) if tm > 0 else 0.0)
+        # the logged rotor follows the undelayed command exactly: n(s) = c + (n₀ − c) e^{−s/T}
+        n0 = self.rotor
+        decay = np.exp(-h / tm) if tm > 0 else 0.0
+        n_mid = cmd + (n0 - cmd) * (np.exp(-h / (2 * tm)) if tm > 0 else 0.0)
+        self.rotor = cmd + (n0 - cmd) * decay
+        if self._record:
+            tau_mean = (tau1 + 2 * tau2 + 2 * tau3 + self._last_tau) / 6.0
+            # step means of the logged rotor speed (exact) and nominal thrust (Simpson)
+            n_mean = cmd + (n0 - cmd) * ((tm / h) * (1 - decay) if tm > 0 else 0.0)
+            f = self._thr.thrust
+            thrust_mean = (f(n0) + 4 * f(n_mid) + f(self.rotor)) / 6.0
+            self._log.append(np.concatenate([[t], x[:13], k1[7:13], tau_mean, n_mean,
+                                             thrust_mean, self.current_ned(t),
+                                             x[13:13 + self._n_mem]]))
         self.t = t + h
 
     def wrench_to_command(self, tau: FloatArray) -> FloatArray:
@@ -366,11 +381,11 @@ class Simulator:
     def trajectory(self) -> Trajectory:
         """Ground truth of every recorded step."""
         nt, nm = self._n_thr, self._n_mem
-        log = np.array(self._log) if self._log else np.zeros((0, 26 + nt + 3 + nm))
-        cols = np.cumsum([1, 3, 4, 6, 6, 6, nt, 3])
-        t, pos, quat, nu, nu_dot, tau, rotor, cur, mem = np.split(log, cols, axis=1)
+        log = np.array(self._log) if self._log else np.zeros((0, 26 + 2 * nt + 3 + nm))
+        cols = np.cumsum([1, 3, 4, 6, 6, 6, nt, nt, 3])
+        t, pos, quat, nu, nu_dot, tau, rotor, thrust, cur, mem = np.split(log, cols, axis=1)
         return Trajectory(t=t[:, 0], position=pos, quaternion=quat, nu=nu, nu_dot=nu_dot,
-                          tau=tau, rotor_speed=rotor, thrust=self._thr.thrust(rotor),
+                          tau=tau, rotor_speed=rotor, thrust=thrust,
                           current=cur, memory=mem, thruster_names=self._thr.names)
 
 

@@ -27,11 +27,13 @@ class Trajectory:
     nu_dot : ndarray, shape (N, 6)
         Its time derivative (m/s², rad/s²).
     tau : ndarray, shape (N, 6)
-        Generalised force the thrusters actually applied (N, N·m).
+        Generalised force the thrusters actually applied, mean over [t, t + dt] (N, N·m).
     rotor_speed : ndarray, shape (N, n_thrusters)
-        Rotor speed a real vehicle would log (rev/s).
+        Rotor speed a real vehicle would log, mean over [t, t + dt] (rev/s).
     thrust : ndarray, shape (N, n_thrusters)
-        Thrust a real vehicle would log: the nominal curve at ``rotor_speed`` (N).
+        Thrust a real vehicle would log (the nominal curve of the logged rotor speed), mean
+        over [t, t + dt] (N). Thruster telemetry is a window average, like an ESC's rpm
+        counter; the step means let the sensor model average over any window.
     current : ndarray, shape (N, 3)
         Water current in NED (m/s).
     memory : ndarray, shape (N, n_states)

@@ -1,0 +1,1 @@
+"""dampest_ros.cli"""

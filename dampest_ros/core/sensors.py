@@ -1,0 +1,582 @@
+"""Sensor models: turn a ground-truth :class:`Trajectory` into the messages a vehicle logs.
+
+The trajectory is in Fossen's frames (FRD body, NED world) at the integration step; the
+output is one :class:`~dampest_ros.core.measurements.Series` per topic of the topic contract,
+in ROS frames (FLU body ``base_link``, ENU world ``odom``), at each sensor's own rate:
+
+- ``truth/odom``: OdometrySeries, ``odom`` → ``base_link``; ENU position, FLU→ENU
+  attitude, FLU body twist.
+- ``imu/data``: ImuSeries, ``imu_link``; AHRS attitude, gyro rate, specific force.
+- ``dvl/twist``: TwistSeries, ``dvl_link``; bottom-lock body velocity, with dropouts.
+- ``pressure``: PressureSeries, ``pressure_link``; absolute pressure (Pa).
+- ``thrusters/state``: JointSeries, ``base_link``; rotor speed (rad/s), logged thrust (N).
+
+All sensors sit at the body origin with axes aligned to the body, so their frames differ from
+``base_link`` only by name. Every FRD/NED → FLU/ENU conversion goes through
+:mod:`dampest_ros.core.frames`.
+
+Between integration steps the models interpolate the truth: ν by the cubic Hermite polynomial
+through (ν, ν̇) at the two neighbouring steps (its derivative is the IMU's ν̇), the NED
+position by the cubic Hermite polynomial through (p, R ν₁), the attitude by normalised linear
+interpolation of quaternions (nlerp) and the thruster logs linearly.
+
+Noise comes from independent random streams, one per noise source, spawned from
+``np.random.default_rng(seed)`` in the fixed order of ``_STREAMS``: changing one sensor's
+settings never changes another sensor's noise.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.frames import body_vec, quat_frd_ned_to_flu_enu, quat_to_matrix, world_vec
+from dampest_ros.core.measurements import (
+    ImuSeries,
+    JointSeries,
+    OdometrySeries,
+    PressureSeries,
+    Recording,
+    TwistSeries,
+)
+from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.trajectory import Trajectory
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+BoolArray = NDArray[np.bool_]
+
+#: Variance (m²/s² or rad²/s²) put on covariance entries a sensor does not measure (the DVL's
+#: angular rates). Large rather than −1 so that a consumer that inverts the covariance simply
+#: gives those entries no weight.
+UNUSED_VARIANCE = 1.0e6
+
+#: Frame ids of the sensor messages.
+FRAME_IDS: dict[str, str] = {
+    "truth/odom": "odom",
+    "imu/data": "imu_link",
+    "dvl/twist": "dvl_link",
+    "pressure": "pressure_link",
+    "thrusters/state": "base_link",
+}
+
+#: One random stream per noise source, spawned in this order (append only: reordering would
+#: change every seeded recording).
+_STREAMS = (
+    "gyro_noise",
+    "gyro_walk",
+    "accel_noise",
+    "accel_walk",
+    "orientation",
+    "dvl_noise",
+    "dvl_dropout",
+    "pressure",
+    "rpm",
+)
+
+# Tolerance, in sample periods, for the last sample to count as lying on the end time.
+_GRID_TOL = 1e-6
+
+_RATES = ("imu_rate", "dvl_rate", "pressure_rate", "thruster_rate", "truth_rate")
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """Rates and noise levels of the simulated sensors (SI units; defaults are realistic).
+
+    Attributes
+    ----------
+    imu_rate : float
+        IMU/AHRS sample rate (Hz), > 0.
+    gyro_noise : float
+        Gyro white-noise standard deviation per sample (rad/s).
+    gyro_bias_walk : float
+        Gyro bias random walk (rad/s/√s): the bias changes by N(0, σ² Δt) per sample.
+    accel_noise : float
+        Accelerometer white-noise standard deviation per sample (m/s²).
+    accel_bias_walk : float
+        Accelerometer bias random walk (m/s²/√s).
+    orientation_noise : float
+        AHRS attitude noise, standard deviation of each small-angle component (rad).
+    dvl_rate : float
+        DVL ping rate (Hz); 5–8 Hz for small DVLs.
+    dvl_noise : float
+        DVL velocity white-noise standard deviation per axis (m/s).
+    dvl_dropout_rate : float
+        Rate of bottom-lock losses while locked (1/s, Poisson); 0 disables dropouts.
+    dvl_dropout_mean : float
+        Mean length of a dropout (s, exponential).
+    pressure_rate : float
+        Pressure sensor rate (Hz).
+    pressure_noise : float
+        Pressure white-noise standard deviation (Pa).
+    atmospheric_pressure : float
+        Pressure at the surface (Pa).
+    thruster_rate : float
+        Rate of the thruster state log (Hz).
+    rpm_noise : float
+        White-noise standard deviation of the reported rotor speed (rad/s).
+    truth_rate : float
+        Rate of the ground-truth odometry (Hz).
+    """
+
+    imu_rate: float = 200.0
+    gyro_noise: float = 0.002
+    gyro_bias_walk: float = 1e-5
+    accel_noise: float = 0.02
+    accel_bias_walk: float = 1e-4
+    orientation_noise: float = 0.002
+    dvl_rate: float = 8.0
+    dvl_noise: float = 0.005
+    dvl_dropout_rate: float = 0.01
+    dvl_dropout_mean: float = 2.0
+    pressure_rate: float = 20.0
+    pressure_noise: float = 20.0
+    atmospheric_pressure: float = 101325.0
+    thruster_rate: float = 50.0
+    rpm_noise: float = 0.2
+    truth_rate: float = 50.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ConfigError(f.name, f"must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ConfigError(f.name, f"must be finite, got {value!r}")
+            if f.name in _RATES and value <= 0:
+                raise ConfigError(f.name, f"must be > 0 Hz, got {value!r}")
+            if value < 0:
+                raise ConfigError(f.name, f"must be ≥ 0, got {value!r}")
+            object.__setattr__(self, f.name, float(value))
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> SensorConfig:
+        """Build from a mapping of the attribute names above (missing keys keep defaults).
+
+        Raises
+        ------
+        ConfigError
+            (a ValueError) naming an unknown key or an invalid value.
+        """
+        known = {f.name for f in fields(cls)}
+        for key in d:
+            if key not in known:
+                raise ConfigError(str(key), f"unknown sensor setting; known: {sorted(known)}")
+        return cls(**dict(d))
+
+
+@dataclass(frozen=True)
+class SensorBias:
+    """Constant hidden sensor biases (the 'effects'), in the FRD body frame.
+
+    Attributes
+    ----------
+    gyro : tuple of 3 float
+        Gyro bias (rad/s).
+    accel : tuple of 3 float
+        Accelerometer bias (m/s²).
+    dvl : tuple of 3 float
+        DVL velocity bias (m/s).
+    """
+
+    gyro: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    accel: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    dvl: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            try:
+                v = tuple(float(x) for x in getattr(self, f.name))
+            except (TypeError, ValueError):
+                raise ConfigError(f.name, "must be 3 numbers") from None
+            if len(v) != 3 or not all(math.isfinite(x) for x in v):
+                raise ConfigError(f.name, f"must be 3 finite numbers, got {v}")
+            object.__setattr__(self, f.name, v)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> SensorBias:
+        """Build from ``{gyro: [..], accel: [..], dvl: [..]}``; unknown keys raise ConfigError."""
+        known = {f.name for f in fields(cls)}
+        for key in d:
+            if key not in known:
+                raise ConfigError(str(key), f"unknown sensor bias; known: {sorted(known)}")
+        return cls(**dict(d))
+
+
+def sample_times(t0: float, t1: float, rate: float) -> FloatArray:
+    """Sample stamps t0 + k / rate for k = 0, 1, … up to t1 (included when on the grid).
+
+    Parameters
+    ----------
+    t0, t1 : float
+        First and last time of the record (s), t1 ≥ t0.
+    rate : float
+        Sample rate (Hz), > 0.
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        M = ⌊(t1 − t0) rate⌋ + 1 stamps (s); a sample within 1e-6 periods of t1 counts.
+    """
+    n = math.floor((t1 - t0) * rate + _GRID_TOL) + 1
+    # t_k = t0 + k / rate (not a cumulative sum, so no drift)
+    return t0 + np.arange(max(n, 1), dtype=float) / rate
+
+
+def measure(
+    traj: Trajectory,
+    rho: float,
+    gravity: float,
+    config: SensorConfig = SensorConfig(),
+    bias: SensorBias = SensorBias(),
+    seed: int = 0,
+) -> Recording:
+    """Simulate all sensors along a ground-truth trajectory.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        Ground truth at the integration step (FRD body, NED world), N ≥ 1 samples.
+    rho : float
+        Water density (kg/m³), for the pressure sensor.
+    gravity : float
+        g (m/s²), for the pressure sensor and the accelerometer.
+    config : SensorConfig
+        Rates and noise levels.
+    bias : SensorBias
+        Constant hidden biases (FRD).
+    seed : int
+        Seed of the noise; the same seed gives identical output.
+
+    Returns
+    -------
+    dict of str to Series
+        ``truth/odom`` (OdometrySeries), ``imu/data`` (ImuSeries), ``dvl/twist``
+        (TwistSeries), ``pressure`` (PressureSeries) and ``thrusters/state`` (JointSeries),
+        all in ROS frames, sampled at ``t[0] + k / rate`` up to ``t[-1]``.
+
+    Notes
+    -----
+    With R the body→NED rotation, ν = [v, ω] and g_n = [0, 0, g] (NED):
+
+    - gyro: ω + b_g + b_g,walk(t) + white noise;
+    - accelerometer (specific force): v̇ + ω × v − Rᵀ g_n + b_a + b_a,walk(t) + white noise,
+      i.e. [0, 0, −g] FRD = [0, 0, +g] FLU at rest and level;
+    - AHRS attitude: q ⊗ exp(δθ / 2), δθ ~ N(0, σ² I) a small rotation in the sensor frame;
+    - DVL (bottom lock): v + b_dvl + white noise, with messages missing inside dropouts
+      (an alternating renewal process: locked for Exp(1 / dvl_dropout_rate) s, then lost for
+      Exp(dvl_dropout_mean) s, starting locked at t[0]; the expected lost fraction is
+      λ m / (1 + λ m)); the angular variances are ``UNUSED_VARIANCE``;
+    - pressure: p_atm + ρ g z + white noise, z the NED depth of the body origin;
+    - thrusters: velocity 2π n + white noise (rad/s, n in rev/s), effort = logged thrust (N),
+      both the mean over the window of one message period before the stamp.
+
+    Random-walk biases start at zero at t[0]. Covariances hold the white-noise variances.
+    """
+    _check_trajectory(traj)
+    for name, value in (("rho", rho), ("gravity", gravity)):
+        if not math.isfinite(value) or value <= 0:
+            raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    children = np.random.default_rng(seed).spawn(len(_STREAMS))
+    rngs = dict(zip(_STREAMS, children, strict=True))
+
+    t = np.asarray(traj.t, dtype=float)
+    q = _continuous(np.asarray(traj.quaternion, dtype=float))
+    nu = np.asarray(traj.nu, dtype=float)
+    # ṗ = R(q) v: NED velocity of the body origin, the slope of the position interpolant
+    p_dot = np.einsum("nij,nj->ni", quat_to_matrix(q), nu[:, :3])
+    truth = _Truth(t, np.asarray(traj.position, dtype=float), p_dot, q, nu,
+                   np.asarray(traj.nu_dot, dtype=float))
+    return {
+        "truth/odom": _odometry(truth, config),
+        "imu/data": _imu(truth, gravity, config, bias, rngs),
+        "dvl/twist": _dvl(truth, config, bias, rngs),
+        "pressure": _pressure(truth, rho, gravity, config, rngs),
+        "thrusters/state": _thrusters(traj, config, rngs),
+    }
+
+
+# --- interpolation -------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Knots:
+    """Where query times fall among the trajectory steps: t = t[i] + s h, s ∈ [0, 1]."""
+
+    i: IntArray  # (M,) left step
+    j: IntArray  # (M,) right step (= i when the trajectory has one sample)
+    s: FloatArray  # (M, 1) normalised position in the step
+    h: FloatArray  # (M, 1) step length (s)
+
+
+def _locate(t: FloatArray, ts: FloatArray) -> _Knots:
+    """Steps containing the query times ``ts`` (clamped to [t[0], t[-1]])."""
+    ts = np.clip(ts, t[0], t[-1])
+    if len(t) == 1:
+        zero = np.zeros(len(ts), dtype=np.intp)
+        return _Knots(zero, zero, np.zeros((len(ts), 1)), np.ones((len(ts), 1)))
+    i = np.clip(np.searchsorted(t, ts, side="right") - 1, 0, len(t) - 2)
+    h = t[i + 1] - t[i]
+    # s = (t − t_i) / h
+    s = (ts - t[i]) / h
+    return _Knots(i, i + 1, s[:, None], h[:, None])
+
+
+def _hermite(k: _Knots, y: FloatArray, yd: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Cubic Hermite interpolant through values ``y`` and slopes ``yd`` (both (N, d)).
+
+    Returns the interpolated values and their time derivatives, both (M, d).
+    """
+    s, h = k.s, k.h
+    y0, y1, d0, d1 = y[k.i], y[k.j], yd[k.i], yd[k.j]
+    h01 = s * s * (3.0 - 2.0 * s)
+    h10 = s * (s - 1.0) ** 2
+    h11 = s * s * (s - 1.0)
+    # y(s) = y0 + h01 (y1 − y0) + h (h10 d0 + h11 d1), using h00 = 1 − h01
+    value = y0 + h01 * (y1 - y0) + h * (h10 * d0 + h11 * d1)
+    # dy/dt = h01' (y1 − y0) / h + h10' d0 + h11' d1, with ' = d/ds
+    slope = (6.0 * s * (1.0 - s)) * (y1 - y0) / h + (3.0 * s * s - 4.0 * s + 1.0) * d0 \
+        + (3.0 * s * s - 2.0 * s) * d1
+    return value, slope
+
+
+def _linear(k: _Knots, y: FloatArray) -> FloatArray:
+    """Linear interpolation of ``y`` (N, d) → (M, d)."""
+    # y(s) = y0 + s (y1 − y0)
+    return y[k.i] + k.s * (y[k.j] - y[k.i])
+
+
+def _continuous(q: FloatArray) -> FloatArray:
+    """Flip quaternion signs so that consecutive ones have a non-negative dot product."""
+    if len(q) < 2:
+        return q
+    flip = np.where(np.einsum("ni,ni->n", q[1:], q[:-1]) < 0.0, -1.0, 1.0)
+    # sign_k = Π_{j ≤ k} sign(q_{j−1} · q_j): the running product of the flips
+    sign = np.concatenate([[1.0], np.cumprod(flip)])
+    return q * sign[:, None]
+
+
+def _nlerp(k: _Knots, q: FloatArray) -> FloatArray:
+    """Normalised linear interpolation of sign-continuous quaternions (N, 4) → (M, 4)."""
+    qs = _linear(k, q)
+    # q(s) = ((1 − s) q0 + s q1) / ‖·‖
+    return qs / np.linalg.norm(qs, axis=1, keepdims=True)
+
+
+@dataclass(frozen=True)
+class _Truth:
+    """The trajectory arrays the sensor models interpolate (FRD/NED, quaternions wxyz)."""
+
+    t: FloatArray
+    position: FloatArray
+    p_dot: FloatArray
+    q: FloatArray
+    nu: FloatArray
+    nu_dot: FloatArray
+
+    def times(self, rate: float) -> FloatArray:
+        return sample_times(float(self.t[0]), float(self.t[-1]), rate)
+
+
+# --- sensor models -------------------------------------------------------------------------
+
+
+def _random_walk(rng: np.random.Generator, n: int, sigma: float, rate: float) -> FloatArray:
+    """Random-walk bias (n, 3) starting at 0: b_{k+1} = b_k + σ √Δt ξ_k, ξ ~ N(0, I)."""
+    steps = rng.standard_normal((n, 3)) * (sigma * math.sqrt(1.0 / rate))
+    steps[0] = 0.0
+    # b_k = Σ_{j ≤ k} increments
+    return np.cumsum(steps, axis=0)
+
+
+def _white(rng: np.random.Generator, shape: tuple[int, ...], sigma: float) -> FloatArray:
+    """Gaussian white noise N(0, σ²) of the given shape (always drawn, so streams stay aligned)."""
+    return rng.standard_normal(shape) * sigma
+
+
+def _wxyz_to_xyzw(q: FloatArray) -> FloatArray:
+    return q[:, [1, 2, 3, 0]]
+
+
+def _quat_mul(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Hamilton products a ⊗ b of quaternions [w, x, y, z], shapes (M, 4)."""
+    aw, av = a[:, :1], a[:, 1:]
+    bw, bv = b[:, :1], b[:, 1:]
+    # (a_w b_w − a_v·b_v, a_w b_v + b_w a_v + a_v × b_v)
+    w = aw * bw - np.sum(av * bv, axis=1, keepdims=True)
+    v = aw * bv + bw * av + np.cross(av, bv)
+    return np.concatenate([w, v], axis=1)
+
+
+def _small_rotation(dtheta: FloatArray) -> FloatArray:
+    """Unit quaternions [w, x, y, z] (M, 4) of rotation vectors (M, 3) (rad)."""
+    angle = np.linalg.norm(dtheta, axis=1, keepdims=True)
+    # exp(δθ/2) = [cos(|δθ|/2), sin(|δθ|/2) δθ/|δθ|]; sin(a/2)/a = ½ sinc(a / 2π), safe at 0
+    return np.concatenate([np.cos(angle / 2.0), 0.5 * np.sinc(angle / (2.0 * np.pi)) * dtheta],
+                          axis=1)
+
+
+def _imu(truth: _Truth, gravity: float, config: SensorConfig, bias: SensorBias,
+         rngs: dict[str, np.random.Generator]) -> ImuSeries:
+    stamp = truth.times(config.imu_rate)
+    n = len(stamp)
+    k = _locate(truth.t, stamp)
+    nu, nu_dot = _hermite(k, truth.nu, truth.nu_dot)
+    q = _nlerp(k, truth.q)
+    v, w, v_dot = nu[:, :3], nu[:, 3:], nu_dot[:, :3]
+    # Rᵀ [0, 0, g] = g × (third row of R): gravity in the body frame
+    g_body = gravity * quat_to_matrix(q)[:, 2, :]
+    # f = v̇ + ω × v − Rᵀ [0, 0, g]: specific force at the body origin (FRD)
+    specific_force = v_dot + np.cross(w, v) - g_body
+    gyro = (w + np.asarray(bias.gyro)
+            + _random_walk(rngs["gyro_walk"], n, config.gyro_bias_walk, config.imu_rate)
+            + _white(rngs["gyro_noise"], (n, 3), config.gyro_noise))
+    accel = (specific_force + np.asarray(bias.accel)
+             + _random_walk(rngs["accel_walk"], n, config.accel_bias_walk, config.imu_rate)
+             + _white(rngs["accel_noise"], (n, 3), config.accel_noise))
+    dtheta = _white(rngs["orientation"], (n, 3), config.orientation_noise)
+    # q_meas = q_flu_enu ⊗ exp(δθ / 2): perturbation about the sensor (FLU) axes
+    q_meas = _quat_mul(quat_frd_ned_to_flu_enu(q), _small_rotation(dtheta))
+    q_meas *= np.where(q_meas[:, :1] < 0.0, -1.0, 1.0)
+    return ImuSeries(
+        stamp=stamp,
+        frame_id=FRAME_IDS["imu/data"],
+        orientation=_wxyz_to_xyzw(q_meas),
+        angular_velocity=body_vec(gyro),
+        linear_acceleration=body_vec(accel),
+        orientation_covariance=_diag3(config.orientation_noise**2),
+        angular_velocity_covariance=_diag3(config.gyro_noise**2),
+        linear_acceleration_covariance=_diag3(config.accel_noise**2),
+    )
+
+
+def _diag3(variance: float) -> FloatArray:
+    """Row-major 3×3 covariance σ² I, shape (9,)."""
+    return (np.eye(3) * variance).ravel()
+
+
+def _dropout_keep(t0: float, stamp: FloatArray, rate: float, mean: float,
+                  rng: np.random.Generator) -> BoolArray:
+    """True for stamps outside DVL dropouts (locked/lost alternating renewal process)."""
+    keep = np.ones(len(stamp), dtype=bool)
+    if rate <= 0.0 or mean <= 0.0 or len(stamp) == 0:
+        return keep
+    span = float(stamp[-1] - t0)
+    edges = np.zeros(0)
+    cycles = int(2.0 * span * rate) + 16  # expected cycles ≤ span·rate; draw more per batch
+    while edges.size == 0 or edges[-1] <= span:
+        locked = rng.exponential(1.0 / rate, cycles)
+        lost = rng.exponential(mean, cycles)
+        start = edges[-1] if edges.size else 0.0
+        # phase ends: locked₁, lost₁, locked₂, … accumulated from t0
+        edges = np.concatenate([edges, start + np.cumsum(np.column_stack([locked, lost]).ravel())])
+    # even phase index → locked, odd → in a dropout
+    phase = np.searchsorted(edges, stamp - t0, side="right")
+    return np.asarray(phase % 2 == 0)
+
+
+def _dvl(truth: _Truth, config: SensorConfig, bias: SensorBias,
+         rngs: dict[str, np.random.Generator]) -> TwistSeries:
+    stamp = truth.times(config.dvl_rate)
+    n = len(stamp)
+    nu, _ = _hermite(_locate(truth.t, stamp), truth.nu, truth.nu_dot)
+    # v_dvl = v + b_dvl + noise (bottom lock: velocity over ground, FRD)
+    v = nu[:, :3] + np.asarray(bias.dvl) + _white(rngs["dvl_noise"], (n, 3), config.dvl_noise)
+    keep = _dropout_keep(float(truth.t[0]), stamp, config.dvl_dropout_rate,
+                         config.dvl_dropout_mean, rngs["dvl_dropout"])
+    cov = np.diag([config.dvl_noise**2] * 3 + [UNUSED_VARIANCE] * 3).ravel()
+    return TwistSeries(
+        stamp=stamp[keep],
+        frame_id=FRAME_IDS["dvl/twist"],
+        linear=body_vec(v[keep]),
+        angular=np.zeros((int(keep.sum()), 3)),
+        covariance=cov,
+    )
+
+
+def _pressure(truth: _Truth, rho: float, gravity: float, config: SensorConfig,
+              rngs: dict[str, np.random.Generator]) -> PressureSeries:
+    stamp = truth.times(config.pressure_rate)
+    position, _ = _hermite(_locate(truth.t, stamp), truth.position, truth.p_dot)
+    noise = _white(rngs["pressure"], (len(stamp),), config.pressure_noise)
+    # p = p_atm + ρ g z + noise, z the NED depth
+    pressure = config.atmospheric_pressure + rho * gravity * position[:, 2] + noise
+    return PressureSeries(stamp=stamp, frame_id=FRAME_IDS["pressure"],
+                          fluid_pressure=pressure, variance=config.pressure_noise**2)
+
+
+def _thrusters(traj: Trajectory, config: SensorConfig,
+               rngs: dict[str, np.random.Generator]) -> JointSeries:
+    t = np.asarray(traj.t, dtype=float)
+    # each message reports the mean over the window [s − w, s] before its stamp s, from the
+    # running integral of the step means (exact for piecewise-constant step means)
+    w = 1.0 / config.thruster_rate
+    edges = np.r_[t, t[-1] + traj.dt] if len(t) > 1 else np.r_[t, t + w]
+    stamp = sample_times(float(edges[0]) + w, float(edges[-1]), config.thruster_rate)
+
+    def window_mean(x: FloatArray) -> FloatArray:
+        if x.shape[1] == 0:
+            return np.zeros((len(stamp), 0))
+        integral = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(x * np.diff(edges)[:, None],
+                                                                    axis=0)])
+        hi = np.stack([np.interp(stamp, edges, c) for c in integral.T], axis=1)
+        lo = np.stack([np.interp(stamp - w, edges, c) for c in integral.T], axis=1)
+        return np.asarray((hi - lo) / w, dtype=float)
+
+    speed = window_mean(np.asarray(traj.rotor_speed, dtype=float))
+    thrust = window_mean(np.asarray(traj.thrust, dtype=float))
+    noise = _white(rngs["rpm"], speed.shape, config.rpm_noise)
+    return JointSeries(
+        stamp=stamp,
+        frame_id=FRAME_IDS["thrusters/state"],
+        names=tuple(traj.thruster_names),
+        # ω_rotor = 2π n + noise (rev/s → rad/s)
+        velocity=2.0 * np.pi * speed + noise,
+        effort=thrust,
+    )
+
+
+def _odometry(truth: _Truth, config: SensorConfig) -> OdometrySeries:
+    stamp = truth.times(config.truth_rate)
+    k = _locate(truth.t, stamp)
+    position, _ = _hermite(k, truth.position, truth.p_dot)
+    nu, _ = _hermite(k, truth.nu, truth.nu_dot)
+    return OdometrySeries(
+        stamp=stamp,
+        frame_id=FRAME_IDS["truth/odom"],
+        child_frame_id="base_link",
+        position=world_vec(position),
+        orientation=_wxyz_to_xyzw(quat_frd_ned_to_flu_enu(_nlerp(k, truth.q))),
+        linear=body_vec(nu[:, :3]),
+        angular=body_vec(nu[:, 3:]),
+    )
+
+
+def _check_trajectory(traj: Trajectory) -> None:
+    """Raise ValueError unless the trajectory's arrays agree in shape and time increases."""
+    t = np.asarray(traj.t, dtype=float)
+    if t.ndim != 1 or len(t) == 0:
+        raise ValueError(f"trajectory.t must be a non-empty 1-D array, got shape {t.shape}")
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise ValueError("trajectory.t must be finite and strictly increasing")
+    n = len(t)
+    for name, width in (("position", 3), ("quaternion", 4), ("nu", 6), ("nu_dot", 6)):
+        a = np.asarray(getattr(traj, name))
+        if a.shape != (n, width):
+            raise ValueError(f"trajectory.{name} must have shape ({n}, {width}), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"trajectory.{name} contains NaN or Inf")
+    if np.any(np.linalg.norm(traj.quaternion, axis=1) < 1e-9):
+        raise ValueError("trajectory.quaternion contains a zero quaternion")
+    m = len(traj.thruster_names)
+    for name in ("rotor_speed", "thrust"):
+        a = np.asarray(getattr(traj, name))
+        if a.shape != (n, m):
+            raise ValueError(f"trajectory.{name} must have shape ({n}, {m}) for "
+                             f"{m} thruster names, got {a.shape}")

@@ -1,0 +1,322 @@
+"""rosbag2 bags (MCAP or SQLite3) of measurement series, written and read with rosbags.
+
+Bags are rosbag2 directories (``metadata.yaml`` + storage file) that ``ros2 bag`` on Jazzy,
+rosbags and the mcap library read. Topic names are stored fully qualified (``/imu/data``) and
+returned relative (``imu/data``), as in :data:`dampest_ros.core.measurements.TOPIC_TYPES`.
+The log time of every message is its header stamp in nanoseconds.
+
+Messages are serialized and deserialized with the fixed-layout numpy codec of
+:mod:`dampest_ros.io.cdr`; the only per-message Python work is the rosbags read or write call.
+"""
+
+from __future__ import annotations
+
+import shutil
+import warnings
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import suppress
+from dataclasses import dataclass, fields
+from itertools import chain
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rosbags.interfaces import (
+    Connection,
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+
+from dampest_ros.core.measurements import TOPIC_TYPES, Series
+from dampest_ros.io import cdr
+
+#: Topics published with the sensor-data QoS (best effort, volatile, depth 5).
+SENSOR_TOPICS = ("imu/data", "dvl/twist", "pressure", "thrusters/state")
+#: Topics published transient local with depth 1 (late joiners get the last message).
+LATCHED_TOPICS = ("dampest/model",)
+
+#: Messages decoded at once per topic while reading: bounds the raw bytes held in memory
+#: (about 2 MB per topic) without slowing the numpy decode down.
+READ_CHUNK = 5_000
+
+_STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
+_INFINITE = QosTime(2147483647, 4294967295)  # "infinite" as rosbag2 writes it (and rosbags)
+
+
+class BagError(RuntimeError):
+    """A bag cannot be read (missing metadata, corrupt or truncated storage file)."""
+
+
+class MissingTopicError(LookupError):
+    """A requested topic is not in the bag; the message lists the topics that are."""
+
+
+def _relative(topic: str) -> str:
+    return topic.lstrip("/")
+
+
+def _is(topic: str, names: Iterable[str]) -> bool:
+    rel = _relative(topic)
+    return any(rel == n or rel.endswith("/" + n) for n in names)
+
+
+def offered_qos(topic: str) -> Qos:
+    """QoS offered by the publisher of a topic (stored in the bag metadata).
+
+    Sensor topics (also under a namespace, e.g. ``vehicle/imu/data``): best effort, volatile,
+    keep last 5. ``dampest/model``: reliable, transient local, keep last 1. Others: reliable,
+    volatile, keep last 10.
+    """
+    if _is(topic, SENSOR_TOPICS):
+        rel, dur, depth = QosReliability.BEST_EFFORT, QosDurability.VOLATILE, 5
+    elif _is(topic, LATCHED_TOPICS):
+        rel, dur, depth = QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, 1
+    else:
+        rel, dur, depth = QosReliability.RELIABLE, QosDurability.VOLATILE, 10
+    return Qos(QosHistory.KEEP_LAST, depth, rel, dur, _INFINITE, _INFINITE,
+               QosLiveliness.AUTOMATIC, _INFINITE, False)
+
+
+def _message_type(topic: str, series: Series) -> str:
+    msgtype = cdr.message_type(series)
+    contract = TOPIC_TYPES.get(_relative(topic))
+    if contract is not None and contract[0] != msgtype:
+        raise ValueError(f"topic {topic!r} carries {contract[0]} (DESIGN.md §3), "
+                         f"got a {type(series).__name__} ({msgtype})")
+    return msgtype
+
+
+def write_bag(path: str | Path, recording: dict[str, Series], *, storage: str = "mcap"
+              ) -> Path:
+    """Write a recording as a rosbag2 bag, messages interleaved in stamp order.
+
+    Parameters
+    ----------
+    path : str or Path
+        Bag directory to create; it must not exist.
+    recording : dict of str to Series
+        Topic name (relative or absolute) → series; the message type follows from the series
+        class and must match the topic contract for the topics of ``TOPIC_TYPES``. Stamps
+        (s) must be ≥ 0: they become the header stamps and the log times (ns).
+    storage : {'mcap', 'sqlite3'}
+
+    Returns
+    -------
+    Path
+        The bag directory.
+
+    Raises
+    ------
+    FileExistsError
+        If ``path`` exists (bags are never overwritten).
+    """
+    path = Path(path)
+    if path.exists():
+        raise FileExistsError(f"{path} exists; write_bag never overwrites a bag, "
+                              "remove it or choose another path")
+    if storage not in _STORAGES:
+        raise ValueError(f"storage must be one of {sorted(_STORAGES)}, got {storage!r}")
+    topics = ["/" + _relative(t) for t in recording]
+    types = [_message_type(t, s) for t, s in zip(topics, recording.values(), strict=True)]
+    msgs = [cdr.encode(s) for s in recording.values()]
+    stamps = [cdr.stamps_to_ns(s.stamp) for s in recording.values()]
+    log_ns = np.concatenate(stamps) if stamps else np.zeros(0, dtype=np.int64)
+    if log_ns.size and log_ns.min() < 0:
+        raise ValueError("stamps must be >= 0 s to serve as bag log times")
+    order = np.argsort(log_ns, kind="stable")
+    conn_index = np.repeat(np.arange(len(msgs)), [len(m) for m in msgs])[order].tolist()
+    flat = list(chain.from_iterable(msgs))
+    writer = Writer(path, version=9, storage_plugin=_STORAGES[storage])
+    writer.open()  # creates the directory, refusing an existing one
+    try:
+        conns = [writer.add_connection(t, m, typestore=cdr.typestore(),
+                                       offered_qos_profiles=[offered_qos(t)])
+                 for t, m in zip(topics, types, strict=True)]
+        for k, i, t in zip(conn_index, order.tolist(), log_ns[order].tolist(), strict=True):
+            writer.write(conns[k], t, flat[i])
+        writer.close()
+    except BaseException:
+        with suppress(Exception):
+            writer.abort()
+        shutil.rmtree(path, ignore_errors=True)  # made by open() above: no half-written bag
+        raise
+    return path
+
+
+# --- reading -------------------------------------------------------------------------------
+
+
+def _files(path: Path) -> str:
+    if path.is_dir():
+        names = sorted(p.name for p in path.iterdir() if p.suffix in (".mcap", ".db3", ".yaml"))
+        return f"{path} ({', '.join(names) or 'no storage files'})"
+    return str(path)
+
+
+class _Bag:
+    """A rosbags Reader whose failures become :class:`BagError` naming the files."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.exists():
+            raise FileNotFoundError(f"no bag at {self.path}")
+        try:
+            self.reader = Reader(self.path)
+            self.reader.open()
+        except Exception as exc:
+            raise BagError(f"cannot read bag {_files(self.path)}: {exc}") from exc
+
+    def __enter__(self) -> _Bag:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.reader.close()
+
+    def messages(self, conns: Sequence[Connection]) -> Iterator[tuple[Connection, bytes]]:
+        try:
+            for conn, _, data in self.reader.messages(connections=conns):
+                yield conn, data
+        except Exception as exc:
+            raise BagError(f"cannot read bag {_files(self.path)}: {exc}") from exc
+
+    def decode(self, topic: str, msgtype: str, raw: list[bytes]) -> Series:
+        try:
+            return cdr.decode(msgtype, raw)
+        except Exception as exc:
+            raise BagError(f"cannot decode {topic} ({msgtype}) in bag {_files(self.path)}: "
+                           f"{exc}") from exc
+
+
+def _concat(parts: list[Series]) -> Series:
+    """Join series chunks along axis 0 (per-series values from the first chunk)."""
+    if len(parts) == 1:
+        return parts[0]
+    first = parts[0]
+    kw: dict[str, Any] = {f.name: getattr(first, f.name) for f in fields(first)}
+    for name, value in kw.items():
+        if not isinstance(value, np.ndarray) and any(getattr(p, name) != value for p in parts):
+            warnings.warn(f"{type(first).__name__}.{name} changes within the series; keeping "
+                          f"the first, {value!r}", stacklevel=3)
+    for name, arr in first.arrays().items():
+        if arr.ndim >= 1 and arr.shape[0] == len(first):
+            kw[name] = np.concatenate([getattr(p, name) for p in parts])
+    return type(first)(**kw)
+
+
+def read_bag(path: str | Path, topics: Sequence[str] | None = None) -> dict[str, Series]:
+    """Read the series of a rosbag2 bag (MCAP or SQLite3 directory, or a single storage file).
+
+    Parameters
+    ----------
+    path : str or Path
+    topics : sequence of str, optional
+        Topics to read, with or without the leading ``/``. Default: every topic whose type
+        is one of :data:`dampest_ros.io.cdr.SERIES_CLASSES` (others are skipped).
+
+    Returns
+    -------
+    dict of str to Series
+        Keyed by the names asked for (default: bag names without the leading ``/``); rows
+        in bag (log time) order. Stamps (s) are the header stamps.
+
+    Raises
+    ------
+    MissingTopicError
+        If a requested topic is not in the bag; lists the topics that are.
+    BagError
+        If the bag is missing its metadata, corrupt or truncated; names the files.
+    """
+    with _Bag(path) as bag:
+        info = bag.reader.topics
+        if topics is None:
+            wanted = {_relative(t): t for t, i in info.items() if i.msgtype in cdr.SERIES_CLASSES}
+        else:
+            by_rel = {_relative(t): t for t in info}
+            missing = [t for t in topics if _relative(t) not in by_rel]
+            if missing:
+                have = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(info.items()))
+                raise MissingTopicError(f"topics {missing} not in bag {path}; it has: {have}")
+            wanted = {t: by_rel[_relative(t)] for t in topics}
+        key = {name: out for out, name in wanted.items()}
+        msgtype = {name: str(info[name].msgtype) for name in key}
+        for name, typ in msgtype.items():
+            if typ not in cdr.SERIES_CLASSES:
+                raise TypeError(f"topic {name} has type {typ}, which has no series class; "
+                                f"readable types: {sorted(cdr.SERIES_CLASSES)}")
+        raw: dict[str, list[bytes]] = {name: [] for name in key}
+        parts: dict[str, list[Series]] = {name: [] for name in key}
+        conns = [c for name in key for c in info[name].connections]
+        for conn, data in bag.messages(conns):
+            buf = raw[conn.topic]
+            buf.append(data)
+            if len(buf) == READ_CHUNK:
+                parts[conn.topic].append(bag.decode(conn.topic, msgtype[conn.topic], buf))
+                buf.clear()
+        out: dict[str, Series] = {}
+        for name, buf in raw.items():
+            if buf or not parts[name]:
+                parts[name].append(bag.decode(name, msgtype[name], buf))
+            series = _concat(parts[name])
+            if info[name].msgcount and len(series) != info[name].msgcount:
+                raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "
+                               f"{len(series)} of its {info[name].msgcount} messages")
+            out[key[name]] = series
+    return out
+
+
+@dataclass(frozen=True)
+class TopicSummary:
+    """One topic of a bag: name (as stored), message type and message count."""
+
+    name: str
+    msgtype: str
+    count: int
+
+
+@dataclass(frozen=True)
+class BagSummary:
+    """What a bag holds: storage, time range of the log times (s) and its topics."""
+
+    path: Path
+    storage: str
+    start: float
+    end: float
+    topics: dict[str, TopicSummary]
+
+    @property
+    def message_count(self) -> int:
+        """Total number of messages."""
+        return sum(t.count for t in self.topics.values())
+
+    @property
+    def duration(self) -> float:
+        """end − start (s)."""
+        return self.end - self.start
+
+
+def bag_summary(path: str | Path) -> BagSummary:
+    """Topics, types, counts and time range of a bag, from its metadata (no messages read).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    BagSummary
+        ``start``/``end``: first and last log time (s); 0 for an empty bag.
+    """
+    with _Bag(path) as bag:
+        r = bag.reader
+        topics = {t: TopicSummary(t, str(i.msgtype), i.msgcount) for t, i in r.topics.items()}
+        empty = r.message_count == 0
+        start = 0 if empty else r.start_time
+        end = 0 if empty else r.end_time - 1  # rosbags: end_time is one past the last
+        files = [bag.path] if bag.path.is_file() else list(bag.path.iterdir())
+        storage = "mcap" if any(f.suffix == ".mcap" for f in files) else "sqlite3"
+    return BagSummary(bag.path, storage, start / 1e9, end / 1e9, topics)

@@ -1,0 +1,392 @@
+"""Vehicle presets and the model file (a ROS 2 parameters file), read and written as YAML.
+
+Vehicle presets (``config/vehicles/<name>.yaml``) are loaded by name or path into a
+:class:`dampest_ros.core.vehicle.Vehicle`.
+
+The model file is a valid ROS 2 parameters file, so ``--ros-args --params-file`` loads it as
+well as :func:`load_model` does (DESIGN.md §1, §3)::
+
+    /**:
+      ros__parameters:
+        model:
+          sign_convention: dissipative_positive
+          parameter_names: [X_u, Y_v, ..., X_uu, ...]
+          theta: [13.7, 0.0, ..., 141.0, ...]
+          theta_std: [0.2, 0.1, ..., 1.5, ...]
+          M: [...]              # 36 numbers, row-major, M_RB + M_A
+          version: 1
+          terms:                # structure of D(ν), enough to rebuild it (values are theta)
+            linear: [X_u, Y_v, Z_w, K_p, M_q, N_r]     # SNAME names (off-diagonal: Y_r, ...)
+            quadratic: [X_uu, Y_vv, Z_ww, K_pp, M_qq, N_rr]
+            cross: {rows: [1], cols: [1], alphas: ['|r|'], names: [Y_vr]}  # rows X..N = 0..5
+            freq: {dofs: [0], rates: [2.0]}            # dofs u..r = 0..5, rates λ (1/s)
+            added: true                               # Munk moments added.K_vw, M_uw, N_uv
+            residual: {modes: [...]}                   # r unit 6-vectors, row-major
+          ...                   # extra entries (scalars, homogeneous arrays, namespaces)
+
+ROS parameters allow only scalars and non-empty homogeneous arrays as leaves (nested
+mappings are namespaces), so the term structure is stored as parallel arrays, with integer
+indices where letters such as ``N`` or ``Y`` would read as booleans. Damping coefficients are
+positive when dissipative (force on the left-hand side is +D(ν)ν).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml  # type: ignore[import-untyped]  # no types-PyYAML in the lock
+
+from dampest_ros.core.damping import TERM_KINDS, Alpha, DampingModel
+from dampest_ros.core.measurements import FloatArray
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
+from dampest_ros.core.vehicle import Vehicle, damping_from_spec
+
+SIGN_CONVENTION = "dissipative_positive"
+_RESERVED = ("sign_convention", "parameter_names", "theta", "theta_std", "M", "version",
+             "terms")
+
+
+def _read_yaml(path: Path) -> Any:
+    try:
+        return yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ConfigError(str(path), f"not valid YAML: {exc}") from None
+
+
+# --- vehicles ------------------------------------------------------------------------------
+
+
+def vehicle_dirs() -> list[Path]:
+    """Where presets are looked up: the source tree's ``config/vehicles``, then the installed
+    ``<prefix>/share/dampest_ros/config/vehicles``."""
+    package = Path(__file__).resolve().parents[1]
+    return [package.parent / "config" / "vehicles",
+            Path(sys.prefix) / "share" / "dampest_ros" / "config" / "vehicles"]
+
+
+def list_vehicles() -> list[str]:
+    """Names of the available presets."""
+    return sorted({p.stem for d in vehicle_dirs() if d.is_dir() for p in d.glob("*.yaml")})
+
+
+def vehicle_path(name_or_path: str | Path) -> Path:
+    """The YAML file of a preset name (``bluerov2_heavy``) or of a path."""
+    text = str(name_or_path)
+    if isinstance(name_or_path, Path) or text.endswith((".yaml", ".yml")) or os.sep in text:
+        path = Path(name_or_path)
+        if not path.is_file():
+            raise FileNotFoundError(f"no vehicle file {path}")
+        return path
+    for d in vehicle_dirs():
+        if (d / f"{text}.yaml").is_file():
+            return d / f"{text}.yaml"
+    raise FileNotFoundError(f"no vehicle preset {text!r}; presets: {list_vehicles()} "
+                            f"(searched {[str(d) for d in vehicle_dirs()]})")
+
+
+def load_vehicle(name_or_path: str | Path) -> Vehicle:
+    """Load a vehicle preset by name or path.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        A preset name such as ``bluerov2_heavy`` or a path to a YAML file with the sections
+        ``vehicle``, ``damping`` and ``thrusters`` (see :mod:`dampest_ros.core.vehicle`).
+
+    Returns
+    -------
+    Vehicle
+
+    Raises
+    ------
+    ConfigError
+        Naming the invalid field (e.g. ``mass``) and the file.
+    """
+    path = vehicle_path(name_or_path)
+    doc = _read_yaml(path)
+    if not isinstance(doc, dict):
+        raise ConfigError(str(path), "a vehicle file is a mapping with sections vehicle, "
+                                     "damping, thrusters")
+    try:
+        return Vehicle.from_dict(doc)
+    except ConfigError as exc:
+        raise ConfigError(exc.field, f"{exc.reason} (in {path})") from None
+
+
+# --- damping spec --------------------------------------------------------------------------
+
+
+def damping_spec(model: DampingModel, theta: FloatArray) -> dict[str, Any]:
+    """The ``damping`` mapping of a vehicle preset for a model and its coefficients.
+
+    The inverse of :func:`dampest_ros.core.vehicle.damping_from_spec`: that function rebuilds
+    the same parameter names, θ and regressor from the result.
+
+    Parameters
+    ----------
+    model : DampingModel
+        Terms in the order of ``TERM_KINDS`` (as ``damping_from_spec`` builds them).
+    theta : ndarray, shape (p,)
+
+    Returns
+    -------
+    dict
+        Sections ``linear``, ``quadratic`` (name → value), ``cross``, ``freq`` (lists of
+        mappings), ``added`` (name → value), ``residual`` (``modes``, ``values``).
+    """
+    if model.kinds != sorted(model.kinds, key=TERM_KINDS.index):
+        raise ValueError(f"terms must be in the order {TERM_KINDS}, got {model.kinds}")
+    theta = np.asarray(theta, dtype=float)
+    if theta.shape != (model.n_params,):
+        raise ValueError(f"theta has shape {theta.shape}, the model {model.n_params} parameters")
+    spec: dict[str, Any] = {}
+    for term in model.terms:
+        values = [float(v) for v in theta[model.slice(term.kind)]]
+        named = dict(zip(term.parameter_names, values, strict=True))
+        if term.kind in ("linear", "quadratic", "added"):
+            spec[term.kind] = named
+        elif term.kind == "cross":
+            spec["cross"] = []
+            for b, v in zip(term.bases, values, strict=True):
+                (row, col), = np.argwhere(b.B != 0)
+                if Alpha.parse(b.alpha.label()) != b.alpha:
+                    raise ValueError(f"cross term {b.name}: α {b.alpha} has no text form")
+                spec["cross"].append({"row": FORCE_NAMES[row], "col": DOF_NAMES[col],
+                                      "alpha": b.alpha.label(), "name": b.name, "value": v})
+        elif term.kind == "freq":
+            spec["freq"] = [{"dof": DOF_NAMES[int(d)], "rate": float(lam), "c": v}
+                            for d, lam, v in zip(term.state_dofs, term.rates, values,
+                                                 strict=True)]
+        elif term.kind == "residual":
+            spec["residual"] = {"modes": [list(map(float, b.alpha.w)) for b in term.bases],
+                                "values": values}
+    return spec
+
+
+def _terms_params(spec: Mapping[str, Any]) -> dict[str, Any]:
+    """The structure of a damping spec as ROS parameters (no values, no empty arrays)."""
+    out: dict[str, Any] = {}
+    for kind in ("linear", "quadratic"):
+        if spec.get(kind):
+            out[kind] = list(spec[kind])
+    if spec.get("cross"):
+        c = spec["cross"]
+        out["cross"] = {"rows": [FORCE_NAMES.index(x["row"]) for x in c],
+                        "cols": [DOF_NAMES.index(x["col"]) for x in c],
+                        "alphas": [x["alpha"] for x in c], "names": [x["name"] for x in c]}
+    if spec.get("freq"):
+        out["freq"] = {"dofs": [DOF_NAMES.index(x["dof"]) for x in spec["freq"]],
+                       "rates": [float(x["rate"]) for x in spec["freq"]]}
+    if "added" in spec:
+        out["added"] = True
+    if spec.get("residual"):
+        out["residual"] = {"modes": [float(v) for m in spec["residual"]["modes"] for v in m]}
+    return out
+
+
+def _spec_from_params(terms: Mapping[str, Any]) -> dict[str, Any]:
+    """A damping spec (all values zero) from :func:`_terms_params` output."""
+    spec: dict[str, Any] = {}
+    for kind in ("linear", "quadratic"):
+        if kind in terms:
+            spec[kind] = {str(n): 0.0 for n in terms[kind]}
+    if "cross" in terms:
+        c = terms["cross"]
+        spec["cross"] = [{"row": int(r), "col": int(k), "alpha": str(a), "name": str(n)}
+                         for r, k, a, n in zip(c["rows"], c["cols"], c["alphas"], c["names"],
+                                               strict=True)]
+    if "freq" in terms:
+        spec["freq"] = [{"dof": DOF_NAMES[int(d)], "rate": float(r)}
+                        for d, r in zip(terms["freq"]["dofs"], terms["freq"]["rates"],
+                                        strict=True)]
+    if terms.get("added"):
+        spec["added"] = {}
+    if "residual" in terms:
+        spec["residual"] = {"modes": np.reshape(terms["residual"]["modes"], (-1, 6)).tolist()}
+    return spec
+
+
+# --- the model file ------------------------------------------------------------------------
+
+
+@dataclass
+class ModelFile:
+    """The content of a model file.
+
+    Parameters
+    ----------
+    parameter_names : list of str
+        SNAME names, in θ order.
+    theta, theta_std : ndarray, shape (p,)
+        Coefficients (positive when dissipative) and their standard deviations, SI units.
+    M : ndarray, shape (6, 6)
+        Mass matrix M_RB + M_A (kg, kg·m, kg·m²), FRD body frame.
+    version : int
+        Bumped at each publish.
+    damping : DampingModel or None
+        Rebuilt from ``model.terms`` when the file has them.
+    extra : dict
+        Every other entry under ``model``.
+    """
+
+    parameter_names: list[str]
+    theta: FloatArray
+    theta_std: FloatArray
+    M: FloatArray
+    version: int = 1
+    damping: DampingModel | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+    sign_convention: str = SIGN_CONVENTION
+
+
+def _param_value(key: str, value: Any) -> Any:
+    """``value`` as a ROS parameter (scalar, homogeneous non-empty array or namespace)."""
+    if isinstance(value, np.ndarray | np.generic):
+        value = value.tolist()
+    if isinstance(value, Mapping):
+        return {str(k): _param_value(f"{key}.{k}", v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        items = [_param_value(key, v) for v in value]
+        if items and all(isinstance(v, int | float) and not isinstance(v, bool) for v in items):
+            return items if all(isinstance(v, int) for v in items) else list(map(float, items))
+        if items and any(all(isinstance(v, t) for v in items) for t in (bool, str)):
+            return items
+        raise ValueError(f"model.{key}: a ROS parameter array must be non-empty and of one "
+                         f"type (bool, number or string), got {value!r}")
+    if isinstance(value, bool | int | float | str):
+        return value
+    raise ValueError(f"model.{key}: {type(value).__name__} is not a ROS parameter type")
+
+
+class _Dumper(yaml.SafeDumper):  # type: ignore[misc]
+    """Quotes y/Y/n/N, which the ROS parameter parser reads as booleans."""
+
+
+_Dumper.add_representer(str, lambda d, s: d.represent_scalar(
+    "tag:yaml.org,2002:str", s, style="'" if s in ("y", "Y", "n", "N") else None))
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            os.fchmod(f.fileno(), 0o644)
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def save_model(path: str | Path, names: Sequence[str], theta: FloatArray,
+               theta_std: FloatArray, M: FloatArray, extra: Mapping[str, Any] | None = None,
+               *, damping: DampingModel | None = None, version: int = 1) -> Path:
+    """Write the model file atomically (temporary file in the same directory + rename).
+
+    Parameters
+    ----------
+    path : str or Path
+    names : sequence of str, length p
+        Parameter names in θ order.
+    theta, theta_std : ndarray, shape (p,)
+        Coefficients (positive when dissipative) and standard deviations, SI units.
+    M : ndarray, shape (6, 6) or (36,)
+        Mass matrix, row-major.
+    extra : mapping, optional
+        More entries under ``model`` (scalars, homogeneous arrays, nested namespaces).
+    damping : DampingModel, optional
+        Written as ``model.terms`` so that :func:`load_model` rebuilds it; its parameter
+        names must be ``names``.
+    version : int
+
+    Returns
+    -------
+    Path
+    """
+    path = Path(path)
+    names = [str(n) for n in names]
+    theta = np.asarray(theta, dtype=float)
+    theta_std = np.asarray(theta_std, dtype=float)
+    M = np.asarray(M, dtype=float)
+    if not names or theta.shape != (len(names),) or theta_std.shape != (len(names),):
+        raise ValueError(f"need p >= 1 names, theta and theta_std of one length, got "
+                         f"{len(names)}, {theta.shape}, {theta_std.shape}")
+    if M.size != 36:
+        raise ValueError(f"M must have 36 entries, got shape {M.shape}")
+    model: dict[str, Any] = {
+        "sign_convention": SIGN_CONVENTION, "parameter_names": names,
+        "theta": theta.tolist(), "theta_std": theta_std.tolist(),
+        "M": M.reshape(36).tolist(), "version": int(version)}
+    if damping is not None:
+        if damping.parameter_names != names:
+            raise ValueError("damping.parameter_names differ from names")
+        model["terms"] = _terms_params(damping_spec(damping, theta))
+    for key, value in (extra or {}).items():
+        if key in _RESERVED:
+            raise ValueError(f"extra key {key!r} is reserved")
+        model[str(key)] = _param_value(str(key), value)
+    text = ("# dampest_ros model: a ROS 2 parameters file (--ros-args --params-file).\n"
+            "# Damping coefficients are positive when dissipative; M is row-major, FRD.\n"
+            + yaml.dump({"/**": {"ros__parameters": {"model": model}}}, Dumper=_Dumper,
+                        sort_keys=False, default_flow_style=None, width=100))
+    _atomic_write(path, text)
+    return path
+
+
+def _model_section(doc: Any, path: Path) -> dict[str, Any]:
+    """``<node>: ros__parameters: model`` of a parameters file (the first node that has it)."""
+    for node in (doc.values() if isinstance(doc, dict) else ()):
+        params = node.get("ros__parameters") if isinstance(node, dict) else None
+        if isinstance(params, dict) and isinstance(params.get("model"), dict):
+            return params["model"]
+    raise ConfigError("model", f"no <node>: ros__parameters: model: mapping in {path}")
+
+
+def load_model(path: str | Path) -> ModelFile:
+    """Read a model file written by :func:`save_model` (or by the estimator's ``~/save``).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    ModelFile
+
+    Raises
+    ------
+    ConfigError
+        Naming the missing or invalid ``model.*`` entry and the file.
+    """
+    path = Path(path)
+    model = _model_section(_read_yaml(path), path)
+    for key in _RESERVED[:-1]:
+        if key not in model:
+            raise ConfigError(f"model.{key}", f"missing in {path}")
+    if model["sign_convention"] != SIGN_CONVENTION:
+        raise ConfigError("model.sign_convention",
+                          f"{model['sign_convention']!r}, expected {SIGN_CONVENTION!r} ({path})")
+    names = [str(n) for n in model["parameter_names"]]
+    arrays = {k: np.asarray(model[k], dtype=float) for k in ("theta", "theta_std", "M")}
+    for key, size in (("theta", len(names)), ("theta_std", len(names)), ("M", 36)):
+        if arrays[key].shape != (size,):
+            raise ConfigError(f"model.{key}", f"needs {size} numbers, got "
+                                              f"{arrays[key].shape} ({path})")
+    damping = None
+    if "terms" in model:
+        damping, _ = damping_from_spec(_spec_from_params(model["terms"]))
+        if damping.parameter_names != names:
+            raise ConfigError("model.terms", f"the terms give parameters "
+                                             f"{damping.parameter_names}, not {names} ({path})")
+    return ModelFile(names, arrays["theta"], arrays["theta_std"], arrays["M"].reshape(6, 6),
+                     int(model["version"]), damping,
+                     {k: v for k, v in model.items() if k not in _RESERVED})

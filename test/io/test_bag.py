@@ -1,0 +1,233 @@
+"""rosbag2 bags: written by write_bag, read back by rosbags, by the mcap library and by
+read_bag, message for message."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import StoragePlugin, Writer
+
+from dampest_ros.core.measurements import ImuSeries, Series, TwistSeries
+from dampest_ros.io import bag, cdr
+
+Tree = Callable[[Any], Any]
+ToRos = Callable[[Series, int], Any]
+AssertSame = Callable[[Series, Series], None]
+
+
+def stamp_ns(s: Series, i: int) -> int:
+    return int(cdr.stamps_to_ns(s.stamp[i:i + 1])[0])
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_rosbags_reads_every_message_written(storage: str, tmp_path: Path,
+                                             recording: dict[str, Series], typestore: Any,
+                                             to_ros: ToRos, tree: Tree) -> None:
+    path = bag.write_bag(tmp_path / "run", recording, storage=storage)
+    seen: dict[str, int] = {t: 0 for t in recording}
+    last = -1
+    with AnyReader([path], default_typestore=typestore) as reader:
+        assert {c.topic for c in reader.connections} == {"/" + t for t in recording}
+        for conn, log_ns, raw in reader.messages():
+            topic = conn.topic.lstrip("/")
+            s, i = recording[topic], seen[topic]
+            assert conn.msgtype == cdr.message_type(s)
+            assert tree(reader.deserialize(raw, conn.msgtype)) == tree(to_ros(s, i))
+            assert log_ns == stamp_ns(s, i) >= last  # log time = header stamp, interleaved
+            last = log_ns
+            seen[topic] += 1
+    assert seen == {t: len(s) for t, s in recording.items()}
+
+
+def test_mcap_library_decodes_every_message_written(tmp_path: Path,
+                                                    recording: dict[str, Series],
+                                                    to_ros: ToRos, tree: Tree) -> None:
+    path = bag.write_bag(tmp_path / "run", recording)
+    (mcap_file,) = path.glob("*.mcap")
+    seen: dict[str, int] = {t: 0 for t in recording}
+    with mcap_file.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            topic = channel.topic.lstrip("/")
+            s, i = recording[topic], seen[topic]
+            assert schema.name == cdr.message_type(s)
+            assert tree(decoded) == tree(to_ros(s, i))
+            assert message.log_time == stamp_ns(s, i)
+            seen[topic] += 1
+    assert seen == {t: len(s) for t, s in recording.items()}
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_read_bag_round_trip_is_exact(storage: str, tmp_path: Path,
+                                      recording: dict[str, Series],
+                                      assert_same: AssertSame,
+                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    path = bag.write_bag(tmp_path / "run", recording, storage=storage)
+    out = bag.read_bag(path)
+    assert out.keys() == recording.keys()
+    for topic, s in recording.items():
+        assert_same(out[topic], s)
+    # in chunks that do not divide the counts, and by absolute names
+    monkeypatch.setattr(bag, "READ_CHUNK", 7)
+    out = bag.read_bag(path, ["/imu/data", "thrusters/state"])
+    assert list(out) == ["/imu/data", "thrusters/state"]
+    assert_same(out["/imu/data"], recording["imu/data"])
+    assert_same(out["thrusters/state"], recording["thrusters/state"])
+
+
+def test_metadata_offers_the_contract_qos(tmp_path: Path, recording: dict[str, Series]) -> None:
+    path = bag.write_bag(tmp_path / "run", recording)
+    meta = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["version"] == 9 and meta["storage_identifier"] == "mcap"
+    qos = {t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"][0]
+           for t in meta["topics_with_message_count"]}
+    counts = {t["topic_metadata"]["name"]: t["message_count"]
+              for t in meta["topics_with_message_count"]}
+    assert counts == {"/" + t: len(s) for t, s in recording.items()}
+    for topic in ("/imu/data", "/dvl/twist", "/pressure", "/thrusters/state"):
+        assert (qos[topic]["reliability"], qos[topic]["durability"], qos[topic]["depth"]) \
+            == ("best_effort", "volatile", 5)
+    for topic in ("/truth/odom", "/dampest/velocity", "/dampest/acceleration",
+                  "/dampest/wrench"):
+        assert (qos[topic]["reliability"], qos[topic]["durability"]) == ("reliable", "volatile")
+    model = bag.offered_qos("vehicle/dampest/model")
+    assert (model.reliability.name, model.durability.name, model.depth) == \
+        ("RELIABLE", "TRANSIENT_LOCAL", 1)
+
+
+def test_existing_path_is_never_overwritten(tmp_path: Path,
+                                            recording: dict[str, Series]) -> None:
+    path = bag.write_bag(tmp_path / "run", recording)
+    before = sorted((p.name, p.stat().st_size) for p in path.iterdir())
+    with pytest.raises(FileExistsError, match="never overwrites"):
+        bag.write_bag(path, {"imu/data": recording["imu/data"]})
+    assert sorted((p.name, p.stat().st_size) for p in path.iterdir()) == before
+
+
+def test_failed_write_leaves_no_half_written_bag(tmp_path: Path,
+                                                 recording: dict[str, Series],
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    calls = []
+
+    def failing_write(self: Writer, *args: Any) -> None:
+        calls.append(1)
+        if len(calls) == 100:
+            raise OSError("disk full")
+
+    monkeypatch.setattr(Writer, "write", failing_write)
+    with pytest.raises(OSError, match="disk full"):
+        bag.write_bag(tmp_path / "run", recording)
+    assert not (tmp_path / "run").exists()
+
+
+def test_missing_topic_error_lists_the_bag_topics(tmp_path: Path,
+                                                  recording: dict[str, Series]) -> None:
+    path = bag.write_bag(tmp_path / "run", {"imu/data": recording["imu/data"],
+                                            "pressure": recording["pressure"]})
+    with pytest.raises(bag.MissingTopicError) as err:
+        bag.read_bag(path, ["imu/data", "dvl/twist"])
+    text = str(err.value)
+    assert "dvl/twist" in text
+    assert "/imu/data (sensor_msgs/msg/Imu)" in text
+    assert "/pressure (sensor_msgs/msg/FluidPressure)" in text
+
+
+@pytest.mark.parametrize("where", [0.0, 0.1, 0.5, 0.98])
+def test_corrupt_bag_error_names_the_file(where: float, tmp_path: Path,
+                                          recording: dict[str, Series],
+                                          assert_same: AssertSame) -> None:
+    """Garbage in the data, the indexes or the summary: an error naming the file, or (where
+    the garbage hits a part rosbags does not need) every message intact."""
+    path = bag.write_bag(tmp_path / "run", recording)
+    (mcap_file,) = path.glob("*.mcap")
+    data = mcap_file.read_bytes()
+    at = int(where * (len(data) - 200))
+    mcap_file.write_bytes(data[:at] + b"\x13" * 200 + data[at + 200:])
+    try:
+        out = bag.read_bag(path)
+    except bag.BagError as err:
+        assert mcap_file.name in str(err)
+    else:
+        assert where > 0.9, "corrupt message data must not read silently"
+        for topic, s in recording.items():
+            assert_same(out[topic], s)
+
+
+def test_truncated_or_incomplete_bag_error_names_the_file(
+        tmp_path: Path, recording: dict[str, Series]) -> None:
+    path = bag.write_bag(tmp_path / "run", recording)
+    (mcap_file,) = path.glob("*.mcap")
+    mcap_file.write_bytes(mcap_file.read_bytes()[:5000])
+    with pytest.raises(bag.BagError, match=mcap_file.name):
+        bag.read_bag(path)
+    (path / "metadata.yaml").unlink()
+    with pytest.raises(bag.BagError, match="metadata"):
+        bag.bag_summary(path)
+    with pytest.raises(FileNotFoundError, match="nowhere"):
+        bag.read_bag(tmp_path / "nowhere")
+
+
+def test_contract_type_and_stamp_checks(tmp_path: Path, recording: dict[str, Series]) -> None:
+    with pytest.raises(ValueError, match="sensor_msgs/msg/Imu"):
+        bag.write_bag(tmp_path / "a", {"imu/data": recording["dvl/twist"]})
+    neg = recording["pressure"]
+    neg.stamp = neg.stamp - 10.0
+    with pytest.raises(ValueError, match=">= 0"):
+        bag.write_bag(tmp_path / "b", {"pressure": neg})
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+@pytest.mark.parametrize("chunk", [bag.READ_CHUNK, 30])
+def test_changing_frame_id_and_foreign_types(chunk: int, tmp_path: Path,
+                                             make_series: Callable[..., Series],
+                                             typestore: Any,
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """A bag recorded elsewhere: frame_id changes halfway (inside a read chunk, or between
+    two), a std_msgs/String topic."""
+    monkeypatch.setattr(bag, "READ_CHUNK", chunk)
+    a = make_series(ImuSeries, 30, frame_id="imu_a")
+    b = make_series(ImuSeries, 30, frame_id="imu_b", t0=1.0)
+    String = typestore.types["std_msgs/msg/String"]
+    path = tmp_path / "foreign"
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        imu = w.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=typestore)
+        model = w.add_connection("/dampest/model", "std_msgs/msg/String", typestore=typestore)
+        w.write(model, 0, bytes(typestore.serialize_cdr(String("x: 1"), "std_msgs/msg/String")))
+        for s in (a, b):
+            for k, raw in enumerate(cdr.encode(s)):
+                w.write(imu, stamp_ns(s, k), raw)
+    with pytest.warns(UserWarning, match="frame_id"):
+        out = bag.read_bag(path)
+    assert list(out) == ["imu/data"]  # the String topic has no series: skipped
+    imu_out = out["imu/data"]
+    assert isinstance(imu_out, ImuSeries) and imu_out.frame_id == "imu_a"
+    np.testing.assert_array_equal(imu_out.linear_acceleration,
+                                  np.vstack([a.linear_acceleration, b.linear_acceleration]))
+    with pytest.raises(TypeError, match="std_msgs/msg/String"):
+        bag.read_bag(path, ["dampest/model"])
+
+
+def test_bag_summary(tmp_path: Path, recording: dict[str, Series]) -> None:
+    path = bag.write_bag(tmp_path / "run", recording, storage="sqlite3")
+    summary = bag.bag_summary(path)
+    assert summary.storage == "sqlite3"
+    assert summary.message_count == sum(len(s) for s in recording.values())
+    assert summary.topics["/dvl/twist"] == bag.TopicSummary(
+        "/dvl/twist", "geometry_msgs/msg/TwistWithCovarianceStamped", 20)
+    first = min(float(s.stamp[0]) for s in recording.values())
+    last = max(float(s.stamp[-1]) for s in recording.values())
+    assert (summary.start, summary.end) == (first, last)
+
+
+def test_empty_series_topic(tmp_path: Path) -> None:
+    path = bag.write_bag(tmp_path / "e", {"dvl/twist": TwistSeries(np.zeros(0))})
+    assert len(bag.read_bag(path)["dvl/twist"]) == 0
+    assert bag.bag_summary(path).topics["/dvl/twist"].count == 0

@@ -1,0 +1,188 @@
+"""Vehicle presets and the model file (a ROS 2 parameters file)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.vehicle import damping_from_spec
+from dampest_ros.io import yaml_io
+
+PRESETS = Path(__file__).resolve().parents[2] / "config" / "vehicles"
+
+FULL_SPEC: dict[str, Any] = {
+    "linear": {"X_u": 13.7, "Y_v": 2.0, "Z_w": 33.0, "K_p": 0.1, "M_q": 0.8, "N_r": 0.3,
+               "Y_r": -0.4},
+    "quadratic": {"X_uu": 141.0, "Y_vv": 217.0, "N_rr": 1.5},
+    "cross": [{"row": "Y", "col": "v", "alpha": "|r|", "value": 2.0},
+              {"row": "N", "col": "r", "alpha": "|v|", "value": 0.7},
+              {"row": "Z", "col": "u", "alpha": "w", "name": "Z_uw", "value": -1.5},
+              {"row": "X", "col": "u", "alpha": "|U|", "value": 3.0}],
+    "freq": [{"dof": "u", "rate": 2.0, "c": 5.0}, {"dof": "r", "rate": 0.5, "c": 0.2},
+             {"dof": "u", "rate": 7.0, "c": 1.0}],
+    "added": {"added.N_uv": 0.3},
+    "residual": {"modes": [[1, 0, 1, 0, 0, 0], [0, 1, 0, 0, 0, 1], [0, 0, 1, 0, 1, 0]],
+                 "values": [4.0, 5.0, 6.0]},
+}
+
+
+@pytest.mark.parametrize(("name", "mass", "x_u", "m11"), [
+    ("bluerov2_heavy", 13.5, 13.7, 13.5 + 6.36),
+    ("platform_a", 35.0, 10.0, 35.0 + 3.5),
+    ("platform_b", 150.0, 60.0, 150.0 + 45.0),
+])
+def test_presets_load_by_name_and_path(name: str, mass: float, x_u: float, m11: float) -> None:
+    assert name in yaml_io.list_vehicles()
+    for ref in (name, PRESETS / f"{name}.yaml", str(PRESETS / f"{name}.yaml")):
+        v = yaml_io.load_vehicle(ref)
+        assert v.body.mass == mass
+        assert v.body.M[0, 0] == pytest.approx(m11, abs=1e-12)
+        assert v.theta[v.damping.parameter_names.index("X_u")] == x_u
+        assert v.damping.parameter_names[:6] == ["X_u", "Y_v", "Z_w", "K_p", "M_q", "N_r"]
+        assert v.thrusters.count == 8
+
+
+def test_bad_preset_names_the_field_and_file(tmp_path: Path) -> None:
+    doc = yaml.safe_load((PRESETS / "bluerov2_heavy.yaml").read_text())
+    doc["vehicle"]["mass"] = -1.0
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=r"^mass: must be .*-1\.0.*bad\.yaml") as err:
+        yaml_io.load_vehicle(bad)
+    assert err.value.field == "mass"
+    bad.write_text("vehicle: [1, 2\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        yaml_io.load_vehicle(bad)
+    with pytest.raises(FileNotFoundError, match=r"no vehicle preset 'nautilus'.*bluerov2_heavy"):
+        yaml_io.load_vehicle("nautilus")
+
+
+def test_installed_share_dir_is_searched(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    share = tmp_path / "share" / "dampest_ros" / "config" / "vehicles"
+    share.mkdir(parents=True)
+    (share / "only_installed.yaml").write_text((PRESETS / "platform_a.yaml").read_text())
+    monkeypatch.setattr(sys, "prefix", str(tmp_path))
+    assert yaml_io.load_vehicle("only_installed").body.mass == 35.0
+
+
+def _regressor_inputs(n_states: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(5)
+    return rng.normal(size=(200, 6)), rng.normal(size=(200, n_states))
+
+
+def test_damping_spec_is_the_inverse_of_damping_from_spec() -> None:
+    model, theta = damping_from_spec(FULL_SPEC)
+    again, theta2 = damping_from_spec(yaml_io.damping_spec(model, theta))
+    assert again.parameter_names == model.parameter_names
+    np.testing.assert_array_equal(theta2, theta)
+    nu, z = _regressor_inputs(model.memory_rates.size)
+    np.testing.assert_allclose(again.regressor(nu, z), model.regressor(nu, z), rtol=0, atol=1e-12)
+
+
+def test_model_file_round_trip(tmp_path: Path) -> None:
+    model, theta = damping_from_spec(FULL_SPEC)
+    p = model.n_params
+    rng = np.random.default_rng(9)
+    theta_std = np.abs(rng.normal(size=p)) * 10.0 ** rng.integers(-12, 5, p)
+    M = rng.normal(size=(6, 6))
+    extra = {"vehicle": "bluerov2_heavy", "fit": {"rmse": [0.1, 0.2, 3], "samples": 36000},
+             "frozen": False, "frame": "N"}
+    path = yaml_io.save_model(tmp_path / "model.yaml", model.parameter_names, theta, theta_std,
+                              M, extra, damping=model, version=7)
+    out = yaml_io.load_model(path)
+    assert out.parameter_names == model.parameter_names
+    np.testing.assert_array_equal(out.theta, theta)
+    np.testing.assert_array_equal(out.theta_std, theta_std)
+    np.testing.assert_array_equal(out.M, M)
+    assert out.version == 7 and out.sign_convention == "dissipative_positive"
+    assert out.extra == {"vehicle": "bluerov2_heavy", "fit": {"rmse": [0.1, 0.2, 3.0],
+                                                                "samples": 36000},
+                         "frozen": False, "frame": "N"}
+    assert out.damping is not None and out.damping.kinds == model.kinds
+    nu, z = _regressor_inputs(model.memory_rates.size)
+    np.testing.assert_allclose(out.damping.regressor(nu, z), model.regressor(nu, z),
+                               rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(out.damping.memory_rates, model.memory_rates)
+    assert [p.name for p in tmp_path.iterdir()] == ["model.yaml"]  # no temporary file left
+
+
+@pytest.mark.skipif(importlib.util.find_spec("rclpy") is None, reason="needs rclpy")
+def test_model_file_is_a_ros_parameters_file(tmp_path: Path) -> None:
+    """rcl's own YAML parser (as for --params-file) reads every entry with the right type."""
+    model, theta = damping_from_spec(FULL_SPEC)
+    path = yaml_io.save_model(tmp_path / "model.yaml", model.parameter_names, theta,
+                              np.full(theta.size, np.inf), np.eye(6) * 2.0,
+                              {"note": "n", "flags": [True, False]}, damping=model)
+    probe = (
+        "import json, sys, rclpy\n"
+        "from rclpy.node import Node\n"
+        "rclpy.init(args=['--ros-args', '--params-file', sys.argv[1]])\n"
+        "n = Node('estimator', automatically_declare_parameters_from_overrides=True)\n"
+        "value = lambda v: v if isinstance(v, (str, bool, int, float)) else list(v)\n"
+        "print(json.dumps({k: [p.type_.name, value(p.value)]\n"
+        "                  for k, p in n.get_parameters_by_prefix('model').items()}))\n"
+        "n.destroy_node(); rclpy.shutdown()\n")
+    env = dict(os.environ, ROS_DOMAIN_ID="93", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               PYTHONPATH=str(Path(__file__).resolve().parents[2]))
+    proc = subprocess.run([sys.executable, "-c", probe, str(path)], capture_output=True,
+                          text=True, timeout=120, env=env)
+    assert proc.returncode == 0, proc.stderr
+    params = json.loads(proc.stdout.strip().splitlines()[-1])
+    types = {k: v[0] for k, v in params.items()}
+    assert types["parameter_names"] == "STRING_ARRAY"
+    assert types["theta"] == types["theta_std"] == types["M"] == "DOUBLE_ARRAY"
+    assert types["version"] == "INTEGER" and types["sign_convention"] == "STRING"
+    assert types["terms.linear"] == types["terms.cross.alphas"] == "STRING_ARRAY"
+    assert types["terms.cross.rows"] == types["terms.freq.dofs"] == "INTEGER_ARRAY"
+    assert types["terms.residual.modes"] == types["terms.freq.rates"] == "DOUBLE_ARRAY"
+    assert types["terms.added"] == "BOOL" and types["flags"] == "BOOL_ARRAY"
+    assert params["note"] == ["STRING", "n"]  # not the boolean "n"
+    assert params["theta"][1] == theta.tolist()
+    assert params["theta_std"][1] == [np.inf] * theta.size
+    assert params["terms.cross.alphas"][1] == ["|r|", "|v|", "w", "|U|"]
+
+
+def test_invalid_extra_and_failed_save_keep_the_old_file(tmp_path: Path) -> None:
+    path = yaml_io.save_model(tmp_path / "m.yaml", ["X_u"], np.array([1.0]), np.array([0.1]),
+                              np.eye(6))
+    before = path.read_text()
+    with pytest.raises(ValueError, match=r"model\.fit\.bad: a ROS parameter array"):
+        yaml_io.save_model(path, ["X_u"], np.array([2.0]), np.array([0.1]), np.eye(6),
+                           {"fit": {"bad": [1.0, "a"]}})
+    with pytest.raises(ValueError, match="reserved"):
+        yaml_io.save_model(path, ["X_u"], np.array([2.0]), np.array([0.1]), np.eye(6),
+                           {"theta": 1.0})
+    with pytest.raises(ValueError, match="non-empty"):
+        yaml_io.save_model(path, ["X_u"], np.array([2.0]), np.array([0.1]), np.eye(6),
+                           {"empty": []})
+    assert path.read_text() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.yaml"]
+
+
+def test_load_model_errors_name_the_entry(tmp_path: Path) -> None:
+    model, theta = damping_from_spec(FULL_SPEC)
+    path = yaml_io.save_model(tmp_path / "m.yaml", model.parameter_names, theta, theta,
+                              np.eye(6), damping=model)
+    doc = yaml.safe_load(path.read_text())
+    params = doc["/**"]["ros__parameters"]["model"]
+    params["terms"]["quadratic"] = ["X_uu"]
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=r"^model\.terms: "):
+        yaml_io.load_model(path)
+    del params["theta"]
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=r"^model\.theta: missing in .*m\.yaml"):
+        yaml_io.load_model(path)
+    path.write_text("/**: {ros__parameters: {other: 1}}\n")
+    with pytest.raises(ConfigError, match="no <node>: ros__parameters: model"):
+        yaml_io.load_model(path)
