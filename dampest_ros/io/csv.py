@@ -17,12 +17,13 @@ tau_X … tau_N       generalized force on the vehicle (thrusters)            N,
 rpm_<name>          optional: rotor speed of a thruster                     rev/min
 thrust_<name>       optional: thrust of a thruster                          N
 roll, pitch, yaw    optional: ZYX Euler angles of FRD in NED                rad
+segment             optional: index of the gap-free stretch                 —
 ==================  ======================================================  ==========
 
 **Frames.** Every body vector in the CSV (velocities, accelerations, forces) is in Fossen's
-FRD body frame (x forward, y starboard, z down), the frame of the core; the ROS topics use
-FLU (REP-103). :func:`to_recording` and :func:`from_recording` convert between the two with
-:func:`dampest_ros.core.frames.body_twist`.
+FRD body frame (x forward, y starboard, z down), the frame of the core and of
+:class:`dampest_ros.core.samples.Samples`, which :func:`samples_to_columns` and
+:func:`samples_from_columns` convert to and from.
 
 Numbers are written with ``%.17g``, so a write/read round trip is exact. Files with other
 column names are read through a column map (``their name: our name``, see
@@ -40,14 +41,8 @@ from typing import Any
 import numpy as np
 import yaml  # type: ignore[import-untyped]  # no types-PyYAML in the lock
 
-from dampest_ros.core import frames
-from dampest_ros.core.measurements import (
-    AccelSeries,
-    FloatArray,
-    Series,
-    TwistSeries,
-    WrenchSeries,
-)
+from dampest_ros.core.measurements import FloatArray
+from dampest_ros.core.samples import Samples
 
 #: Body velocity ν = [u v w p q r] (FRD).
 VELOCITY_COLUMNS = ("u", "v", "w", "p", "q", "r")
@@ -178,70 +173,66 @@ def load_column_map(path: str | Path) -> dict[str, str]:
     return dict(doc)
 
 
-# --- conversion to and from the estimator topics -------------------------------------------
+# --- identification samples ---------------------------------------------------------------
+
+#: Optional columns that :func:`samples_to_columns` writes and :func:`samples_from_columns`
+#: reads: attitude (ZYX Euler angles of FRD in NED, rad) and the gap-free segment index.
+ATTITUDE_COLUMNS = ("roll", "pitch", "yaw")
 
 
 def _stack(columns: Mapping[str, FloatArray], names: Sequence[str]) -> FloatArray:
     return np.stack([np.asarray(columns[n], dtype=float) for n in names], axis=-1)
 
 
-def to_recording(columns: Mapping[str, FloatArray], frame_id: str = "base_link"
-                 ) -> dict[str, Series]:
-    """The estimator input topics from CSV columns, converted from FRD to FLU.
+def samples_to_columns(samples: Samples) -> dict[str, FloatArray]:
+    """CSV columns (FRD, the module's table) of identification samples.
 
     Parameters
     ----------
-    columns : mapping of str to ndarray, each shape (N,)
-        At least ``time``, the velocity, acceleration and force columns.
-    frame_id : str
-        Body frame of the ROS messages.
-
-    Returns
-    -------
-    dict of str to Series
-        ``dampest/velocity`` (TwistSeries), ``dampest/acceleration`` (AccelSeries) and
-        ``dampest/wrench`` (WrenchSeries), stamps = ``time`` (s), body vectors FLU.
-    """
-    t = np.asarray(columns["time"], dtype=float)
-    nu = frames.body_twist(_stack(columns, VELOCITY_COLUMNS))
-    nu_dot = frames.body_twist(_stack(columns, ACCELERATION_COLUMNS))
-    tau = frames.body_twist(_stack(columns, FORCE_COLUMNS))
-    return {
-        "dampest/velocity": TwistSeries(t.copy(), frame_id, nu[:, :3], nu[:, 3:]),
-        "dampest/acceleration": AccelSeries(t.copy(), frame_id, nu_dot[:, :3], nu_dot[:, 3:]),
-        "dampest/wrench": WrenchSeries(t.copy(), frame_id, tau[:, :3], tau[:, 3:]),
-    }
-
-
-def from_recording(recording: Mapping[str, Series], depth: FloatArray) -> dict[str, FloatArray]:
-    """CSV columns from the estimator input topics, converted from FLU to FRD.
-
-    Parameters
-    ----------
-    recording : mapping of str to Series
-        ``dampest/velocity``, ``dampest/acceleration`` and ``dampest/wrench`` with identical
-        stamps (as the preprocessing publishes them).
-    depth : ndarray, shape (N,)
-        Depth (m, positive down) at those stamps.
+    samples : Samples
 
     Returns
     -------
     dict of str to ndarray, each shape (N,)
-        The :data:`REQUIRED_COLUMNS`.
+        :data:`REQUIRED_COLUMNS`, then ``roll``, ``pitch``, ``yaw`` and ``segment``.
     """
-    vel, acc, wre = (recording[k] for k in
-                     ("dampest/velocity", "dampest/acceleration", "dampest/wrench"))
-    if not isinstance(vel, TwistSeries) or not isinstance(acc, AccelSeries) \
-            or not isinstance(wre, WrenchSeries):
-        raise TypeError("need a TwistSeries, an AccelSeries and a WrenchSeries")
-    if not (np.array_equal(vel.stamp, acc.stamp) and np.array_equal(vel.stamp, wre.stamp)):
-        raise ValueError("dampest/velocity, dampest/acceleration and dampest/wrench must "
-                         "have identical stamps")
-    out: dict[str, FloatArray] = {"time": vel.stamp.copy()}
-    for names, (a, b) in ((VELOCITY_COLUMNS, (vel.linear, vel.angular)),
-                          (ACCELERATION_COLUMNS, (acc.linear, acc.angular)),
-                          (FORCE_COLUMNS, (wre.force, wre.torque))):
-        six = frames.body_twist(np.hstack([a, b]))
-        out.update({n: six[:, i].copy() for i, n in enumerate(names)})
-    out["depth"] = np.asarray(depth, dtype=float).copy()
-    return {n: out[n] for n in REQUIRED_COLUMNS}
+    out: dict[str, FloatArray] = {"time": samples.t}
+    for names, arr in ((VELOCITY_COLUMNS, samples.nu), (ACCELERATION_COLUMNS, samples.nu_dot),
+                       (FORCE_COLUMNS, samples.tau), (ATTITUDE_COLUMNS, samples.euler)):
+        out.update({n: arr[:, i] for i, n in enumerate(names)})
+    out["depth"] = samples.depth
+    out["segment"] = samples.segment.astype(float)
+    return {n: out[n] for n in (*REQUIRED_COLUMNS, *ATTITUDE_COLUMNS, "segment")}
+
+
+def samples_from_columns(columns: Mapping[str, FloatArray], max_gap: float = 1.0) -> Samples:
+    """Identification samples from CSV columns.
+
+    Attitude defaults to level (with a warning: restoring forces then assume it); without a
+    ``segment`` column, time gaps longer than ``max_gap`` seconds start a new segment.
+
+    Parameters
+    ----------
+    columns : mapping of str to ndarray, each shape (N,)
+    max_gap : float
+
+    Returns
+    -------
+    Samples
+    """
+    t = np.asarray(columns["time"], dtype=float)
+    if len(t) > 1 and np.any(np.diff(t) <= 0):
+        raise ValueError("time must increase strictly from row to row")
+    if all(n in columns for n in ATTITUDE_COLUMNS):
+        euler = _stack(columns, ATTITUDE_COLUMNS)
+    else:
+        warnings.warn("no roll, pitch, yaw columns: assuming level attitude for g(η)",
+                      stacklevel=2)
+        euler = np.zeros((len(t), 3))
+    if "segment" in columns:
+        segment = np.asarray(columns["segment"]).astype(np.int64)
+    else:
+        segment = np.r_[0, np.cumsum(np.diff(t) > max_gap)].astype(np.int64)
+    return Samples(t, _stack(columns, VELOCITY_COLUMNS), _stack(columns, ACCELERATION_COLUMNS),
+                   _stack(columns, FORCE_COLUMNS), euler,
+                   np.asarray(columns["depth"], dtype=float), segment)

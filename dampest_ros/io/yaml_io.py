@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml  # type: ignore[import-untyped]  # no types-PyYAML in the lock
+import yaml
 
 from dampest_ros.core.damping import TERM_KINDS, Alpha, DampingModel
 from dampest_ros.core.measurements import FloatArray
@@ -58,6 +58,21 @@ def _read_yaml(path: Path) -> Any:
         return yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
         raise ConfigError(str(path), f"not valid YAML: {exc}") from None
+
+
+def read_mapping(source: str) -> dict[str, Any]:
+    """A YAML mapping from a file path or from inline text (``"current: [0.2, 0, 0]"``)."""
+    path = Path(source)
+    if path.is_file():
+        data = _read_yaml(path)
+    else:
+        try:
+            data = yaml.safe_load(source)
+        except yaml.YAMLError as exc:
+            raise ConfigError(source, f"neither a file nor valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(source, "must be a YAML mapping (key: value)")
+    return data
 
 
 # --- vehicles ------------------------------------------------------------------------------

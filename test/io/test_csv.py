@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dampest_ros.core.measurements import TwistSeries, WrenchSeries
+from dampest_ros.core.samples import Samples
 from dampest_ros.io import csv as dcsv
 
 
@@ -93,22 +93,26 @@ def test_header_only_and_bad_rows(tmp_path: Path) -> None:
         dcsv.read_csv(path)
 
 
-def test_frd_columns_become_flu_topics_and_back() -> None:
+def test_samples_round_trip_through_a_file_exactly(tmp_path: Path) -> None:
+    rng = np.random.default_rng(3)
+    n = 50
+    t = np.r_[np.arange(25) * 0.02, 10.0 + np.arange(25) * 0.02]
+    samples = Samples(t, rng.normal(size=(n, 6)), rng.normal(size=(n, 6)),
+                      rng.normal(size=(n, 6)) * 30, rng.normal(size=(n, 3)),
+                      rng.uniform(0, 10, n), np.r_[np.zeros(25), np.ones(25)].astype(np.int64))
+    path = dcsv.write_csv(tmp_path / "s.csv", dcsv.samples_to_columns(samples))
+    back = dcsv.samples_from_columns(dcsv.read_csv(path))
+    for name in ("t", "nu", "nu_dot", "tau", "euler", "depth", "segment"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(samples, name), err_msg=name)
+
+
+def test_samples_without_attitude_or_segments_are_level_and_split_at_gaps() -> None:
     cols = columns(8, extras=False)
-    cols.update(u=np.full(8, 1.0), v=np.full(8, 2.0), w=np.full(8, 3.0),
-                p=np.full(8, 0.1), q=np.full(8, 0.2), r=np.full(8, 0.3),
-                tau_Y=np.full(8, 5.0), tau_N=np.full(8, -7.0))
-    rec = dcsv.to_recording(cols)
-    vel, wrench = rec["dampest/velocity"], rec["dampest/wrench"]
-    assert isinstance(vel, TwistSeries) and isinstance(wrench, WrenchSeries)
-    np.testing.assert_array_equal(vel.linear[0], [1.0, -2.0, -3.0])  # starboard/down -> left/up
-    np.testing.assert_array_equal(vel.angular[0], [0.1, -0.2, -0.3])
-    np.testing.assert_array_equal(wrench.force[0, 1], -5.0)
-    np.testing.assert_array_equal(wrench.torque[0, 2], 7.0)
-    back = dcsv.from_recording(rec, cols["depth"])
-    assert list(back) == list(dcsv.REQUIRED_COLUMNS)
-    for name in dcsv.REQUIRED_COLUMNS:
-        np.testing.assert_array_equal(back[name], cols[name], err_msg=name)
-    rec["dampest/wrench"].stamp = rec["dampest/wrench"].stamp + 1e-3
-    with pytest.raises(ValueError, match="identical stamps"):
-        dcsv.from_recording(rec, cols["depth"])
+    cols["time"] = np.r_[np.arange(4) * 0.1, 5.0 + np.arange(4) * 0.1]
+    with pytest.warns(UserWarning, match="level attitude"):
+        s = dcsv.samples_from_columns(cols)
+    np.testing.assert_array_equal(s.segment, [0, 0, 0, 0, 1, 1, 1, 1])
+    np.testing.assert_array_equal(s.euler, np.zeros((8, 3)))
+    cols["time"] = cols["time"][::-1].copy()
+    with pytest.raises(ValueError, match="increase"):
+        dcsv.samples_from_columns(cols)

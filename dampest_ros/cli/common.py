@@ -1,0 +1,92 @@
+"""Helpers shared by the ``dampest`` sub-commands: inputs, tables, terms."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.preprocess import DataError, PreprocessConfig, preprocess
+from dampest_ros.core.rigid_body import DOF_NAMES
+from dampest_ros.core.samples import Samples
+from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.io.bag import read_bag
+from dampest_ros.io.csv import load_column_map, read_csv, samples_from_columns
+
+#: Topic roles and their default names (DESIGN.md §3).
+DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
+                  "thrusters": "thrusters/state"}
+
+
+def add_topic_options(p: argparse.ArgumentParser) -> None:
+    """--imu-topic, --dvl-topic, --pressure-topic, --thrusters-topic."""
+    for role, name in DEFAULT_TOPICS.items():
+        p.add_argument(f"--{role}-topic", default=name, metavar="TOPIC",
+                       help=f"topic of the {role} data (default: {name})")
+
+
+def add_preprocess_options(p: argparse.ArgumentParser) -> None:
+    """Options of the preprocessing (sample rate, filter, delay)."""
+    p.add_argument("--rate", type=float, default=50.0,
+                   help="sample rate of the synchronised data in Hz (default: 50)")
+    p.add_argument("--max-gap", type=float, default=1.0,
+                   help="DVL gaps longer than this (s) split the data (default: 1)")
+    p.add_argument("--delay", type=float, default=0.0,
+                   help="known delay (s) of the vehicle's response after the logged thrust")
+
+
+def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
+    """Samples from a rosbag2 directory (MCAP or SQLite3) or a CSV file."""
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"{p} does not exist")
+    if p.is_file() and p.suffix.lower() == ".csv":
+        cmap = load_column_map(args.columns) if getattr(args, "columns", None) else None
+        return samples_from_columns(read_csv(p, cmap), max_gap=args.max_gap)
+    if not p.is_dir():
+        raise DataError(f"{p}: expected a rosbag2 directory or a .csv file")
+    topics = {role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS}
+    rec = read_bag(p, [topics[r] for r in ("imu", "dvl", "thrusters")]
+                   + ([topics["pressure"]] if topics["pressure"] else []))
+    cfg = PreprocessConfig(rate=args.rate, max_gap=args.max_gap, delay=args.delay)
+    return preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho, cfg,
+                      topics)
+
+
+def table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    """A plain-text table with right-aligned columns."""
+    cells = [[str(h) for h in header]] + [[_fmt(c) for c in r] for r in rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
+    lines = ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def _fmt(x: object) -> str:
+    if isinstance(x, float | np.floating):
+        return "—" if not np.isfinite(x) else f"{x:.4g}"
+    return str(x)
+
+
+def speed_table(samples_nu: np.ndarray) -> str:
+    """Min / max / RMS of each velocity component."""
+    rows = [(DOF_NAMES[i], float(samples_nu[:, i].min()), float(samples_nu[:, i].max()),
+             float(np.sqrt(np.mean(samples_nu[:, i] ** 2)))) for i in range(6)]
+    return table(("dof", "min", "max", "rms"), rows)
+
+
+def restrict_terms(vehicle: Vehicle, kinds: str | None) -> tuple[DampingModel, np.ndarray]:
+    """The vehicle's damping terms limited to ``kinds`` (comma list), and their nominal θ."""
+    model = vehicle.damping
+    if not kinds:
+        return model, vehicle.theta
+    wanted = [k.strip() for k in kinds.split(",") if k.strip()]
+    missing = [k for k in wanted if model.term(k) is None]
+    if missing:
+        raise DataError(f"the vehicle preset has no {missing} term; it has {model.kinds}")
+    sub = DampingModel([t for t in model.terms if t.kind in wanted])
+    values = dict(zip(model.parameter_names, vehicle.theta, strict=True))
+    return sub, sub.theta_from_dict({n: values[n] for n in sub.parameter_names})

@@ -1,0 +1,108 @@
+"""``dampest identify``: identify the damping model from a bag or a CSV file."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from dampest_ros.cli.common import (
+    add_preprocess_options,
+    add_topic_options,
+    load_samples,
+    restrict_terms,
+    table,
+)
+from dampest_ros.core.batch import METHODS, Fit, FitOptions, fit
+from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.rigid_body import DOF_NAMES
+from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
+
+EXAMPLE = ("example: dampest identify bags/b600 --vehicle config/vehicles/bluerov2_heavy.yaml "
+           "--out model.yaml")
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the sub-command."""
+    p = sub.add_parser("identify", help="identify damping from a bag or CSV",
+                       description=__doc__ + " INPUT is a rosbag2 directory (MCAP or SQLite3) "
+                       "with IMU, DVL, pressure and thruster topics, or a CSV file in the seed "
+                       "format (time,u,v,w,p,q,r,ax,ay,az,wx,wy,wz,depth,tau_X..tau_N).",
+                       epilog=EXAMPLE)
+    p.add_argument("input", help="rosbag2 directory or .csv file")
+    p.add_argument("--vehicle", required=True,
+                   help="vehicle preset (name or YAML): mass, added mass, thrusters, "
+                        "nominal damping (the prior and the term structure)")
+    p.add_argument("--terms", help="comma list of the preset's terms to identify, e.g. "
+                                   "linear,quadratic (default: all terms of the preset)")
+    p.add_argument("--method", choices=METHODS, default="wls",
+                   help="ols, wls (per-DOF noise weights, default), ridge, bounded "
+                        "(physical signs), map (Gaussian prior from --prior)")
+    p.add_argument("--prior", help="model YAML whose theta/theta_std are the MAP prior")
+    p.add_argument("--cutoff", type=float, default=2.0,
+                   help="low-pass (Hz) applied to the regression (default: 2)")
+    p.add_argument("--columns", help="YAML column map for CSV input (their name: our name)")
+    p.add_argument("--out", help="write the model YAML (a ROS 2 parameters file) here")
+    add_topic_options(p)
+    add_preprocess_options(p)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Read, preprocess, fit, print the table, write the model."""
+    t0 = time.perf_counter()
+    vehicle = load_vehicle(args.vehicle)
+    model, nominal = restrict_terms(vehicle, args.terms)
+    samples = load_samples(args.input, vehicle, args)
+    prior, prior_std = nominal, None
+    if args.prior:
+        pm = load_model(args.prior)
+        values = dict(zip(pm.parameter_names, pm.theta, strict=True))
+        stds = dict(zip(pm.parameter_names, pm.theta_std, strict=True))
+        prior = np.array([values.get(n, v) for n, v in zip(model.parameter_names, nominal,
+                                                             strict=True)])
+        prior_std = np.array([stds.get(n, np.inf) for n in model.parameter_names])
+    result = fit(samples, model, vehicle.body, FitOptions(method=args.method, cutoff=args.cutoff),
+                 prior=prior, prior_std=prior_std)
+    elapsed = time.perf_counter() - t0
+    print(f"{args.input}: {len(samples)} samples ({len(samples) / samples.rate:.0f} s in "
+          f"{int(samples.segment.max()) + 1} segment(s)), {result.method}, "
+          f"condition number {result.cond:.3g}, {elapsed:.1f} s")
+    print(report_table(result, prior))
+    print()
+    print(table(("dof", "RMSE", "NSE", "CV RMSE"),
+                [(DOF_NAMES[i], float(result.rmse[i]), float(result.r2[i]),
+                  float(result.cv_rmse[i])) for i in range(6)]))
+    for name, why in result.flags.items():
+        print(f"not identified: {name}: {why}")
+    if args.out:
+        write_model(Path(args.out), result, model, vehicle.body.M, source=str(args.input))
+        print(f"wrote {args.out}")
+    return 0
+
+
+def report_table(result: Fit, prior: np.ndarray) -> str:
+    """Parameter table: estimate, std, 95 % interval, prior; unidentified ones marked."""
+    ci = result.interval()
+    rows = []
+    for j, name in enumerate(result.names):
+        if name in result.flags:
+            rows.append((name, "not identified", "", "", "", float(prior[j])))
+        else:
+            rows.append((name, float(result.theta[j]), float(result.std[j]), float(ci[j, 0]),
+                         float(ci[j, 1]), float(prior[j])))
+    return table(("parameter", "estimate", "std", "95% low", "95% high", "prior"), rows)
+
+
+def write_model(path: Path, result: Fit, model: DampingModel, M: np.ndarray,
+                source: str) -> None:
+    """Save a fit as the model YAML with its metrics and the unidentified parameters."""
+    unidentified = list(result.flags)
+    save_model(path, result.names, result.theta, result.std, M, damping=model, extra={
+        "source": source, "method": result.method, "samples": int(result.n),
+        "nse": [float(x) for x in result.r2], "rmse": [float(x) for x in result.rmse],
+        "condition_number": float(result.cond),
+        "unidentified": unidentified or ["none"],
+        "unidentified_reason": [result.flags[n] for n in unidentified] or ["none"]})

@@ -1,0 +1,48 @@
+"""``dampest inspect``: what a bag holds and whether it can feed identification."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from dampest_ros.cli.common import DEFAULT_TOPICS, table
+from dampest_ros.io.bag import bag_summary, read_bag
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the sub-command."""
+    p = sub.add_parser("inspect", help="topics, rates, gaps and readiness of a bag",
+                       description=__doc__, epilog="example: dampest inspect bags/sample")
+    p.add_argument("bag", help="rosbag2 directory (MCAP or SQLite3)")
+    p.add_argument("--gap", type=float, default=0.5,
+                   help="report gaps longer than this many seconds (default: 0.5)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the summary; exit 1 when the bag lacks a topic identification needs."""
+    summary = bag_summary(args.bag)
+    data = read_bag(args.bag)
+    rows = []
+    for name, topic in sorted(summary.topics.items()):
+        series = data.get(name.lstrip("/"))
+        rate, gaps, longest = float("nan"), 0, 0.0
+        if series is not None and len(series) > 1:
+            dt = np.diff(series.stamp)
+            rate = 1.0 / float(np.median(dt))
+            gaps = int(np.sum(dt > args.gap))
+            longest = float(dt.max())
+        rows.append((name, topic.msgtype, topic.count, rate, gaps, longest))
+    print(f"{summary.path} ({summary.storage}): {summary.message_count} messages, "
+          f"{summary.end - summary.start:.1f} s from t={summary.start:.3f}")
+    print(table(("topic", "type", "messages", "rate Hz", f"gaps>{args.gap}s", "longest s"),
+                rows))
+    have = {n.lstrip("/") for n in summary.topics}
+    missing = [t for role, t in DEFAULT_TOPICS.items() if t not in have and role != "pressure"]
+    if missing:
+        print(f"not ready for identification: missing {missing} "
+              "(use --imu-topic etc. with dampest identify if they have other names)")
+        return 1
+    print("ready for identification: IMU, DVL and thruster topics present")
+    return 0

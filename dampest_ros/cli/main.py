@@ -1,0 +1,48 @@
+"""The ``dampest`` command: simulate, identify, inspect, demo.
+
+Each sub-command lives in its own module with ``add_parser(subparsers)`` and ``run(args)``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+
+from dampest_ros.cli import demo, identify, inspect, simulate
+from dampest_ros.core.preprocess import DataError
+from dampest_ros.core.rigid_body import ConfigError
+
+COMMANDS = (simulate, identify, inspect, demo)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every sub-command."""
+    parser = argparse.ArgumentParser(
+        prog="dampest",
+        description="Identify the hydrodynamic damping D(ν) of underwater vehicles from "
+                    "recorded ROS 2 bags or CSV, and simulate vehicles to test it.",
+        epilog="Run 'dampest COMMAND --help' for the options of a command.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for module in COMMANDS:
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``dampest`` console script; returns the exit status."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.run(args))
+    except (ConfigError, DataError, FileNotFoundError, FileExistsError, ValueError) as exc:
+        print(f"dampest {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"dampest {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
