@@ -25,7 +25,7 @@ $(DEPS): requirements/lock.txt
 
 # This package, editable; reinstalled when setup.py (entry points, data files) changes.
 $(STAMP): $(DEPS) setup.py
-	$(BIN)/pip install --no-deps -e .
+	$(BIN)/pip install --no-deps --no-build-isolation -e .
 	touch $@
 
 demo: $(STAMP)

@@ -17,6 +17,7 @@ from dampest_ros.cli.common import (
 )
 from dampest_ros.core.batch import METHODS, Fit, FitOptions, fit
 from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.rigid_body import DOF_NAMES
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 
@@ -64,8 +65,9 @@ def run(args: argparse.Namespace) -> int:
         prior = np.array([values.get(n, v) for n, v in zip(model.parameter_names, nominal,
                                                              strict=True)])
         prior_std = np.array([stds.get(n, np.inf) for n in model.parameter_names])
-    result = fit(samples, model, vehicle.body, FitOptions(method=args.method, cutoff=args.cutoff),
-                 prior=prior, prior_std=prior_std)
+    options = FitOptions(method=args.method, cutoff=args.cutoff,
+                         speed_range=tuple(speed_limits(vehicle)))
+    result = fit(samples, model, vehicle.body, options, prior=prior, prior_std=prior_std)
     elapsed = time.perf_counter() - t0
     print(f"{args.input}: {len(samples)} samples ({len(samples) / samples.rate:.0f} s in "
           f"{int(samples.segment.max()) + 1} segment(s)), {result.method}, "

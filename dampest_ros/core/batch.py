@@ -21,7 +21,7 @@ from scipy import linalg, optimize, stats
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.frames import matrix_from_euler
 from dampest_ros.core.preprocess import zero_phase
-from dampest_ros.core.rigid_body import ConfigError, RigidBody
+from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 
 FloatArray = NDArray[np.float64]
@@ -49,7 +49,8 @@ def memory_states(samples: Samples, model: DampingModel) -> FloatArray:
 
 
 def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
-                    chunk: int = 20000, cutoff: float = 0.0, margin: float = 5.0
+                    chunk: int = 20000, cutoff: float = 0.0, margin: float = 5.0,
+                    offset: FloatArray | None = None
                     ) -> Iterator[tuple[slice, FloatArray, FloatArray]]:
     """Yield (rows, Φ (n, 6, p), y (n, 6)) over chunks of at most ``chunk`` samples.
 
@@ -58,10 +59,15 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
     exactly however nonlinear Φ is, whereas filtering ν before forming |ν|ν does not. Chunks
     are filtered with ``margin`` seconds of neighbouring data on both sides, so memory stays
     flat while the result equals filtering whole segments (to the filter's decay).
+
+    ``offset`` (6,) is added to ν first: the data as a sensor bias would have made them.
     """
+    if offset is not None:
+        samples = Samples(samples.t, samples.nu + offset, samples.nu_dot, samples.tau,
+                          samples.euler, samples.depth, samples.segment)
     z = memory_states(samples, model)
     has_z = z.shape[1] > 0
-    pad = int(round(margin * samples.rate)) if cutoff > 0 else 0
+    pad = round(margin * samples.rate) if cutoff > 0 else 0
     for seg in samples.segments():
         s0, s1 = seg.start or 0, seg.stop or 0
         for start in range(s0, s1, chunk):
@@ -176,6 +182,7 @@ class Fit:
     flags: dict[str, str] = field(default_factory=dict)
     cv_rmse: FloatArray = field(default_factory=lambda: np.zeros(6))
     n_eff: float = 0.0
+    blocks: int = 0
 
     @property
     def std(self) -> FloatArray:
@@ -183,8 +190,13 @@ class Fit:
         return np.sqrt(np.abs(np.diag(self.cov)))
 
     def interval(self, level: float = 0.95) -> FloatArray:
-        """Two-sided confidence intervals, shape (p, 2)."""
-        z = float(stats.norm.ppf(0.5 + level / 2))
+        """Two-sided confidence intervals, shape (p, 2).
+
+        Student-t with (blocks − 1) degrees of freedom, as suits a covariance estimated from
+        that many block scores; normal when the block count is unknown.
+        """
+        z = float(stats.t.ppf(0.5 + level / 2, self.blocks - 1) if self.blocks > 1
+                  else stats.norm.ppf(0.5 + level / 2))
         return np.stack([self.theta - z * self.std, self.theta + z * self.std], axis=1)
 
     @property
@@ -245,6 +257,13 @@ class FitOptions:
     cutoff : float
         Parallel low-pass applied to y and Φ (Hz); 0 disables it. It also sets the effective
         sample count n_eff = 2 · cutoff · T used by AIC/BIC.
+    gyro_bias, dvl_bias : float
+        Standard deviation of an unknown constant gyro (rad/s) and DVL (m/s) bias per axis:
+        the sensor error budget that :func:`bias_covariance` propagates into θ. 0 ignores
+        it.
+    speed_range : tuple of 6 float, optional
+        Speeds the vehicle can reach per DOF; quadratic terms of DOFs flown below 15 % of
+        it are flagged (:func:`speed_coverage_flags`).
     """
 
     method: str = "wls"
@@ -253,6 +272,9 @@ class FitOptions:
     max_rel_halfwidth: float = 0.5
     max_vif: float = 1e4
     cutoff: float = 2.0
+    gyro_bias: float = 2e-4
+    dvl_bias: float = 1e-3
+    speed_range: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -311,19 +333,47 @@ def _flags(A: FloatArray, theta: FloatArray, cov: FloatArray, names: list[str],
     return flags
 
 
-def parameter_scale(ne: NormalEquations, theta: FloatArray, prior: FloatArray) -> FloatArray:
-    """The size a parameter must be known to: max(|prior|, |θ̂|, force scale), shape (p,).
+def speed_coverage_flags(model: DampingModel, samples: Samples, speed_range: FloatArray,
+                         min_share: float = 0.15) -> dict[str, str]:
+    """Quadratic coefficients of DOFs whose speed range the data do not cover.
 
-    The force scale is the value whose force is 10 % of the RMS target force in the DOF the
-    parameter acts on, so that parameters whose truth is zero are judged on what they could
-    contribute, not on their (zero) value.
+    A quadratic drag coefficient fitted only at low speed is an extrapolation wherever the
+    vehicle is faster; when the 99th percentile of |ν_i| stays below ``min_share`` of the
+    vehicle's speed range in DOF i, every quadratic parameter of that DOF is flagged.
+
+    Parameters
+    ----------
+    speed_range : ndarray, shape (6,)
+        Speeds the vehicle reaches (e.g. at half thrust), m/s and rad/s.
+    """
+    quad = model.term("quadratic")
+    if quad is None or len(samples) == 0:
+        return {}
+    flown = np.percentile(np.abs(samples.nu), 99, axis=0)
+    flags = {}
+    for name, b in zip(quad.parameter_names, quad.bases, strict=True):
+        i = int(np.argmax(np.abs(np.diag(b.B))))
+        if flown[i] < min_share * speed_range[i]:
+            flags[name] = (f"low speed only: |{DOF_NAMES[i]}| ≤ {flown[i]:.3g} in these data, "
+                           f"{flown[i] / speed_range[i]:.0%} of the {speed_range[i]:.3g} the "
+                           f"vehicle reaches; fly faster in {DOF_NAMES[i]} to identify it")
+    return flags
+
+
+def parameter_scale(ne: NormalEquations, theta: FloatArray, prior: FloatArray) -> FloatArray:
+    """The size a parameter must be known to, shape (p,).
+
+    |prior| where the prior is nonzero (an estimate that is inflated by confounding must not
+    raise its own bar); otherwise max(|θ̂|, force scale), the force scale being the value
+    whose force is 10 % of the RMS target force in the DOF the parameter acts on, so that
+    parameters whose truth may be zero are judged on what they could contribute.
     """
     Ad = np.einsum("ipp->ip", ne.A.sum(0))  # Σ Φ_{·,i,j}² per DOF i and parameter j
     c = ne.c.sum(0)
     i = np.argmax(Ad, axis=0)
     col = np.sqrt(np.maximum(Ad[i, np.arange(len(i))], 1e-300))
     force = 0.1 * np.sqrt(c[i]) / col
-    return np.maximum(np.maximum(np.abs(prior), np.abs(theta)), force)
+    return np.where(prior != 0, np.abs(prior), np.maximum(np.abs(theta), force))
 
 
 def fit(samples: Samples, model: DampingModel, body: RigidBody,
@@ -390,13 +440,17 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     for _ in range(3):
         w = weights_for(theta)
         theta = solve(w, free)
-    cov = robust_covariance(samples, model, body, theta, w, ne, free, opts, chunk)
+    cov = robust_covariance(samples, model, body, theta, w, ne, free, opts, chunk) \
+        + bias_covariance(samples, model, body, theta, w, free, opts, chunk)
     A_w, _, _ = ne.total(w)
     flags = _flags(A_w, theta, cov, names, parameter_scale(ne, theta, prior_v), opts)
+    if opts.speed_range is not None:
+        flags.update(speed_coverage_flags(model, samples, np.asarray(opts.speed_range)))
     if flags:
         free = np.array([n not in flags for n in names])
         theta = solve(w, free)
-        cov = robust_covariance(samples, model, body, theta, w, ne, free, opts, chunk)
+        cov = robust_covariance(samples, model, body, theta, w, ne, free, opts, chunk) \
+            + bias_covariance(samples, model, body, theta, w, free, opts, chunk)
     cv = np.zeros(6)
     for f in range(len(ne.n)):
         th_f = solve(w, free, exclude=f)
@@ -410,7 +464,8 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     return Fit(names=names, theta=theta, cov=cov, sigma=np.sqrt(rss / N), method=opts.method,
                n=N, rss=rss, tss=tss, cond=float(max(ev) / max(min(ev), 1e-300)), flags=flags,
                cv_rmse=np.sqrt(cv / N),
-               n_eff=min(float(N), 2 * opts.cutoff * duration) if opts.cutoff > 0 else float(N))
+               n_eff=min(float(N), 2 * opts.cutoff * duration) if opts.cutoff > 0 else float(N),
+               blocks=block_count(samples, opts.block))
 
 
 def total_sum_of_squares(ne: NormalEquations) -> FloatArray:
@@ -420,6 +475,18 @@ def total_sum_of_squares(ne: NormalEquations) -> FloatArray:
     Σ y² is returned: the NSE is then 1 − RSS/Σy², conservative for signals with an offset.
     """
     return np.asarray(ne.c.sum(0))
+
+
+def block_index(samples: Samples, block: float) -> NDArray[np.int64]:
+    """Index 0..B−1 of the ``block``-second block (within its segment) of every sample."""
+    block_of = np.floor((samples.t - samples.t[0]) / block).astype(np.int64)
+    block_of += samples.segment * (int(block_of.max()) + 1)
+    return np.unique(block_of, return_inverse=True)[1].astype(np.int64)
+
+
+def block_count(samples: Samples, block: float) -> int:
+    """Number of blocks B of the robust covariance."""
+    return int(block_index(samples, block).max()) + 1 if len(samples) else 0
 
 
 def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
@@ -438,9 +505,7 @@ def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
         return cov
     A, _, _ = ne.total(weights)
     Af = A[np.ix_(free, free)]
-    block_of = np.floor((samples.t - samples.t[0]) / opts.block).astype(np.int64)
-    block_of += samples.segment * (int(block_of.max()) + 1)
-    _, block_idx = np.unique(block_of, return_inverse=True)
+    block_idx = block_index(samples, opts.block)
     S = np.zeros((int(block_idx.max()) + 1, int(free.sum())))
     for sl, Phi, y in iter_regression(samples, model, body, chunk, opts.cutoff):
         r = y - Phi @ theta
@@ -451,6 +516,35 @@ def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
     meat = S.T @ S * (B / max(B - 1, 1))
     Ainv = linalg.inv(Af)
     cov[np.ix_(free, free)] = Ainv @ meat @ Ainv
+    return cov
+
+
+def bias_covariance(samples: Samples, model: DampingModel, body: RigidBody,
+                    theta: FloatArray, weights: FloatArray, free: NDArray[np.bool_],
+                    opts: FitOptions, chunk: int = 20000) -> FloatArray:
+    """Covariance of θ caused by unknown constant sensor biases (the error budget).
+
+    For each axis k of the gyro (σ = ``opts.gyro_bias``) and of the DVL (``opts.dvl_bias``)
+    the data are refitted with ν offset by σ e_k; the change Δθ_k is one standard deviation
+    of the error that bias causes, and Σ_k Δθ_k Δθ_kᵀ is the covariance (biases independent).
+    Such errors are constant over the record, so the residuals cannot reveal them.
+    """
+    p = model.n_params
+    cov = np.zeros((p, p))
+    sigma = np.array([opts.dvl_bias] * 3 + [opts.gyro_bias] * 3)
+    if not free.any():
+        return cov
+    for k in np.flatnonzero(sigma > 0):
+        offset = np.zeros(6)
+        offset[k] = sigma[k]
+        A = np.zeros((p, p))
+        b = np.zeros(p)
+        for _, Phi, y in iter_regression(samples, model, body, chunk, opts.cutoff,
+                                         offset=offset):
+            A += np.einsum("nip,niq,i->pq", Phi, Phi, weights)
+            b += np.einsum("nip,ni,i->p", Phi, y, weights)
+        d = _solve(A, b, free, theta) - theta
+        cov += np.outer(d, d)
     return cov
 
 

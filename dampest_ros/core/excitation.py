@@ -154,14 +154,14 @@ def make_excitation(name: str, vehicle: Vehicle, duration: float, seed: int = 0,
     max_angle = np.deg2rad(25.0) * min(amplitude, 1.0)
 
     if name == "A":
-        # one DOF at a time: steps at ±15 % of the range, then a slow sine (0.05 Hz)
+        # one DOF at a time: steps at ±5 % of the range, then a slow sine (0.05 Hz)
         order = [0, 1, 2, 5, 3, 4]
         seg = duration / len(order)
         for k, i in enumerate(order):
             m = (t >= k * seg) & (t < (k + 1) * seg)
             ts = t[m] - k * seg
             # angular rates capped so that roll and pitch stay within about 10°
-            a = 0.15 * lim[i] if i < 3 or i == 5 else min(0.15 * lim[i], 0.2)
+            a = 0.05 * lim[i] if i < 3 or i == 5 else min(0.05 * lim[i], 0.1)
             steps = a * np.where((ts // 8.0) % 4 < 2, 1.0, -1.0) * ((ts // 8.0) % 2)
             sine = a * np.sin(2 * np.pi * 0.05 * ts)
             nu_ref[m, i] = np.where(ts < seg / 2, steps, sine)

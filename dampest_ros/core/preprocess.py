@@ -127,14 +127,6 @@ def _clean(s: Series, *cols: FloatArray) -> NDArray[np.bool_]:
     return np.asarray(ok & inc)
 
 
-def _butter(kind: str, fc: float, rate: float) -> FloatArray:
-    return np.asarray(signal.butter(4, fc, btype=kind, fs=rate, output="sos"), dtype=float)
-
-
-def _filtfilt(sos: FloatArray, x: FloatArray) -> FloatArray:
-    return np.asarray(signal.sosfiltfilt(sos, x, axis=0), dtype=float)
-
-
 def zero_phase(x: FloatArray, rate: float, cutoff: float, derivative: bool = False,
                window: float = 0.0, order: int = 4) -> FloatArray:
     """Zero-phase Butterworth-magnitude low-pass, optionally differentiated, along axis 0.
@@ -213,15 +205,14 @@ def fuse_velocity(t: FloatArray, R: FloatArray, f: FloatArray, t_dvl: FloatArray
         body (R ᵀ d/dt(R v)).
     """
     rate = 1.0 / float(t[1] - t[0])
-    lp_c = _butter("lowpass", crossover, rate)
-    hp_c = _butter("highpass", crossover, rate)
     a_ned = np.einsum("nij,nj->ni", R, f)
     a_ned[:, 2] += gravity
     v_dvl_ned = np.einsum("nij,nj->ni", R, _interp(t, t_dvl, v_dvl))
-    # v_ned = LP(R v_dvl) + HP(∫ (R f + g e_z) dt); the pair sums to one at every frequency
-    v_ned = _filtfilt(lp_c, v_dvl_ned) + _filtfilt(hp_c, integrate.cumulative_trapezoid(
-        a_ned, dx=1.0 / rate, axis=0, initial=0.0))
-    a_fused = _filtfilt(lp_c, np.gradient(v_dvl_ned, 1.0 / rate, axis=0)) + _filtfilt(hp_c, a_ned)
+    v_imu_ned = integrate.cumulative_trapezoid(a_ned, dx=1.0 / rate, axis=0, initial=0.0)
+    # v_ned = LP(R v_dvl) + (1 − LP)(∫ (R f + g e_z) dt): complementary at every frequency;
+    # its derivative is the same with the DVL differentiated and the IMU acceleration as is
+    v_ned = v_imu_ned + zero_phase(v_dvl_ned - v_imu_ned, rate, crossover)
+    a_fused = a_ned + zero_phase(v_dvl_ned - v_imu_ned, rate, crossover, derivative=True)
     return (np.einsum("nji,nj->ni", R, v_ned), np.einsum("nji,nj->ni", R, a_fused))
 
 
@@ -320,7 +311,7 @@ def preprocess(rec: Recording, thrusters: Thrusters, gravity: float, rho: float,
     tau_thr = thruster_wrench(thr, thrusters)
     window = float(np.median(np.diff(thr.stamp)))
     phase = float(((thr.stamp[0] - window / 2) * cfg.rate) % 1.0)
-    ratio = max(1, int(round(cfg.inertial_rate / cfg.rate)))
+    ratio = max(1, round(cfg.inertial_rate / cfg.rate))
 
     lo = max(imu.stamp[0], t_dvl[0], thr.stamp[0])
     hi = min(imu.stamp[-1], t_dvl[-1], thr.stamp[-1])
@@ -365,7 +356,7 @@ def preprocess(rec: Recording, thrusters: Thrusters, gravity: float, rho: float,
         depth = (_interp(t, pres.stamp, pres.fluid_pressure[:, None])[:, 0]
                  - cfg.atmospheric_pressure) / (rho * gravity) \
             if isinstance(pres, PressureSeries) and len(pres) > 1 else np.full(len(t), np.nan)
-        n_trim = int(round(cfg.trim * cfg.rate))
+        n_trim = round(cfg.trim * cfg.rate)
         sl = slice(n_trim, len(t) - n_trim)
         parts.append(Samples(t[sl], nu[sl], nu_dot[sl], tau[sl],
                              frames.euler_from_matrix(R[sl]), depth[sl],

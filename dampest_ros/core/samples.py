@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import NDArray
@@ -66,7 +67,7 @@ class Samples:
             return
         edges = np.flatnonzero(np.diff(self.segment)) + 1
         bounds = np.r_[0, edges, len(self)]
-        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        for a, b in pairwise(bounds):
             yield slice(int(a), int(b))
 
     def take(self, index: slice | NDArray[np.int64] | NDArray[np.bool_]) -> Samples:
@@ -81,6 +82,7 @@ class Samples:
         for p in parts:
             seg.append(p.segment - (p.segment.min() if len(p) else 0) + offset)
             offset = int(seg[-1].max()) + 1 if len(p) else offset
-        return Samples(*(np.concatenate([getattr(p, f) for p in parts]) for f in
-                         ("t", "nu", "nu_dot", "tau", "euler", "depth")),
-                       segment=np.concatenate(seg).astype(np.int64))
+        t, nu, nu_dot, tau, euler, depth = (np.concatenate([getattr(p, f) for p in parts])
+                                            for f in ("t", "nu", "nu_dot", "tau", "euler",
+                                                      "depth"))
+        return Samples(t, nu, nu_dot, tau, euler, depth, np.concatenate(seg).astype(np.int64))

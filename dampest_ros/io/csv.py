@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml  # type: ignore[import-untyped]  # no types-PyYAML in the lock
+import yaml
 
 from dampest_ros.core.measurements import FloatArray
 from dampest_ros.core.samples import Samples
