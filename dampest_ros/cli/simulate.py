@@ -12,10 +12,11 @@ from dampest_ros.cli.common import speed_table, table
 from dampest_ros.core.excitation import PROTOCOLS, make_excitation
 from dampest_ros.core.preprocess import PreprocessConfig, preprocess
 from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
-from dampest_ros.core.simulate import Effects, run as run_sim, true_vehicle
+from dampest_ros.core.simulate import Effects, true_vehicle
+from dampest_ros.core.simulate import run as run_sim
 from dampest_ros.io.bag import write_bag
 from dampest_ros.io.csv import samples_to_columns, write_csv
-from dampest_ros.io.yaml_io import damping_spec, load_vehicle, read_mapping, save_model
+from dampest_ros.io.yaml_io import load_vehicle, read_mapping, save_model
 
 EXAMPLE = ("example: dampest simulate --vehicle bluerov2_heavy --protocol B --duration 600 "
            "--seed 1 --out bags/b600")

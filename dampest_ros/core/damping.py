@@ -15,7 +15,7 @@ positive when dissipative (force on the left-hand side is +D(ν)ν).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -389,7 +389,7 @@ def cross_term(specs: Sequence[CrossSpec]) -> DampingTerm:
                        "e.g. sway–yaw", bases)
 
 
-def memory_term(dof_rates: dict[str | int, Sequence[float]]) -> DampingTerm:
+def memory_term(dof_rates: Mapping[str | int, Sequence[float]]) -> DampingTerm:
     """D_freq: fluid memory K(t) = Σ_m c_m e^{−λ_m t} per DOF, e.g. ``{'u': [2.0]}``."""
     rates: list[float] = []
     dofs: list[int] = []

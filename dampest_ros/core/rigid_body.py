@@ -8,6 +8,7 @@ Functions are vectorised over leading sample axes.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -151,9 +152,8 @@ class RigidBody:
     gravity: float = 9.81
 
     def __post_init__(self) -> None:
-        _check_positive("mass", self.mass)
-        _check_positive("rho", self.rho)
-        _check_positive("gravity", self.gravity)
+        for name in ("mass", "rho", "gravity"):
+            object.__setattr__(self, name, _check_positive(name, getattr(self, name)))
         if not np.isfinite(self.volume) or self.volume < 0:
             raise ConfigError("volume", f"must be a finite number ≥ 0, got {self.volume}")
         object.__setattr__(self, "inertia", _matrix("inertia", self.inertia, 3))
@@ -223,7 +223,7 @@ class RigidBody:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> RigidBody:
-        """Build from a preset's ``vehicle`` mapping (inertia and added_mass as diagonal or full)."""
+        """Build from a preset's ``vehicle`` mapping (inertia, added_mass: diagonal or full)."""
         try:
             mass = float(d["mass"])
             inertia = _diag_or_full("inertia", d["inertia"], 3)
@@ -241,9 +241,13 @@ class RigidBody:
         )
 
 
-def _check_positive(name: str, value: float) -> None:
-    if not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+def _check_positive(name: str, value: object) -> float:
+    """``value`` as a float if it is a finite real number > 0 (numpy scalars included)."""
+    # numbers.Real covers int, float, np.integer and np.floating; bool is rejected explicitly
+    if (not isinstance(value, numbers.Real) or isinstance(value, bool)
+            or not np.isfinite(float(value)) or value <= 0):
         raise ConfigError(name, f"must be a finite number > 0, got {value!r}")
+    return float(value)
 
 
 def _vector(name: str, v: Any, n: int) -> FloatArray:

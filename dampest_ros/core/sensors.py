@@ -17,8 +17,10 @@ All sensors sit at the body origin with axes aligned to the body, so their frame
 
 Between integration steps the models interpolate the truth: ν by the cubic Hermite polynomial
 through (ν, ν̇) at the two neighbouring steps (its derivative is the IMU's ν̇), the NED
-position by the cubic Hermite polynomial through (p, R ν₁), the attitude by normalised linear
-interpolation of quaternions (nlerp) and the thruster logs linearly.
+position by the cubic Hermite polynomial through (p, R ν₁) and the attitude by normalised
+linear interpolation of quaternions (nlerp). The thruster logs are not interpolated: the
+trajectory holds step means over [t_k, t_k + dt], and the message stamped s reports their exact
+mean over the window [s − 1/thruster_rate, s] (first stamp t[0] + 1/thruster_rate).
 
 Noise comes from independent random streams, one per noise source, spawned from
 ``np.random.default_rng(seed)`` in the fixed order of ``_STREAMS``: changing one sensor's

@@ -10,7 +10,7 @@ Equations (FRD body, NED world, ν_r = ν − ν_c the velocity relative to the 
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -190,7 +190,8 @@ class Simulator:
         self._theta = self.truth.theta
         self._theta_changed = self._theta.copy()
         if self._model.term("quadratic") is not None:
-            self._theta_changed[self._model.slice("quadratic")] *= self.effects.damping_change_factor
+            quad = self._model.slice("quadratic")
+            self._theta_changed[quad] *= self.effects.damping_change_factor
         self._r_g_l, self._r_b_l = body.r_g.tolist(), body.r_b.tolist()
         self._gain = (self._model.static_gain(self._theta), self._model.memory_gain(self._theta))
         self._gain_changed = (self._model.static_gain(self._theta_changed),
@@ -206,7 +207,7 @@ class Simulator:
         self._alloc = self._thr.allocation
         self._n_mem = len(self._model.memory_rates)
         self._n_thr = self._thr.count
-        self._delay_steps = int(round(self.effects.delay / self.dt))
+        self._delay_steps = round(float(self.effects.delay) / self.dt)
         self._cmd_queue: deque[FloatArray] = deque(
             [np.zeros(self._n_thr)] * self._delay_steps)
         self.t = 0.0
@@ -411,7 +412,7 @@ def run(vehicle: Vehicle, excitation: Excitation, effects: Effects | None = None
     sim = Simulator(vehicle, effects, dt=dt, position=np.array([0.0, 0.0,
                                                                 excitation.depth_ref[0]]))
     dt_c = float(excitation.t[1] - excitation.t[0])
-    sub = max(1, int(round(dt_c / dt)))
+    sub = max(1, round(dt_c / dt))
     ctrl = VelocityPI(np.diag(vehicle.body.M), 0.9 * vehicle.thrusters.max_wrench,
                       excitation.bandwidth)
     for k in range(len(excitation.t)):

@@ -87,7 +87,7 @@ class Thrusters:
     @cached_property
     def allocation_pinv(self) -> FloatArray:
         """Moore–Penrose inverse T_alloc⁺ (n×6)."""
-        return np.linalg.pinv(self.allocation)
+        return np.asarray(np.linalg.pinv(self.allocation), dtype=float)
 
     @property
     def gain(self) -> float:

@@ -72,7 +72,8 @@ def damping_from_spec(spec: dict[str, Any]) -> tuple[DampingModel, FloatArray]:
     values: dict[str, float] = {}
     if "linear" in spec:
         lin = _values("linear", spec["linear"])
-        diag, off = [], []
+        diag: list[tuple[int, int]] = []
+        off: list[tuple[int, int]] = []
         for name in lin:
             r, c = _letters(name, "linear")
             (diag if r == c else off).append((r, c))

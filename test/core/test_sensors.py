@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -184,16 +185,49 @@ def test_biases_are_frd_and_appear_in_flu() -> None:
     np.testing.assert_allclose(dvl.linear[3], [0.05, -0.06, -0.07], atol=1e-15)
 
 
-def test_thruster_state_is_rad_per_s_and_thrust_linearly_interpolated() -> None:
-    traj = at_rest(duration=1.0, dt=0.03, n_thrusters=3)  # 50 Hz samples fall between steps
-    js = measure(traj, RHO, G, EXACT)["thrusters/state"]
+def test_thruster_state_is_rad_per_s_and_window_mean_of_step_means() -> None:
+    # Four steps of dt = 0.03 s; rotor_speed/thrust hold the step MEANS over [t_k, t_k + dt],
+    # so the truth is piecewise constant on [0, .03), [.03, .06), [.06, .09), [.09, .12].
+    traj = replace(at_rest(duration=0.09, dt=0.03, n_thrusters=2),
+                   rotor_speed=np.array([[1.0, 10.0], [2.0, 20.0], [4.0, 40.0], [8.0, 80.0]]),
+                   thrust=np.array([[3.0, 0.5], [-3.0, 0.5], [0.0, 0.5], [6.0, 0.5]]))
+    js = measure(traj, RHO, G, replace(EXACT, thruster_rate=50.0))["thrusters/state"]
     assert isinstance(js, JointSeries)
-    assert js.names == ("thruster_0", "thruster_1", "thruster_2")
+    assert js.names == ("thruster_0", "thruster_1")
     assert js.frame_id == "base_link"
-    t = js.stamp[:, None]
-    # rotor speed n_i(t) = (1 + i) t rev/s → 2π n rad/s; thrust 3t − i N (linear: exact)
-    np.testing.assert_allclose(js.velocity, 2 * np.pi * t * [1.0, 2.0, 3.0], atol=1e-12)
-    np.testing.assert_allclose(js.effort, 3.0 * t - [0.0, 1.0, 2.0], atol=1e-12)
+    # 50 Hz: stamp s reports the mean over [s − 0.02, s]; first stamp t0 + 1/rate, last at the
+    # end of the last step (0.12). Windows straddling a step edge average the two halves:
+    #   [0, .02] → 1     [.02, .04] → (1 + 2)/2    [.04, .06] → 2
+    #   [.06, .08] → 4   [.08, .10] → (4 + 8)/2    [.10, .12] → 8
+    np.testing.assert_allclose(js.stamp, [0.02, 0.04, 0.06, 0.08, 0.10, 0.12], rtol=0,
+                               atol=1e-15)
+    n = np.array([1.0, 1.5, 2.0, 4.0, 6.0, 8.0])
+    # velocity in rad/s: 2π n (n in rev/s); thruster 1 spins 10× thruster 0
+    np.testing.assert_allclose(js.velocity, 2 * np.pi * np.column_stack([n, 10.0 * n]),
+                               rtol=0, atol=1e-12)
+    # thrust: 3 | (3 − 3)/2 | −3 | 0 | (0 + 6)/2 | 6; a constant stays constant
+    np.testing.assert_allclose(js.effort, [[3.0, 0.5], [0.0, 0.5], [-3.0, 0.5], [0.0, 0.5],
+                                           [3.0, 0.5], [6.0, 0.5]], rtol=0, atol=1e-12)
+
+
+def test_thruster_window_mean_matches_brute_force_average() -> None:
+    # Steps (0.03 s) and windows (1/40 s) misaligned; average the piecewise-constant step
+    # means by the midpoint rule on a 1/6000 s grid, on which every step edge and window edge
+    # lies, so the quadrature is exact.
+    rng = np.random.default_rng(3)
+    base = at_rest(duration=0.6, dt=0.03, n_thrusters=3)
+    traj = replace(base, rotor_speed=rng.normal(size=base.rotor_speed.shape),
+                   thrust=rng.normal(size=base.thrust.shape))
+    js = measure(traj, RHO, G, replace(EXACT, thruster_rate=40.0))["thrusters/state"]
+    assert isinstance(js, JointSeries)
+    np.testing.assert_allclose(js.stamp, np.arange(1, 26) / 40.0, rtol=0, atol=1e-12)
+    h = 1.0 / 6000.0
+    for k, s in enumerate(js.stamp):
+        mid = s - 1.0 / 40.0 + h * (np.arange(150) + 0.5)
+        step = np.floor(mid / 0.03).astype(int)
+        np.testing.assert_allclose(js.effort[k], traj.thrust[step].mean(axis=0), atol=1e-12)
+        np.testing.assert_allclose(js.velocity[k],
+                                   2 * np.pi * traj.rotor_speed[step].mean(axis=0), atol=1e-12)
 
 
 def test_frames_ids_and_covariances() -> None:
@@ -313,15 +347,20 @@ def test_dvl_noise_std() -> None:
 
 def test_sample_counts_follow_the_rates() -> None:
     rec = measure(at_rest(duration=20.0), RHO, G, SensorConfig(dvl_dropout_rate=0.0))
+    # thrusters/state: 50 Hz windows [s − 0.02, s] inside [0, 20.01], so s = 0.02 … 20.00
     assert {k: len(v) for k, v in rec.items()} == {
         "truth/odom": 1001, "imu/data": 4001, "dvl/twist": 161, "pressure": 401,
-        "thrusters/state": 1001}
+        "thrusters/state": 1000}
     cfg = SensorConfig(imu_rate=100.0, dvl_rate=5.0, pressure_rate=10.0, thruster_rate=25.0,
                        truth_rate=7.0, dvl_dropout_rate=0.0)
     rec = measure(at_rest(duration=1.01), RHO, G, cfg)
     assert {k: len(v) for k, v in rec.items()} == {
-        "truth/odom": 8, "imu/data": 102, "dvl/twist": 6, "pressure": 11, "thrusters/state": 26}
+        "truth/odom": 8, "imu/data": 102, "dvl/twist": 6, "pressure": 11, "thrusters/state": 25}
     np.testing.assert_allclose(rec["truth/odom"].stamp, np.arange(8) / 7.0, atol=0)
+    # thruster messages close a window of one period: stamps t0 + k/25, k = 1 … 25, the last
+    # at the end of the last step (1.01 + dt = 1.02 s)
+    np.testing.assert_allclose(rec["thrusters/state"].stamp, np.arange(1, 26) / 25.0,
+                               rtol=0, atol=1e-12)
     assert np.all(np.diff(rec["imu/data"].stamp) > 0)
 
 

@@ -1,0 +1,285 @@
+"""Rigid body (dampest_ros.core.rigid_body): M, C(ν), g(η) and configuration checks."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from dampest_ros.core.frames import matrix_from_euler
+from dampest_ros.core.rigid_body import (
+    ConfigError,
+    RigidBody,
+    coriolis_force,
+    coriolis_matrix,
+    rigid_body_mass,
+    skew,
+)
+from dampest_ros.core.vehicle import Vehicle
+
+PRESET_DIR = Path(__file__).resolve().parents[2] / "config" / "vehicles"
+PRESETS = sorted(PRESET_DIR.glob("*.yaml"))
+
+
+def load(path: Path) -> dict[str, Any]:
+    with path.open() as f:
+        return dict(yaml.safe_load(f))
+
+
+def preset_body(path: Path) -> RigidBody:
+    return Vehicle.from_dict(load(path)).body
+
+
+def random_nu(rng: np.random.Generator, n: int) -> np.ndarray:
+    return rng.normal(size=(n, 6)) * [1.0, 0.5, 0.5, 1.0, 1.0, 1.0]
+
+
+def test_presets_found() -> None:
+    names = {p.stem for p in PRESETS}
+    assert {"bluerov2_heavy", "platform_a", "platform_b"} <= names
+
+
+# --- mass matrix -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("path", PRESETS, ids=lambda p: p.stem)
+def test_mass_matrices_of_presets_are_spd(path: Path) -> None:
+    body = preset_body(path)
+    for M in (body.M_RB, body.M):
+        np.testing.assert_array_equal(M, M.T)
+        assert np.linalg.eigvalsh(M).min() > 0
+    assert np.linalg.eigvalsh(body.added_mass).min() >= 0
+
+
+def test_rigid_body_mass_structure() -> None:
+    # Fossen eq. 3.44 with the parallel-axis theorem written out for r_g = (x, y, z)
+    m, x, y, z = 12.0, 0.05, -0.02, 0.1
+    inertia = np.array([[0.3, 0.01, 0.0], [0.01, 0.4, -0.02], [0.0, -0.02, 0.5]])
+    M = rigid_body_mass(m, inertia, np.array([x, y, z]))
+    expected = np.array([
+        [m, 0, 0, 0, m * z, -m * y],
+        [0, m, 0, -m * z, 0, m * x],
+        [0, 0, m, m * y, -m * x, 0],
+        [0, -m * z, m * y, 0, 0, 0],
+        [m * z, 0, -m * x, 0, 0, 0],
+        [-m * y, m * x, 0, 0, 0, 0],
+    ], dtype=float)
+    expected[3:, 3:] = inertia + m * np.array([
+        [y * y + z * z, -x * y, -x * z],
+        [-x * y, x * x + z * z, -y * z],
+        [-x * z, -y * z, x * x + y * y],
+    ])
+    np.testing.assert_allclose(M, expected, rtol=0, atol=1e-15)
+
+
+def test_skew_is_cross_product() -> None:
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(100, 3)), rng.normal(size=(100, 3))
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", skew(a), b), np.cross(a, b), atol=1e-15)
+
+
+# --- Coriolis ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("path", PRESETS, ids=lambda p: p.stem)
+def test_coriolis_skew_symmetric_for_every_preset(path: Path) -> None:
+    body = preset_body(path)
+    nu = random_nu(np.random.default_rng(1), 100)
+    for M in (body.M_RB, body.added_mass, body.M):
+        C = coriolis_matrix(M, nu)
+        assert C.shape == (100, 6, 6)
+        scale = np.abs(C).max()
+        assert scale > 0
+        np.testing.assert_allclose(C + np.swapaxes(C, 1, 2), 0.0, atol=1e-12 * scale)
+        # C(ν)ν computed without forming C
+        np.testing.assert_allclose(np.einsum("nij,nj->ni", C, nu), coriolis_force(M, nu),
+                                   rtol=0, atol=1e-12 * scale)
+        # no power: νᵀ C(ν) ν = 0
+        np.testing.assert_allclose(np.einsum("ni,ni->n", nu, coriolis_force(M, nu)), 0.0,
+                                   atol=1e-12 * scale)
+
+
+def test_coriolis_rigid_body_against_fossen_6_43() -> None:
+    # C_RB(ν) = [[m S(ν2), −m S(ν2) S(r_g)], [m S(r_g) S(ν2), −S(I_o ν2)]] (Fossen 2011,
+    # eq. 3.57, the form without ν1) is another parametrisation of the same force C_RB(ν)ν.
+    rng = np.random.default_rng(2)
+    m = 20.0
+    r_g = np.array([0.02, -0.01, 0.05])
+    inertia = np.diag([0.5, 0.7, 0.9])
+    M = rigid_body_mass(m, inertia, r_g)
+    I_o = M[3:, 3:]
+    for nu in random_nu(rng, 20):
+        S2, Sg = skew(nu[3:]), skew(r_g)
+        C = np.block([[m * S2, -m * S2 @ Sg], [m * Sg @ S2, -skew(I_o @ nu[3:])]])
+        np.testing.assert_allclose(coriolis_force(M, nu), C @ nu, rtol=0, atol=1e-13)
+
+
+def test_coriolis_added_mass_munk_moment() -> None:
+    # diagonal M_A = diag(A_11 … A_66), pure u and w: no force, and the Munk pitch moment
+    # (ν1 × M_A ν1)_y = (A_11 − A_33) u w (Fossen 2011, eq. 6.50 with C_A on the left).
+    MA = np.diag([2.0, 3.0, 11.0, 0.1, 0.2, 0.3])
+    u, w = 0.7, -0.3
+    f = coriolis_force(MA, np.array([u, 0, w, 0, 0, 0]))
+    np.testing.assert_allclose(f, [0, 0, 0, 0, (2.0 - 11.0) * u * w, 0], atol=1e-15)
+
+
+def test_rigid_body_coriolis_with_current() -> None:
+    body = preset_body(PRESET_DIR / "bluerov2_heavy.yaml")
+    rng = np.random.default_rng(3)
+    nu, nu_r = random_nu(rng, 10), random_nu(rng, 10)
+    np.testing.assert_allclose(
+        body.coriolis_force(nu, nu_r),
+        coriolis_force(body.M_RB, nu) + coriolis_force(body.added_mass, nu_r), atol=1e-14)
+    np.testing.assert_allclose(body.coriolis_force(nu), coriolis_force(body.M, nu), atol=1e-13)
+
+
+# --- restoring ----------------------------------------------------------------------------------
+
+
+def fossen_4_6(W: float, B: float, r_g: np.ndarray, r_b: np.ndarray, phi: float,
+               theta: float) -> np.ndarray:
+    """g(η) of Fossen (2011) eq. 4.6, written out term by term."""
+    xg, yg, zg = r_g
+    xb, yb, zb = r_b
+    cf, sf, ct, st = np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta)
+    return np.array([
+        (W - B) * st,
+        -(W - B) * ct * sf,
+        -(W - B) * ct * cf,
+        -(yg * W - yb * B) * ct * cf + (zg * W - zb * B) * ct * sf,
+        (zg * W - zb * B) * st + (xg * W - xb * B) * ct * cf,
+        -(xg * W - xb * B) * ct * sf - (yg * W - yb * B) * st,
+    ])
+
+
+def test_restoring_matches_fossen_4_6() -> None:
+    rng = np.random.default_rng(4)
+    body = RigidBody(mass=30.0, inertia=np.diag([1.0, 1.2, 1.5]),
+                     r_g=np.array([0.01, -0.02, 0.03]), r_b=np.array([-0.015, 0.01, -0.04]),
+                     volume=0.0285, rho=1025.0)
+    W, B = body.weight, body.buoyancy
+    assert W != pytest.approx(B)
+    angles = np.column_stack([rng.uniform(-np.pi, np.pi, 200), rng.uniform(-1.5, 1.5, 200),
+                              rng.uniform(-np.pi, np.pi, 200)])
+    g = body.restoring(matrix_from_euler(angles))
+    assert g.shape == (200, 6)
+    for k, (phi, theta, _) in enumerate(angles):
+        np.testing.assert_allclose(g[k], fossen_4_6(W, B, body.r_g, body.r_b, phi, theta),
+                                   rtol=0, atol=1e-12 * W)
+
+
+def test_restoring_level_heavy_vehicle_sinks() -> None:
+    # level attitude: g(η) = [0, 0, −(W − B), 0, 0, 0]; on the left-hand side, so a heavy
+    # vehicle (W > B) is pushed down (+z in NED): M ν̇ = −g has ẇ > 0.
+    body = RigidBody(mass=10.0, inertia=np.eye(3), volume=0.009, rho=1000.0, gravity=9.81)
+    g = body.restoring(np.eye(3))
+    W_minus_B = 10.0 * 9.81 - 1000.0 * 9.81 * 0.009
+    np.testing.assert_allclose(g, [0, 0, -W_minus_B, 0, 0, 0], atol=1e-12)
+    assert (-np.linalg.solve(body.M, g))[2] > 0
+
+
+def test_restoring_moment_rights_a_pitched_vehicle() -> None:
+    # buoyancy above gravity (z_b < z_g in FRD): nose-up pitch θ > 0 gives g_M > 0 on the left,
+    # i.e. a nose-down restoring moment.
+    body = RigidBody(mass=10.0, inertia=np.eye(3), r_b=np.array([0, 0, -0.05]), volume=0.01,
+                     rho=1000.0)
+    g = body.restoring(matrix_from_euler([0.0, 0.2, 0.0]))
+    assert g[4] == pytest.approx(0.05 * body.buoyancy * np.sin(0.2), rel=1e-12)
+
+
+def test_restoring_independent_of_heading() -> None:
+    body = preset_body(PRESET_DIR / "platform_a.yaml")
+    a = body.restoring(matrix_from_euler([0.3, -0.2, 0.0]))
+    b = body.restoring(matrix_from_euler([0.3, -0.2, 2.1]))
+    np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+# --- configuration errors --------------------------------------------------------------------
+
+
+def base_vehicle() -> dict[str, Any]:
+    return copy.deepcopy(load(PRESET_DIR / "bluerov2_heavy.yaml")["vehicle"])
+
+
+def edit(**changes: Any) -> dict[str, Any]:
+    d = base_vehicle()
+    d.update(changes)
+    return d
+
+
+BAD_CONFIGS = {
+    "negative mass": (edit(mass=-13.5), "mass"),
+    "zero mass": (edit(mass=0.0), "mass"),
+    "NaN inertia": (edit(inertia=[0.26, float("nan"), 0.37]), "inertia"),
+    "non-SPD inertia": (edit(inertia=[0.26, -0.23, 0.37]), "inertia"),
+    "non-symmetric inertia": (edit(inertia=[[0.26, 0.1, 0], [0, 0.23, 0], [0, 0, 0.37]]),
+                              "inertia"),
+    "added_mass wrong shape": (edit(added_mass=[6.36, 7.12, 18.68, 0.189, 0.135]), "added_mass"),
+    "added_mass 5x5": (edit(added_mass=np.eye(5).tolist()), "added_mass"),
+    "non-symmetric added_mass": (
+        edit(added_mass=(np.diag([6.36, 7.12, 18.68, 0.189, 0.135, 0.222])
+                         + 0.5 * np.eye(6, k=1)).tolist()), "added_mass"),
+    "indefinite added_mass": (edit(added_mass=[6.36, 7.12, -18.68, 0.189, 0.135, 0.222]),
+                              "added_mass"),
+    "NaN r_g": (edit(r_g=[0.0, float("nan"), 0.0]), "r_g"),
+    "r_b wrong length": (edit(r_b=[0.0, 0.0]), "r_b"),
+    "negative volume": (edit(volume=-0.01), "volume"),
+    "missing mass": ({k: v for k, v in base_vehicle().items() if k != "mass"}, "mass"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_CONFIGS, ids=list(BAD_CONFIGS))
+def test_bad_vehicle_config_names_the_field(case: str) -> None:
+    d, field = BAD_CONFIGS[case]
+    with pytest.raises(ConfigError) as info:
+        RigidBody.from_dict(d)
+    assert info.value.field == field
+    assert str(info.value).startswith(f"{field}:")
+
+
+def test_non_spd_total_mass_matrix() -> None:
+    # M_A passes the PSD check (its negative eigenvalue is inside the 1e-9·max tolerance)
+    # but the tiny yaw inertia cannot make M = M_RB + M_A positive definite.
+    added = np.diag([1e6, 1.0, 1.0, 1.0, 1.0, -1e-4])
+    with pytest.raises(ConfigError) as info:
+        RigidBody(mass=1.0, inertia=np.eye(3) * 1e-6, added_mass=added)
+    assert info.value.field == "mass matrix M_RB + M_A"
+
+
+def test_good_config_accepts_full_matrices() -> None:
+    d = edit(inertia=np.diag([0.26, 0.23, 0.37]).tolist(),
+             added_mass=np.diag([6.36, 7.12, 18.68, 0.189, 0.135, 0.222]).ravel().tolist())
+    body = RigidBody.from_dict(d)
+    np.testing.assert_array_equal(body.M, RigidBody.from_dict(base_vehicle()).M)
+
+
+def test_bad_preset_section_names_it() -> None:
+    d = load(PRESET_DIR / "bluerov2_heavy.yaml")
+    del d["thrusters"]
+    with pytest.raises(ConfigError) as info:
+        Vehicle.from_dict(d)
+    assert info.value.field == "thrusters"
+
+
+@pytest.mark.parametrize("value", [np.int64(13), np.float32(13.5), np.float64(13.5), 13, 13.5],
+                         ids=["int64", "float32", "float64", "int", "float"])
+def test_numpy_scalars_accepted_as_positive_numbers(value: Any) -> None:
+    body = RigidBody(mass=value, inertia=np.eye(3), rho=np.float32(1025.0),
+                     gravity=np.int64(10))
+    assert type(body.mass) is float and body.mass == float(value)
+    assert type(body.rho) is float and body.rho == 1025.0
+    assert type(body.gravity) is float and body.gravity == 10.0
+    np.testing.assert_array_equal(body.M_RB[:3, :3], float(value) * np.eye(3))
+
+
+@pytest.mark.parametrize("value", [np.float64(-1.0), np.int64(0), np.float32("nan"),
+                                   np.float64("inf"), True, "13.5", None],
+                         ids=["negative", "zero", "nan", "inf", "bool", "str", "None"])
+def test_non_positive_or_non_numbers_rejected(value: Any) -> None:
+    with pytest.raises(ConfigError) as info:
+        RigidBody(mass=value, inertia=np.eye(3))
+    assert info.value.field == "mass"
