@@ -1,0 +1,591 @@
+"""Recursive least squares for the stacked damping parameters θ, one sample (6 rows) at a time.
+
+Model per sample n (FRD body frame; the target and regressor of :mod:`dampest_ros.core.batch`):
+
+    y_n = Φ_n θ + e_n,    y_n ∈ ℝ⁶ (N, N·m),  Φ_n ∈ ℝ^{6×p},  e_n ~ N(0, R),  R = diag(r)
+
+Exponentially weighted least squares minimises Σ_n λ^{N−n} ‖y_n − Φ_n θ‖²_{R⁻¹} (plus the prior
+term). Its recursion is a Kalman filter with F = I, Q = 0 and a fading-memory prediction
+P⁻ = P / λ:
+
+    G = P⁻ Φᵀ,  S = Φ G + R,  K = G S⁻¹,  ε = y − Φ θ,  θ⁺ = θ + K ε,
+    P⁺ = (I − KΦ) P⁻ (I − KΦ)ᵀ + K R Kᵀ        (Joseph form)
+
+The Joseph form is evaluated without forming I − KΦ, as P⁻ + A + Aᵀ with
+A = K (½ S Kᵀ − Gᵀ) (= P⁻ − K Gᵀ − G Kᵀ + K S Kᵀ): two p × 6 by 6 × p products, O(6 p²) per
+sample, and symmetric by construction.
+
+Against wind-up (P growing as λ⁻ⁿ in directions the data do not excite):
+
+- **trace bound**: the forgetting inflation is limited so that the scaled trace
+  Σ_j P_jj / s_j² never exceeds ``trace_max`` (s the parameter scales; with s the prior
+  standard deviations and ``trace_max = p`` the covariance never grows past the prior);
+- **directional forgetting** (optional): the information is forgotten only along the output
+  directions that the current sample excites. In whitened coordinates Ŝ = R^{-1/2} Φ P Φᵀ
+  R^{-1/2} = V diag(s_k) Vᵀ, the variance of the k-th output combination is inflated by
+  1/λ_k with 1 − λ_k = (1 − λ) min(1, s_k / ρ) and nothing else changes:
+  P ← P + Σ_k (1/λ_k − 1) g_k g_kᵀ / s_k, g_k = P Φᵀ R^{-1/2} v_k. s_k is the sample's
+  information along that direction relative to the information already held; under steady
+  excitation s_k ≈ 1 − λ, so ``rho = 0.1 (1 − λ)`` forgets wherever the excitation is at least
+  about a third (RMS) of its usual level and freezes the covariance where it is not.
+
+Change detection: two-sided CUSUM (:class:`Cusum`) on block means of normalised innovations
+z_i = ε_i / √S_ii, in two forms per DOF: ``bias`` (z_i itself: an offset appeared) and
+``gain`` (z_i · sign(ŷ_i), ŷ = Φθ the predicted damping force: the damping force became larger
+or smaller than the model says; a gain change flips sign with the velocity and averages out of
+z_i itself). Block means over ``block`` samples remove most of the autocorrelation that the
+parallel low-pass gives the residuals; each block mean is standardised by a running estimate
+of its own standard deviation before it enters the CUSUM.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+FORGETTING_MODES = ("exponential", "directional")
+
+
+@dataclass
+class StepResult:
+    """Everything one RLS step computes (the function form returns the first three).
+
+    Attributes
+    ----------
+    theta : ndarray, shape (p,)
+        Updated estimate.
+    P : ndarray, shape (p, p)
+        Updated covariance.
+    innovation : ndarray, shape (6,)
+        ε = y − Φ θ_prior (N, N·m).
+    S : ndarray, shape (6, 6)
+        Innovation covariance Φ P⁻ Φᵀ + R.
+    """
+
+    theta: FloatArray
+    P: FloatArray
+    innovation: FloatArray
+    S: FloatArray
+
+
+def _noise_matrix(R: FloatArray | float, m: int) -> FloatArray:
+    """R as an (m, m) matrix from a scalar, a (m,) diagonal or an (m, m) matrix."""
+    R = np.asarray(R, dtype=float)
+    if R.ndim == 0:
+        return np.eye(m) * float(R)
+    if R.ndim == 1:
+        return np.diag(R)
+    return R
+
+
+def scaled_trace(P: FloatArray, scale: FloatArray | None = None) -> float:
+    """Σ_j P_jj / s_j² (the plain trace when ``scale`` is None)."""
+    d = P.diagonal()
+    return float(P.trace() if scale is None else d @ (1.0 / (scale * scale)))
+
+
+def forget(P: FloatArray, Phi: FloatArray, lam: float, R: FloatArray, *,
+           mode: str = "exponential", trace_max: float | None = None,
+           scale: FloatArray | None = None, rho: float | None = None) -> FloatArray:
+    """The forgetting (prediction) step P⁻ of the RLS recursion.
+
+    Parameters
+    ----------
+    P : ndarray, shape (p, p)
+        Covariance after the previous sample (units of θ²).
+    Phi : ndarray, shape (m, p)
+        Regressor of the coming sample (directional mode only).
+    lam : float
+        Forgetting factor λ in (0, 1].
+    R : ndarray, shape (m, m)
+        Measurement noise covariance (directional mode only).
+    mode : {'exponential', 'directional'}
+    trace_max : float, optional
+        Upper bound of the scaled trace after forgetting (the forgetting is reduced, never
+        the existing covariance).
+    scale : ndarray, shape (p,), optional
+        Parameter scales s_j for the trace bound (units of θ_j).
+    rho : float, optional
+        Directional mode: excitation ratio at which a direction is forgotten fully
+        (default 0.1 (1 − λ)).
+
+    Returns
+    -------
+    ndarray, shape (p, p)
+        A new array; ``P`` is not modified.
+    """
+    if lam >= 1.0:
+        return P.copy()
+    if mode == "exponential":
+        f = 1.0 / lam
+        if trace_max is not None:
+            tr = scaled_trace(P, scale)
+            if tr * f > trace_max:
+                # P⁻ = f P with f ∈ [1, 1/λ]: inflate at most up to the bound
+                f = max(1.0, trace_max / max(tr, 1e-300))
+        return P * f
+    if mode != "directional":
+        raise ConfigError("forgetting_mode", f"unknown mode {mode!r}; use {FORGETTING_MODES}")
+    w = 1.0 / np.sqrt(np.maximum(np.diagonal(R), 1e-300))
+    G = P @ Phi.T  # (p, m)
+    Gw = G * w  # P Φᵀ R^{-1/2}
+    S_hat = (Phi @ Gw) * w[:, None]  # R^{-1/2} Φ P Φᵀ R^{-1/2}
+    s, V = np.linalg.eigh(0.5 * (S_hat + S_hat.T))
+    r = 0.1 * (1.0 - lam) if rho is None else rho
+    # 1 − λ_k = (1 − λ) min(1, s_k/ρ);  coefficient (1/λ_k − 1)/s_k, finite as s_k → 0
+    one_minus = (1.0 - lam) * np.minimum(1.0, np.maximum(s, 0.0) / r)
+    lam_k = 1.0 - one_minus
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = np.where(s > 1e-300, (1.0 / lam_k - 1.0) / s, 0.0)
+    if not np.any(c > 0):
+        return P.copy()
+    Gk = Gw @ V  # columns g_k
+    inc = (Gk * c) @ Gk.T
+    if trace_max is not None:
+        tr, dtr = scaled_trace(P, scale), scaled_trace(inc, scale)
+        if tr + dtr > trace_max and dtr > 0:
+            inc *= max(0.0, (trace_max - tr) / dtr)
+    return P + inc
+
+
+def _step(theta: FloatArray, P: FloatArray, Phi: FloatArray, y: FloatArray, lam: float,
+          R: FloatArray | float, *, mode: str = "exponential", trace_max: float | None = None,
+          scale: FloatArray | None = None, rho: float | None = None) -> StepResult:
+    Phi = np.asarray(Phi, dtype=float)
+    m = Phi.shape[0]
+    Rm = _noise_matrix(R, m)
+    Pp = forget(P, Phi, lam, Rm, mode=mode, trace_max=trace_max, scale=scale,
+                rho=rho) if lam < 1.0 else P
+    G = Pp @ Phi.T  # (p, m)
+    S = Phi @ G + Rm
+    S = 0.5 * (S + S.T)
+    innovation = np.asarray(y, dtype=float) - Phi @ theta
+    # K = G S⁻¹; S is small (m × m) and symmetric positive definite
+    K = G @ np.linalg.inv(S)
+    theta_new = theta + K @ innovation
+    # Joseph form (I − KΦ) P⁻ (I − KΦ)ᵀ + K R Kᵀ = P⁻ − K Gᵀ − G Kᵀ + K S Kᵀ, in O(m p²)
+    # as P⁻ + A + Aᵀ with A = K (½ S Kᵀ − Gᵀ): exactly symmetric, one p × m × p product
+    A = K @ (0.5 * (S @ K.T) - G.T)
+    P_new = A + A.T
+    P_new += Pp
+    return StepResult(theta_new, P_new, innovation, S)
+
+
+def rls_update(theta: FloatArray, P: FloatArray, Phi: FloatArray, y: FloatArray, lam: float,
+               R: FloatArray | float, *, mode: str = "exponential",
+               trace_max: float | None = None, scale: FloatArray | None = None,
+               rho: float | None = None) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """One multi-output RLS update with forgetting (Joseph form).
+
+    Parameters
+    ----------
+    theta : ndarray, shape (p,)
+        Current estimate.
+    P : ndarray, shape (p, p)
+        Its covariance, symmetric positive definite.
+    Phi : ndarray, shape (m, p)
+        Regressor of this sample (m = 6 for one 6-DOF sample).
+    y : ndarray, shape (m,)
+        Target of this sample (N, N·m).
+    lam : float
+        Forgetting factor λ in (0, 1]; 1: none.
+    R : float or ndarray, shape (m,) or (m, m)
+        Measurement noise variance (per-DOF weights 1/r_i).
+    mode, trace_max, scale, rho
+        Forgetting options, see :func:`forget`.
+
+    Returns
+    -------
+    theta : ndarray, shape (p,)
+    P : ndarray, shape (p, p)
+    innovation : ndarray, shape (m,)
+        y − Φ θ before the update.
+    """
+    r = _step(theta, P, Phi, y, lam, R, mode=mode, trace_max=trace_max, scale=scale, rho=rho)
+    return r.theta, r.P, r.innovation
+
+
+class Cusum:
+    """Two-sided CUSUM on standardised statistics (unit variance, zero mean when no change).
+
+    g⁺ ← max(0, g⁺ + x − k),  g⁻ ← max(0, g⁻ − x − k); an alarm is raised in a channel when
+    g⁺ or g⁻ exceeds h, which detects a mean shift of size δ after about h / (δ − k) steps.
+    For Gaussian input, k = 0.5 and h = 10 give an in-control average run length of about
+    10⁵ steps per side (Siegmund's approximation), a 2σ shift is found in about 7 steps.
+
+    Parameters
+    ----------
+    n : int
+        Number of channels.
+    drift : float
+        k, the allowance per step (in standard deviations); shifts smaller than k are ignored.
+    threshold : float
+        h, the decision level (in standard deviations).
+    """
+
+    def __init__(self, n: int, drift: float = 0.5, threshold: float = 10.0) -> None:
+        if drift < 0 or threshold <= 0:
+            raise ConfigError("cusum", f"need drift ≥ 0 and threshold > 0, got {drift}, "
+                                       f"{threshold}")
+        self.drift = float(drift)
+        self.threshold = float(threshold)
+        self.pos = np.zeros(n)
+        self.neg = np.zeros(n)
+        self.alarm = np.zeros(n, dtype=bool)
+        self.alarm_sign = np.zeros(n)
+
+    def update(self, x: FloatArray) -> BoolArray:
+        """Feed one vector of standardised statistics; returns channels newly in alarm."""
+        x = np.where(np.isfinite(x), x, 0.0)
+        self.pos = np.maximum(0.0, self.pos + x - self.drift)
+        self.neg = np.maximum(0.0, self.neg - x - self.drift)
+        up, down = self.pos > self.threshold, self.neg > self.threshold
+        new = (up | down) & ~self.alarm
+        self.alarm_sign = np.where(new, np.where(up, 1.0, -1.0), self.alarm_sign)
+        self.alarm |= up | down
+        return np.asarray(new)
+
+    @property
+    def statistic(self) -> FloatArray:
+        """max(g⁺, g⁻) per channel."""
+        return np.maximum(self.pos, self.neg)
+
+    def reset(self) -> None:
+        """Clear the sums and the alarms."""
+        self.pos[:] = 0.0
+        self.neg[:] = 0.0
+        self.alarm[:] = False
+        self.alarm_sign[:] = 0.0
+
+
+@dataclass(frozen=True)
+class RLSConfig:
+    """Settings of :class:`RecursiveLeastSquares`.
+
+    Attributes
+    ----------
+    forgetting_factor : float
+        λ in [0.9, 1]; memory ≈ 1 / (1 − λ) samples.
+    forgetting_mode : {'exponential', 'directional'}
+    directional_rho : float
+        Directional mode: excitation ratio ρ for full forgetting (≤ 0: 0.1 (1 − λ)).
+    trace_max : float
+        Bound of Σ_j P_jj / s_j² (s the parameter scales); ≤ 0: p (never above the prior
+        when the scales are the prior standard deviations).
+    noise_var : tuple of 6 float
+        Initial per-DOF noise variances r_i (N², N²m²).
+    adapt_noise : bool
+        Re-estimate r_i from the innovations: r_i = Σ f² ε_i² / Σ f (exponentially weighted)
+        with f = r_i / S_ii the share of the innovation variance that is noise.
+    noise_window : float
+        Samples of the exponential window of that estimate.
+    noise_floor : float
+        Smallest r_i.
+    cusum_drift, cusum_threshold : float
+        CUSUM allowance k and decision level h (standard deviations of a block mean).
+    cusum_block : int
+        Samples per block mean fed to the CUSUM.
+    cusum_warmup : int
+        Blocks used to learn the block standard deviation before the CUSUM runs.
+    stats_window : float
+        Samples of the exponential window of the innovation RMS and the excitation measure.
+    min_excitation : float
+        A DOF whose damping-force RMS is below this many noise standard deviations is
+        reported as not excited.
+    """
+
+    forgetting_factor: float = 0.999
+    forgetting_mode: str = "exponential"
+    directional_rho: float = 0.0
+    trace_max: float = 0.0
+    noise_var: tuple[float, ...] = (1.0,) * 6
+    adapt_noise: bool = True
+    noise_window: float = 5000.0
+    noise_floor: float = 1e-12
+    cusum_drift: float = 0.5
+    cusum_threshold: float = 10.0
+    cusum_block: int = 25
+    cusum_warmup: int = 40
+    stats_window: float = 500.0
+    min_excitation: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not 0.9 <= self.forgetting_factor <= 1.0:
+            raise ConfigError("forgetting_factor",
+                              f"must be in [0.9, 1.0], got {self.forgetting_factor}")
+        if self.forgetting_mode not in FORGETTING_MODES:
+            raise ConfigError("forgetting_mode", f"must be one of {FORGETTING_MODES}, got "
+                                                 f"{self.forgetting_mode!r}")
+        if len(self.noise_var) != 6 or min(self.noise_var) <= 0:
+            raise ConfigError("noise_var", f"need 6 variances > 0, got {self.noise_var}")
+        for name in ("noise_window", "stats_window"):
+            if getattr(self, name) < 1:
+                raise ConfigError(name, "must be ≥ 1 sample")
+        if self.cusum_block < 1 or self.cusum_warmup < 2:
+            raise ConfigError("cusum_block", "need cusum_block ≥ 1 and cusum_warmup ≥ 2")
+
+
+@dataclass
+class Diagnostics:
+    """Health of the estimator (see :meth:`RecursiveLeastSquares.diagnostics`).
+
+    Attributes
+    ----------
+    samples : int
+    innovation_rms : ndarray, shape (6,)
+        EW RMS of the innovations per DOF (N, N·m).
+    noise_std : ndarray, shape (6,)
+        √r_i (N, N·m).
+    excitation : ndarray, shape (6,)
+        EW RMS of the predicted damping force Φθ per DOF over the noise standard deviation.
+    excited : ndarray of bool, shape (6,)
+    covariance_trace : float
+        Σ_j P_jj / s_j².
+    condition_number : float
+        Of the information matrix P⁻¹ scaled to unit diagonal (NaN if not computed).
+    cusum : ndarray, shape (12,)
+        Statistics, ``bias`` channels X..N then ``gain`` channels X..N.
+    alarm : bool
+    alarm_channels : list of str
+        e.g. ``['Y gain+']``: the damping force in Y became larger than predicted.
+    """
+
+    samples: int
+    innovation_rms: FloatArray
+    noise_std: FloatArray
+    excitation: FloatArray
+    excited: BoolArray
+    covariance_trace: float
+    condition_number: float
+    cusum: FloatArray
+    alarm: bool
+    alarm_channels: list[str] = field(default_factory=list)
+
+    @property
+    def unexcited(self) -> list[str]:
+        """Names (u..r) of the DOFs that are not excited."""
+        return [DOF_NAMES[i] for i in range(6) if not self.excited[i]]
+
+
+CUSUM_CHANNELS = [f"{f} bias" for f in FORCE_NAMES] + [f"{f} gain" for f in FORCE_NAMES]
+
+
+class RecursiveLeastSquares:
+    """RLS over the damping parameters, with diagnostics and a change detector.
+
+    Parameters
+    ----------
+    theta0 : ndarray, shape (p,)
+        Prior mean.
+    P0 : ndarray, shape (p,) or (p, p)
+        Prior covariance (a vector: its diagonal).
+    config : RLSConfig, optional
+    scale : ndarray, shape (p,), optional
+        Parameter scales for the trace bound (default: √diag(P0)).
+
+    Notes
+    -----
+    :meth:`update` calls :func:`rls_update`'s step with the configured options, so the class
+    and the function agree to rounding.
+    """
+
+    def __init__(self, theta0: FloatArray, P0: FloatArray, config: RLSConfig | None = None,
+                 scale: FloatArray | None = None) -> None:
+        self.config = config or RLSConfig()
+        theta0 = np.asarray(theta0, dtype=float)
+        P0 = np.asarray(P0, dtype=float)
+        if P0.ndim == 1:
+            P0 = np.diag(P0)
+        p = theta0.shape[0]
+        if P0.shape != (p, p):
+            raise ConfigError("P0", f"must be ({p}, {p}) or ({p},), got {P0.shape}")
+        if not np.all(np.isfinite(theta0)) or not np.all(np.isfinite(P0)):
+            raise ConfigError("prior", "theta0 and P0 must be finite")
+        self.theta0 = theta0.copy()
+        self.P0 = 0.5 * (P0 + P0.T)
+        self.scale = (np.sqrt(np.diagonal(self.P0)).copy() if scale is None
+                      else np.asarray(scale, dtype=float))
+        if np.any(self.scale <= 0):
+            raise ConfigError("scale", "parameter scales must be > 0")
+        self.lam = self.config.forgetting_factor
+        self.frozen = False
+        self.reset()
+
+    # --- state ----------------------------------------------------------------------------
+
+    @property
+    def n_params(self) -> int:
+        """p."""
+        return int(self.theta0.shape[0])
+
+    @property
+    def trace_max(self) -> float:
+        """The scaled-trace bound in use."""
+        t = self.config.trace_max
+        return float(t if t > 0 else self.n_params)
+
+    def reset(self) -> None:
+        """Back to the prior; clears the statistics and the change detector."""
+        cfg = self.config
+        self.theta = self.theta0.copy()
+        self.P = self.P0.copy()
+        self.R = np.array(cfg.noise_var, dtype=float)
+        self.n = 0
+        self._e2 = self.R.copy()  # EW mean of ε², seeded with the prior noise
+        # weighted EW estimate of r; the prior counts as one fully informative sample
+        self._r_num = self.R.copy()
+        self._r_den = np.ones(6)
+        self._force2 = np.zeros(6)  # EW mean of (Φθ)²
+        self._blk_sum = np.zeros(12)
+        self._blk_n = 0
+        self._blk_count = 0
+        self._blk_var = np.zeros(12)
+        self.cusum = Cusum(12, cfg.cusum_drift, cfg.cusum_threshold)
+        self.alarm_time: float | None = None
+        self.last_innovation = np.zeros(6)
+        self.skipped = 0
+
+    def set_forgetting_factor(self, lam: float) -> None:
+        """Change λ on the fly (validated like the config)."""
+        if not 0.9 <= lam <= 1.0:
+            raise ConfigError("forgetting_factor", f"must be in [0.9, 1.0], got {lam}")
+        self.lam = float(lam)
+
+    @property
+    def std(self) -> FloatArray:
+        """√diag(P), shape (p,)."""
+        return np.sqrt(np.maximum(np.diagonal(self.P), 0.0))
+
+    # --- update ---------------------------------------------------------------------------
+
+    def update(self, Phi: FloatArray, y: FloatArray, t: float | None = None) -> FloatArray:
+        """Process one sample; returns the innovation y − Φθ (6,) (before the update).
+
+        Parameters
+        ----------
+        Phi : ndarray, shape (6, p)
+        y : ndarray, shape (6,)
+        t : float, optional
+            Time of the sample (s), recorded with the first alarm.
+
+        Notes
+        -----
+        Non-finite samples are skipped (innovation NaN). When frozen, θ and P stay as they are
+        but the diagnostics and the change detector still run.
+        """
+        Phi = np.asarray(Phi, dtype=float)
+        y = np.asarray(y, dtype=float)
+        if not np.isfinite(Phi.sum() + y.sum()):
+            self.skipped += 1
+            return np.full(6, np.nan)
+        cfg = self.config
+        if self.frozen:
+            e = y - Phi @ self.theta
+            S = Phi @ self.P @ Phi.T + np.diag(self.R)
+        else:
+            r = _step(self.theta, self.P, Phi, y, self.lam, self.R, mode=cfg.forgetting_mode,
+                      trace_max=self.trace_max, scale=self.scale,
+                      rho=cfg.directional_rho if cfg.directional_rho > 0 else None)
+            if not np.isfinite(r.theta.sum() + r.P.trace()):
+                self.skipped += 1  # defensive: never store a non-finite state
+                return np.full(6, np.nan)
+            self.theta, self.P, e, S = r.theta, r.P, r.innovation, r.S
+        self.n += 1
+        self.last_innovation = e
+        s_diag = np.diagonal(S)
+        # per-DOF statistics: EW means with windows in samples
+        a = 1.0 / min(self.n, cfg.stats_window)
+        a_r = 1.0 / cfg.noise_window
+        self._e2 += (e * e - self._e2) * a
+        if cfg.adapt_noise and not self.frozen:
+            # E[ε_i²] = S_ii, of which the share f_i = r_i / S_ii is noise: f_i ε_i² estimates
+            # r_i, with weight f_i (a sample whose innovation is mostly parameter uncertainty
+            # says little about the noise). Innovations beyond 3√S_ii are clipped so that a
+            # change or an outlier cannot inflate r and stall the tracking.
+            f = self.R / s_diag
+            e2 = np.minimum(e * e, 9.0 * s_diag)
+            self._r_num += f * f * e2 - self._r_num * a_r
+            self._r_den += f - self._r_den * a_r
+            self.R = np.maximum(self._r_num / self._r_den, cfg.noise_floor)
+        force = Phi @ self.theta
+        self._force2 += (force * force - self._force2) * a
+        z = e / np.sqrt(s_diag)
+        self._blk_sum[:6] += z
+        self._blk_sum[6:] += z * np.sign(force)
+        self._blk_n += 1
+        if self._blk_n >= cfg.cusum_block:
+            self._cusum_block(t)
+        return e
+
+    def update_many(self, Phi: FloatArray, y: FloatArray,
+                    t: FloatArray | None = None) -> FloatArray:
+        """:meth:`update` over N samples in order; returns the innovations (N, 6)."""
+        out = np.empty((len(y), 6))
+        for k in range(len(y)):
+            out[k] = self.update(Phi[k], y[k], None if t is None else float(t[k]))
+        return out
+
+    def _cusum_block(self, t: float | None) -> None:
+        cfg = self.config
+        mean = self._blk_sum / self._blk_n
+        self._blk_sum[:] = 0.0
+        self._blk_n = 0
+        self._blk_count += 1
+        k = self._blk_count
+        if k <= cfg.cusum_warmup:
+            # running mean square of the block means while learning (no change assumed)
+            self._blk_var += (mean * mean - self._blk_var) / k
+            return
+        sd = np.sqrt(np.maximum(self._blk_var, 1e-12))
+        x = np.clip(mean / sd, -50.0, 50.0)
+        new = self.cusum.update(x)
+        if new.any() and self.alarm_time is None:
+            self.alarm_time = t
+        # slow update of the block variance, only from blocks that look in control
+        quiet = np.abs(x) < 3.0
+        a = 1.0 / min(k, 10 * cfg.cusum_warmup)
+        self._blk_var = np.where(quiet, self._blk_var + a * (mean * mean - self._blk_var),
+                                 self._blk_var)
+
+    def clear_alarm(self) -> None:
+        """Acknowledge a change: clear the CUSUM (the estimate is kept)."""
+        self.cusum.reset()
+        self.alarm_time = None
+
+    # --- diagnostics ----------------------------------------------------------------------
+
+    def condition_number(self) -> float:
+        """Condition number of the information matrix P⁻¹ scaled to unit diagonal (O(p³))."""
+        d = np.sqrt(np.maximum(np.diagonal(self.P), 1e-300))
+        C = self.P / np.outer(d, d)  # unit-diagonal P: its inverse is D Ω D, same spectrum
+        ev = np.linalg.eigvalsh(0.5 * (C + C.T))
+        return float(ev.max() / max(ev.min(), 1e-300))
+
+    def is_spd(self) -> bool:
+        """True when P is symmetric positive definite (Cholesky succeeds)."""
+        try:
+            np.linalg.cholesky(self.P)
+        except np.linalg.LinAlgError:
+            return False
+        return bool(np.allclose(self.P, self.P.T))
+
+    def diagnostics(self, condition: bool = True) -> Diagnostics:
+        """Current diagnostics; ``condition`` computes the condition number (O(p³))."""
+        noise_std = np.sqrt(self.R)
+        excitation = np.sqrt(self._force2) / noise_std
+        channels = [f"{CUSUM_CHANNELS[i]}{'+' if self.cusum.alarm_sign[i] > 0 else '-'}"
+                    for i in np.flatnonzero(self.cusum.alarm)]
+        return Diagnostics(
+            samples=self.n, innovation_rms=np.sqrt(self._e2), noise_std=noise_std,
+            excitation=excitation, excited=excitation >= self.config.min_excitation,
+            covariance_trace=scaled_trace(self.P, self.scale),
+            condition_number=self.condition_number() if condition else float("nan"),
+            cusum=self.cusum.statistic.copy(), alarm=bool(self.cusum.alarm.any()),
+            alarm_channels=channels)

@@ -1,0 +1,241 @@
+"""Recursive least squares (dampest_ros.core.rls) against filterpy, batch LS and known truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+
+from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.rls import (
+    Cusum,
+    RecursiveLeastSquares,
+    RLSConfig,
+    forget,
+    rls_update,
+    scaled_trace,
+)
+
+
+def random_problem(seed: int, n: int, p: int, noise: float = 0.1
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """n samples of 6 rows: Φ (n, 6, p), y (n, 6) and the true θ (p,)."""
+    rng = np.random.default_rng(seed)
+    theta = rng.normal(size=p) * 3.0
+    Phi = rng.normal(size=(n, 6, p))
+    y = Phi @ theta + noise * rng.normal(size=(n, 6))
+    return Phi, y, theta
+
+
+def test_equals_filterpy_fading_memory_kalman_filter() -> None:
+    """F = I, Q = 0, alpha = 1/√λ: filterpy's KalmanFilter is exponentially weighted RLS."""
+    p, lam = 20, 0.98
+    Phi, y, _ = random_problem(1, 300, p, noise=0.5)
+    R = np.random.default_rng(2).uniform(0.5, 2.0, 6)
+    theta, P = np.zeros(p), 10.0 * np.eye(p)
+    kf = KalmanFilter(dim_x=p, dim_z=6)
+    kf.x, kf.P, kf.F, kf.Q, kf.R = theta.copy(), P.copy(), np.eye(p), np.zeros((p, p)), np.diag(R)
+    kf.alpha = 1.0 / np.sqrt(lam)
+    worst = 0.0
+    for k in range(len(y)):
+        theta, P, e = rls_update(theta, P, Phi[k], y[k], lam, R)
+        kf.predict()
+        kf.update(y[k], H=Phi[k])
+        np.testing.assert_allclose(e, kf.y, rtol=1e-9, atol=1e-9)
+        worst = max(worst, np.abs(theta - kf.x).max() / np.abs(kf.x).max(),
+                    np.abs(P - kf.P).max() / np.abs(kf.P).max())
+    assert worst < 1e-10
+
+
+def test_lambda_one_diffuse_prior_reproduces_batch_least_squares() -> None:
+    p = 12
+    Phi, y, truth = random_problem(3, 300, p)
+    theta, P = np.zeros(p), 1e6 * np.eye(p)
+    for k in range(len(y)):
+        theta, P, _ = rls_update(theta, P, Phi[k], y[k], 1.0, 1.0)
+    ls = np.linalg.lstsq(Phi.reshape(-1, p), y.reshape(-1), rcond=None)[0]
+    assert np.abs(theta - ls).max() / np.abs(ls).max() < 1e-8
+    assert np.abs(ls - truth).max() < 0.01  # and LS itself finds the truth
+
+
+def test_weighted_rls_equals_weighted_least_squares() -> None:
+    """R = diag(r): the rows are weighted by 1/r_i, as in the batch WLS."""
+    p = 8
+    Phi, y, _ = random_problem(4, 200, p)
+    r = np.array([1.0, 4.0, 0.25, 9.0, 1.0, 2.0])
+    theta, P = np.zeros(p), 1e6 * np.eye(p)
+    for k in range(len(y)):
+        theta, P, _ = rls_update(theta, P, Phi[k], y[k], 1.0, r)
+    w = 1.0 / np.sqrt(r)
+    A = (Phi * w[None, :, None]).reshape(-1, p)
+    b = (y * w).reshape(-1)
+    ls = np.linalg.lstsq(A, b, rcond=None)[0]
+    assert np.abs(theta - ls).max() / np.abs(ls).max() < 1e-8
+
+
+@pytest.mark.parametrize("mode", ["exponential", "directional"])
+def test_class_and_function_agree(mode: str) -> None:
+    p = 10
+    Phi, y, _ = random_problem(5, 250, p)
+    cfg = RLSConfig(forgetting_factor=0.97, forgetting_mode=mode, adapt_noise=False,
+                    noise_var=(0.5, 1.0, 2.0, 1.0, 1.0, 3.0), trace_max=4.0)
+    P0 = np.full(p, 2.0)
+    rls = RecursiveLeastSquares(np.zeros(p), P0, cfg)
+    theta, P = np.zeros(p), np.diag(P0)
+    for k in range(len(y)):
+        e_cls = rls.update(Phi[k], y[k])
+        theta, P, e = rls_update(theta, P, Phi[k], y[k], 0.97, np.array(cfg.noise_var),
+                                 mode=mode, trace_max=4.0, scale=np.sqrt(P0))
+        np.testing.assert_array_equal(e, e_cls)
+    assert np.abs(rls.theta - theta).max() <= 1e-12 * np.abs(theta).max()
+    assert np.abs(rls.P - P).max() <= 1e-12 * np.abs(P).max()
+
+
+def test_converges_to_truth_with_known_noise() -> None:
+    p = 12
+    rng = np.random.default_rng(6)
+    truth = rng.normal(size=p)
+    sd = np.array([0.1, 0.2, 0.4, 0.05, 0.1, 0.3])
+    Phi = rng.normal(size=(3000, 6, p))
+    y = Phi @ truth + sd * rng.normal(size=(3000, 6))
+    rls = RecursiveLeastSquares(np.zeros(p), np.full(p, 100.0),
+                                RLSConfig(forgetting_factor=1.0, noise_var=(0.01,) * 6))
+    rls.update_many(Phi, y)
+    # with λ = 1 the error is at the Cramér–Rao level: all within 4σ
+    assert np.all(np.abs(rls.theta - truth) < 4 * rls.std)
+    d = rls.diagnostics()
+    np.testing.assert_allclose(d.noise_std, sd, rtol=0.06)  # learnt per-DOF noise
+    # innovations: noise plus the (small) parameter uncertainty Φ P Φᵀ
+    assert np.all(d.innovation_rms > 0.95 * sd) and np.all(d.innovation_rms < 1.25 * sd)
+    assert d.condition_number < 3.0  # white regressors: well conditioned
+    assert not d.alarm
+
+
+def test_trace_bound_stops_wind_up_without_excitation() -> None:
+    """λ = 0.95 with zero regressors for 5000 samples: P would grow by 0.95⁻⁵⁰⁰⁰."""
+    p = 6
+    rls = RecursiveLeastSquares(np.ones(p), np.full(p, 4.0),
+                                RLSConfig(forgetting_factor=0.95, trace_max=12.0))
+    Phi, y, _ = random_problem(7, 200, p)
+    rls.update_many(Phi, y)
+    before = rls.diagnostics().covariance_trace
+    noise = 0.1 * np.random.default_rng(70).normal(size=(5000, 6))
+    rls.update_many(np.zeros((5000, 6, p)), noise)
+    d = rls.diagnostics()
+    assert before < d.covariance_trace <= 12.0 * (1 + 1e-12)
+    assert rls.is_spd() and np.all(np.isfinite(rls.P))
+    assert not d.excited.any()  # zero regressors: nothing excited
+
+
+def test_directional_forgetting_only_forgets_excited_directions() -> None:
+    """Only the first 3 parameters are excited after a rich start: exponential forgetting
+    inflates the other variances to the bound, directional forgetting keeps them."""
+    p = 6
+    Phi, y, truth = random_problem(8, 300, p)
+    Phi2 = Phi.copy()
+    Phi2[:, :, 3:] = 0.0
+    y2 = Phi2 @ truth
+    out = {}
+    for mode in ("exponential", "directional"):
+        rls = RecursiveLeastSquares(np.zeros(p), np.full(p, 100.0), RLSConfig(
+            forgetting_factor=0.98, forgetting_mode=mode, adapt_noise=False,
+            noise_var=(0.01,) * 6))
+        rls.update_many(Phi, y)
+        var_rich = np.diagonal(rls.P).copy()
+        rls.update_many(Phi2, y2)
+        out[mode] = np.diagonal(rls.P) / var_rich
+        assert rls.is_spd()
+    assert np.all(out["exponential"][3:] > 400.0)  # λ⁻³⁰⁰ = 428
+    np.testing.assert_allclose(out["directional"][3:], 1.0, rtol=0.05)  # frozen
+    assert np.all(out["directional"][:3] < 1.5)  # the excited ones stay at their level
+
+
+def test_directional_forgetting_tracks_a_change_in_excited_directions() -> None:
+    p = 4
+    rng = np.random.default_rng(9)
+    truth = np.array([1.0, 2.0, 3.0, 4.0])
+    rls = RecursiveLeastSquares(np.zeros(p), np.full(p, 100.0), RLSConfig(
+        forgetting_factor=0.98, forgetting_mode="directional", noise_var=(0.01,) * 6,
+        adapt_noise=False))
+    for k in range(1500):
+        th = truth * (1.3 if k >= 500 else 1.0)
+        Phi = rng.normal(size=(6, p))
+        rls.update(Phi, Phi @ th + 0.1 * rng.normal(size=6))
+    np.testing.assert_allclose(rls.theta, 1.3 * truth, rtol=0.01)
+
+
+def test_forget_exponential_is_p_over_lambda() -> None:
+    P = np.diag([1.0, 2.0])
+    np.testing.assert_allclose(forget(P, np.zeros((6, 2)), 0.8, np.eye(6)), P / 0.8)
+    # bounded: the inflation stops at the scaled trace 3.3
+    Pb = forget(P, np.zeros((6, 2)), 0.8, np.eye(6), trace_max=3.3)
+    assert scaled_trace(Pb) == pytest.approx(3.3)
+
+
+def test_cusum_detects_a_shift_and_not_noise() -> None:
+    rng = np.random.default_rng(10)
+    c = Cusum(2, drift=0.5, threshold=10.0)
+    for _ in range(20000):
+        c.update(rng.normal(size=2))
+    assert not c.alarm.any()  # in-control run length ≫ 20000 at h = 10
+    c.reset()
+    steps = 0
+    while not c.alarm[1]:
+        c.update(np.array([0.0, -2.0]) + rng.normal(size=2))
+        steps += 1
+    # a 2σ shift: h / (δ − k) ≈ 6.7 steps
+    assert 4 <= steps <= 12
+    assert c.alarm_sign[1] == -1.0
+
+
+def test_change_detector_fires_on_a_gain_change() -> None:
+    """The damping force grows 30 %: the 'gain' channel of that DOF alarms soon after."""
+    p = 2
+    rng = np.random.default_rng(11)
+    rls = RecursiveLeastSquares(np.zeros(p), np.full(p, 1e4), RLSConfig(
+        forgetting_factor=0.995, cusum_block=25))
+    alarm_at = None
+    for k in range(10000):
+        v = np.sin(0.01 * k) + 0.3 * rng.normal()
+        Phi = np.zeros((6, p))
+        Phi[0] = [v, v * abs(v)]
+        gain = 1.3 if k >= 8000 else 1.0
+        y = Phi @ np.array([10.0, 100.0]) * gain + 0.5 * rng.normal(size=6)
+        rls.update(Phi, y, t=k / 50.0)
+        if alarm_at is None and rls.cusum.alarm.any():
+            alarm_at = k
+    assert alarm_at is not None and 8000 <= alarm_at < 8250
+    assert "X gain+" in rls.diagnostics().alarm_channels
+    np.testing.assert_allclose(rls.theta, [13.0, 130.0], rtol=0.05)
+
+
+def test_non_finite_samples_are_skipped() -> None:
+    rls = RecursiveLeastSquares(np.zeros(3), np.ones(3))
+    Phi = np.ones((6, 3))
+    Phi[0, 0] = np.nan
+    assert np.all(np.isnan(rls.update(Phi, np.zeros(6))))
+    assert rls.skipped == 1 and rls.n == 0
+    np.testing.assert_array_equal(rls.theta, 0.0)
+
+
+def test_freeze_and_reset() -> None:
+    Phi, y, _ = random_problem(12, 50, 3)
+    rls = RecursiveLeastSquares(np.zeros(3), np.ones(3))
+    rls.update_many(Phi[:20], y[:20])
+    theta = rls.theta.copy()
+    rls.frozen = True
+    rls.update_many(Phi[20:], y[20:])
+    np.testing.assert_array_equal(rls.theta, theta)
+    rls.reset()
+    np.testing.assert_array_equal(rls.theta, 0.0)
+    np.testing.assert_array_equal(rls.P, np.eye(3))
+
+
+def test_invalid_settings_are_rejected_with_a_reason() -> None:
+    with pytest.raises(ConfigError, match="forgetting_factor"):
+        RLSConfig(forgetting_factor=1.5)
+    with pytest.raises(ConfigError, match="forgetting_mode"):
+        RLSConfig(forgetting_mode="sideways")
+    rls = RecursiveLeastSquares(np.zeros(2), np.ones(2))
+    with pytest.raises(ConfigError, match=r"\[0.9, 1.0\]"):
+        rls.set_forgetting_factor(0.5)
