@@ -102,8 +102,10 @@ def write_model(path: Path, result: Fit, model: DampingModel, M: np.ndarray,
                 source: str) -> None:
     """Save a fit as the model YAML with its metrics and the unidentified parameters."""
     unidentified = list(result.flags)
+    ci = result.interval()
     save_model(path, result.names, result.theta, result.std, M, damping=model, extra={
         "source": source, "method": result.method, "samples": int(result.n),
+        "ci95_low": [float(x) for x in ci[:, 0]], "ci95_high": [float(x) for x in ci[:, 1]],
         "nse": [float(x) for x in result.r2], "rmse": [float(x) for x in result.rmse],
         "condition_number": float(result.cond),
         "unidentified": unidentified or ["none"],

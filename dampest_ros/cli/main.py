@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from dampest_ros.cli import demo, identify, inspect, simulate
 from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.io.bag import BagError, MissingTopicError
 
 COMMANDS = (simulate, identify, inspect, demo)
 
@@ -36,7 +37,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.run(args))
-    except (ConfigError, DataError, FileNotFoundError, FileExistsError, ValueError) as exc:
+    except (ConfigError, DataError, BagError, MissingTopicError, FileNotFoundError,
+            FileExistsError, ValueError) as exc:
         print(f"dampest {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
