@@ -19,6 +19,7 @@ from dampest_ros.core.batch import METHODS, Fit, FitOptions, fit
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.rigid_body import DOF_NAMES
+from dampest_ros.core.selection import Selection, select_terms
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 
 EXAMPLE = ("example: dampest identify bags/b600 --vehicle config/vehicles/bluerov2_heavy.yaml "
@@ -41,6 +42,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--method", choices=METHODS, default="wls",
                    help="ols, wls (per-DOF noise weights, default), ridge, bounded "
                         "(physical signs), map (Gaussian prior from --prior)")
+    p.add_argument("--select", action="store_true",
+                   help="choose extra terms by forward BIC selection: sway-yaw, heave-pitch "
+                        "and lift cross-coupling, fluid memory per DOF (rate estimated)")
     p.add_argument("--prior", help="model YAML whose theta/theta_std are the MAP prior")
     p.add_argument("--cutoff", type=float, default=2.0,
                    help="low-pass (Hz) applied to the regression (default: 2)")
@@ -57,6 +61,12 @@ def run(args: argparse.Namespace) -> int:
     vehicle = load_vehicle(args.vehicle)
     model, nominal = restrict_terms(vehicle, args.terms)
     samples = load_samples(args.input, vehicle, args)
+    if args.select:
+        selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
+        print(selection_table(selection))
+        values = dict(zip(model.parameter_names, nominal, strict=True))
+        model = selection.model
+        nominal = np.array([values.get(n, 0.0) for n in model.parameter_names])
     prior, prior_std = nominal, None
     if args.prior:
         pm = load_model(args.prior)
@@ -83,6 +93,15 @@ def run(args: argparse.Namespace) -> int:
         write_model(Path(args.out), result, model, vehicle.body.M, source=str(args.input))
         print(f"wrote {args.out}")
     return 0
+
+
+def selection_table(selection: Selection) -> str:
+    """The forward-selection path: each added term with BIC, AIC and its error reduction."""
+    rows = [(st.added, st.n_params, st.bic, st.aic,
+             f"{st.err:.1%}" if st.err else "") for st in selection.steps]
+    rates = "".join(f"\n{k} = {v:.4g} 1/s" for k, v in selection.rates.items())
+    return ("term selection (forward, BIC; a term must remove ≥ 10 % of its DOF's residual):\n"
+            + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates + "\n")
 
 
 def report_table(result: Fit, prior: np.ndarray) -> str:
