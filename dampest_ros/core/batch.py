@@ -50,8 +50,8 @@ def memory_states(samples: Samples, model: DampingModel) -> FloatArray:
 
 def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
                     chunk: int = 20000, cutoff: float = 0.0, margin: float = 5.0,
-                    offset: FloatArray | None = None
-                    ) -> Iterator[tuple[slice, FloatArray, FloatArray]]:
+                    offset: FloatArray | None = None, decimate: bool = False
+                    ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
     """Yield (rows, Φ (n, 6, p), y (n, 6)) over chunks of at most ``chunk`` samples.
 
     With ``cutoff`` > 0 both y and every column of Φ are low-passed (zero phase) along time
@@ -61,6 +61,11 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
     flat while the result equals filtering whole segments (to the filter's decay).
 
     ``offset`` (6,) is added to ν first: the data as a sensor bias would have made them.
+
+    With ``decimate`` (and ``cutoff`` > 0) only every k-th sample is yielded, k the largest
+    step that keeps four samples per period of the cutoff: the low-passed signals carry no
+    more information than that, and the normal equations cost k times less. Rows are then
+    global sample indices (the same whatever the chunking).
     """
     if offset is not None:
         samples = Samples(samples.t, samples.nu + offset, samples.nu_dot, samples.tau,
@@ -68,6 +73,7 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
     z = memory_states(samples, model)
     has_z = z.shape[1] > 0
     pad = round(margin * samples.rate) if cutoff > 0 else 0
+    step = max(1, int(samples.rate / (4.0 * cutoff))) if decimate and cutoff > 0 else 1
     for seg in samples.segments():
         s0, s1 = seg.start or 0, seg.stop or 0
         for start in range(s0, s1, chunk):
@@ -79,8 +85,12 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
             if cutoff > 0:
                 Phi = zero_phase(Phi, samples.rate, cutoff)
                 y = zero_phase(y, samples.rate, cutoff)
-            core = slice(start - a, stop - a)
-            yield slice(start, stop), Phi[core], y[core]
+            if step > 1:
+                rows = np.arange(start + (-start) % step, stop, step)
+                yield rows, Phi[rows - a], y[rows - a]
+            else:
+                core = slice(start - a, stop - a)
+                yield slice(start, stop), Phi[core], y[core]
 
 
 @dataclass
@@ -141,8 +151,8 @@ def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: in
     A = np.zeros((folds, 6, p, p))
     b = np.zeros((folds, 6, p))
     c = np.zeros((folds, 6))
-    n = np.bincount(fold_of, minlength=folds).astype(float)
-    for sl, Phi, y in iter_regression(samples, model, body, chunk, cutoff):
+    n = np.zeros(folds)
+    for sl, Phi, y in iter_regression(samples, model, body, chunk, cutoff, decimate=True):
         fo = fold_of[sl]
         for f in np.unique(fo):
             m = fo == f
@@ -151,6 +161,7 @@ def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: in
             A[f] += np.einsum("nip,niq->ipq", P, P)
             b[f] += np.einsum("nip,ni->ip", P, Y)
             c[f] += np.einsum("ni,ni->i", Y, Y)
+            n[f] += len(Y)
     return NormalEquations(A, b, c, n)
 
 
@@ -460,7 +471,7 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     A_s, _, _ = ne.total(np.ones(6))
     d = np.sqrt(np.maximum(np.diag(A_s[np.ix_(free, free)]), 1e-300))
     ev = np.linalg.eigvalsh(A_s[np.ix_(free, free)] / np.outer(d, d)) if free.any() else [1.0]
-    duration = N / samples.rate if samples.rate else float(N)
+    duration = len(samples) / samples.rate if samples.rate else float(N)
     return Fit(names=names, theta=theta, cov=cov, sigma=np.sqrt(rss / N), method=opts.method,
                n=N, rss=rss, tss=tss, cond=float(max(ev) / max(min(ev), 1e-300)), flags=flags,
                cv_rmse=np.sqrt(cv / N),
@@ -507,7 +518,8 @@ def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
     Af = A[np.ix_(free, free)]
     block_idx = block_index(samples, opts.block)
     S = np.zeros((int(block_idx.max()) + 1, int(free.sum())))
-    for sl, Phi, y in iter_regression(samples, model, body, chunk, opts.cutoff):
+    for sl, Phi, y in iter_regression(samples, model, body, chunk, opts.cutoff,
+                                      decimate=True):
         r = y - Phi @ theta
         # weighted score of each sample: Σ_i w_i Φ_iᵀ r_i
         g = np.einsum("nip,ni,i->np", Phi[:, :, free], r, weights)
@@ -540,7 +552,7 @@ def bias_covariance(samples: Samples, model: DampingModel, body: RigidBody,
         A = np.zeros((p, p))
         b = np.zeros(p)
         for _, Phi, y in iter_regression(samples, model, body, chunk, opts.cutoff,
-                                         offset=offset):
+                                         offset=offset, decimate=True):
             A += np.einsum("nip,niq,i->pq", Phi, Phi, weights)
             b += np.einsum("nip,ni,i->p", Phi, y, weights)
         d = _solve(A, b, free, theta) - theta

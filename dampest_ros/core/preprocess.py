@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import fft as sp_fft
 from scipy import integrate, signal
 
 from dampest_ros.core import frames
@@ -135,7 +136,8 @@ def zero_phase(x: FloatArray, rate: float, cutoff: float, derivative: bool = Fal
     and backwards) in the frequency domain, times i2πf for the derivative, so that a signal
     and its derivative are filtered identically and the derivative is exact for what the
     filter passes (a finite difference loses 16 % at 8 Hz and 50 Hz sampling). The signal is
-    mirrored to twice its length first, so the ends do not wrap around.
+    mirrored to twice its length first (then held to a fast FFT length), so the ends do not
+    wrap around.
 
     Parameters
     ----------
@@ -156,14 +158,17 @@ def zero_phase(x: FloatArray, rate: float, cutoff: float, derivative: bool = Fal
     ndarray, shape like x
     """
     n = x.shape[0]
-    ext = np.concatenate([x, x[::-1]], axis=0)
-    f = np.fft.rfftfreq(2 * n, d=1.0 / rate)
+    # mirror, then hold the first value up to a fast FFT length: the periodic extension stays
+    # continuous at both joins
+    size = sp_fft.next_fast_len(2 * n, real=True)
+    ext = np.concatenate([x, x[::-1], np.repeat(x[:1], size - 2 * n, axis=0)], axis=0)
+    f = np.fft.rfftfreq(size, d=1.0 / rate)
     # H(f) = 1 / (1 + (f/f_c)^{2 order})
     H = 1.0 / (1.0 + (f / cutoff) ** (2 * order)) * np.sinc(f * window)
     if derivative:
         H = H * (2j * np.pi * f)
     shape = (len(f),) + (1,) * (x.ndim - 1)
-    y = np.fft.irfft(np.fft.rfft(ext, axis=0) * H.reshape(shape), n=2 * n, axis=0)
+    y = sp_fft.irfft(sp_fft.rfft(ext, axis=0) * H.reshape(shape), n=size, axis=0)
     return np.asarray(y[:n], dtype=float)
 
 
