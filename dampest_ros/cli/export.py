@@ -1,0 +1,110 @@
+"""``dampest export`` and ``dampest import``: a model to and from simulator formats.
+
+``export`` writes a model file as gz-sim Hydrodynamics plugin tags (``gz``), a URDF
+``<hydrodynamics>`` block (``urdf``) or UUV Simulator ``fossen`` matrices (``uuv``), converting
+signs (SNAME, negative when dissipative) and, for ``gz``, the frame (FRD to the link's FLU).
+``import`` reads ``gz`` or ``urdf`` back into a model file. See :mod:`dampest_ros.io.export`
+for the conventions and where they come from.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from dampest_ros.io.export import (
+    FORMATS,
+    FRAMES,
+    IMPORT_FORMATS,
+    ExportWarning,
+    export_model,
+    import_model,
+    imported_mass,
+)
+from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
+
+EXPORT_EXAMPLE = ("example: dampest export model.yaml --format gz --vehicle bluerov2_heavy "
+                  "--out hydrodynamics.sdf")
+IMPORT_EXAMPLE = ("example: dampest import model.sdf --format gz --vehicle bluerov2_heavy "
+                  "--out model.yaml")
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the sub-commands ``export`` and ``import``."""
+    p = sub.add_parser("export", help="write a model as gz-sim, URDF or UUV Simulator "
+                                      "hydrodynamics", description=__doc__,
+                       epilog=EXPORT_EXAMPLE)
+    p.add_argument("model", help="model file (ROS 2 parameters YAML written by dampest)")
+    p.add_argument("--format", required=True, choices=FORMATS,
+                   help="gz: Hydrodynamics plugin tags; urdf: <hydrodynamics> block; "
+                        "uuv: UUV Simulator fossen matrices (YAML)")
+    p.add_argument("--out", help="file to write (default: standard output)")
+    p.add_argument("--vehicle", help="preset name or YAML path; its rigid body gives the "
+                                     "added mass M_A = M - M_RB (without it: damping only)")
+    p.add_argument("--link-name", default="base_link",
+                   help="gz: <link_name> of the plugin (default: base_link)")
+    p.add_argument("--frame", choices=FRAMES, default="flu",
+                   help="gz: frame of that link, flu (Gazebo/REP-103, default) or frd")
+    p.set_defaults(run=run)
+
+    q = sub.add_parser("import", help="read gz-sim or URDF hydrodynamics into a model file",
+                       description=__doc__, epilog=IMPORT_EXAMPLE)
+    q.add_argument("file", help="SDF/URDF/XML file holding the plugin or the block")
+    q.add_argument("--format", required=True, choices=IMPORT_FORMATS)
+    q.add_argument("--out", required=True, help="model file to write (YAML)")
+    q.add_argument("--vehicle", help="preset name or YAML path for the rigid body M_RB "
+                                     "(needed when the file has no mass and inertia) and the "
+                                     "added mass when the file has none")
+    q.add_argument("--link-name", help="gz: which plugin to read when there are several")
+    q.add_argument("--frame", choices=FRAMES, default="flu",
+                   help="gz: frame of the plugin's link, flu (default) or frd")
+    q.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``export`` or ``import`` (by ``args.command``)."""
+    if args.command == "import":
+        return _run_import(args)
+    return _run_export(args)
+
+
+def _run_export(args: argparse.Namespace) -> int:
+    model = load_model(args.model)
+    vehicle = load_vehicle(args.vehicle) if args.vehicle else None
+    with warnings.catch_warnings():
+        # the left-out list is printed below, once
+        warnings.simplefilter("ignore", ExportWarning)
+        result = export_model(model, args.format, vehicle, link_name=args.link_name,
+                              frame=args.frame, source=str(args.model))
+    if args.out:
+        Path(args.out).write_text(result.text, encoding="utf-8")
+        print(f"wrote {args.out} ({args.format})", file=sys.stderr)
+    else:
+        sys.stdout.write(result.text)
+    if vehicle is None:
+        print("note: no --vehicle, so no added mass was exported (damping only)",
+              file=sys.stderr)
+    for line in result.left_out:
+        print(f"warning: left out {line}", file=sys.stderr)
+    return 0
+
+
+def _run_import(args: argparse.Namespace) -> int:
+    vehicle = load_vehicle(args.vehicle) if args.vehicle else None
+    imp = import_model(Path(args.file), args.format, frame=args.frame,
+                       link_name=args.link_name)
+    M, mass_notes = imported_mass(imp, vehicle)
+    damping = imp.damping()
+    save_model(args.out, imp.names, imp.theta, np.zeros(len(imp.names)), M,
+               extra={"source": f"dampest import {args.file} ({args.format})",
+                      "import_notes": "; ".join([*imp.notes, *mass_notes])},
+               damping=damping)
+    print(f"wrote {args.out}: {len(imp.names)} parameters from {args.file} ({args.format}); "
+          + "; ".join(mass_notes))
+    for note in imp.notes:
+        print(f"note: {note}", file=sys.stderr)
+    return 0
