@@ -1,0 +1,478 @@
+"""Export to gz-sim / URDF <hydrodynamics> / UUV Simulator and import back (dampest_ros.io.export).
+
+The force laws of the targets are re-implemented here from their sources (gz-sim
+HydrodynamicsUtils.hh buildDampingMatrix, RDML hydrodynamics.cpp, UUV Simulator
+HydrodynamicModel.cc) and evaluated on the exported numbers, so the tests check the physics of
+the conversion (signs and frame), not only that export and import agree with each other.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from dampest_ros.cli import export as cli_export
+from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.vehicle import Vehicle, damping_from_spec
+from dampest_ros.io.export import (
+    ExportWarning,
+    export_gz,
+    export_model,
+    export_urdf,
+    export_uuv,
+    import_gz,
+    import_model,
+    import_urdf,
+    imported_mass,
+)
+from dampest_ros.io.yaml_io import ModelFile, load_model, load_vehicle, save_model
+
+T6 = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])  # FRD <-> FLU for a 6-vector
+GZ_F, GZ_V = "xyzkmn", "UVWPQR"
+
+
+def model_file(tmp_path: Path, spec: dict[str, Any], M: np.ndarray | None = None,
+               name: str = "model.yaml") -> ModelFile:
+    """A model file on disk (with model.terms) from a damping spec, read back."""
+    model, theta = damping_from_spec(spec)
+    path = save_model(tmp_path / name, model.parameter_names, theta,
+                      np.zeros(model.n_params), np.eye(6) * 20.0 if M is None else M,
+                      damping=model)
+    return load_model(path)
+
+
+@pytest.fixture
+def heavy() -> Vehicle:
+    return load_vehicle("bluerov2_heavy")
+
+
+@pytest.fixture
+def heavy_file(tmp_path: Path, heavy: Vehicle) -> ModelFile:
+    path = save_model(tmp_path / "heavy.yaml", heavy.damping.parameter_names, heavy.theta,
+                      np.zeros(heavy.damping.n_params), heavy.body.M, damping=heavy.damping)
+    return load_model(path)
+
+
+#: Every kind of coefficient the gz plugin can hold, with couplings that flip in FLU
+#: (X_w, K_v, Y_u) and couplings that do not (Y_r, N_v).
+COUPLED: dict[str, Any] = {
+    "linear": {"X_u": 13.7, "Y_v": 4.0, "Z_w": 33.0, "K_p": 0.3, "M_q": 0.8, "N_r": 0.5,
+               "X_w": 2.0, "Y_r": 1.5, "N_v": -0.7, "K_v": 0.25, "Y_u": 0.4},
+    "quadratic": {"X_uu": 141.0, "Y_vv": 217.0, "Z_ww": 190.0, "K_pp": 1.19, "M_qq": 0.47,
+                  "N_rr": 1.5},
+    "cross": [{"row": "Y", "col": "v", "alpha": "|r|", "value": 3.0},       # Y_vr
+              {"row": "N", "col": "v", "alpha": "|r|", "value": -1.25},     # N_vr
+              {"row": "X", "col": "u", "alpha": "|w|", "value": 5.5},       # X_uw
+              {"row": "Z", "col": "w", "alpha": "u", "value": 7.0},         # Z_wu (signed)
+              {"row": "Y", "col": "r", "alpha": "u", "value": -2.5}],       # Y_ru (signed)
+}
+
+
+def tags(text: str) -> dict[str, float]:
+    """Coefficient tags of the (only) Hydrodynamics plugin in ``text``."""
+    plugin = ET.fromstring(text)        # the header comment precedes the root element
+    return {e.tag: float(e.text or "") for e in plugin if e.tag != "link_name"}
+
+
+def gz_applied(t: dict[str, float], nu: np.ndarray) -> np.ndarray:
+    """The damping wrench gz-sim applies to the link for link-frame velocities ``nu``.
+
+    HydrodynamicsUtils.hh: D(i,j) = -(lin[ij] + Σ_k quadAbs[ijk]|ν_k| + quad[ijk] ν_k) and
+    Hydrodynamics.cc applies -D ν.
+    """
+    D = np.zeros((len(nu), 6, 6))
+    for tag, value in t.items():
+        m = re.fullmatch(r"([xyzkmn])([UVWPQR])(abs)?([UVWPQR])?", tag)
+        if m is None:
+            continue
+        i, j = GZ_F.index(m.group(1)), GZ_V.index(m.group(2))
+        if m.group(4) is None:
+            D[:, i, j] -= value
+        else:
+            k = GZ_V.index(m.group(4))
+            D[:, i, j] -= value * (np.abs(nu[:, k]) if m.group(3) else nu[:, k])
+    return -np.einsum("nij,nj->ni", D, nu)
+
+
+def random_nu(n: int = 50) -> np.ndarray:
+    return np.random.default_rng(7).normal(scale=[1.0, 0.8, 0.6, 0.5, 0.5, 0.7], size=(n, 6))
+
+
+# --- gz ---------------------------------------------------------------------------------------
+
+
+def test_gz_bluerov2_heavy_tags_are_sname_negative(heavy_file: ModelFile,
+                                                   heavy: Vehicle) -> None:
+    out = export_gz(heavy_file, heavy)
+    assert out.text.count("<plugin") == 1
+    assert '<plugin filename="gz-sim-hydrodynamics-system" ' \
+           'name="gz::sim::systems::Hydrodynamics">' in out.text
+    assert "<link_name>base_link</link_name>" in out.text
+    assert "<xU>-13.7</xU>" in out.text
+    t = tags(out.text)
+    assert t["xUabsU"] == -141.0
+    assert t["yVabsV"] == -217.0 and t["zWabsW"] == -190.0 and t["nRabsR"] == -1.5
+    assert t["zW"] == -33.0 and t["mQ"] == -0.8 and t["yV"] == 0.0
+    # added mass: X_udot = -M_A (BlueROV2 Heavy, von Benzon et al. 2022)
+    assert "<xDotU>-6.36</xDotU>" in out.text
+    assert [t[f"{f}Dot{v}"] for f, v in zip(GZ_F, GZ_V, strict=True)] == \
+        [-6.36, -7.12, -18.68, -0.189, -0.135, -0.222]
+    assert out.left_out == ()
+
+
+def test_gz_frame_conversion_small_example(tmp_path: Path) -> None:
+    # FRD -> FLU negates v, w, q, r (and Y, Z, M, N): X_w couples x with z -> flips;
+    # Y_r couples y with the yaw rate r, both negated -> keeps its sign; |r| never flips.
+    mf = model_file(tmp_path, {"linear": {"X_u": 1.0, "X_w": 2.0, "Y_r": 1.5, "K_v": 0.25},
+                               "cross": [{"row": "Y", "col": "v", "alpha": "|r|",
+                                          "value": 3.0},
+                                         {"row": "Y", "col": "r", "alpha": "u",
+                                          "value": -2.5}]})
+    flu, frd = tags(export_gz(mf).text), tags(export_gz(mf, frame="frd").text)
+    assert flu["xU"] == frd["xU"] == -1.0
+    assert frd["xW"] == -2.0 and flu["xW"] == 2.0
+    assert frd["kV"] == -0.25 and flu["kV"] == 0.25
+    assert flu["yR"] == frd["yR"] == -1.5
+    assert flu["yVabsR"] == frd["yVabsR"] == -3.0
+    # Y += c·r·u: t_Y t_r t_u = (−1)(−1)(+1) → no flip
+    assert flu["yRU"] == frd["yRU"] == 2.5
+
+
+@pytest.mark.parametrize("frame", ["flu", "frd"])
+def test_gz_force_law_reproduces_the_model(tmp_path: Path, frame: str) -> None:
+    spec = {**COUPLED, "added": {"added.K_vw": 0.3, "added.M_uw": -1.1, "added.N_uv": 0.9}}
+    mf = model_file(tmp_path, spec)
+    assert mf.damping is not None
+    nu = random_nu()
+    applied_frd = -mf.damping.force(nu, mf.theta)           # τ side: -D(ν)ν
+    t = tags(export_gz(mf, frame=frame).text)
+    if frame == "flu":
+        np.testing.assert_allclose(gz_applied(t, nu * T6), applied_frd * T6, rtol=1e-12,
+                                   atol=1e-12)
+    else:
+        np.testing.assert_allclose(gz_applied(t, nu), applied_frd, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("frame", ["flu", "frd"])
+def test_gz_round_trip_gives_the_same_parameters(tmp_path: Path, frame: str) -> None:
+    mf = model_file(tmp_path, COUPLED)
+    back = import_gz(export_gz(mf, frame=frame).text, frame=frame)
+    got = dict(zip(back.names, back.theta, strict=True))
+    # Y_vr (|r|) and the diagonal terms come back under their own names; the signed
+    # products under Y_ru / Z_wu (the default labels).
+    assert set(got) == set(mf.parameter_names)
+    for name, value in zip(mf.parameter_names, mf.theta, strict=True):
+        assert got[name] == pytest.approx(value, abs=1e-12, rel=1e-12), name
+    model = back.damping()
+    nu = random_nu()
+    assert mf.damping is not None
+    np.testing.assert_allclose(model.force(nu, back.theta), mf.damping.force(nu, mf.theta),
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_gz_added_mass_round_trip_with_couplings(tmp_path: Path, heavy: Vehicle) -> None:
+    M_A = np.diag([6.36, 7.12, 18.68, 0.189, 0.135, 0.222])
+    M_A[0, 4] = M_A[4, 0] = 0.4     # surge–pitch: flips in FLU
+    M_A[1, 5] = M_A[5, 1] = 0.3     # sway–yaw: keeps its sign
+    d = yaml.safe_load(Path("config/vehicles/bluerov2_heavy.yaml").read_text())
+    d["vehicle"]["added_mass"] = M_A.tolist()
+    vehicle = Vehicle.from_dict(d)
+    mf = model_file(tmp_path, {"linear": {"X_u": 13.7}}, M=vehicle.body.M)
+    out = export_gz(mf, vehicle)
+    t = tags(out.text)
+    assert t["xDotQ"] == 0.4 and t["mDotU"] == 0.4
+    assert t["yDotR"] == -0.3 and t["nDotV"] == -0.3
+    back = import_gz(out.text)
+    assert back.added_mass is not None
+    np.testing.assert_allclose(back.added_mass, M_A, atol=1e-12)
+    M, _ = imported_mass(back, vehicle)
+    np.testing.assert_allclose(M, vehicle.body.M, atol=1e-12)
+
+
+def test_gz_without_vehicle_exports_damping_only_and_says_so(heavy_file: ModelFile) -> None:
+    out = export_gz(heavy_file)
+    assert "Dot" not in "".join(tags(out.text))
+    assert any("Added mass not exported" in n for n in out.notes)
+    assert "Added mass not exported" in out.text
+    back = import_gz(out.text)
+    assert back.added_mass is None and back.rigid_body is None
+    with pytest.raises(ConfigError, match="vehicle"):
+        imported_mass(back, None)
+
+
+def test_gz_import_from_an_sdf_with_a_blue_style_plugin(tmp_path: Path) -> None:
+    # the layout of the blue project's gazebo.xacro (after xacro), inside a model
+    sdf = tmp_path / "model.sdf"
+    sdf.write_text("""<?xml version="1.0"?>
+<sdf version="1.9"><model name="bluerov2_heavy">
+  <plugin filename="gz-sim-thruster-system" name="gz::sim::systems::Thruster"/>
+  <plugin filename="gz-sim-hydrodynamics-system" name="gz::sim::systems::Hydrodynamics">
+    <link_name>base_footprint</link_name>
+    <xDotU>0</xDotU><yDotV>0</yDotV><zDotW>0</zDotW>
+    <kDotP>0</kDotP><mDotQ>0</mDotQ><nDotR>0</nDotR>
+    <xU>0</xU><yV>0</yV><zW>0</zW><kP>0</kP><mQ>0</mQ><nR>0</nR>
+    <xUabsU>-58.42</xUabsU><yVabsV>-55.137</yVabsV><zWabsW>-124.818</zWabsW>
+    <kPabsP>-4.0</kPabsP><mQabsQ>-4.0</mQabsQ><nRabsR>-4.0</nRabsR>
+    <water_density>1000</water_density>
+  </plugin>
+</model></sdf>""")
+    imp = import_model(sdf, "gz")
+    got = dict(zip(imp.names, imp.theta, strict=True))
+    assert got["X_uu"] == 58.42 and got["Z_ww"] == 124.818 and got["N_rr"] == 4.0
+    assert got["X_u"] == 0.0 and len(got) == 12
+    assert imp.added_mass is not None and not imp.added_mass.any()
+    assert "base_footprint" in imp.notes[-1]
+
+
+def test_gz_import_errors(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="no gz-sim Hydrodynamics"):
+        import_gz("<sdf><model/></sdf>")
+    with pytest.raises(ConfigError, match=r"<xU>.*not a number.*xacro"):
+        import_gz('<plugin filename="gz-sim-hydrodynamics-system" name="x">'
+                  "<link_name>a</link_name><xU>${xu}</xU></plugin>")
+    two = ('<m><plugin filename="gz-sim-hydrodynamics-system"><link_name>a</link_name>'
+           '<xU>-1</xU></plugin><plugin filename="gz-sim-hydrodynamics-system">'
+           "<link_name>b</link_name><xU>-2</xU></plugin></m>")
+    with pytest.raises(ConfigError, match="2 Hydrodynamics plugins"):
+        import_gz(two)
+    assert import_gz(two, link_name="b").theta.tolist() == [2.0]
+    with pytest.raises(ConfigError, match="not valid XML"):
+        import_gz("<plugin>")
+    with pytest.raises(FileNotFoundError):
+        import_gz(tmp_path / "missing.sdf")
+    with pytest.raises(ValueError, match="unknown frame"):
+        import_gz(two, frame="enu", link_name="a")
+
+
+def test_gz_signed_diagonal_product_is_read_as_signed_with_a_note() -> None:
+    imp = import_gz('<plugin filename="gz-sim-hydrodynamics-system"><link_name>a</link_name>'
+                    "<xUabsU>-10</xUabsU><xUU>-3</xUU></plugin>")
+    got = dict(zip(imp.names, imp.theta, strict=True))
+    assert got == {"X_uu": 10.0, "X_uu_lin": 3.0}
+    assert any("<xUabsU>" in n for n in imp.notes)
+
+
+# --- urdf -------------------------------------------------------------------------------------
+
+
+def urdf_block(text: str) -> ET.Element:
+    return ET.fromstring(text)
+
+
+def test_urdf_bluerov2_heavy_block(heavy_file: ModelFile, heavy: Vehicle) -> None:
+    out = export_urdf(heavy_file, heavy)
+    block = urdf_block(out.text)
+    lin, quad = block.find("linear_damping"), block.find("quadratic_damping")
+    am = block.find("added_mass")
+    assert lin is not None and quad is not None and am is not None
+    assert lin.get("Xu") == "-13.7" and float(lin.get("Zw", "")) == -33.0
+    assert float(quad.get("Xuu", "")) == -141.0 and float(quad.get("Nrr", "")) == -1.5
+    assert am.get("Xdu") == "-6.36" and am.get("Ndr") == "-0.222"
+    assert block.findtext("mass") == "13.5"
+    assert float(block.findtext("weight") or "") == pytest.approx(13.5 * 9.81)
+    assert float(block.findtext("buoyancy") or "") == pytest.approx(1000 * 9.81 * 0.0134)
+    cob = block.find("center_of_buoyancy")
+    assert cob is not None and cob.get("z") == "-0.01"      # FRD: above the origin
+    assert out.left_out == ()
+
+
+def test_urdf_round_trip_and_force_law(heavy_file: ModelFile, heavy: Vehicle) -> None:
+    out = export_urdf(heavy_file, heavy)
+    back = import_urdf(out.text)
+    assert back.names == heavy_file.parameter_names
+    np.testing.assert_allclose(back.theta, heavy_file.theta, rtol=1e-12, atol=1e-12)
+    assert back.added_mass is not None and back.rigid_body is not None
+    np.testing.assert_allclose(back.added_mass, heavy.body.added_mass, atol=1e-12)
+    np.testing.assert_allclose(back.rigid_body, heavy.body.M_RB, atol=1e-12)
+    M, _ = imported_mass(back, None)
+    np.testing.assert_allclose(M, heavy.body.M, atol=1e-12)
+    # hydrodynamics.cpp: D(ν) = -diag(linear) - diag(quadratic ⊙ |ν|), on the left-hand side
+    block = urdf_block(out.text)
+    lin_el, quad_el = block.find("linear_damping"), block.find("quadratic_damping")
+    assert lin_el is not None and quad_el is not None
+    lin = np.array([float(lin_el.get(k, "")) for k in ("Xu", "Yv", "Zw", "Kp", "Mq", "Nr")])
+    quad = np.array([float(quad_el.get(k, "")) for k in ("Xuu", "Yvv", "Zww", "Kpp", "Mqq",
+                                                           "Nrr")])
+    nu = random_nu()
+    lhs = (-lin - quad * np.abs(nu)) * nu
+    assert heavy_file.damping is not None
+    np.testing.assert_allclose(lhs, heavy_file.damping.force(nu, heavy_file.theta),
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_urdf_lists_what_the_block_cannot_hold(tmp_path: Path) -> None:
+    mf = model_file(tmp_path, {**COUPLED, "freq": [{"dof": "u", "rate": 2.0, "c": 5.0}]})
+    with pytest.warns(ExportWarning, match="left out"):
+        out = export_urdf(mf)
+    left = "\n".join(out.left_out)
+    for name in ("X_w", "Y_r", "Y_vr", "N_vr", "Z_wu", "freq.u.c1"):
+        assert name in left, name
+    assert "LEFT OUT" in out.text and "Y_vr" in out.text.split("-->")[0]
+    back = import_urdf(out.text)          # the diagonal terms still round-trip
+    got = dict(zip(back.names, back.theta, strict=True))
+    for name in ("X_u", "N_r", "X_uu", "N_rr"):
+        assert got[name] == pytest.approx(dict(zip(mf.parameter_names, mf.theta,
+                                                   strict=True))[name], abs=1e-12)
+
+
+def test_urdf_import_of_the_nested_auv_controllers_layout_and_of_text() -> None:
+    nested = """<robot><hydrodynamics>
+      <inertial><mass value="16.61"/><inertia ixx="0.24" iyy="0.2" izz="0.4"/>
+        <center_of_gravity x="0.0" y="0.0" z="0.0"/>
+        <added_mass Xdu="-12.7" Ydv="-10.5" Zdw="-14.57" Kdp="-0.12" Mdq="-0.12" Ndr="-0.12"/>
+      </inertial>
+      <damping><linear Xu="-28.23" Yv="-18.29" Zw="-23.51" Kp="-0.31" Mq="-0.31" Nr="-0.31"/>
+        <quadratic Xuu="-93.47" Yvv="-74.28" Zww="-168.17" Kpp="-1.55" Mqq="-1.55" Nrr="-1.55"/>
+      </damping></hydrodynamics></robot>"""
+    imp = import_urdf(nested)
+    got = dict(zip(imp.names, imp.theta, strict=True))
+    assert got["X_u"] == 28.23 and got["Z_ww"] == 168.17 and got["N_rr"] == 1.55
+    assert imp.added_mass is not None and imp.rigid_body is not None
+    np.testing.assert_allclose(np.diag(imp.added_mass), [12.7, 10.5, 14.57, 0.12, 0.12, 0.12])
+    np.testing.assert_allclose(np.diag(imp.rigid_body), [16.61] * 3 + [0.24, 0.2, 0.4])
+    text = ("<hydrodynamics><linear_damping>-4.03 -6.22 -5.18 -0.07 -0.07 -0.07"
+            "</linear_damping><quadratic_damping>-18.18 -21.66 -36.99 -1.55 -1.55 -1.55"
+            "</quadratic_damping></hydrodynamics>")
+    imp = import_urdf(text)
+    assert imp.theta.tolist() == [4.03, 6.22, 5.18, 0.07, 0.07, 0.07,
+                                  18.18, 21.66, 36.99, 1.55, 1.55, 1.55]
+    with pytest.raises(ConfigError, match="6 or 36"):
+        import_urdf("<hydrodynamics><linear_damping>1 2 3</linear_damping></hydrodynamics>")
+    with pytest.raises(ConfigError, match="no <hydrodynamics>"):
+        import_urdf("<robot/>")
+    with pytest.raises(ConfigError, match="no damping coefficient"):
+        import_urdf("<hydrodynamics><mass>1</mass></hydrodynamics>")
+
+
+# --- uuv --------------------------------------------------------------------------------------
+
+
+def test_uuv_matrices_and_force_law(tmp_path: Path, heavy: Vehicle) -> None:
+    spec = {"linear": COUPLED["linear"], "quadratic": COUPLED["quadratic"],
+            "cross": [c for c in COUPLED["cross"] if c["alpha"] == "u"]}
+    mf = model_file(tmp_path, spec, M=heavy.body.M)
+    out = export_uuv(mf, heavy)
+    hm = yaml.safe_load(out.text)["hydrodynamic_model"]
+    assert hm["type"] == "fossen"
+    DLin, DNon, DFwd, Ma = (np.array(hm[k]).reshape(6, 6) for k in (
+        "linear_damping", "quadratic_damping", "linear_damping_forward_speed", "added_mass"))
+    assert DLin[0, 0] == -13.7 and DNon[0, 0] == -141.0 and DLin[0, 2] == -2.0  # FRD, as is
+    np.testing.assert_allclose(Ma, heavy.body.added_mass, atol=1e-12)          # positive
+    # HMFossen: D = -DLin - u DFwd, D_ii += -DNon_ii |ν_i|; applied -D ν
+    nu = random_nu()
+    D = -DLin - nu[:, 0, None, None] * DFwd
+    D[:, range(6), range(6)] -= np.diag(DNon) * np.abs(nu)
+    assert mf.damping is not None
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", D, nu), mf.damping.force(nu, mf.theta),
+                               rtol=1e-12, atol=1e-12)
+    assert out.left_out == ()
+
+
+def test_uuv_leaves_out_cross_quadratic_terms(tmp_path: Path) -> None:
+    mf = model_file(tmp_path, COUPLED)
+    with pytest.warns(ExportWarning):
+        out = export_uuv(mf)
+    assert [x.split(" =")[0] for x in out.left_out] == ["Y_vr", "N_vr", "X_uw"]
+    assert "added_mass" not in yaml.safe_load(out.text)["hydrodynamic_model"]
+
+
+# --- common -----------------------------------------------------------------------------------
+
+
+def test_memory_and_residual_are_listed_never_dropped(tmp_path: Path) -> None:
+    mf = model_file(tmp_path, {"linear": {"X_u": 1.0},
+                               "freq": [{"dof": "u", "rate": 2.0, "c": 5.0}],
+                               "residual": {"values": [0.5, 0.25]}})
+    for fmt in ("gz", "urdf", "uuv"):
+        with pytest.warns(ExportWarning, match="freq.u.c1"):
+            out = export_model(mf, fmt)
+        names = [x.split(" =")[0] for x in out.left_out]
+        assert names == ["freq.u.c1", "residual.s1", "residual.s2"], fmt
+        assert "fluid memory" in out.left_out[0]
+        for name in names:
+            assert name in out.text, (fmt, name)
+
+
+def test_unknown_format_and_frame(heavy_file: ModelFile) -> None:
+    with pytest.raises(ValueError, match=r"unknown export format 'sdf'.*gz.*urdf.*uuv"):
+        export_model(heavy_file, "sdf")
+    with pytest.raises(ValueError, match="unknown frame"):
+        export_gz(heavy_file, frame="enu")
+    with pytest.raises(ValueError, match="unknown import format 'uuv'"):
+        import_model("<a/>", "uuv")
+
+
+def test_wrong_vehicle_warns_about_negative_added_mass(heavy_file: ModelFile) -> None:
+    with pytest.warns(ExportWarning, match="negative diagonal"):
+        out = export_gz(heavy_file, load_vehicle("platform_b"))
+    assert any("negative diagonal" in n for n in out.notes)
+
+
+def test_model_file_without_terms_is_read_from_the_names(tmp_path: Path) -> None:
+    path = save_model(tmp_path / "old.yaml", ["X_u", "Y_r", "X_uu", "Y_vr"],
+                      np.array([13.7, 1.5, 141.0, 3.0]), np.zeros(4), np.eye(6))
+    mf = load_model(path)
+    assert mf.damping is None
+    with pytest.warns(ExportWarning, match="Y_vr"):
+        out = export_gz(mf)
+    t = tags(out.text)
+    assert t == {"xU": -13.7, "yR": -1.5, "xUabsU": -141.0}
+    assert out.left_out[0].startswith("Y_vr = 3.0 (the model file has no model.terms")
+
+
+# --- command line -----------------------------------------------------------------------------
+
+
+def cli(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog="dampest")
+    sub = parser.add_subparsers(dest="command", required=True)
+    cli_export.add_parser(sub)
+    args = parser.parse_args(argv)
+    return int(args.run(args))
+
+
+def test_cli_export_then_import(tmp_path: Path, heavy_file: ModelFile,
+                                capsys: pytest.CaptureFixture[str]) -> None:
+    src = tmp_path / "heavy.yaml"
+    sdf = tmp_path / "hydro.sdf"
+    assert cli(["export", str(src), "--format", "gz", "--vehicle", "bluerov2_heavy",
+                "--out", str(sdf)]) == 0
+    assert "<xU>-13.7</xU>" in sdf.read_text()
+    out = tmp_path / "back.yaml"
+    assert cli(["import", str(sdf), "--format", "gz", "--vehicle", "bluerov2_heavy",
+                "--out", str(out)]) == 0
+    back = load_model(out)
+    assert back.parameter_names == heavy_file.parameter_names
+    np.testing.assert_allclose(back.theta, heavy_file.theta, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(back.M, heavy_file.M, atol=1e-12)
+    assert back.damping is not None and back.extra["source"].startswith("dampest import")
+    capsys.readouterr()
+    # stdout export, and the left-out list on stderr
+    mf_path = tmp_path / "coupled.yaml"
+    model_file(tmp_path, {"linear": {"X_u": 1.0}, "freq": [{"dof": "u", "rate": 2.0,
+                                                            "c": 5.0}]}, name=mf_path.name)
+    assert cli(["export", str(mf_path), "--format", "urdf"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.lstrip().startswith("<!--") and "<hydrodynamics>" in captured.out
+    assert "warning: left out freq.u.c1" in captured.err
+    assert "no --vehicle" in captured.err
+
+
+def test_cli_import_urdf_without_rigid_body_needs_a_vehicle(tmp_path: Path) -> None:
+    f = tmp_path / "block.urdf"
+    f.write_text('<robot><hydrodynamics><linear_damping Xu="-1" Yv="-2" Zw="-3" Kp="0" '
+                 'Mq="0" Nr="0"/></hydrodynamics></robot>')
+    with pytest.raises(ConfigError, match="vehicle"):
+        cli(["import", str(f), "--format", "urdf", "--out", str(tmp_path / "m.yaml")])
+    assert cli(["import", str(f), "--format", "urdf", "--vehicle", "bluerov2_heavy",
+                "--out", str(tmp_path / "m.yaml")]) == 0
+    m = load_model(tmp_path / "m.yaml")
+    assert m.theta.tolist() == [1.0, 2.0, 3.0, 0.0, 0.0, 0.0]
+    np.testing.assert_allclose(m.M, load_vehicle("bluerov2_heavy").body.M)
