@@ -260,7 +260,7 @@ def coefficients(model: DampingModel, theta: FloatArray) -> tuple[list[Coefficie
                 other.append(f"{b.name} = {_num(v)} (quadratic drag along the mode "
                              f"w = [{w}], force = s |w'nu| w w'nu: not a single coefficient)")
             else:
-                other.append(f"{b.name} = {_num(v)} (α = {a.label() or a.kind}: no such "
+                other.append(f"{b.name} = {_num(v)} (alpha = {a.label() or a.kind}: no such "
                              f"velocity dependence in the format)")
     return out, other
 
