@@ -1,0 +1,416 @@
+"""HTML report of a batch identification: plots and tables in one directory.
+
+``write_report`` writes ``index.html`` and PNG figures (relative links, so the directory
+can be copied or zipped as is): measured vs predicted damping force, residual spectrum and
+autocorrelation with whiteness bounds, coefficients with 95 % intervals vs a prior (and a
+truth when known), a free-run velocity overlay, excitation coverage, and the tables of
+coefficients and metrics (:mod:`dampest_ros.core.validate`).
+
+Figures are drawn with matplotlib's object API on the Agg canvas (no pyplot state, no
+display); never imports rclpy.
+"""
+
+from __future__ import annotations
+
+import html
+import time
+from collections.abc import Mapping, Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
+
+from dampest_ros.core import validate
+from dampest_ros.core.batch import Fit
+from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, RigidBody
+from dampest_ros.core.samples import Samples
+
+FloatArray = NDArray[np.float64]
+
+FORCE_UNITS = ("N", "N", "N", "N·m", "N·m", "N·m")
+VEL_UNITS = ("m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s")
+DPI = 90
+
+Values = FloatArray | Sequence[float] | Mapping[str, float]
+
+
+def _aligned(values: Values | None, names: Sequence[str]) -> FloatArray | None:
+    """Values in ``names`` order (NaN where a mapping lacks a name), or None."""
+    if values is None:
+        return None
+    if isinstance(values, Mapping):
+        return np.array([float(values.get(n, np.nan)) for n in names])
+    a = np.asarray(values, dtype=float)
+    if a.shape != (len(names),):
+        raise ValueError(f"expected {len(names)} values (one per parameter), got {a.shape}")
+    return a
+
+
+def _grid(n: int, ncols: int = 3) -> tuple[int, int]:
+    return max(1, -(-n // ncols)), ncols
+
+
+def _save(fig: Figure, path: Path, bottom: float = 0.08, wspace: float = 0.22,
+          hspace: float = 0.3) -> str:
+    # fixed margins (constrained layout would double the drawing time); 0.6 in for the title
+    fig.subplots_adjust(left=0.08, right=0.985, bottom=bottom,
+                        top=1.0 - 0.6 / fig.get_figheight(), wspace=wspace, hspace=hspace)
+    fig.savefig(path, dpi=DPI, format="png")
+    return path.name
+
+
+def _force_figure(t: FloatArray, y: FloatArray, y_hat: FloatArray, path: Path) -> str:
+    fig = Figure(figsize=(11, 7.5))
+    axes = fig.subplots(3, 2, sharex=True).T.ravel()
+    for i, ax in enumerate(axes):
+        ax.plot(t, y[:, i], lw=1.0, color="0.2", label="measured y")
+        ax.plot(t, y_hat[:, i], lw=1.0, color="tab:red", alpha=0.85, label="predicted Φθ")
+        ax.set_ylabel(f"{FORCE_NAMES[i]} ({FORCE_UNITS[i]})")
+        ax.grid(alpha=0.3)
+    axes[2].set_xlabel("time (s)")
+    axes[5].set_xlabel("time (s)")
+    axes[0].legend(loc="upper right", fontsize=8)
+    fig.suptitle("Damping force: measured y = τ − Mν̇ − C(ν)ν − g(η) vs model Φ(ν)θ")
+    return _save(fig, path)
+
+
+def _spectrum_figure(f: FloatArray, p_y: FloatArray, p_r: FloatArray, cutoff: float,
+                     path: Path) -> str:
+    fig = Figure(figsize=(11, 7))
+    axes = fig.subplots(3, 2, sharex=True).T.ravel()
+    for i, ax in enumerate(axes):
+        ax.loglog(f[1:], p_y[1:, i], lw=1.0, color="0.5", label="measured force")
+        ax.loglog(f[1:], p_r[1:, i], lw=1.0, color="tab:red", label="residual")
+        if cutoff > 0:
+            ax.axvline(cutoff, color="k", ls=":", lw=0.8)
+        top = float(np.nanmax(p_y[1:, i])) if len(f) > 1 else 0.0
+        if np.isfinite(top) and top > 0:
+            # nine decades below the force: the filter's roll-off beyond is not of interest
+            ax.set_ylim(1e-9 * top, 10 * top)
+        if cutoff > 0 and len(f) > 1:
+            ax.set_xlim(f[1], min(float(f[-1]), 5 * cutoff))
+        unit = FORCE_UNITS[i] if i < 3 else f"({FORCE_UNITS[i]})"
+        ax.set_ylabel(f"{FORCE_NAMES[i]} ({unit}²/Hz)")
+        ax.grid(alpha=0.3, which="both")
+    axes[2].set_xlabel("frequency (Hz)")
+    axes[5].set_xlabel("frequency (Hz)")
+    axes[0].legend(loc="lower left", fontsize=8)
+    fig.suptitle("Welch PSD of the measured force and of the residual"
+                 + (f" (dotted: fit low-pass {cutoff:g} Hz)" if cutoff > 0 else ""))
+    return _save(fig, path)
+
+
+def _acf_figure(w: validate.Whiteness, path: Path) -> str:
+    fig = Figure(figsize=(11, 7))
+    axes = fig.subplots(3, 2, sharex=True, sharey=True).T.ravel()
+    for i, ax in enumerate(axes):
+        ax.vlines(w.lags[1:], 0, w.acf[1:, i], color="tab:blue", lw=1.5)
+        ax.axhspan(-w.bound, w.bound, color="tab:green", alpha=0.2, lw=0)
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_ylabel(f"ACF {FORCE_NAMES[i]}")
+        ax.set_title(f"{w.fraction_outside[i]:.0%} of lags outside ±{w.bound:.3f}",
+                     fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[2].set_xlabel("lag (s)")
+    axes[5].set_xlabel("lag (s)")
+    fig.suptitle("Residual autocorrelation with 95 % whiteness bounds ±1.96/√N (shaded)")
+    return _save(fig, path)
+
+
+def _coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray, flags: Mapping[str, str],
+                 prior: FloatArray | None, truth: FloatArray | None, path: Path) -> str:
+    nrows, ncols = _grid(len(names), 6)
+    fig = Figure(figsize=(13, 1.9 * nrows + 0.8))
+    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
+    for j, ax in enumerate(axes):
+        if j >= len(names):
+            ax.set_visible(False)
+            continue
+        name = names[j]
+        flagged = name in flags
+        if not flagged and np.all(np.isfinite(ci[j])):
+            ax.errorbar([0], [est[j]], yerr=[[est[j] - ci[j, 0]], [ci[j, 1] - est[j]]],
+                        fmt="o", color="tab:blue", capsize=4, label="estimate, 95 %")
+        elif not flagged:
+            ax.plot([0], [est[j]], "o", color="tab:blue", label="estimate")
+        else:
+            ax.text(0.5, 0.5, "not identified", transform=ax.transAxes, ha="center",
+                    va="center", color="tab:red", fontsize=9)
+        if prior is not None and np.isfinite(prior[j]):
+            ax.plot([-0.3], [prior[j]], "s", color="0.4", label="prior")
+        if truth is not None and np.isfinite(truth[j]):
+            ax.plot([0.3], [truth[j]], "*", color="tab:orange", ms=11, label="truth")
+        ax.set_xlim(-1, 1)
+        ax.set_xticks([])
+        if not ax.lines and not ax.collections:
+            ax.set_yticks([])  # nothing to show: no meaningless 0…1 scale
+        ax.set_title(name, fontsize=10, color="tab:red" if flagged else "k")
+        ax.grid(alpha=0.3, axis="y")
+        ax.tick_params(labelsize=8)
+    handles, labels = [], []
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    if handles:
+        fig.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=9)
+    fig.suptitle("Coefficients (SI, positive = dissipative)")
+    return _save(fig, path, bottom=0.5 / fig.get_figheight() + 0.02, wspace=0.5)
+
+
+def _free_run_figure(t: FloatArray, nu: FloatArray, sim: FloatArray, path: Path) -> str:
+    fig = Figure(figsize=(11, 7.5))
+    axes = fig.subplots(3, 2, sharex=True).T.ravel()
+    for i, ax in enumerate(axes):
+        ax.plot(t, nu[:, i], lw=1.0, color="0.2", label="measured ν")
+        ax.plot(t, sim[:, i], lw=1.0, color="tab:red", alpha=0.85, label="free run")
+        ax.set_ylabel(f"{DOF_NAMES[i]} ({VEL_UNITS[i]})")
+        ax.grid(alpha=0.3)
+    axes[2].set_xlabel("time (s)")
+    axes[5].set_xlabel("time (s)")
+    axes[0].legend(loc="upper right", fontsize=8)
+    fig.suptitle("Free-run simulation driven by the measured τ and attitude vs measured ν")
+    return _save(fig, path)
+
+
+def _coverage_figure(nu: FloatArray, path: Path) -> str:
+    fig = Figure(figsize=(11, 5.5))
+    axes = fig.subplots(2, 3).ravel()
+    for i, ax in enumerate(axes):
+        ax.hist(nu[:, i], bins=60, color="tab:blue", alpha=0.8)
+        lo, hi = np.percentile(nu[:, i], [1, 99]) if len(nu) else (0.0, 0.0)
+        ax.axvline(lo, color="k", ls=":", lw=0.8)
+        ax.axvline(hi, color="k", ls=":", lw=0.8)
+        ax.set_xlabel(f"{DOF_NAMES[i]} ({VEL_UNITS[i]})")
+        ax.set_title(f"1–99 %: [{lo:.3g}, {hi:.3g}]", fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("samples")
+    axes[3].set_ylabel("samples")
+    fig.suptitle("Excitation coverage: distribution of each velocity component")
+    return _save(fig, path, bottom=0.1, hspace=0.5)
+
+
+def _num(x: float, digits: int = 4) -> str:
+    if not np.isfinite(x):
+        return "—" if np.isnan(x) else ("∞" if x > 0 else "−∞")
+    return f"{x:.{digits}g}"
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]],
+           classes: Sequence[str] | None = None) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    body = []
+    for k, row in enumerate(rows):
+        cls = f' class="{classes[k]}"' if classes and classes[k] else ""
+        body.append(f"<tr{cls}>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>")
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+
+
+CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1200px;
+margin:2em auto;padding:0 1em;color:#222;line-height:1.45}
+h1{margin-bottom:.1em}.meta{color:#666;margin-top:0}
+table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.92em}
+th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}
+th{background:#f2f2f2}td:first-child,th:first-child{text-align:left}
+tr.flag td{background:#fff1f0}td.reason{text-align:left;max-width:34em;font-size:.9em}
+img{max-width:100%;border:1px solid #ddd;margin:.3em 0 1em}
+.note{color:#555;font-size:.92em;max-width:60em}
+"""
+
+
+def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, body: RigidBody,
+                 fit: Fit, prior: Values | None = None, truth: Values | None = None,
+                 title: str = "", *, source: str = "", cutoff: float = 2.0,
+                 tau_hold: str = "linear", force_seconds: float = 60.0,
+                 free_run_seconds: float = 120.0) -> Path:
+    """Write ``index.html`` and its PNG figures for one identification.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Directory (created if needed); existing report files in it are overwritten.
+    samples : Samples
+        The data the model was identified from (or held-out data to validate on).
+    model : DampingModel
+        Term structure of ``fit``.
+    body : RigidBody
+        M and restoring data used by the fit.
+    fit : Fit
+        Result of :func:`dampest_ros.core.batch.fit`; ``fit.flags`` marks unidentified
+        parameters, which are shown as such, not as numbers.
+    prior : array of shape (p,) or mapping name → value, optional
+        Prior / nominal coefficients to compare with.
+    truth : array of shape (p,) or mapping name → value, optional
+        True coefficients (simulated data).
+    title : str
+        Heading of the report.
+    source : str
+        Name of the input (bag directory or CSV file), shown in the header.
+    cutoff : float
+        The fit's parallel low-pass (Hz), so that predicted and measured force are compared
+        as the fit saw them; 0: unfiltered.
+    tau_hold : {'linear', 'zero'}
+        τ between samples in the free run (see :func:`dampest_ros.core.validate.free_run`).
+    force_seconds, free_run_seconds : float
+        Length of the force plot and of the free run (s), from the start of the longest
+        segment.
+
+    Returns
+    -------
+    Path
+        The written ``index.html``.
+    """
+    t_start = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    names = list(fit.names)
+    theta = np.asarray(fit.theta, dtype=float)
+    prior_v, truth_v = _aligned(prior, names), _aligned(truth, names)
+    rate = samples.rate
+    N = len(samples)
+
+    # --- validation numbers ----------------------------------------------------------------
+    y, y_hat = validate.predicted_force(samples, model, body, theta, cutoff)
+    r = y - y_hat
+    met = validate.metrics(y, y_hat, samples.nu_dot, rate)
+    # the fit low-passed y and Φ at `cutoff`: decimate the residual to ≈ 2·cutoff so that
+    # the whiteness test asks whether what is left in the fitted band is white
+    dec = max(1, int(rate // (2 * cutoff))) if cutoff > 0 else 1
+    white = validate.residual_whiteness(r[::dec], rate / dec, max_lag=min(5.0, N / rate / 4))
+    f, p_r = validate.residual_spectrum(r, rate)
+    _, p_y = validate.residual_spectrum(y, rate)
+    try:
+        frf: validate.FrfError | None = validate.frf_error(
+            samples, y, y_hat, rate, f_max=cutoff if cutoff > 0 else None)
+    except ValueError:
+        frf = None
+    rows = validate.longest_segment(samples, free_run_seconds)
+    sim = validate.free_run(samples, model, body, theta, rows, tau_hold)
+    fr_met = validate.metrics(samples.nu[rows], np.where(np.isfinite(sim), sim, np.inf))
+    neg_share, min_power = validate.energy_consistency(samples, model, theta)
+
+    # --- figures ---------------------------------------------------------------------------
+    seg = validate.longest_segment(samples, force_seconds)
+    t0 = float(samples.t[seg.start])
+    figs = {
+        "force": _force_figure(samples.t[seg] - t0, y[seg], y_hat[seg], out / "force.png"),
+        "spectrum": _spectrum_figure(f, p_y, p_r, cutoff, out / "residual_spectrum.png"),
+        "acf": _acf_figure(white, out / "residual_acf.png"),
+        "coef": _coef_figure(names, theta, fit.interval(), fit.flags, prior_v, truth_v,
+                             out / "coefficients.png"),
+        "free_run": _free_run_figure(samples.t[rows] - float(samples.t[rows.start]),
+                                     samples.nu[rows], sim, out / "free_run.png"),
+        "coverage": _coverage_figure(samples.nu, out / "coverage.png"),
+    }
+
+    # --- tables ----------------------------------------------------------------------------
+    ci = fit.interval()
+    std = fit.std
+    header = ["parameter", "estimate", "std", "95 % low", "95 % high", "prior"]
+    if truth_v is not None:
+        header += ["truth", "truth in 95 %"]
+    header.append("note")
+    coef_rows, coef_cls = [], []
+    for j, name in enumerate(names):
+        flagged = name in fit.flags
+        row = [html.escape(name)]
+        if flagged:
+            row += ["not identified", "", "", ""]
+        else:
+            row += [_num(theta[j]), _num(std[j], 3), _num(ci[j, 0]), _num(ci[j, 1])]
+        row.append(_num(prior_v[j]) if prior_v is not None else "—")
+        if truth_v is not None:
+            row.append(_num(truth_v[j]))
+            inside = (not flagged and np.isfinite(truth_v[j])
+                      and ci[j, 0] <= truth_v[j] <= ci[j, 1])
+            row.append("" if flagged else ("yes" if inside else "<b>no</b>"))
+        row.append(f'<span class="reason">{html.escape(fit.flags[name])}</span>'
+                   if flagged else "")
+        coef_rows.append(row)
+        coef_cls.append("flag" if flagged else "")
+
+    force_rows = []
+    for i in range(6):
+        g = frf.median_gain_db[i] if frf is not None else np.nan
+        ph = frf.median_phase_deg[i] if frf is not None else np.nan
+        force_rows.append([
+            f"{FORCE_NAMES[i]} ({FORCE_UNITS[i]})", _num(met["rmse"][i]),
+            _num(met["nrmse"][i], 3), _num(met["nse"][i], 5), _num(met["peak_error"][i]),
+            _num(met["steady_bias"][i], 3), f"{met['steady_fraction'][i]:.0%}",
+            _num(fit.cv_rmse[i]), _num(g, 3), _num(ph, 3),
+            f"{white.fraction_outside[i]:.0%}"])
+    vel_rows = [[f"{DOF_NAMES[i]} ({VEL_UNITS[i]})", _num(fr_met["rmse"][i], 3),
+                 _num(fr_met["nrmse"][i], 3), _num(fr_met["nse"][i], 4),
+                 _num(fr_met["peak_error"][i], 3)] for i in range(6)]
+
+    n_seg = int(np.unique(samples.segment).size)
+    duration = N / rate if rate else 0.0
+    fr_len = (rows.stop - rows.start - 1) / rate if rate else 0.0
+    summary = _table(["", ""], [
+        ["input", html.escape(source or "—")],
+        ["samples", f"{N} at {rate:.4g} Hz ({duration:.1f} s in {n_seg} segment(s))"],
+        ["method", html.escape(fit.method)],
+        ["regression low-pass", f"{cutoff:g} Hz" if cutoff > 0 else "none"],
+        ["condition number (scaled)", _num(fit.cond, 3)],
+        ["effective samples n_eff", _num(fit.n_eff, 4)],
+        ["AIC / BIC", f"{_num(fit.aic, 6)} / {_num(fit.bic, 6)}"],
+        ["parameters not identified", str(len(fit.flags)) + " of " + str(len(names))],
+        ["energy consistency νᵀD(ν)ν ≥ 0",
+         f"{neg_share:.2%} of samples negative, minimum {_num(min_power, 3)} W"],
+    ])
+    generated = datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+    heading = html.escape(title or f"Damping identification: {source or 'data'}")
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>{heading}</title><style>{CSS}</style></head><body>",
+        f"<h1>{heading}</h1>",
+        f'<p class="meta">input <code>{html.escape(source or "—")}</code> · generated '
+        f"{generated} · dampest_ros</p>",
+        "<h2>Summary</h2>", summary,
+        "<h2>Coefficients</h2>",
+        '<p class="note">Fossen model M ν̇ + C(ν)ν + D(ν)ν + g(η) = τ, FRD body frame; '
+        "damping coefficients in SI units, positive when dissipative. Intervals are 95 % "
+        "(Student-t on the block-robust covariance, including the sensor-bias budget). "
+        "Parameters the data cannot determine are reported as not identified, with the "
+        "reason.</p>",
+        _table(header, coef_rows, coef_cls),
+        f'<img src="{figs["coef"]}" alt="coefficients with 95 % intervals">',
+        "<h2>Force prediction</h2>",
+        '<p class="note">Measured y = τ − M ν̇ − C(ν)ν − g(η) vs predicted Φ(ν)θ, both '
+        "low-passed as in the fit. NRMSE = RMSE / std(y); NSE = 1 − Σr²/Σ(y − ȳ)²; peak "
+        "= max |r|; steady bias = mean residual over stretches of ≥ 1 s where |ν̇ᵢ| ≤ 10 % of "
+        "its RMS (— where there are none); CV RMSE from blocked cross-validation; FRF "
+        "error = median over the excited band (τ coherence ≥ 0.5) of the gain (dB) and "
+        "phase (deg) of S<sub>τŷ</sub>/S<sub>τy</sub>; whiteness = share of autocorrelation "
+        f"lags outside ±1.96/√N on the residual decimated by {dec}.</p>",
+        _table(["DOF", "RMSE", "NRMSE", "NSE", "peak error", "steady bias", "steady share",
+                "CV RMSE", "FRF gain err (dB)", "FRF phase err (°)", "ACF outside"],
+               force_rows),
+        f'<p class="note">First {min(force_seconds, duration):.0f} s of the longest '
+        "segment:</p>",
+        f'<img src="{figs["force"]}" alt="measured vs predicted force">',
+        "<h2>Residuals</h2>",
+        f'<img src="{figs["spectrum"]}" alt="residual spectrum">',
+        f'<img src="{figs["acf"]}" alt="residual autocorrelation">',
+        "<h2>Free run</h2>",
+        f'<p class="note">The model integrated (RK4 at the sample rate) from the measured ν '
+        f"at the start of the longest segment for {fr_len:.0f} s, driven by the measured τ "
+        "and attitude, with no feedback from the measured velocity.</p>",
+        _table(["DOF", "RMSE", "NRMSE", "NSE", "peak error"], vel_rows),
+        f'<img src="{figs["free_run"]}" alt="free-run velocity overlay">',
+        "<h2>Excitation coverage</h2>",
+        '<p class="note">Quadratic terms are only determined over the speeds the data cover; '
+        "dotted lines: 1st and 99th percentiles.</p>",
+        f'<img src="{figs["coverage"]}" alt="velocity histograms">',
+        f'<p class="meta">Written in {time.perf_counter() - t_start:.1f} s.</p>',
+        "</body></html>",
+    ]
+    index = out / "index.html"
+    index.write_text("\n".join(parts), encoding="utf-8")
+    return index
