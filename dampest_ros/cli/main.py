@@ -10,12 +10,12 @@ import os
 import sys
 from collections.abc import Sequence
 
-from dampest_ros.cli import demo, identify, inspect, simulate
+from dampest_ros.cli import demo, export, identify, inspect, simulate
 from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.io.bag import BagError, MissingTopicError
 
-COMMANDS = (simulate, identify, inspect, demo)
+COMMANDS = (simulate, identify, inspect, export, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:

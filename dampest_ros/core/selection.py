@@ -121,10 +121,13 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
     A = np.einsum("i,fipq->pq", weights, ne.A)
     b = np.einsum("i,fip->p", weights, ne.b)
     c = float(np.einsum("i,fi->", weights, ne.c))
-    rows = np.empty((len(samples), base.n_params))
-    y_d = np.empty(len(samples))
-    for sl, Phi, y in iter_regression(samples, base, body, cutoff=cutoff):
-        rows[sl], y_d[sl] = Phi[:, dof, :], y[:, dof]
+    # the same (decimated) samples as the normal equations
+    parts = [(np.arange(len(samples))[sl], Phi[:, dof, :], y[:, dof])
+             for sl, Phi, y in iter_regression(samples, base, body, cutoff=cutoff,
+                                               decimate=True)]
+    used = np.concatenate([p[0] for p in parts])
+    rows = np.concatenate([p[1] for p in parts])
+    y_d = np.concatenate([p[2] for p in parts])
     w = float(weights[dof])
 
     def cost(log_rate: float) -> float:
@@ -133,6 +136,7 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
         for sl in samples.segments():
             zs = filter_memory(samples.t[sl], samples.nu[sl, dof:dof + 1], lam)[:, 0]
             z[sl] = zero_phase(zs, samples.rate, cutoff) if cutoff > 0 else zs
+        z = z[used]
         # bordered normal equations: [A, a; aᵀ, s] [θ; c_m] = [b; β]
         a = w * rows.T @ z
         Ab = np.block([[A, a[:, None]], [a[None, :], np.array([[w * z @ z]])]])
