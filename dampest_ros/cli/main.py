@@ -1,4 +1,4 @@
-"""The ``dampest`` command: simulate, identify, inspect, demo.
+"""The ``dampest`` command: simulate, identify, inspect, export/import, demo.
 
 Each sub-command lives in its own module with ``add_parser(subparsers)`` and ``run(args)``.
 """

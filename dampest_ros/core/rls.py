@@ -29,13 +29,14 @@ Against wind-up (P growing as λ⁻ⁿ in directions the data do not excite):
   excitation s_k ≈ 1 − λ, so ``rho = 0.1 (1 − λ)`` forgets wherever the excitation is at least
   about a third (RMS) of its usual level and freezes the covariance where it is not.
 
-Change detection: two-sided CUSUM (:class:`Cusum`) on block means of normalised innovations
-z_i = ε_i / √S_ii, in two forms per DOF: ``bias`` (z_i itself: an offset appeared) and
-``gain`` (z_i · sign(ŷ_i), ŷ = Φθ the predicted damping force: the damping force became larger
-or smaller than the model says; a gain change flips sign with the velocity and averages out of
-z_i itself). Block means over ``block`` samples remove most of the autocorrelation that the
-parallel low-pass gives the residuals; each block mean is standardised by a running estimate
-of its own standard deviation before it enters the CUSUM.
+Change detection (:class:`InnovationMonitor`): two-sided CUSUM on block means of normalised
+innovations z_i = ε_i / √S_ii, in two forms per DOF: ``bias`` (z_i itself: an offset appeared)
+and ``gain`` (z_i · sign(ŷ_i), ŷ = Φθ the predicted damping force: the damping force became
+larger or smaller than the model says; a gain change flips sign with the velocity and
+averages out of z_i itself). The block means are standardised against their recent history
+and whitened, so that the slowly correlated residuals of a real model do not sum into false
+alarms. On an alarm the covariance can be reset to the trace bound (``boost_on_alarm``) so
+that the estimate re-converges at once.
 """
 
 from __future__ import annotations
@@ -265,6 +266,102 @@ class Cusum:
         self.alarm_sign[:] = 0.0
 
 
+class InnovationMonitor:
+    """Change detector on normalised innovations: block means → robust standardisation →
+    AR(1) whitening → two-sided :class:`Cusum`.
+
+    Channels (12): ``bias`` z_i and ``gain`` z_i · sign(ŷ_i) for the six DOFs, z_i = ε_i/√S_ii.
+    Every ``block`` samples the channel means m_b are standardised by an exponentially
+    weighted mean and standard deviation of past block means (``window`` blocks; the update
+    is winsorised at ±4σ so that a change enters with bounded weight), then whitened with
+    their lag-one autocorrelation ρ (estimated the same way, clipped to [0, 0.95]):
+    u_b = (x_b − ρ x_{b−1}) / √(1 − ρ²). Residuals of a real vehicle model are correlated
+    over many seconds; without the whitening the CUSUM would sum that correlation into false
+    alarms. Detection therefore means "the innovations changed relative to the last
+    ``window`` blocks". The first ``warmup`` blocks only initialise the statistics.
+
+    Parameters
+    ----------
+    block : int
+        Samples per block.
+    drift, threshold : float
+        CUSUM k and h, in standard deviations of a whitened block mean.
+    window : float
+        Blocks in the exponential window of the standardisation.
+    warmup : int
+        Blocks before the CUSUM runs.
+    """
+
+    def __init__(self, block: int = 50, drift: float = 1.0, threshold: float = 15.0,
+                 window: float = 120.0, warmup: int = 20) -> None:
+        self.block, self.window, self.warmup = int(block), float(window), int(warmup)
+        self.cusum = Cusum(12, drift, threshold)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the statistics and the alarms."""
+        self.cusum.reset()
+        self._sum = np.zeros(12)
+        self._n = 0
+        self.blocks = 0
+        self._mu = np.zeros(12)
+        self._var = np.zeros(12)
+        self._c1 = np.zeros(12)
+        self._prev = np.zeros(12)
+        self.alarm_time: float | None = None
+
+    def update(self, z: FloatArray, sign: FloatArray, t: float | None = None) -> BoolArray:
+        """Add one sample's normalised innovations z (6,) and signs of ŷ (6,); returns the
+        channels that went into alarm at this sample."""
+        self._sum[:6] += z
+        self._sum[6:] += z * sign
+        self._n += 1
+        if self._n < self.block:
+            return np.zeros(12, dtype=bool)
+        m = self._sum / self._n
+        self._sum[:] = 0.0
+        self._n = 0
+        self.blocks += 1
+        b = self.blocks
+        if b <= self.warmup:
+            a = 1.0 / b
+            self._mu += a * (m - self._mu)
+            self._var += a * ((m - self._mu) ** 2 - self._var)
+            self._prev = (m - self._mu) / np.sqrt(self._var + 1e-300)
+            return np.zeros(12, dtype=bool)
+        sd = np.sqrt(np.maximum(self._var, 1e-300))
+        x = (m - self._mu) / sd
+        rho = np.clip(self._c1, 0.0, 0.95)
+        u = (x - rho * self._prev) / np.sqrt(1.0 - rho * rho)
+        new = self.cusum.update(np.clip(u, -50.0, 50.0))
+        if new.any() and self.alarm_time is None:
+            self.alarm_time = t
+        a = 1.0 / min(b, self.window)
+        d = np.clip(m - self._mu, -4.0 * sd, 4.0 * sd)
+        self._mu += a * d
+        self._var += a * (d * d - self._var)
+        xc = np.clip(x, -4.0, 4.0)
+        self._c1 += a * (xc * np.clip(self._prev, -4.0, 4.0) - self._c1)
+        self._prev = xc
+        return new
+
+    @property
+    def alarm(self) -> bool:
+        """True once any channel alarmed (until :meth:`clear`)."""
+        return bool(self.cusum.alarm.any())
+
+    def channels(self) -> list[str]:
+        """Names of the channels in alarm with the sign of the shift, e.g. ``X gain+``."""
+        c = self.cusum
+        return [f"{CUSUM_CHANNELS[i]}{'+' if c.alarm_sign[i] > 0 else '-'}"
+                for i in np.flatnonzero(c.alarm)]
+
+    def clear(self) -> None:
+        """Acknowledge the alarms (the statistics are kept)."""
+        self.cusum.reset()
+        self.alarm_time = None
+
+
 @dataclass(frozen=True)
 class RLSConfig:
     """Settings of :class:`RecursiveLeastSquares`.
@@ -289,11 +386,16 @@ class RLSConfig:
     noise_floor : float
         Smallest r_i.
     cusum_drift, cusum_threshold : float
-        CUSUM allowance k and decision level h (standard deviations of a block mean).
+        CUSUM allowance k and decision level h (see :class:`InnovationMonitor`).
     cusum_block : int
-        Samples per block mean fed to the CUSUM.
+        Samples per block mean fed to the detector.
+    cusum_window : float
+        Blocks in the window of the detector's standardisation.
     cusum_warmup : int
-        Blocks used to learn the block standard deviation before the CUSUM runs.
+        Blocks that initialise the detector before it runs.
+    boost_on_alarm : bool
+        On a change alarm, inflate P to the trace bound (covariance resetting) so that the
+        estimate re-converges at once instead of at the pace of λ.
     stats_window : float
         Samples of the exponential window of the innovation RMS and the excitation measure.
     min_excitation : float
@@ -309,10 +411,12 @@ class RLSConfig:
     adapt_noise: bool = True
     noise_window: float = 5000.0
     noise_floor: float = 1e-12
-    cusum_drift: float = 0.5
-    cusum_threshold: float = 10.0
-    cusum_block: int = 25
-    cusum_warmup: int = 40
+    cusum_drift: float = 1.0
+    cusum_threshold: float = 15.0
+    cusum_block: int = 50
+    cusum_window: float = 120.0
+    cusum_warmup: int = 20
+    boost_on_alarm: bool = True
     stats_window: float = 500.0
     min_excitation: float = 2.0
 
@@ -328,8 +432,9 @@ class RLSConfig:
         for name in ("noise_window", "stats_window"):
             if getattr(self, name) < 1:
                 raise ConfigError(name, "must be ≥ 1 sample")
-        if self.cusum_block < 1 or self.cusum_warmup < 2:
-            raise ConfigError("cusum_block", "need cusum_block ≥ 1 and cusum_warmup ≥ 2")
+        if self.cusum_block < 1 or self.cusum_warmup < 2 or self.cusum_window < 1:
+            raise ConfigError("cusum_block", "need cusum_block ≥ 1, cusum_warmup ≥ 2 and "
+                                             "cusum_window ≥ 1")
 
 
 @dataclass
@@ -439,18 +544,15 @@ class RecursiveLeastSquares:
         self.R = np.array(cfg.noise_var, dtype=float)
         self.n = 0
         self._e2 = self.R.copy()  # EW mean of ε², seeded with the prior noise
-        # weighted EW estimate of r; the prior counts as one fully informative sample
-        self._r_num = self.R.copy()
-        self._r_den = np.ones(6)
+        # weighted EW estimate of r; the prior counts as 1 % of one informative sample
+        self._r_num = 0.01 * self.R
+        self._r_den = np.full(6, 0.01)
         self._force2 = np.zeros(6)  # EW mean of (Φθ)²
-        self._blk_sum = np.zeros(12)
-        self._blk_n = 0
-        self._blk_count = 0
-        self._blk_var = np.zeros(12)
-        self.cusum = Cusum(12, cfg.cusum_drift, cfg.cusum_threshold)
-        self.alarm_time: float | None = None
+        self.monitor = InnovationMonitor(cfg.cusum_block, cfg.cusum_drift, cfg.cusum_threshold,
+                                         cfg.cusum_window, cfg.cusum_warmup)
         self.last_innovation = np.zeros(6)
         self.skipped = 0
+        self.boosts = 0
 
     def set_forgetting_factor(self, lam: float) -> None:
         """Change λ on the fly (validated like the config)."""
@@ -516,12 +618,11 @@ class RecursiveLeastSquares:
             self.R = np.maximum(self._r_num / self._r_den, cfg.noise_floor)
         force = Phi @ self.theta
         self._force2 += (force * force - self._force2) * a
-        z = e / np.sqrt(s_diag)
-        self._blk_sum[:6] += z
-        self._blk_sum[6:] += z * np.sign(force)
-        self._blk_n += 1
-        if self._blk_n >= cfg.cusum_block:
-            self._cusum_block(t)
+        new = self.monitor.update(e / np.sqrt(s_diag), np.sign(force), t)
+        if cfg.boost_on_alarm and new.any() and not self.frozen:
+            tr = scaled_trace(self.P, self.scale)
+            self.P = self.P * max(1.0, min(1e4, self.trace_max / max(tr, 1e-300)))
+            self.boosts += 1
         return e
 
     def update_many(self, Phi: FloatArray, y: FloatArray,
@@ -532,32 +633,14 @@ class RecursiveLeastSquares:
             out[k] = self.update(Phi[k], y[k], None if t is None else float(t[k]))
         return out
 
-    def _cusum_block(self, t: float | None) -> None:
-        cfg = self.config
-        mean = self._blk_sum / self._blk_n
-        self._blk_sum[:] = 0.0
-        self._blk_n = 0
-        self._blk_count += 1
-        k = self._blk_count
-        if k <= cfg.cusum_warmup:
-            # running mean square of the block means while learning (no change assumed)
-            self._blk_var += (mean * mean - self._blk_var) / k
-            return
-        sd = np.sqrt(np.maximum(self._blk_var, 1e-12))
-        x = np.clip(mean / sd, -50.0, 50.0)
-        new = self.cusum.update(x)
-        if new.any() and self.alarm_time is None:
-            self.alarm_time = t
-        # slow update of the block variance, only from blocks that look in control
-        quiet = np.abs(x) < 3.0
-        a = 1.0 / min(k, 10 * cfg.cusum_warmup)
-        self._blk_var = np.where(quiet, self._blk_var + a * (mean * mean - self._blk_var),
-                                 self._blk_var)
+    @property
+    def alarm_time(self) -> float | None:
+        """Stamp of the first change alarm since the last clear (None: none)."""
+        return self.monitor.alarm_time
 
     def clear_alarm(self) -> None:
         """Acknowledge a change: clear the CUSUM (the estimate is kept)."""
-        self.cusum.reset()
-        self.alarm_time = None
+        self.monitor.clear()
 
     # --- diagnostics ----------------------------------------------------------------------
 
@@ -580,12 +663,10 @@ class RecursiveLeastSquares:
         """Current diagnostics; ``condition`` computes the condition number (O(p³))."""
         noise_std = np.sqrt(self.R)
         excitation = np.sqrt(self._force2) / noise_std
-        channels = [f"{CUSUM_CHANNELS[i]}{'+' if self.cusum.alarm_sign[i] > 0 else '-'}"
-                    for i in np.flatnonzero(self.cusum.alarm)]
         return Diagnostics(
             samples=self.n, innovation_rms=np.sqrt(self._e2), noise_std=noise_std,
             excitation=excitation, excited=excitation >= self.config.min_excitation,
             covariance_trace=scaled_trace(self.P, self.scale),
             condition_number=self.condition_number() if condition else float("nan"),
-            cusum=self.cusum.statistic.copy(), alarm=bool(self.cusum.alarm.any()),
-            alarm_channels=channels)
+            cusum=self.monitor.cusum.statistic.copy(), alarm=self.monitor.alarm,
+            alarm_channels=self.monitor.channels())
