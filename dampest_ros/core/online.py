@@ -1,0 +1,838 @@
+"""Causal preprocessing of live sensor messages into samples of ν, ν̇, τ, and the causal
+regression that feeds the RLS: the online counterpart of :mod:`dampest_ros.core.preprocess`
+and :func:`dampest_ros.core.batch.iter_regression`.
+
+One class, :class:`OnlinePreprocessor`, takes the messages one at a time (the ROS node calls
+it from its subscriptions) or a whole recording (:meth:`OnlinePreprocessor.run` feeds the
+messages of a :data:`~dampest_ros.core.measurements.Recording` in stamp order through the
+very same methods), so live topics and replayed bags take one code path.
+
+State estimation (FRD body, NED world; frames converted only through
+:mod:`dampest_ros.core.frames`):
+
+- **Linear velocity**: a filterpy ``KalmanFilter`` per stream with state
+  x = [v_NED (3), b_a (3)] (NED velocity, accelerometer bias in the body frame). Prediction
+  at every IMU message with the specific force rotated to NED plus gravity as the input,
+  d/dt v_NED = R (f − b_a) + [0, 0, g]; DVL body velocities are the measurement
+  (z = R v_DVL, Mahalanobis-gated; a DVL message stamped before the latest IMU message is
+  moved forward by the inertial velocity increment since its stamp). During DVL dropouts the
+  filter only predicts. Body velocity v = Rᵀ v_NED and v̇ = f − b̂_a + Rᵀ g e_z − ω × v.
+- **Angular rate and its derivative**: per axis a constant-acceleration Kalman filter on
+  [ω, ω̇] driven by the gyro (the three axes are stacked block-diagonally in one filterpy
+  filter; the blocks do not interact). In steady state it is an α-β filter whose ω̇ estimate
+  lags by L = T (α/β − ½) (its error for a constant ω̈ is −L ω̈); ω̇ is read L later so that
+  ω, ω̇ and τ refer to the same instant.
+- **Attitude** from the IMU orientation; **depth** from the pressure.
+- **τ** from the thruster JointState efforts through the allocation
+  (:func:`dampest_ros.core.preprocess.thruster_wrench`). Thruster telemetry is the mean over
+  the message period w before its stamp s, so it describes the window centre s − w/2.
+
+Samples are emitted at ``rate`` Hz on a grid phase-locked to the thrust window centres, all
+fields with the same stamp t_k: τ interpolated between window centres, and ν, ν̇ averaged over
+the same window [t_k − w/2, t_k + w/2] (the boxcar that the thrust telemetry has), so all
+three see the same filter, as in the offline preprocessing.
+
+Rejected and counted: non-finite messages, messages out of order within a topic, stale
+messages (older than ``stale_after`` behind the newest stamp seen), DVL outliers. A stamp more
+than ``clock_jump`` seconds behind its topic's last stamp is a clock jump backwards: the state
+is reset and the event reported. Samples before the first DVL fix, during DVL dropouts longer
+than ``max_dvl_gap`` and for ``settle`` seconds after a (re)start are flagged not usable.
+
+:class:`LowPass` is the causal "parallel filter": the same second-order Butterworth low-pass
+applied to y and to every column of Φ (O(p) per sample), so that LP(y) = LP(Φ) θ holds for
+the nonlinear regressor. :class:`OnlineRegression` turns samples into filtered (Φ, y) with the
+regressor and target of the batch path.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Iterator
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+from numpy.typing import NDArray
+from scipy import signal
+
+from dampest_ros.core import frames
+from dampest_ros.core.batch import target
+from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.measurements import (
+    ImuSeries,
+    JointSeries,
+    PressureSeries,
+    Recording,
+    TwistSeries,
+)
+from dampest_ros.core.preprocess import DataError, thruster_wrench
+from dampest_ros.core.rigid_body import ConfigError, RigidBody
+from dampest_ros.core.samples import Samples
+from dampest_ros.core.thrusters import Thrusters
+
+FloatArray = NDArray[np.float64]
+
+TOPIC_ROLES = ("imu", "dvl", "pressure", "thrusters")
+DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
+                  "thrusters": "thrusters/state"}
+
+
+@dataclass(frozen=True)
+class OnlineConfig:
+    """Settings of :class:`OnlinePreprocessor` (defaults suit a 200 Hz IMU, 5–8 Hz DVL).
+
+    Attributes
+    ----------
+    rate : float
+        Output sample rate (Hz).
+    accel_noise : float
+        Accelerometer (plus AHRS-induced gravity) noise per IMU message (m/s²).
+    accel_bias_walk : float
+        Accelerometer bias random walk (m/s²/√s).
+    gyro_noise : float
+        Gyro noise per message (rad/s).
+    angular_jerk : float
+        Power spectral density q of the white angular jerk of the [ω, ω̇] model
+        ((rad/s³)²/Hz); sets the filter bandwidth (q = 1: about 11 Hz at 200 Hz).
+    dvl_noise : float
+        DVL noise (m/s) when the message carries no usable covariance.
+    dvl_gate : float
+        Mahalanobis gate (χ², 3 DOF) for DVL messages; 0 disables it.
+    max_dvl_gap : float
+        Samples more than this (s) after the last DVL fix are not usable.
+    max_imu_gap : float
+        An IMU gap longer than this (s) restarts the inertial filters.
+    settle : float
+        Samples within this (s) after a start, restart or DVL recovery are not usable.
+    stale_after : float
+        Messages older than this (s) behind the newest stamp are rejected.
+    clock_jump : float
+        A stamp this much (s) behind its topic's last stamp is a clock jump: reset.
+    thrust_window : float
+        Averaging window of the thruster telemetry (s); 0: the message period.
+    atmospheric_pressure : float
+        Pa.
+    """
+
+    rate: float = 50.0
+    accel_noise: float = 0.03
+    accel_bias_walk: float = 1e-4
+    gyro_noise: float = 0.002
+    angular_jerk: float = 1.0
+    dvl_noise: float = 0.01
+    dvl_gate: float = 25.0
+    max_dvl_gap: float = 1.0
+    max_imu_gap: float = 0.1
+    settle: float = 1.0
+    stale_after: float = 1.0
+    clock_jump: float = 1.0
+    thrust_window: float = 0.0
+    atmospheric_pressure: float = 101325.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+                raise ConfigError(f.name, f"must be a finite number, got {v!r}")
+            if v < 0:
+                raise ConfigError(f.name, f"must be ≥ 0, got {v}")
+        for name in ("rate", "gyro_noise", "accel_noise", "angular_jerk", "dvl_noise",
+                     "max_imu_gap", "stale_after", "clock_jump"):
+            if getattr(self, name) <= 0:
+                raise ConfigError(name, "must be > 0")
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> OnlineConfig:
+        """From a mapping; unknown keys raise ConfigError naming them."""
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ConfigError("online", f"unknown key(s) {sorted(unknown)}")
+        return cls(**{k: float(v) for k, v in d.items()})
+
+
+@dataclass
+class OnlineSample:
+    """One synchronised sample (FRD/NED, SI units).
+
+    Attributes
+    ----------
+    t : float
+        Stamp (s), shared by all fields.
+    nu, nu_dot, tau : ndarray, shape (6,)
+        Velocity (m/s, rad/s), its derivative, generalised thruster force (N, N·m).
+    euler : ndarray, shape (3,)
+        Roll, pitch, yaw (rad).
+    depth : float
+        m (NaN without pressure).
+    usable : bool
+        False during DVL dropouts, before the first fix and while settling.
+    """
+
+    t: float
+    nu: FloatArray
+    nu_dot: FloatArray
+    tau: FloatArray
+    euler: FloatArray
+    depth: float
+    usable: bool
+
+
+class _History:
+    """Fixed-capacity ring of time-stamped rows, oldest first (time strictly increasing)."""
+
+    def __init__(self, width: int, capacity: int) -> None:
+        self.t = np.zeros(capacity)
+        self.x = np.zeros((capacity, width))
+        self.n = 0
+        self.head = 0  # index of the next write
+        self.cap = capacity
+
+    def clear(self) -> None:
+        self.n = 0
+        self.head = 0
+
+    def append(self, t: float, x: FloatArray) -> None:
+        self.t[self.head] = t
+        self.x[self.head] = x
+        self.head = (self.head + 1) % self.cap
+        self.n = min(self.n + 1, self.cap)
+
+    def arrays(self) -> tuple[FloatArray, FloatArray]:
+        """Times (n,) and rows (n, width) in time order."""
+        idx = (self.head - self.n + np.arange(self.n)) % self.cap
+        return self.t[idx], self.x[idx]
+
+    @property
+    def last_t(self) -> float:
+        return float(self.t[(self.head - 1) % self.cap]) if self.n else -math.inf
+
+    @property
+    def first_t(self) -> float:
+        return float(self.t[(self.head - self.n) % self.cap]) if self.n else math.inf
+
+
+def _interp_rows(ts: FloatArray, X: FloatArray, t: FloatArray) -> FloatArray:
+    """Linear interpolation of the rows X (n, d) at times t (m,), clamped at the ends."""
+    i = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2)
+    h = ts[i + 1] - ts[i]
+    s = np.clip((t - ts[i]) / np.where(h > 0, h, 1.0), 0.0, 1.0)[:, None]
+    return X[i] + s * (X[i + 1] - X[i])
+
+
+def window_mean(ts: FloatArray, X: FloatArray, a: float, b: float) -> FloatArray:
+    """Mean over [a, b] of the piecewise-linear interpolant of rows X (n, d) at times ts.
+
+    Exact trapezoid integration between the knots that fall inside, with interpolated
+    values at a and b. Returns shape (d,).
+    """
+    inside = ts[(ts > a) & (ts < b)]
+    knots = np.concatenate([[a], inside, [b]])
+    vals = _interp_rows(ts, X, knots)
+    dt = np.diff(knots)[:, None]
+    return np.asarray(np.sum(0.5 * (vals[1:] + vals[:-1]) * dt, axis=0) / (b - a), dtype=float)
+
+
+def _finite(*arrays: Any) -> bool:
+    """True if every value is finite (sum of all: NaN or ±Inf propagate)."""
+    return bool(np.isfinite(sum(float(np.sum(a)) for a in arrays)))
+
+
+def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """a × b for single 3-vectors (np.cross costs ~40 µs per call)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
+def derivative_lag(dt: float, q: float, r: float, iterations: int = 4000) -> float:
+    """Lag L (s) of the steady-state ω̇ estimate of the [ω, ω̇] Kalman filter.
+
+    The steady-state filter is an α-β filter with α = K₀, β = K₁ T; its ω̇ error for a
+    constant ω̈ is −T (α/β − ½) ω̈ (Kalata 1984), i.e. a delay L = T (α/β − ½).
+
+    Parameters
+    ----------
+    dt : float
+        IMU period T (s).
+    q : float
+        White-jerk PSD ((rad/s³)²/Hz).
+    r : float
+        Gyro noise variance per message ((rad/s)²).
+    """
+    F = np.array([[1.0, dt], [0.0, 1.0]])
+    Q = q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+    P = np.eye(2)
+    K = np.zeros(2)
+    for _ in range(iterations):
+        P = F @ P @ F.T + Q
+        K = P[:, 0] / (P[0, 0] + r)
+        P = P - np.outer(K, P[0, :])
+    alpha, beta = float(K[0]), float(K[1] * dt)
+    return dt * (alpha / beta - 0.5)
+
+
+class OnlinePreprocessor:
+    """Causal fusion of IMU, DVL, pressure and thruster messages into samples.
+
+    Parameters
+    ----------
+    thrusters : Thrusters
+        Allocation (JointState names must match ``thrusters.names``).
+    gravity : float
+        g (m/s²).
+    rho : float
+        Water density (kg/m³), for depth from pressure.
+    config : OnlineConfig, optional
+
+    Notes
+    -----
+    Every message method returns the samples that became complete (possibly none).
+    ``counts`` holds the statistics; ``events`` the reports of resets (newest last).
+    """
+
+    _COUNTS = ("imu", "dvl", "pressure", "thrusters", "rejected_nonfinite",
+               "rejected_out_of_order", "rejected_stale", "dvl_outliers", "clock_resets",
+               "imu_gaps", "samples", "samples_unusable", "samples_skipped")
+
+    def __init__(self, thrusters: Thrusters, gravity: float, rho: float,
+                 config: OnlineConfig | None = None) -> None:
+        self.thr = thrusters
+        self.gravity = float(gravity)
+        self.rho = float(rho)
+        self.cfg = config or OnlineConfig()
+        self.counts: dict[str, int] = dict.fromkeys(self._COUNTS, 0)
+        self.events: deque[str] = deque(maxlen=50)
+        self._thr_order: list[int] | None = None
+        self._thr_names: tuple[str, ...] = ()
+        self.reset()
+
+    # --- state --------------------------------------------------------------------------
+
+    def reset(self, reason: str = "") -> None:
+        """Forget all state (not the counts); ``reason`` is recorded in ``events``."""
+        if reason:
+            self.events.append(reason)
+        self._last: dict[str, float] = {}
+        self._newest = -math.inf
+        self._restart_inertial()
+        # thrust window centres and τ; pressure; DVL messages waiting for the IMU
+        self._thrust = _History(6, 64)
+        self._window = 0.0
+        self._last_thr_stamp = -math.inf
+        self._pres: deque[tuple[float, float]] = deque(maxlen=2)
+        self._dvl_pending: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
+        self._next_t = math.nan  # next grid time to emit
+        self._unusable_until = -math.inf
+
+    def _restart_inertial(self) -> None:
+        cfg = self.cfg
+        self._imu_t = -math.inf
+        self._imu_dt = 1.0 / 200.0
+        self._lag = derivative_lag(self._imu_dt, cfg.angular_jerk, cfg.gyro_noise**2)
+        self._a_prev: FloatArray | None = None
+        # columns: v (3), v̇ (3), ω (3), ω̇ (3), R (9), v_int NED (3)
+        self._hist = _History(24, 512)
+        self._v_int = np.zeros(3)
+        self._last_dvl = -math.inf
+        self._dvl_seen = False
+        # linear velocity filter: x = [v_NED, b_a]
+        kv = KalmanFilter(dim_x=6, dim_z=3)
+        kv.x = np.zeros((6, 1))
+        kv.P = np.diag([1.0] * 3 + [0.05**2] * 3)
+        kv.H = np.hstack([np.eye(3), np.zeros((3, 3))])
+        self.kf_v = kv
+        # angular filter: per axis [ω, ω̇], stacked block-diagonally (x = [ω, ω̇] × 3)
+        ka = KalmanFilter(dim_x=6, dim_z=3)
+        ka.x = np.zeros((6, 1))
+        ka.P = np.diag([cfg.gyro_noise**2 * 100, 1.0] * 3)
+        ka.H = np.zeros((3, 6))
+        ka.H[[0, 1, 2], [0, 2, 4]] = 1.0
+        ka.R = np.eye(3) * cfg.gyro_noise**2
+        self.kf_w = ka
+        self._set_imu_dt(self._imu_dt)
+        self._imu_started = False
+
+    def _set_imu_dt(self, dt: float) -> None:
+        cfg = self.cfg
+        T = dt
+        F = np.eye(6)
+        for k in range(3):
+            F[2 * k, 2 * k + 1] = T
+        self.kf_w.F = F
+        blk = cfg.angular_jerk * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
+        Q = np.zeros((6, 6))
+        for k in range(3):
+            Q[2 * k:2 * k + 2, 2 * k:2 * k + 2] = blk
+        self.kf_w.Q = Q
+        self.kf_v.Q = np.diag([(cfg.accel_noise * T) ** 2] * 3 + [cfg.accel_bias_walk**2 * T] * 3)
+        self._imu_dt = dt
+        self._lag = derivative_lag(T, cfg.angular_jerk, cfg.gyro_noise**2)
+
+    @property
+    def derivative_lag(self) -> float:
+        """The lag (s) of the ω̇ estimate that the sampling compensates."""
+        return self._lag
+
+    def _admit(self, topic: str, t: float) -> bool:
+        """Order, staleness and clock-jump checks shared by every topic."""
+        cfg = self.cfg
+        last = self._last.get(topic, -math.inf)
+        if t <= last:
+            if last - t > cfg.clock_jump:
+                self.counts["clock_resets"] += 1
+                self.reset(f"clock jumped back {last - t:.3f} s on {topic} "
+                           f"(from {last:.3f} to {t:.3f}); state reset")
+            else:
+                self.counts["rejected_out_of_order"] += 1
+                return False
+        elif t < self._newest - cfg.stale_after:
+            self.counts["rejected_stale"] += 1
+            return False
+        self._last[topic] = t
+        self._newest = max(self._newest, t)
+        return True
+
+    # --- messages ---------------------------------------------------------------------------
+
+    def imu(self, t: float, orientation: FloatArray, angular_velocity: FloatArray,
+            linear_acceleration: FloatArray) -> list[OnlineSample]:
+        """sensor_msgs/Imu: orientation [x, y, z, w] FLU→ENU, rates and specific force FLU."""
+        self.counts["imu"] += 1
+        if not _finite(t, orientation, angular_velocity, linear_acceleration) or \
+                float(np.linalg.norm(orientation)) < 1e-9:
+            self.counts["rejected_nonfinite"] += 1
+            return []
+        if not self._admit("imu", t):
+            return []
+        q = np.asarray(orientation, dtype=float)
+        # ROS FLU→ENU [x, y, z, w] → rotation FRD→NED
+        R = frames.rotation(frames.quat_to_matrix(q[[3, 0, 1, 2]]))
+        w = frames.body_vec(np.asarray(angular_velocity, dtype=float))
+        f = frames.body_vec(np.asarray(linear_acceleration, dtype=float))
+        if self._imu_started and t - self._imu_t > self.cfg.max_imu_gap:
+            self.counts["imu_gaps"] += 1
+            self.events.append(f"IMU gap of {t - self._imu_t:.3f} s at {t:.3f}; inertial "
+                               "filters restarted")
+            self._restart_inertial()
+        self._inertial_step(t, R, w, f)
+        return self._emit()
+
+    def _inertial_step(self, t: float, R: FloatArray, w: FloatArray, f: FloatArray) -> None:
+        kv, ka = self.kf_v, self.kf_w
+        b = kv.x[3:, 0]
+        a_ned = R @ (f - b)
+        a_ned[2] += self.gravity
+        if not self._imu_started:
+            ka.x[[0, 2, 4], 0] = w
+            self._imu_started = True
+            self._unusable_until = max(self._unusable_until, t + self.cfg.settle)
+        else:
+            dt = t - self._imu_t
+            if abs(dt - self._imu_dt) > 0.2 * self._imu_dt:
+                self._set_imu_dt(dt)  # re-tune to the actual IMU period
+            # velocity: trapezoid of the previous and current NED acceleration
+            a_mean = 0.5 * (a_ned + (self._a_prev if self._a_prev is not None else a_ned))
+            Fv = np.eye(6)
+            Fv[:3, 3:] = -R * dt
+            kv.F = Fv
+            # x⁺ = F x + B u with u = a_mean + R b (so that F x + B u = v + (R(f − b) + g) dt)
+            kv.predict(u=(a_mean + R @ b).reshape(3, 1) * dt,
+                       B=np.vstack([np.eye(3), np.zeros((3, 3))]))
+            self._v_int = self._v_int + a_mean * dt
+            ka.predict()
+            ka.update(w.reshape(3, 1))
+        self._a_prev = a_ned
+        self._imu_t = t
+        # DVL messages that the IMU has now passed
+        while self._dvl_pending and self._dvl_pending[0][0] <= t:
+            td, v, var = self._dvl_pending.popleft()
+            self._dvl_update(td, v, var)
+        v_ned = kv.x[:3, 0]
+        v = R.T @ v_ned
+        omega = ka.x[[0, 2, 4], 0]
+        omega_dot = ka.x[[1, 3, 5], 0]
+        g_body = self.gravity * R[2, :]
+        # v̇ = Rᵀ d/dt(R v) − ω × v = f − b + Rᵀ g e_z − ω × v
+        v_dot = f - kv.x[3:, 0] + g_body - _cross(omega, v)
+        self._hist.append(t, np.concatenate([v, v_dot, omega, omega_dot, R.ravel(),
+                                             self._v_int]))
+
+    def dvl(self, t: float, linear: FloatArray,
+            covariance: FloatArray | None = None) -> list[OnlineSample]:
+        """geometry_msgs/TwistWithCovarianceStamped: body velocity (FLU), covariance (36,)."""
+        self.counts["dvl"] += 1
+        if not _finite(t, linear):
+            self.counts["rejected_nonfinite"] += 1
+            return []
+        if not self._admit("dvl", t):
+            return []
+        v = frames.body_vec(np.asarray(linear, dtype=float))
+        var = np.full(3, self.cfg.dvl_noise**2)
+        if covariance is not None:
+            c = np.asarray(covariance, dtype=float).reshape(-1)
+            if c.size == 36 and np.all(np.isfinite(c[[0, 7, 14]])) and np.all(c[[0, 7, 14]] > 0):
+                var = c[[0, 7, 14]]
+        if t > self._imu_t:
+            self._dvl_pending.append((t, v, var))
+            return []
+        if self._hist.n < 2 or t < self._hist.first_t:
+            self.counts["rejected_stale"] += 1
+            return []
+        self._dvl_update(t, v, var)
+        return self._emit()
+
+    def _dvl_update(self, td: float, v_body: FloatArray, var: FloatArray) -> None:
+        kv = self.kf_v
+        ts, X = self._hist.arrays()
+        if len(ts) == 0:
+            return
+        row = _interp_rows(ts, X, np.array([td]))[0] if len(ts) > 1 else X[0]
+        Rd = row[12:21].reshape(3, 3)
+        # NED velocity at td, moved forward by the inertial increment up to the IMU time
+        z = Rd @ v_body + (self._v_int - row[21:24])
+        Rm = Rd @ np.diag(var) @ Rd.T
+        S = kv.P[:3, :3] + Rm
+        innov = z - kv.x[:3, 0]
+        if not self._dvl_seen:
+            # first fix: take it as the velocity
+            kv.x[:3, 0] = z
+            kv.P[:3, :3] = Rm
+            kv.P[:3, 3:] = 0.0
+            kv.P[3:, :3] = 0.0
+            self._dvl_seen = True
+            self._unusable_until = max(self._unusable_until, self._imu_t + self.cfg.settle)
+        else:
+            d2 = float(innov @ np.linalg.solve(S, innov))
+            if self.cfg.dvl_gate > 0 and d2 > self.cfg.dvl_gate:
+                self.counts["dvl_outliers"] += 1
+                return
+            kv.update(z.reshape(3, 1), R=Rm)
+        if self._imu_t - self._last_dvl > self.cfg.max_dvl_gap:
+            # back from a long dropout: let the filter settle before samples are usable
+            self._unusable_until = max(self._unusable_until, self._imu_t + self.cfg.settle)
+        self._last_dvl = max(self._last_dvl, td)
+
+    def pressure(self, t: float, fluid_pressure: float) -> list[OnlineSample]:
+        """sensor_msgs/FluidPressure: absolute pressure (Pa)."""
+        self.counts["pressure"] += 1
+        if not _finite(t, fluid_pressure):
+            self.counts["rejected_nonfinite"] += 1
+            return []
+        if not self._admit("pressure", t):
+            return []
+        depth = (float(fluid_pressure) - self.cfg.atmospheric_pressure) / (self.rho * self.gravity)
+        self._pres.append((t, depth))
+        return []
+
+    def thrusters(self, t: float, names: tuple[str, ...] | list[str],
+                  effort: FloatArray) -> list[OnlineSample]:
+        """sensor_msgs/JointState: thrust per named thruster (N), mean over the period."""
+        self.counts["thrusters"] += 1
+        effort = np.asarray(effort, dtype=float).reshape(1, -1)
+        if not _finite(t, effort) or effort.shape[1] != len(names):
+            self.counts["rejected_nonfinite"] += 1
+            return []
+        if not self._admit("thrusters", t):
+            return []
+        joints = JointSeries(np.array([t]), names=tuple(names), effort=effort,
+                             velocity=np.zeros_like(effort))
+        tau = thruster_wrench(joints, self.thr)[0]
+        w = self.cfg.thrust_window
+        if w <= 0:
+            gap = t - self._last_thr_stamp
+            w = gap if 0.0 < gap <= 0.2 else (self._window or 1.0 / self.cfg.rate)
+        self._window = w
+        self._last_thr_stamp = t
+        c = t - w / 2
+        if c <= self._thrust.last_t:
+            self.counts["rejected_out_of_order"] += 1
+            return []
+        self._thrust.append(c, tau)
+        if math.isnan(self._next_t):
+            self._next_t = c
+        return self._emit()
+
+    # --- sampling -----------------------------------------------------------------------------
+
+    def _emit(self) -> list[OnlineSample]:
+        out: list[OnlineSample] = []
+        if math.isnan(self._next_t) or self._thrust.n == 0 or self._hist.n < 2:
+            return out
+        half = 0.5 * self._window
+        step = 1.0 / self.cfg.rate
+        tc, tau_hist = self._thrust.arrays()
+        ts, X = self._hist.arrays()
+        while True:
+            tk = self._next_t
+            if tk > tc[-1] or self._imu_t < tk + half + self._lag:
+                break  # τ or the inertial data do not reach this instant yet
+            self._next_t = tk + step
+            j = int(np.searchsorted(tc, tk, side="right")) - 1
+            if j < 0 or ts[0] > tk - half:
+                self.counts["samples_skipped"] += 1  # before the data began
+                continue
+            if j + 1 < len(tc) and tc[j + 1] - tc[j] > 2.5 * self._window:
+                self.counts["samples_skipped"] += 1  # inside a thrust gap
+                continue
+            if tc[j] == tk or j + 1 >= len(tc):
+                tau = tau_hist[j]
+            else:
+                s = (tk - tc[j]) / (tc[j + 1] - tc[j])
+                tau = tau_hist[j] + s * (tau_hist[j + 1] - tau_hist[j])
+            a, b = tk - half, tk + half
+            m = window_mean(ts, X[:, :9], a, b)  # v, v̇, ω over the thrust window
+            wd = window_mean(ts, X[:, 9:12], a + self._lag, b + self._lag)  # ω̇, lag removed
+            Rk = _interp_rows(ts, X[:, 12:21], np.array([tk]))[0].reshape(3, 3)
+            U, _, Vt = np.linalg.svd(Rk)  # nearest rotation to the interpolated matrix
+            euler = frames.euler_from_matrix(U @ Vt)
+            usable = (self._dvl_seen and tk >= self._unusable_until
+                      and tk - self._last_dvl <= self.cfg.max_dvl_gap)
+            self.counts["samples"] += 1
+            if not usable:
+                self.counts["samples_unusable"] += 1
+            out.append(OnlineSample(tk, np.concatenate([m[:3], m[6:9]]),
+                                    np.concatenate([m[3:6], wd]), np.asarray(tau, dtype=float),
+                                    euler, self._depth(tk), bool(usable)))
+        return out
+
+    def _depth(self, t: float) -> float:
+        if not self._pres:
+            return math.nan
+        if len(self._pres) == 1 or t >= self._pres[-1][0]:
+            return self._pres[-1][1]
+        (t0, d0), (t1, d1) = self._pres[0], self._pres[1]
+        s = min(max((t - t0) / (t1 - t0), 0.0), 1.0) if t1 > t0 else 1.0
+        return d0 + s * (d1 - d0)
+
+    # --- whole recordings -------------------------------------------------------------------
+
+    def messages(self, rec: Recording, topics: dict[str, str] | None = None
+                 ) -> Iterator[tuple[str, float, int]]:
+        """(role, stamp, row) of every message of a recording, in stamp order.
+
+        Ties keep the role order imu, dvl, pressure, thrusters.
+        """
+        names = {**DEFAULT_TOPICS, **(topics or {})}
+        stamps, roles, rows = [], [], []
+        for k, role in enumerate(TOPIC_ROLES):
+            s = rec.get(names[role])
+            if s is None:
+                if role == "pressure":
+                    continue
+                raise DataError(f"topic {names[role]!r} missing; the data has {sorted(rec)}")
+            stamps.append(np.asarray(s.stamp, dtype=float))
+            roles.append(np.full(len(s), k))
+            rows.append(np.arange(len(s)))
+        st, ro, rw = np.concatenate(stamps), np.concatenate(roles), np.concatenate(rows)
+        order = np.lexsort((ro, st))  # by stamp, then role
+        for i in order.tolist():
+            yield TOPIC_ROLES[int(ro[i])], float(st[i]), int(rw[i])
+
+    def run(self, rec: Recording, topics: dict[str, str] | None = None) -> list[OnlineSample]:
+        """Feed every message of a recording (as :func:`dampest_ros.io.bag.read_bag` returns)
+        through the message methods in stamp order; returns all emitted samples."""
+        names = {**DEFAULT_TOPICS, **(topics or {})}
+        imu = rec[names["imu"]]
+        dvl = rec[names["dvl"]]
+        thr = rec[names["thrusters"]]
+        pres = rec.get(names["pressure"])
+        if not (isinstance(imu, ImuSeries) and isinstance(dvl, TwistSeries)
+                and isinstance(thr, JointSeries)):
+            raise DataError("imu, dvl and thrusters topics must be Imu, TwistWithCovariance"
+                            "Stamped and JointState series")
+        out: list[OnlineSample] = []
+        for role, t, i in self.messages(rec, topics):
+            if role == "imu":
+                out += self.imu(t, imu.orientation[i], imu.angular_velocity[i],
+                                imu.linear_acceleration[i])
+            elif role == "dvl":
+                out += self.dvl(t, dvl.linear[i], dvl.covariance)
+            elif role == "thrusters":
+                out += self.thrusters(t, thr.names, thr.effort[i])
+            elif isinstance(pres, PressureSeries):
+                out += self.pressure(t, float(pres.fluid_pressure[i]))
+        return out
+
+
+def to_samples(samples: list[OnlineSample], rate: float, usable_only: bool = True) -> Samples:
+    """Stack online samples into :class:`Samples`; a gap or an unusable stretch starts a new
+    segment (so that the batch path sees the same data as the RLS)."""
+    keep = [s for s in samples if s.usable or not usable_only]
+    if not keep:
+        raise DataError("no usable samples")
+    t = np.array([s.t for s in keep])
+    new_seg = np.r_[False, np.diff(t) > 1.5 / rate]
+    return Samples(t, np.array([s.nu for s in keep]), np.array([s.nu_dot for s in keep]),
+                   np.array([s.tau for s in keep]), np.array([s.euler for s in keep]),
+                   np.array([s.depth for s in keep]), np.cumsum(new_seg).astype(np.int64))
+
+
+class LowPass:
+    """Second-order Butterworth low-pass applied in parallel to many channels, causally.
+
+    Transposed direct form II per channel (as ``scipy.signal.lfilter``), vectorised:
+    O(channels) per sample. The state starts at the steady state of the first input (no
+    start-up step).
+
+    Parameters
+    ----------
+    channels : int
+    cutoff : float
+        −3 dB frequency (Hz).
+    rate : float
+        Sample rate (Hz); cutoff < rate / 2.
+    """
+
+    def __init__(self, channels: int, cutoff: float, rate: float) -> None:
+        if not 0 < cutoff < 0.5 * rate:
+            raise ConfigError("cutoff", f"must be in (0, rate/2 = {0.5 * rate}), got {cutoff}")
+        b, a = signal.butter(2, cutoff, fs=rate)
+        self.b = np.asarray(b, dtype=float)
+        self.a = np.asarray(a, dtype=float)
+        self._zi = np.asarray(signal.lfilter_zi(self.b, self.a), dtype=float)
+        self.state = np.zeros((2, channels))
+        self.started = False
+
+    def reset(self) -> None:
+        """Forget the state; the next input restarts the filter."""
+        self.started = False
+
+    def __call__(self, x: FloatArray) -> FloatArray:
+        """Filter one sample of every channel (shape (channels,)); returns the output."""
+        return self.filter(np.asarray(x, dtype=float).reshape(1, -1))[0]
+
+    def filter(self, X: FloatArray) -> FloatArray:
+        """Filter consecutive samples (n, channels), continuing from the current state."""
+        if len(X) == 0:
+            return X
+        if not self.started:
+            self.state = self._zi[:, None] * X[0]
+            self.started = True
+        y, self.state = signal.lfilter(self.b, self.a, X, axis=0, zi=self.state)
+        return np.asarray(y, dtype=float)
+
+
+class OnlineRegression:
+    """Samples → parallel-filtered (Φ, y) for the RLS, with the batch path's regressor and
+    target (:meth:`DampingModel.regressor`, :func:`dampest_ros.core.batch.target`).
+
+    Samples can be given one at a time or in chunks (vectorised, the same result); a stamp
+    gap longer than 1.5 sample periods or an unusable sample starts a new segment: the
+    low-pass and the memory states restart and the first ``settle`` seconds only settle them.
+
+    Parameters
+    ----------
+    model : DampingModel
+        Term structure being identified.
+    body : RigidBody
+        Known M and restoring data.
+    rate : float
+        Sample rate (Hz).
+    cutoff : float
+        Parallel low-pass (Hz); 0 disables it.
+    settle : float
+        Seconds after a (re)start whose samples are not returned.
+    """
+
+    def __init__(self, model: DampingModel, body: RigidBody, rate: float = 50.0,
+                 cutoff: float = 2.0, settle: float = 1.0) -> None:
+        self.model = model
+        self.body = body
+        self.rate = float(rate)
+        self.cutoff = float(cutoff)
+        self.settle = float(settle)
+        p = model.n_params
+        self.lp = LowPass(6 * (p + 1), cutoff, rate) if cutoff > 0 else None
+        h = 1.0 / self.rate
+        lam = model.memory_rates
+        self._mem_a = np.exp(-lam * h)
+        # first-order hold, as in dampest_ros.core.damping.filter_memory
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self._mem_b1 = (lam * h - 1.0 + self._mem_a) / (lam * lam * h)
+            self._mem_b0 = (1.0 - self._mem_a) / lam - self._mem_b1
+        self.reset()
+
+    def reset(self) -> None:
+        """Start a new segment."""
+        self._t_prev = -math.inf
+        self._t_start = math.nan
+        self._z = np.zeros(len(self.model.memory_rates))
+        self._x_prev = np.zeros(len(self.model.memory_rates))
+        if self.lp is not None:
+            self.lp.reset()
+
+    def __call__(self, s: OnlineSample) -> tuple[FloatArray, FloatArray] | None:
+        """Filtered (Φ (6, p), y (6,)) of one sample, or None (settling or unusable)."""
+        _, Phi, y = self.process([s])
+        return (Phi[0], y[0]) if len(y) else None
+
+    def process(self, samples: list[OnlineSample]) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Filtered regression of consecutive samples.
+
+        Returns
+        -------
+        t : ndarray, shape (n,)
+        Phi : ndarray, shape (n, 6, p)
+        y : ndarray, shape (n, 6)
+            For the samples past settling (n ≤ len(samples)).
+        """
+        p = self.model.n_params
+        ts: list[FloatArray] = []
+        Phis: list[FloatArray] = []
+        ys: list[FloatArray] = []
+        run: list[OnlineSample] = []
+        for s in samples:
+            if not s.usable:
+                self._flush(run, ts, Phis, ys)
+                run = []
+                self.reset()
+                continue
+            last = run[-1].t if run else self._t_prev
+            if s.t - last > 1.5 / self.rate or s.t <= last:
+                self._flush(run, ts, Phis, ys)
+                run = []
+                self.reset()
+                self._t_start = s.t
+            run.append(s)
+        self._flush(run, ts, Phis, ys)
+        if not ts:
+            return np.zeros(0), np.zeros((0, 6, p)), np.zeros((0, 6))
+        return np.concatenate(ts), np.concatenate(Phis), np.concatenate(ys)
+
+    def _flush(self, run: list[OnlineSample], ts: list[FloatArray], Phis: list[FloatArray],
+               ys: list[FloatArray]) -> None:
+        """Regression of one gap-free run that continues the current segment."""
+        if not run:
+            return
+        n = len(run)
+        t = np.array([s.t for s in run])
+        smp = Samples(t, np.array([s.nu for s in run]), np.array([s.nu_dot for s in run]),
+                      np.array([s.tau for s in run]), np.array([s.euler for s in run]),
+                      np.array([s.depth for s in run]), np.zeros(n, dtype=np.int64))
+        states = None
+        if len(self._z):
+            x = smp.nu[:, self.model.memory_dofs]
+            prev = np.vstack([self._x_prev, x[:-1]])
+            # z_n = a z_{n−1} + b0 x_{n−1} + b1 x_n (z = 0 at the segment start)
+            u = self._mem_b0 * prev + self._mem_b1 * x
+            if not math.isfinite(self._t_prev):
+                u[0] = 0.0
+            z = np.empty_like(u)
+            zc = self._z
+            for k in range(n):
+                zc = self._mem_a * zc + u[k]
+                z[k] = zc
+            self._z, self._x_prev = zc, x[-1]
+            states = z
+        self._t_prev = float(t[-1])
+        y = target(smp, self.body)
+        Phi = self.model.regressor(smp.nu, states)
+        if self.lp is not None:
+            out = self.lp.filter(np.concatenate([y, Phi.reshape(n, -1)], axis=1))
+            y, Phi = out[:, :6], out[:, 6:].reshape(n, 6, -1)
+        keep = t - self._t_start >= self.settle
+        ts.append(t[keep])
+        Phis.append(Phi[keep])
+        ys.append(y[keep])
