@@ -47,7 +47,9 @@ def run(args: argparse.Namespace) -> int:
     simulate.run(sim_args)
     print(f"\n== identify from the bag alone → {out / 'model.yaml'}")
     id_args = parser.parse_args(["identify", str(bag), "--vehicle", args.vehicle,
-                                 "--out", str(out / "model.yaml")])
+                                 "--out", str(out / "model.yaml"), "--report",
+                                 str(out / "report"), "--truth",
+                                 str(bag / "truth_model.yaml")])
     identify.run(id_args)
     truth = load_model(bag / "truth_model.yaml")
     est = load_model(out / "model.yaml")

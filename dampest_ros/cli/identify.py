@@ -21,6 +21,7 @@ from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.rigid_body import DOF_NAMES
 from dampest_ros.core.selection import Selection, select_terms
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
+from dampest_ros.report import write_report
 
 EXAMPLE = ("example: dampest identify bags/b600 --vehicle config/vehicles/bluerov2_heavy.yaml "
            "--out model.yaml")
@@ -50,6 +51,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="low-pass (Hz) applied to the regression (default: 2)")
     p.add_argument("--columns", help="YAML column map for CSV input (their name: our name)")
     p.add_argument("--out", help="write the model YAML (a ROS 2 parameters file) here")
+    p.add_argument("--report", metavar="DIR",
+                   help="write an HTML report with plots (index.html + PNG) to DIR")
+    p.add_argument("--truth", help="model YAML of the true coefficients (simulated data), "
+                                   "shown in the report")
     add_topic_options(p)
     add_preprocess_options(p)
     p.set_defaults(run=run)
@@ -92,6 +97,15 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         write_model(Path(args.out), result, model, vehicle.body.M, source=str(args.input))
         print(f"wrote {args.out}")
+    if args.report:
+        truth = None
+        if args.truth:
+            tm = load_model(args.truth)
+            truth = dict(zip(tm.parameter_names, tm.theta, strict=True))
+        page = write_report(args.report, samples, model, vehicle.body, result, prior=prior,
+                            truth=truth, title=f"Damping of {vehicle.name}",
+                            source=str(args.input), cutoff=args.cutoff)
+        print(f"wrote {page}")
     return 0
 
 
