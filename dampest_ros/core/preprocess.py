@@ -69,6 +69,9 @@ class PreprocessConfig:
         Seconds dropped at both ends of each segment (filter transients).
     min_segment : float
         Segments shorter than this (s, after trimming) are dropped.
+    stretch : float
+        Long segments are processed this many seconds at a time (with overlap), so memory
+        does not grow with the length of the log.
     outlier_sigma : float
         DVL samples farther than this many robust σ from a running median are dropped.
     delay : float
@@ -84,6 +87,7 @@ class PreprocessConfig:
     max_gap: float = 1.0
     trim: float = 2.0
     min_segment: float = 5.0
+    stretch: float = 300.0
     outlier_sigma: float = 6.0
     delay: float = 0.0
     atmospheric_pressure: float = 101325.0
@@ -329,17 +333,14 @@ def preprocess(rec: Recording, thrusters: Thrusters, gravity: float, rho: float,
     if hi - lo < cfg.min_segment + 2 * cfg.trim:
         raise DataError(f"the topics overlap for only {max(hi - lo, 0.0):.1f} s")
 
-    parts: list[Samples] = []
-    for k, (a, b) in enumerate(segments_from_gaps(t_dvl, cfg.max_gap)):
-        a, b = max(a, lo), min(b, hi)
-        if b - a < cfg.min_segment + 2 * cfg.trim:
-            continue
-        # output grid: phase-locked to the thrust windows' centres; inertial grid: `ratio`
-        # times finer, containing every output instant
-        t = (np.arange(np.ceil(a * cfg.rate - phase), np.floor(b * cfg.rate - phase) + 1)
-             + phase) / cfg.rate
-        tf = t[0] + np.arange((len(t) - 1) * ratio + 1) / (cfg.rate * ratio)
-        rate_f = cfg.rate * ratio
+    rate_f = cfg.rate * ratio
+    pressure = pres if isinstance(pres, PressureSeries) and len(pres) > 1 else None
+
+    def window_(t: FloatArray, core: slice) -> tuple[FloatArray, ...]:
+        """ν, ν̇, R, τ, depth on the output grid t (one stretch of a segment with margins);
+        DVL outliers are counted within the core."""
+        nonlocal n_outliers
+        tf = t[0] + np.arange((len(t) - 1) * ratio + 1) / rate_f
         # attitude: normalised linear interpolation of sign-aligned quaternions
         R = frames.rotation(frames.quat_to_matrix(_interp(tf, imu.stamp, q_wxyz)))
         om = _interp(tf, imu.stamp, gyro)
@@ -348,7 +349,8 @@ def preprocess(rec: Recording, thrusters: Thrusters, gravity: float, rho: float,
         td, vd = t_dvl[inside], v_dvl[inside]
         v, v_ned_dot = fuse_velocity(tf, R, f, td, vd, gravity, cfg.crossover)
         keep = dvl_inliers(td, vd, tf, v, cfg.outlier_sigma)
-        n_outliers += int((~keep).sum())
+        in_core = (td >= t[core.start]) & (td < t[core.stop - 1] + 0.5 / cfg.rate)
+        n_outliers += int((~keep & in_core).sum())
         if not keep.all():
             v, v_ned_dot = fuse_velocity(tf, R, f, td[keep], vd[keep], gravity, cfg.crossover)
         # body-frame derivative: v̇ = Rᵀ d/dt(R v) − ω × v
@@ -360,27 +362,50 @@ def preprocess(rec: Recording, thrusters: Thrusters, gravity: float, rho: float,
         nu_dot = np.concatenate([zero_phase(v_dot, rate_f, cfg.cutoff, window=window),
                                  zero_phase(om, rate_f, cfg.cutoff, derivative=True,
                                             window=window)], axis=1)
-        nu, nu_dot, R = nu[::ratio], nu_dot[::ratio], R[::ratio]
         # thruster telemetry is the mean over the message period before its stamp
         tau = zero_phase(_interp(t - cfg.delay, thr.stamp - window / 2, tau_thr), cfg.rate,
                          cfg.cutoff)
-        depth = (_interp(t, pres.stamp, pres.fluid_pressure[:, None])[:, 0]
-                 - cfg.atmospheric_pressure) / (rho * gravity) \
-            if isinstance(pres, PressureSeries) and len(pres) > 1 else np.full(len(t), np.nan)
+        depth = ((_interp(t, pressure.stamp, pressure.fluid_pressure[:, None])[:, 0]
+                  - cfg.atmospheric_pressure) / (rho * gravity)) if pressure is not None \
+            else np.full(len(t), np.nan)
+        return nu[::ratio], nu_dot[::ratio], R[::ratio], tau, depth
+
+    # stretches of `stretch` seconds computed with `margin` seconds on each side (more than
+    # the slowest filter's memory, the fusion crossover): memory stays flat with bag length
+    # and the result equals processing the whole segment at once
+    stretch = max(1, round(cfg.stretch * cfg.rate))
+    margin = round(10.0 / cfg.crossover * cfg.rate)
+    parts: list[Samples] = []
+    for k, (a, b) in enumerate(segments_from_gaps(t_dvl, cfg.max_gap)):
+        a, b = max(a, lo), min(b, hi)
+        if b - a < cfg.min_segment + 2 * cfg.trim:
+            continue
+        # output grid: phase-locked to the centres of the thrust telemetry windows
+        t = (np.arange(np.ceil(a * cfg.rate - phase), np.floor(b * cfg.rate - phase) + 1)
+             + phase) / cfg.rate
         n_trim = round(cfg.trim * cfg.rate)
-        sl = slice(n_trim, len(t) - n_trim)
-        parts.append(Samples(t[sl], nu[sl], nu_dot[sl], tau[sl],
-                             frames.euler_from_matrix(R[sl]), depth[sl],
-                             np.full(len(t[sl]), k, dtype=np.int64)))
+        for i0 in range(n_trim, len(t) - n_trim, stretch):
+            i1 = min(i0 + stretch, len(t) - n_trim)
+            e0, e1 = max(0, i0 - margin), min(len(t), i1 + margin)
+            core = slice(i0 - e0, i1 - e0)
+            nu, nu_dot, R, tau, depth = window_(t[e0:e1], core)
+            parts.append(Samples(t[i0:i1], nu[core], nu_dot[core], tau[core],
+                                 frames.euler_from_matrix(R[core]), depth[core],
+                                 np.full(i1 - i0, k, dtype=np.int64)))
     if report is not None:
         kept = sum(len(p) for p in parts) / cfg.rate
         report.update(rejected_nonfinite_or_unordered=float(sum(int((~m).sum()) for m in masks)),
-                      dvl_outliers=float(n_outliers), segments=float(len(parts)),
+                      dvl_outliers=float(n_outliers),
+                      segments=float(len({int(p.segment[0]) for p in parts})),
                       dropped_seconds=float(max(hi - lo - kept, 0.0)))
     if not parts:
         raise DataError(f"no gap-free stretch of at least {cfg.min_segment + 2 * cfg.trim:.0f} s"
                         " (DVL gaps split the data)")
-    return Samples.concatenate(parts)
+    joined = Samples.concatenate(parts)
+    # stretches of one segment stay one segment: number by the gap-split index k
+    joined.segment = np.unique(np.concatenate([p.segment for p in parts]),
+                               return_inverse=True)[1].astype(np.int64)
+    return joined
 
 
 def estimate_delay(samples: Samples, M: FloatArray, max_lag: float = 1.0) -> float:

@@ -1,0 +1,116 @@
+"""Preprocessing: frames, fusion, segments, filters (dampest_ros.core.preprocess)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from dampest_ros.core.excitation import make_excitation
+from dampest_ros.core.measurements import TwistSeries
+from dampest_ros.core.preprocess import (
+    DataError,
+    PreprocessConfig,
+    preprocess,
+    segments_from_gaps,
+    zero_phase,
+)
+from dampest_ros.core.sensors import SensorConfig, measure
+from dampest_ros.core.simulate import run
+from dampest_ros.core.trajectory import Trajectory
+from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.io.yaml_io import load_vehicle
+
+QUIET = SensorConfig(gyro_noise=0, gyro_bias_walk=0, accel_noise=0, accel_bias_walk=0,
+                     orientation_noise=0, dvl_noise=0, dvl_dropout_rate=0, pressure_noise=0,
+                     rpm_noise=0)
+
+
+@pytest.fixture(scope="module")
+def vehicle() -> Vehicle:
+    return load_vehicle("bluerov2_heavy")
+
+
+@pytest.fixture(scope="module")
+def traj(vehicle: Vehicle) -> Trajectory:
+    return run(vehicle, make_excitation("B", vehicle, 120.0, seed=4))
+
+
+def test_noise_free_velocity_and_acceleration_match_the_truth(vehicle: Vehicle,
+                                                              traj: Trajectory) -> None:
+    rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, QUIET, seed=4)
+    s = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho)
+    # the truth filtered the way the preprocessing filters (light low-pass + telemetry window)
+    nu = zero_phase(traj.nu, 50.0, 10.0, window=0.02)
+    nu_dot = zero_phase(traj.nu, 50.0, 10.0, derivative=True, window=0.02)
+    i = np.searchsorted(traj.t, s.t - 1e-9)
+    # grid phase-locked to the thrust windows: half a step after the trajectory's instants
+    frac = (s.t - traj.t[i - 1]) / traj.dt
+    truth_nu = (1 - frac[:, None]) * nu[i - 1] + frac[:, None] * nu[i]
+    truth_dot = (1 - frac[:, None]) * nu_dot[i - 1] + frac[:, None] * nu_dot[i]
+    err = np.sqrt(np.mean((s.nu - truth_nu) ** 2, axis=0)) / np.std(traj.nu, axis=0)
+    assert np.all(err < 0.01), err
+    err_dot = np.sqrt(np.mean((s.nu_dot - truth_dot) ** 2, axis=0)) / np.std(traj.nu_dot, axis=0)
+    assert np.all(err_dot < 0.05), err_dot
+
+
+def test_processing_in_stretches_equals_processing_at_once(vehicle: Vehicle,
+                                                           traj: Trajectory) -> None:
+    rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, seed=5)
+    whole = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho)
+    parts = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
+                       PreprocessConfig(stretch=15.0))
+    np.testing.assert_array_equal(parts.t, whole.t)
+    np.testing.assert_array_equal(parts.segment, whole.segment)
+    for name in ("nu", "nu_dot", "tau", "euler"):
+        # equal to the filters' numerical tails (≪ any sensor noise)
+        np.testing.assert_allclose(getattr(parts, name), getattr(whole, name), rtol=1e-7,
+                                   atol=1e-7, err_msg=name)
+
+
+def test_long_dvl_gaps_split_segments_short_ones_are_bridged(vehicle: Vehicle,
+                                                             traj: Trajectory) -> None:
+    rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, QUIET, seed=4)
+    dvl = rec["dvl/twist"]
+    assert isinstance(dvl, TwistSeries)
+    cut = ((dvl.stamp > 40.0) & (dvl.stamp < 43.0)) | ((dvl.stamp > 80.0) & (dvl.stamp < 80.5))
+    rec = {**rec, "dvl/twist": dvl.select(~cut)}
+    report: dict[str, float] = {}
+    s = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
+                   report=report)
+    assert report["segments"] == 2
+    assert int(s.segment.max()) == 1
+    assert not np.any((s.t > 40.0) & (s.t < 43.0))  # nothing invented inside the long gap
+    assert np.any((s.t > 80.0) & (s.t < 80.5))  # the short gap is bridged by the IMU
+    assert segments_from_gaps(np.array([0.0, 0.1, 0.2, 2.0, 2.1]), 1.0) == [(0.0, 0.2),
+                                                                             (2.0, 2.1)]
+
+
+def test_missing_topic_and_bad_values_are_reported(vehicle: Vehicle, traj: Trajectory) -> None:
+    rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, QUIET, seed=4)
+    with pytest.raises(DataError, match=r"'dvl/twist' missing.*imu/data"):
+        preprocess({k: v for k, v in rec.items() if k != "dvl/twist"}, vehicle.thrusters,
+                   vehicle.body.gravity, vehicle.body.rho)
+    dvl = rec["dvl/twist"]
+    assert isinstance(dvl, TwistSeries)
+    bad = dvl.linear.copy()
+    bad[10] = np.nan
+    report: dict[str, float] = {}
+    preprocess({**rec, "dvl/twist": replace(dvl, linear=bad)}, vehicle.thrusters,
+               vehicle.body.gravity, vehicle.body.rho, report=report)
+    assert report["rejected_nonfinite_or_unordered"] == 1
+    with pytest.raises(ValueError, match="cutoff"):
+        PreprocessConfig(cutoff=30.0)
+
+
+def test_zero_phase_derivative_is_exact_and_chunk_independent() -> None:
+    t = np.arange(20000) / 50.0
+    x = np.sin(2 * np.pi * 0.5 * t)[:, None]
+    d = zero_phase(x, 50.0, 4.0, derivative=True)[500:-500, 0]
+    expected = np.pi * np.cos(2 * np.pi * 0.5 * t[500:-500]) / (1 + (0.5 / 4.0) ** 8)
+    np.testing.assert_allclose(d, expected, atol=1e-6)
+    rng = np.random.default_rng(0)
+    y = np.cumsum(rng.normal(size=(30000, 2)), axis=0)
+    np.testing.assert_allclose(zero_phase(y[:5000], 50.0, 2.0)[:4000],
+                               zero_phase(y, 50.0, 2.0)[:4000], atol=1e-9)
