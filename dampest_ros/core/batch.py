@@ -126,8 +126,8 @@ class NormalEquations:
         """Residual sum of squares per DOF, Σ (y − Φθ)², shape (6,)."""
         sel = slice(None) if fold is None else slice(fold, fold + 1)
         A, b, c = self.A[sel].sum(0), self.b[sel].sum(0), self.c[sel].sum(0)
-        # ‖y − Φθ‖² = yᵀy − 2 θᵀΦᵀy + θᵀΦᵀΦθ
-        return np.asarray(c - 2 * b @ theta + np.einsum("ipq,p,q->i", A, theta, theta))
+        # ‖y − Φθ‖² = yᵀy − 2 θᵀΦᵀy + θᵀΦᵀΦθ (≥ 0; rounding can dip below for exact fits)
+        return np.maximum(c - 2 * b @ theta + np.einsum("ipq,p,q->i", A, theta, theta), 0.0)
 
 
 def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: int = 5,
@@ -322,12 +322,14 @@ def _flags(A: FloatArray, theta: FloatArray, cov: FloatArray, names: list[str],
     d = np.diag(A)
     dmax = float(d.max()) if len(d) else 0.0
     z = float(stats.norm.ppf(0.975))
+    live = d > 1e-12 * max(dmax, 1e-300)
     s = 1.0 / np.sqrt(np.maximum(d, 1e-300))
     As = A * np.outer(s, s)
+    vif = np.full(len(d), np.inf)
     try:
-        vif = np.diag(linalg.inv(As))
+        vif[live] = np.diag(linalg.inv(As[np.ix_(live, live)]))
     except linalg.LinAlgError:
-        vif = np.full(len(d), np.inf)
+        pass
     corr = As.copy()
     np.fill_diagonal(corr, 0.0)
     for j, name in enumerate(names):
@@ -447,6 +449,9 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
         s2 = np.maximum(ne.rss(theta) / N, 1e-12)
         return np.asarray(1.0 / s2)
 
+    # columns that are zero in these data cannot be estimated at all: hold them from the start
+    d = np.diag(ne.total(w)[0])
+    free = d > 1e-12 * max(float(d.max()), 1e-300)
     theta = solve(w, free)
     for _ in range(3):
         w = weights_for(theta)
