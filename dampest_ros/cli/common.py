@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -38,6 +39,27 @@ def add_preprocess_options(p: argparse.ArgumentParser) -> None:
                    help="known delay (s) of the vehicle's response after the logged thrust")
 
 
+class Progress:
+    """A one-line progress bar on stderr for long inputs (silent below ``minimum`` items)."""
+
+    def __init__(self, label: str, minimum: int = 200_000) -> None:
+        self.label, self.minimum, self.shown = label, minimum, -1
+
+    def __call__(self, done: int, total: int) -> None:
+        """Redraw at each whole percent; finish the line at 100 %."""
+        if total < self.minimum:
+            return
+        pct = min(100, 100 * done // max(total, 1))
+        if pct == self.shown:
+            return
+        self.shown = pct
+        bar = "#" * (pct // 4) + "." * (25 - pct // 4)
+        sys.stderr.write(f"\r{self.label} [{bar}] {pct:3d}% {done}/{total}")
+        if pct == 100:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
 def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
     """Samples from a rosbag2 directory (MCAP or SQLite3) or a CSV file."""
     p = Path(path)
@@ -50,7 +72,8 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
         raise DataError(f"{p}: expected a rosbag2 directory or a .csv file")
     topics = {role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS}
     rec = read_bag(p, [topics[r] for r in ("imu", "dvl", "thrusters")]
-                   + ([topics["pressure"]] if topics["pressure"] else []))
+                   + ([topics["pressure"]] if topics["pressure"] else []),
+                   progress=Progress(f"reading {p.name}"))
     cfg = PreprocessConfig(rate=args.rate, max_gap=args.max_gap, delay=args.delay)
     return preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho, cfg,
                       topics)

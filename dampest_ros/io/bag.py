@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import shutil
 import warnings
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import suppress
 from dataclasses import dataclass, fields
 from itertools import chain
@@ -208,7 +208,8 @@ def _concat(parts: list[Series]) -> Series:
     return type(first)(**kw)
 
 
-def read_bag(path: str | Path, topics: Sequence[str] | None = None) -> dict[str, Series]:
+def read_bag(path: str | Path, topics: Sequence[str] | None = None,
+             progress: Callable[[int, int], None] | None = None) -> dict[str, Series]:
     """Read the series of a rosbag2 bag (MCAP or SQLite3 directory, or a single storage file).
 
     Parameters
@@ -217,6 +218,9 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None) -> dict[str,
     topics : sequence of str, optional
         Topics to read, with or without the leading ``/``. Default: every topic whose type
         is one of :data:`dampest_ros.io.cdr.SERIES_CLASSES` (others are skipped).
+    progress : callable, optional
+        Called as ``progress(done, total)`` (message counts) every :data:`READ_CHUNK`
+        messages and at the end.
 
     Returns
     -------
@@ -251,12 +255,17 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None) -> dict[str,
         raw: dict[str, list[bytes]] = {name: [] for name in key}
         parts: dict[str, list[Series]] = {name: [] for name in key}
         conns = [c for name in key for c in info[name].connections]
+        total = sum(int(info[name].msgcount or 0) for name in key)
+        done = 0
         for conn, data in bag.messages(conns):
             buf = raw[conn.topic]
             buf.append(data)
             if len(buf) == READ_CHUNK:
                 parts[conn.topic].append(bag.decode(conn.topic, msgtype[conn.topic], buf))
                 buf.clear()
+                done += READ_CHUNK
+                if progress is not None:
+                    progress(done, total)
         out: dict[str, Series] = {}
         for name, buf in raw.items():
             if buf or not parts[name]:
@@ -266,6 +275,8 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None) -> dict[str,
                 raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "
                                f"{len(series)} of its {info[name].msgcount} messages")
             out[key[name]] = series
+        if progress is not None:
+            progress(total, total)
     return out
 
 

@@ -231,3 +231,15 @@ def test_empty_series_topic(tmp_path: Path) -> None:
     path = bag.write_bag(tmp_path / "e", {"dvl/twist": TwistSeries(np.zeros(0))})
     assert len(bag.read_bag(path)["dvl/twist"]) == 0
     assert bag.bag_summary(path).topics["/dvl/twist"].count == 0
+
+
+def test_read_bag_reports_progress_to_the_end(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                              recording: dict[str, Series]) -> None:
+    bag.write_bag(tmp_path / "b", recording)
+    monkeypatch.setattr(bag, "READ_CHUNK", 7)
+    calls: list[tuple[int, int]] = []
+    bag.read_bag(tmp_path / "b", progress=lambda done, total: calls.append((done, total)))
+    total = sum(len(s) for s in recording.values())
+    assert calls[-1] == (total, total)
+    assert all(b[0] >= a[0] for a, b in zip(calls, calls[1:], strict=False))
+    assert len(calls) > 2
