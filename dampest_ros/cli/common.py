@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.preprocess import DataError, PreprocessConfig, preprocess
 from dampest_ros.core.rigid_body import DOF_NAMES
 from dampest_ros.core.samples import Samples
+from dampest_ros.core.selection import profile_delay
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import read_bag
 from dampest_ros.io.csv import load_column_map, read_csv, samples_from_columns
@@ -35,8 +37,9 @@ def add_preprocess_options(p: argparse.ArgumentParser) -> None:
                    help="sample rate of the synchronised data in Hz (default: 50)")
     p.add_argument("--max-gap", type=float, default=1.0,
                    help="DVL gaps longer than this (s) split the data (default: 1)")
-    p.add_argument("--delay", type=float, default=0.0,
-                   help="known delay (s) of the vehicle's response after the logged thrust")
+    p.add_argument("--delay", default="0",
+                   help="delay (s) of the vehicle's response after the logged thrust, or "
+                        "'auto' to estimate it by cross-correlation and correct it (default: 0)")
 
 
 class Progress:
@@ -74,9 +77,22 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
     rec = read_bag(p, [topics[r] for r in ("imu", "dvl", "thrusters")]
                    + ([topics["pressure"]] if topics["pressure"] else []),
                    progress=Progress(f"reading {p.name}"))
-    cfg = PreprocessConfig(rate=args.rate, max_gap=args.max_gap, delay=args.delay)
-    return preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho, cfg,
-                      topics)
+    auto = str(args.delay).strip().lower() == "auto"
+    try:
+        delay = 0.0 if auto else float(args.delay)
+    except ValueError:
+        raise DataError(f"--delay must be a number of seconds or 'auto', got {args.delay!r}"
+                        ) from None
+    cfg = PreprocessConfig(rate=args.rate, max_gap=args.max_gap, delay=delay)
+    samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho, cfg,
+                         topics)
+    if auto:
+        delay = profile_delay(samples, vehicle.damping, vehicle.body)
+        print(f"estimated delay of the response after the thrust: {delay * 1000:.0f} ms",
+              file=sys.stderr)
+        samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
+                             replace(cfg, delay=delay), topics)
+    return samples
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:

@@ -110,3 +110,22 @@ def test_selection_adds_nothing_to_clean_data(protocol_b: Path,
     printed = capsys.readouterr().out
     selection = printed.split("term selection")[1].split("\n\n")[0]
     assert "Y_vr" not in selection and "memory on" not in selection
+
+
+def test_delay_auto_finds_and_corrects_a_thrust_delay(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """A 100 ms delay between logged thrust and response (ESC latency) ruins the fit; --delay
+    auto finds it from the data and the coefficients come back."""
+    bag, out = tmp_path / "bag", tmp_path / "model.yaml"
+    assert main(["simulate", "--duration", "300", "--seed", "3", "--out", str(bag),
+                 "--effects", "{delay: 0.1}"]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy", "--delay", "auto",
+                 "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    delay_ms = float(err.split("after the thrust:")[1].split("ms")[0])
+    assert abs(delay_ms - 100.0) <= 10.0
+    est, truth = load_model(out), load_model(bag / "truth_model.yaml")
+    for name, value, t in zip(est.parameter_names, est.theta, truth.theta, strict=True):
+        if t:
+            assert abs(value - t) <= 0.02 * t, name
