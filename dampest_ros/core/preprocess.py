@@ -311,16 +311,12 @@ def preprocess(rec: Recording, thrusters: Thrusters, gravity: float, rho: float,
 
     masks = [_clean(imu, imu.orientation, imu.angular_velocity, imu.linear_acceleration),
              _clean(dvl, dvl.linear), _clean(thr, thr.effort)]
-    imu = imu.select(masks[0])  # type: ignore[assignment]
-    dvl = dvl.select(masks[1])  # type: ignore[assignment]
-    thr = thr.select(masks[2])  # type: ignore[assignment]
+    # copies only where rows must go (a long IMU log is the largest thing in memory)
+    imu = imu if masks[0].all() else imu.select(masks[0])  # type: ignore[assignment]
+    dvl = dvl if masks[1].all() else dvl.select(masks[1])  # type: ignore[assignment]
+    thr = thr if masks[2].all() else thr.select(masks[2])  # type: ignore[assignment]
 
-    # --- frames: ROS (FLU/ENU) → Fossen (FRD/NED) --------------------------------------
-    gyro = frames.body_vec(imu.angular_velocity)
-    accel = frames.body_vec(imu.linear_acceleration)
-    q_wxyz = imu.orientation[:, [3, 0, 1, 2]]
-    q_wxyz = q_wxyz * np.where(np.cumsum(np.r_[0, np.sign(
-        np.einsum("ij,ij->i", q_wxyz[1:], q_wxyz[:-1])) < 0]) % 2 == 1, -1.0, 1.0)[:, None]
+    # --- frames: ROS (FLU/ENU) → Fossen (FRD/NED); the IMU per stretch, below -----------
     t_dvl, v_dvl = dvl.stamp, frames.body_vec(dvl.linear)
     n_outliers = 0
     tau_thr = thruster_wrench(thr, thrusters)
@@ -341,10 +337,16 @@ def preprocess(rec: Recording, thrusters: Thrusters, gravity: float, rho: float,
         DVL outliers are counted within the core."""
         nonlocal n_outliers
         tf = t[0] + np.arange((len(t) - 1) * ratio + 1) / rate_f
+        i0, i1 = np.searchsorted(imu.stamp, [tf[0], tf[-1]])
+        k = slice(max(int(i0) - 1, 0), int(i1) + 1)
+        ts = imu.stamp[k]
         # attitude: normalised linear interpolation of sign-aligned quaternions
-        R = frames.rotation(frames.quat_to_matrix(_interp(tf, imu.stamp, q_wxyz)))
-        om = _interp(tf, imu.stamp, gyro)
-        f = _interp(tf, imu.stamp, accel)
+        q = imu.orientation[k][:, [3, 0, 1, 2]]
+        flip = np.cumsum(np.r_[0, np.einsum("ij,ij->i", q[1:], q[:-1]) < 0]) % 2 == 1
+        q[flip] *= -1.0
+        R = frames.rotation(frames.quat_to_matrix(_interp(tf, ts, q)))
+        om = _interp(tf, ts, frames.body_vec(imu.angular_velocity[k]))
+        f = _interp(tf, ts, frames.body_vec(imu.linear_acceleration[k]))
         inside = (t_dvl >= t[0] - 1.0) & (t_dvl <= t[-1] + 1.0)
         td, vd = t_dvl[inside], v_dvl[inside]
         v, v_ned_dot = fuse_velocity(tf, R, f, td, vd, gravity, cfg.crossover)

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from rosbags.interfaces import (
     Connection,
     Qos,
@@ -192,20 +193,46 @@ class _Bag:
                            f"{exc}") from exc
 
 
-def _concat(parts: list[Series]) -> Series:
-    """Join series chunks along axis 0 (per-series values from the first chunk)."""
-    if len(parts) == 1:
-        return parts[0]
-    first = parts[0]
-    kw: dict[str, Any] = {f.name: getattr(first, f.name) for f in fields(first)}
-    for name, value in kw.items():
-        if not isinstance(value, np.ndarray) and any(getattr(p, name) != value for p in parts):
-            warnings.warn(f"{type(first).__name__}.{name} changes within the series; keeping "
-                          f"the first, {value!r}", stacklevel=3)
-    for name, arr in first.arrays().items():
-        if arr.ndim >= 1 and arr.shape[0] == len(first):
-            kw[name] = np.concatenate([getattr(p, name) for p in parts])
-    return type(first)(**kw)
+class _Assembler:
+    """Decoded chunks of one topic copied into arrays preallocated for the announced count,
+    so a long topic is held once, not once in chunks plus once joined."""
+
+    def __init__(self, count: int) -> None:
+        self.count = count
+        self.first: Series | None = None
+        self.arrays: dict[str, NDArray[Any]] = {}
+        self.n = 0
+
+    def add(self, part: Series) -> None:
+        """Append a decoded chunk."""
+        if self.first is None:
+            self.first = part
+            total = max(self.count, len(part))
+            self.arrays = {k: np.empty((total, *a.shape[1:]), dtype=a.dtype)
+                           for k, a in part.per_message().items()}
+        else:
+            for f in fields(part):
+                value = getattr(part, f.name)
+                if not isinstance(value, np.ndarray) and value != getattr(self.first, f.name):
+                    warnings.warn(f"{type(part).__name__}.{f.name} changes within the series; "
+                                  f"keeping the first, {getattr(self.first, f.name)!r}",
+                                  stacklevel=3)
+        m = len(part)
+        if self.n + m > len(self.arrays["stamp"]):  # more than announced: grow
+            for k, a in self.arrays.items():
+                grown = np.empty((max(2 * len(a), self.n + m), *a.shape[1:]), a.dtype)
+                grown[:self.n] = a[:self.n]
+                self.arrays[k] = grown
+        for k, a in part.per_message().items():
+            self.arrays[k][self.n:self.n + m] = a
+        self.n += m
+
+    def result(self) -> Series:
+        """The joined series."""
+        assert self.first is not None
+        kw: dict[str, Any] = {f.name: getattr(self.first, f.name) for f in fields(self.first)}
+        kw.update({k: a[:self.n] for k, a in self.arrays.items()})
+        return type(self.first)(**kw)
 
 
 def read_bag(path: str | Path, topics: Sequence[str] | None = None,
@@ -253,7 +280,7 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
                 raise TypeError(f"topic {name} has type {typ}, which has no series class; "
                                 f"readable types: {sorted(cdr.SERIES_CLASSES)}")
         raw: dict[str, list[bytes]] = {name: [] for name in key}
-        parts: dict[str, list[Series]] = {name: [] for name in key}
+        parts = {name: _Assembler(int(info[name].msgcount or 0)) for name in key}
         conns = [c for name in key for c in info[name].connections]
         total = sum(int(info[name].msgcount or 0) for name in key)
         done = 0
@@ -261,16 +288,16 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
             buf = raw[conn.topic]
             buf.append(data)
             if len(buf) == READ_CHUNK:
-                parts[conn.topic].append(bag.decode(conn.topic, msgtype[conn.topic], buf))
+                parts[conn.topic].add(bag.decode(conn.topic, msgtype[conn.topic], buf))
                 buf.clear()
                 done += READ_CHUNK
                 if progress is not None:
                     progress(done, total)
         out: dict[str, Series] = {}
         for name, buf in raw.items():
-            if buf or not parts[name]:
-                parts[name].append(bag.decode(name, msgtype[name], buf))
-            series = _concat(parts[name])
+            if buf or parts[name].first is None:
+                parts[name].add(bag.decode(name, msgtype[name], buf))
+            series = parts[name].result()
             if info[name].msgcount and len(series) != info[name].msgcount:
                 raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "
                                f"{len(series)} of its {info[name].msgcount} messages")
