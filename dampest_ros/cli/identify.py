@@ -18,7 +18,9 @@ from dampest_ros.cli.common import (
 from dampest_ros.core.batch import METHODS, Fit, FitOptions, fit
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.excitation import speed_limits
-from dampest_ros.core.rigid_body import DOF_NAMES
+from dampest_ros.core.frequency import memory_impedance
+from dampest_ros.core.rigid_body import DOF_NAMES, RigidBody
+from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import Selection, select_terms
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 from dampest_ros.report import write_report
@@ -69,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
     if args.select:
         selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
         print(selection_table(selection))
+        print(memory_check(samples, selection.model, vehicle.body))
         values = dict(zip(model.parameter_names, nominal, strict=True))
         model = selection.model
         nominal = np.array([values.get(n, 0.0) for n in model.parameter_names])
@@ -116,6 +119,21 @@ def selection_table(selection: Selection) -> str:
     rates = "".join(f"\n{k} = {v:.4g} 1/s" for k, v in selection.rates.items())
     return ("term selection (forward, BIC; a term must remove ≥ 10 % of its DOF's residual):\n"
             + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates + "\n")
+
+
+def memory_check(samples: Samples, model: DampingModel, body: RigidBody) -> str:
+    """Frequency-domain cross-check of each selected memory rate (Welch + rational fit)."""
+    mem = model.term("freq")
+    if mem is None:
+        return ""
+    static = DampingModel([t for t in model.terms if t.kind != "freq"])
+    theta = fit(samples, static, body, FitOptions(gyro_bias=0.0, dvl_bias=0.0)).theta
+    lines = []
+    for d, lam in zip(mem.state_dofs, mem.rates, strict=True):
+        imp = memory_impedance(samples, static, body, theta, int(d))
+        lines.append(f"memory on {DOF_NAMES[int(d)]}: λ = {lam:.4g} 1/s (time domain), "
+                     f"{imp.rate:.4g} 1/s (frequency domain, c = {imp.gain:.4g})")
+    return "\n".join(lines) + "\n"
 
 
 def report_table(result: Fit, prior: np.ndarray) -> str:

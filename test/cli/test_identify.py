@@ -90,6 +90,8 @@ def test_selection_finds_cross_coupling_and_memory_on_platform_b(
                  "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "Y_vr" in printed and "memory on u" in printed
+    fd = float(printed.split("1/s (time domain), ")[1].split()[0])
+    assert abs(fd - 1.5) <= 0.1 * 1.5  # the frequency-domain estimate agrees
     est = load_model(out)
     base = ["X_u", "Y_v", "Z_w", "K_p", "M_q", "N_r", "X_uu", "Y_vv", "Z_ww", "K_pp", "M_qq",
             "N_rr"]
