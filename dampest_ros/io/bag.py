@@ -170,7 +170,11 @@ class _Bag:
             self.reader = Reader(self.path)
             self.reader.open()
         except Exception as exc:
-            raise BagError(f"cannot read bag {_files(self.path)}: {exc}") from exc
+            hint = ""
+            if self.path.is_dir() and any(self.path.glob("*.mcap")):
+                hint = (f"; if its recording was interrupted, 'dampest reindex {self.path}' "
+                        "rebuilds metadata.yaml and recovers it up to its last complete chunk")
+            raise BagError(f"cannot read bag {_files(self.path)}: {exc}{hint}") from exc
 
     def __enter__(self) -> _Bag:
         return self
