@@ -33,19 +33,23 @@ the same window [t_k − w/2, t_k + w/2] (the boxcar that the thrust telemetry h
 three see the same filter, as in the offline preprocessing.
 
 Rejected and counted: non-finite messages, messages out of order within a topic, stale
-messages (older than ``stale_after`` behind the newest stamp seen), DVL outliers. A stamp more
+messages (DVL, pressure and thruster messages older than ``stale_after`` behind the inertial
+filter, which the IMU drives), DVL outliers. Messages of other topics that run ahead of the
+IMU (a subscriber drains its topics one message at a time each, so under load the slow
+topics get ahead) wait for it. A stamp more
 than ``clock_jump`` seconds behind its topic's last stamp is a clock jump backwards: the state
 is reset and the event reported. Samples before the first DVL fix, during DVL dropouts longer
 than ``max_dvl_gap`` and for ``settle`` seconds after a (re)start are flagged not usable.
 
-:class:`LowPass` is the causal "parallel filter": the same second-order Butterworth low-pass
-applied to y and to every column of Φ (O(p) per sample), so that LP(y) = LP(Φ) θ holds for
-the nonlinear regressor. :class:`OnlineRegression` turns samples into filtered (Φ, y) with the
-regressor and target of the batch path.
+:class:`LowPass` is the causal "parallel filter": the same Butterworth low-pass (second-order
+sections) applied to y and to every column of Φ (O(p) per sample), so that LP(y) = LP(Φ) θ
+holds for the nonlinear regressor. :class:`OnlineRegression` turns samples into filtered
+(Φ, y) with the regressor and target of the batch path.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
 from collections.abc import Iterator
@@ -107,7 +111,7 @@ class OnlineConfig:
     settle : float
         Samples within this (s) after a start, restart or DVL recovery are not usable.
     stale_after : float
-        Messages older than this (s) behind the newest stamp are rejected.
+        DVL, pressure and thruster messages older than this (s) behind the IMU are rejected.
     clock_jump : float
         A stamp this much (s) behind its topic's last stamp is a clock jump: reset.
     thrust_window : float
@@ -200,9 +204,10 @@ class _History:
         self.head = (self.head + 1) % self.cap
         self.n = min(self.n + 1, self.cap)
 
-    def arrays(self) -> tuple[FloatArray, FloatArray]:
-        """Times (n,) and rows (n, width) in time order."""
-        idx = (self.head - self.n + np.arange(self.n)) % self.cap
+    def arrays(self, last: int | None = None) -> tuple[FloatArray, FloatArray]:
+        """Times (n,) and rows (n, width) in time order (only the ``last`` newest rows)."""
+        n = self.n if last is None else min(last, self.n)
+        idx = (self.head - n + np.arange(n)) % self.cap
         return self.t[idx], self.x[idx]
 
     @property
@@ -236,8 +241,12 @@ def window_mean(ts: FloatArray, X: FloatArray, a: float, b: float) -> FloatArray
 
 
 def _finite(*arrays: Any) -> bool:
-    """True if every value is finite (sum of all: NaN or ±Inf propagate)."""
-    return bool(np.isfinite(sum(float(np.sum(a)) for a in arrays)))
+    """True if every value is finite (x·x is NaN or Inf when any entry is)."""
+    for a in arrays:
+        x = np.asarray(a, dtype=float).ravel()
+        if not math.isfinite(float(x @ x)):
+            return False
+    return True
 
 
 def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -246,11 +255,13 @@ def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
                      a[0] * b[1] - a[1] * b[0]])
 
 
-def derivative_lag(dt: float, q: float, r: float, iterations: int = 4000) -> float:
+@functools.lru_cache(maxsize=64)
+def derivative_lag(dt: float, q: float, r: float) -> float:
     """Lag L (s) of the steady-state ω̇ estimate of the [ω, ω̇] Kalman filter.
 
     The steady-state filter is an α-β filter with α = K₀, β = K₁ T; its ω̇ error for a
-    constant ω̈ is −T (α/β − ½) ω̈ (Kalata 1984), i.e. a delay L = T (α/β − ½).
+    constant ω̈ is −T (α/β − ½) ω̈ (Kalata 1984), i.e. a delay L = T (α/β − ½). The gain comes
+    from iterating the Riccati recursion to convergence.
 
     Parameters
     ----------
@@ -265,10 +276,13 @@ def derivative_lag(dt: float, q: float, r: float, iterations: int = 4000) -> flo
     Q = q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
     P = np.eye(2)
     K = np.zeros(2)
-    for _ in range(iterations):
+    for _ in range(20000):
         P = F @ P @ F.T + Q
-        K = P[:, 0] / (P[0, 0] + r)
-        P = P - np.outer(K, P[0, :])
+        K_new = P[:, 0] / (P[0, 0] + r)
+        P = P - np.outer(K_new, P[0, :])
+        if np.allclose(K_new, K, rtol=1e-12, atol=0.0):
+            break
+        K = K_new
     alpha, beta = float(K[0]), float(K[1] * dt)
     return dt * (alpha / beta - 0.5)
 
@@ -318,11 +332,11 @@ class OnlinePreprocessor:
         self._newest = -math.inf
         self._restart_inertial()
         # thrust window centres and τ; pressure; DVL messages waiting for the IMU
-        self._thrust = _History(6, 64)
+        self._thrust = _History(6, 1024)
         self._window = 0.0
         self._last_thr_stamp = -math.inf
         self._pres: deque[tuple[float, float]] = deque(maxlen=2)
-        self._dvl_pending: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
+        self._dvl_pending: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=256)
         self._next_t = math.nan  # next grid time to emit
         self._unusable_until = -math.inf
 
@@ -330,6 +344,7 @@ class OnlinePreprocessor:
         cfg = self.cfg
         self._imu_t = -math.inf
         self._imu_dt = 1.0 / 200.0
+        self._period = self._lag_period = self._imu_dt
         self._lag = derivative_lag(self._imu_dt, cfg.angular_jerk, cfg.gyro_noise**2)
         self._a_prev: FloatArray | None = None
         # columns: v (3), v̇ (3), ω (3), ω̇ (3), R (9), v_int NED (3)
@@ -342,6 +357,8 @@ class OnlinePreprocessor:
         kv.x = np.zeros((6, 1))
         kv.P = np.diag([1.0] * 3 + [0.05**2] * 3)
         kv.H = np.hstack([np.eye(3), np.zeros((3, 3))])
+        kv.F = np.eye(6)
+        self._B_v = np.vstack([np.eye(3), np.zeros((3, 3))])
         self.kf_v = kv
         # angular filter: per axis [ω, ω̇], stacked block-diagonally (x = [ω, ω̇] × 3)
         ka = KalmanFilter(dim_x=6, dim_z=3)
@@ -350,25 +367,33 @@ class OnlinePreprocessor:
         ka.H = np.zeros((3, 6))
         ka.H[[0, 1, 2], [0, 2, 4]] = 1.0
         ka.R = np.eye(3) * cfg.gyro_noise**2
+        ka.F = np.eye(6)
+        ka.Q = np.zeros((6, 6))
         self.kf_w = ka
         self._set_imu_dt(self._imu_dt)
         self._imu_started = False
 
     def _set_imu_dt(self, dt: float) -> None:
+        """Process model of both filters for an IMU step dt (s)."""
         cfg = self.cfg
         T = dt
-        F = np.eye(6)
+        F = self.kf_w.F
         for k in range(3):
             F[2 * k, 2 * k + 1] = T
-        self.kf_w.F = F
         blk = cfg.angular_jerk * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
-        Q = np.zeros((6, 6))
+        Q = self.kf_w.Q
         for k in range(3):
             Q[2 * k:2 * k + 2, 2 * k:2 * k + 2] = blk
-        self.kf_w.Q = Q
         self.kf_v.Q = np.diag([(cfg.accel_noise * T) ** 2] * 3 + [cfg.accel_bias_walk**2 * T] * 3)
         self._imu_dt = dt
-        self._lag = derivative_lag(T, cfg.angular_jerk, cfg.gyro_noise**2)
+
+    def _nominal_period(self, dt: float) -> None:
+        """Track the IMU period (EW mean); re-tune the derivative lag when it moves > 10 %."""
+        self._period += 0.02 * (dt - self._period)
+        if abs(self._period - self._lag_period) > 0.1 * self._lag_period:
+            self._lag_period = self._period
+            self._lag = derivative_lag(round(self._period, 5), self.cfg.angular_jerk,
+                                       self.cfg.gyro_noise**2)
 
     @property
     def derivative_lag(self) -> float:
@@ -387,7 +412,7 @@ class OnlinePreprocessor:
             else:
                 self.counts["rejected_out_of_order"] += 1
                 return False
-        elif t < self._newest - cfg.stale_after:
+        elif topic != "imu" and t < self._imu_t - cfg.stale_after:
             self.counts["rejected_stale"] += 1
             return False
         self._last[topic] = t
@@ -430,16 +455,14 @@ class OnlinePreprocessor:
             self._unusable_until = max(self._unusable_until, t + self.cfg.settle)
         else:
             dt = t - self._imu_t
-            if abs(dt - self._imu_dt) > 0.2 * self._imu_dt:
-                self._set_imu_dt(dt)  # re-tune to the actual IMU period
+            if abs(dt - self._imu_dt) > 1e-9:
+                self._set_imu_dt(dt)
+            self._nominal_period(dt)
             # velocity: trapezoid of the previous and current NED acceleration
             a_mean = 0.5 * (a_ned + (self._a_prev if self._a_prev is not None else a_ned))
-            Fv = np.eye(6)
-            Fv[:3, 3:] = -R * dt
-            kv.F = Fv
+            kv.F[:3, 3:] = -R * dt
             # x⁺ = F x + B u with u = a_mean + R b (so that F x + B u = v + (R(f − b) + g) dt)
-            kv.predict(u=(a_mean + R @ b).reshape(3, 1) * dt,
-                       B=np.vstack([np.eye(3), np.zeros((3, 3))]))
+            kv.predict(u=(a_mean + R @ b).reshape(3, 1) * dt, B=self._B_v)
             self._v_int = self._v_int + a_mean * dt
             ka.predict()
             ka.update(w.reshape(3, 1))
@@ -561,9 +584,13 @@ class OnlinePreprocessor:
         if math.isnan(self._next_t) or self._thrust.n == 0 or self._hist.n < 2:
             return out
         half = 0.5 * self._window
+        if self._next_t > self._thrust.last_t or self._imu_t < self._next_t + half + self._lag:
+            return out  # nothing complete yet (the common case: no copies)
         step = 1.0 / self.cfg.rate
         tc, tau_hist = self._thrust.arrays()
-        ts, X = self._hist.arrays()
+        ts, X = self._hist.arrays(64)
+        if ts[0] > self._next_t - half:
+            ts, X = self._hist.arrays()  # a backlog: take the whole history
         while True:
             tk = self._next_t
             if tk > tc[-1] or self._imu_t < tk + half + self._lag:
@@ -670,11 +697,13 @@ def to_samples(samples: list[OnlineSample], rate: float, usable_only: bool = Tru
 
 
 class LowPass:
-    """Second-order Butterworth low-pass applied in parallel to many channels, causally.
+    """Causal Butterworth low-pass applied in parallel to many channels.
 
-    Transposed direct form II per channel (as ``scipy.signal.lfilter``), vectorised:
-    O(channels) per sample. The state starts at the steady state of the first input (no
-    start-up step).
+    Cascaded second-order sections (``order`` / 2 of them, as ``scipy.signal.sosfilt``),
+    vectorised over channels: O(channels) per sample. The state starts at the steady state
+    of the first input (no start-up step). Order 4 has the magnitude |H|² = 1/(1 + (f/f_c)⁸)
+    of the batch path's zero-phase filter, so the normal equations weight the frequencies as
+    the batch path does (the phase cancels in ΦᵀΦ and Φᵀy, since y and Φ share the filter).
 
     Parameters
     ----------
@@ -683,16 +712,18 @@ class LowPass:
         −3 dB frequency (Hz).
     rate : float
         Sample rate (Hz); cutoff < rate / 2.
+    order : int
+        Even filter order (2: one biquad).
     """
 
-    def __init__(self, channels: int, cutoff: float, rate: float) -> None:
+    def __init__(self, channels: int, cutoff: float, rate: float, order: int = 4) -> None:
         if not 0 < cutoff < 0.5 * rate:
             raise ConfigError("cutoff", f"must be in (0, rate/2 = {0.5 * rate}), got {cutoff}")
-        b, a = signal.butter(2, cutoff, fs=rate)
-        self.b = np.asarray(b, dtype=float)
-        self.a = np.asarray(a, dtype=float)
-        self._zi = np.asarray(signal.lfilter_zi(self.b, self.a), dtype=float)
-        self.state = np.zeros((2, channels))
+        if order < 2 or order % 2:
+            raise ConfigError("order", f"must be even and ≥ 2, got {order}")
+        self.sos = np.asarray(signal.butter(order, cutoff, fs=rate, output="sos"), dtype=float)
+        self._zi = np.asarray(signal.sosfilt_zi(self.sos), dtype=float)  # (sections, 2)
+        self.state = np.zeros((len(self.sos), 2, channels))
         self.started = False
 
     def reset(self) -> None:
@@ -708,9 +739,9 @@ class LowPass:
         if len(X) == 0:
             return X
         if not self.started:
-            self.state = self._zi[:, None] * X[0]
+            self.state = self._zi[:, :, None] * X[0]
             self.started = True
-        y, self.state = signal.lfilter(self.b, self.a, X, axis=0, zi=self.state)
+        y, self.state = signal.sosfilt(self.sos, X, axis=0, zi=self.state)
         return np.asarray(y, dtype=float)
 
 
@@ -734,17 +765,19 @@ class OnlineRegression:
         Parallel low-pass (Hz); 0 disables it.
     settle : float
         Seconds after a (re)start whose samples are not returned.
+    order : int
+        Order of the parallel low-pass (even; 4: the batch path's magnitude).
     """
 
     def __init__(self, model: DampingModel, body: RigidBody, rate: float = 50.0,
-                 cutoff: float = 2.0, settle: float = 1.0) -> None:
+                 cutoff: float = 2.0, settle: float = 1.0, order: int = 4) -> None:
         self.model = model
         self.body = body
         self.rate = float(rate)
         self.cutoff = float(cutoff)
         self.settle = float(settle)
         p = model.n_params
-        self.lp = LowPass(6 * (p + 1), cutoff, rate) if cutoff > 0 else None
+        self.lp = LowPass(6 * (p + 1), cutoff, rate, order) if cutoff > 0 else None
         h = 1.0 / self.rate
         lam = model.memory_rates
         self._mem_a = np.exp(-lam * h)

@@ -380,7 +380,15 @@ class RLSConfig:
         Initial per-DOF noise variances r_i (N², N²m²).
     adapt_noise : bool
         Re-estimate r_i from the innovations: r_i = Σ f² ε_i² / Σ f (exponentially weighted)
-        with f = r_i / S_ii the share of the innovation variance that is noise.
+        with f = r_i / S_ii the share of the innovation variance that is noise. The estimate
+        scales the reported standard deviations and normalises the innovations of the change
+        detector.
+    adapt_weights : bool
+        Also weight the update with the estimated r_i. Off by default: a weight that changes
+        over time re-weights the samples of a DOF against each other (with λ = 1 the estimate
+        then differs from the batch solution by a few percent), while for the diagonal terms
+        the DOF weights do not matter at all. Use it, or set ``noise_var``, for terms that
+        couple DOFs.
     noise_window : float
         Samples of the exponential window of that estimate.
     noise_floor : float
@@ -409,6 +417,7 @@ class RLSConfig:
     trace_max: float = 0.0
     noise_var: tuple[float, ...] = (1.0,) * 6
     adapt_noise: bool = True
+    adapt_weights: bool = False
     noise_window: float = 5000.0
     noise_floor: float = 1e-12
     cusum_drift: float = 1.0
@@ -541,7 +550,9 @@ class RecursiveLeastSquares:
         cfg = self.config
         self.theta = self.theta0.copy()
         self.P = self.P0.copy()
-        self.R = np.array(cfg.noise_var, dtype=float)
+        self.R = np.array(cfg.noise_var, dtype=float)  # estimated noise variances
+        self.R_w = self.R.copy()  # variances that weight the update
+        self._phi2 = np.zeros((6, self.n_params))  # Σ Φ² per row and parameter
         self.n = 0
         self._e2 = self.R.copy()  # EW mean of ε², seeded with the prior noise
         # weighted EW estimate of r; the prior counts as 1 % of one informative sample
@@ -562,8 +573,11 @@ class RecursiveLeastSquares:
 
     @property
     def std(self) -> FloatArray:
-        """√diag(P), shape (p,)."""
-        return np.sqrt(np.maximum(np.diagonal(self.P), 0.0))
+        """Standard deviations of θ, shape (p,): √diag(P) scaled by the ratio of the estimated
+        to the weighting noise variance of the DOF each parameter acts on most."""
+        c = self.R / self.R_w
+        row = np.argmax(self._phi2, axis=0)
+        return np.sqrt(np.maximum(np.diagonal(self.P), 0.0) * c[row])
 
     # --- update ---------------------------------------------------------------------------
 
@@ -590,9 +604,9 @@ class RecursiveLeastSquares:
         cfg = self.config
         if self.frozen:
             e = y - Phi @ self.theta
-            S = Phi @ self.P @ Phi.T + np.diag(self.R)
+            S = Phi @ self.P @ Phi.T + np.diag(self.R_w)
         else:
-            r = _step(self.theta, self.P, Phi, y, self.lam, self.R, mode=cfg.forgetting_mode,
+            r = _step(self.theta, self.P, Phi, y, self.lam, self.R_w, mode=cfg.forgetting_mode,
                       trace_max=self.trace_max, scale=self.scale,
                       rho=cfg.directional_rho if cfg.directional_rho > 0 else None)
             if not np.isfinite(r.theta.sum() + r.P.trace()):
@@ -601,7 +615,9 @@ class RecursiveLeastSquares:
             self.theta, self.P, e, S = r.theta, r.P, r.innovation, r.S
         self.n += 1
         self.last_innovation = e
-        s_diag = np.diagonal(S)
+        self._phi2 += Phi * Phi
+        c = self.R / self.R_w
+        s_diag = np.diagonal(S) * c  # innovation variances with the estimated noise
         # per-DOF statistics: EW means with windows in samples
         a = 1.0 / min(self.n, cfg.stats_window)
         a_r = 1.0 / cfg.noise_window
@@ -616,6 +632,8 @@ class RecursiveLeastSquares:
             self._r_num += f * f * e2 - self._r_num * a_r
             self._r_den += f - self._r_den * a_r
             self.R = np.maximum(self._r_num / self._r_den, cfg.noise_floor)
+            if cfg.adapt_weights:
+                self.R_w = self.R.copy()
         force = Phi @ self.theta
         self._force2 += (force * force - self._force2) * a
         new = self.monitor.update(e / np.sqrt(s_diag), np.sign(force), t)

@@ -375,6 +375,16 @@ class Simulator:
                                              x[13:13 + self._n_mem]]))
         self.t = t + h
 
+    def take_log(self, keep: int = 1) -> Trajectory:
+        """The steps recorded so far as a Trajectory, then forget all but the last ``keep``.
+
+        For streaming (the simulator node): the memory of a long run stays bounded, and the
+        kept steps let the next chunk interpolate across the boundary.
+        """
+        traj = self.trajectory()
+        self._log = self._log[-keep:] if keep > 0 else []
+        return traj
+
     def wrench_to_command(self, tau: FloatArray) -> FloatArray:
         """Rotor speeds (rev/s) that produce τ with the nominal thrusters, saturated."""
         return self._thr.speed_for_thrust(self._thr.allocate(tau))

@@ -328,6 +328,18 @@ def save_model(path: str | Path, names: Sequence[str], theta: FloatArray,
     Path
     """
     path = Path(path)
+    text = model_text(names, theta, theta_std, M, extra, damping=damping, version=version)
+    _atomic_write(path, text)
+    return path
+
+
+def model_text(names: Sequence[str], theta: FloatArray, theta_std: FloatArray, M: FloatArray,
+               extra: Mapping[str, Any] | None = None, *, damping: DampingModel | None = None,
+               version: int = 1) -> str:
+    """The model file's text (what :func:`save_model` writes and ``dampest/model`` carries).
+
+    Parameters are those of :func:`save_model`.
+    """
     names = [str(n) for n in names]
     theta = np.asarray(theta, dtype=float)
     theta_std = np.asarray(theta_std, dtype=float)
@@ -353,8 +365,7 @@ def save_model(path: str | Path, names: Sequence[str], theta: FloatArray,
             "# Damping coefficients are positive when dissipative; M is row-major, FRD.\n"
             + yaml.dump({"/**": {"ros__parameters": {"model": model}}}, Dumper=_Dumper,
                         sort_keys=False, default_flow_style=None, width=100))
-    _atomic_write(path, text)
-    return path
+    return text
 
 
 def _model_section(doc: Any, path: Path) -> dict[str, Any]:
@@ -383,7 +394,20 @@ def load_model(path: str | Path) -> ModelFile:
         Naming the missing or invalid ``model.*`` entry and the file.
     """
     path = Path(path)
-    model = _model_section(_read_yaml(path), path)
+    return _model_from_doc(_read_yaml(path), path)
+
+
+def loads_model(text: str) -> ModelFile:
+    """:func:`load_model` for the text of a model file (e.g. a ``dampest/model`` message)."""
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError("model", f"not valid YAML: {exc}") from None
+    return _model_from_doc(doc, Path("<text>"))
+
+
+def _model_from_doc(doc: Any, path: Path) -> ModelFile:
+    model = _model_section(doc, path)
     for key in _RESERVED[:-1]:
         if key not in model:
             raise ConfigError(f"model.{key}", f"missing in {path}")

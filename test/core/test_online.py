@@ -200,9 +200,13 @@ def test_low_pass_chunks_equal_samples_and_scipy() -> None:
     y1 = np.array([lp1(r) for r in x])
     y2 = np.concatenate([lp2.filter(x[:100]), lp2.filter(x[100:])])
     np.testing.assert_allclose(y1, y2, rtol=0, atol=1e-13)
-    b, a = signal.butter(2, 2.0, fs=50.0)
-    ref = signal.lfilter(b, a, x, axis=0, zi=signal.lfilter_zi(b, a)[:, None] * x[0])[0]
+    sos = signal.butter(4, 2.0, fs=50.0, output="sos")
+    ref = signal.sosfilt(sos, x, axis=0, zi=signal.sosfilt_zi(sos)[:, :, None] * x[0])[0]
     np.testing.assert_allclose(y1, ref, atol=1e-12)
+    # its magnitude is the batch path's zero-phase one, |H|² = 1 / (1 + (f/fc)⁸), up to the
+    # frequency warping of the bilinear transform
+    f, h = signal.sosfreqz(sos, worN=[0.5, 2.0, 4.0], fs=50.0)
+    np.testing.assert_allclose(np.abs(h) ** 2, 1 / (1 + (f / 2.0) ** 8), rtol=0.15)
     with pytest.raises(ConfigError, match="cutoff"):
         LowPass(1, 30.0, 50.0)
 
@@ -258,8 +262,9 @@ def truncated(ex: Excitation, stop: float) -> Excitation:
 def rls_for(vehicle: Vehicle, lam: float) -> RecursiveLeastSquares:
     """A diffuse-prior RLS over the preset's terms (the estimator node's defaults)."""
     p = vehicle.damping.n_params
-    return RecursiveLeastSquares(np.zeros(p), np.full(p, 1e6), RLSConfig(forgetting_factor=lam),
-                                 scale=np.maximum(np.abs(vehicle.theta), 1.0))
+    noise = tuple((0.01 * vehicle.thrusters.max_wrench) ** 2)
+    return RecursiveLeastSquares(np.zeros(p), np.full(p, 1e6), RLSConfig(
+        forgetting_factor=lam, noise_var=noise), scale=np.maximum(np.abs(vehicle.theta), 1.0))
 
 
 def test_step_change_is_tracked_and_detected(vehicle: Vehicle) -> None:
@@ -321,7 +326,7 @@ def test_hovering_for_an_hour_keeps_the_covariance_bounded(
     d = rls.diagnostics()
     assert np.all(np.isfinite(rls.P)) and np.all(np.isfinite(rls.theta))
     # P grew (forgetting works) but never past the bound: the prior's scale, p = 12
-    assert trace[-1] > 100 * converged.covariance_trace
+    assert trace[-1] > 2 * converged.covariance_trace
     assert max(trace) <= rls.trace_max * (1 + 1e-9)
     assert np.isfinite(d.condition_number)
     # hovering: the damping force is below twice the noise in every DOF

@@ -99,8 +99,9 @@ def test_converges_to_truth_with_known_noise() -> None:
     sd = np.array([0.1, 0.2, 0.4, 0.05, 0.1, 0.3])
     Phi = rng.normal(size=(3000, 6, p))
     y = Phi @ truth + sd * rng.normal(size=(3000, 6))
-    rls = RecursiveLeastSquares(np.zeros(p), np.full(p, 100.0),
-                                RLSConfig(forgetting_factor=1.0, noise_var=(0.01,) * 6))
+    # every parameter acts on all six rows: weight them with the learnt noise (WLS)
+    rls = RecursiveLeastSquares(np.zeros(p), np.full(p, 100.0), RLSConfig(
+        forgetting_factor=1.0, noise_var=(0.01,) * 6, adapt_weights=True))
     rls.update_many(Phi, y)
     # with λ = 1 the error is at the Cramér–Rao level: all within 4σ
     assert np.all(np.abs(rls.theta - truth) < 4 * rls.std)

@@ -1,0 +1,293 @@
+"""The online estimator behind the estimator node: joins the sample streams by exact stamp,
+builds the parallel-filtered regression (:class:`~dampest_ros.core.online.OnlineRegression`)
+and runs the RLS (:class:`~dampest_ros.core.rls.RecursiveLeastSquares`).
+
+Inputs per sample stamp (integer nanoseconds, identical on the four streams): velocity ν,
+acceleration ν̇ and wrench τ (FRD, SI) and the attitude for g(η) (the IMU orientation at the
+sample instant, ROS order [x, y, z, w], FLU → ENU; converted through
+:mod:`dampest_ros.core.frames`). Samples are processed in chunks of ``chunk`` (the regression
+is vectorised over a chunk; the RLS updates sample by sample).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core import frames
+from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.online import OnlineRegression, OnlineSample
+from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError
+from dampest_ros.core.rls import Diagnostics, RecursiveLeastSquares, RLSConfig
+from dampest_ros.core.vehicle import Vehicle
+
+FloatArray = NDArray[np.float64]
+
+STREAMS = ("velocity", "acceleration", "wrench", "attitude")
+_WIDTH = {"velocity": 6, "acceleration": 6, "wrench": 6, "attitude": 4}
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Settings of :class:`OnlineEstimator`.
+
+    Attributes
+    ----------
+    forgetting_factor : float
+        λ in [0.9, 1].
+    forgetting_mode : {'exponential', 'directional'}
+    rate : float
+        Sample rate of the streams (Hz).
+    cutoff : float
+        Parallel low-pass of y and Φ (Hz).
+    chunk : int
+        Samples processed at once.
+    prior_scale : float
+        Without a prior file: prior standard deviation = prior_scale × the parameter's
+        scale (|nominal θ|, or the largest |θ| of its term when the nominal is 0).
+    max_pending : float
+        Partial samples (not all streams seen) older than this (s) are dropped.
+    """
+
+    forgetting_factor: float = 0.999
+    forgetting_mode: str = "exponential"
+    rate: float = 50.0
+    cutoff: float = 2.0
+    chunk: int = 10
+    prior_scale: float = 10.0
+    max_pending: float = 1.0
+
+    def __post_init__(self) -> None:
+        RLSConfig(forgetting_factor=self.forgetting_factor,
+                  forgetting_mode=self.forgetting_mode)  # validates both
+        if not 0 < self.cutoff < 0.5 * self.rate:
+            raise ConfigError("cutoff", f"must be in (0, rate/2), got {self.cutoff}")
+        if self.chunk < 1:
+            raise ConfigError("chunk", f"must be ≥ 1, got {self.chunk}")
+        if self.prior_scale <= 0:
+            raise ConfigError("prior_scale", "must be > 0")
+
+
+def restrict(model: DampingModel, theta: FloatArray, kinds: Sequence[str] | None
+             ) -> tuple[DampingModel, FloatArray]:
+    """The terms of ``model`` of the given kinds (None or empty: all), with their θ."""
+    if not kinds:
+        return model, np.asarray(theta, dtype=float)
+    missing = [k for k in kinds if model.term(k) is None]
+    if missing:
+        raise ConfigError("terms", f"the vehicle has no {missing} term; it has {model.kinds}")
+    sub = DampingModel([t for t in model.terms if t.kind in kinds])
+    values = dict(zip(model.parameter_names, theta, strict=True))
+    return sub, sub.theta_from_dict({n: values[n] for n in sub.parameter_names})
+
+
+def parameter_scale(model: DampingModel, nominal: FloatArray) -> FloatArray:
+    """|nominal θ_j|, or the largest |θ| of the same term when that is 0 (then 1), (p,)."""
+    s = np.abs(np.asarray(nominal, dtype=float)).copy()
+    for t in model.terms:
+        sl = model.slice(t.kind)
+        fill = float(s[sl].max()) if s[sl].size and s[sl].max() > 0 else 1.0
+        s[sl] = np.where(s[sl] > 0, s[sl], fill)
+    return s
+
+
+class OnlineEstimator:
+    """Stamp matching, regression and RLS for one vehicle.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        Body (M, restoring) and the nominal damping (term structure, prior mean, scales).
+    terms : sequence of str, optional
+        Term kinds to identify (default: all of the vehicle's).
+    config : EstimatorConfig, optional
+    prior : tuple (names, theta, theta_std), optional
+        Prior mean and standard deviation by name (a model file); parameters it does not
+        name keep the default prior. A std of 0 or non-finite means the default.
+    keep_samples : bool
+        Keep every sample used in ``samples_log`` (to compare with the batch path).
+    """
+
+    def __init__(self, vehicle: Vehicle, terms: Sequence[str] | None = None,
+                 config: EstimatorConfig | None = None,
+                 prior: tuple[Sequence[str], FloatArray, FloatArray] | None = None,
+                 keep_samples: bool = False) -> None:
+        self.vehicle = vehicle
+        self.cfg = config or EstimatorConfig()
+        self.model, self.nominal = restrict(vehicle.damping, vehicle.theta, terms)
+        self.body = vehicle.body
+        self.M = vehicle.body.M
+        self.names = self.model.parameter_names
+        scale = parameter_scale(self.model, self.nominal)
+        theta0 = self.nominal.copy()
+        std0 = self.cfg.prior_scale * scale
+        if prior is not None:
+            pn, pt, ps = prior
+            for n, v, sd in zip(pn, np.asarray(pt, float), np.asarray(ps, float), strict=True):
+                if n in self.names:
+                    j = self.names.index(n)
+                    theta0[j] = v
+                    if np.isfinite(sd) and sd > 0:
+                        std0[j] = sd
+        self.prior_theta, self.prior_std = theta0, std0
+        # weights: 1 % of the largest thrust per DOF as the noise level (the estimated noise
+        # scales the reported uncertainty; see RLSConfig.adapt_weights)
+        noise = tuple(float(x) for x in (0.01 * vehicle.thrusters.max_wrench) ** 2)
+        self.rls = RecursiveLeastSquares(theta0, std0**2, RLSConfig(
+            forgetting_factor=self.cfg.forgetting_factor,
+            forgetting_mode=self.cfg.forgetting_mode, noise_var=noise))
+        self.regression = OnlineRegression(self.model, self.body, self.cfg.rate, self.cfg.cutoff)
+        self.counts = {"velocity": 0, "acceleration": 0, "wrench": 0, "attitude": 0,
+                       "matched": 0, "unmatched": 0, "rejected_nonfinite": 0,
+                       "used": 0, "dropped_out_of_order": 0}
+        self._pending: OrderedDict[int, dict[str, FloatArray]] = OrderedDict()
+        self._ready: list[tuple[int, dict[str, FloatArray]]] = []
+        self._last_matched = -1
+        self.last_sample_t = math.nan
+        self.keep_samples = keep_samples
+        self.samples_log: list[OnlineSample] = []
+
+    # --- inputs ------------------------------------------------------------------------
+
+    def add(self, stream: str, stamp_ns: int, value: FloatArray) -> int:
+        """One sample stream message (FRD, SI, shape (6,); attitude (4,) [x, y, z, w] FLU →
+        ENU); returns the number of samples processed."""
+        self.counts[stream] += 1
+        v = np.asarray(value, dtype=float)
+        if v.shape != (_WIDTH[stream],) or not np.all(np.isfinite(v)) or \
+                (stream == "attitude" and float(v @ v) < 1e-12):
+            self.counts["rejected_nonfinite"] += 1
+            return 0
+        if stamp_ns <= self._last_matched:
+            self.counts["dropped_out_of_order"] += 1
+            return 0
+        entry = self._pending.setdefault(int(stamp_ns), {})
+        entry[stream] = v
+        if len(entry) == len(STREAMS):
+            del self._pending[int(stamp_ns)]
+            # everything older than a completed sample can no longer complete in order
+            while self._pending and next(iter(self._pending)) < stamp_ns:
+                self._pending.popitem(last=False)
+                self.counts["unmatched"] += 1
+            self._last_matched = int(stamp_ns)
+            self.counts["matched"] += 1
+            self._ready.append((int(stamp_ns), entry))
+        else:
+            limit = stamp_ns - int(self.cfg.max_pending * 1e9)
+            while self._pending and next(iter(self._pending)) < limit:
+                self._pending.popitem(last=False)
+                self.counts["unmatched"] += 1
+        return self.process()
+
+    @staticmethod
+    def _euler(q: FloatArray) -> FloatArray:
+        """Roll, pitch, yaw (FRD → NED) of an orientation [x, y, z, w] FLU → ENU."""
+        R = frames.rotation(frames.quat_to_matrix(q[[3, 0, 1, 2]]))
+        return np.asarray(frames.euler_from_matrix(R), dtype=float)
+
+    # --- processing ----------------------------------------------------------------------
+
+    def process(self, force: bool = False) -> int:
+        """Run the regression and RLS on the ready samples (at least ``chunk`` of them, or
+        all when ``force``); returns the number of samples used."""
+        if not self._ready or (len(self._ready) < self.cfg.chunk and not force):
+            return 0
+        batch, self._ready = self._ready, []
+        samples = [OnlineSample(stamp * 1e-9, e["velocity"], e["acceleration"], e["wrench"],
+                                self._euler(e["attitude"]), math.nan, True)
+                   for stamp, e in batch]
+        if self.keep_samples:
+            self.samples_log += samples
+        T, Phi, y = self.regression.process(samples)
+        for k in range(len(T)):
+            self.rls.update(Phi[k], y[k], float(T[k]))
+        self.counts["used"] += len(T)
+        if samples:
+            self.last_sample_t = samples[-1].t
+        return len(T)
+
+    # --- state ---------------------------------------------------------------------------
+
+    @property
+    def theta(self) -> FloatArray:
+        """Current estimate, shape (p,)."""
+        return self.rls.theta
+
+    @property
+    def theta_std(self) -> FloatArray:
+        """Its standard deviations, shape (p,)."""
+        return self.rls.std
+
+    def reset(self) -> None:
+        """Back to the prior: RLS, regression filters and pending samples."""
+        self.rls.reset()
+        self.regression.reset()
+        self._pending.clear()
+        self._ready.clear()
+        self._last_matched = -1
+
+    def restart_clock(self) -> None:
+        """Forget the stamps seen (after a clock jump), keep the estimate."""
+        self._pending.clear()
+        self._ready.clear()
+        self._last_matched = -1
+        self.regression.reset()
+
+    def diagnostics(self) -> Diagnostics:
+        """The RLS diagnostics (condition number included)."""
+        return self.rls.diagnostics(condition=True)
+
+    def diagnostic_values(self) -> dict[str, Any]:
+        """Flat key → value summary for a DiagnosticArray."""
+        d = self.diagnostics()
+        out: dict[str, Any] = {
+            "samples": d.samples, "condition_number": d.condition_number,
+            "covariance_trace": d.covariance_trace, "change_alarm": d.alarm,
+            "alarm_channels": ",".join(d.alarm_channels) or "none",
+            "alarm_time": self.rls.alarm_time if self.rls.alarm_time is not None else "none",
+            "unexcited": ",".join(d.unexcited) or "none",
+            "forgetting_factor": self.rls.lam, "frozen": self.rls.frozen,
+            "cusum_max": float(np.max(d.cusum)),
+        }
+        for i, n in enumerate(DOF_NAMES):
+            out[f"excitation.{n}"] = float(d.excitation[i])
+            out[f"innovation_rms.{n}"] = float(d.innovation_rms[i])
+            out[f"noise_std.{n}"] = float(d.noise_std[i])
+        for k in ("matched", "unmatched", "used", "rejected_nonfinite", "attitude"):
+            out[f"count.{k}"] = self.counts[k]
+        return out
+
+    def model_extra(self) -> dict[str, Any]:
+        """Extra entries of the model file: provenance and health."""
+        d = self.rls.diagnostics(condition=False)
+        return {"source": "dampest estimator_node", "vehicle": self.vehicle.name,
+                "samples": int(d.samples), "forgetting_factor": float(self.rls.lam),
+                "unexcited": d.unexcited or ["none"], "change_alarm": bool(d.alarm)}
+
+    def save(self, path: str | Path, version: int) -> Path:
+        """Atomic write of the model file (:func:`dampest_ros.io.yaml_io.save_model`)."""
+        from dampest_ros.io.yaml_io import save_model
+        return save_model(path, self.names, self.theta, self.theta_std, self.M,
+                          self.model_extra(), damping=self.model, version=version)
+
+    def text(self, version: int) -> str:
+        """The model file text for ``dampest/model``."""
+        from dampest_ros.io.yaml_io import model_text
+        return model_text(self.names, self.theta, self.theta_std, self.M, self.model_extra(),
+                          damping=self.model, version=version)
+
+
+def config_from_dict(d: dict[str, Any]) -> EstimatorConfig:
+    """EstimatorConfig from a mapping; unknown keys raise ConfigError."""
+    known = {f.name: f for f in fields(EstimatorConfig)}
+    unknown = set(d) - set(known)
+    if unknown:
+        raise ConfigError("estimator", f"unknown key(s) {sorted(unknown)}")
+    return EstimatorConfig(**d)

@@ -1,0 +1,105 @@
+"""An identified damping model as controllers use it: D(ν), the damping force and its
+uncertainty, and C(ν)ν from the mass matrix (FRD body frame, SI units)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, coriolis_force
+from dampest_ros.core.vehicle import damping_from_spec
+
+FloatArray = NDArray[np.float64]
+
+
+def damping_from_names(names: Sequence[str]) -> DampingModel:
+    """Rebuild a damping model from SNAME names alone (linear ``X_u``, ``Y_r``; quadratic
+    ``X_uu`` … ``N_rr``), for model files written without ``model.terms``."""
+    linear: dict[str, float] = {}
+    quadratic: dict[str, float] = {}
+    for n in names:
+        force, _, vel = n.partition("_")
+        if force in FORCE_NAMES and len(vel) == 2 and vel[0] == vel[1] and vel[0] in DOF_NAMES:
+            quadratic[n] = 0.0
+        elif force in FORCE_NAMES and vel in DOF_NAMES:
+            linear[n] = 0.0
+        else:
+            raise ConfigError("model.parameter_names",
+                              f"{n!r} needs model.terms to be rebuilt (not linear/quadratic)")
+    spec: dict[str, dict[str, float]] = {}
+    if linear:
+        spec["linear"] = linear
+    if quadratic:
+        spec["quadratic"] = quadratic
+    model, _ = damping_from_spec(spec)
+    if model.parameter_names != list(names):
+        raise ConfigError("model.parameter_names", "order must be linear terms, then quadratic")
+    return model
+
+
+class IdentifiedModel:
+    """θ of a damping model with its standard deviations and the mass matrix.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Parameter names, θ order.
+    theta, theta_std : ndarray, shape (p,)
+    M : ndarray, shape (6, 6) or (36,)
+        M_RB + M_A, row-major.
+    damping : DampingModel, optional
+        Term structure; rebuilt from the names when omitted.
+    version : int
+    """
+
+    def __init__(self, names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
+                 M: FloatArray, damping: DampingModel | None = None, version: int = 0) -> None:
+        self.names = [str(n) for n in names]
+        self.theta = np.asarray(theta, dtype=float)
+        self.theta_std = np.asarray(theta_std, dtype=float)
+        self.M = np.asarray(M, dtype=float).reshape(6, 6)
+        self.damping = damping if damping is not None else damping_from_names(self.names)
+        self.version = int(version)
+        p = len(self.names)
+        if self.theta.shape != (p,) or self.theta_std.shape != (p,):
+            raise ConfigError("model.theta", f"theta and theta_std need {p} values")
+        if self.damping.parameter_names != self.names:
+            raise ConfigError("model.terms", "the terms do not give model.parameter_names")
+        if self.damping.term("freq") is not None:
+            raise ConfigError("model.terms", "a memory (freq) term needs its filter states; "
+                                             "evaluate it with DampingModel.force")
+
+    def value(self, name: str) -> float:
+        """θ of one named parameter."""
+        return float(self.theta[self.names.index(name)])
+
+    def D(self, nu: FloatArray) -> FloatArray:
+        """D(ν), shape (6, 6) for ν (6,) or (N, 6, 6) for (N, 6)."""
+        nu = np.asarray(nu, dtype=float)
+        D = self.damping.matrix(np.atleast_2d(nu), self.theta)
+        return D[0] if nu.ndim == 1 else D
+
+    def damping_force(self, nu: FloatArray) -> FloatArray:
+        """D(ν)ν (N, N·m), shape like ν."""
+        nu = np.asarray(nu, dtype=float)
+        f = self.damping.force(np.atleast_2d(nu), self.theta)
+        return f[0] if nu.ndim == 1 else f
+
+    def damping_force_std(self, nu: FloatArray) -> FloatArray:
+        """Standard deviation of D(ν)ν from θ_std (independent parameters), shape like ν:
+        √(Σ_j Φ_ij(ν)² σ_j²)."""
+        nu = np.asarray(nu, dtype=float)
+        Phi = self.damping.regressor(np.atleast_2d(nu))
+        s = np.sqrt(np.einsum("nip,p->ni", Phi * Phi, self.theta_std**2))
+        return s[0] if nu.ndim == 1 else s
+
+    def coriolis_force(self, nu: FloatArray) -> FloatArray:
+        """C(ν)ν from M (rigid body and added mass, no current), shape like ν."""
+        return coriolis_force(self.M, np.asarray(nu, dtype=float))
+
+    def feedforward(self, nu: FloatArray) -> FloatArray:
+        """D(ν)ν + C(ν)ν, the model-based feed-forward of a velocity controller."""
+        return self.damping_force(nu) + self.coriolis_force(nu)
