@@ -9,7 +9,15 @@ PACKAGE_NAME = "dampest_ros"
 # The single list of ROS 2 node executables: script name -> "module:function".
 # Each becomes a console script (installed to lib/dampest_ros for `ros2 run`).
 # test/test_package.py reads this dict with `ast`, so keep it a plain literal.
-NODE_SCRIPTS: dict[str, str] = {}
+NODE_SCRIPTS: dict[str, str] = {
+    "sim_node": "dampest_ros.ros.sim_node:main",
+    "preprocess_node": "dampest_ros.ros.preprocess_node:main",
+    "estimator_node": "dampest_ros.ros.estimator_node:main",
+    "model_server_node": "dampest_ros.ros.model_server_node:main",
+    "controller_node": "dampest_ros.ros.controller_node:main",
+    "recorder_node": "dampest_ros.ros.recorder_node:main",
+    "replay_node": "dampest_ros.ros.replay_node:main",
+}
 
 
 def config_data_files(root="config"):

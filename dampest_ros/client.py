@@ -1,0 +1,210 @@
+"""Client of the model service: what a controller imports to use the identified damping.
+
+Fetches ``model.*`` (DESIGN.md §3) from a node (``estimator_node``, ``model_server_node``) with
+the standard ``get_parameters`` service, follows ``/parameter_events`` to refresh when
+``model.version`` changes, and evaluates D(ν), the damping force D(ν)ν, its standard deviation
+and C(ν)ν (FRD body frame, SI units). Without ROS, :meth:`ModelClient.from_yaml` reads a model
+file. rclpy is imported only by the ROS methods.
+
+The service is called with ``call_async``; the caller's node must be spun by an executor
+(its own, or the background thread :meth:`ModelClient.standalone` starts). Blocking on
+``rclpy.spin_until_future_complete`` is avoided: in this rclpy it slows down with every call
+(DESIGN.md §6).
+
+Example::
+
+    client = ModelClient.standalone("estimator_node")   # node + spin thread
+    client.wait(10.0)                                    # first model
+    tau_ff = client.feedforward(nu)                     # D(ν)ν + C(ν)ν
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.identified import IdentifiedModel
+
+FloatArray = NDArray[np.float64]
+
+MODEL_PARAMETERS = ("model.parameter_names", "model.theta", "model.theta_std", "model.M",
+                    "model.version")
+
+
+class ModelUnavailableError(RuntimeError):
+    """No model yet (the server has not answered, or its model is invalid)."""
+
+
+class ModelClient:
+    """The identified model of one server node, kept up to date.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node, optional
+        The node whose service client and subscription are used (None: YAML only).
+    server : str
+        Name of the node that holds ``model.*`` (relative names follow the node's namespace).
+    follow : bool
+        Refresh on ``/parameter_events`` of the server.
+    on_update : callable, optional
+        Called with the new :class:`IdentifiedModel` after each refresh.
+    """
+
+    def __init__(self, node: Any = None, server: str = "estimator_node", follow: bool = True,
+                 on_update: Callable[[IdentifiedModel], None] | None = None) -> None:
+        self.node = node
+        self.server = server
+        self.on_update = on_update
+        self._model: IdentifiedModel | None = None
+        self._lock = threading.Lock()
+        self._got = threading.Event()
+        self.refreshes = 0
+        self.errors: list[str] = []
+        self._executor: Any = None
+        self._thread: threading.Thread | None = None
+        self._pending = False
+        if node is not None:
+            from rcl_interfaces.msg import ParameterEvent
+            from rcl_interfaces.srv import GetParameters
+            self._cli = node.create_client(GetParameters, f"{server}/get_parameters")
+            # fully qualified server name, as /parameter_events reports it
+            ns = node.get_namespace().rstrip("/")
+            self._full_name = server if server.startswith("/") else f"{ns}/{server}"
+            if follow:
+                node.create_subscription(ParameterEvent, "/parameter_events", self._on_event,
+                                         100)
+            self.request()
+
+    # --- without ROS ---------------------------------------------------------------------
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> ModelClient:
+        """A client holding the model of a model file (no ROS needed)."""
+        from dampest_ros.io.yaml_io import load_model
+        m = load_model(path)
+        client = cls(None)
+        client._set(IdentifiedModel(m.parameter_names, m.theta, m.theta_std, m.M, m.damping,
+                                    m.version))
+        return client
+
+    # --- with ROS ------------------------------------------------------------------------
+
+    @classmethod
+    def standalone(cls, server: str = "estimator_node", name: str = "dampest_model_client",
+                   **kwargs: Any) -> ModelClient:
+        """A client with its own node, spun by a background thread (rclpy must be initialised;
+        call :meth:`close` at the end)."""
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        node = rclpy.create_node(name)
+        client = cls(node, server, **kwargs)
+        client._executor = SingleThreadedExecutor()
+        client._executor.add_node(node)
+        client._thread = threading.Thread(target=client._executor.spin, daemon=True)
+        client._thread.start()
+        return client
+
+    def close(self) -> None:
+        """Stop the background thread and destroy the node (standalone clients)."""
+        if self._executor is not None:
+            self._executor.shutdown()
+            self._executor = None
+            if self._thread is not None:
+                self._thread.join(timeout=5.0)
+            self.node.destroy_node()
+
+    def request(self) -> Any:
+        """Ask the server for ``model.*`` (asynchronous; the answer updates the model)."""
+        from rcl_interfaces.srv import GetParameters
+        if self.node is None:
+            raise ModelUnavailableError("this client reads a YAML file; it has no ROS node")
+        if not self._cli.service_is_ready():
+            # not discovered yet: try again when it is (the timer stops after the request)
+            if not self._pending:
+                self._pending = True
+                self._retry = self.node.create_timer(0.2, self._retry_request)
+            return None
+        future = self._cli.call_async(GetParameters.Request(names=list(MODEL_PARAMETERS)))
+        future.add_done_callback(self._on_response)
+        return future
+
+    def _retry_request(self) -> None:
+        if self._cli.service_is_ready():
+            self._retry.cancel()
+            self.node.destroy_timer(self._retry)
+            self._pending = False
+            self.request()
+
+    def _on_response(self, future: Any) -> None:
+        try:
+            values = future.result().values
+            names, theta, std, M, version = (
+                list(values[0].string_array_value), np.array(values[1].double_array_value),
+                np.array(values[2].double_array_value), np.array(values[3].double_array_value),
+                int(values[4].integer_value))
+            self._set(IdentifiedModel(names, theta, std, M, version=version))
+        except Exception as exc:  # a bad answer must not kill the caller's executor
+            self.errors.append(f"{type(exc).__name__}: {exc}")
+
+    def _on_event(self, event: Any) -> None:
+        if event.node != self._full_name:
+            return
+        changed = [p.name for p in (*event.new_parameters, *event.changed_parameters)]
+        if "model.version" in changed:
+            self.request()
+
+    def _set(self, model: IdentifiedModel) -> None:
+        with self._lock:
+            self._model = model
+            self.refreshes += 1
+        self._got.set()
+        if self.on_update is not None:
+            self.on_update(model)
+
+    def wait(self, timeout: float = 10.0) -> IdentifiedModel:
+        """Block until a model is available (the node must be spun elsewhere)."""
+        if not self._got.wait(timeout):
+            raise ModelUnavailableError(f"no model from {self.server} within {timeout} s"
+                                   + (f" ({self.errors[-1]})" if self.errors else ""))
+        return self.model
+
+    # --- evaluation ----------------------------------------------------------------------
+
+    @property
+    def available(self) -> bool:
+        """True once a model was received."""
+        return self._model is not None
+
+    @property
+    def model(self) -> IdentifiedModel:
+        """The latest model."""
+        with self._lock:
+            if self._model is None:
+                raise ModelUnavailableError(f"no model from {self.server} yet")
+            return self._model
+
+    @property
+    def version(self) -> int:
+        """model.version of the latest model (-1: none)."""
+        return self._model.version if self._model is not None else -1
+
+    def D(self, nu: FloatArray) -> FloatArray:
+        """D(ν) (6, 6) for ν (6,), FRD."""
+        return self.model.D(nu)
+
+    def damping_force(self, nu: FloatArray) -> FloatArray:
+        """D(ν)ν (N, N·m)."""
+        return self.model.damping_force(nu)
+
+    def damping_force_std(self, nu: FloatArray) -> FloatArray:
+        """Standard deviation of D(ν)ν from model.theta_std."""
+        return self.model.damping_force_std(nu)
+
+    def feedforward(self, nu: FloatArray) -> FloatArray:
+        """D(ν)ν + C(ν)ν."""
+        return self.model.feedforward(nu)

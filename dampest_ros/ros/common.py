@@ -1,0 +1,208 @@
+"""Shared pieces of the nodes: QoS profiles, stamps, validated parameters, main()."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+from rclpy.utilities import remove_ros_args
+
+#: Sensor topics: the sensor-data policies (best effort, volatile) with a deeper queue than
+#: its 5, for the bursts of a simulator running faster than real time.
+SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000,
+                        reliability=qos_profile_sensor_data.reliability,
+                        durability=qos_profile_sensor_data.durability)
+#: Sample and command topics: reliable, keep last 200 (bursts when faster than real time).
+RELIABLE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=200,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE)
+#: ``dampest/model``: reliable, transient local, keep last 1 (late joiners get the model).
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def to_time(t: float) -> Time:
+    """builtin_interfaces/Time from seconds (rounded to the nanosecond)."""
+    ns = round(t * 1e9)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def stamp_ns(stamp: Time) -> int:
+    """Integer nanoseconds of a stamp (exact, for matching)."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def seconds(stamp: Time) -> float:
+    """Seconds of a stamp."""
+    return stamp_ns(stamp) * 1e-9
+
+
+@dataclass(frozen=True)
+class Param:
+    """A declared parameter: default, one-line description, range or choices, validator.
+
+    ``check`` returns an error text for an invalid value (None when valid); ranges and
+    choices are checked by :func:`declare` as well, so every rejection names its reason.
+    """
+
+    name: str
+    default: Any
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] = ()
+    check: Callable[[Any], str | None] | None = None
+    read_only: bool = False
+    type_: Parameter.Type | None = None
+
+
+def _descriptor(p: Param) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=p.description, read_only=p.read_only)
+    extra = f" One of: {', '.join(p.choices)}." if p.choices else ""
+    d.description = p.description + extra
+    if p.low is not None and p.high is not None:
+        if isinstance(p.default, bool):
+            pass
+        elif isinstance(p.default, int):
+            d.integer_range = [IntegerRange(from_value=int(p.low), to_value=int(p.high), step=0)]
+        else:
+            d.floating_point_range = [FloatingPointRange(from_value=float(p.low),
+                                                         to_value=float(p.high), step=0.0)]
+    if p.type_ is not None:
+        d.type = p.type_.value
+    return d
+
+
+def validate(p: Param, value: Any) -> str | None:
+    """The reason why ``value`` is invalid for ``p``, or None."""
+    if p.choices and value not in p.choices:
+        return f"{p.name} must be one of {list(p.choices)}, got {value!r}"
+    if isinstance(value, float) and not math.isfinite(value):
+        return f"{p.name} must be finite, got {value!r}"
+    if p.low is not None and isinstance(value, int | float) and not isinstance(value, bool) \
+            and not p.low <= value <= (p.high if p.high is not None else math.inf):
+        return f"{p.name} must be in [{p.low}, {p.high}], got {value!r}"
+    if p.check is not None:
+        return p.check(value)
+    return None
+
+
+class ParamNode(Node):
+    """A node whose parameters are declared from :class:`Param` specs and validated on set;
+    accepted changes go to :meth:`on_parameters` (after they are set)."""
+
+    def __init__(self, name: str, specs: Sequence[Param], **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        self._specs = {p.name: p for p in specs}
+        for p in specs:
+            self.declare_parameter(p.name, p.default, _descriptor(p))
+            reason = validate(p, self.get_parameter(p.name).value)
+            if reason is not None:
+                raise ValueError(f"parameter {reason}")
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+
+    def p(self, name: str) -> Any:
+        """The value of a parameter."""
+        return self.get_parameter(name).value
+
+    def _check_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        for prm in params:
+            spec = self._specs.get(prm.name)
+            if spec is None:
+                continue
+            reason = validate(spec, prm.value)
+            if reason is None:
+                reason = self.check_parameter(prm.name, prm.value)
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params: list[Parameter]) -> None:
+        names = [p.name for p in params if p.name in self._specs]
+        if names:
+            self.on_parameters(names)
+
+    def check_parameter(self, name: str, value: Any) -> str | None:
+        """Node-specific validation (override); returns a reason to reject."""
+        return None
+
+    def on_parameters(self, names: list[str]) -> None:
+        """Apply accepted parameter changes (override)."""
+
+
+def diagnostic_array(node: Node, name: str, values: dict[str, Any], level: int = 0,
+                     message: str = "ok", stamp: Time | None = None) -> DiagnosticArray:
+    """A DiagnosticArray with one status of key/value pairs."""
+    status = DiagnosticStatus(level=bytes([level]), name=name, message=message,
+                              hardware_id=node.get_name())
+    status.values = [KeyValue(key=str(k), value=_text(v)) for k, v in values.items()]
+    arr = DiagnosticArray()
+    arr.header.stamp = stamp if stamp is not None else node.get_clock().now().to_msg()
+    arr.status = [status]
+    return arr
+
+
+def _text(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v)
+
+
+def main_for(node_class: Callable[[], Node], doc: str) -> Callable[[list[str] | None], None]:
+    """A console-script main(): ``--help`` lists the node's parameters; otherwise init, spin,
+    stop on Ctrl-C or external shutdown, destroy the node, shut down (as demo_nodes_py)."""
+
+    def main(args: list[str] | None = None) -> None:
+        argv = sys.argv if args is None else args
+        name = getattr(node_class, "NODE_NAME", node_class.__name__)
+        parser = argparse.ArgumentParser(
+            prog=name, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter,
+            epilog="ROS arguments follow --ros-args, e.g. --ros-args -p forgetting_factor:=0.99 "
+                   "-r __ns:=/vehicle" + _param_help(node_class))
+        parser.parse_args(remove_ros_args(argv)[1:])
+        rclpy.init(args=argv)
+        node = None
+        try:
+            node = node_class()
+            rclpy.spin(node)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+
+    return main
+
+
+def _param_help(node_class: Any) -> str:
+    specs: Sequence[Param] = getattr(node_class, "PARAMS", ())
+    if not specs:
+        return ""
+    lines = [f"  {p.name} (default {p.default!r}): {p.description}" for p in specs]
+    return "\n\nparameters:\n" + "\n".join(lines)

@@ -1,0 +1,149 @@
+"""preprocess_node: causal fusion of IMU, DVL, pressure and thruster states into samples.
+
+Subscribes imu/data, dvl/twist, pressure, thrusters/state (sensor-data QoS); publishes
+dampest/velocity (TwistWithCovarianceStamped), dampest/acceleration
+(AccelWithCovarianceStamped), dampest/wrench (WrenchStamped) and dampest/attitude
+(QuaternionStamped, base_link FLU → odom ENU, for the restoring forces) with identical header
+stamps at a fixed rate, body frame FLU (base_link), only for usable samples (not during DVL
+dropouts); diagnostics with the message counts, rejections and resets once per second.
+The work is done by dampest_ros.core.online.OnlinePreprocessor (the same class replays bags).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import (
+    AccelWithCovarianceStamped,
+    QuaternionStamped,
+    TwistWithCovarianceStamped,
+    WrenchStamped,
+)
+from sensor_msgs.msg import FluidPressure, Imu, JointState
+
+from dampest_ros.core import frames
+from dampest_ros.core.online import OnlineConfig, OnlinePreprocessor, OnlineSample
+from dampest_ros.io.yaml_io import load_vehicle
+from dampest_ros.ros.common import (
+    RELIABLE_QOS,
+    SENSOR_QOS,
+    Param,
+    ParamNode,
+    diagnostic_array,
+    main_for,
+    seconds,
+    to_time,
+)
+from dampest_ros.ros.convert import accel_msg, twist_msg, wrench_msg, xyz
+from dampest_ros.ros.sim_node import _vehicle_ok
+
+
+class PreprocessNode(ParamNode):
+    """Preprocessing node (see the module docstring)."""
+
+    NODE_NAME = "preprocess_node"
+    PARAMS = (
+        Param("vehicle", "bluerov2_heavy", "vehicle preset (thruster allocation, g, ρ)",
+              check=_vehicle_ok),
+        Param("rate", 50.0, "output sample rate in Hz", low=1.0, high=500.0),
+        Param("max_dvl_gap", 1.0, "samples more than this (s) after the last DVL fix are "
+              "not published", low=0.05, high=60.0),
+        Param("settle", 1.0, "s after a (re)start or a DVL recovery before samples are "
+              "published", low=0.0, high=60.0),
+        Param("stale_after", 1.0, "messages older than this (s) behind the newest are "
+              "rejected", low=0.01, high=60.0),
+        Param("clock_jump", 1.0, "a stamp this far (s) behind its topic's last one is a "
+              "clock jump: reset", low=0.01, high=3600.0),
+        Param("frame_id", "base_link", "frame_id of the published samples"),
+    )
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMS, **kwargs)
+        self.pub_v = self.create_publisher(TwistWithCovarianceStamped, "dampest/velocity",
+                                           RELIABLE_QOS)
+        self.pub_a = self.create_publisher(AccelWithCovarianceStamped, "dampest/acceleration",
+                                           RELIABLE_QOS)
+        self.pub_w = self.create_publisher(WrenchStamped, "dampest/wrench", RELIABLE_QOS)
+        self.pub_q = self.create_publisher(QuaternionStamped, "dampest/attitude", RELIABLE_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RELIABLE_QOS)
+        self._build()
+        self.create_subscription(Imu, "imu/data", self._on_imu, SENSOR_QOS)
+        self.create_subscription(TwistWithCovarianceStamped, "dvl/twist", self._on_dvl,
+                                 SENSOR_QOS)
+        self.create_subscription(FluidPressure, "pressure", self._on_pressure, SENSOR_QOS)
+        self.create_subscription(JointState, "thrusters/state", self._on_thrusters, SENSOR_QOS)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self.published = 0
+
+    def _build(self) -> None:
+        v = load_vehicle(self.p("vehicle"))
+        cfg = OnlineConfig(rate=self.p("rate"), max_dvl_gap=self.p("max_dvl_gap"),
+                           settle=self.p("settle"), stale_after=self.p("stale_after"),
+                           clock_jump=self.p("clock_jump"))
+        self.pre = OnlinePreprocessor(v.thrusters, v.body.gravity, v.body.rho, cfg)
+
+    def on_parameters(self, names: list[str]) -> None:
+        if set(names) - {"frame_id"}:
+            self._build()
+            self.get_logger().info(f"preprocessing restarted ({', '.join(names)} changed)")
+
+    # --- subscriptions: convert, call core, publish -------------------------------------------
+
+    def _on_imu(self, m: Imu) -> None:
+        o = m.orientation
+        self._publish(self.pre.imu(seconds(m.header.stamp), np.array([o.x, o.y, o.z, o.w]),
+                                   xyz(m.angular_velocity), xyz(m.linear_acceleration)))
+
+    def _on_dvl(self, m: TwistWithCovarianceStamped) -> None:
+        self._publish(self.pre.dvl(seconds(m.header.stamp), xyz(m.twist.twist.linear),
+                                   np.asarray(m.twist.covariance, dtype=float)))
+
+    def _on_pressure(self, m: FluidPressure) -> None:
+        self._publish(self.pre.pressure(seconds(m.header.stamp), m.fluid_pressure))
+
+    def _on_thrusters(self, m: JointState) -> None:
+        self._publish(self.pre.thrusters(seconds(m.header.stamp), tuple(m.name),
+                                         np.asarray(m.effort, dtype=float)))
+
+    def _publish(self, samples: list[OnlineSample]) -> None:
+        frame = self.p("frame_id") if samples else ""
+        for s in samples:
+            if not s.usable:
+                continue
+            stamp = to_time(s.t)
+            # FRD → FLU through the core's frame conversion
+            mv = twist_msg(frames.body_twist(s.nu))
+            ma = accel_msg(frames.body_twist(s.nu_dot))
+            mw = wrench_msg(frames.body_twist(s.tau))
+            # attitude FRD → NED (Euler) to the ROS quaternion FLU → ENU
+            q = frames.matrix_to_quat(frames.rotation(frames.matrix_from_euler(s.euler)))
+            mq = QuaternionStamped()
+            mq.quaternion.w, mq.quaternion.x, mq.quaternion.y, mq.quaternion.z = map(float, q)
+            for msg in (mv, ma, mw, mq):
+                msg.header.stamp = stamp
+                msg.header.frame_id = frame
+            mq.header.frame_id = "odom"
+            self.pub_v.publish(mv)
+            self.pub_a.publish(ma)
+            self.pub_w.publish(mw)
+            self.pub_q.publish(mq)
+            self.published += 1
+        while self.pre.events:
+            self.get_logger().warning(self.pre.events.popleft())
+
+    def _publish_diagnostics(self) -> None:
+        c = dict(self.pre.counts)
+        c["published"] = self.published
+        c["derivative_lag_s"] = self.pre.derivative_lag
+        problems = c["rejected_nonfinite"] + c["rejected_stale"] + c["clock_resets"]
+        self.pub_diag.publish(diagnostic_array(
+            self, "dampest preprocess", c, level=1 if problems else 0,
+            message=f"{problems} rejected or reset" if problems else "ok"))
+
+
+main = main_for(PreprocessNode, __doc__ or "")
+
+if __name__ == "__main__":
+    main()
