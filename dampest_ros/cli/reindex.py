@@ -1,0 +1,32 @@
+"""``dampest reindex``: rebuild metadata.yaml of an MCAP bag from its storage files.
+
+For a recording that was killed, the storage file without a summary is read up to its last
+complete chunk and rewritten; the damaged original is kept as ``<file>.damaged``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from dampest_ros.cli.common import table
+from dampest_ros.io.recorder import reindex
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the sub-command."""
+    p = sub.add_parser("reindex", help="rebuild metadata.yaml, recover a killed recording",
+                       description=__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog="example: dampest reindex rosbag2_2024_05_01-10_00_00")
+    p.add_argument("bag", help="rosbag2 directory with .mcap files")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Reindex and print what each file held."""
+    report = reindex(args.bag)
+    rows = [(f.name, f.messages, "complete" if f.complete else "recovered" if f.messages
+             else "unreadable", f.lost_bytes, f.error or "") for f in report.files]
+    print(table(("file", "messages", "state", "bytes lost", "stopped at"), rows))
+    print(f"wrote {report.path / 'metadata.yaml'}: {report.messages} messages")
+    return 0

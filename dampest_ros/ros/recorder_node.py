@@ -1,0 +1,192 @@
+"""recorder_node: records topics to a rosbag2 MCAP bag (as ``ros2 bag record``).
+
+Subscribes to each topic as soon as a publisher of it appears in the graph (checked every
+discovery_period), with a QoS compatible with every publisher (reliable only if all of them
+are), receives the serialized bytes (no deserialisation) and writes them with their receive
+time (the node clock: simulation time under use_sim_time) through
+dampest_ros.io.recorder.BagRecorder. The QoS each publisher offers is stored in the bag
+metadata. Chunks reach the disk every chunk_size bytes or flush_period seconds, so a killed
+recorder loses at most that; SIGINT/SIGTERM close the bag (summary, metadata.yaml). A killed
+recording is recovered with 'dampest reindex BAG'.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from datetime import datetime
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.subscription import Subscription
+
+from dampest_ros.io.recorder import DEFAULT_CHUNK_SIZE, BagRecorder
+from dampest_ros.ros.bag_interop import compatible_qos, import_message_type, to_bag_qos
+from dampest_ros.ros.common import Param, ParamNode, main_for
+
+#: The topics of DESIGN.md §3 (relative: resolved in the node's namespace).
+DEFAULT_TOPICS = ["truth/odom", "imu/data", "dvl/twist", "pressure", "thrusters/state",
+                  "dampest/velocity", "dampest/acceleration", "dampest/wrench", "dampest/model",
+                  "diagnostics"]
+
+
+def _output_ok(value: Any) -> str | None:
+    if str(value) and Path(str(value)).exists():
+        return f"output {value} exists; the recorder never overwrites a bag"
+    return None
+
+
+def _topics_ok(value: Any) -> str | None:
+    names = [t for t in value if t]
+    if not names:
+        return "topics must name at least one topic, or be ['all']"
+    if "all" in names and len(names) > 1:
+        return "topics: 'all' records every topic and takes no other name"
+    return None
+
+
+class RecorderNode(ParamNode):
+    """Recorder node (see the module docstring)."""
+
+    NODE_NAME = "recorder_node"
+    PARAMS = (
+        Param("output", "", "bag directory to create (must not exist); empty: "
+              "rosbag2_YYYY_MM_DD-HH_MM_SS in the working directory", check=_output_ok,
+              read_only=True),
+        Param("topics", DEFAULT_TOPICS, "topics to record (relative names are resolved in "
+              "the node namespace); ['all']: every topic found in the graph",
+              check=_topics_ok, read_only=True),
+        Param("exclude", ["/rosout", "/parameter_events"], "topics never recorded by 'all'",
+              read_only=True),
+        Param("max_bag_size", 0, "start a new storage file after this many bytes; 0: never",
+              low=0, high=2**62, read_only=True),
+        Param("max_bag_duration", 0.0, "start a new storage file after this many seconds of "
+              "log time; 0: never", low=0.0, high=1e9, read_only=True),
+        Param("chunk_size", DEFAULT_CHUNK_SIZE, "bytes of messages per MCAP chunk; each "
+              "chunk is flushed to disk when complete", low=1024, high=2**30, read_only=True),
+        Param("flush_period", 1.0, "a chunk is also flushed once it is this many seconds old "
+              "(a crash loses at most this much); 0: by size only", low=0.0, high=3600.0,
+              read_only=True),
+        Param("compression", "none", "chunk compression", choices=("none", "zstd", "lz4"),
+              read_only=True),
+        Param("queue_depth", 2000, "subscription queue (messages) absorbing bursts",
+              low=1, high=1_000_000, read_only=True),
+        Param("discovery_period", 0.5, "seconds between looks at the graph for publishers "
+              "of topics not yet subscribed", low=0.05, high=60.0),
+        Param("status_period", 10.0, "seconds between status lines in the log; 0: none",
+              low=0.0, high=3600.0),
+    )
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMS, **kwargs)
+        output = str(self.p("output")) or datetime.now().strftime("rosbag2_%Y_%m_%d-%H_%M_%S")
+        self.recorder = BagRecorder(
+            output, chunk_size=int(self.p("chunk_size")),
+            chunk_interval=float(self.p("flush_period")),
+            max_bag_size=int(self.p("max_bag_size")),
+            max_bag_duration=float(self.p("max_bag_duration")),
+            compression=str(self.p("compression"))).open()
+        wanted = [t for t in self.p("topics") if t]
+        self.all_topics = wanted == ["all"]
+        self.wanted = [] if self.all_topics else [self.resolve_topic_name(t) for t in wanted]
+        self.exclude = {self.resolve_topic_name(t) for t in self.p("exclude") if t}
+        self.subs: dict[str, Subscription] = {}
+        self.lost: dict[str, int] = {}
+        self.skipped: set[str] = set()
+        self._cpu0, self._wall0 = time.process_time(), time.monotonic()
+        self._discover()
+        self.discovery_timer = self.create_timer(float(self.p("discovery_period")),
+                                                 self._discover)
+        period = float(self.p("flush_period"))
+        self.flush_timer = self.create_timer(max(period / 4, 0.05), self.recorder.flush_if_due)
+        self.status_timer = None
+        if self.p("status_period") > 0:
+            self.status_timer = self.create_timer(float(self.p("status_period")), self._status)
+        what = "every topic" if self.all_topics else ", ".join(self.wanted)
+        self.get_logger().info(f"recording {what} to {self.recorder.path}")
+
+    def on_parameters(self, names: list[str]) -> None:
+        """discovery_period and status_period apply at once."""
+        if "discovery_period" in names:
+            self.discovery_timer.timer_period_ns = int(self.p("discovery_period") * 1e9)
+        if "status_period" in names and self.status_timer is not None:
+            self.status_timer.timer_period_ns = int(max(self.p("status_period"), 0.05) * 1e9)
+
+    def _candidates(self) -> list[str]:
+        if not self.all_topics:
+            return [t for t in self.wanted if t not in self.subs]
+        return [name for name, _ in self.get_topic_names_and_types()
+                if name not in self.subs and name not in self.exclude]
+
+    def _discover(self) -> None:
+        for topic in self._candidates():
+            pubs = self.get_publishers_info_by_topic(topic)
+            if not pubs or topic in self.skipped:
+                continue
+            msgtype = pubs[0].topic_type
+            try:
+                cls = import_message_type(msgtype)
+            except ImportError as exc:
+                self.get_logger().warning(f"not recording {topic}: {exc}")
+                self.skipped.add(topic)
+                continue
+            offered = [p.qos_profile for p in pubs if p.topic_type == msgtype]
+            conn = self.recorder.add_connection(
+                topic, msgtype, [to_bag_qos(q) for q in offered],
+                type_hash=str(getattr(pubs[0], "topic_type_hash", "")) or None)
+            self.lost[topic] = 0
+            events = SubscriptionEventCallbacks(message_lost=partial(self._on_lost, topic))
+            # raw: the callback gets the serialized bytes and the message info
+            callback: Any = partial(self._on_message, conn)
+            self.subs[topic] = self.create_subscription(
+                cls, topic, callback, compatible_qos(offered, int(self.p("queue_depth"))),
+                raw=True, event_callbacks=events)
+            self.get_logger().info(f"recording {topic} ({msgtype}, "
+                                   f"{len(offered)} publisher(s))")
+
+    def _on_message(self, conn: int, data: bytes, info: dict[str, Any]) -> None:
+        self.recorder.write(conn, self.get_clock().now().nanoseconds, data,
+                            publish_time=int(info.get("source_timestamp") or 0) or None,
+                            sequence=int(info.get("publication_sequence_number") or 0))
+
+    def _on_lost(self, topic: str, info: Any) -> None:
+        self.lost[topic] = int(info.total_count)
+        self.get_logger().warning(f"{topic}: {info.total_count_change} message(s) lost in "
+                                  f"transport ({info.total_count} in all)")
+
+    def stats(self) -> dict[str, Any]:
+        """Messages written per topic, messages lost in transport, CPU share of one core."""
+        wall = max(time.monotonic() - self._wall0, 1e-9)
+        return {"messages": {t.topic: t.count for t in self.recorder.topics},
+                "lost": sum(self.lost.values()),
+                "cpu": (time.process_time() - self._cpu0) / wall}
+
+    def _status(self) -> None:
+        s = self.stats()
+        self.get_logger().info(
+            f"{sum(s['messages'].values())} messages on {len(s['messages'])} topics, "
+            f"{self.recorder.bytes_written / 1e6:.1f} MB, {s['lost']} lost, "
+            f"CPU {100 * s['cpu']:.0f} %")
+
+    def destroy_node(self) -> None:
+        """Close the bag (last chunk, summary, metadata.yaml), then destroy the node."""
+        if not self.recorder.closed:
+            s = self.stats()
+            path = self.recorder.close()
+            counts = ", ".join(f"{t} {n}" for t, n in s["messages"].items())
+            text = (f"closed {path}: {sum(s['messages'].values())} messages "
+                    f"({counts or 'none'}), {s['lost']} lost in transport, "
+                    f"CPU {100 * s['cpu']:.0f} % of one core")
+            if self.context.ok():
+                self.get_logger().info(text)
+            else:  # after SIGINT/SIGTERM: /rosout is gone, the console is not
+                print(f"[INFO] [{self.get_name()}]: {text}", file=sys.stderr, flush=True)
+        super().destroy_node()
+
+
+main = main_for(RecorderNode, __doc__ or "")
+
+if __name__ == "__main__":
+    main()

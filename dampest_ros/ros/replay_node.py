@@ -1,0 +1,219 @@
+"""replay_node: plays a rosbag2 bag (MCAP or SQLite3) with its timing (as ``ros2 bag play``).
+
+Publishes every message's serialized bytes unchanged (bit-identical to the bag) at its log
+time, the intervals divided by rate, from start_offset seconds into the bag; optionally
+loops, publishes /clock with the bag time (for use_sim_time listeners), plays only some
+topics and renames them. Publishers use the QoS recorded in the bag (reliable only when every
+recorded publisher was; override with reliability) and keep queue_depth messages. A topic
+whose message type is not installed is skipped with a warning. Progress is logged every
+progress_period seconds; when the bag has been played (and loop is false) the node exits.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from builtin_interfaces.msg import Time
+from rclpy.publisher import Publisher
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.rosbag2 import Reader
+from rosgraph_msgs.msg import Clock
+
+from dampest_ros.ros.bag_interop import compatible_qos, import_message_type
+from dampest_ros.ros.common import Param, ParamNode, main_for
+
+
+def _bag_ok(value: Any) -> str | None:
+    if not str(value):
+        return "bag: give the bag directory (or .mcap/.db3 file) to play"
+    if not Path(str(value)).exists():
+        return f"bag {value} does not exist"
+    return None
+
+
+def _remap_ok(value: Any) -> str | None:
+    bad = [r for r in value if r and (":=" not in r or not all(r.split(":=", 1)))]
+    return f"remap entries must read 'from:=to', got {bad}" if bad else None
+
+
+class ReplayNode(ParamNode):
+    """Replay node (see the module docstring)."""
+
+    NODE_NAME = "replay_node"
+    PARAMS = (
+        Param("bag", "", "rosbag2 directory (MCAP or SQLite3) or a single .mcap/.db3 file",
+              check=_bag_ok, read_only=True),
+        Param("rate", 1.0, "playback speed: bag seconds per wall-clock second", low=0.01,
+              high=1000.0),
+        Param("topics", [""], "bag topics to play (with or without the leading /); [''] "
+              "or empty names: all", read_only=True),
+        Param("remap", [""], "renamed topics, 'from:=to' per entry (bag name := published "
+              "name)", check=_remap_ok, read_only=True),
+        Param("start_offset", 0.0, "seconds after the first message of the bag to start at",
+              low=0.0, high=1e9),
+        Param("loop", False, "play again from start_offset after the end"),
+        Param("clock", False, "publish /clock with the bag time"),
+        Param("clock_rate", 100.0, "/clock messages per wall-clock second", low=1.0,
+              high=10000.0),
+        Param("reliability", "bag", "publisher reliability: as recorded, or forced",
+              choices=("bag", "reliable", "best_effort"), read_only=True),
+        Param("queue_depth", 1000, "publisher queue (messages)", low=1, high=1_000_000,
+              read_only=True),
+        Param("wait_for_subscribers", 0, "before playing, wait until every played topic has "
+              "this many subscribers", low=0, high=1000, read_only=True),
+        Param("delay", 0.0, "seconds to wait before playing (after wait_for_subscribers)",
+              low=0.0, high=3600.0, read_only=True),
+        Param("progress_period", 5.0, "seconds between progress lines in the log; 0: none",
+              low=0.0, high=3600.0),
+    )
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMS, **kwargs)
+        self.reader = Reader(Path(str(self.p("bag"))))
+        self.reader.open()
+        wanted = {"/" + t.lstrip("/") for t in self.p("topics") if t}
+        remap = dict(("/" + a.strip().lstrip("/"), b.strip())
+                     for a, b in (r.split(":=", 1) for r in self.p("remap") if r))
+        depth = int(self.p("queue_depth"))
+        forced = {"bag": "auto"}.get(str(self.p("reliability")), str(self.p("reliability")))
+        self.pubs: dict[int, Publisher] = {}
+        self.skipped: list[str] = []
+        by_topic: dict[str, Publisher] = {}
+        for conn in self.reader.connections:
+            if wanted and conn.topic not in wanted:
+                continue
+            try:
+                cls = import_message_type(conn.msgtype)
+            except ImportError as exc:
+                self.get_logger().warning(f"skipping {conn.topic}: {exc}")
+                self.skipped.append(conn.topic)
+                continue
+            name = remap.get(conn.topic, conn.topic)
+            if name not in by_topic:
+                offered = getattr(conn.ext, "offered_qos_profiles", [])  # rosbag2 bags
+                qos = compatible_qos(offered, depth, forced)
+                by_topic[name] = self.create_publisher(cls, name, qos)
+            self.pubs[conn.id] = by_topic[name]
+        missing = sorted(wanted - {c.topic for c in self.reader.connections})
+        if missing:
+            self.get_logger().warning(f"topics not in the bag: {missing}")
+        self.connections = [c for c in self.reader.connections if c.id in self.pubs]
+        self.total = sum(int(c.msgcount) for c in self.connections)
+        self.clock_pub = None
+        if self.p("clock"):
+            self.clock_pub = self.create_publisher(
+                Clock, "/clock", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                                            durability=DurabilityPolicy.VOLATILE))
+        self.published = 0
+        self.bag_time = 0
+        self._anchor: tuple[float, int] | None = None  # (wall time, bag time) of the pace
+        self._stop = threading.Event()
+        self._done = threading.Event()
+        self._last_progress = time.monotonic()
+        self._last_clock = 0.0
+        self.get_logger().info(
+            f"playing {self.total} messages on {len(by_topic)} topics of {self.p('bag')} "
+            f"at rate {self.p('rate')}" + (f", skipping {self.skipped}" if self.skipped else ""))
+        self.thread = threading.Thread(target=self._run, name="replay", daemon=True)
+        self.thread.start()
+
+    def on_parameters(self, names: list[str]) -> None:
+        """A new rate or start_offset takes effect from the current message on."""
+        if "rate" in names:
+            self._anchor = None
+
+    # -- playback (its own thread; publishing is thread safe in rclpy) --
+
+    def _run(self) -> None:
+        try:
+            if self._wait_to_start():
+                self._play()
+        except Exception as exc:  # a shut-down context while publishing: stop quietly
+            if not self._stop.is_set() and self.context.ok():
+                self.get_logger().error(f"playback failed: {exc}")
+        finally:
+            self._done.set()
+            if not self._stop.is_set():
+                self._log_progress(final=True)
+                self.context.try_shutdown()  # ends spin(): the node has done its job
+
+    def _wait_to_start(self) -> bool:
+        need = int(self.p("wait_for_subscribers"))
+        pubs = set(self.pubs.values())
+        while need and any(p.get_subscription_count() < need for p in pubs):
+            if self._stop.wait(0.05):
+                return False
+        return not self._stop.wait(float(self.p("delay")))
+
+    def _play(self) -> None:
+        start = self.reader.start_time + round(float(self.p("start_offset")) * 1e9)
+        while not self._stop.is_set():
+            self._anchor = None
+            for conn, t, data in self.reader.messages(connections=self.connections,
+                                                      start=start):
+                if not self._sleep_until(t):
+                    return
+                self.pubs[conn.id].publish(bytes(data))
+                self.published += 1
+                self.bag_time = t
+            if not self.p("loop"):
+                return
+
+    def _sleep_until(self, t: int) -> bool:
+        """Wait for the wall time of bag time ``t`` (publishing /clock meanwhile); False
+        when stopped."""
+        while True:
+            if self._anchor is None:
+                self._anchor = (time.perf_counter(), t)
+            wall0, bag0 = self._anchor
+            rate = float(self.p("rate"))
+            now = time.perf_counter()
+            due = wall0 + (t - bag0) / 1e9 / rate
+            if self.clock_pub is not None:
+                self._publish_clock(now, bag0 + round((now - wall0) * rate * 1e9), t)
+            self._maybe_progress(now)
+            if now >= due:
+                return not self._stop.is_set()
+            step = due - now
+            if self.clock_pub is not None:
+                step = min(step, 1.0 / float(self.p("clock_rate")))
+            if self._stop.wait(min(step, 0.5)):
+                return False
+
+    def _publish_clock(self, now: float, bag_now: int, next_t: int) -> None:
+        if now - self._last_clock >= 1.0 / float(self.p("clock_rate")):
+            self._last_clock = now
+            assert self.clock_pub is not None
+            ns = min(bag_now, next_t)
+            self.clock_pub.publish(Clock(clock=Time(sec=ns // 1_000_000_000,
+                                                    nanosec=ns % 1_000_000_000)))
+
+    def _maybe_progress(self, now: float) -> None:
+        period = float(self.p("progress_period"))
+        if period > 0 and time.monotonic() - self._last_progress >= period:
+            self._log_progress()
+
+    def _log_progress(self, final: bool = False) -> None:
+        self._last_progress = time.monotonic()
+        into = max(self.bag_time - self.reader.start_time, 0) * 1e-9
+        length = max(self.reader.duration - 1, 0) * 1e-9
+        pct = 100.0 * self.published / max(self.total, 1)
+        what = "finished" if final else "playing"
+        self.get_logger().info(f"{what}: {self.published}/{self.total} messages "
+                               f"({pct:.0f} %), bag time {into:.1f} of {length:.1f} s")
+
+    def destroy_node(self) -> None:
+        """Stop playback, close the bag, destroy the node."""
+        self._stop.set()
+        self.thread.join(timeout=5.0)
+        self.reader.close()
+        super().destroy_node()
+
+
+main = main_for(ReplayNode, __doc__ or "")
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,319 @@
+"""recorder_node and replay_node as separate processes against in-process rclpy publishers and
+subscribers: every message recorded (SIGINT), recovery after SIGKILL, replay timing and bytes.
+
+Runs on its own ROS_DOMAIN_ID, localhost only (DESIGN.md §6)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from mcap.reader import make_reader  # noqa: E402
+from mcap_ros2.decoder import DecoderFactory  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.qos import (  # noqa: E402
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+from rosbags.rosbag2 import Reader  # noqa: E402
+from sensor_msgs.msg import Imu, JointState  # noqa: E402
+
+from dampest_ros.io import bag  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[2]
+DOMAIN = "88"
+IMU_HZ, JOINT_HZ = 200, 50
+CLI = ("import argparse, sys; from importlib import import_module; "
+       "m = import_module('dampest_ros.cli.' + sys.argv[1]); p = argparse.ArgumentParser(); "
+       "m.add_parser(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); sys.exit(a.run(a))")
+
+
+def env() -> dict[str, str]:
+    e = dict(os.environ)
+    e.update(ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+             OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1",
+             PYTHONPATH=os.pathsep.join(p for p in (str(REPO), e.get("PYTHONPATH")) if p))
+    return e
+
+
+def node_process(module: str, params: dict[str, str], log: Path) -> subprocess.Popen[bytes]:
+    args = [a for k, v in params.items() for a in ("-p", f"{k}:={v}")]
+    with log.open("wb") as out:
+        return subprocess.Popen([sys.executable, "-m", f"dampest_ros.ros.{module}",
+                                 "--ros-args", *args], env=env(), stdout=out,
+                                stderr=subprocess.STDOUT)
+
+
+def cli(*argv: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-c", CLI, *argv], env=env(), capture_output=True,
+                          text=True, timeout=120)
+
+
+class Ros:
+    """An rclpy context of its own on the test domain, spun in a background thread."""
+
+    def __init__(self) -> None:
+        os.environ.update(ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node("record_replay_test", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        try:
+            self.executor.spin()
+        except Exception:  # shutdown while waiting
+            pass
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=2.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self.thread.join(timeout=5.0)
+
+
+@pytest.fixture(scope="module")
+def ros() -> Iterator[Ros]:
+    r = Ros()
+    yield r
+    r.close()
+
+
+class Publishers:
+    """200 Hz Imu and 50 Hz JointState with sensor-data QoS; message k carries k in
+    angular_velocity.x (Imu) and velocity[0] (JointState)."""
+
+    def __init__(self, ros: Ros) -> None:
+        self.node = ros.node
+        self.imu = ros.node.create_publisher(Imu, "imu/data", qos_profile_sensor_data)
+        self.joint = ros.node.create_publisher(JointState, "thrusters/state",
+                                               qos_profile_sensor_data)
+        self.sent = {"/imu/data": 0, "/thrusters/state": 0}
+
+    def wait_for_subscriber(self, timeout: float = 30.0) -> None:
+        end = time.monotonic() + timeout
+        while min(self.imu.get_subscription_count(), self.joint.get_subscription_count()) < 1:
+            assert time.monotonic() < end, "the recorder did not subscribe"
+            time.sleep(0.05)
+
+    def run(self, seconds: float, stop: threading.Event | None = None) -> None:
+        t0 = time.perf_counter()
+        for k in range(int(seconds * IMU_HZ)):
+            if stop is not None and stop.is_set():
+                return
+            due = t0 + k / IMU_HZ
+            time.sleep(max(0.0, due - time.perf_counter()))
+            stamp = self.node.get_clock().now().to_msg()
+            m = Imu()
+            m.header.stamp, m.header.frame_id = stamp, "imu_link"
+            m.angular_velocity.x = float(self.sent["/imu/data"])
+            self.imu.publish(m)
+            self.sent["/imu/data"] += 1
+            if k % (IMU_HZ // JOINT_HZ) == 0:
+                j = JointState()
+                j.header.stamp = stamp
+                j.name = [f"thruster{i + 1}" for i in range(8)]
+                j.velocity = [float(self.sent["/thrusters/state"])] * 8
+                j.effort = [1.5] * 8
+                self.joint.publish(j)
+                self.sent["/thrusters/state"] += 1
+
+    def destroy(self) -> None:
+        self.node.destroy_publisher(self.imu)
+        self.node.destroy_publisher(self.joint)
+
+
+def sequence_numbers(path: Path) -> dict[str, list[int]]:
+    """The k carried by each recorded message, per topic, decoded with mcap + mcap_ros2."""
+    out: dict[str, list[int]] = {"/imu/data": [], "/thrusters/state": []}
+    for f in sorted(path.glob("*.mcap")):
+        with f.open("rb") as h:
+            reader = make_reader(h, decoder_factories=[DecoderFactory()])
+            for _, channel, _, msg in reader.iter_decoded_messages():
+                k = msg.angular_velocity.x if channel.topic == "/imu/data" else msg.velocity[0]
+                out[channel.topic].append(int(k))
+    return out
+
+
+def closing_line(log: Path) -> str:
+    lines = [x for x in log.read_text().splitlines() if "closed" in x]
+    assert lines, log.read_text()
+    return lines[-1]
+
+
+@pytest.fixture(scope="module")
+def recorded(ros: Ros, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, int]]:
+    """12 s recorded by recorder_node (default QoS handling), stopped with SIGINT."""
+    tmp = tmp_path_factory.mktemp("record")
+    out = tmp / "bag"
+    proc = node_process("recorder_node", {"output": str(out), "status_period": "0.0",
+                                          "topics": "[imu/data, thrusters/state]"},
+                        tmp / "recorder.log")
+    pubs = Publishers(ros)
+    try:
+        pubs.wait_for_subscriber()
+        time.sleep(0.3)
+        pubs.run(12.0)
+        time.sleep(0.5)  # the last messages reach the recorder
+    finally:
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 0, (tmp / "recorder.log").read_text()
+        pubs.destroy()
+    print(closing_line(tmp / "recorder.log"))
+    return out, dict(pubs.sent)
+
+
+def test_sigint_bag_holds_every_published_message(recorded: tuple[Path, dict[str, int]]
+                                                  ) -> None:
+    path, sent = recorded
+    assert sent == {"/imu/data": 12 * IMU_HZ, "/thrusters/state": 12 * JOINT_HZ}
+    summary = bag.bag_summary(path)
+    assert {t: s.count for t, s in summary.topics.items()} == sent
+    # every message, in publishing order, and readable by mcap + mcap_ros2
+    assert sequence_numbers(path) == {t: list(range(n)) for t, n in sent.items()}
+    data = bag.read_bag(path)
+    np.testing.assert_array_equal(data["imu/data"].angular_velocity[:, 0],
+                                  np.arange(sent["/imu/data"]))
+    assert summary.duration == pytest.approx(12.0, abs=0.5)
+    with Reader(path) as reader:  # the publishers' offered QoS, as discovered
+        for conn in reader.connections:
+            (qos,) = conn.ext.offered_qos_profiles
+            assert qos.reliability.name == "BEST_EFFORT"
+            assert qos.durability.name == "VOLATILE"
+    again = cli("record", "-o", str(path), "imu/data")
+    assert again.returncode != 0 and "never overwrites" in again.stderr
+
+
+def test_sigkill_bag_recovered_by_reindex(ros: Ros, tmp_path: Path) -> None:
+    """Killed mid-recording ('all' topics, 16 KiB chunks): after 'dampest reindex' the bag
+    reads back and holds every message published up to its last complete chunk."""
+    out = tmp_path / "bag"
+    proc = node_process("recorder_node", {"output": str(out), "topics": "[all]",
+                                          "chunk_size": "16384", "flush_period": "0.5",
+                                          "discovery_period": "0.1"},
+                        tmp_path / "recorder.log")
+    pubs = Publishers(ros)
+    stop = threading.Event()
+    try:
+        pubs.wait_for_subscriber()
+        time.sleep(0.5)  # the 'all' recorder subscribes as it discovers each topic
+        worker = threading.Thread(target=pubs.run, args=(10.0, stop))
+        worker.start()
+        time.sleep(float(np.random.default_rng().uniform(3.0, 6.0)))
+        proc.send_signal(signal.SIGKILL)
+        at_kill = dict(pubs.sent)
+        proc.wait(timeout=10)
+        stop.set()
+        worker.join()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        pubs.destroy()
+    assert not (out / "metadata.yaml").exists()
+    with pytest.raises(bag.BagError, match="dampest reindex"):
+        bag.read_bag(out)
+
+    done = cli("reindex", str(out))
+    assert done.returncode == 0, done.stderr
+    print(done.stdout)
+    seqs = sequence_numbers(out)
+    assert set(seqs) == {"/imu/data", "/thrusters/state"}
+    recovered = sum(len(s) for s in seqs.values())
+    # messages published before the last complete chunk boundary: up to the last recovered
+    before_boundary = sum(max(s) + 1 for s in seqs.values() if s)
+    assert recovered >= 0.99 * before_boundary
+    assert all(s == list(range(len(s))) for s in seqs.values())  # no hole at all
+    lost_tail = sum(at_kill.values()) - recovered
+    # at most the chunk in progress: 0.5 s flush period (+ kill latency) at 250 msg/s
+    assert 0 <= lost_tail <= 0.5 * (IMU_HZ + JOINT_HZ) + 100
+    print(f"killed after {sum(at_kill.values())} published: {recovered} recovered "
+          f"({before_boundary} before the last chunk boundary), {lost_tail} in the lost tail")
+    summary = bag.bag_summary(out)
+    assert summary.message_count == recovered
+    data = bag.read_bag(out)
+    assert len(data["imu/data"]) == len(seqs["/imu/data"])
+
+
+def test_replay_rate_10_keeps_timing_and_bytes(ros: Ros, recorded: tuple[Path, dict[str, int]],
+                                               tmp_path: Path) -> None:
+    path, sent = recorded
+    with Reader(path) as reader:
+        expected = [(c.topic, t, bytes(d)) for c, t, d in reader.messages()]
+    got: list[tuple[str, int, bytes]] = []
+    lock = threading.Lock()
+
+    def receiver(topic: str) -> Any:
+        def cb(data: bytes, info: dict[str, Any]) -> None:
+            with lock:
+                got.append((topic, int(info["received_timestamp"]), data))
+        return cb
+
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    subs = [ros.node.create_subscription(cls, topic, receiver("/" + topic), qos, raw=True)
+            for cls, topic in ((Imu, "imu/data"), (JointState, "thrusters/state"))]
+    log = tmp_path / "replay.log"
+    proc = node_process("replay_node", {"bag": str(path), "rate": "10.0",
+                                        "reliability": "reliable",
+                                        "wait_for_subscribers": "1", "delay": "0.5"}, log)
+    try:
+        assert proc.wait(timeout=60) == 0, log.read_text()
+        time.sleep(0.3)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        for s in subs:
+            ros.node.destroy_subscription(s)
+    assert "skipping" not in log.read_text()
+    assert len(got) == len(expected) == sum(sent.values()), log.read_text()
+    errors = []
+    for topic in sent:  # bit-identical, in bag order; intervals per topic
+        mine = sorted((r, d) for t, r, d in got if t == topic)
+        theirs = [(b, d) for t, b, d in expected if t == topic]
+        assert [d for _, d in mine] == [d for _, d in theirs]
+        recv_t = np.array([r for r, _ in mine], dtype=np.int64)
+        bag_t = np.array([b for b, _ in theirs], dtype=np.int64)
+        errors.append(np.abs(np.diff(recv_t) - np.diff(bag_t) / 10.0) / 1e6)  # ms
+    err = np.concatenate(errors)
+    recv = np.sort([r for _, r, _ in got])
+    bag_t = np.array([b for _, b, _ in expected], dtype=np.int64)
+    span = (recv[-1] - recv[0]) / 1e9
+    print(f"replay at rate 10: interval error median {np.median(err):.3f} ms, "
+          f"p95 {np.percentile(err, 95):.3f} ms, max {err.max():.1f} ms; "
+          f"{(bag_t[-1] - bag_t[0]) / 1e9:.2f} s of bag in {span:.3f} s")
+    assert np.median(err) < 5.0
+    assert span == pytest.approx((bag_t[-1] - bag_t[0]) / 1e10, rel=0.1)
+
+
+def test_replay_skips_unknown_types_and_filters_topics(ros: Ros, tmp_path: Path) -> None:
+    from dampest_ros.io.recorder import BagRecorder
+
+    src = tmp_path / "src"
+    with BagRecorder(src) as rec:
+        unknown = rec.add_connection("/odd", "nonexistent_msgs/msg/Thing", msgdef="int32 a",
+                                     type_hash="")
+        rec.add_connection("/imu/data", "sensor_msgs/msg/Imu")
+        rec.write(unknown, 1, b"\x00\x01\x00\x00\x01\x00\x00\x00")
+    log = tmp_path / "replay.log"
+    proc = node_process("replay_node", {"bag": str(src), "topics": "[odd]"}, log)
+    assert proc.wait(timeout=60) == 0, log.read_text()
+    text = log.read_text()
+    assert "skipping /odd" in text and "nonexistent_msgs/msg/Thing" in text
+    assert "0/0 messages" in text
