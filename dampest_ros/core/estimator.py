@@ -222,8 +222,13 @@ class OnlineEstimator:
 
     @property
     def theta_std(self) -> FloatArray:
-        """Its standard deviations, shape (p,)."""
-        return self.rls.std
+        """Its standard deviations, shape (p,).
+
+        The RLS treats the samples as independent, but the parallel low-pass correlates them:
+        only n_eff = 2 · cutoff · T of the rate · T samples are (as the batch path's AIC
+        counts them), so the RLS standard deviation is scaled by √(rate / (2 · cutoff)).
+        """
+        return self.rls.std * np.sqrt(max(1.0, self.cfg.rate / (2.0 * self.cfg.cutoff)))
 
     def reset(self) -> None:
         """Back to the prior: RLS, regression filters and pending samples."""

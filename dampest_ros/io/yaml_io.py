@@ -80,10 +80,19 @@ def read_mapping(source: str) -> dict[str, Any]:
 
 def vehicle_dirs() -> list[Path]:
     """Where presets are looked up: the source tree's ``config/vehicles``, then the installed
-    ``<prefix>/share/dampest_ros/config/vehicles``."""
+    ``<prefix>/share/dampest_ros/config/vehicles`` for the prefix this package is installed in
+    (a colcon install space: ``<prefix>/lib/python3.X/site-packages/dampest_ros``), the
+    prefixes of ``AMENT_PREFIX_PATH`` and ``sys.prefix``."""
     package = Path(__file__).resolve().parents[1]
-    return [package.parent / "config" / "vehicles",
-            Path(sys.prefix) / "share" / "dampest_ros" / "config" / "vehicles"]
+    share = Path("share") / "dampest_ros" / "config" / "vehicles"
+    prefixes = [package.parents[3]] if len(package.parents) > 3 else []
+    prefixes += [Path(p) for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    prefixes.append(Path(sys.prefix))
+    dirs = [package.parent / "config" / "vehicles"]
+    for prefix in prefixes:
+        if prefix / share not in dirs:
+            dirs.append(prefix / share)
+    return dirs
 
 
 def list_vehicles() -> list[str]:

@@ -1,0 +1,162 @@
+"""sim_node, preprocess_node and estimator_node as separate processes (the colcon-installed
+executables) over DDS; this test process is the client: it reads model.* with GetParameters
+(dampest_ros.client) and sets an invalid forgetting factor."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from rcl_interfaces.srv import SetParameters  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+
+from dampest_ros.client import ModelClient  # noqa: E402
+from dampest_ros.io.yaml_io import load_vehicle  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[2]
+DOMAIN = "78"
+SIM_SECONDS = 60.0
+RATE = 3.0
+
+
+def colcon_install(ws: Path) -> Path:
+    """colcon build of this package in a temporary workspace; returns install/dampest_ros."""
+    colcon = Path(sys.executable).parent / "colcon"
+    if not colcon.exists():
+        found = shutil.which("colcon")
+        if found is None:
+            pytest.skip("colcon not installed")
+        colcon = Path(found)
+    src = ws / "src" / "dampest_ros"
+    src.mkdir(parents=True)
+    for name in ("package.xml", "setup.py", "setup.cfg", "pyproject.toml", "resource",
+                 "dampest_ros", "config"):
+        path = REPO / name
+        if path.is_dir():
+            shutil.copytree(path, src / name, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            shutil.copy2(path, src / name)
+    env = dict(os.environ, COLCON_HOME=str(ws / "colcon_home"), COLCON_LOG_PATH=str(ws / "log"))
+    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
+    proc = subprocess.run([str(colcon), "build", "--base-paths", "src"], cwd=ws, env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return ws / "install" / "dampest_ros"
+
+
+@pytest.fixture(scope="module")
+def processes(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, object]]:
+    install = colcon_install(tmp_path_factory.mktemp("ws"))
+    site = next(install.glob("lib/python3*/site-packages"))
+    env = dict(os.environ, ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1")
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(site), env.get("PYTHONPATH")) if p)
+    exe = install / "lib" / "dampest_ros"
+    logs = tmp_path_factory.mktemp("logs")
+    cmds = {
+        "sim_node": ["-p", f"rate_factor:={RATE}", "-p", f"duration:={SIM_SECONDS}",
+                     "-p", "seed:=5"],
+        "preprocess_node": [],
+        "estimator_node": ["-p", "use_sim_time:=true", "-p", "forgetting_factor:=1.0",
+                           "-p", "publish_rate:=1.0"],
+    }
+    procs = {}
+    for name, args in reversed(cmds.items()):  # consumers first, the simulator last
+        out = (logs / f"{name}.log").open("w")
+        procs[name] = subprocess.Popen([str(exe / name), "--ros-args", *args], env=env,
+                                       stdout=out, stderr=subprocess.STDOUT)
+        time.sleep(0.5 if name != "sim_node" else 0.0)
+    os.environ["ROS_DOMAIN_ID"] = DOMAIN
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    start = time.monotonic()
+    yield {"procs": procs, "logs": logs, "context": context, "start": start}
+    for p in procs.values():
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    for p in procs.values():
+        try:
+            p.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+    rclpy.try_shutdown(context=context)
+
+
+def test_client_reads_a_converged_model(processes: dict) -> None:
+    context = processes["context"]
+    node = rclpy.create_node("test_client", context=context)
+    from rclpy.executors import SingleThreadedExecutor
+    ex = SingleThreadedExecutor(context=context)
+    ex.add_node(node)
+    client = ModelClient(node, "estimator_node")
+    # wait for the simulated run to end (sim time / rate) plus the pipeline's latency
+    end = processes["start"] + SIM_SECONDS / RATE + 25.0
+    first = None
+    while time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.1)
+        if client.available and first is None:
+            first = client.version
+        if client.available and client.version >= SIM_SECONDS - 5:
+            break
+    logs = {n: (processes["logs"] / f"{n}.log").read_text()[-2000:] for n in processes["procs"]}
+    assert client.available, logs
+    m = client.model
+    v = load_vehicle("bluerov2_heavy")
+    truth = dict(zip(v.damping.parameter_names, v.theta, strict=True))
+    print(f"\nmodel version {m.version} (first seen {first})")
+    for name, th, sd in zip(m.names, m.theta, m.theta_std, strict=True):
+        print(f"{name:5s} {th:10.4f} ± {sd:.4f}  truth {truth[name]:.4f}")
+    assert m.version >= SIM_SECONDS - 10, logs  # one publication per simulated second
+    for name in ("X_uu", "Y_vv", "Z_ww", "K_pp", "N_rr"):
+        assert m.value(name) == pytest.approx(truth[name], rel=0.05), name
+    np.testing.assert_allclose(m.M, v.body.M)
+    # the client follows the publications: a later version arrives by itself
+    version = client.version
+    end = time.monotonic() + 5.0
+    while client.version == version and time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.1)
+    # (after the simulation ended the estimator stops publishing new versions: either is fine)
+    node.destroy_node()
+
+
+def test_invalid_forgetting_factor_is_rejected(processes: dict) -> None:
+    context = processes["context"]
+    node = rclpy.create_node("test_setter", context=context)
+    from rclpy.executors import SingleThreadedExecutor
+    ex = SingleThreadedExecutor(context=context)
+    ex.add_node(node)
+    cli = node.create_client(SetParameters, "estimator_node/set_parameters")
+    assert cli.wait_for_service(timeout_sec=20.0)
+    future = cli.call_async(SetParameters.Request(parameters=[
+        Parameter("forgetting_factor", value=1.5).to_parameter_msg()]))
+    end = time.monotonic() + 10.0
+    while not future.done() and time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.1)
+    result = future.result().results[0]
+    assert not result.successful
+    print(f"\nrejected: {result.reason}")
+    assert "forgetting_factor" in result.reason and "1.5" in result.reason
+    node.destroy_node()
+
+
+def test_nodes_stop_cleanly_on_sigint(processes: dict) -> None:
+    procs = processes["procs"]
+    for name, p in procs.items():
+        assert p.poll() is None, f"{name} died: " + (processes["logs"] /
+                                                      f"{name}.log").read_text()[-2000:]
+    for p in procs.values():
+        p.send_signal(signal.SIGINT)
+    for name, p in procs.items():
+        assert p.wait(timeout=15) == 0, (processes["logs"] / f"{name}.log").read_text()[-2000:]
