@@ -41,6 +41,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="chunk compression (default: none)")
     p.add_argument("--namespace", default="", metavar="NS",
                    help="namespace the relative topic names are resolved in")
+    p.add_argument("--node-name", default="", metavar="NAME",
+                   help="name of the recorder node (default: recorder_node)")
     p.add_argument("--use-sim-time", action="store_true",
                    help="log times from /clock instead of the system clock")
     p.set_defaults(run=run)
@@ -68,6 +70,8 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
         out += ["-p", f"{name}:={json.dumps(value)}"]
     if args.namespace:
         out += ["-r", f"__ns:={args.namespace}"]
+    if args.node_name:
+        out += ["-r", f"__node:={args.node_name}"]
     return out
 
 

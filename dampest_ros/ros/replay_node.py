@@ -118,7 +118,14 @@ class ReplayNode(ParamNode):
             f"playing {self.total} messages on {len(by_topic)} topics of {self.p('bag')} "
             f"at rate {self.p('rate')}" + (f", skipping {self.skipped}" if self.skipped else ""))
         self.thread = threading.Thread(target=self._run, name="replay", daemon=True)
-        self.thread.start()
+        # started from the executor, so that its end (which shuts the context down) always
+        # finds spin() running
+        self._starter = self.create_timer(0.0, self._start_playback)
+
+    def _start_playback(self) -> None:
+        self._starter.cancel()
+        if not self.thread.is_alive() and not self._done.is_set():
+            self.thread.start()
 
     def on_parameters(self, names: list[str]) -> None:
         """A new rate or start_offset takes effect from the current message on."""
@@ -149,6 +156,8 @@ class ReplayNode(ParamNode):
         return not self._stop.wait(float(self.p("delay")))
 
     def _play(self) -> None:
+        if not self.connections:  # (rosbags reads every topic for an empty selection)
+            return
         start = self.reader.start_time + round(float(self.p("start_offset")) * 1e9)
         while not self._stop.is_set():
             self._anchor = None
@@ -208,7 +217,8 @@ class ReplayNode(ParamNode):
     def destroy_node(self) -> None:
         """Stop playback, close the bag, destroy the node."""
         self._stop.set()
-        self.thread.join(timeout=5.0)
+        if self.thread.is_alive():
+            self.thread.join(timeout=5.0)
         self.reader.close()
         super().destroy_node()
 

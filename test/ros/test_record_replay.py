@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+import yaml
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -50,8 +51,11 @@ def env() -> dict[str, str]:
     return e
 
 
-def node_process(module: str, params: dict[str, str], log: Path) -> subprocess.Popen[bytes]:
+def node_process(module: str, params: dict[str, str], log: Path, name: str = ""
+                 ) -> subprocess.Popen[bytes]:
     args = [a for k, v in params.items() for a in ("-p", f"{k}:={v}")]
+    if name:
+        args += ["-r", f"__node:={name}"]
     with log.open("wb") as out:
         return subprocess.Popen([sys.executable, "-m", f"dampest_ros.ros.{module}",
                                  "--ros-args", *args], env=env(), stdout=out,
@@ -89,6 +93,19 @@ class Ros:
         self.thread.join(timeout=5.0)
 
 
+@pytest.fixture
+def make_imu() -> Any:
+    """2 s of random IMU samples at 200 Hz from t = 100 s."""
+    from dampest_ros.core.measurements import ImuSeries
+
+    rng = np.random.default_rng(3)
+    n = 400
+    q = rng.normal(size=(n, 4))
+    return ImuSeries(100.0 + np.arange(n) * 0.005, "imu_link",
+                     q / np.linalg.norm(q, axis=1, keepdims=True), rng.normal(size=(n, 3)),
+                     rng.normal(size=(n, 3)), np.zeros(9), np.zeros(9), np.zeros(9))
+
+
 @pytest.fixture(scope="module")
 def ros() -> Iterator[Ros]:
     r = Ros()
@@ -107,11 +124,16 @@ class Publishers:
                                                qos_profile_sensor_data)
         self.sent = {"/imu/data": 0, "/thrusters/state": 0}
 
-    def wait_for_subscriber(self, timeout: float = 30.0) -> None:
+    def wait_for_subscriber(self, name: str, timeout: float = 30.0) -> None:
+        """Until node ``name`` subscribes to both topics (a killed recorder's subscriptions
+        stay in the graph for a while, so the subscription count alone would mislead)."""
         end = time.monotonic() + timeout
-        while min(self.imu.get_subscription_count(), self.joint.get_subscription_count()) < 1:
-            assert time.monotonic() < end, "the recorder did not subscribe"
+        while not all(any(i.node_name == name
+                          for i in self.node.get_subscriptions_info_by_topic(t))
+                      for t in self.sent):
+            assert time.monotonic() < end, f"{name} did not subscribe"
             time.sleep(0.05)
+        time.sleep(0.3)  # and the publishers have matched it
 
     def run(self, seconds: float, stop: threading.Event | None = None) -> None:
         t0 = time.perf_counter()
@@ -165,11 +187,10 @@ def recorded(ros: Ros, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, 
     out = tmp / "bag"
     proc = node_process("recorder_node", {"output": str(out), "status_period": "0.0",
                                           "topics": "[imu/data, thrusters/state]"},
-                        tmp / "recorder.log")
+                        tmp / "recorder.log", "recorder_sigint")
     pubs = Publishers(ros)
     try:
-        pubs.wait_for_subscriber()
-        time.sleep(0.3)
+        pubs.wait_for_subscriber("recorder_sigint")
         pubs.run(12.0)
         time.sleep(0.5)  # the last messages reach the recorder
     finally:
@@ -208,12 +229,11 @@ def test_sigkill_bag_recovered_by_reindex(ros: Ros, tmp_path: Path) -> None:
     proc = node_process("recorder_node", {"output": str(out), "topics": "[all]",
                                           "chunk_size": "16384", "flush_period": "0.5",
                                           "discovery_period": "0.1"},
-                        tmp_path / "recorder.log")
+                        tmp_path / "recorder.log", "recorder_sigkill")
     pubs = Publishers(ros)
     stop = threading.Event()
     try:
-        pubs.wait_for_subscriber()
-        time.sleep(0.5)  # the 'all' recorder subscribes as it discovers each topic
+        pubs.wait_for_subscriber("recorder_sigkill")
         worker = threading.Thread(target=pubs.run, args=(10.0, stop))
         worker.start()
         time.sleep(float(np.random.default_rng().uniform(3.0, 6.0)))
@@ -317,3 +337,72 @@ def test_replay_skips_unknown_types_and_filters_topics(ros: Ros, tmp_path: Path)
     text = log.read_text()
     assert "skipping /odd" in text and "nonexistent_msgs/msg/Thing" in text
     assert "0/0 messages" in text
+
+
+def test_replay_sqlite3_with_offset_remap_clock_and_loop(ros: Ros, tmp_path: Path,
+                                                         make_imu: Any) -> None:
+    """A SQLite3 bag of 2 s of IMU at 200 Hz, played from 1 s on at rate 5, renamed, with
+    /clock, looping: the second half of the bag again and again, byte for byte."""
+    from rosgraph_msgs.msg import Clock
+
+    path = bag.write_bag(tmp_path / "sq", {"imu/data": make_imu}, storage="sqlite3")
+    with Reader(path) as reader:
+        msgs = [(t, bytes(d)) for _, t, d in reader.messages()]
+        start = reader.start_time
+    tail = [d for t, d in msgs if t >= start + 1_000_000_000]
+    assert len(tail) == 200
+    got: list[bytes] = []
+    clock: list[int] = []
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    subs = [ros.node.create_subscription(Imu, "replayed/imu", got.append, qos, raw=True),
+            ros.node.create_subscription(
+                Clock, "/clock", lambda m: clock.append(m.clock.sec * 10**9 + m.clock.nanosec),
+                10)]
+    log = tmp_path / "replay.log"
+    proc = node_process("replay_node", {
+        "bag": str(path), "rate": "5.0", "start_offset": "1.0", "loop": "true",
+        "remap": "['/imu/data:=/replayed/imu']", "clock": "true", "clock_rate": "200.0",
+        "reliability": "reliable", "wait_for_subscribers": "1", "delay": "0.3"}, log)
+    try:
+        end = time.monotonic() + 30
+        while len(got) < 2.5 * len(tail) and time.monotonic() < end:
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 0, log.read_text()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        for s in subs:
+            ros.node.destroy_subscription(s)
+    assert got[:2 * len(tail)] == tail + tail, log.read_text()
+    bag_clock = np.array(clock) - start
+    assert len(clock) > 40
+    assert bag_clock.min() >= 1e9 - 1 and bag_clock.max() <= msgs[-1][0] - start
+    assert np.sum(np.diff(bag_clock) < 0) >= 1  # it jumped back at the loop
+
+
+def test_dampest_record_stops_cleanly_on_sigterm(ros: Ros, tmp_path: Path) -> None:
+    out = tmp_path / "bag"
+    log = tmp_path / "record.log"
+    with log.open("wb") as f:
+        proc = subprocess.Popen([sys.executable, "-c", CLI, "record", "-o", str(out),
+                                 "imu/data", "thrusters/state", "--max-bag-duration", "1.0",
+                                 "--node-name", "recorder_sigterm"],
+                                env=env(), stdout=f, stderr=subprocess.STDOUT)
+    pubs = Publishers(ros)
+    try:
+        pubs.wait_for_subscriber("recorder_sigterm")
+        pubs.run(3.0)
+        time.sleep(0.5)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 0, log.read_text()
+        pubs.destroy()
+    assert {t: s.count for t, s in bag.bag_summary(out).topics.items()} == pubs.sent
+    assert sequence_numbers(out) == {t: list(range(n)) for t, n in pubs.sent.items()}
+    # split every second of log time
+    files = yaml.safe_load((out / "metadata.yaml").read_text())[
+        "rosbag2_bagfile_information"]["files"]
+    assert len(files) in (3, 4) and len(list(out.glob("*.mcap"))) == len(files)
+    assert all(f["duration"]["nanoseconds"] < 1e9 for f in files)
