@@ -1,4 +1,5 @@
-"""The ``dampest`` command: simulate, identify, inspect, export/import, demo, live.
+"""The ``dampest`` command: simulate, identify, inspect, export/import, record, replay,
+reindex, demo, live.
 
 Each sub-command lives in its own module with ``add_parser(subparsers)`` and ``run(args)``.
 """
@@ -10,12 +11,22 @@ import os
 import sys
 from collections.abc import Sequence
 
-from dampest_ros.cli import demo, export, identify, inspect, live, simulate
+from dampest_ros.cli import (
+    demo,
+    export,
+    identify,
+    inspect,
+    live,
+    record,
+    reindex,
+    replay,
+    simulate,
+)
 from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.io.bag import BagError, MissingTopicError
 
-COMMANDS = (simulate, identify, inspect, export, demo, live)
+COMMANDS = (simulate, identify, inspect, export, record, replay, reindex, demo, live)
 
 
 def build_parser() -> argparse.ArgumentParser:
