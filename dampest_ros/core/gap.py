@@ -525,10 +525,14 @@ class Delay(Effect):
         return np.zeros(1), np.ones(1)
 
     def predict(self, data: GapData, ch: Chunk, p: FloatArray) -> FloatArray:
-        t = ch.t
-        shifted = np.stack([np.interp(t - float(p[0]), t, ch.tau[:, i]) for i in range(6)],
-                           axis=1)
-        return np.asarray(ch.tau - shifted, dtype=float)
+        # τ(t − d) by a band-limited (Fourier) fractional shift of the mirrored chunk, so
+        # that ρ is smooth in d (linear interpolation has a kink at every sample period)
+        n = len(ch)
+        ext = np.concatenate([ch.tau, ch.tau[::-1]], axis=0)
+        f = np.fft.rfftfreq(2 * n, d=1.0 / data.rate)
+        shift = np.exp(-2j * np.pi * f * float(p[0]))[:, None]
+        delayed = np.fft.irfft(np.fft.rfft(ext, axis=0) * shift, n=2 * n, axis=0)[:n]
+        return np.asarray(ch.tau - delayed, dtype=float)
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
         return (f"d = {1e3 * float(p[0]):.0f} ± {1e3 * float(np.sqrt(abs(cov[0, 0]))):.0f} ms")
@@ -1407,6 +1411,9 @@ def residual_psd(samples: Samples, r: FloatArray, mask: BoolArray | None = None,
     window : float
         Welch segment length (s).
 
+    The mean is kept (no detrending): a constant offset (e.g. a buoyancy error) is part of
+    the residual and belongs to the lowest band.
+
     Returns
     -------
     f : ndarray, shape (F,)
@@ -1425,12 +1432,12 @@ def residual_psd(samples: Samples, r: FloatArray, mask: BoolArray | None = None,
         n = len(rows)
         if n < nper or np.any(np.diff(rows) != 1):
             continue
-        _, p = signal.welch(r[rows], fs=rate, nperseg=nper, axis=0)
+        _, p = signal.welch(r[rows], fs=rate, nperseg=nper, axis=0, detrend=False)
         P += p * n
         total += n
     if total == 0:
         x = r[keep]
-        _, p = signal.welch(x, fs=rate, nperseg=min(nper, len(x)), axis=0)
+        _, p = signal.welch(x, fs=rate, nperseg=min(nper, len(x)), axis=0, detrend=False)
         f = np.fft.rfftfreq(min(nper, len(x)), 1.0 / rate)
         return np.asarray(f, dtype=float), np.asarray(p, dtype=float)
     return np.asarray(f, dtype=float), np.asarray(P / total, dtype=float)
