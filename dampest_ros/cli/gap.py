@@ -1,0 +1,406 @@
+"""``dampest gap``: where do a simulator model and measured data disagree, and what is missing?
+
+Compares the model (``--model``, the damping model the user believes, with ``--vehicle`` for
+mass, restoring data and thrusters) with a measured bag or CSV through the one-step
+inverse-dynamics residual and a free run, localises the residual, then names the missing
+physical effects one at a time by their held-out evidence (:mod:`dampest_ros.core.gap`),
+until no candidate is significant. Uses only what a real vehicle logs (IMU, DVL, pressure,
+thruster state, or the CSV columns): never truth topics or simulator settings.
+"""
+
+from __future__ import annotations
+
+import argparse
+import html
+import re
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from dampest_ros.cli.common import add_preprocess_options, add_topic_options, load_samples, table
+from dampest_ros.core import gap
+from dampest_ros.core.measurements import JointSeries
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
+from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.io.bag import read_bag
+from dampest_ros.io.yaml_io import ModelFile, load_model, load_vehicle, save_model
+
+EXAMPLE = ("example: dampest gap bags/pool_run --model sim_model.yaml --vehicle "
+           "config/vehicles/bluerov2_heavy.yaml --report gap_report")
+
+DPI = 90
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the sub-command."""
+    p = sub.add_parser("gap", help="find where a model and measured data disagree and name "
+                                   "the missing effect",
+                       description=__doc__, epilog=EXAMPLE,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("input", metavar="MEASURED",
+                   help="rosbag2 directory (MCAP or SQLite3) or .csv file from the vehicle")
+    p.add_argument("--model", required=True,
+                   help="model YAML (ROS 2 parameters file) of the damping you believe, e.g. "
+                        "the simulator's; its M is used as M_RB + M_A")
+    p.add_argument("--vehicle", required=True,
+                   help="vehicle preset (name or YAML): mass, restoring data, thrusters")
+    p.add_argument("--report", metavar="DIR",
+                   help="write index.html, PNG figures and final_model.yaml here")
+    p.add_argument("--out", help="write the model with the named effects (YAML) here")
+    p.add_argument("--candidates", default="all",
+                   help="comma list of candidate keys or families (current, buoyancy, "
+                        "cg_offset, thrusters, added_mass, damping, memory, sensor_bias, "
+                        "or keys such as thrust_gain, delay, linear.X_u, cross.Y_vr); "
+                        "default: all")
+    p.add_argument("--max-steps", type=int, default=6,
+                   help="name at most this many effects (default: 6)")
+    p.add_argument("--cutoff", type=float, default=2.0,
+                   help="low-pass (Hz) applied to the regression, as in identify (default: 2)")
+    p.add_argument("--split", type=float, default=0.7,
+                   help="share of the time used to fit; the rest is held out (default: 0.7)")
+    p.add_argument("--min-heldout", type=float, default=gap.GapOptions.min_heldout,
+                   help="smallest held-out reduction of the weighted residual power for an "
+                        f"effect to count (default: {gap.GapOptions.min_heldout})")
+    p.add_argument("--columns", help="YAML column map for CSV input (their name: our name)")
+    add_topic_options(p)
+    add_preprocess_options(p)
+    p.set_defaults(run=run)
+
+
+def believed_body(vehicle: Vehicle, mf: ModelFile) -> RigidBody:
+    """The vehicle's rigid body with the model file's M (added mass = M − M_RB)."""
+    b = vehicle.body
+    added = mf.M - b.M_RB
+    if np.allclose(mf.M, b.M, rtol=1e-9, atol=1e-9):
+        return b
+    try:
+        return RigidBody(b.mass, b.inertia, b.r_g, b.r_b, b.volume, 0.5 * (added + added.T),
+                         b.rho, b.gravity)
+    except ConfigError as exc:
+        raise ConfigError("model.M", f"M − M_RB of the vehicle is not a valid added mass "
+                                     f"({exc.reason}); is --vehicle the model's vehicle?"
+                          ) from None
+
+
+def _joints(path: str, args: argparse.Namespace) -> JointSeries | None:
+    """The logged thruster state of a bag on the samples' clock, or None for CSV input."""
+    p = Path(path)
+    if not p.is_dir():
+        return None
+    topic = args.thrusters_topic
+    series = read_bag(p, [topic])[topic]
+    if not isinstance(series, JointSeries):
+        return None
+    # the preprocessing shifts the thrust by --delay; so must the dead-zone table
+    return replace(series, stamp=series.stamp + float(args.delay))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Load, compare, localise, name the missing effects, print and write the report."""
+    t0 = time.perf_counter()
+    vehicle = load_vehicle(args.vehicle)
+    mf = load_model(args.model)
+    model = mf.damping
+    if model is None:
+        if mf.parameter_names != vehicle.damping.parameter_names:
+            raise ConfigError("model.terms", f"{args.model} has no term structure and its "
+                              "parameters differ from the vehicle preset's")
+        model = vehicle.damping
+    body = believed_body(vehicle, mf)
+    samples = load_samples(args.input, vehicle, args)
+    joints = _joints(args.input, args)
+    cands = gap.library([c.strip() for c in str(args.candidates).split(",") if c.strip()])
+    if args.max_steps < 0:
+        raise ConfigError("--max-steps", "must be ≥ 0")
+    data = gap.GapData(samples, model, mf.theta, body, vehicle.thrusters, joints,
+                       cutoff=args.cutoff, split=args.split)
+    seconds = len(samples) / samples.rate
+    print(f"{args.input}: {len(samples)} samples ({seconds:.0f} s in "
+          f"{int(samples.segment.max()) + 1} segment(s)); fit on the first "
+          f"{100 * args.split:.0f} % of the time, scored on the last "
+          f"{100 * (1 - args.split):.0f} %")
+    y_rms = np.sqrt(np.mean((data.r0 + _model_force(data)) ** 2, axis=0))
+    r_rms = np.sqrt(np.mean(data.r0**2, axis=0))
+    print("\n1. one-step residual r = τ − (M ν̇ + C ν + D ν + g) of the model "
+          f"(low-passed at {args.cutoff:g} Hz):")
+    print(table(("dof", "damping force RMS", "residual RMS", "residual / force"),
+                [(f"{FORCE_NAMES[i]} ({gap.FORCE_UNITS[i]})", float(y_rms[i]), float(r_rms[i]),
+                  f"{100 * r_rms[i] / max(y_rms[i], 1e-300):.1f} %") for i in range(6)]))
+    rows = gap.localise(samples, data.r0, passband=args.cutoff)
+    print("\n2. where the residual is concentrated (RMS in the subset / overall RMS):")
+    print(concentration_text(rows))
+    print("\n3-4. candidate effects, ranked by held-out evidence:")
+    opts = gap.GapOptions(min_heldout=args.min_heldout, max_steps=args.max_steps)
+    result = gap.find_gap(data, cands, opts, progress=lambda s: print("  " + s))
+    for key, why in result.skipped.items():
+        print(f"  skipped {key}: {why}")
+    print()
+    print(steps_table(result) if result.steps else "no effect named.")
+    print(f"\n{result.conclusion}.")
+    free = gap.free_run_errors(data, result.effects)
+    print()
+    print(free_run_text(free))
+    final = final_model(data, result, mf, args)
+    if args.out:
+        save_final(Path(args.out), final)
+        print(f"wrote {args.out}")
+    if args.report:
+        out = Path(args.report)
+        write_report(out, data, result, rows, free, final, args)
+        print(f"wrote {out / 'index.html'}")
+    print(f"({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+def _model_force(data: gap.GapData) -> np.ndarray:
+    """Φθ of the model, low-passed like the residual (for the force scale)."""
+    def force(ch: gap.Chunk) -> np.ndarray:
+        z = np.zeros((len(ch), data.n_states))
+        return data.model.force(ch.nu, data.theta, z)
+    return data.filtered(force)
+
+
+def concentration_text(rows: list[gap.LocalRow], top: int = 3) -> str:
+    """Per DOF, the subsets where the residual RMS is most above its overall RMS."""
+    conc = gap.concentration(rows, top)
+    lines = []
+    for i in range(6):
+        items = [f"{label} {ratio:.2f}×" for d, label, ratio in conc if d == i]
+        lines.append(f"  {FORCE_NAMES[i]} (RMS {rows[0].rms[i]:.3g} {gap.FORCE_UNITS[i]}): "
+                     + ", ".join(items))
+    return "\n".join(lines)
+
+
+def steps_table(result: gap.GapResult) -> str:
+    """The steps: effect, magnitude ± σ, held-out RMS per DOF before → after, ΔBIC."""
+    rows = []
+    for k, st in enumerate(result.steps, 1):
+        rows.append((k, st.effect.title, f"{100 * st.screen.heldout:.1f} %",
+                     f"{st.bic_after - st.bic_before:.0f}"))
+    head = table(("step", "effect named", "held-out reduction", "ΔBIC"), rows)
+    mags = "\n".join(f"  step {k}: {st.description}" for k, st in enumerate(result.steps, 1))
+    rms = table(("step", *(f"{f} before→after" for f in FORCE_NAMES)),
+                [(k, *(f"{st.rms_before[i]:.3g}→{st.rms_after[i]:.3g}" for i in range(6)))
+                 for k, st in enumerate(result.steps, 1)])
+    return (head + "\n\nmagnitudes (± 1σ, block-robust):\n" + mags
+            + "\n\nheld-out residual RMS per DOF (N, N·m):\n" + rms)
+
+
+def free_run_text(free: dict[str, Any] | str) -> str:
+    """The free-run comparison, or why it was skipped."""
+    if isinstance(free, str):
+        return free
+    text = (f"free run over {free['seconds']:.0f} s (velocity RMSE, m/s and rad/s):\n"
+            + table(("model", *DOF_NAMES),
+                    [("believed", *map(float, free["nominal"])),
+                     ("with the named effects", *map(float, free["final"]))]))
+    if free["omitted"]:
+        text += "\n(not representable in the free run: " + "; ".join(free["omitted"]) + ")"
+    return text
+
+
+def _param_key(key: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_]", "_", key)
+
+
+def final_model(data: gap.GapData, result: gap.GapResult, mf: ModelFile,
+                args: argparse.Namespace) -> dict[str, Any]:
+    """Names, θ, std, M, damping model and extra entries of the model with the effects."""
+    model, theta, M, _ = gap.updated_model(data, result.effects)
+    std = dict(zip(mf.parameter_names, mf.theta_std.tolist(), strict=True))
+    effects: dict[str, Any] = {}
+    for (e, p), cov in zip(result.effects, result.covs, strict=True):
+        s = np.sqrt(np.abs(np.diag(cov)))
+        upd = e.model_update(data, p)
+        for name in upd.get("theta", {}):
+            std[name] = float(s[0])
+        for c in upd.get("cross", []):
+            std[c["name"]] = float(s[0])
+        entry: dict[str, Any] = {}
+        for name, v, sd in zip(e.params, p, s, strict=True):
+            entry[_param_key(name)] = float(v)
+            entry[_param_key(name) + "_std"] = float(sd)
+        entry["title"] = e.title
+        effects[_param_key(e.key)] = entry
+    mem = model.term("freq")
+    if mem is not None:
+        for (e, _), cov in zip(result.effects, result.covs, strict=True):
+            if isinstance(e, gap.Memory):
+                for name, d in zip(mem.parameter_names, mem.state_dofs, strict=True):
+                    if int(d) == e.dof:
+                        std[name] = float(np.sqrt(abs(cov[0, 0])))
+    names = model.parameter_names
+    extra: dict[str, Any] = {
+        "source": f"dampest gap {args.input} --model {args.model}",
+        "gap": {"named": [e.key for e, _ in result.effects] or ["none"],
+                "conclusion": result.conclusion, **effects}}
+    return {"names": names, "theta": theta,
+            "std": np.array([std.get(n, 0.0) for n in names]), "M": M, "damping": model,
+            "extra": extra}
+
+
+def save_final(path: Path, final: dict[str, Any]) -> None:
+    """Write the model with the named effects as a model YAML."""
+    save_model(path, final["names"], final["theta"], final["std"], final["M"],
+               extra=final["extra"], damping=final["damping"])
+
+
+# --- report ------------------------------------------------------------------------------
+
+
+CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1200px;
+margin:2em auto;padding:0 1em;color:#222;line-height:1.45}
+table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.9em}
+th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}
+th{background:#f2f2f2}td:first-child,th:first-child{text-align:left}
+td.hot{background:#ffe0d6}td.warm{background:#fff4e0}
+img{max-width:100%;border:1px solid #ddd;margin:.3em 0 1em}.note{color:#555;font-size:.92em}
+"""
+
+
+def _html_table(header: list[str], rows: list[list[str]], classes: list[list[str]] | None = None
+                ) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    body = []
+    for k, row in enumerate(rows):
+        cells = []
+        for j, c in enumerate(row):
+            cls = classes[k][j] if classes else ""
+            cells.append(f'<td class="{cls}">{c}</td>' if cls else f"<td>{c}</td>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+
+
+def _residual_figure(data: gap.GapData, before: np.ndarray, after: np.ndarray, title: str,
+                     path: Path, seconds: float = 60.0) -> str:
+    """Held-out residual before/after over ``seconds`` and its spectrum, per DOF."""
+    before_all = before
+    test = np.flatnonzero(data.test)
+    n = min(len(test), round(seconds * data.rate))
+    idx = test[:n]
+    t = data.samples.t[idx] - data.samples.t[0]
+    # break the lines at segment boundaries
+    cut = np.flatnonzero(np.diff(data.samples.segment[idx])) + 1
+    t = np.insert(t, cut, np.nan)
+    before = np.insert(before[idx], cut, np.nan, axis=0)
+    after_s = np.insert(after[idx], cut, np.nan, axis=0)
+    fig = Figure(figsize=(12, 9))
+    axes = fig.subplots(6, 2, gridspec_kw={"width_ratios": [2.2, 1]})
+    f_b, P_b = gap.residual_psd(data.samples, before_all, data.test)
+    f_a, P_a = gap.residual_psd(data.samples, after, data.test)
+    for i in range(6):
+        ax = axes[i, 0]
+        ax.plot(t, before[:, i], lw=0.9, color="0.55", label="before")
+        ax.plot(t, after_s[:, i], lw=0.9, color="tab:red", label="after")
+        ax.set_ylabel(f"{FORCE_NAMES[i]} ({gap.FORCE_UNITS[i]})")
+        ax.grid(alpha=0.3)
+        ax = axes[i, 1]
+        ax.loglog(f_b[1:], np.maximum(P_b[1:, i], 1e-300), lw=0.9, color="0.55")
+        ax.loglog(f_a[1:], np.maximum(P_a[1:, i], 1e-300), lw=0.9, color="tab:red")
+        ax.set_xlim(f_b[1], max(2 * data.cutoff, 1.0))
+        ax.grid(alpha=0.3, which="both")
+    axes[0, 0].legend(loc="upper right", fontsize=8)
+    axes[5, 0].set_xlabel("time (s), held-out part")
+    axes[5, 1].set_xlabel("frequency (Hz)")
+    axes[0, 1].set_title("residual PSD", fontsize=9)
+    fig.suptitle(title, fontsize=11)
+    fig.subplots_adjust(left=0.07, right=0.985, bottom=0.06, top=0.94, hspace=0.35, wspace=0.2)
+    fig.savefig(path, dpi=DPI, format="png")
+    return path.name
+
+
+def write_report(out: Path, data: gap.GapData, result: gap.GapResult,
+                 rows: list[gap.LocalRow], free: dict[str, Any] | str,
+                 final: dict[str, Any], args: argparse.Namespace) -> Path:
+    """index.html, residual figures per step and final_model.yaml in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    save_final(out / "final_model.yaml", final)
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>dampest gap</title>"
+             f"<style>{CSS}</style></head><body><h1>Sim-to-real gap</h1>"
+             f"<p class='note'>measured: {html.escape(str(args.input))} · model: "
+             f"{html.escape(str(args.model))} · vehicle: {html.escape(str(args.vehicle))} · "
+             f"{len(data.samples)} samples, {len(data.samples) / data.rate:.0f} s · fit on the "
+             f"first {100 * data.split:.0f} % of the time, held-out scores on the rest · "
+             f"regression low-passed at {data.cutoff:g} Hz</p>"]
+    # 1. compare
+    r_rms = np.sqrt(np.mean(data.r0**2, axis=0))
+    parts.append("<h2>1. Comparison</h2><p>One-step inverse-dynamics residual "
+                 "r = τ − (M ν̇ + C ν + D ν + g) of the model (RMS over all data):</p>")
+    parts.append(_html_table(["", *FORCE_NAMES], [["residual RMS",
+                                                   *(f"{x:.4g}" for x in r_rms)]]))
+    if isinstance(free, str):
+        parts.append(f"<p class='note'>{html.escape(free)}</p>")
+    else:
+        parts.append(f"<p>Free run of the measured τ over {free['seconds']:.0f} s (velocity "
+                     "RMSE, m/s and rad/s):</p>")
+        parts.append(_html_table(["model", *DOF_NAMES], [
+            ["believed", *(f"{x:.4g}" for x in free["nominal"])],
+            ["with the named effects", *(f"{x:.4g}" for x in free["final"])]]))
+        if free["omitted"]:
+            parts.append("<p class='note'>Not representable in the free run: "
+                         + html.escape("; ".join(free["omitted"])) + "</p>")
+    # 2. localise
+    parts.append("<h2>2. Where the residual is</h2><p class='note'>RMS of the residual in "
+                 "each subset divided by its overall RMS (bands: RMS per unit bandwidth "
+                 "relative to the whole spectrum). Shaded: ≥ 1.5× and ≥ 1.25×.</p>")
+    total = rows[0].rms
+    trows, tcls = [], []
+    for row in rows:
+        if row.group == "band":
+            ratio = row.rms / np.maximum(total, 1e-300) / np.sqrt(max(row.share, 1e-12))
+        else:
+            ratio = row.rms / np.maximum(total, 1e-300)
+        trows.append([html.escape(f"{row.group}: {row.label}"), f"{100 * row.share:.0f} %",
+                      *(f"{x:.2f}" for x in ratio)])
+        tcls.append(["", "", *("hot" if x >= 1.5 else "warm" if x >= 1.25 else ""
+                               for x in ratio)])
+    parts.append(_html_table(["subset", "share", *FORCE_NAMES], trows, tcls))
+    # 3-4. steps
+    parts.append("<h2>3–4. Effects named</h2>")
+    if result.steps:
+        srows = []
+        for k, st in enumerate(result.steps, 1):
+            srows.append([str(k), html.escape(st.effect.title), html.escape(st.description),
+                          *(f"{st.rms_before[i]:.3g} → {st.rms_after[i]:.3g}" for i in range(6)),
+                          f"{st.bic_before:.0f} → {st.bic_after:.0f}",
+                          f"{100 * st.screen.heldout:.1f} %"])
+        parts.append(_html_table(["step", "effect", "magnitude ± σ",
+                                  *(f"{f} held-out RMS" for f in FORCE_NAMES), "BIC",
+                                  "held-out reduction"], srows))
+        r_prev = result.r0
+        for k, st in enumerate(result.steps, 1):
+            r_after = data.r0 - gap.correction(data, result.effects[:k]) \
+                if k < len(result.steps) else result.r
+            name = _residual_figure(data, r_prev, r_after,
+                                    f"step {k}: {st.effect.title}", out / f"step{k}.png")
+            parts.append(f"<h3>Step {k}: {html.escape(st.effect.title)}</h3>"
+                         f"<p>{html.escape(st.description)}; runner-up: "
+                         f"{html.escape(st.runner_up)}</p><img src='{name}'>")
+            r_prev = r_after
+    parts.append(f"<p><b>{html.escape(result.conclusion)}.</b></p>")
+    if result.skipped:
+        parts.append("<p class='note'>Not tested: " + html.escape("; ".join(
+            f"{k} ({v})" for k, v in result.skipped.items())) + "</p>")
+    last = result.screens[-1] if result.screens else []
+    parts.append("<h3>Last round: the best remaining candidates</h3>")
+    parts.append(_html_table(
+        ["candidate", "held-out reduction", "best DOF", "ΔBIC (train)", "ERR", "significant"],
+        [[html.escape(s.effect.title), f"{100 * s.heldout:.2f} %",
+          f"{100 * float(s.heldout_dof.max()):.1f} %", f"{s.dbic:.0f}", f"{100 * s.err:.2f} %",
+          "yes" if s.significant else "no"] for s in last[:10]]))
+    if not result.steps:
+        name = _residual_figure(data, result.r0, result.r0, "residual of the model",
+                                out / "residual.png")
+        parts.append(f"<img src='{name}'>")
+    parts.append("<h2>5. Final model</h2><p><a href='final_model.yaml'>final_model.yaml</a> "
+                 "(ROS 2 parameters file; effects that are not damping terms are listed under "
+                 "<code>model.gap</code>).</p></body></html>")
+    path = out / "index.html"
+    path.write_text("\n".join(parts))
+    return path
+
