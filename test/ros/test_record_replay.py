@@ -197,7 +197,9 @@ def recorded(ros: Ros, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, 
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0, (tmp / "recorder.log").read_text()
         pubs.destroy()
-    print(closing_line(tmp / "recorder.log"))
+    line = closing_line(tmp / "recorder.log")
+    print(line)
+    assert " 0 lost," in line  # no transport loss, no gap in the publishers' sequences
     return out, dict(pubs.sent)
 
 
