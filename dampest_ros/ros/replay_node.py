@@ -114,6 +114,7 @@ class ReplayNode(ParamNode):
         self._done = threading.Event()
         self._last_progress = time.monotonic()
         self._last_clock = 0.0
+        self._cpu0 = time.process_time()
         self.get_logger().info(
             f"playing {self.total} messages on {len(by_topic)} topics of {self.p('bag')} "
             f"at rate {self.p('rate')}" + (f", skipping {self.skipped}" if self.skipped else ""))
@@ -211,8 +212,10 @@ class ReplayNode(ParamNode):
         length = max(self.reader.duration - 1, 0) * 1e-9
         pct = 100.0 * self.published / max(self.total, 1)
         what = "finished" if final else "playing"
+        cpu = time.process_time() - self._cpu0
         self.get_logger().info(f"{what}: {self.published}/{self.total} messages "
-                               f"({pct:.0f} %), bag time {into:.1f} of {length:.1f} s")
+                               f"({pct:.0f} %), bag time {into:.1f} of {length:.1f} s, "
+                               f"CPU {cpu:.1f} s")
 
     def destroy_node(self) -> None:
         """Stop playback, close the bag, destroy the node."""
