@@ -94,11 +94,17 @@ def _descriptor(p: Param) -> ParameterDescriptor:
                                                          to_value=float(p.high), step=0.0)]
     if p.type_ is not None:
         d.type = p.type_.value
+    if isinstance(p.default, float):
+        # '-p duration:=90' arrives as an integer: accept it (validate() checks the number)
+        d.dynamic_typing = True
     return d
 
 
 def validate(p: Param, value: Any) -> str | None:
     """The reason why ``value`` is invalid for ``p``, or None."""
+    if isinstance(p.default, float) and (isinstance(value, bool)
+                                         or not isinstance(value, int | float)):
+        return f"{p.name} must be a number, got {value!r}"
     if p.choices and value not in p.choices:
         return f"{p.name} must be one of {list(p.choices)}, got {value!r}"
     if isinstance(value, float) and not math.isfinite(value):
@@ -127,8 +133,12 @@ class ParamNode(Node):
         self.add_post_set_parameters_callback(self._apply_parameters)
 
     def p(self, name: str) -> Any:
-        """The value of a parameter."""
-        return self.get_parameter(name).value
+        """The value of a parameter (numbers of float parameters as float)."""
+        value = self.get_parameter(name).value
+        spec = self._specs.get(name)
+        if spec is not None and isinstance(spec.default, float):
+            return float(value)
+        return value
 
     def _check_parameters(self, params: list[Parameter]) -> SetParametersResult:
         for prm in params:

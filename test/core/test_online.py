@@ -295,7 +295,7 @@ def test_step_change_is_tracked_and_detected(vehicle: Vehicle) -> None:
 def test_hovering_for_an_hour_keeps_the_covariance_bounded(
         vehicle: Vehicle, flight: tuple[Trajectory, Recording]) -> None:
     """Converge on 60 s of protocol B, then 1 h of station keeping (no excitation) at
-    λ = 0.995: without the bound, P would grow by 0.995⁻⁹⁰⁰⁰⁰ in the unexcited directions."""
+    λ = 0.995: without the bound, P would grow by 0.995⁻³⁶⁰⁰⁰ in the unexcited directions."""
     _, rec = flight
     rls = rls_for(vehicle, 0.995)
     T, Phi, y = OnlineRegression(vehicle.damping, vehicle.body).process(
@@ -303,24 +303,26 @@ def test_hovering_for_an_hour_keeps_the_covariance_bounded(
     rls.update_many(Phi, y, T)
     converged = rls.diagnostics(condition=False)
     assert converged.excited.all()
-    rate = 20.0
+    # the vehicle barely moves: a coarse step (0.1 s) and slow sensors keep this test short
+    rate = 10.0
     t = np.arange(0.0, 3600.0 + 0.5 / rate, 1.0 / rate)
     z = np.zeros((len(t), 6))
     hover = Excitation("hover", t, z, np.zeros((len(t), 2)), np.full(len(t), 5.0), z,
                        np.full(6, 1.0))
-    traj = run(vehicle, hover, dt=0.05)
-    sensors = SensorConfig(imu_rate=100.0, dvl_dropout_rate=0.0)
+    traj = run(vehicle, hover, dt=0.1)
+    sensors = SensorConfig(imu_rate=50.0, dvl_dropout_rate=0.0, thruster_rate=10.0,
+                           truth_rate=10.0, pressure_rate=10.0)
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, sensors, seed=4)
     s = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
-                   PreprocessConfig(rate=25.0, inertial_rate=100.0))
+                   PreprocessConfig(rate=10.0, inertial_rate=50.0, cutoff=4.0))
     assert s.t[-1] - s.t[0] > 3500.0
     from dampest_ros.core.online import OnlineSample
     samples = [OnlineSample(float(s.t[k]), s.nu[k], s.nu_dot[k], s.tau[k], s.euler[k],
                             float(s.depth[k]), True) for k in range(len(s))]
-    T, Phi, y = OnlineRegression(vehicle.damping, vehicle.body, rate=25.0).process(samples)
+    T, Phi, y = OnlineRegression(vehicle.damping, vehicle.body, rate=10.0).process(samples)
     trace = []
-    for k in range(0, len(T), 5000):
-        rls.update_many(Phi[k:k + 5000], y[k:k + 5000])
+    for k in range(0, len(T), 2000):
+        rls.update_many(Phi[k:k + 2000], y[k:k + 2000])
         trace.append(rls.diagnostics(condition=False).covariance_trace)
         assert rls.is_spd(), f"P lost positive definiteness after {T[k]:.0f} s"
     d = rls.diagnostics()
