@@ -119,8 +119,9 @@ def run(args: argparse.Namespace) -> int:
     if args.controller != "off":
         remap = [] if args.controller == "fly" else ["--ros-args", "-r",
                                                      "cmd_wrench:=controller/cmd_wrench"]
+        reference = [float(x) for x in args.reference]
         ctrl = ControllerNode(context=context, cli_args=remap or None, parameter_overrides=[
-            P("vehicle", value=args.vehicle), P("reference", value=[float(x) for x in args.reference])])
+            P("vehicle", value=args.vehicle), P("reference", value=reference)])
         nodes.append(ctrl)
     ex = (MultiThreadedExecutor(num_threads=2, context=context) if args.executor == "multi"
           else SingleThreadedExecutor(context=context))
