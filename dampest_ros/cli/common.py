@@ -16,7 +16,7 @@ from dampest_ros.core.rigid_body import DOF_NAMES
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import profile_delay
 from dampest_ros.core.vehicle import Vehicle
-from dampest_ros.io.bag import read_bag
+from dampest_ros.io.bag import BagSource
 from dampest_ros.io.csv import load_column_map, read_csv, samples_from_columns
 
 #: Topic roles and their default names (DESIGN.md §3).
@@ -74,9 +74,9 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
     if not p.is_dir():
         raise DataError(f"{p}: expected a rosbag2 directory or a .csv file")
     topics = {role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS}
-    rec = read_bag(p, [topics[r] for r in ("imu", "dvl", "thrusters")]
-                   + ([topics["pressure"]] if topics["pressure"] else []),
-                   progress=Progress(f"reading {p.name}"))
+    # windows are read as the preprocessing needs them: memory stays flat with bag length
+    rec = BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),
+                    together=[topics["imu"], topics["thrusters"]])
     auto = str(args.delay).strip().lower() == "auto"
     try:
         delay = 0.0 if auto else float(args.delay)

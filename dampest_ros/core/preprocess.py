@@ -19,12 +19,12 @@ Pipeline, all vectorised over whole segments:
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import fft as sp_fft
-from scipy import integrate, signal
+from scipy import integrate
 
 from dampest_ros.core import frames
 from dampest_ros.core.measurements import (
@@ -111,10 +111,8 @@ class PreprocessConfig:
         return cls(**{k: float(v) for k, v in d.items()})
 
 
-def _need(rec: Recording, topic: str, kind: type[Series], minimum: int = 10) -> Any:
-    if topic not in rec:
-        raise DataError(f"topic {topic!r} missing; the data has {sorted(rec)}")
-    s = rec[topic]
+def _need(s: Series, topic: str, kind: type[Series], minimum: int = 10) -> Any:
+    """``s`` checked to be a ``kind`` with at least ``minimum`` messages."""
     if not isinstance(s, kind):
         raise DataError(f"topic {topic!r} is {type(s).__name__}, expected {kind.__name__}")
     if len(s) < minimum:
@@ -275,16 +273,54 @@ def thruster_wrench(joints: JointSeries, thrusters: Thrusters) -> FloatArray:
     return np.asarray(joints.effort[:, order] @ thrusters.allocation.T, dtype=float)
 
 
-def preprocess(rec: Recording, thrusters: Thrusters, gravity: float, rho: float,
-               config: PreprocessConfig | None = None,
+class SeriesSource(Protocol):
+    """Where :func:`preprocess` gets its data: whole topics or time windows of them.
+
+    A Recording in memory is wrapped in :class:`MemorySource`; ``dampest_ros.io.bag`` offers
+    a source that reads windows straight from a bag, so a long log is never held whole.
+    """
+
+    def topics(self) -> list[str]:
+        """Topic names available."""
+        ...
+
+    def series(self, topic: str, start: float | None = None,
+               stop: float | None = None) -> Series:
+        """Messages of ``topic`` stamped in [start, stop) (s); the whole topic by default."""
+        ...
+
+
+class MemorySource:
+    """A :class:`SeriesSource` over a Recording already in memory."""
+
+    def __init__(self, rec: Recording) -> None:
+        self.rec = rec
+
+    def topics(self) -> list[str]:
+        """Topic names available."""
+        return list(self.rec)
+
+    def series(self, topic: str, start: float | None = None,
+               stop: float | None = None) -> Series:
+        """Messages of ``topic`` stamped in [start, stop) (s); the whole topic by default."""
+        s = self.rec[topic]
+        if start is None and stop is None:
+            return s
+        lo, hi = np.searchsorted(s.stamp, [-np.inf if start is None else start,
+                                           np.inf if stop is None else stop])
+        return s.select(np.arange(int(lo), int(hi)))
+
+
+def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters, gravity: float,
+               rho: float, config: PreprocessConfig | None = None,
                topics: dict[str, str] | None = None,
                report: dict[str, float] | None = None) -> Samples:
     """Synchronise and filter sensor topics into samples of ν, ν̇, τ.
 
     Parameters
     ----------
-    rec : Recording
-        Topic → series, ROS frames (as read from a bag).
+    rec : Recording or SeriesSource
+        Topic → series, ROS frames (as read from a bag), or a source that reads windows.
     thrusters : Thrusters
         Allocation (names must match the JointState names).
     gravity, rho : float
@@ -302,56 +338,70 @@ def preprocess(rec: Recording, thrusters: Thrusters, gravity: float, rho: float,
         FRD/NED, uniformly sampled segments.
     """
     cfg = config or PreprocessConfig()
+    src: SeriesSource = MemorySource(rec) if isinstance(rec, dict) else rec
     names = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
              "thrusters": "thrusters/state", **(topics or {})}
-    imu: ImuSeries = _need(rec, names["imu"], ImuSeries)
-    dvl: TwistSeries = _need(rec, names["dvl"], TwistSeries)
-    thr: JointSeries = _need(rec, names["thrusters"], JointSeries)
-    pres = rec.get(names["pressure"])
-
-    masks = [_clean(imu, imu.orientation, imu.angular_velocity, imu.linear_acceleration),
-             _clean(dvl, dvl.linear), _clean(thr, thr.effort)]
-    # copies only where rows must go (a long IMU log is the largest thing in memory)
-    imu = imu if masks[0].all() else imu.select(masks[0])  # type: ignore[assignment]
-    dvl = dvl if masks[1].all() else dvl.select(masks[1])  # type: ignore[assignment]
-    thr = thr if masks[2].all() else thr.select(masks[2])  # type: ignore[assignment]
-
-    # --- frames: ROS (FLU/ENU) → Fossen (FRD/NED); the IMU per stretch, below -----------
+    have = src.topics()
+    for role in ("imu", "dvl", "thrusters"):
+        if names[role] not in have:
+            raise DataError(f"topic {names[role]!r} missing; the data has {sorted(have)}")
+    # the small topics whole, the large ones (IMU, thrusters) per stretch below
+    dvl: TwistSeries = _need(src.series(names["dvl"]), names["dvl"], TwistSeries)
+    pres = src.series(names["pressure"]) if names["pressure"] in have else None
+    dvl_ok = _clean(dvl, dvl.linear)
+    rejected = int((~dvl_ok).sum())
+    dvl = dvl if dvl_ok.all() else dvl.select(dvl_ok)  # type: ignore[assignment]
     t_dvl, v_dvl = dvl.stamp, frames.body_vec(dvl.linear)
-    n_outliers = 0
-    tau_thr = thruster_wrench(thr, thrusters)
-    window = float(np.median(np.diff(thr.stamp)))
-    phase = float(((thr.stamp[0] - window / 2) * cfg.rate) % 1.0)
+    # thrust telemetry period and phase from the first messages
+    head: JointSeries = _need(src.series(names["thrusters"], None, t_dvl[0] + 10.0),
+                              names["thrusters"], JointSeries, minimum=2)
+    window = float(np.median(np.diff(head.stamp)))
+    phase = float(((head.stamp[0] - window / 2) * cfg.rate) % 1.0)
     ratio = max(1, round(cfg.inertial_rate / cfg.rate))
-
-    lo = max(imu.stamp[0], t_dvl[0], thr.stamp[0])
-    hi = min(imu.stamp[-1], t_dvl[-1], thr.stamp[-1])
+    n_outliers = 0
+    lo, hi = max(t_dvl[0], head.stamp[0]), t_dvl[-1]
     if hi - lo < cfg.min_segment + 2 * cfg.trim:
         raise DataError(f"the topics overlap for only {max(hi - lo, 0.0):.1f} s")
 
     rate_f = cfg.rate * ratio
     pressure = pres if isinstance(pres, PressureSeries) and len(pres) > 1 else None
 
-    def window_(t: FloatArray, core: slice) -> tuple[FloatArray, ...]:
-        """ν, ν̇, R, τ, depth on the output grid t (one stretch of a segment with margins);
-        DVL outliers are counted within the core."""
-        nonlocal n_outliers
+    def window_(t: FloatArray, core: slice) -> tuple[FloatArray, ...] | None:
+        """ν, ν̇, R, τ, depth on the output grid t (one stretch of a segment with margins),
+        or None where IMU or thruster data do not cover it; counts rejections in the core."""
+        nonlocal n_outliers, rejected
+        pad = 1.0
+        imu: ImuSeries = _need(src.series(names["imu"], t[0] - pad, t[-1] + pad),
+                               names["imu"], ImuSeries, minimum=0)
+        thr: JointSeries = _need(src.series(names["thrusters"], t[0] - pad, t[-1] + pad),
+                                 names["thrusters"], JointSeries, minimum=0)
+        t_core = (t[core.start], t[core.stop - 1])
+        for series, ok in ((imu, _clean(imu, imu.orientation, imu.angular_velocity,
+                                        imu.linear_acceleration)),
+                           (thr, _clean(thr, thr.effort))):
+            in_core = (series.stamp >= t_core[0]) & (series.stamp <= t_core[1])
+            rejected += int((~ok & in_core).sum())
+        imu_ok = _clean(imu, imu.orientation, imu.angular_velocity, imu.linear_acceleration)
+        thr_ok = _clean(thr, thr.effort)
+        imu = imu if imu_ok.all() else imu.select(imu_ok)  # type: ignore[assignment]
+        thr = thr if thr_ok.all() else thr.select(thr_ok)  # type: ignore[assignment]
+        if len(imu) < 2 or len(thr) < 2 or imu.stamp[0] > t[0] or imu.stamp[-1] < t[-1] \
+                or thr.stamp[0] - window > t[0] or thr.stamp[-1] < t[-1]:
+            return None
         tf = t[0] + np.arange((len(t) - 1) * ratio + 1) / rate_f
-        i0, i1 = np.searchsorted(imu.stamp, [tf[0], tf[-1]])
-        k = slice(max(int(i0) - 1, 0), int(i1) + 1)
-        ts = imu.stamp[k]
+        ts = imu.stamp
         # attitude: normalised linear interpolation of sign-aligned quaternions
-        q = imu.orientation[k][:, [3, 0, 1, 2]]
+        q = imu.orientation[:, [3, 0, 1, 2]]
         flip = np.cumsum(np.r_[0, np.einsum("ij,ij->i", q[1:], q[:-1]) < 0]) % 2 == 1
         q[flip] *= -1.0
         R = frames.rotation(frames.quat_to_matrix(_interp(tf, ts, q)))
-        om = _interp(tf, ts, frames.body_vec(imu.angular_velocity[k]))
-        f = _interp(tf, ts, frames.body_vec(imu.linear_acceleration[k]))
+        om = _interp(tf, ts, frames.body_vec(imu.angular_velocity))
+        f = _interp(tf, ts, frames.body_vec(imu.linear_acceleration))
         inside = (t_dvl >= t[0] - 1.0) & (t_dvl <= t[-1] + 1.0)
         td, vd = t_dvl[inside], v_dvl[inside]
         v, v_ned_dot = fuse_velocity(tf, R, f, td, vd, gravity, cfg.crossover)
         keep = dvl_inliers(td, vd, tf, v, cfg.outlier_sigma)
-        in_core = (td >= t[core.start]) & (td < t[core.stop - 1] + 0.5 / cfg.rate)
+        in_core = (td >= t_core[0]) & (td < t_core[1] + 0.5 / cfg.rate)
         n_outliers += int((~keep & in_core).sum())
         if not keep.all():
             v, v_ned_dot = fuse_velocity(tf, R, f, td[keep], vd[keep], gravity, cfg.crossover)
@@ -365,8 +415,8 @@ def preprocess(rec: Recording, thrusters: Thrusters, gravity: float, rho: float,
                                  zero_phase(om, rate_f, cfg.cutoff, derivative=True,
                                             window=window)], axis=1)
         # thruster telemetry is the mean over the message period before its stamp
-        tau = zero_phase(_interp(t - cfg.delay, thr.stamp - window / 2, tau_thr), cfg.rate,
-                         cfg.cutoff)
+        tau = zero_phase(_interp(t - cfg.delay, thr.stamp - window / 2,
+                                 thruster_wrench(thr, thrusters)), cfg.rate, cfg.cutoff)
         depth = ((_interp(t, pressure.stamp, pressure.fluid_pressure[:, None])[:, 0]
                   - cfg.atmospheric_pressure) / (rho * gravity)) if pressure is not None \
             else np.full(len(t), np.nan)
@@ -377,63 +427,44 @@ def preprocess(rec: Recording, thrusters: Thrusters, gravity: float, rho: float,
     # and the result equals processing the whole segment at once
     stretch = max(1, round(cfg.stretch * cfg.rate))
     margin = round(10.0 / cfg.crossover * cfg.rate)
-    parts: list[Samples] = []
+    grids: list[tuple[int, FloatArray]] = []
+    n_trim = round(cfg.trim * cfg.rate)
     for k, (a, b) in enumerate(segments_from_gaps(t_dvl, cfg.max_gap)):
         a, b = max(a, lo), min(b, hi)
-        if b - a < cfg.min_segment + 2 * cfg.trim:
-            continue
-        # output grid: phase-locked to the centres of the thrust telemetry windows
-        t = (np.arange(np.ceil(a * cfg.rate - phase), np.floor(b * cfg.rate - phase) + 1)
-             + phase) / cfg.rate
-        n_trim = round(cfg.trim * cfg.rate)
+        if b - a >= cfg.min_segment + 2 * cfg.trim:
+            # output grid: phase-locked to the centres of the thrust telemetry windows
+            grids.append((k, (np.arange(np.ceil(a * cfg.rate - phase),
+                                        np.floor(b * cfg.rate - phase) + 1) + phase) / cfg.rate))
+    # the output is written in place (no list of parts joined at the end: half the memory)
+    size = sum(max(len(t) - 2 * n_trim, 0) for _, t in grids)
+    out = Samples(np.empty(size), np.empty((size, 6)), np.empty((size, 6)),
+                  np.empty((size, 6)), np.empty((size, 3)), np.empty(size),
+                  np.empty(size, dtype=np.int64))
+    n = 0
+    kept_segments: list[int] = []
+    for k, t in grids:
         for i0 in range(n_trim, len(t) - n_trim, stretch):
             i1 = min(i0 + stretch, len(t) - n_trim)
             e0, e1 = max(0, i0 - margin), min(len(t), i1 + margin)
             core = slice(i0 - e0, i1 - e0)
-            nu, nu_dot, R, tau, depth = window_(t[e0:e1], core)
-            parts.append(Samples(t[i0:i1], nu[core], nu_dot[core], tau[core],
-                                 frames.euler_from_matrix(R[core]), depth[core],
-                                 np.full(i1 - i0, k, dtype=np.int64)))
+            result = window_(t[e0:e1], core)
+            if result is None:
+                continue
+            nu, nu_dot, R, tau, depth = result
+            m = slice(n, n + i1 - i0)
+            out.t[m], out.nu[m], out.nu_dot[m], out.tau[m] = t[i0:i1], nu[core], nu_dot[core], \
+                tau[core]
+            out.euler[m], out.depth[m] = frames.euler_from_matrix(R[core]), depth[core]
+            # stretches of one segment stay one segment
+            if not kept_segments or kept_segments[-1] != k:
+                kept_segments.append(k)
+            out.segment[m] = len(kept_segments) - 1
+            n += i1 - i0
     if report is not None:
-        kept = sum(len(p) for p in parts) / cfg.rate
-        report.update(rejected_nonfinite_or_unordered=float(sum(int((~m).sum()) for m in masks)),
-                      dvl_outliers=float(n_outliers),
-                      segments=float(len({int(p.segment[0]) for p in parts})),
-                      dropped_seconds=float(max(hi - lo - kept, 0.0)))
-    if not parts:
+        report.update(rejected_nonfinite_or_unordered=float(rejected),
+                      dvl_outliers=float(n_outliers), segments=float(len(kept_segments)),
+                      dropped_seconds=float(max(hi - lo - n / cfg.rate, 0.0)))
+    if n == 0:
         raise DataError(f"no gap-free stretch of at least {cfg.min_segment + 2 * cfg.trim:.0f} s"
                         " (DVL gaps split the data)")
-    joined = Samples.concatenate(parts)
-    # stretches of one segment stay one segment: number by the gap-split index k
-    joined.segment = np.unique(np.concatenate([p.segment for p in parts]),
-                               return_inverse=True)[1].astype(np.int64)
-    return joined
-
-
-def estimate_delay(samples: Samples, M: FloatArray, max_lag: float = 1.0) -> float:
-    """Delay (s) of the response after τ, from the cross-correlation of Δτ and M Δν̇.
-
-    Differencing whitens both signals so that the peak is sharp; the lag is refined by a
-    parabola through the peak and its neighbours. Positive: the vehicle responds later.
-    """
-    rate = samples.rate
-    n_lag = int(max_lag * rate)
-    acc = samples.nu_dot @ M.T
-    score = np.zeros(2 * n_lag + 1)
-    for sl in samples.segments():
-        dt_ = np.diff(samples.tau[sl], axis=0)
-        da = np.diff(acc[sl], axis=0)
-        n = len(dt_)
-        if n <= 2 * n_lag:
-            continue
-        for i in range(6):
-            x, y = dt_[:, i] - dt_[:, i].mean(), da[:, i] - da[:, i].mean()
-            c = signal.correlate(y, x, mode="full", method="fft")[n - 1 - n_lag:n + n_lag]
-            score += c / (np.linalg.norm(x) * np.linalg.norm(y) + 1e-12)
-    k = int(np.argmax(score))
-    frac = 0.0
-    if 0 < k < len(score) - 1:
-        y0, y1, y2 = score[k - 1], score[k], score[k + 1]
-        den = y0 - 2 * y1 + y2
-        frac = 0.5 * (y0 - y2) / den if den != 0 else 0.0
-    return float((k - n_lag + frac) / rate)
+    return out.take(slice(0, n)) if n < size else out

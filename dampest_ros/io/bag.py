@@ -182,9 +182,11 @@ class _Bag:
     def __exit__(self, *exc: object) -> None:
         self.reader.close()
 
-    def messages(self, conns: Sequence[Connection]) -> Iterator[tuple[Connection, bytes]]:
+    def messages(self, conns: Sequence[Connection], start: int | None = None,
+                 stop: int | None = None) -> Iterator[tuple[Connection, bytes]]:
         try:
-            for conn, _, data in self.reader.messages(connections=conns):
+            for conn, _, data in self.reader.messages(connections=conns, start=start,
+                                                      stop=stop):
                 yield conn, data
         except Exception as exc:
             raise BagError(f"cannot read bag {_files(self.path)}: {exc}") from exc
@@ -240,7 +242,8 @@ class _Assembler:
 
 
 def read_bag(path: str | Path, topics: Sequence[str] | None = None,
-             progress: Callable[[int, int], None] | None = None) -> dict[str, Series]:
+             progress: Callable[[int, int], None] | None = None,
+             start: float | None = None, stop: float | None = None) -> dict[str, Series]:
     """Read the series of a rosbag2 bag (MCAP or SQLite3 directory, or a single storage file).
 
     Parameters
@@ -252,6 +255,9 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
     progress : callable, optional
         Called as ``progress(done, total)`` (message counts) every :data:`READ_CHUNK`
         messages and at the end.
+    start, stop : float, optional
+        Read only messages logged in [start, stop) (s, bag log time); uses the storage's
+        index, so a window of a long bag costs only its own messages.
 
     Returns
     -------
@@ -284,11 +290,15 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
                 raise TypeError(f"topic {name} has type {typ}, which has no series class; "
                                 f"readable types: {sorted(cdr.SERIES_CLASSES)}")
         raw: dict[str, list[bytes]] = {name: [] for name in key}
-        parts = {name: _Assembler(int(info[name].msgcount or 0)) for name in key}
+        window = start is not None or stop is not None
+        parts = {name: _Assembler(0 if window else int(info[name].msgcount or 0))
+                 for name in key}
         conns = [c for name in key for c in info[name].connections]
         total = sum(int(info[name].msgcount or 0) for name in key)
         done = 0
-        for conn, data in bag.messages(conns):
+        ns = (None if start is None else round(start * 1e9),
+              None if stop is None else round(stop * 1e9))
+        for conn, data in bag.messages(conns, *ns):
             buf = raw[conn.topic]
             buf.append(data)
             if len(buf) == READ_CHUNK:
@@ -302,7 +312,7 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
             if buf or parts[name].first is None:
                 parts[name].add(bag.decode(name, msgtype[name], buf))
             series = parts[name].result()
-            if info[name].msgcount and len(series) != info[name].msgcount:
+            if not window and info[name].msgcount and len(series) != info[name].msgcount:
                 raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "
                                f"{len(series)} of its {info[name].msgcount} messages")
             out[key[name]] = series
@@ -362,3 +372,47 @@ def bag_summary(path: str | Path) -> BagSummary:
         files = [bag.path] if bag.path.is_file() else list(bag.path.iterdir())
         storage = "mcap" if any(f.suffix == ".mcap" for f in files) else "sqlite3"
     return BagSummary(bag.path, storage, start / 1e9, end / 1e9, topics)
+
+
+class BagSource:
+    """Time windows of a bag's topics on demand: the
+    :class:`dampest_ros.core.preprocess.SeriesSource` that keeps a long log out of memory.
+
+    Parameters
+    ----------
+    path : str or Path
+        rosbag2 directory (MCAP or SQLite3).
+    progress : callable, optional
+        Called as ``progress(seconds_read, seconds_total)`` as windows are read.
+    together : sequence of str
+        Topics read in one pass per window (their messages share the bag's chunks, which
+        would otherwise be decompressed once per topic).
+    """
+
+    def __init__(self, path: str | Path,
+                 progress: Callable[[int, int], None] | None = None,
+                 together: Sequence[str] = ()) -> None:
+        self.path = Path(path)
+        self.summary = bag_summary(self.path)
+        self.progress = progress
+        self.together = [_relative(t) for t in together]
+        self._cache: tuple[tuple[float, float], dict[str, Series]] | None = None
+
+    def topics(self) -> list[str]:
+        """Topic names (without the leading ``/``)."""
+        return [_relative(t) for t in self.summary.topics]
+
+    def series(self, topic: str, start: float | None = None,
+               stop: float | None = None) -> Series:
+        """Messages of ``topic`` logged in [start, stop) (s); the whole topic by default."""
+        name = _relative(topic)
+        if start is None or stop is None or name not in self.together:
+            return read_bag(self.path, [topic], start=start, stop=stop)[name]
+        if self._cache is None or self._cache[0] != (start, stop):
+            self._cache = ((start, stop), read_bag(self.path, self.together, start=start,
+                                                   stop=stop))
+        out = self._cache[1][name]
+        if self.progress is not None:
+            total = self.summary.end - self.summary.start
+            self.progress(round(min(max(stop - self.summary.start, 0.0), total)), round(total))
+        return out
