@@ -180,6 +180,7 @@ class GapData:
         if [(c.start, c.stop) for c, _, _ in self._chunks] != bounds:
             raise RuntimeError("chunk boundaries differ from batch.iter_regression")
         self._cache: dict[tuple[int, int], Chunk] = {}
+        self._memo: dict[tuple[Any, ...], Any] = {}
         seconds = N / self.rate
         self.n_eff_train = min(float(self.train.sum()), 2 * self.cutoff * seconds * split) \
             if self.cutoff > 0 else float(self.train.sum())
@@ -215,6 +216,18 @@ class GapData:
             self._cache[key] = Chunk(ext, s.t[ext], s.nu[ext], s.nu_dot[ext], s.tau[ext],
                                      matrix_from_euler(s.euler[ext]))
         return self._cache[key]
+
+    def memo(self, key: tuple[Any, ...], make: Callable[[], Any], size: int = 48) -> Any:
+        """``make()`` cached under ``key`` for these data (least recently made dropped).
+
+        Effects keep their tables here (memory states per rate, dead-zone thrust per width),
+        so that a candidate object can be used with several data sets.
+        """
+        if key not in self._memo:
+            self._memo[key] = make()
+            if len(self._memo) > size:
+                self._memo.pop(next(iter(self._memo)))
+        return self._memo[key]
 
     def filtered(self, fn: Callable[[Chunk], FloatArray]) -> FloatArray:
         """``fn`` evaluated chunk by chunk, low-passed like the regression, all rows.
@@ -308,6 +321,10 @@ class Effect:
         """Starting points of the screening (a grid over a shape parameter)."""
         return [np.zeros(self.k)]
 
+    def implausible(self, data: GapData, p: FloatArray) -> str:
+        """Why magnitudes p do not describe this effect on these data (empty: they do)."""
+        return ""
+
     def bounds(self) -> tuple[FloatArray, FloatArray]:
         """Lower and upper bounds of p."""
         return np.full(self.k, -np.inf), np.full(self.k, np.inf)
@@ -399,7 +416,7 @@ class Current(Effect):
         g_d = np.degrees(np.array([-e, n]) / max(speed**2, 1e-24))
         s_s = float(np.sqrt(max(float(g_s @ C @ g_s), 0.0)))
         s_d = float(np.sqrt(max(float(g_d @ C @ g_d), 0.0)))
-        text = (f"{speed:.3f} ± {s_s:.3f} m/s towards {heading:.0f}° ± {s_d:.0f}° "
+        text = (f"{speed:.3f} ± {s_s:.2g} m/s towards {heading:.1f}° ± {s_d:.2g}° "
                 f"(north {n:+.3f}, east {e:+.3f} m/s)")
         if self.k == 3:
             text += f", down {float(p[2]):+.3f} m/s"
@@ -476,7 +493,7 @@ class CGOffset(Effect):
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
         s = np.sqrt(np.abs(np.diag(cov)))
-        return "δ = [" + ", ".join(f"{1e3 * v:+.1f} ± {1e3 * e:.1f}" for v, e in
+        return "δ = [" + ", ".join(f"{1e3 * v:+.2f} ± {1e3 * e:.2g}" for v, e in
                                    zip(p, s, strict=True)) + "] mm (FRD)"
 
     def model_update(self, data: GapData, p: FloatArray) -> dict[str, Any]:
@@ -498,7 +515,7 @@ class ThrustGain(LinearEffect):
         return -ch.tau[:, :, None]
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
-        return (f"ε = {100 * float(p[0]):+.1f} ± {100 * float(np.sqrt(abs(cov[0, 0]))):.1f} % "
+        return (f"ε = {100 * float(p[0]):+.2f} ± {100 * float(np.sqrt(abs(cov[0, 0]))):.2g} % "
                 "of the logged thrust")
 
     def model_update(self, data: GapData, p: FloatArray) -> dict[str, Any]:
@@ -528,14 +545,19 @@ class Delay(Effect):
         # τ(t − d) by a band-limited (Fourier) fractional shift of the mirrored chunk, so
         # that ρ is smooth in d (linear interpolation has a kink at every sample period)
         n = len(ch)
-        ext = np.concatenate([ch.tau, ch.tau[::-1]], axis=0)
-        f = np.fft.rfftfreq(2 * n, d=1.0 / data.rate)
+
+        def spectrum() -> tuple[FloatArray, NDArray[np.complex128]]:
+            ext = np.concatenate([ch.tau, ch.tau[::-1]], axis=0)
+            return (np.asarray(np.fft.rfftfreq(2 * n, d=1.0 / data.rate), dtype=float),
+                    np.fft.rfft(ext, axis=0))
+
+        f, spec = data.memo(("tau_spectrum", ch.rows.start, ch.rows.stop), spectrum)
         shift = np.exp(-2j * np.pi * f * float(p[0]))[:, None]
-        delayed = np.fft.irfft(np.fft.rfft(ext, axis=0) * shift, n=2 * n, axis=0)[:n]
+        delayed = np.fft.irfft(spec * shift, n=2 * n, axis=0)[:n]
         return np.asarray(ch.tau - delayed, dtype=float)
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
-        return (f"d = {1e3 * float(p[0]):.0f} ± {1e3 * float(np.sqrt(abs(cov[0, 0]))):.0f} ms")
+        return (f"d = {1e3 * float(p[0]):.1f} ± {1e3 * float(np.sqrt(abs(cov[0, 0]))):.2g} ms")
 
     def model_update(self, data: GapData, p: FloatArray) -> dict[str, Any]:
         return {"extra": {"delay": float(p[0])}}
@@ -559,9 +581,6 @@ class DeadZone(Effect):
     steps = (0.4,)
     grid = (1.5, 3.0, 4.5, 6.0, 8.0, 10.0, 13.0)
 
-    def __init__(self) -> None:
-        self._table: dict[float, FloatArray] = {}
-
     def available(self, data: GapData) -> str:
         if data.joints is None or data.thrusters is None or len(data.joints) < 2:
             return "needs the logged rotor speeds (thrusters/state); CSV input has none"
@@ -577,8 +596,7 @@ class DeadZone(Effect):
 
     def lost(self, data: GapData, n_dz: float) -> FloatArray:
         """τ lost in the dead-zone on every sample, shape (N, 6) (cached per n_dz)."""
-        key = round(float(n_dz), 6)
-        if key not in self._table:
+        def table() -> FloatArray:
             j, th = data.joints, data.thrusters
             assert j is not None and th is not None
             order = [j.names.index(n) for n in th.names]
@@ -588,17 +606,17 @@ class DeadZone(Effect):
             window = float(np.median(np.diff(j.stamp)))
             tc = j.stamp - window / 2  # a message reports the mean over the window before it
             t = data.samples.t
-            self._table[key] = np.stack([np.interp(t, tc, tau[:, i]) for i in range(6)], axis=1)
-            if len(self._table) > 64:
-                self._table.pop(next(iter(self._table)))
-        return self._table[key]
+            return np.stack([np.interp(t, tc, tau[:, i]) for i in range(6)], axis=1)
+
+        out: FloatArray = data.memo(("deadzone", round(float(n_dz), 6)), table)
+        return out
 
     def predict(self, data: GapData, ch: Chunk, p: FloatArray) -> FloatArray:
         return self.lost(data, max(float(p[0]), 0.0))[ch.rows]
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
         s = float(np.sqrt(abs(cov[0, 0])))
-        return (f"n_dz = {float(p[0]):.2f} ± {s:.2f} rev/s ({60 * float(p[0]):.0f} rpm); "
+        return (f"n_dz = {float(p[0]):.2f} ± {s:.2g} rev/s ({60 * float(p[0]):.0f} rpm); "
                 "no thrust below it")
 
     def model_update(self, data: GapData, p: FloatArray) -> dict[str, Any]:
@@ -621,7 +639,7 @@ class AddedMassScale(LinearEffect):
         return (ch.nu_dot @ M_A.T + coriolis_force(M_A, ch.nu))[:, :, None]
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
-        return (f"ε = {100 * float(p[0]):+.1f} ± {100 * float(np.sqrt(abs(cov[0, 0]))):.1f} % "
+        return (f"ε = {100 * float(p[0]):+.2f} ± {100 * float(np.sqrt(abs(cov[0, 0]))):.2g} % "
                 "of M_A")
 
     def model_update(self, data: GapData, p: FloatArray) -> dict[str, Any]:
@@ -743,21 +761,31 @@ class Memory(Effect):
         self.units = ("N/m" if dof < 3 else "N·m", "1/s")
         self.steps = (0.5 if dof < 3 else 0.05, 0.05)
         self.dofs = (dof,)
-        self._z: dict[float, FloatArray] = {}
+
+    def implausible(self, data: GapData, p: FloatArray) -> str:
+        # the regression sees ν low-passed at the cutoff f_c: a kernel faster than
+        # 2π f_c / 2 is indistinguishable from linear damping, one slower than the grid is a
+        # trend or an offset
+        fast = np.pi * data.cutoff if data.cutoff > 0 else 0.5 * np.pi * data.rate
+        if float(p[1]) >= fast:
+            return (f"λ = {float(p[1]):.3g} 1/s is faster than the regression resolves "
+                    f"({fast:.3g} 1/s): that is linear damping, not memory")
+        if float(p[1]) <= 1.05 * self.grid[0] / 2:
+            return f"λ = {float(p[1]):.3g} 1/s: a trend or an offset, not memory"
+        return ""
 
     def states(self, data: GapData, lam: float) -> FloatArray:
         """z for every sample at rate λ, shape (N,) (cached)."""
-        key = round(float(lam), 9)
-        if key not in self._z:
+        def make() -> FloatArray:
             s = data.samples
             z = np.zeros(len(s))
             for sl in s.segments():
                 z[sl] = filter_memory(s.t[sl], s.nu[sl, self.dof:self.dof + 1],
                                       np.array([lam]))[:, 0]
-            if len(self._z) > 32:
-                self._z.pop(next(iter(self._z)))
-            self._z[key] = z
-        return self._z[key]
+            return z
+
+        out: FloatArray = data.memo(("memory", self.dof, round(float(lam), 9)), make)
+        return out
 
     def starts(self, data: GapData) -> list[FloatArray]:
         return [np.array([0.0, lam]) for lam in self.grid]
@@ -811,7 +839,7 @@ class GyroBias(Effect):
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
         s = np.sqrt(np.abs(np.diag(cov)))
-        return "b_gyro = [" + ", ".join(f"{np.degrees(v):+.3f} ± {np.degrees(e):.3f}"
+        return "b_gyro = [" + ", ".join(f"{np.degrees(v):+.3f} ± {np.degrees(e):.2g}"
                                         for v, e in zip(p, s, strict=True)) + "] °/s (p, q, r)"
 
     def model_update(self, data: GapData, p: FloatArray) -> dict[str, Any]:
@@ -850,7 +878,7 @@ class DvlBias(Effect):
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
         s = np.sqrt(np.abs(np.diag(cov)))
-        return "b_dvl = [" + ", ".join(f"{v:+.4f} ± {e:.4f}" for v, e in
+        return "b_dvl = [" + ", ".join(f"{v:+.4f} ± {e:.2g}" for v, e in
                                        zip(p, s, strict=True)) + "] m/s (u, v, w)"
 
     def model_update(self, data: GapData, p: FloatArray) -> dict[str, Any]:
@@ -919,6 +947,8 @@ class Screen:
         Held-out RMS of the force the effect explains, as a share of the force scale of its
         DOF (:attr:`GapData.force_scale`), largest over DOFs.
     significant : bool
+    note : str
+        Why the fitted magnitudes do not describe the effect (then not significant).
     """
 
     effect: Effect
@@ -932,6 +962,11 @@ class Screen:
     err: float
     relevance: float
     significant: bool = False
+    note: str = ""
+
+    def score(self, n_eff: float) -> float:
+        """Held-out evidence for ranking: the gain less ½ k log n_eff (parsimony)."""
+        return self.gain - 0.5 * self.effect.k * float(np.log(max(n_eff, 2.0)))
 
 
 @dataclass
@@ -1132,10 +1167,11 @@ def screen(data: GapData, effect: Effect, r: FloatArray, w: FloatArray,
     err = 1.0 - float(w @ rss_tr / (w @ before_tr))
     explained = np.sqrt(np.mean((r - e)[te] ** 2, axis=0))
     relevance = float(np.max(explained / np.maximum(data.force_scale, 1e-300)))
+    note = effect.implausible(data, p)
     sig = (heldout >= opts.min_heldout and float(heldout_dof.max()) >= opts.min_heldout_dof
-           and dbic <= -opts.min_bic and relevance >= opts.min_relevance)
+           and dbic <= -opts.min_bic and relevance >= opts.min_relevance and not note)
     return Screen(effect, p, rss_tr, rss_te, heldout, heldout_dof, gain, dbic, err, relevance,
-                  sig)
+                  sig, note)
 
 
 def correction(data: GapData, effects: Sequence[tuple[Effect, FloatArray]]) -> FloatArray:
@@ -1243,9 +1279,9 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
 
     Each round: weights 1/σ_i² from the current residual on the training part; every
     candidate not yet added is screened (:func:`screen`); the significant one with the
-    largest held-out log-likelihood gain is added; all added effects are refitted jointly
-    on their exact models (:func:`refit`); the held-out RMS per DOF before and after and
-    the training BIC are recorded.
+    largest held-out log-likelihood gain, less ½ log n_eff per unknown, is added; all added
+    effects are refitted jointly on their exact models (:func:`refit`); the held-out RMS per
+    DOF before and after and the training BIC are recorded.
 
     Parameters
     ----------
@@ -1277,7 +1313,7 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
         w = _weights(r, tr)
         round_ = [screen(data, e, r, w, opts) for e in cands
                   if e.key not in {a.key for a, _ in added}]
-        round_.sort(key=lambda s: -s.gain)
+        round_.sort(key=lambda s: -s.score(data.n_eff_test))
         screens.append(round_)
         ok = [s for s in round_ if s.significant]
         if not ok:
