@@ -37,7 +37,7 @@ lint: $(STAMP)
 
 test: export OPENBLAS_NUM_THREADS = 1
 test: lint
-	$(BIN)/python -m pytest -q test
+	$(BIN)/python -m pytest -q -m "not slow" --durations=15 test
 
 bench: $(STAMP)
 	$(BIN)/python -m dampest_ros.bench

@@ -1,5 +1,5 @@
 """The ``dampest`` command: simulate, identify, inspect, export/import, record, replay,
-reindex, demo, live.
+reindex, demo, live, gap.
 
 Each sub-command lives in its own module with ``add_parser(subparsers)`` and ``run(args)``.
 """
@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from dampest_ros.cli import (
     demo,
     export,
+    gap,
     identify,
     inspect,
     live,
@@ -26,7 +27,7 @@ from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.io.bag import BagError, MissingTopicError
 
-COMMANDS = (simulate, identify, inspect, export, record, replay, reindex, demo, live)
+COMMANDS = (simulate, identify, gap, inspect, export, record, replay, reindex, demo, live)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -8,36 +8,20 @@ the model and say that nothing further is missing.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from dampest_ros.cli import gap as gap_cli
-from dampest_ros.cli import main as main_module
+from dampest_ros.cli.main import main
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
-
-Dampest = Callable[..., int]
-
-
-@pytest.fixture
-def dampest(monkeypatch: pytest.MonkeyPatch) -> Dampest:
-    """``dampest ARGS`` through cli.main, with the gap sub-command registered."""
-    if gap_cli not in main_module.COMMANDS:
-        monkeypatch.setattr(main_module, "COMMANDS", (*main_module.COMMANDS, gap_cli))
-
-    def call(*argv: str) -> int:
-        return main_module.main(list(argv))
-
-    return call
 
 
 @pytest.fixture(scope="module")
 def measured(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Bag + CSV with hidden buoyancy offset and thrust-gain error; the believed model."""
     root = tmp_path_factory.mktemp("gap")
-    assert main_module.main([
+    assert main([
         "simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B", "--duration", "600",
         "--seed", "2", "--out", str(root / "bag"), "--csv", str(root / "samples.csv"),
         "--effects", "{buoyancy_offset: 1.0, thrust_gain_error: -0.1}"]) == 0
@@ -50,12 +34,12 @@ def measured(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_bag_names_the_three_missing_effects_and_writes_the_report(
-        measured: Path, dampest: Dampest, capsys: pytest.CaptureFixture[str]) -> None:
+        measured: Path, capsys: pytest.CaptureFixture[str]) -> None:
     report, out = measured / "report", measured / "final.yaml"
     capsys.readouterr()
-    assert dampest("gap", str(measured / "bag"), "--model", str(measured / "sim_model.yaml"),
-                   "--vehicle", "bluerov2_heavy", "--report", str(report),
-                   "--out", str(out)) == 0
+    assert main(["gap", str(measured / "bag"), "--model", str(measured / "sim_model.yaml"),
+                 "--vehicle", "bluerov2_heavy", "--report", str(report),
+                 "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     for words in ("thrust-gain error", "buoyancy/weight offset", "quadratic damping in u",
                   "no further missing effect found", "where the residual is concentrated",
@@ -81,22 +65,22 @@ def test_bag_names_the_three_missing_effects_and_writes_the_report(
 
 
 def test_csv_input_skips_the_dead_zone_and_finds_the_same(
-        measured: Path, dampest: Dampest, capsys: pytest.CaptureFixture[str]) -> None:
+        measured: Path, capsys: pytest.CaptureFixture[str]) -> None:
     capsys.readouterr()
-    assert dampest("gap", str(measured / "samples.csv"), "--model",
-                   str(measured / "sim_model.yaml"), "--vehicle", "bluerov2_heavy",
-                   "--candidates", "thrusters,buoyancy,damping") == 0
+    assert main(["gap", str(measured / "samples.csv"), "--model",
+                 str(measured / "sim_model.yaml"), "--vehicle", "bluerov2_heavy",
+                 "--candidates", "thrusters,buoyancy,damping"]) == 0
     printed = capsys.readouterr().out
     assert "skipped deadzone" in printed and "rotor speeds" in printed
     assert "thrust-gain error" in printed and "buoyancy/weight offset" in printed
     assert "no further missing effect found" in printed
 
 
-def test_unknown_candidate_is_an_error(measured: Path, dampest: Dampest,
+def test_unknown_candidate_is_an_error(measured: Path,
                                        capsys: pytest.CaptureFixture[str]) -> None:
     capsys.readouterr()
-    assert dampest("gap", str(measured / "samples.csv"), "--model",
-                   str(measured / "sim_model.yaml"), "--vehicle", "bluerov2_heavy",
-                   "--candidates", "warp_drive") == 2
+    assert main(["gap", str(measured / "samples.csv"), "--model",
+                 str(measured / "sim_model.yaml"), "--vehicle", "bluerov2_heavy",
+                 "--candidates", "warp_drive"]) == 2
     err = capsys.readouterr().err
     assert "warp_drive" in err and "current" in err
