@@ -7,6 +7,10 @@ dampest/velocity (TwistWithCovarianceStamped), dampest/acceleration
 stamps at a fixed rate, body frame FLU (base_link), only for usable samples (not during DVL
 dropouts); diagnostics with the message counts, rejections and resets once per second.
 The work is done by dampest_ros.core.online.OnlinePreprocessor (the same class replays bags).
+The sensor messages reach it in stamp order whatever the order of their arrival
+(dampest_ros.core.reorder.StampOrder, up to reorder_latency of stamp time; what is held is
+released when no message has come for half a second), so that live data, a replayed bag and
+'dampest identify --method rls' give the same samples.
 """
 
 from __future__ import annotations
@@ -24,7 +28,8 @@ from geometry_msgs.msg import (
 from sensor_msgs.msg import FluidPressure, Imu, JointState
 
 from dampest_ros.core import frames
-from dampest_ros.core.online import OnlineConfig, OnlinePreprocessor, OnlineSample
+from dampest_ros.core.online import TOPIC_ROLES, OnlineConfig, OnlinePreprocessor, OnlineSample
+from dampest_ros.core.reorder import StampOrder
 from dampest_ros.io.yaml_io import load_vehicle
 from dampest_ros.ros.common import (
     RELIABLE_QOS,
@@ -38,6 +43,27 @@ from dampest_ros.ros.common import (
 )
 from dampest_ros.ros.convert import accel_msg, twist_msg, wrench_msg, xyz
 from dampest_ros.ros.sim_node import _vehicle_ok
+
+
+def sample_messages(s: OnlineSample, frame_id: str) -> tuple[
+        TwistWithCovarianceStamped, AccelWithCovarianceStamped, WrenchStamped,
+        QuaternionStamped]:
+    """The four dampest/* messages of one sample (velocity, acceleration, wrench in
+    ``frame_id``, FLU; attitude base_link FLU → odom ENU), all with the sample's stamp."""
+    stamp = to_time(s.t)
+    # FRD → FLU through the core's frame conversion
+    mv = twist_msg(frames.body_twist(s.nu))
+    ma = accel_msg(frames.body_twist(s.nu_dot))
+    mw = wrench_msg(frames.body_twist(s.tau))
+    # attitude FRD → NED (Euler) to the ROS quaternion FLU → ENU
+    q = frames.matrix_to_quat(frames.rotation(frames.matrix_from_euler(s.euler)))
+    mq = QuaternionStamped()
+    mq.quaternion.w, mq.quaternion.x, mq.quaternion.y, mq.quaternion.z = map(float, q)
+    for msg in (mv, ma, mw, mq):
+        msg.header.stamp = stamp
+        msg.header.frame_id = frame_id
+    mq.header.frame_id = "odom"
+    return mv, ma, mw, mq
 
 
 class PreprocessNode(ParamNode):
@@ -56,6 +82,9 @@ class PreprocessNode(ParamNode):
               "rejected", low=0.01, high=60.0),
         Param("clock_jump", 1.0, "a stamp this far (s) behind its topic's last one is a "
               "clock jump: reset", low=0.01, high=3600.0),
+        Param("reorder_latency", 0.5, "s of stamp time a sensor message may arrive after a "
+              "newer one of another topic and still be put in stamp order (later: counted as "
+              "late)", low=0.0, high=10.0),
         Param("frame_id", "base_link", "frame_id of the published samples"),
     )
 
@@ -75,7 +104,9 @@ class PreprocessNode(ParamNode):
         self.create_subscription(FluidPressure, "pressure", self._on_pressure, SENSOR_QOS)
         self.create_subscription(JointState, "thrusters/state", self._on_thrusters, SENSOR_QOS)
         self.create_timer(1.0, self._publish_diagnostics)
+        self.create_timer(0.5, self._flush_if_idle)
         self.published = 0
+        self._received = self._received_at_check = 0
 
     def _build(self) -> None:
         v = load_vehicle(self.p("vehicle"))
@@ -83,6 +114,7 @@ class PreprocessNode(ParamNode):
                            settle=self.p("settle"), stale_after=self.p("stale_after"),
                            clock_jump=self.p("clock_jump"))
         self.pre = OnlinePreprocessor(v.thrusters, v.body.gravity, v.body.rho, cfg)
+        self.order = StampOrder(TOPIC_ROLES, self.p("reorder_latency"), self.p("clock_jump"))
 
     def on_parameters(self, names: list[str]) -> None:
         if set(names) - {"frame_id"}:
@@ -93,38 +125,43 @@ class PreprocessNode(ParamNode):
 
     def _on_imu(self, m: Imu) -> None:
         o = m.orientation
-        self._publish(self.pre.imu(seconds(m.header.stamp), np.array([o.x, o.y, o.z, o.w]),
-                                   xyz(m.angular_velocity), xyz(m.linear_acceleration)))
+        self._feed("imu", m.header.stamp, (np.array([o.x, o.y, o.z, o.w]),
+                                           xyz(m.angular_velocity), xyz(m.linear_acceleration)))
 
     def _on_dvl(self, m: TwistWithCovarianceStamped) -> None:
-        self._publish(self.pre.dvl(seconds(m.header.stamp), xyz(m.twist.twist.linear),
-                                   np.asarray(m.twist.covariance, dtype=float)))
+        self._feed("dvl", m.header.stamp, (xyz(m.twist.twist.linear),
+                                           np.asarray(m.twist.covariance, dtype=float)))
 
     def _on_pressure(self, m: FluidPressure) -> None:
-        self._publish(self.pre.pressure(seconds(m.header.stamp), m.fluid_pressure))
+        self._feed("pressure", m.header.stamp, (m.fluid_pressure,))
 
     def _on_thrusters(self, m: JointState) -> None:
-        self._publish(self.pre.thrusters(seconds(m.header.stamp), tuple(m.name),
-                                         np.asarray(m.effort, dtype=float)))
+        self._feed("thrusters", m.header.stamp, (tuple(m.name),
+                                                 np.asarray(m.effort, dtype=float)))
+
+    def _feed(self, role: str, stamp: Any, args: tuple[Any, ...]) -> None:
+        """Through the stamp-order stage to the preprocessor method of the role."""
+        self._received += 1
+        self._process(self.order.push(role, seconds(stamp), args))
+
+    def _process(self, released: list[tuple[str, float, Any]]) -> None:
+        samples: list[OnlineSample] = []
+        for role, t, args in released:
+            samples += getattr(self.pre, role)(t, *args)
+        self._publish(samples)
+
+    def _flush_if_idle(self) -> None:
+        """No sensor message since the last look: process what the stamp order holds."""
+        if self._received == self._received_at_check and len(self.order):
+            self._process(self.order.flush())
+        self._received_at_check = self._received
 
     def _publish(self, samples: list[OnlineSample]) -> None:
         frame = self.p("frame_id") if samples else ""
         for s in samples:
             if not s.usable:
                 continue
-            stamp = to_time(s.t)
-            # FRD → FLU through the core's frame conversion
-            mv = twist_msg(frames.body_twist(s.nu))
-            ma = accel_msg(frames.body_twist(s.nu_dot))
-            mw = wrench_msg(frames.body_twist(s.tau))
-            # attitude FRD → NED (Euler) to the ROS quaternion FLU → ENU
-            q = frames.matrix_to_quat(frames.rotation(frames.matrix_from_euler(s.euler)))
-            mq = QuaternionStamped()
-            mq.quaternion.w, mq.quaternion.x, mq.quaternion.y, mq.quaternion.z = map(float, q)
-            for msg in (mv, ma, mw, mq):
-                msg.header.stamp = stamp
-                msg.header.frame_id = frame
-            mq.header.frame_id = "odom"
+            mv, ma, mw, mq = sample_messages(s, frame)
             self.pub_v.publish(mv)
             self.pub_a.publish(ma)
             self.pub_w.publish(mw)
@@ -136,6 +173,7 @@ class PreprocessNode(ParamNode):
     def _publish_diagnostics(self) -> None:
         c = dict(self.pre.counts)
         c["published"] = self.published
+        c["late"] = self.order.counts["late"]
         c["derivative_lag_s"] = self.pre.derivative_lag
         problems = c["rejected_nonfinite"] + c["rejected_stale"] + c["clock_resets"]
         self.pub_diag.publish(diagnostic_array(

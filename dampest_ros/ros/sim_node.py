@@ -102,6 +102,8 @@ class SimNode(ParamNode):
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", 10)
         self.create_subscription(WrenchStamped, "cmd_wrench", self._on_wrench, RELIABLE_QOS)
         self.published = 0
+        #: messages published per topic (since the node started)
+        self.counts = dict.fromkeys(self.pub, 0)
         self._start()
         # the loop runs on the wall clock even when this node uses sim time
         self._timer = self.create_timer(self.p("tick"), self._tick,
@@ -158,6 +160,7 @@ class SimNode(ParamNode):
         msgs.sort(key=lambda x: x[0])
         for _, name, m in msgs:
             self.pub[name].publish(m)
+            self.counts[name] += 1
         self.published += len(msgs)
         if self.p("publish_clock") and msgs:
             self.clock_pub.publish(ClockMsg(clock=to_time(live.t)))
