@@ -7,6 +7,11 @@ acceleration ν̇ and wrench τ (FRD, SI) and the attitude for g(η) (the IMU or
 sample instant, ROS order [x, y, z, w], FLU → ENU; converted through
 :mod:`dampest_ros.core.frames`). Samples are processed in chunks of ``chunk`` (the regression
 is vectorised over a chunk; the RLS updates sample by sample).
+
+The dampest/* topics carry the preprocessor's samples in that form
+(:func:`wire_stamp`, :func:`attitude_quaternion`); :meth:`OnlineEstimator.add_sample` feeds
+a sample exactly as it arrives through them, so that an offline run
+(``dampest identify --method rls``) takes the nodes' code path number for number.
 """
 
 from __future__ import annotations
@@ -73,6 +78,25 @@ class EstimatorConfig:
             raise ConfigError("chunk", f"must be ≥ 1, got {self.chunk}")
         if self.prior_scale <= 0:
             raise ConfigError("prior_scale", "must be > 0")
+
+
+def wire_stamp(t: float) -> int:
+    """The integer nanoseconds that a header stamp of t seconds carries (nearest)."""
+    return round(t * 1e9)
+
+
+def attitude_quaternion(euler: FloatArray) -> FloatArray:
+    """The ROS orientation [x, y, z, w] (base_link FLU → odom ENU) of roll, pitch, yaw
+    (FRD → NED, rad, shape (3,)); shape (4,), w ≥ 0."""
+    q = frames.matrix_to_quat(frames.rotation(frames.matrix_from_euler(euler)))
+    return np.asarray(q[[1, 2, 3, 0]], dtype=float)
+
+
+def attitude_euler(q: FloatArray) -> FloatArray:
+    """Roll, pitch, yaw (FRD → NED, rad, shape (3,)) of a ROS orientation [x, y, z, w]
+    (FLU → ENU, shape (4,)); the inverse of :func:`attitude_quaternion`."""
+    R = frames.rotation(frames.quat_to_matrix(q[[3, 0, 1, 2]]))
+    return np.asarray(frames.euler_from_matrix(R), dtype=float)
 
 
 def restrict(model: DampingModel, theta: FloatArray, kinds: Sequence[str] | None
@@ -186,11 +210,18 @@ class OnlineEstimator:
                 self.counts["unmatched"] += 1
         return self.process()
 
-    @staticmethod
-    def _euler(q: FloatArray) -> FloatArray:
-        """Roll, pitch, yaw (FRD → NED) of an orientation [x, y, z, w] FLU → ENU."""
-        R = frames.rotation(frames.quat_to_matrix(q[[3, 0, 1, 2]]))
-        return np.asarray(frames.euler_from_matrix(R), dtype=float)
+    def add_sample(self, s: OnlineSample) -> int:
+        """One preprocessor sample as the dampest/* topics deliver it: stamp rounded to the
+        nanosecond, attitude as the ROS quaternion, unusable samples not sent (the
+        preprocess node publishes only usable ones); returns the samples processed.
+
+        The FLU ↔ FRD conversions on the way are sign changes, exact in floating point."""
+        if not s.usable:
+            return 0
+        ns = wire_stamp(s.t)
+        return (self.add("velocity", ns, s.nu) + self.add("acceleration", ns, s.nu_dot)
+                + self.add("wrench", ns, s.tau)
+                + self.add("attitude", ns, attitude_quaternion(s.euler)))
 
     # --- processing ----------------------------------------------------------------------
 
@@ -201,7 +232,7 @@ class OnlineEstimator:
             return 0
         batch, self._ready = self._ready, []
         samples = [OnlineSample(stamp * 1e-9, e["velocity"], e["acceleration"], e["wrench"],
-                                self._euler(e["attitude"]), math.nan, True)
+                                attitude_euler(e["attitude"]), math.nan, True)
                    for stamp, e in batch]
         if self.keep_samples:
             self.samples_log += samples
@@ -269,18 +300,20 @@ class OnlineEstimator:
             out[f"count.{k}"] = self.counts[k]
         return out
 
-    def model_extra(self) -> dict[str, Any]:
-        """Extra entries of the model file: provenance and health."""
+    def model_extra(self, **extra: Any) -> dict[str, Any]:
+        """Extra entries of the model file: provenance and health (``extra`` overrides or
+        adds entries, e.g. ``source``)."""
         d = self.rls.diagnostics(condition=False)
         return {"source": "dampest estimator_node", "vehicle": self.vehicle.name,
                 "samples": int(d.samples), "forgetting_factor": float(self.rls.lam),
-                "unexcited": d.unexcited or ["none"], "change_alarm": bool(d.alarm)}
+                "unexcited": d.unexcited or ["none"], "change_alarm": bool(d.alarm), **extra}
 
-    def save(self, path: str | Path, version: int) -> Path:
-        """Atomic write of the model file (:func:`dampest_ros.io.yaml_io.save_model`)."""
+    def save(self, path: str | Path, version: int, **extra: Any) -> Path:
+        """Atomic write of the model file (:func:`dampest_ros.io.yaml_io.save_model`);
+        ``extra``: more entries (:meth:`model_extra`)."""
         from dampest_ros.io.yaml_io import save_model
         return save_model(path, self.names, self.theta, self.theta_std, self.M,
-                          self.model_extra(), damping=self.model, version=version)
+                          self.model_extra(**extra), damping=self.model, version=version)
 
     def text(self, version: int) -> str:
         """The model file text for ``dampest/model``."""
