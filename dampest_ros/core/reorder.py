@@ -59,7 +59,7 @@ class StampOrder:
     ``clock_jumps``. Each push costs O(log n + roles) for n messages held.
     """
 
-    def __init__(self, roles: Sequence[str], latency: float = 0.5,
+    def __init__(self, roles: Sequence[str], latency: float = 1.0,
                  clock_jump: float = 1.0) -> None:
         if not roles or len(set(roles)) != len(roles):
             raise ConfigError("roles", f"must be distinct names, got {list(roles)}")

@@ -30,6 +30,8 @@ from rclpy.qos import (
 )
 from rclpy.utilities import remove_ros_args
 
+from dampest_ros.core.estimator import wire_stamp
+
 #: Sensor topics: the sensor-data policies (best effort, volatile) with a deeper queue than
 #: its 5, for the bursts of a simulator running faster than real time.
 SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000,
@@ -47,7 +49,7 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 
 def to_time(t: float) -> Time:
     """builtin_interfaces/Time from seconds (rounded to the nanosecond)."""
-    ns = round(t * 1e9)
+    ns = wire_stamp(t)
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 

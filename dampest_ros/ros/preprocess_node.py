@@ -28,6 +28,7 @@ from geometry_msgs.msg import (
 from sensor_msgs.msg import FluidPressure, Imu, JointState
 
 from dampest_ros.core import frames
+from dampest_ros.core.estimator import attitude_quaternion
 from dampest_ros.core.online import TOPIC_ROLES, OnlineConfig, OnlinePreprocessor, OnlineSample
 from dampest_ros.core.reorder import StampOrder
 from dampest_ros.io.yaml_io import load_vehicle
@@ -56,9 +57,9 @@ def sample_messages(s: OnlineSample, frame_id: str) -> tuple[
     ma = accel_msg(frames.body_twist(s.nu_dot))
     mw = wrench_msg(frames.body_twist(s.tau))
     # attitude FRD → NED (Euler) to the ROS quaternion FLU → ENU
-    q = frames.matrix_to_quat(frames.rotation(frames.matrix_from_euler(s.euler)))
     mq = QuaternionStamped()
-    mq.quaternion.w, mq.quaternion.x, mq.quaternion.y, mq.quaternion.z = map(float, q)
+    mq.quaternion.x, mq.quaternion.y, mq.quaternion.z, mq.quaternion.w = \
+        map(float, attitude_quaternion(s.euler))
     for msg in (mv, ma, mw, mq):
         msg.header.stamp = stamp
         msg.header.frame_id = frame_id
@@ -82,7 +83,7 @@ class PreprocessNode(ParamNode):
               "rejected", low=0.01, high=60.0),
         Param("clock_jump", 1.0, "a stamp this far (s) behind its topic's last one is a "
               "clock jump: reset", low=0.01, high=3600.0),
-        Param("reorder_latency", 0.5, "s of stamp time a sensor message may arrive after a "
+        Param("reorder_latency", 1.0, "s of stamp time a sensor message may arrive after a "
               "newer one of another topic and still be put in stamp order (later: counted as "
               "late)", low=0.0, high=10.0),
         Param("frame_id", "base_link", "frame_id of the published samples"),
