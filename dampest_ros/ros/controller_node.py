@@ -17,7 +17,7 @@ from geometry_msgs.msg import Twist, TwistWithCovarianceStamped, WrenchStamped
 
 from dampest_ros.client import ModelClient
 from dampest_ros.core import frames
-from dampest_ros.core.control import VelocityPI
+from dampest_ros.core.control import DEFAULT_BANDWIDTH, VelocityPI
 from dampest_ros.io.yaml_io import load_vehicle
 from dampest_ros.ros.common import RELIABLE_QOS, Param, ParamNode, main_for, seconds
 from dampest_ros.ros.convert import twist6, wrench_msg, xyz
@@ -41,7 +41,7 @@ class ControllerNode(ParamNode):
         Param("model_node", "estimator_node", "node that holds model.* (estimator_node or "
               "model_server_node)"),
         Param("feedforward", True, "add the model feed-forward D(ν)ν + C(ν)ν"),
-        Param("bandwidth", 1.5, "closed-loop bandwidth of the PI in rad/s", low=0.01,
+        Param("bandwidth", DEFAULT_BANDWIDTH, "closed-loop bandwidth of the PI in rad/s", low=0.01,
               high=50.0),
         Param("reference", [0.0] * 6, "velocity reference, body FLU (m/s, rad/s), used until "
               "cmd_vel arrives", check=_six),
@@ -50,9 +50,7 @@ class ControllerNode(ParamNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.NODE_NAME, self.PARAMS, **kwargs)
         self.vehicle = load_vehicle(self.p("vehicle"))
-        self.client = ModelClient(self, self.p("model_node"),
-                                  on_update=lambda m: self.get_logger().info(
-                                      f"model version {m.version}"))
+        self.client = ModelClient(self, self.p("model_node"), on_update=self._on_model)
         self._build()
         self.ref = frames.body_twist(np.array(self.p("reference"), dtype=float))
         self.pub = self.create_publisher(WrenchStamped, "cmd_wrench", RELIABLE_QOS)
@@ -62,9 +60,13 @@ class ControllerNode(ParamNode):
         self._t_prev: float | None = None
         self.commands = 0
 
+    def _on_model(self, m: Any) -> None:
+        # the estimator publishes about once a second: only the first model is news
+        log = self.get_logger()
+        (log.info if self.client.refreshes == 1 else log.debug)(f"model version {m.version}")
+
     def _build(self) -> None:
-        self.pi = VelocityPI(np.diag(self.vehicle.body.M), 0.9 * self.vehicle.thrusters.max_wrench,
-                             self.p("bandwidth"), self._feedforward)
+        self.pi = VelocityPI.for_vehicle(self.vehicle, self.p("bandwidth"), self._feedforward)
 
     def _feedforward(self, nu_ref: np.ndarray) -> np.ndarray:
         if not self.p("feedforward") or not self.client.available:

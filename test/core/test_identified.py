@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dampest_ros.core.control import VelocityPI
+from dampest_ros.core.control import VelocityPI, track, tracking_rms
 from dampest_ros.core.identified import IdentifiedModel, damping_from_names
 from dampest_ros.core.rigid_body import ConfigError, coriolis_force
 from dampest_ros.core.simulate import Simulator
@@ -30,25 +30,19 @@ def test_force_matrix_and_std_from_names() -> None:
         damping_from_names(["X_u", "Y_vr"])
 
 
-def tracking_rms(feedforward: bool) -> float:
+def tracking_rms_60s(feedforward: bool) -> float:
     """Velocity PI (bandwidth 1 rad/s) tracking sines in surge, heave and yaw for 60 s."""
     v = load_vehicle("bluerov2_heavy")
     model = IdentifiedModel(v.damping.parameter_names, v.theta, np.zeros(12), v.body.M)
-    ctrl = VelocityPI(np.diag(v.body.M), 0.9 * v.thrusters.max_wrench, 1.0,
-                      model.feedforward if feedforward else None)
-    sim = Simulator(v, dt=0.02, record=False)
-    err = []
-    for k in range(3000):
-        t = 0.02 * k
-        ref = np.array([0.5 * np.sin(0.3 * t), 0, 0.2 * np.sin(0.2 * t), 0, 0,
-                        0.4 * np.sin(0.25 * t)])
-        sim.step(sim.wrench_to_command(ctrl(ref, sim.nu, 0.02)))
-        if t > 10:
-            err.append(ref[[0, 2, 5]] - sim.nu[[0, 2, 5]])
-    return float(np.sqrt(np.mean(np.square(err))))
+    ctrl = VelocityPI.for_vehicle(v, 1.0, model.feedforward if feedforward else None)
+    t = 0.02 * np.arange(3000)
+    ref = np.zeros((3000, 6))
+    ref[:, [0, 2, 5]] = [0.5, 0.2, 0.4] * np.sin(np.outer(t, [0.3, 0.2, 0.25]))
+    nu = track(Simulator(v, dt=0.02, record=False), ctrl, ref, 0.02)
+    return tracking_rms(ref, nu, [0, 2, 5], skip=500)
 
 
 def test_feedforward_from_the_model_improves_tracking() -> None:
-    pid, ff = tracking_rms(False), tracking_rms(True)
+    pid, ff = tracking_rms_60s(False), tracking_rms_60s(True)
     print(f"\nvelocity tracking RMS: PI {pid:.4f}, PI + D(ν)ν + C(ν)ν {ff:.4f}")
     assert ff < 0.5 * pid
