@@ -1,10 +1,16 @@
 """Client of the model service: what a controller imports to use the identified damping.
 
 Fetches ``model.*`` (DESIGN.md §3) from a node (``estimator_node``, ``model_server_node``) with
-the standard ``get_parameters`` service, follows ``/parameter_events`` to refresh when
-``model.version`` changes, and evaluates D(ν), the damping force D(ν)ν, its standard deviation
-and C(ν)ν (FRD body frame, SI units). Without ROS, :meth:`ModelClient.from_yaml` reads a model
-file. rclpy is imported only by the ROS methods.
+the standard ``list_parameters`` and ``get_parameters`` services, follows ``/parameter_events``
+to refresh when ``model.version`` changes, and evaluates D(ν), the damping force D(ν)ν, its
+standard deviation and C(ν)ν (FRD body frame, SI units). Without ROS,
+:meth:`ModelClient.from_yaml` reads a model file. rclpy is imported only by the ROS methods.
+
+Every static damping term is evaluated (linear, quadratic, cross, added mass, residual): the
+structure comes from ``model.terms.*`` when the server declares them (model_server_node does,
+as the model file has them), otherwise it is rebuilt from the parameter names, which is
+enough for linear and quadratic terms. A fluid-memory term needs its filter states and is
+refused (:class:`dampest_ros.core.identified.IdentifiedModel`).
 
 The service is called with ``call_async``; the caller's node must be spun by an executor
 (its own, or the background thread :meth:`ModelClient.standalone` starts). Blocking on
@@ -29,11 +35,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.identified import IdentifiedModel
+from dampest_ros.io.yaml_io import ModelFile, load_model, model_from_parameters
 
 FloatArray = NDArray[np.float64]
 
+#: The parameters every model server holds (DESIGN.md §3); ``model.terms.*`` may come too.
 MODEL_PARAMETERS = ("model.parameter_names", "model.theta", "model.theta_std", "model.M",
                     "model.version")
+
+
+def _identified(m: ModelFile) -> IdentifiedModel:
+    """The evaluable model of a model file (structure from its terms, else from the names)."""
+    return IdentifiedModel(m.parameter_names, m.theta, m.theta_std, m.M, m.damping, m.version)
 
 
 class ModelUnavailableError(RuntimeError):
@@ -70,7 +83,8 @@ class ModelClient:
         self._pending = False
         if node is not None:
             from rcl_interfaces.msg import ParameterEvent
-            from rcl_interfaces.srv import GetParameters
+            from rcl_interfaces.srv import GetParameters, ListParameters
+            self._list = node.create_client(ListParameters, f"{server}/list_parameters")
             self._cli = node.create_client(GetParameters, f"{server}/get_parameters")
             # fully qualified server name, as /parameter_events reports it
             ns = node.get_namespace().rstrip("/")
@@ -85,11 +99,8 @@ class ModelClient:
     @classmethod
     def from_yaml(cls, path: str | Path) -> ModelClient:
         """A client holding the model of a model file (no ROS needed)."""
-        from dampest_ros.io.yaml_io import load_model
-        m = load_model(path)
         client = cls(None)
-        client._set(IdentifiedModel(m.parameter_names, m.theta, m.theta_std, m.M, m.damping,
-                                    m.version))
+        client._set(_identified(load_model(path)))
         return client
 
     # --- with ROS ------------------------------------------------------------------------
@@ -119,35 +130,52 @@ class ModelClient:
             self.node.destroy_node()
 
     def request(self) -> Any:
-        """Ask the server for ``model.*`` (asynchronous; the answer updates the model)."""
-        from rcl_interfaces.srv import GetParameters
+        """Ask the server for ``model.*`` (asynchronous: the names under ``model``, then their
+        values; the answer updates the model). Returns the first future, or None while the
+        server is not discovered yet (the request is then sent when it is)."""
+        from rcl_interfaces.srv import ListParameters
         if self.node is None:
             raise ModelUnavailableError("this client reads a YAML file; it has no ROS node")
-        if not self._cli.service_is_ready():
+        if not (self._list.service_is_ready() and self._cli.service_is_ready()):
             # not discovered yet: try again when it is (the timer stops after the request)
             if not self._pending:
                 self._pending = True
                 self._retry = self.node.create_timer(0.2, self._retry_request)
             return None
-        future = self._cli.call_async(GetParameters.Request(names=list(MODEL_PARAMETERS)))
-        future.add_done_callback(self._on_response)
+        future = self._list.call_async(ListParameters.Request(prefixes=["model"], depth=0))
+        future.add_done_callback(self._on_list)
         return future
 
     def _retry_request(self) -> None:
-        if self._cli.service_is_ready():
+        if self._list.service_is_ready() and self._cli.service_is_ready():
             self._retry.cancel()
             self.node.destroy_timer(self._retry)
             self._pending = False
             self.request()
 
-    def _on_response(self, future: Any) -> None:
+    def _on_list(self, future: Any) -> None:
+        from rcl_interfaces.srv import GetParameters
+        try:
+            names = list(future.result().result.names)
+            missing = sorted(set(MODEL_PARAMETERS) - set(names))
+            if missing:
+                raise ModelUnavailableError(f"{self.server} has no {', '.join(missing)}")
+        except Exception as exc:  # a bad answer must not kill the caller's executor
+            self.errors.append(f"{type(exc).__name__}: {exc}")
+            return
+        get = self._cli.call_async(GetParameters.Request(names=names))
+        get.add_done_callback(lambda f: self._on_response(names, f))
+
+    def _on_response(self, names: list[str], future: Any) -> None:
+        from rclpy.parameter import parameter_value_to_python
         try:
             values = future.result().values
-            names, theta, std, M, version = (
-                list(values[0].string_array_value), np.array(values[1].double_array_value),
-                np.array(values[2].double_array_value), np.array(values[3].double_array_value),
-                int(values[4].integer_value))
-            self._set(IdentifiedModel(names, theta, std, M, version=version))
+            if len(values) != len(names):
+                raise ModelUnavailableError(f"{self.server} answered {len(values)} of "
+                                            f"{len(names)} model parameters")
+            m = model_from_parameters({n: parameter_value_to_python(v)
+                                       for n, v in zip(names, values, strict=True)})
+            self._set(_identified(m))
         except Exception as exc:  # a bad answer must not kill the caller's executor
             self.errors.append(f"{type(exc).__name__}: {exc}")
 

@@ -349,6 +349,72 @@ def model_text(names: Sequence[str], theta: FloatArray, theta_std: FloatArray, M
 
     Parameters are those of :func:`save_model`.
     """
+    model = _model_mapping(names, theta, theta_std, M, extra, damping, version)
+    return ("# dampest_ros model: a ROS 2 parameters file (--ros-args --params-file).\n"
+            "# Damping coefficients are positive when dissipative; M is row-major, FRD.\n"
+            + yaml.dump({"/**": {"ros__parameters": {"model": model}}}, Dumper=_Dumper,
+                        sort_keys=False, default_flow_style=None, width=100))
+
+
+def model_parameters(names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
+                     M: FloatArray, *, damping: DampingModel | None = None,
+                     version: int = 1) -> dict[str, Any]:
+    """The model as the ROS parameters a node declares from the model file.
+
+    Parameters are those of :func:`save_model` (without ``extra``).
+
+    Returns
+    -------
+    dict
+        Dotted parameter name → value (``model.theta``: list of p floats, ``model.M``: 36
+        floats, ``model.terms.cross.rows``: list of int, …), the names and values
+        ``--params-file`` gives for the file :func:`save_model` writes.
+    """
+    flat: dict[str, Any] = {}
+
+    def walk(prefix: str, value: Any) -> None:
+        if isinstance(value, Mapping):
+            for k, v in value.items():
+                walk(f"{prefix}.{k}", v)
+        else:
+            flat[prefix] = value
+
+    walk("model", _model_mapping(names, theta, theta_std, M, None, damping, version))
+    return flat
+
+
+def model_from_parameters(values: Mapping[str, Any]) -> ModelFile:
+    """:func:`load_model` for the ``model.*`` parameters of a node.
+
+    Parameters
+    ----------
+    values : mapping
+        Dotted parameter name → value (as :func:`model_parameters` gives them); at least
+        ``model.parameter_names``, ``theta``, ``theta_std``, ``M`` and ``version``.
+        ``model.sign_convention`` defaults to the one the parameter contract states;
+        without ``model.terms.*`` the structure is left to the caller (``damping`` None).
+
+    Returns
+    -------
+    ModelFile
+    """
+    model: dict[str, Any] = {"sign_convention": SIGN_CONVENTION}
+    for name, value in values.items():
+        head, _, rest = name.partition(".")
+        if head != "model" or not rest:
+            continue
+        *path, leaf = rest.split(".")
+        node = model
+        for key in path:
+            node = node.setdefault(key, {})
+        node[leaf] = value
+    return _model_from_mapping(model, Path("<parameters>"))
+
+
+def _model_mapping(names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
+                   M: FloatArray, extra: Mapping[str, Any] | None,
+                   damping: DampingModel | None, version: int) -> dict[str, Any]:
+    """The ``model`` mapping of the file (checked)."""
     names = [str(n) for n in names]
     theta = np.asarray(theta, dtype=float)
     theta_std = np.asarray(theta_std, dtype=float)
@@ -370,11 +436,7 @@ def model_text(names: Sequence[str], theta: FloatArray, theta_std: FloatArray, M
         if key in _RESERVED:
             raise ValueError(f"extra key {key!r} is reserved")
         model[str(key)] = _param_value(str(key), value)
-    text = ("# dampest_ros model: a ROS 2 parameters file (--ros-args --params-file).\n"
-            "# Damping coefficients are positive when dissipative; M is row-major, FRD.\n"
-            + yaml.dump({"/**": {"ros__parameters": {"model": model}}}, Dumper=_Dumper,
-                        sort_keys=False, default_flow_style=None, width=100))
-    return text
+    return model
 
 
 def _model_section(doc: Any, path: Path) -> dict[str, Any]:
@@ -416,7 +478,12 @@ def loads_model(text: str) -> ModelFile:
 
 
 def _model_from_doc(doc: Any, path: Path) -> ModelFile:
-    model = _model_section(doc, path)
+    """The ModelFile of a parsed parameters file."""
+    return _model_from_mapping(_model_section(doc, path), path)
+
+
+def _model_from_mapping(model: Mapping[str, Any], path: Path) -> ModelFile:
+    """The ModelFile of a ``model`` mapping (checked; ``path`` names it in errors)."""
     for key in _RESERVED[:-1]:
         if key not in model:
             raise ConfigError(f"model.{key}", f"missing in {path}")

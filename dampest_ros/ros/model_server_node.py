@@ -1,9 +1,11 @@
 """model_server_node: serves a saved model file through the model.* parameters and topic.
 
 The model comes from the model_file parameter, or from model.* given directly (a model file
-is a ROS 2 parameters file: --ros-args --params-file model.yaml). Publishes it on
-dampest/model (std_msgs/String with the YAML, transient local). Setting model_file loads
-another file (validated first) and bumps model.version.
+is a ROS 2 parameters file: --ros-args --params-file model.yaml). Its parameters are those
+of the file: model.parameter_names, theta, theta_std, M, version, sign_convention and the
+term structure model.terms.* (so that dampest_ros.client evaluates cross, added-mass and
+residual terms too). Publishes it on dampest/model (std_msgs/String with the YAML, transient
+local). Setting model_file loads another file (validated first) and bumps model.version.
 """
 
 from __future__ import annotations
@@ -11,12 +13,19 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from dampest_ros.core.rigid_body import ConfigError
-from dampest_ros.io.yaml_io import ModelFile, load_model, model_text
+from dampest_ros.io.yaml_io import (
+    ModelFile,
+    load_model,
+    model_from_parameters,
+    model_parameters,
+    model_text,
+)
 from dampest_ros.ros.common import LATCHED_QOS, Param, main_for
-from dampest_ros.ros.estimator_node import ModelParamNode, _prior_ok, model_params
+from dampest_ros.ros.estimator_node import ModelParamNode, _prior_ok
 
 
 class ModelServerNode(ModelParamNode):
@@ -34,9 +43,8 @@ class ModelServerNode(ModelParamNode):
         self.pub = self.create_publisher(String, "dampest/model", LATCHED_QOS)
         self.model = self._load()
         self.version = max(int(self.model.version), 1)
-        self.declare_model(model_params(self.model.parameter_names, self.model.theta,
-                                        self.model.theta_std, self.model.M, self.version))
-        self._publish()
+        self._served: dict[str, Any] = {}
+        self._serve()
         self.get_logger().info(f"serving {len(self.model.parameter_names)} parameters, "
                                f"version {self.version}")
 
@@ -46,32 +54,36 @@ class ModelServerNode(ModelParamNode):
             return load_model(Path(path))
         # model.* from the parameter overrides (a model file given with --params-file)
         ov = self._parameter_overrides
-        try:
-            import numpy as np
-            return ModelFile(list(ov["model.parameter_names"].value),
-                             np.array(ov["model.theta"].value),
-                             np.array(ov["model.theta_std"].value),
-                             np.array(ov["model.M"].value).reshape(6, 6),
-                             int(ov["model.version"].value) if "model.version" in ov else 1)
-        except KeyError as exc:
-            raise ConfigError("model_file", f"no model_file and no {exc.args[0]} parameter; "
-                              "give --params-file model.yaml or -p model_file:=...") from None
+        if "model.parameter_names" not in ov:
+            raise ConfigError("model_file", "no model_file and no model.parameter_names "
+                              "parameter; give --params-file model.yaml or -p model_file:=...")
+        return model_from_parameters({k: v.value for k, v in ov.items()})
+
+    def _serve(self) -> None:
+        """Declare or update model.* (the terms' names may change with the file), publish."""
+        m = self.model
+        new = model_parameters(m.parameter_names, m.theta, m.theta_std, m.M, damping=m.damping,
+                               version=self.version)
+        for name in set(self._served) - set(new):
+            self.undeclare_parameter(name)
+        added = [Parameter(n, value=v) for n, v in new.items() if n not in self._served]
+        kept = [Parameter(n, value=v) for n, v in new.items() if n in self._served]
+        if added:
+            self.declare_model(added)
+        if kept:
+            self.set_model(kept)
+        self._served = new
+        self.pub.publish(String(data=model_text(
+            m.parameter_names, m.theta, m.theta_std, m.M, {"source": "model_server_node"},
+            damping=m.damping, version=self.version)))
 
     def on_parameters(self, names: list[str]) -> None:
         if "model_file" in names and str(self.p("model_file")).strip():
             self.model = self._load()
             self.version += 1
-            self.set_model(model_params(self.model.parameter_names, self.model.theta,
-                                        self.model.theta_std, self.model.M, self.version))
-            self._publish()
+            self._serve()
             self.get_logger().info(f"now serving {self.p('model_file')} as version "
                                    f"{self.version}")
-
-    def _publish(self) -> None:
-        m = self.model
-        self.pub.publish(String(data=model_text(
-            m.parameter_names, m.theta, m.theta_std, m.M, {"source": "model_server_node"},
-            damping=m.damping, version=self.version)))
 
 
 main = main_for(ModelServerNode, __doc__ or "")

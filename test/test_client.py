@@ -1,0 +1,130 @@
+"""dampest_ros.client evaluates every static damping term of a model: from a YAML file and
+from a model_server_node's parameters (model.terms.* carry the structure)."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from dampest_ros.client import ModelClient
+from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.rigid_body import coriolis_force
+from dampest_ros.core.vehicle import damping_from_spec
+from dampest_ros.io.yaml_io import load_vehicle, save_model
+
+SPEC: dict[str, Any] = {
+    "linear": {"X_u": 0, "Y_v": 0, "Z_w": 0, "K_p": 0, "M_q": 0, "N_r": 0, "Y_r": 0},
+    "quadratic": {"X_uu": 0, "Y_vv": 0, "Z_ww": 0, "K_pp": 0, "M_qq": 0, "N_rr": 0},
+    "cross": [{"row": "Y", "col": "v", "alpha": "|r|", "name": "Y_vr"},
+              {"row": "N", "col": "r", "alpha": "v"},
+              {"row": "X", "col": "u", "alpha": "|U|"}],
+    "added": {},
+    "residual": {"modes": [[1, 0, 1, 0, 0, 0], [0, 1, 0, 0, 0, 1], [0, 0, 1, 0, 1, 0]]},
+}
+
+
+def model_and_file(path: Path, seed: int = 3) -> tuple[DampingModel, np.ndarray, np.ndarray,
+                                                       np.ndarray]:
+    """Every static term kind with random coefficients, written to ``path``."""
+    model, _ = damping_from_spec(SPEC)
+    rng = np.random.default_rng(seed)
+    theta = rng.uniform(0.1, 50.0, model.n_params)
+    std = rng.uniform(0.01, 1.0, model.n_params)
+    M = load_vehicle("bluerov2_heavy").body.M
+    save_model(path, model.parameter_names, theta, std, M, damping=model, version=4)
+    return model, theta, std, M
+
+
+def check_client(client: ModelClient, model: DampingModel, theta: np.ndarray, std: np.ndarray,
+                 M: np.ndarray) -> None:
+    """D(ν), D(ν)ν, its σ and the feed-forward equal the core model's on random ν."""
+    nu = np.random.default_rng(7).normal(0.0, [0.5, 0.4, 0.3, 0.6, 0.5, 0.7], (40, 6))
+    np.testing.assert_allclose(client.damping_force(nu), model.force(nu, theta),
+                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(client.damping_force(nu[3]), model.force(nu[3:4], theta)[0],
+                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(client.D(nu), model.matrix(nu, theta), rtol=1e-12, atol=1e-12)
+    Phi = model.regressor(nu)
+    np.testing.assert_allclose(client.damping_force_std(nu),
+                               np.sqrt((Phi**2 * std**2).sum(axis=2)), rtol=1e-12)
+    np.testing.assert_allclose(client.feedforward(nu),
+                               model.force(nu, theta) + coriolis_force(M, nu),
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_yaml_client_evaluates_cross_added_and_residual_terms(tmp_path: Path) -> None:
+    path = tmp_path / "model.yaml"
+    model, theta, std, M = model_and_file(path)
+    assert {t.kind for t in model.terms} == {"linear", "quadratic", "cross", "added",
+                                             "residual"}
+    client = ModelClient.from_yaml(path)
+    assert client.version == 4 and client.model.names == model.parameter_names
+    check_client(client, model, theta, std, M)
+    # the cross and residual terms matter at these speeds (the test would see them missing)
+    nu = np.array([[0.5, 0.3, 0.2, 0.1, 0.2, 0.6]])
+    static = DampingModel([t for t in model.terms if t.kind in ("linear", "quadratic")])
+    full, part = model.force(nu, theta)[0], static.force(nu, theta[:static.n_params])[0]
+    assert np.max(np.abs(full - part)) > 1.0
+
+
+def test_model_server_parameters_give_the_same_model(tmp_path: Path) -> None:
+    rclpy = pytest.importorskip("rclpy")
+    from rclpy.executors import SingleThreadedExecutor
+
+    from dampest_ros.ros.model_server_node import ModelServerNode
+
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "77")
+    path = tmp_path / "model.yaml"
+    model, theta, std, M = model_and_file(path)
+    ns = f"/test_client_{os.getpid()}"  # no other test run's server answers
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    ex = SingleThreadedExecutor(context=context)
+    nodes: list[Any] = []
+    try:
+        # the file as model_file, and the same file as --params-file of a second server
+        by_file = ModelServerNode(context=context, cli_args=[
+            "--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={path}"])
+        by_params = ModelServerNode(context=context, cli_args=[
+            "--ros-args", "-r", f"__ns:={ns}", "-r", "__node:=params_server",
+            "--params-file", str(path)])
+        probe = rclpy.create_node("probe", namespace=ns, context=context)
+        nodes += [by_file, by_params, probe]
+        for n in nodes:
+            ex.add_node(n)
+        clients = [ModelClient(probe, "model_server_node"), ModelClient(probe, "params_server")]
+
+        def spin_until(done: Callable[[], bool]) -> None:
+            end = time.monotonic() + 10.0
+            while not done() and time.monotonic() < end:
+                ex.spin_once(timeout_sec=0.05)
+
+        spin_until(lambda: all(c.available for c in clients))
+        for c in clients:
+            assert c.available, c.errors
+            assert c.version == 4 and c.model.damping.kinds == model.kinds
+            check_client(c, model, theta, std, M)
+        assert "model.terms.cross.rows" in by_file._served
+        # another file without cross/added/residual terms: the terms' parameters go, the
+        # client follows the version bump to the new structure
+        small = tmp_path / "small.yaml"
+        v = load_vehicle("bluerov2_heavy")
+        save_model(small, v.damping.parameter_names, 2.0 * v.theta, np.ones(12), v.body.M,
+                   damping=v.damping)
+        by_file.set_parameters([rclpy.parameter.Parameter("model_file", value=str(small))])
+        spin_until(lambda: clients[0].version == 5)
+        assert clients[0].version == 5, clients[0].errors
+        assert not by_file.has_parameter("model.terms.cross.rows")
+        check_client(clients[0], v.damping, 2.0 * v.theta, np.ones(12), v.body.M)
+    finally:
+        ex.shutdown()
+        for n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown(context=context)
