@@ -24,10 +24,8 @@ from rclpy.subscription import Subscription
 
 from dampest_ros.io.recorder import DEFAULT_CHUNK_SIZE, BagRecorder
 from dampest_ros.ros.bag_interop import compatible_qos, import_message_type, to_bag_qos
-from dampest_ros.ros.common import Param, ParamNode, main_for
+from dampest_ros.ros.common import DRAIN_LIMIT, Param, ParamNode, main_for
 
-#: At most this many queued messages are taken in one callback (then other topics' turn).
-DRAIN_LIMIT = 500
 #: The topics of DESIGN.md §3 (relative: resolved in the node's namespace).
 DEFAULT_TOPICS = ["truth/odom", "imu/data", "dvl/twist", "pressure", "thrusters/state",
                   "dampest/velocity", "dampest/acceleration", "dampest/wrench", "dampest/model",
@@ -155,17 +153,12 @@ class RecorderNode(ParamNode):
             self.single[conn], self.span[conn], self.gaps[conn] = len(pubs) == 1, [0, 0, 0], 0
             events = SubscriptionEventCallbacks(message_lost=partial(self._on_lost, topic))
             # raw: the callback gets the serialized bytes and the message info
-            callback: Any = partial(self._on_message, conn, topic)
+            callback: Any = partial(self._write, conn)
             self.subs[topic] = self.create_subscription(
                 cls, topic, callback, compatible_qos(offered, int(self.p("queue_depth"))),
-                raw=True, event_callbacks=events)
+                raw=True, event_callbacks=events, drain=DRAIN_LIMIT if self.p_drain else 0)
             self.get_logger().info(f"recording {topic} ({msgtype}, "
                                    f"{len(offered)} publisher(s))")
-
-    def _on_message(self, conn: int, topic: str, data: bytes, info: dict[str, Any]) -> None:
-        self._write(conn, data, info)
-        if self.p_drain:
-            self._drain(conn, self.subs[topic])
 
     def _write(self, conn: int, data: bytes, info: dict[str, Any]) -> None:
         seq = int(info.get("publication_sequence_number") or 0)
@@ -178,22 +171,6 @@ class RecorderNode(ParamNode):
         self.recorder.write(conn, self.get_clock().now().nanoseconds, data,
                             publish_time=int(info.get("source_timestamp") or 0) or None,
                             sequence=seq)
-
-    def _drain(self, conn: int, sub: Subscription) -> None:
-        """Take the messages already queued on this subscription in this callback (as the
-        executor's own take does) instead of one executor round each: 3× less CPU per
-        message at thousands of messages per second."""
-        try:
-            with sub.handle:
-                for _ in range(DRAIN_LIMIT):
-                    taken = sub.handle.take_message(sub.msg_type, True)
-                    if taken is None:
-                        return
-                    self._write(conn, taken[0], taken[1])
-        except (AttributeError, TypeError) as exc:  # another rclpy: executor rounds only
-            self.p_drain = False
-            self.get_logger().warning(f"taking queued messages directly failed ({exc}); "
-                                      "one message per executor round from now on")
 
     def _on_lost(self, topic: str, info: Any) -> None:
         self.lost[topic] = int(info.total_count)
