@@ -1,10 +1,14 @@
-"""HTML report of a batch identification: plots and tables in one directory.
+"""HTML reports: plots and tables in one directory.
 
-``write_report`` writes ``index.html`` and PNG figures (relative links, so the directory
-can be copied or zipped as is): measured vs predicted damping force, residual spectrum and
-autocorrelation with whiteness bounds, coefficients with 95 % intervals vs a prior (and a
-truth when known), a free-run velocity overlay, excitation coverage, and the tables of
-coefficients and metrics (:mod:`dampest_ros.core.validate`).
+``write_report`` (a batch identification) writes ``index.html`` and PNG figures (relative
+links, so the directory can be copied or zipped as is): measured vs predicted damping force,
+residual spectrum and autocorrelation with whiteness bounds, coefficients with 95 % intervals
+vs a prior (and a truth when known), a free-run velocity overlay, excitation coverage, and
+the tables of coefficients and metrics (:mod:`dampest_ros.core.validate`).
+
+``write_convergence_report`` (an online identification) writes the estimate of each
+coefficient over time with its ±2σ band and the truth, one figure per damping term, and a
+controller's velocity tracking without and with the model's feed-forward.
 
 Figures are drawn with matplotlib's object API on the Agg canvas (no pyplot state, no
 display); never imports rclpy.
@@ -15,6 +19,7 @@ from __future__ import annotations
 import html
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -54,10 +59,12 @@ def _grid(n: int, ncols: int = 3) -> tuple[int, int]:
 
 
 def _save(fig: Figure, path: Path, bottom: float = 0.08, wspace: float = 0.22,
-          hspace: float = 0.3) -> str:
-    # fixed margins (constrained layout would double the drawing time); 0.6 in for the title
+          hspace: float = 0.3, title_height: float = 0.6) -> str:
+    # fixed margins (constrained layout would double the drawing time); title_height inches
+    # for the title
     fig.subplots_adjust(left=0.08, right=0.985, bottom=bottom,
-                        top=1.0 - 0.6 / fig.get_figheight(), wspace=wspace, hspace=hspace)
+                        top=1.0 - title_height / fig.get_figheight(), wspace=wspace,
+                        hspace=hspace)
     fig.savefig(path, dpi=DPI, format="png")
     return path.name
 
@@ -411,6 +418,202 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
         f'<p class="meta">Written in {time.perf_counter() - t_start:.1f} s.</p>',
         "</body></html>",
     ]
+    index = out / "index.html"
+    index.write_text("\n".join(parts), encoding="utf-8")
+    return index
+
+
+# --- online identification ------------------------------------------------------------------
+
+
+@dataclass
+class Tracking:
+    """Closed-loop velocity tracking runs on one reference (FRD, m/s and rad/s).
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Time (s).
+    nu_ref : ndarray, shape (N, 6)
+    nu : mapping label → ndarray, shape (N, 6)
+        The velocity of each run (e.g. ``PI``, ``PI + D(ν)ν + C(ν)ν``).
+    rms : mapping label → float
+        RMS tracking error of each run over ``dofs`` after ``skip`` steps.
+    dofs : sequence of int
+        The DOFs with a reference (0..5 = u..r).
+    skip : int
+        Steps of transient left out of the RMS.
+    bandwidth : float
+        Closed-loop bandwidth of the controller (rad/s).
+    """
+
+    t: FloatArray
+    nu_ref: FloatArray
+    nu: Mapping[str, FloatArray]
+    rms: Mapping[str, float]
+    dofs: Sequence[int]
+    skip: int
+    bandwidth: float
+
+
+def _convergence_figure(kind: str, names: Sequence[str], t: FloatArray, theta: FloatArray,
+                        std: FloatArray, truth: FloatArray | None, path: Path) -> str:
+    nrows, ncols = _grid(len(names), 3)
+    fig = Figure(figsize=(11, 2.3 * nrows + 0.9))
+    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False, sharex=True).ravel())
+    late = t >= t[0] + 0.1 * (t[-1] - t[0])  # the prior's wide band would hide the rest
+    for j, ax in enumerate(axes):
+        if j >= len(names):
+            ax.set_visible(False)
+            continue
+        lo, hi = theta[:, j] - 2 * std[:, j], theta[:, j] + 2 * std[:, j]
+        ax.fill_between(t, lo, hi, color="tab:blue", alpha=0.2, lw=0, label="±2σ")
+        ax.plot(t, theta[:, j], color="tab:blue", lw=1.2, label="estimate")
+        span = [lo[late], hi[late]]
+        if truth is not None and np.isfinite(truth[j]):
+            ax.axhline(truth[j], color="tab:orange", ls="--", lw=1.2, label="truth")
+            span.append(np.array([truth[j]]))
+        a, b = float(np.min(np.concatenate(span))), float(np.max(np.concatenate(span)))
+        pad = 0.15 * (b - a) if b > a else 0.05 * max(abs(a), 1e-6)
+        ax.set_ylim(a - pad, b + pad)
+        ax.set_title(names[j], fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=8)
+    for ax in axes[-ncols:]:
+        ax.set_xlabel("simulation time (s)")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=9)
+    fig.suptitle(f"{kind} term: RLS estimate over time with ±2σ and the truth (SI, "
+                 "positive = dissipative)")
+    return _save(fig, path, bottom=0.55 / fig.get_figheight() + 0.06, wspace=0.3, hspace=0.4)
+
+
+def _tracking_figure(tr: Tracking, path: Path) -> str:
+    fig = Figure(figsize=(11, 2.3 * len(tr.dofs) + 1.3))
+    axes = np.atleast_1d(fig.subplots(len(tr.dofs), 1, sharex=True, squeeze=False).ravel())
+    colours = ("tab:red", "tab:blue", "tab:green", "tab:purple")
+    for ax, i in zip(axes, tr.dofs, strict=True):
+        ax.plot(tr.t, tr.nu_ref[:, i], color="k", ls="--", lw=1.0, label="reference")
+        per_dof = []
+        for (label, nu), c in zip(tr.nu.items(), colours, strict=False):
+            ax.plot(tr.t, nu[:, i], color=c, lw=1.1, label=label)
+            e = tr.nu_ref[tr.skip:, i] - nu[tr.skip:, i]
+            per_dof.append(f"{label} {np.sqrt(np.mean(e * e)):.4f}")
+        ax.axvspan(tr.t[0], tr.t[tr.skip], color="0.9", lw=0)
+        ax.set_ylabel(f"{DOF_NAMES[i]} ({VEL_UNITS[i]})")
+        ax.set_title("RMS error: " + ", ".join(per_dof), fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=9)
+    total = ", ".join(f"{k} {v:.4f}" for k, v in tr.rms.items())
+    fig.suptitle(f"Velocity PI (bandwidth {tr.bandwidth:g} rad/s) on the simulator, without "
+                 f"and with the model feed-forward\nRMS error over "
+                 f"{', '.join(DOF_NAMES[i] for i in tr.dofs)}: {total} (grey: transient, "
+                 "not counted)", fontsize=11)
+    return _save(fig, path, bottom=0.45 / fig.get_figheight() + 0.05, hspace=0.35,
+                 title_height=0.85)
+
+
+def write_convergence_report(out_dir: str | Path, names: Sequence[str], t: FloatArray,
+                             theta: FloatArray, std: FloatArray,
+                             groups: Mapping[str, Sequence[str]], truth: Values | None = None,
+                             batch: Values | None = None, tracking: Tracking | None = None,
+                             summary: Sequence[tuple[str, str]] = (), title: str = "") -> Path:
+    """Write ``index.html``, PNG figures and ``convergence.csv`` for an online identification.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Directory (created if needed); existing report files in it are overwritten.
+    names : sequence of str, length p
+        Parameter names, θ order.
+    t : ndarray, shape (K,)
+        Times of the recorded estimates (s).
+    theta, std : ndarray, shape (K, p)
+        The estimate and its standard deviation at each time (SI units).
+    groups : mapping term kind → parameter names
+        One convergence figure per entry (e.g. ``linear``, ``quadratic``).
+    truth, batch : array of shape (p,) or mapping name → value, optional
+        True coefficients (simulated data) and a batch estimate to compare the last
+        estimate with.
+    tracking : Tracking, optional
+        Closed-loop runs for the tracking figure.
+    summary : sequence of (str, str)
+        Rows of the summary table.
+    title : str
+        Heading of the report.
+
+    Returns
+    -------
+    Path
+        The written ``index.html``.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    names = list(names)
+    t, theta, std = (np.asarray(a, dtype=float) for a in (t, theta, std))
+    if theta.shape != (len(t), len(names)) or std.shape != theta.shape:
+        raise ValueError(f"theta and std need shape {(len(t), len(names))}, got "
+                         f"{theta.shape} and {std.shape}")
+    truth_v, batch_v = _aligned(truth, names), _aligned(batch, names)
+    header = ",".join(["t"] + names + [f"{n}_std" for n in names])
+    np.savetxt(out / "convergence.csv", np.column_stack([t, theta, std]), delimiter=",",
+               header=header, comments="", fmt="%.9g")
+    figs = []
+    for kind, members in groups.items():
+        idx = [names.index(n) for n in members]
+        png = _convergence_figure(kind, members, t, theta[:, idx], std[:, idx],
+                                  truth_v[idx] if truth_v is not None else None,
+                                  out / f"convergence_{kind}.png")
+        figs.append(f'<img src="{png}" alt="{html.escape(kind)} coefficients over time">')
+    head = ["parameter", "estimate", "std", "truth", "error %", "truth within ±2σ"]
+    if batch_v is not None:
+        head += ["batch (same samples)", "batch error %"]
+    rows = []
+    for j, name in enumerate(names):
+        tr = truth_v[j] if truth_v is not None else np.nan
+        err = (theta[-1, j] - tr) / tr * 100 if tr and np.isfinite(tr) else np.nan
+        inside = abs(theta[-1, j] - tr) <= 2 * std[-1, j] if np.isfinite(tr) else None
+        row = [html.escape(name), _num(theta[-1, j]), _num(std[-1, j], 3), _num(tr),
+               _num(err, 3), "—" if inside is None else ("yes" if inside else "<b>no</b>")]
+        if batch_v is not None:
+            b_err = (batch_v[j] - tr) / tr * 100 if tr and np.isfinite(tr) else np.nan
+            row += [_num(batch_v[j]), _num(b_err, 3)]
+        rows.append(row)
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>{html.escape(title or 'Online identification')}</title>"
+        f"<style>{CSS}</style></head><body>",
+        f"<h1>{html.escape(title or 'Online identification')}</h1>",
+        f'<p class="meta">generated {datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC")} · '
+        "dampest_ros</p>",
+        "<h2>Summary</h2>",
+        _table(["", ""], [[html.escape(k), html.escape(v)] for k, v in summary]),
+        f"<h2>Final estimate (t = {t[-1]:.1f} s)</h2>",
+        '<p class="note">Recursive least squares on the live samples; damping coefficients '
+        "in SI units, positive when dissipative. The batch column is the least-squares fit "
+        "on the same samples, all weighted equally. The estimate over time is in "
+        "<code>convergence.csv</code>.</p>",
+        _table(head, rows),
+        "<h2>Convergence</h2>", *figs,
+    ]
+    if tracking is not None:
+        dofs = ", ".join(DOF_NAMES[i] for i in tracking.dofs)
+        parts += [
+            "<h2>Velocity tracking with the identified model</h2>",
+            '<p class="note">The per-DOF velocity PI of <code>controller_node</code> flies sine '
+            f"references in {html.escape(dofs)} on the simulator (the true vehicle), alone "
+            "and with the feed-forward D(ν<sub>ref</sub>)ν<sub>ref</sub> + "
+            "C(ν<sub>ref</sub>)ν<sub>ref</sub> of the final model. RMS over those DOFs "
+            f"after the first {tracking.t[tracking.skip] - tracking.t[0]:.0f} s.</p>",
+            _table(["controller", "RMS error"],
+                   [[html.escape(k), _num(v, 4)] for k, v in tracking.rms.items()]),
+            f'<img src="{_tracking_figure(tracking, out / "tracking.png")}" '
+            'alt="velocity tracking">',
+        ]
+    parts.append("</body></html>")
     index = out / "index.html"
     index.write_text("\n".join(parts), encoding="utf-8")
     return index

@@ -6,6 +6,12 @@ identifies its damping with recursive least squares. Every few simulated seconds
 shows the estimate converging against the simulator's truth; at the end the model is saved
 (an atomic write, as the estimator's ~/save does) to OUT/model.yaml.
 
+Then, unless switched off: the batch least-squares estimate on the very samples the RLS used
+(--batch, an extra column of the final table), and a convergence report in OUT/report/
+(--report): each coefficient's estimate over time with its ±2σ band and the truth, and the
+velocity PI flying sine references on the simulator without and with the identified model's
+feed-forward D(ν)ν + C(ν)ν, with the RMS tracking errors.
+
 The controller runs in shadow mode by default: it reads the model through
 dampest_ros.client and computes its commands (controller/cmd_wrench) while the protocol flies
 the vehicle; with --controller fly it flies the vehicle itself (cmd_wrench) at the reference
@@ -22,19 +28,35 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from dampest_ros.cli.common import table
+from dampest_ros.core.control import DEFAULT_BANDWIDTH
+from dampest_ros.core.estimator import OnlineEstimator
+from dampest_ros.core.preprocess import DataError
+from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.simulate import Effects, true_vehicle
+from dampest_ros.core.vehicle import Vehicle
+
+FloatArray = NDArray[np.float64]
+
+#: Tracking comparison: sine references in surge, heave and yaw (FRD), amplitudes (m/s,
+#: rad/s) and angular frequencies (rad/s); the first TRACK_SKIP seconds are the transient.
+TRACK_DOFS = (0, 2, 5)
+TRACK_AMPLITUDE = (0.5, 0.2, 0.4)
+TRACK_OMEGA = (0.3, 0.2, 0.25)
+TRACK_DT = 0.02
+TRACK_SKIP = 10.0
 
 
-def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the sub-command."""
-    p = sub.add_parser("live", help="online pipeline (sim, preprocess, RLS, controller) in "
-                                    "one process", description=__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter,
-                       epilog="example: dampest live --duration 300 --rate-factor 2.5")
-    p.add_argument("--out", default="runs/live", help="output folder (default: runs/live)")
+def add_options(p: argparse.ArgumentParser, out: str) -> None:
+    """The options of the online run (``dampest live`` and ``dampest demo``)."""
+    p.add_argument("--out", default=out, help=f"output folder (default: {out})")
     p.add_argument("--duration", type=float, default=300.0,
                    help="simulated seconds (default: 300)")
     p.add_argument("--rate-factor", type=float, default=2.5,
@@ -49,6 +71,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    "'{damping_change_time: 200, damping_change_factor: 1.3}'")
     p.add_argument("--every", type=float, default=20.0,
                    help="print the table every this many simulated seconds (default: 20)")
+    p.add_argument("--record-every", type=float, default=0.5,
+                   help="record the estimate and its σ for the report every this many "
+                        "simulated seconds (default: 0.5)")
     p.add_argument("--executor", choices=("single", "multi"), default="single",
                    help="rclpy executor (default: single; see above)")
     p.add_argument("--controller", choices=("shadow", "fly", "off"), default="shadow",
@@ -56,41 +81,87 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--reference", type=float, nargs=6, default=[0.3, 0.0, 0.0, 0.0, 0.0, 0.2],
                    metavar="V", help="velocity reference of the controller, FLU "
                    "(default: 0.3 0 0 0 0 0.2)")
+    p.add_argument("--batch", action=argparse.BooleanOptionalAction, default=True,
+                   help="also fit the batch least squares on the samples the RLS used (kept "
+                        "in memory, ~1 kB per sample) (default: on)")
+    p.add_argument("--report", action=argparse.BooleanOptionalAction, default=True,
+                   help="write OUT/report/ (convergence and tracking plots) (default: on)")
+    p.add_argument("--tracking-seconds", type=float, default=60.0,
+                   help="length of each tracking run of the report (default: 60)")
     p.add_argument("--domain-id", type=int, default=None,
                    help="ROS_DOMAIN_ID (default: the environment's, else 77)")
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the sub-command."""
+    p = sub.add_parser("live", help="online pipeline (sim, preprocess, RLS, controller) in "
+                                    "one process", description=__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog="example: dampest live --duration 300 --rate-factor 2.5")
+    add_options(p, "runs/live")
     p.set_defaults(run=run)
 
 
-def _table(est: Any, truth: dict[str, float], t: float) -> str:
+@dataclass
+class History:
+    """The estimate over time: times (s, simulation), θ and σ(θ) rows of shape (p,)."""
+
+    t: list[float] = field(default_factory=list)
+    theta: list[FloatArray] = field(default_factory=list)
+    std: list[FloatArray] = field(default_factory=list)
+
+    def add(self, t: float, theta: FloatArray, std: FloatArray) -> None:
+        """One row (copies of θ and σ)."""
+        self.t.append(float(t))
+        self.theta.append(np.array(theta, dtype=float))
+        self.std.append(np.array(std, dtype=float))
+
+    def arrays(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """t (K,), θ (K, p), σ (K, p)."""
+        return np.array(self.t), np.array(self.theta), np.array(self.std)
+
+
+@dataclass
+class Flight:
+    """What an online run leaves: the estimator, the estimate over time, the saved model."""
+
+    estimator: OnlineEstimator
+    history: History
+    t: float  #: simulated seconds
+    wall: float  #: wall-clock seconds
+    path: Path  #: the saved model file
+    summary: str  #: pace and message counts, printed
+    bandwidth: float  #: of the controller node (rad/s)
+
+
+def _table(est: OnlineEstimator, truth: dict[str, float], t: float,
+           batch: FloatArray | None = None) -> str:
+    """The estimate against the truth (and the batch estimate) as a text table."""
     rows = []
-    for name, th, sd in zip(est.names, est.theta, est.theta_std, strict=True):
+    for j, (name, th, sd) in enumerate(zip(est.names, est.theta, est.theta_std, strict=True)):
         tr = truth.get(name, float("nan"))
-        err = (th - tr) / tr * 100 if tr else float("nan")
-        rows.append((name, float(th), float(sd), tr, err))
+        row: list[object] = [name, float(th), float(sd), tr, _error(th, tr)]
+        if batch is not None:
+            row += [float(batch[j]), _error(batch[j], tr)]
+        rows.append(row)
     d = est.rls.diagnostics(condition=False)
     head = (f"t = {t:6.1f} s  samples {d.samples}  unexcited: "
             f"{','.join(d.unexcited) or 'none'}  change alarm: "
             f"{','.join(d.alarm_channels) or 'none'}")
-    return head + "\n" + table(("coefficient", "estimate", "std", "truth", "error %"), rows)
+    header = ["coefficient", "estimate", "std", "truth", "error %"]
+    if batch is not None:
+        header += ["batch", "batch error %"]
+    return head + "\n" + table(header, rows)
+
+
+def _error(value: float, truth: float) -> float:
+    """Relative error in % (NaN for a zero or unknown truth)."""
+    return float((value - truth) / truth * 100) if truth and np.isfinite(truth) else np.nan
 
 
 def run(args: argparse.Namespace) -> int:
-    """Build the nodes, spin until the protocol ends, print and save."""
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    if args.domain_id is not None:
-        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
-    else:
-        os.environ.setdefault("ROS_DOMAIN_ID", "77")
-    import rclpy
-    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
-    from rclpy.parameter import Parameter
-
-    from dampest_ros.core.simulate import Effects, true_vehicle
+    """Fly the pipeline, print and save; then the batch column and the report."""
     from dampest_ros.io.yaml_io import load_vehicle, read_mapping
-    from dampest_ros.ros.controller_node import ControllerNode
-    from dampest_ros.ros.estimator_node import EstimatorNode
-    from dampest_ros.ros.preprocess_node import PreprocessNode
-    from dampest_ros.ros.sim_node import SimNode
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -101,6 +172,55 @@ def run(args: argparse.Namespace) -> int:
     if effects.damping_change_time >= 0:
         print(f"(the quadratic damping changes by x{effects.damping_change_factor} at "
               f"t = {effects.damping_change_time} s; the table's truth is before the change)")
+    flight = _fly(args, vehicle.name, truth, out / "model.yaml")
+    e = flight.estimator
+    batch = None
+    if args.batch:
+        from dampest_ros.core.batch import FitOptions, fit
+        from dampest_ros.core.online import to_samples
+        c = time.perf_counter()
+        try:
+            samples = to_samples(e.samples_log, e.cfg.rate)
+            batch = fit(samples, e.model, e.body, FitOptions(cutoff=e.cfg.cutoff),
+                        prior=e.nominal).theta
+            print(f"\nbatch least squares on the same {len(samples)} samples: "
+                  f"{time.perf_counter() - c:.1f} s")
+        except (ConfigError, DataError) as exc:  # e.g. interrupted before enough samples
+            print(f"\nno batch estimate: {exc}")
+    print("\n" + _table(e, truth, flight.t, batch))
+    errors = [abs(_error(th, truth.get(n, np.nan))) for n, th in zip(e.names, e.theta,
+                                                                      strict=True)]
+    if np.any(np.isfinite(errors)):
+        worst = int(np.nanargmax(errors))
+        print(f"largest relative error of a nonzero coefficient: {errors[worst]:.2f} % "
+              f"({e.names[worst]})")
+    print(flight.summary)
+    if args.report:
+        c = time.perf_counter()
+        index = _report(args, out / "report", flight, truth, batch, vehicle, effects)
+        print(f"report: {index} ({time.perf_counter() - c:.1f} s)")
+    print(f"model: {flight.path}\n(offline identification from a bag: dampest simulate "
+          "... --out BAG, then dampest identify BAG)")
+    return 0
+
+
+def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float],
+         path: Path) -> Flight:
+    """Build the nodes, spin until the protocol ends (tables every ``args.every`` s, the
+    estimate recorded every ``args.record_every`` s), save the model to ``path``."""
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if args.domain_id is not None:
+        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    else:
+        os.environ.setdefault("ROS_DOMAIN_ID", "77")
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from dampest_ros.ros.controller_node import ControllerNode
+    from dampest_ros.ros.estimator_node import EstimatorNode
+    from dampest_ros.ros.preprocess_node import PreprocessNode
+    from dampest_ros.ros.sim_node import SimNode
 
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -110,10 +230,10 @@ def run(args: argparse.Namespace) -> int:
         P("duration", value=float(args.duration)), P("seed", value=int(args.seed)),
         P("rate_factor", value=float(args.rate_factor)), P("effects", value=args.effects)])
     pre = PreprocessNode(context=context, parameter_overrides=[P("vehicle", value=args.vehicle)])
-    est = EstimatorNode(context=context, parameter_overrides=[
+    est = EstimatorNode(keep_samples=bool(args.batch), context=context, parameter_overrides=[
         P("vehicle", value=args.vehicle), P("use_sim_time", value=True),
         P("forgetting_factor", value=float(args.forgetting_factor)),
-        P("save_path", value=str(out / "model.yaml"))])
+        P("save_path", value=str(path))])
     nodes: list[Any] = [sim, pre, est]
     ctrl = None
     if args.controller != "off":
@@ -128,17 +248,22 @@ def run(args: argparse.Namespace) -> int:
     for n in nodes:
         ex.add_node(n)
     cpu_est = _time_callbacks(est)
-    print(f"dampest live: {vehicle.name}, protocol {args.protocol}, {args.duration:.0f} s at "
-          f"{args.rate_factor:g}x real time, λ = {args.forgetting_factor}, "
-          f"{args.executor} executor, controller {args.controller}")
+    print(f"dampest {getattr(args, 'command', 'live')}: {vehicle_name}, protocol "
+          f"{args.protocol}, {args.duration:.0f} s at {args.rate_factor:g}x real time, "
+          f"λ = {args.forgetting_factor}, {args.executor} executor, controller {args.controller}")
+    e = est.estimator
+    history = History()
+    history.add(0.0, e.theta, e.theta_std)  # the prior
     t0, c0 = time.monotonic(), time.process_time()
-    next_print = args.every
+    next_print, next_record = args.every, args.record_every
     try:
         while not sim.live.done:
             ex.spin_once(timeout_sec=0.05)
-            if est.estimator.last_sample_t >= next_print:
-                print("\n" + _table(est.estimator, truth, est.estimator.last_sample_t),
-                      flush=True)
+            if e.last_sample_t >= next_record:
+                history.add(e.last_sample_t, e.theta, e.theta_std)
+                next_record = e.last_sample_t + args.record_every
+            if e.last_sample_t >= next_print:
+                print("\n" + _table(e, truth, e.last_sample_t), flush=True)
                 next_print += args.every
         end = time.monotonic() + 2.0
         while time.monotonic() < end:  # drain the queues
@@ -146,29 +271,68 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print("\ninterrupted: saving what was identified so far")
     wall, cpu = time.monotonic() - t0, time.process_time() - c0
-    e = est.estimator
     e.process(force=True)
+    history.add(e.last_sample_t, e.theta, e.theta_std)
     est.version += 1
-    path = e.save(out / "model.yaml", est.version)
-    print("\n" + _table(e, truth, sim.live.t))
+    saved = e.save(path, est.version)
     used = max(e.counts["used"], 1)
-    print(f"\n{sim.live.t:.0f} s simulated in {wall:.1f} s: {sim.live.t / wall:.2f}x real time "
-          f"({cpu:.1f} s CPU); {sim.published} sensor messages, {pre.published} samples, "
-          f"{e.counts['used']} used by the RLS")
-    print(f"estimator callbacks: {cpu_est['cpu'] / used * 1e6:.0f} µs CPU per sample "
-          f"(4 messages; rclpy's own receive cost, ~200 µs per message, comes on top)")
     lost = pre.pre.counts
-    print(f"preprocessing: {lost['imu']} IMU, {lost['thrusters']} thruster messages; "
-          f"{lost['imu_gaps']} IMU gaps, {lost['rejected_stale']} stale, "
-          f"{lost['clock_resets']} clock resets")
+    lines = [
+        f"\n{sim.live.t:.0f} s simulated in {wall:.1f} s: {sim.live.t / wall:.2f}x real time "
+        f"({cpu:.1f} s CPU); {sim.published} sensor messages, {pre.published} samples, "
+        f"{e.counts['used']} used by the RLS",
+        f"estimator callbacks: {cpu_est['cpu'] / used * 1e6:.0f} µs CPU per sample "
+        f"(4 messages; rclpy's own receive cost, ~200 µs per message, comes on top)",
+        f"preprocessing: {lost['imu']} IMU, {lost['thrusters']} thruster messages; "
+        f"{lost['imu_gaps']} IMU gaps, {lost['rejected_stale']} stale, "
+        f"{lost['clock_resets']} clock resets"]
     if ctrl is not None:
-        print(f"controller: {ctrl.commands} commands, model version {ctrl.client.version}")
-    print(f"wrote {path}")
+        lines.append(f"controller: {ctrl.commands} commands, model version "
+                     f"{ctrl.client.version}")
+    flight = Flight(e, history, sim.live.t, wall, saved, "\n".join(lines),
+                    ctrl.p("bandwidth") if ctrl is not None else DEFAULT_BANDWIDTH)
     ex.shutdown()
     for n in nodes:
         n.destroy_node()
     rclpy.try_shutdown(context=context)
-    return 0
+    return flight
+
+
+def _report(args: argparse.Namespace, out: Path, flight: Flight,
+            truth: dict[str, float], batch: FloatArray | None, vehicle: Vehicle,
+            effects: Effects) -> Path:
+    """Tracking runs without and with the saved model's feed-forward, then the report."""
+    from dampest_ros.client import ModelClient
+    from dampest_ros.core.control import VelocityPI, track, tracking_rms
+    from dampest_ros.core.simulate import Simulator
+    from dampest_ros.report import Tracking, write_convergence_report
+
+    e = flight.estimator
+    client = ModelClient.from_yaml(flight.path)
+    bandwidth = flight.bandwidth
+    n = max(2, round(args.tracking_seconds / TRACK_DT))
+    t = TRACK_DT * np.arange(n)
+    ref = np.zeros((n, 6))
+    ref[:, TRACK_DOFS] = np.asarray(TRACK_AMPLITUDE) * np.sin(np.outer(t, TRACK_OMEGA))
+    skip = min(round(TRACK_SKIP / TRACK_DT), n // 2)
+    runs, rms = {}, {}
+    for label, ff in (("PI", None), ("PI + D(ν)ν + C(ν)ν", client.feedforward)):
+        sim = Simulator(vehicle, effects, dt=TRACK_DT, record=False)
+        runs[label] = track(sim, VelocityPI.for_vehicle(vehicle, bandwidth, ff), ref, TRACK_DT)
+        rms[label] = tracking_rms(ref, runs[label], TRACK_DOFS, skip)
+    print("velocity tracking on the simulator (sines in u, w, r; RMS after "
+          f"{skip * TRACK_DT:.0f} s): " + ", ".join(f"{k} {v:.4f}" for k, v in rms.items())
+          + f"  ({rms['PI'] / rms['PI + D(ν)ν + C(ν)ν']:.1f}x lower with the model)")
+    tr = Tracking(t, ref, runs, rms, TRACK_DOFS, skip, bandwidth)
+    ht, theta, std = flight.history.arrays()
+    groups = {term.kind: term.parameter_names for term in e.model.terms}
+    summary = [("vehicle", vehicle.name), ("protocol", args.protocol),
+               ("simulated", f"{flight.t:.0f} s in {flight.wall:.0f} s wall clock"),
+               ("forgetting factor λ", f"{args.forgetting_factor:g}"),
+               ("samples used by the RLS", str(e.counts["used"])),
+               ("effects", args.effects or "none"), ("model", str(flight.path))]
+    return write_convergence_report(out, e.names, ht, theta, std, groups, truth, batch, tr,
+                                    summary, title=f"Online identification: {vehicle.name}")
 
 
 def _time_callbacks(node: Any) -> dict[str, float]:
