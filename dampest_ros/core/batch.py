@@ -27,6 +27,8 @@ from dampest_ros.core.samples import Samples
 FloatArray = NDArray[np.float64]
 
 METHODS = ("ols", "wls", "ridge", "bounded", "map")
+CHUNK = 8000  # samples per chunk of Φ (n, 6, p): ~10 MB for p = 24, whatever the log length
+STRETCH = 20000  # samples per stretch of the sensor-bias sensitivity on long logs
 
 
 def target(samples: Samples, body: RigidBody, index: slice | None = None) -> FloatArray:
@@ -49,7 +51,7 @@ def memory_states(samples: Samples, model: DampingModel) -> FloatArray:
 
 
 def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
-                    chunk: int = 20000, cutoff: float = 0.0, margin: float = 5.0,
+                    chunk: int = CHUNK, cutoff: float = 0.0, margin: float = 5.0,
                     offset: FloatArray | None = None, decimate: bool = False
                     ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
     """Yield (rows, Φ (n, 6, p), y (n, 6)) over chunks of at most ``chunk`` samples.
@@ -131,7 +133,7 @@ class NormalEquations:
 
 
 def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: int = 5,
-               chunk: int = 20000, cutoff: float = 0.0) -> NormalEquations:
+               chunk: int = CHUNK, cutoff: float = 0.0) -> NormalEquations:
     """Accumulate :class:`NormalEquations` over contiguous time folds in chunks.
 
     Parameters
@@ -362,7 +364,8 @@ def speed_coverage_flags(model: DampingModel, samples: Samples, speed_range: Flo
     quad = model.term("quadratic")
     if quad is None or len(samples) == 0:
         return {}
-    flown = np.percentile(np.abs(samples.nu), 99, axis=0)
+    # column by column: no copy of the whole (n, 6) velocity array on long logs
+    flown = np.array([np.percentile(np.abs(samples.nu[:, i]), 99) for i in range(6)])
     flags = {}
     for name, b in zip(quad.parameter_names, quad.bases, strict=True):
         i = int(np.argmax(np.abs(np.diag(b.B))))
@@ -392,7 +395,7 @@ def parameter_scale(ne: NormalEquations, theta: FloatArray, prior: FloatArray) -
 def fit(samples: Samples, model: DampingModel, body: RigidBody,
         options: FitOptions | None = None, prior: FloatArray | None = None,
         prior_std: FloatArray | None = None, normal: NormalEquations | None = None,
-        chunk: int = 20000) -> Fit:
+        chunk: int = CHUNK) -> Fit:
     """Identify θ from samples.
 
     Parameters
@@ -507,7 +510,7 @@ def block_count(samples: Samples, block: float) -> int:
 
 def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
                       theta: FloatArray, weights: FloatArray, ne: NormalEquations,
-                      free: NDArray[np.bool_], opts: FitOptions, chunk: int = 20000
+                      free: NDArray[np.bool_], opts: FitOptions, chunk: int = CHUNK
                       ) -> FloatArray:
     """Block sandwich covariance A⁻¹ (Σ_b s_b s_bᵀ) A⁻¹ of the free parameters.
 
@@ -538,7 +541,7 @@ def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
 
 def bias_covariance(samples: Samples, model: DampingModel, body: RigidBody,
                     theta: FloatArray, weights: FloatArray, free: NDArray[np.bool_],
-                    opts: FitOptions, chunk: int = 20000) -> FloatArray:
+                    opts: FitOptions, chunk: int = CHUNK) -> FloatArray:
     """Covariance of θ caused by unknown constant sensor biases (the error budget).
 
     For each axis k of the gyro (σ = ``opts.gyro_bias``) and of the DVL (``opts.dvl_bias``)
@@ -552,13 +555,13 @@ def bias_covariance(samples: Samples, model: DampingModel, body: RigidBody,
     if not free.any() or not np.any(sigma > 0):
         return cov
     # a sensitivity is an average property of the data: on long logs, three evenly spread
-    # stretches of ``chunk`` samples give it at a fraction of the cost
+    # stretches of STRETCH samples give it at a fraction of the cost
     data = samples
-    if len(samples) > 3 * chunk:
-        starts = np.linspace(0, len(samples) - chunk, 3).astype(int)
-        index = np.concatenate([np.arange(a, a + chunk) for a in starts])
+    if len(samples) > 3 * STRETCH:
+        starts = np.linspace(0, len(samples) - STRETCH, 3).astype(int)
+        index = np.concatenate([np.arange(a, a + STRETCH) for a in starts])
         data = samples.take(index)
-        data.segment = np.repeat(np.arange(3), chunk) + 3 * data.segment
+        data.segment = np.repeat(np.arange(3), STRETCH) + 3 * data.segment
 
     def refit(offset: FloatArray | None) -> FloatArray:
         A = np.zeros((p, p))

@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, optimize, signal
 
-from dampest_ros.core.batch import iter_regression
+from dampest_ros.core.batch import CHUNK, iter_regression
 from dampest_ros.core.damping import (
     CrossSpec,
     DampingModel,
@@ -144,7 +144,7 @@ class GapData:
     def __init__(self, samples: Samples, model: DampingModel, theta: FloatArray,
                  body: RigidBody, thrusters: Thrusters | None = None,
                  joints: JointSeries | None = None, cutoff: float = 2.0, split: float = 0.7,
-                 chunk: int = 20000, margin: float = 5.0, block: float = 10.0,
+                 chunk: int = CHUNK, margin: float = 5.0, block: float = 10.0,
                  crossover: float = 0.3) -> None:
         if not 0.2 <= split <= 0.9:
             raise ConfigError("split", f"must be in [0.2, 0.9], got {split}")

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import fft, signal
 
-from dampest_ros.core.batch import iter_regression
+from dampest_ros.core.batch import CHUNK, iter_regression
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.frames import matrix_from_euler
 from dampest_ros.core.rigid_body import ConfigError, RigidBody
@@ -40,7 +40,7 @@ Z95 = 1.959963984540054
 
 
 def predicted_force(samples: Samples, model: DampingModel, body: RigidBody,
-                    theta: FloatArray, cutoff: float = 0.0, chunk: int = 20000
+                    theta: FloatArray, cutoff: float = 0.0, chunk: int = CHUNK
                     ) -> tuple[FloatArray, FloatArray]:
     """Measured and predicted damping force per sample.
 
@@ -522,7 +522,7 @@ def free_run_error(samples: Samples, model: DampingModel, body: RigidBody, theta
 
 
 def energy_consistency(samples: Samples, model: DampingModel, theta: FloatArray,
-                       chunk: int = 20000) -> tuple[float, float]:
+                       chunk: int = CHUNK) -> tuple[float, float]:
     """Check νᵀD(ν)ν ≥ 0 (dissipated power, W) of the static terms on the data.
 
     Parameters
