@@ -83,9 +83,9 @@ class PreprocessNode(ParamNode):
               "rejected", low=0.01, high=60.0),
         Param("clock_jump", 1.0, "a stamp this far (s) behind its topic's last one is a "
               "clock jump: reset", low=0.01, high=3600.0),
-        Param("reorder_latency", 1.0, "s of stamp time a sensor message may arrive after a "
+        Param("reorder_latency", 5.0, "s of stamp time a sensor message may arrive after a "
               "newer one of another topic and still be put in stamp order (later: counted as "
-              "late)", low=0.0, high=10.0),
+              "late); a topic gone quiet holds the others up this long", low=0.0, high=60.0),
         Param("frame_id", "base_link", "frame_id of the published samples"),
     )
 
@@ -175,6 +175,7 @@ class PreprocessNode(ParamNode):
         c = dict(self.pre.counts)
         c["published"] = self.published
         c["late"] = self.order.counts["late"]
+        c["max_lag_s"] = self.order.max_lag
         c["derivative_lag_s"] = self.pre.derivative_lag
         problems = c["rejected_nonfinite"] + c["rejected_stale"] + c["clock_resets"]
         self.pub_diag.publish(diagnostic_array(

@@ -76,6 +76,7 @@ def test_a_message_later_than_the_latency_is_passed_on_and_counted() -> None:
     assert [t for _, t, _ in out] == [0.0, 0.6]  # older than newest − latency
     assert order.push("b", 0.3, "late") == [("b", 0.3, "late")]
     assert order.counts["late"] == 1
+    assert order.max_lag == pytest.approx(0.9)  # 1.2 − 0.3: a latency ≥ 0.9 takes it
     assert order.push("b", 0.9) == [("b", 0.9, None)]  # in time, and a has passed it
     assert order.push("b", 1.5) == [("a", 1.2, None)]
 
