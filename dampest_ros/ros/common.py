@@ -83,8 +83,9 @@ def stamp_ns(stamp: Time) -> int:
 
 
 def seconds(stamp: Time) -> float:
-    """Seconds of a stamp."""
-    return stamp_ns(stamp) * 1e-9
+    """Seconds of a stamp: the float nearest to it, as dampest_ros.io.cdr.stamps_from_ros
+    gives the stamps of a bag (ns × 1e-9 can differ by one unit in the last place)."""
+    return stamp_ns(stamp) / 1e9
 
 
 @dataclass(frozen=True)
