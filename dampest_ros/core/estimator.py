@@ -93,9 +93,9 @@ def attitude_quaternion(euler: FloatArray) -> FloatArray:
 
 
 def attitude_euler(q: FloatArray) -> FloatArray:
-    """Roll, pitch, yaw (FRD → NED, rad, shape (3,)) of a ROS orientation [x, y, z, w]
-    (FLU → ENU, shape (4,)); the inverse of :func:`attitude_quaternion`."""
-    R = frames.rotation(frames.quat_to_matrix(q[[3, 0, 1, 2]]))
+    """Roll, pitch, yaw (FRD → NED, rad, shape (..., 3)) of ROS orientations [x, y, z, w]
+    (FLU → ENU, shape (..., 4)); the inverse of :func:`attitude_quaternion`."""
+    R = frames.rotation(frames.quat_to_matrix(q[..., [3, 0, 1, 2]]))
     return np.asarray(frames.euler_from_matrix(R), dtype=float)
 
 
@@ -231,14 +231,14 @@ class OnlineEstimator:
         if not self._ready or (len(self._ready) < self.cfg.chunk and not force):
             return 0
         batch, self._ready = self._ready, []
+        euler = attitude_euler(np.array([e["attitude"] for _, e in batch]))
         samples = [OnlineSample(stamp * 1e-9, e["velocity"], e["acceleration"], e["wrench"],
-                                attitude_euler(e["attitude"]), math.nan, True)
-                   for stamp, e in batch]
+                                euler[k], math.nan, True)
+                   for k, (stamp, e) in enumerate(batch)]
         if self.keep_samples:
             self.samples_log += samples
         T, Phi, y = self.regression.process(samples)
-        for k in range(len(T)):
-            self.rls.update(Phi[k], y[k], float(T[k]))
+        self.rls.update_many(Phi, y, T)
         self.counts["used"] += len(T)
         if samples:
             self.last_sample_t = samples[-1].t

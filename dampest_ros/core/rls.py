@@ -15,6 +15,17 @@ The Joseph form is evaluated without forming I − KΦ, as P⁻ + A + Aᵀ with
 A = K (½ S Kᵀ − Gᵀ) (= P⁻ − K Gᵀ − G Kᵀ + K S Kᵀ): two p × 6 by 6 × p products, O(6 p²) per
 sample, and symmetric by construction.
 
+**Blocks** (:meth:`RecursiveLeastSquares.update_many`): n consecutive samples are one update
+of the stacked sample (6n rows) with P̃ = P / λⁿ and the noise of sample j (0-based) scaled by
+λ^{−(n−1−j)}: in information form both give λⁿ Ω + Σ_j λ^{n−1−j} Φ_jᵀ R⁻¹ Φ_j, so θ and P
+are the sequential ones (to rounding). With S̃ = C Cᵀ (Cholesky) and w = C⁻¹ (y − Φ θ), the
+sequential innovation of sample j is C_jj w_j with covariance λ^{n−1−j} C_jj C_jjᵀ (the block
+LDLᵀ of S̃), and θ after sample j is θ + Σ_{i≤j} B_iᵀ w_i with B = C⁻¹ Φ P̃: the diagnostics
+and the change detector see every sample as the sequential recursion does. The blocks hold at
+most :data:`BLOCK` samples, and are used only where the sequential steps would forget by
+exactly 1/λ (trace bound inactive, exponential mode, fixed weights, not frozen); the rest runs
+sample by sample. That is ~4 times less CPU per sample for p = 12.
+
 Against wind-up (P growing as λ⁻ⁿ in directions the data do not excite):
 
 - **trace bound**: the forgetting inflation is limited so that the scaled trace
@@ -41,10 +52,12 @@ that the estimate re-converges at once.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg import lapack
 
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 
@@ -52,6 +65,8 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
 FORGETTING_MODES = ("exponential", "directional")
+#: Most samples in one block update of :meth:`RecursiveLeastSquares.update_many`.
+BLOCK = 10
 
 
 @dataclass
@@ -171,12 +186,94 @@ def _step(theta: FloatArray, P: FloatArray, Phi: FloatArray, y: FloatArray, lam:
     # K = G S⁻¹; S is small (m × m) and symmetric positive definite
     K = G @ np.linalg.inv(S)
     theta_new = theta + K @ innovation
-    # Joseph form (I − KΦ) P⁻ (I − KΦ)ᵀ + K R Kᵀ = P⁻ − K Gᵀ − G Kᵀ + K S Kᵀ, in O(m p²)
-    # as P⁻ + A + Aᵀ with A = K (½ S Kᵀ − Gᵀ): exactly symmetric, one p × m × p product
+    return StepResult(theta_new, _joseph(Pp, G, S, K), innovation, S)
+
+
+def _joseph(Pp: FloatArray, G: FloatArray, S: FloatArray, K: FloatArray) -> FloatArray:
+    """The covariance update in Joseph form, (I − KΦ) P⁻ (I − KΦ)ᵀ + K R Kᵀ
+    = P⁻ − K Gᵀ − G Kᵀ + K S Kᵀ, in O(m p²) as P⁻ + A + Aᵀ with A = K (½ S Kᵀ − Gᵀ): exactly
+    symmetric, one p × m × p product.
+
+    Parameters
+    ----------
+    Pp : ndarray, shape (p, p)
+        P⁻, the covariance after forgetting.
+    G : ndarray, shape (p, m)
+        P⁻ Φᵀ.
+    S : ndarray, shape (m, m)
+        Φ P⁻ Φᵀ + R, symmetric.
+    K : ndarray, shape (p, m)
+        G S⁻¹.
+    """
     A = K @ (0.5 * (S @ K.T) - G.T)
     P_new = A + A.T
     P_new += Pp
-    return StepResult(theta_new, P_new, innovation, S)
+    return P_new
+
+
+@dataclass
+class BlockResult:
+    """A block of n samples processed at once (:func:`block_update`).
+
+    Attributes
+    ----------
+    thetas : ndarray, shape (n, p)
+        θ after each sample.
+    P : ndarray, shape (p, p)
+        Covariance after the last sample.
+    innovation : ndarray, shape (n, 6)
+        ε_j = y_j − Φ_j θ_{j−1} (N, N·m).
+    S_diag : ndarray, shape (n, 6)
+        Diagonals of the innovation covariances Φ_j P⁻_j Φ_jᵀ + R.
+    """
+
+    thetas: FloatArray
+    P: FloatArray
+    innovation: FloatArray
+    S_diag: FloatArray
+
+
+def block_update(theta: FloatArray, P: FloatArray, Phi: FloatArray, y: FloatArray, lam: float,
+                 r: FloatArray) -> BlockResult | None:
+    """n sequential RLS steps with exponential forgetting (no trace bound) as one update of
+    the stacked samples (see the module notes); O(n³ m³ + n² m² p) for n ≤ :data:`BLOCK`.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (p,)
+    P : ndarray, shape (p, p)
+    Phi : ndarray, shape (n, m, p)
+    y : ndarray, shape (n, m)
+    lam : float
+        λ in (0, 1].
+    r : ndarray, shape (m,)
+        Diagonal noise variances.
+
+    Returns
+    -------
+    BlockResult, or None when the stacked innovation covariance is not numerically
+    positive definite (then take the samples one by one).
+    """
+    n, m, p = Phi.shape
+    g = lam ** np.arange(n - 1, -1, -1, dtype=float)  # λ^{n−1−j}
+    Pp = P * (1.0 / lam) ** n if lam < 1.0 else P
+    A = Phi.reshape(n * m, p)
+    G = Pp @ A.T
+    S = A @ G
+    S = 0.5 * (S + S.T)
+    S[np.diag_indices(n * m)] += (r[None, :] / g[:, None]).ravel()
+    # LAPACK directly: the scipy.linalg wrappers cost more than the 60 × 60 work itself
+    C, info = lapack.dpotrf(S, lower=1)  # S̃ = C Cᵀ
+    if info:
+        return None
+    W, _ = lapack.dtrtrs(C, np.column_stack([(y - Phi @ theta).ravel(), G.T]), lower=1)
+    w, B = W[:, 0].reshape(n, m), W[:, 1:]  # C⁻¹ (y − Φθ), C⁻¹ Φ P̃
+    Kt, _ = lapack.dtrtrs(C, B, lower=1, trans=1)  # S̃⁻¹ Φ P̃ = Kᵀ
+    thetas = theta + np.cumsum(np.einsum("jip,ji->jp", B.reshape(n, m, p), w), axis=0)
+    j = np.arange(n)
+    Cjj = C.reshape(n, m, n, m)[j, :, j, :]  # diagonal blocks, (n, m, m)
+    return BlockResult(thetas, _joseph(Pp, G, S, Kt.T), np.einsum("jab,jb->ja", Cjj, w),
+                       np.einsum("jab,jab->ja", Cjj, Cjj) * g[:, None])
 
 
 def rls_update(theta: FloatArray, P: FloatArray, Phi: FloatArray, y: FloatArray, lam: float,
@@ -211,6 +308,24 @@ def rls_update(theta: FloatArray, P: FloatArray, Phi: FloatArray, y: FloatArray,
     """
     r = _step(theta, P, Phi, y, lam, R, mode=mode, trace_max=trace_max, scale=scale, rho=rho)
     return r.theta, r.P, r.innovation
+
+
+@functools.lru_cache(maxsize=64)
+def _decay(n: int, d: float) -> tuple[FloatArray, FloatArray]:
+    """For x_j = d x_{j−1} + u_j over n steps: T (n, n) with T_jk = d^{j−k} (k ≤ j) and the
+    factors d^{j+1} (n, 1) of the initial value, so that x = T u + d^{j+1} x₀."""
+    lag = np.subtract.outer(np.arange(n), np.arange(n))
+    T = np.where(lag >= 0, d ** np.maximum(lag, 0), 0.0)
+    return T, d ** np.arange(1, n + 1, dtype=float)[:, None]
+
+
+def _ew_mean(m0: FloatArray, x: FloatArray, a: FloatArray) -> FloatArray:
+    """m_j = m_{j−1} + a_j (x_j − m_{j−1}) over the rows of x (n, d) from m0 (d,), with
+    weights a (n,); returns m_n, computed in one product."""
+    d = 1.0 - a
+    tail = np.cumprod(d[::-1])[::-1]  # Π_{i≥j} d_i
+    after = np.append(tail[1:], 1.0)  # Π_{i>j} d_i
+    return np.asarray(tail[0] * m0 + (a * after) @ x, dtype=float)
 
 
 class Cusum:
@@ -318,6 +433,30 @@ class InnovationMonitor:
         self._n += 1
         if self._n < self.block:
             return np.zeros(12, dtype=bool)
+        return self._close_block(t)
+
+    def update_many(self, z: FloatArray, sign: FloatArray, t: FloatArray | None = None,
+                    stop_at_alarm: bool = False) -> tuple[int, bool]:
+        """:meth:`update` for n samples in order, z and sign (n, 6), t (n,); with
+        ``stop_at_alarm`` it stops after the first sample that raised an alarm. Returns the
+        number of samples taken and whether the last of them raised an alarm."""
+        n, i = len(z), 0
+        while i < n:
+            k = min(n - i, self.block - self._n)
+            self._sum[:6] += z[i:i + k].sum(axis=0)
+            self._sum[6:] += (z[i:i + k] * sign[i:i + k]).sum(axis=0)
+            self._n += k
+            i += k
+            if self._n < self.block:
+                break
+            new = self._close_block(None if t is None else float(t[i - 1]))
+            if stop_at_alarm and new.any():
+                return i, True
+        return n, False
+
+    def _close_block(self, t: float | None) -> BoolArray:
+        """A block of samples is complete: standardise, whiten and feed its means to the
+        CUSUM; returns the channels that went into alarm."""
         m = self._sum / self._n
         self._sum[:] = 0.0
         self._n = 0
@@ -638,18 +777,127 @@ class RecursiveLeastSquares:
         self._force2 += (force * force - self._force2) * a
         new = self.monitor.update(e / np.sqrt(s_diag), np.sign(force), t)
         if cfg.boost_on_alarm and new.any() and not self.frozen:
-            tr = scaled_trace(self.P, self.scale)
-            self.P = self.P * max(1.0, min(1e4, self.trace_max / max(tr, 1e-300)))
-            self.boosts += 1
+            self._boost()
         return e
+
+    def _boost(self) -> None:
+        """Covariance resetting after a change alarm: P inflated up to the trace bound."""
+        tr = scaled_trace(self.P, self.scale)
+        self.P = self.P * max(1.0, min(1e4, self.trace_max / max(tr, 1e-300)))
+        self.boosts += 1
 
     def update_many(self, Phi: FloatArray, y: FloatArray,
                     t: FloatArray | None = None) -> FloatArray:
-        """:meth:`update` over N samples in order; returns the innovations (N, 6)."""
+        """:meth:`update` over N samples in order; returns the innovations (N, 6).
+
+        Parameters
+        ----------
+        Phi : ndarray, shape (N, 6, p)
+        y : ndarray, shape (N, 6)
+        t : ndarray, shape (N,), optional
+            Sample times (s).
+
+        Notes
+        -----
+        Runs of samples that the sequential recursion forgets by exactly 1/λ are processed as
+        blocks of at most :data:`BLOCK` (:func:`block_update`); θ, P, the diagnostics and the
+        change detector end as with :meth:`update` sample by sample, to rounding.
+        """
+        Phi = np.asarray(Phi, dtype=float)
+        y = np.asarray(y, dtype=float)
         out = np.empty((len(y), 6))
-        for k in range(len(y)):
-            out[k] = self.update(Phi[k], y[k], None if t is None else float(t[k]))
+        k = 0
+        while k < len(y):
+            n = self._block_length(Phi[k:k + BLOCK], y[k:k + BLOCK])
+            done = self._update_block(Phi[k:k + n], y[k:k + n], None if t is None else
+                                      np.asarray(t[k:k + n], dtype=float), out[k:k + n]) \
+                if n > 1 else 0
+            if not done:
+                out[k] = self.update(Phi[k], y[k], None if t is None else float(t[k]))
+                done = 1
+            k += done
         return out
+
+    def _block_length(self, Phi: FloatArray, y: FloatArray) -> int:
+        """How many of the next samples (n, 6, p) one block can take exactly: finite ones,
+        while the forgetting is 1/λ at every step (0: sample by sample)."""
+        cfg = self.config
+        if self.frozen or cfg.forgetting_mode != "exponential" or cfg.adapt_weights:
+            return 0
+        finite = np.isfinite(Phi.sum(axis=(1, 2)) + y.sum(axis=1))
+        n = len(y) if finite.all() else int(np.argmin(finite))
+        if self.lam < 1.0 and n > 0:
+            # P_k ≼ P_{k−1}/λ, so tr(P_k) ≤ tr(P)/λᵏ: the bound cannot act within n steps if
+            # tr(P)/λⁿ ≤ trace_max
+            tr = scaled_trace(self.P, self.scale)
+            room = np.log(self.trace_max / tr) / -np.log(self.lam) if tr > 0 else np.inf
+            n = min(n, int(np.floor(room)) if np.isfinite(room) else n)
+        return max(n, 0)
+
+    def _update_block(self, Phi: FloatArray, y: FloatArray, t: FloatArray | None,
+                      out: FloatArray) -> int:
+        """Samples (n, 6, p) as one block; returns how many were taken (fewer when a change
+        alarm boosts P after one of them; 0 when the block is not finite)."""
+        cfg = self.config
+        b = block_update(self.theta, self.P, Phi, y, self.lam, self.R_w)
+        if b is None or not np.isfinite(b.thetas[-1].sum() + b.P.trace()):
+            return 0  # sample by sample: update() skips what is not finite
+        n = len(y)
+        e = b.innovation
+        if cfg.adapt_noise:
+            R_prev, num, den = self._noise_path(e, b.S_diag)
+        else:
+            R_prev = np.broadcast_to(self.R, (n, 6))
+        s_diag = b.S_diag * (R_prev / self.R_w)
+        force = np.einsum("jip,jp->ji", Phi, b.thetas)
+        m, alarm = self.monitor.update_many(e / np.sqrt(s_diag), np.sign(force), t,
+                                            stop_at_alarm=cfg.boost_on_alarm)
+        if m < n:  # the state after sample m, boosted below; the rest is a new block
+            prefix = block_update(self.theta, self.P, Phi[:m], y[:m], self.lam, self.R_w)
+            assert prefix is not None  # a leading block of a positive definite S̃
+            b = prefix
+        self.theta, self.P = b.thetas[m - 1].copy(), b.P
+        a = 1.0 / np.minimum(self.n + 1 + np.arange(m), cfg.stats_window)
+        self.n += m
+        out[:m] = e[:m]
+        self.last_innovation = e[m - 1].copy()
+        self._phi2 += np.einsum("jip,jip->ip", Phi[:m], Phi[:m])
+        self._e2 = _ew_mean(self._e2, e[:m] ** 2, a)
+        self._force2 = _ew_mean(self._force2, force[:m] ** 2, a)
+        if cfg.adapt_noise:
+            self._r_num, self._r_den = num[m - 1], den[m - 1]
+            self.R = np.maximum(num[m - 1] / den[m - 1], cfg.noise_floor)
+        if alarm:
+            self._boost()
+        return m
+
+    def _noise_path(self, e: FloatArray, S_diag: FloatArray
+                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The noise estimate of :meth:`update` over n samples: r_i before each sample
+        (n, 6) and the weighted sums Σ f² ε², Σ f after each (n, 6).
+
+        The sums are linear recursions with the constant factor 1 − 1/noise_window (a
+        lower-triangular Toeplitz product); only the clipping of ε² at 9 S_ii depends on the
+        estimate itself, so it is settled row by row: each pass fixes the first sample whose
+        clipping differs from the one assumed.
+        """
+        cfg = self.config
+        n = len(e)
+        T, dk = _decay(n, 1.0 - 1.0 / cfg.noise_window)
+        f = self.R_w / S_diag  # the noise share r_i / S_ii of the innovation variance
+        den = T @ f + dk * self._r_den
+        e2 = e * e
+        lim = np.full((n, 6), np.inf)  # 9 S_ii with the estimate of the time: clip level
+        for _ in range(n + 1):
+            num = T @ (f * f * np.minimum(e2, lim)) + dk * self._r_num
+            R_prev = np.vstack([self.R, np.maximum(num[:-1] / den[:-1], cfg.noise_floor)])
+            new_lim = 9.0 * S_diag * (R_prev / self.R_w)
+            differs = np.any(np.minimum(e2, new_lim) != np.minimum(e2, lim), axis=1)
+            if not differs.any():
+                break
+            j = int(np.argmax(differs))
+            lim[j] = new_lim[j]
+        return R_prev, num, den
 
     @property
     def alarm_time(self) -> float | None:

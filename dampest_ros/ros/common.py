@@ -6,7 +6,7 @@ import argparse
 import inspect
 import math
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,26 +49,66 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-#: Messages a subscription callback takes from its queue after the one the executor gave it
-#: (:meth:`ParamNode.create_subscription`): at least what one sim tick publishes per topic.
+#: Turns of :class:`Drain` per callback (:meth:`ParamNode.create_subscription`): at least
+#: what one sim tick publishes per topic.
 DRAIN_LIMIT = 500
 
 
-def take_queued(sub: Subscription, limit: int) -> Iterator[tuple[Any, Any]]:
-    """(message, message info) of up to ``limit`` messages already queued on ``sub``, taken
-    as the executor takes them (deserialised, or bytes for a raw subscription).
+class Drain:
+    """Subscriptions whose callbacks, after the message the executor gave them, also take
+    the messages already queued on every subscription of the group: one from each in turn,
+    for at most ``limit`` turns, deserialised (or bytes, raw) as the executor takes them.
 
     rclpy's executors take one message per subscription per wait round, and each round
-    rebuilds the wait set of every node (~100–200 µs in Python), so a subscription that
-    receives bursts falls behind a timer that fires every round; taking the queue in the
-    callback costs a fraction of that per message.
+    rebuilds the wait set of every node in Python (~150–200 µs), so a subscription that
+    receives bursts falls behind a timer that is ready every round, and topics published
+    together (the four dampest/* messages of a sample) cost a round each; taken here they
+    cost a fraction of that. Taking in turns keeps the topics of a group in step.
     """
-    with sub.handle:
-        for _ in range(limit):
-            taken = sub.handle.take_message(sub.msg_type, sub.raw)
-            if taken is None:
+
+    def __init__(self, limit: int = DRAIN_LIMIT) -> None:
+        self.limit = int(limit)
+        self._members: list[tuple[Subscription, Callable[[tuple[Any, Any]], None]]] = []
+
+    def add(self, sub: Subscription) -> None:
+        """Make ``sub`` a member: its callback (taking the message, or the message and its
+        info, as rclpy decides by the signature) is wrapped."""
+        callback = sub.callback
+        deliver: Callable[[tuple[Any, Any]], None]
+        try:
+            inspect.signature(callback).bind(object())
+        except TypeError:  # (message, info)
+            def deliver(taken: tuple[Any, Any]) -> None:
+                callback(*taken)
+
+            def with_info(msg: Any, info: Any) -> None:
+                callback(msg, info)
+                self.take()
+
+            sub.callback = with_info
+        else:
+            def deliver(taken: tuple[Any, Any]) -> None:
+                callback(taken[0])
+
+            def message_only(msg: Any) -> None:
+                callback(msg)
+                self.take()
+
+            sub.callback = message_only
+        self._members.append((sub, deliver))
+
+    def take(self) -> None:
+        """Hand the queued messages to the callbacks, one per subscription and turn."""
+        for _ in range(self.limit):
+            took = False
+            for sub, deliver in self._members:
+                with sub.handle:
+                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                if taken is not None:
+                    deliver(taken)
+                    took = True
+            if not took:
                 return
-            yield taken
 
 
 def to_time(t: float) -> Time:
@@ -160,31 +200,15 @@ class ParamNode(Node):
         self.add_post_set_parameters_callback(self._apply_parameters)
 
     def create_subscription(self, msg_type: Any, topic: str, callback: Callable[..., None],
-                            qos_profile: QoSProfile | int, *, drain: int = DRAIN_LIMIT,
+                            qos_profile: QoSProfile | int, *, drain: int | Drain = DRAIN_LIMIT,
                             **kwargs: Any) -> Subscription:
-        """:meth:`rclpy.node.Node.create_subscription` whose callback, after the message the
-        executor gives it, also handles the messages already queued (at most ``drain``; 0:
-        one per executor round, as plain rclpy), in order (:func:`take_queued`). The callback
-        takes the message, or the message and its info (as rclpy decides by its signature)."""
+        """:meth:`rclpy.node.Node.create_subscription` whose callback also takes the messages
+        already queued (:class:`Drain`): ``drain`` turns on this subscription alone (0: one
+        message per executor round, as plain rclpy), or a group to join."""
         sub = super().create_subscription(msg_type, topic, callback, qos_profile, **kwargs)
-        if drain <= 0:
-            return sub
-        try:
-            inspect.signature(callback).bind(object())
-        except TypeError:  # (message, info)
-            def with_info(msg: Any, info: Any) -> None:
-                callback(msg, info)
-                for taken in take_queued(sub, drain):
-                    callback(*taken)
-
-            sub.callback = with_info
-        else:
-            def message_only(msg: Any) -> None:
-                callback(msg)
-                for taken in take_queued(sub, drain):
-                    callback(taken[0])
-
-            sub.callback = message_only
+        group = Drain(drain) if isinstance(drain, int) else drain
+        if group.limit > 0:
+            group.add(sub)
         return sub
 
     def p(self, name: str) -> Any:

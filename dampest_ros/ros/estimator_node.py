@@ -38,6 +38,7 @@ from dampest_ros.io.yaml_io import load_model, load_vehicle
 from dampest_ros.ros.common import (
     LATCHED_QOS,
     RELIABLE_QOS,
+    Drain,
     Param,
     ParamNode,
     diagnostic_array,
@@ -158,13 +159,13 @@ class EstimatorNode(ModelParamNode):
                    ("acceleration", AccelWithCovarianceStamped, accel6),
                    ("wrench", WrenchStamped, wrench6),
                    ("attitude", QuaternionStamped, quat4))
-        # queued messages taken per callback: half the matching window, so that a stream
-        # drained ahead of the others never leaves its partial samples to expire
-        drain = max(1, int(0.5 * self.estimator.cfg.max_pending * self.p("rate")))
+        # the four topics of a sample are taken together; at most half the matching window
+        # per callback, so that a stream taken ahead never leaves partial samples to expire
+        group = Drain(max(1, int(0.5 * self.estimator.cfg.max_pending * self.p("rate"))))
         for name, kind, conv in streams:
             self.create_subscription(kind, f"dampest/{name}",
                                      lambda m, n=name, c=conv: self._on_sample(n, m, c),
-                                     RELIABLE_QOS, drain=drain)
+                                     RELIABLE_QOS, drain=group)
         self.create_service(Trigger, "~/reset", self._srv_reset)
         self.create_service(Trigger, "~/save", self._srv_save)
         self.create_service(SetBool, "~/freeze", self._srv_freeze)
