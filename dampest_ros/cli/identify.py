@@ -1,4 +1,13 @@
-"""``dampest identify``: identify the damping model from a bag or a CSV file."""
+"""``dampest identify``: identify the damping model from a bag or a CSV file.
+
+Batch methods (``--method ols|wls|ridge|bounded|map``) preprocess the whole log at once
+(:mod:`dampest_ros.core.preprocess`, :mod:`dampest_ros.core.batch`). ``--method rls`` instead
+replays the bag's sensor messages through the online path of the nodes: the causal
+preprocessor (:class:`~dampest_ros.core.online.OnlinePreprocessor`, messages in stamp order),
+the samples as the dampest/* topics carry them, and the estimator node's recursive least
+squares with its default prior and settings (:class:`~dampest_ros.core.estimator.
+OnlineEstimator`), so that its result is the estimator node's on the same data.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from dampest_ros.cli.common import (
+    DEFAULT_TOPICS,
     add_preprocess_options,
     add_topic_options,
     load_samples,
@@ -17,11 +27,16 @@ from dampest_ros.cli.common import (
 )
 from dampest_ros.core.batch import METHODS, Fit, FitOptions, fit
 from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator
 from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.frequency import memory_impedance
+from dampest_ros.core.online import OnlineConfig, OnlinePreprocessor
+from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import DOF_NAMES, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import Selection, select_terms
+from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 from dampest_ros.report import write_report
 
@@ -42,13 +57,19 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                         "nominal damping (the prior and the term structure)")
     p.add_argument("--terms", help="comma list of the preset's terms to identify, e.g. "
                                    "linear,quadratic (default: all terms of the preset)")
-    p.add_argument("--method", choices=METHODS, default="wls",
+    p.add_argument("--method", choices=(*METHODS, "rls"), default="wls",
                    help="ols, wls (per-DOF noise weights, default), ridge, bounded "
-                        "(physical signs), map (Gaussian prior from --prior)")
+                        "(physical signs), map (Gaussian prior from --prior); rls: the "
+                        "estimator node's recursive least squares on the bag's messages "
+                        "replayed through the online preprocessing (bags only)")
+    p.add_argument("--forgetting-factor", type=float, default=1.0, metavar="LAMBDA",
+                   help="rls: forgetting factor λ in [0.9, 1] (default: 1, every sample "
+                        "weighs the same)")
     p.add_argument("--select", action="store_true",
                    help="choose extra terms by forward BIC selection: sway-yaw, heave-pitch "
                         "and lift cross-coupling, fluid memory per DOF (rate estimated)")
-    p.add_argument("--prior", help="model YAML whose theta/theta_std are the MAP prior")
+    p.add_argument("--prior", help="model YAML whose theta/theta_std are the MAP prior "
+                                   "(rls: the RLS prior)")
     p.add_argument("--cutoff", type=float, default=2.0,
                    help="low-pass (Hz) applied to the regression (default: 2)")
     p.add_argument("--columns", help="YAML column map for CSV input (their name: our name)")
@@ -66,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
     """Read, preprocess, fit, print the table, write the model."""
     t0 = time.perf_counter()
     vehicle = load_vehicle(args.vehicle)
+    if args.method == "rls":
+        return run_rls(args, vehicle)
     model, nominal = restrict_terms(vehicle, args.terms)
     samples = load_samples(args.input, vehicle, args)
     if args.select:
@@ -109,6 +132,62 @@ def run(args: argparse.Namespace) -> int:
                             truth=truth, title=f"Damping of {vehicle.name}",
                             source=str(args.input), cutoff=args.cutoff)
         print(f"wrote {page}")
+    return 0
+
+
+def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
+    """``--method rls``: the bag's sensor messages in stamp order through the online
+    preprocessor and the estimator node's RLS; print the table, write the model."""
+    t0 = time.perf_counter()
+    unsupported = [opt for opt, used in (("--select", args.select), ("--report", args.report),
+                                         ("--delay", str(args.delay).strip() not in ("0", "0.0")),
+                                         ("--columns", args.columns)) if used]
+    if unsupported:
+        raise DataError(f"--method rls does not take {', '.join(unsupported)} (batch methods "
+                        "only)")
+    path = Path(args.input)
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist")
+    if not path.is_dir():
+        raise DataError(f"--method rls replays the sensor messages of a rosbag2 directory; "
+                        f"{path} is not one (a CSV holds samples, not messages)")
+    topics = {role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS}
+    have = {t.lstrip("/") for t in bag_summary(path).topics}
+    if topics["pressure"].lstrip("/") not in have:
+        del topics["pressure"]  # optional, as in the batch path
+    rec = read_bag(path, list(topics.values()))
+    pre = OnlinePreprocessor(vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
+                             OnlineConfig(rate=args.rate, max_dvl_gap=args.max_gap))
+    prior = None
+    if args.prior:
+        pm = load_model(args.prior)
+        prior = (pm.parameter_names, pm.theta, pm.theta_std)
+    terms = [k.strip() for k in args.terms.split(",") if k.strip()] if args.terms else None
+    est = OnlineEstimator(vehicle, terms, EstimatorConfig(
+        forgetting_factor=args.forgetting_factor, rate=args.rate, cutoff=args.cutoff), prior)
+    for sample in pre.run(rec, topics):
+        est.add_sample(sample)
+    est.process(force=True)
+    d = est.rls.diagnostics(condition=True)
+    c = pre.counts
+    print(f"{args.input}: {sum(c[r] for r in DEFAULT_TOPICS)} messages (" +
+          ", ".join(f"{c[r]} {r}" for r in DEFAULT_TOPICS) + f"), {c['samples']} samples, "
+          f"{est.counts['used']} used by the RLS, λ = {args.forgetting_factor:g}, "
+          f"condition number {d.condition_number:.3g}, {time.perf_counter() - t0:.1f} s")
+    rejected = {k: c[k] for k in ("rejected_nonfinite", "rejected_out_of_order",
+                                  "rejected_stale", "dvl_outliers", "clock_resets") if c[k]}
+    if rejected:
+        print("rejected: " + ", ".join(f"{n} {k}" for k, n in rejected.items()))
+    ci = 1.959964 * est.theta_std
+    print(table(("parameter", "estimate", "std", "95% low", "95% high", "prior"),
+                [(n, float(th), float(sd), float(th - w), float(th + w), float(p0))
+                 for n, th, sd, w, p0 in zip(est.names, est.theta, est.theta_std, ci,
+                                             est.prior_theta, strict=True)]))
+    for dof in d.unexcited:
+        print(f"not excited: {dof} (its coefficients stay near the prior)")
+    if args.out:
+        est.save(Path(args.out), 1, source=str(args.input), method="rls")
+        print(f"wrote {args.out}")
     return 0
 
 

@@ -131,3 +131,53 @@ def test_delay_auto_finds_and_corrects_a_thrust_delay(tmp_path: Path,
     for name, value, t in zip(est.parameter_names, est.theta, truth.theta, strict=True):
         if t:
             assert abs(value - t) <= 0.02 * t, name
+
+
+@pytest.fixture(scope="module")
+def short_b(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """60 s of BlueROV2 Heavy, protocol B, seed 2, as a bag and a CSV."""
+    root = tmp_path_factory.mktemp("b60")
+    assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B",
+                 "--duration", "60", "--seed", "2", "--out", str(root / "bag"),
+                 "--csv", str(root / "samples.csv")]) == 0
+    return root
+
+
+def test_rls_method_runs_the_online_path_and_agrees_with_the_batch(
+        short_b: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--method rls (λ = 1) on 60 s: the well-excited coefficients within 3 % of the batch
+    WLS on the same bag and within 5 % of the truth; every message of the bag is fed."""
+    bag, rls, wls = short_b / "bag", short_b / "rls.yaml", short_b / "wls.yaml"
+    capsys.readouterr()
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy", "--method", "rls",
+                 "--out", str(rls)]) == 0
+    printed = capsys.readouterr().out
+    assert "12001 imu" in printed and "3001 thrusters" in printed
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy", "--out", str(wls)]) == 0
+    r, w, truth = load_model(rls), load_model(wls), load_model(bag / "truth_model.yaml")
+    assert r.parameter_names == w.parameter_names == truth.parameter_names
+    assert r.extra["method"] == "rls" and r.extra["source"] == str(bag)
+    assert r.extra["forgetting_factor"] == 1.0 and r.extra["samples"] > 2500
+    assert r.damping is not None  # the terms are in the file, as from the batch path
+    for name in ("X_u", "Z_w", "X_uu", "Y_vv", "Z_ww", "K_pp", "N_rr"):
+        j = r.parameter_names.index(name)
+        assert r.theta[j] == pytest.approx(w.theta[j], rel=0.03), name
+        assert r.theta[j] == pytest.approx(truth.theta[j], rel=0.05), name
+
+
+def test_rls_forgetting_factor_and_unsupported_inputs(
+        short_b: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag, out = short_b / "bag", short_b / "rls995.yaml"
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy", "--method", "rls",
+                 "--forgetting-factor", "0.995", "--terms", "quadratic", "--out",
+                 str(out)]) == 0
+    m = load_model(out)
+    assert m.extra["forgetting_factor"] == 0.995
+    assert m.parameter_names == ["X_uu", "Y_vv", "Z_ww", "K_pp", "M_qq", "N_rr"]
+    capsys.readouterr()
+    for argv, needle in (([str(short_b / "samples.csv")], "rosbag2"),
+                         ([str(bag), "--select"], "--select"),
+                         ([str(bag), "--forgetting-factor", "1.5"], "forgetting_factor")):
+        assert main(["identify", *argv, "--vehicle", "bluerov2_heavy", "--method",
+                     "rls"]) == 2
+        assert needle in capsys.readouterr().err
