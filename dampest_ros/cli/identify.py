@@ -139,8 +139,9 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     """``--method rls``: the bag's sensor messages in stamp order through the online
     preprocessor and the estimator node's RLS; print the table, write the model."""
     t0 = time.perf_counter()
+    delay = str(args.delay).strip().lower()
     unsupported = [opt for opt, used in (("--select", args.select), ("--report", args.report),
-                                         ("--delay", str(args.delay).strip() not in ("0", "0.0")),
+                                         ("--delay", delay == "auto" or float(delay) != 0.0),
                                          ("--columns", args.columns)) if used]
     if unsupported:
         raise DataError(f"--method rls does not take {', '.join(unsupported)} (batch methods "
