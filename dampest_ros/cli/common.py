@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 
-from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.preprocess import DataError, PreprocessConfig, preprocess
 from dampest_ros.core.rigid_body import DOF_NAMES
 from dampest_ros.core.samples import Samples
@@ -117,15 +116,6 @@ def speed_table(samples_nu: np.ndarray) -> str:
     return table(("dof", "min", "max", "rms"), rows)
 
 
-def restrict_terms(vehicle: Vehicle, kinds: str | None) -> tuple[DampingModel, np.ndarray]:
-    """The vehicle's damping terms limited to ``kinds`` (comma list), and their nominal θ."""
-    model = vehicle.damping
-    if not kinds:
-        return model, vehicle.theta
-    wanted = [k.strip() for k in kinds.split(",") if k.strip()]
-    missing = [k for k in wanted if model.term(k) is None]
-    if missing:
-        raise DataError(f"the vehicle preset has no {missing} term; it has {model.kinds}")
-    sub = DampingModel([t for t in model.terms if t.kind in wanted])
-    values = dict(zip(model.parameter_names, vehicle.theta, strict=True))
-    return sub, sub.theta_from_dict({n: values[n] for n in sub.parameter_names})
+def term_list(text: str | None) -> list[str]:
+    """The term kinds of a ``--terms`` comma list (empty: all terms)."""
+    return [k.strip() for k in (text or "").split(",") if k.strip()]

@@ -22,12 +22,12 @@ from dampest_ros.cli.common import (
     add_preprocess_options,
     add_topic_options,
     load_samples,
-    restrict_terms,
     table,
+    term_list,
 )
 from dampest_ros.core.batch import METHODS, Fit, FitOptions, fit
 from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator
+from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.frequency import memory_impedance
 from dampest_ros.core.online import OnlineConfig, OnlinePreprocessor
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     vehicle = load_vehicle(args.vehicle)
     if args.method == "rls":
         return run_rls(args, vehicle)
-    model, nominal = restrict_terms(vehicle, args.terms)
+    model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
     samples = load_samples(args.input, vehicle, args)
     if args.select:
         selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
@@ -163,8 +163,7 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     if args.prior:
         pm = load_model(args.prior)
         prior = (pm.parameter_names, pm.theta, pm.theta_std)
-    terms = [k.strip() for k in args.terms.split(",") if k.strip()] if args.terms else None
-    est = OnlineEstimator(vehicle, terms, EstimatorConfig(
+    est = OnlineEstimator(vehicle, term_list(args.terms) or None, EstimatorConfig(
         forgetting_factor=args.forgetting_factor, rate=args.rate, cutoff=args.cutoff), prior)
     for sample in pre.run(rec, topics):
         est.add_sample(sample)
