@@ -24,7 +24,7 @@ LDLᵀ of S̃), and θ after sample j is θ + Σ_{i≤j} B_iᵀ w_i with B = C�
 and the change detector see every sample as the sequential recursion does. The blocks hold at
 most :data:`BLOCK` samples, and are used only where the sequential steps would forget by
 exactly 1/λ (trace bound inactive, exponential mode, fixed weights, not frozen); the rest runs
-sample by sample. That is ~4 times less CPU per sample for p = 12.
+sample by sample. For p = 12 that is about 2.5 times less CPU per sample.
 
 Against wind-up (P growing as λ⁻ⁿ in directions the data do not excite):
 

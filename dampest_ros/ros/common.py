@@ -19,6 +19,7 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
+from rclpy.callback_groups import CallbackGroup
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -54,6 +55,20 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 DRAIN_LIMIT = 500
 
 
+class _Taken(CallbackGroup):
+    """A callback group that executors never wait on or run: its subscriptions are read
+    only by the :class:`Drain` group they belong to."""
+
+    def can_execute(self, entity: Any) -> bool:
+        return False
+
+    def beginning_execution(self, entity: Any) -> bool:
+        return False
+
+    def ending_execution(self, entity: Any) -> None:
+        pass
+
+
 class Drain:
     """Subscriptions whose callbacks, after the message the executor gave them, also take
     the messages already queued on every subscription of the group: one from each in turn,
@@ -64,10 +79,16 @@ class Drain:
     receives bursts falls behind a timer that is ready every round, and topics published
     together (the four dampest/* messages of a sample) cost a round each; taken here they
     cost a fraction of that. Taking in turns keeps the topics of a group in step.
+
+    Members in the callback group :attr:`passive` do not wake the executor at all: their
+    messages wait in their queues for the next message of an active member (or
+    :meth:`take`), e.g. the topics that a publisher sends before the one that completes a
+    sample.
     """
 
     def __init__(self, limit: int = DRAIN_LIMIT) -> None:
         self.limit = int(limit)
+        self.passive: CallbackGroup = _Taken()
         self._members: list[tuple[Subscription, Callable[[tuple[Any, Any]], None]]] = []
 
     def add(self, sub: Subscription) -> None:

@@ -3,10 +3,11 @@ FRD/NED happen in dampest_ros.core (frames), never here."""
 
 from __future__ import annotations
 
+import struct
+
 import numpy as np
 from geometry_msgs.msg import (
     AccelWithCovarianceStamped,
-    QuaternionStamped,
     TwistWithCovarianceStamped,
     Vector3,
     WrenchStamped,
@@ -88,18 +89,6 @@ def twist6(m: TwistWithCovarianceStamped) -> FloatArray:
     return np.concatenate([xyz(tw.linear), xyz(tw.angular)])
 
 
-def accel6(m: AccelWithCovarianceStamped) -> FloatArray:
-    """[linear, angular] of an AccelWithCovarianceStamped (FLU)."""
-    a = m.accel.accel
-    return np.concatenate([xyz(a.linear), xyz(a.angular)])
-
-
-def quat4(m: QuaternionStamped) -> FloatArray:
-    """[x, y, z, w] of a QuaternionStamped."""
-    q = m.quaternion
-    return np.array([q.x, q.y, q.z, q.w])
-
-
 def wrench6(m: WrenchStamped) -> FloatArray:
     """[force, torque] of a WrenchStamped (FLU)."""
     return np.concatenate([xyz(m.wrench.force), xyz(m.wrench.torque)])
@@ -129,3 +118,47 @@ def wrench_msg(w: FloatArray) -> WrenchStamped:
     m.wrench.force = vec3(w[:3])
     m.wrench.torque = vec3(w[3:])
     return m
+
+
+#: Plain CDR encapsulation (little, big endian) → byte order of struct and numpy.
+_CDR_ORDER = {b"\x00\x01": "<", b"\x00\x00": ">"}
+_STAMP = {o: struct.Struct(f"{o}iII") for o in _CDR_ORDER.values()}
+
+
+def stamped_floats(data: bytes, count: int) -> tuple[int, FloatArray]:
+    """Header stamp and the first float64 fields of a serialized message that is a
+    std_msgs/Header followed by float64 fields, read in place from its CDR bytes (a raw
+    subscription's message; ~1 µs instead of ~23 µs for rclpy's deserialisation).
+
+    TwistWithCovarianceStamped and AccelWithCovarianceStamped: [linear, angular] with
+    ``count`` 6; WrenchStamped: [force, torque]; QuaternionStamped: [x, y, z, w] with 4.
+
+    Parameters
+    ----------
+    data : bytes
+        Plain CDR (XCDR1, as every ROS 2 middleware sends these types): the 4-byte
+        encapsulation header, int32 sec, uint32 nanosec, the frame_id string (uint32 length
+        with its NUL, the bytes), then the float64 fields aligned to 8 bytes.
+    count : int
+        Number of float64 fields to read.
+
+    Returns
+    -------
+    stamp : int
+        sec · 10⁹ + nanosec (ns).
+    values : ndarray, shape (count,)
+        Read-only view of ``data``.
+
+    Raises
+    ------
+    ValueError
+        Another encapsulation, or a message too short for ``count`` fields.
+    """
+    order = _CDR_ORDER.get(bytes(data[:2]))
+    if order is None:
+        raise ValueError(f"not plain CDR (encapsulation {bytes(data[:2]).hex()})")
+    sec, nanosec, size = _STAMP[order].unpack_from(data, 4)
+    start = 4 + ((12 + size + 7) & ~7)  # alignment counts from the byte after the header
+    if len(data) < start + 8 * count:
+        raise ValueError(f"{len(data)} bytes: too short for {count} float64 after the header")
+    return sec * 1_000_000_000 + nanosec, np.frombuffer(data, f"{order}f8", count, start)

@@ -2,8 +2,9 @@
 
 Subscribes dampest/velocity, dampest/acceleration, dampest/wrench and dampest/attitude (the
 attitude for the restoring forces g(η)), matched by exact header stamp. Holds the model as the
-parameters model.parameter_names, model.theta, model.theta_std, model.M (row-major, FRD) and
-model.version (bumped at each publish; read-only from outside), publishes it on dampest/model
+parameters model.parameter_names, model.theta, model.theta_std, model.M (row-major, FRD),
+model.version (bumped at each publish) and the term structure model.terms.* (read-only from
+outside; the layout of the model file, as model_server_node has it), publishes it on dampest/model
 (std_msgs/String with the model file YAML, transient local) and diagnostics
 (diagnostic_msgs/DiagnosticArray: excitation per DOF, condition number, covariance trace,
 innovation RMS, CUSUM change alarm) at publish_rate. Services: ~/reset (std_srvs/Trigger,
@@ -34,7 +35,7 @@ from dampest_ros.core import frames
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.rls import FORGETTING_MODES
-from dampest_ros.io.yaml_io import load_model, load_vehicle
+from dampest_ros.io.yaml_io import load_model, load_vehicle, model_parameters
 from dampest_ros.ros.common import (
     LATCHED_QOS,
     RELIABLE_QOS,
@@ -43,9 +44,8 @@ from dampest_ros.ros.common import (
     ParamNode,
     diagnostic_array,
     main_for,
-    stamp_ns,
 )
-from dampest_ros.ros.convert import accel6, quat4, twist6, wrench6
+from dampest_ros.ros.convert import stamped_floats
 from dampest_ros.ros.sim_node import _vehicle_ok
 
 TERM_HELP = "comma list of the vehicle's damping terms to identify, e.g. 'linear,quadratic' " \
@@ -71,24 +71,29 @@ def _save_ok(value: Any) -> str | None:
     return None
 
 
-def model_params(names: list[str], theta: np.ndarray, std: np.ndarray, M: np.ndarray,
-                 version: int) -> list[Parameter]:
-    """The model.* parameters (DESIGN.md §3)."""
-    return [
-        Parameter("model.parameter_names", Parameter.Type.STRING_ARRAY, list(names)),
-        Parameter("model.theta", Parameter.Type.DOUBLE_ARRAY, [float(x) for x in theta]),
-        Parameter("model.theta_std", Parameter.Type.DOUBLE_ARRAY, [float(x) for x in std]),
-        Parameter("model.M", Parameter.Type.DOUBLE_ARRAY, [float(x) for x in M.ravel()]),
-        Parameter("model.version", Parameter.Type.INTEGER, int(version)),
-    ]
-
-
 class ModelParamNode(ParamNode):
     """A node that holds the model in the read-only (from outside) model.* parameters."""
 
     def __init__(self, name: str, specs: Any, **kwargs: Any) -> None:
         self._internal = threading.local()
+        self._served: dict[str, Any] = {}
         super().__init__(name, specs, **kwargs)
+
+    def serve_model(self, values: dict[str, Any]) -> None:
+        """Hold ``values`` in model.* (dotted name → value, as
+        :func:`dampest_ros.io.yaml_io.model_parameters` gives them): declare the new names,
+        undeclare those gone (the terms' names change with the structure), set the changed
+        values."""
+        for name in set(self._served) - set(values):
+            self.undeclare_parameter(name)
+        added = [Parameter(n, value=v) for n, v in values.items() if n not in self._served]
+        changed = [Parameter(n, value=v) for n, v in values.items()
+                   if n in self._served and self._served[n] != v]
+        if added:
+            self.declare_model(added)
+        if changed:
+            self.set_model(changed)
+        self._served = values
 
     def declare_model(self, params: list[Parameter]) -> None:
         """Declare model.* (read-only from outside: see :meth:`_check_parameters`)."""
@@ -139,7 +144,8 @@ class EstimatorNode(ModelParamNode):
         Param("rate", 50.0, "sample rate of the dampest/* topics in Hz", low=1.0, high=500.0),
         Param("cutoff", 2.0, "parallel low-pass of the regression in Hz (< rate/2)", low=0.05,
               high=100.0),
-        Param("chunk", 10, "samples processed at once", low=1, high=1000),
+        Param("chunk", 25, "samples processed at once (the estimate lags by up to chunk / rate)",
+              low=1, high=1000),
         Param("prior", "", "model YAML whose theta/theta_std are the prior ('' : nominal "
               "damping of the preset with wide uncertainty)", check=_prior_ok),
         Param("save_path", "dampest_model.yaml", "where ~/save writes the model YAML",
@@ -151,21 +157,24 @@ class EstimatorNode(ModelParamNode):
         self.keep_samples = keep_samples
         self.version = 0
         self._build()
-        self.declare_model(model_params(self.estimator.names, self.estimator.theta,
-                                        self.estimator.theta_std, self.estimator.M, 0))
+        self.serve_model(self._model_values())
         self.pub_model = self.create_publisher(String, "dampest/model", LATCHED_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RELIABLE_QOS)
-        streams = (("velocity", TwistWithCovarianceStamped, twist6),
-                   ("acceleration", AccelWithCovarianceStamped, accel6),
-                   ("wrench", WrenchStamped, wrench6),
-                   ("attitude", QuaternionStamped, quat4))
-        # the four topics of a sample are taken together; at most half the matching window
-        # per callback, so that a stream taken ahead never leaves partial samples to expire
-        group = Drain(max(1, int(0.5 * self.estimator.cfg.max_pending * self.p("rate"))))
-        for name, kind, conv in streams:
-            self.create_subscription(kind, f"dampest/{name}",
-                                     lambda m, n=name, c=conv: self._on_sample(n, m, c),
-                                     RELIABLE_QOS, drain=group)
+        # raw subscriptions: the stamp and the values are read from the CDR bytes
+        streams = (("velocity", TwistWithCovarianceStamped, 6),
+                   ("acceleration", AccelWithCovarianceStamped, 6),
+                   ("wrench", WrenchStamped, 6), ("attitude", QuaternionStamped, 4))
+        # the four topics of a sample are taken together when its last one (the attitude,
+        # as preprocess_node publishes them) arrives: one executor round per sample. At most
+        # half the matching window per callback, so that a stream taken ahead never leaves
+        # partial samples to expire; the publish timer takes what is left.
+        self._samples = Drain(max(1, int(0.5 * self.estimator.cfg.max_pending * self.p("rate"))))
+        for name, kind, width in streams:
+            self.create_subscription(
+                kind, f"dampest/{name}",
+                lambda data, n=name, w=width: self._on_sample(n, *stamped_floats(data, w)),
+                RELIABLE_QOS, raw=True, drain=self._samples,
+                callback_group=None if name == "attitude" else self._samples.passive)
         self.create_service(Trigger, "~/reset", self._srv_reset)
         self.create_service(Trigger, "~/save", self._srv_save)
         self.create_service(SetBool, "~/freeze", self._srv_freeze)
@@ -184,6 +193,12 @@ class EstimatorNode(ModelParamNode):
                               cutoff=self.p("cutoff"), chunk=self.p("chunk"))
         self.estimator = OnlineEstimator(load_vehicle(self.p("vehicle")), terms, cfg, prior,
                                          keep_samples=self.keep_samples)
+
+    def _model_values(self) -> dict[str, Any]:
+        """model.* of the current estimate, its term structure included."""
+        e = self.estimator
+        return model_parameters(e.names, e.theta, e.theta_std, e.M, damping=e.model,
+                                version=self.version)
 
     def check_parameter(self, name: str, value: Any) -> str | None:
         try:
@@ -215,8 +230,7 @@ class EstimatorNode(ModelParamNode):
 
     # --- inputs --------------------------------------------------------------------------------
 
-    def _on_sample(self, stream: str, msg: Any, conv: Any) -> None:
-        ns = stamp_ns(msg.header.stamp)
+    def _on_sample(self, stream: str, ns: int, value: np.ndarray) -> None:
         if ns < self._last_stamp - 1_000_000_000:
             self.get_logger().warning(f"sample clock jumped back by "
                                       f"{(self._last_stamp - ns) * 1e-9:.3f} s; matching "
@@ -225,7 +239,6 @@ class EstimatorNode(ModelParamNode):
             self._last_stamp = ns
         else:
             self._last_stamp = max(self._last_stamp, ns)
-        value = conv(msg)
         # vectors FLU → FRD through the core's frame conversion (the attitude is converted
         # by the core when used)
         self.estimator.add(stream, ns, value if stream == "attitude" else
@@ -235,13 +248,13 @@ class EstimatorNode(ModelParamNode):
 
     def _publish(self, force: bool = False) -> None:
         est = self.estimator
+        self._samples.take()
         est.process(force=True)
         used = est.counts["used"]
         if force or used != self._used_at_publish:
             self._used_at_publish = used
             self.version += 1
-            self.set_model(model_params(est.names, est.theta, est.theta_std, est.M,
-                                        self.version))
+            self.serve_model(self._model_values())
             self.pub_model.publish(String(data=est.text(self.version)))
         values = est.diagnostic_values()
         values["model.version"] = self.version
