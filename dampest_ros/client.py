@@ -7,10 +7,10 @@ standard deviation and C(ν)ν (FRD body frame, SI units). Without ROS,
 :meth:`ModelClient.from_yaml` reads a model file. rclpy is imported only by the ROS methods.
 
 Every static damping term is evaluated (linear, quadratic, cross, added mass, residual): the
-structure comes from ``model.terms.*`` when the server declares them (model_server_node does,
-as the model file has them), otherwise it is rebuilt from the parameter names, which is
-enough for linear and quadratic terms. A fluid-memory term needs its filter states and is
-refused (:class:`dampest_ros.core.identified.IdentifiedModel`).
+structure comes from ``model.terms.*`` when the server declares them (estimator_node and
+model_server_node do, as the model file has them), otherwise it is rebuilt from the
+parameter names, which is enough for linear and quadratic terms. A fluid-memory term needs
+its filter states and is refused (:class:`dampest_ros.core.identified.IdentifiedModel`).
 
 The service is called with ``call_async``; the caller's node must be spun by an executor
 (its own, or the background thread :meth:`ModelClient.standalone` starts). Blocking on

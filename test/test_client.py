@@ -1,5 +1,6 @@
 """dampest_ros.client evaluates every static damping term of a model: from a YAML file and
-from a model_server_node's parameters (model.terms.* carry the structure)."""
+from the parameters of a model_server_node and of a live estimator_node (model.terms.* carry
+the structure)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from dampest_ros.client import ModelClient
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.rigid_body import coriolis_force
 from dampest_ros.core.vehicle import damping_from_spec
-from dampest_ros.io.yaml_io import load_vehicle, save_model
+from dampest_ros.io.yaml_io import damping_spec, load_vehicle, save_model, vehicle_path
 
 SPEC: dict[str, Any] = {
     "linear": {"X_u": 0, "Y_v": 0, "Z_w": 0, "K_p": 0, "M_q": 0, "N_r": 0, "Y_r": 0},
@@ -73,16 +74,23 @@ def test_yaml_client_evaluates_cross_added_and_residual_terms(tmp_path: Path) ->
     assert np.max(np.abs(full - part)) > 1.0
 
 
-def test_model_server_parameters_give_the_same_model(tmp_path: Path) -> None:
+def test_model_server_and_estimator_parameters_give_the_same_model(tmp_path: Path) -> None:
     rclpy = pytest.importorskip("rclpy")
+    import yaml
     from rclpy.executors import SingleThreadedExecutor
 
+    from dampest_ros.ros.estimator_node import EstimatorNode
     from dampest_ros.ros.model_server_node import ModelServerNode
 
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", "77")
     path = tmp_path / "model.yaml"
     model, theta, std, M = model_and_file(path)
+    # a vehicle whose nominal damping is that model: the estimator's prior, before any data
+    doc = yaml.safe_load(vehicle_path("bluerov2_heavy").read_text())
+    doc["damping"] = damping_spec(model, theta)
+    vehicle = tmp_path / "vehicle.yaml"
+    vehicle.write_text(yaml.safe_dump(doc, sort_keys=False))
     ns = f"/test_client_{os.getpid()}"  # no other test run's server answers
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -95,11 +103,15 @@ def test_model_server_parameters_give_the_same_model(tmp_path: Path) -> None:
         by_params = ModelServerNode(context=context, cli_args=[
             "--ros-args", "-r", f"__ns:={ns}", "-r", "__node:=params_server",
             "--params-file", str(path)])
+        est = EstimatorNode(context=context, cli_args=["--ros-args", "-r", f"__ns:={ns}"],
+                            parameter_overrides=[rclpy.parameter.Parameter(
+                                "vehicle", value=str(vehicle))])
         probe = rclpy.create_node("probe", namespace=ns, context=context)
-        nodes += [by_file, by_params, probe]
+        nodes += [by_file, by_params, est, probe]
         for n in nodes:
             ex.add_node(n)
-        clients = [ModelClient(probe, "model_server_node"), ModelClient(probe, "params_server")]
+        clients = [ModelClient(probe, "model_server_node"), ModelClient(probe, "params_server"),
+                   ModelClient(probe, "estimator_node")]
 
         def spin_until(done: Callable[[], bool]) -> None:
             end = time.monotonic() + 10.0
@@ -107,11 +119,25 @@ def test_model_server_parameters_give_the_same_model(tmp_path: Path) -> None:
                 ex.spin_once(timeout_sec=0.05)
 
         spin_until(lambda: all(c.available for c in clients))
-        for c in clients:
+        for c in clients[:2]:
             assert c.available, c.errors
             assert c.version == 4 and c.model.damping.kinds == model.kinds
             check_client(c, model, theta, std, M)
         assert "model.terms.cross.rows" in by_file._served
+        e = est.estimator
+        assert clients[2].available, clients[2].errors
+        assert clients[2].model.damping.kinds == model.kinds
+        check_client(clients[2], model, theta, e.theta_std, M)
+        # the estimator restricted to the linear and quadratic terms: its cross, added and
+        # residual parameters go, the client follows to the new structure
+        version = clients[2].version
+        est.set_parameters([rclpy.parameter.Parameter("terms", value="linear,quadratic")])
+        spin_until(lambda: clients[2].version > version)
+        assert clients[2].version > version, clients[2].errors
+        assert not est.has_parameter("model.terms.cross.rows")
+        assert est.estimator.model.kinds == ["linear", "quadratic"]
+        kept = [model.parameter_names.index(n) for n in est.estimator.names]
+        check_client(clients[2], est.estimator.model, theta[kept], est.estimator.theta_std, M)
         # another file without cross/added/residual terms: the terms' parameters go, the
         # client follows the version bump to the new structure
         small = tmp_path / "small.yaml"

@@ -13,7 +13,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from dampest_ros.core.rigid_body import ConfigError
@@ -43,7 +42,6 @@ class ModelServerNode(ModelParamNode):
         self.pub = self.create_publisher(String, "dampest/model", LATCHED_QOS)
         self.model = self._load()
         self.version = max(int(self.model.version), 1)
-        self._served: dict[str, Any] = {}
         self._serve()
         self.get_logger().info(f"serving {len(self.model.parameter_names)} parameters, "
                                f"version {self.version}")
@@ -60,19 +58,10 @@ class ModelServerNode(ModelParamNode):
         return model_from_parameters({k: v.value for k, v in ov.items()})
 
     def _serve(self) -> None:
-        """Declare or update model.* (the terms' names may change with the file), publish."""
+        """Hold the model in model.* (the terms' names may change with the file), publish."""
         m = self.model
-        new = model_parameters(m.parameter_names, m.theta, m.theta_std, m.M, damping=m.damping,
-                               version=self.version)
-        for name in set(self._served) - set(new):
-            self.undeclare_parameter(name)
-        added = [Parameter(n, value=v) for n, v in new.items() if n not in self._served]
-        kept = [Parameter(n, value=v) for n, v in new.items() if n in self._served]
-        if added:
-            self.declare_model(added)
-        if kept:
-            self.set_model(kept)
-        self._served = new
+        self.serve_model(model_parameters(m.parameter_names, m.theta, m.theta_std, m.M,
+                                          damping=m.damping, version=self.version))
         self.pub.publish(String(data=model_text(
             m.parameter_names, m.theta, m.theta_std, m.M, {"source": "model_server_node"},
             damping=m.damping, version=self.version)))
