@@ -2,9 +2,16 @@
 
 sim_node → preprocess_node → estimator_node → controller_node on one rclpy executor: the
 BlueROV2 Heavy flies protocol B (300 s of simulation time by default) while the estimator
-identifies its damping with recursive least squares. Every few simulated seconds a table
-shows the estimate converging against the simulator's truth; at the end the model is saved
-(an atomic write, as the estimator's ~/save does) to OUT/model.yaml.
+identifies its damping with recursive least squares. The estimator starts from a wrong
+prior, as it would on a real vehicle: --prior-factor times the preset's nominal coefficients
+(default 0.5: every coefficient at half the value the simulator flies as the truth; written
+to OUT/prior.yaml and given to estimator_node as its prior parameter) with a standard
+deviation ten times that, so that the data decide; or --prior FILE, a model YAML. A table
+shows the estimate against the simulator's truth at t = 0 and every few simulated seconds as
+it converges; at the end the model is saved (an atomic write, as the estimator's ~/save does)
+to OUT/model.yaml, and the final table gives the coverage of the ±2σ band: the share of the
+recorded instants of the second half of the run at which the truth lay within ±2σ of the
+estimate (about 95 % when σ is right).
 
 Then, unless switched off: the batch least-squares estimate on the very samples the RLS used
 (--batch, an extra column of the final table), and a convergence report in OUT/report/
@@ -37,7 +44,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.cli.common import table
 from dampest_ros.core.control import DEFAULT_BANDWIDTH
-from dampest_ros.core.estimator import OnlineEstimator
+from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
 from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.simulate import Effects, true_vehicle
@@ -65,8 +72,16 @@ def add_options(p: argparse.ArgumentParser, out: str) -> None:
                                                                "bluerov2_heavy)")
     p.add_argument("--protocol", default="B", help="excitation protocol (default: B)")
     p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--prior", default="", metavar="FILE",
+                   help="model YAML whose theta/theta_std are the estimator's prior (default: "
+                        "OUT/prior.yaml written from --prior-factor)")
+    p.add_argument("--prior-factor", type=float, default=0.5,
+                   help="without --prior: prior mean = this × the preset's nominal "
+                        "coefficients, standard deviation 10 × that (default: 0.5)")
     p.add_argument("--forgetting-factor", type=float, default=0.999,
-                   help="RLS forgetting factor λ (default: 0.999)")
+                   help="RLS forgetting factor λ (default: 0.999; at λ = 1 the RLS σ shrinks "
+                        "below the estimate's systematic error and the ±2σ band misses the "
+                        "truth most of the time)")
     p.add_argument("--effects", default="", help="hidden effects as YAML, e.g. "
                    "'{damping_change_time: 200, damping_change_factor: 1.3}'")
     p.add_argument("--every", type=float, default=20.0,
@@ -135,14 +150,17 @@ class Flight:
 
 
 def _table(est: OnlineEstimator, truth: dict[str, float], t: float,
-           batch: FloatArray | None = None) -> str:
-    """The estimate against the truth (and the batch estimate) as a text table."""
+           batch: FloatArray | None = None, coverage: FloatArray | None = None) -> str:
+    """The estimate against the truth (and the batch estimate, the ±2σ coverage) as a text
+    table."""
     rows = []
     for j, (name, th, sd) in enumerate(zip(est.names, est.theta, est.theta_std, strict=True)):
         tr = truth.get(name, float("nan"))
         row: list[object] = [name, float(th), float(sd), tr, _error(th, tr)]
         if batch is not None:
             row += [float(batch[j]), _error(batch[j], tr)]
+        if coverage is not None:
+            row.append(float(100 * coverage[j]))
         rows.append(row)
     d = est.rls.diagnostics(condition=False)
     head = (f"t = {t:6.1f} s  samples {d.samples}  unexcited: "
@@ -151,6 +169,8 @@ def _table(est: OnlineEstimator, truth: dict[str, float], t: float,
     header = ["coefficient", "estimate", "std", "truth", "error %"]
     if batch is not None:
         header += ["batch", "batch error %"]
+    if coverage is not None:
+        header.append("±2σ cover %")
     return head + "\n" + table(header, rows)
 
 
@@ -162,17 +182,20 @@ def _error(value: float, truth: float) -> float:
 def run(args: argparse.Namespace) -> int:
     """Fly the pipeline, print and save; then the batch column and the report."""
     from dampest_ros.io.yaml_io import load_vehicle, read_mapping
+    from dampest_ros.report import band_coverage
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     vehicle = load_vehicle(args.vehicle)
+    prior = Path(args.prior) if args.prior else write_prior(vehicle, args.prior_factor,
+                                                            out / "prior.yaml")
     effects = Effects.from_dict(read_mapping(args.effects)) if args.effects else Effects()
     truth_v = true_vehicle(vehicle, effects)
     truth = dict(zip(truth_v.damping.parameter_names, truth_v.theta, strict=True))
     if effects.damping_change_time >= 0:
         print(f"(the quadratic damping changes by x{effects.damping_change_factor} at "
               f"t = {effects.damping_change_time} s; the table's truth is before the change)")
-    flight = _fly(args, vehicle.name, truth, out / "model.yaml")
+    flight = _fly(args, vehicle.name, truth, prior, out / "model.yaml")
     e = flight.estimator
     batch = None
     if args.batch:
@@ -182,32 +205,67 @@ def run(args: argparse.Namespace) -> int:
         try:
             samples = to_samples(e.samples_log, e.cfg.rate)
             batch = fit(samples, e.model, e.body, FitOptions(cutoff=e.cfg.cutoff),
-                        prior=e.nominal).theta
+                        prior=e.prior_theta).theta
             print(f"\nbatch least squares on the same {len(samples)} samples: "
                   f"{time.perf_counter() - c:.1f} s")
         except (ConfigError, DataError) as exc:  # e.g. interrupted before enough samples
             print(f"\nno batch estimate: {exc}")
-    print("\n" + _table(e, truth, flight.t, batch))
+    ht, theta, std = flight.history.arrays()
+    coverage = band_coverage(ht, theta, std, np.array([truth.get(n, np.nan) for n in e.names]))
+    print("\n" + _table(e, truth, flight.t, batch, coverage))
     errors = [abs(_error(th, truth.get(n, np.nan))) for n, th in zip(e.names, e.theta,
                                                                       strict=True)]
     if np.any(np.isfinite(errors)):
         worst = int(np.nanargmax(errors))
         print(f"largest relative error of a nonzero coefficient: {errors[worst]:.2f} % "
               f"({e.names[worst]})")
+    if np.any(np.isfinite(coverage)):
+        low = int(np.nanargmin(coverage))
+        print(f"±2σ coverage of the truth over the second half of the run: "
+              f"{100 * np.nanmean(coverage):.0f} % on average, lowest {100 * coverage[low]:.0f} "
+              f"% ({e.names[low]}) (about 95 % when σ is right)")
     print(flight.summary)
     if args.report:
         c = time.perf_counter()
-        index = _report(args, out / "report", flight, truth, batch, vehicle, effects)
+        index = _report(args, out / "report", flight, truth, batch, vehicle, effects, prior)
         print(f"report: {index} ({time.perf_counter() - c:.1f} s)")
     print(f"model: {flight.path}\n(offline identification from a bag: dampest simulate "
           "... --out BAG, then dampest identify BAG)")
     return 0
 
 
-def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float],
+def write_prior(vehicle: Vehicle, factor: float, path: Path) -> Path:
+    """A deliberately wrong prior model file: ``factor`` × the vehicle's nominal coefficients,
+    standard deviations as estimator_node gives a prior without them (ten times the scale of
+    that mean): wide, so that the data decide.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+    factor : float
+        > 0.
+    path : Path
+        Where the model YAML is written (atomically).
+
+    Returns
+    -------
+    Path
+    """
+    if not factor > 0:
+        raise ConfigError("prior_factor", f"must be > 0, got {factor}")
+    from dampest_ros.io.yaml_io import save_model
+    theta = factor * vehicle.theta
+    std = EstimatorConfig().prior_scale * parameter_scale(vehicle.damping, theta)
+    return save_model(path, vehicle.damping.parameter_names, theta, std, vehicle.body.M,
+                      {"source": f"{factor:g} x the nominal damping of {vehicle.name}"},
+                      damping=vehicle.damping)
+
+
+def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float], prior: Path,
          path: Path) -> Flight:
-    """Build the nodes, spin until the protocol ends (tables every ``args.every`` s, the
-    estimate recorded every ``args.record_every`` s), save the model to ``path``."""
+    """Build the nodes (the estimator from the prior model file ``prior``), spin until the
+    protocol ends (tables at 0 s and every ``args.every`` s, the estimate recorded every
+    ``args.record_every`` s), save the model to ``path``."""
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     if args.domain_id is not None:
         os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
@@ -233,7 +291,7 @@ def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float],
     est = EstimatorNode(keep_samples=bool(args.batch), context=context, parameter_overrides=[
         P("vehicle", value=args.vehicle), P("use_sim_time", value=True),
         P("forgetting_factor", value=float(args.forgetting_factor)),
-        P("save_path", value=str(path))])
+        P("prior", value=str(prior)), P("save_path", value=str(path))])
     nodes: list[Any] = [sim, pre, est]
     ctrl = None
     if args.controller != "off":
@@ -250,10 +308,12 @@ def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float],
     cpu_est = _time_callbacks(est)
     print(f"dampest {getattr(args, 'command', 'live')}: {vehicle_name}, protocol "
           f"{args.protocol}, {args.duration:.0f} s at {args.rate_factor:g}x real time, "
-          f"λ = {args.forgetting_factor}, {args.executor} executor, controller {args.controller}")
+          f"λ = {args.forgetting_factor}, {args.executor} executor, controller {args.controller}"
+          f"\nprior: {prior}")
     e = est.estimator
     history = History()
     history.add(0.0, e.theta, e.theta_std)  # the prior
+    print("\n" + _table(e, truth, 0.0), flush=True)
     t0, c0 = time.monotonic(), time.process_time()
     next_print, next_record = args.every, args.record_every
     try:
@@ -300,7 +360,7 @@ def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float],
 
 def _report(args: argparse.Namespace, out: Path, flight: Flight,
             truth: dict[str, float], batch: FloatArray | None, vehicle: Vehicle,
-            effects: Effects) -> Path:
+            effects: Effects, prior: Path) -> Path:
     """Tracking runs without and with the saved model's feed-forward, then the report."""
     from dampest_ros.client import ModelClient
     from dampest_ros.core.control import VelocityPI, track, tracking_rms
@@ -329,6 +389,8 @@ def _report(args: argparse.Namespace, out: Path, flight: Flight,
     summary = [("vehicle", vehicle.name), ("protocol", args.protocol),
                ("simulated", f"{flight.t:.0f} s in {flight.wall:.0f} s wall clock"),
                ("forgetting factor λ", f"{args.forgetting_factor:g}"),
+               ("prior", str(prior) if args.prior else f"{args.prior_factor:g} × the "
+                "nominal coefficients, std 10 × that"),
                ("samples used by the RLS", str(e.counts["used"])),
                ("effects", args.effects or "none"), ("model", str(flight.path))]
     return write_convergence_report(out, e.names, ht, theta, std, groups, truth, batch, tr,
