@@ -143,10 +143,11 @@ def stamp_ns(stamp: Time) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
-def seconds(stamp: Time) -> float:
-    """Seconds of a stamp: the float nearest to it, as dampest_ros.io.cdr.stamps_from_ros
-    gives the stamps of a bag (ns × 1e-9 can differ by one unit in the last place)."""
-    return stamp_ns(stamp) / 1e9
+def seconds(stamp: Time | int) -> float:
+    """Seconds of a stamp (or of its integer nanoseconds): the float nearest to it, as
+    dampest_ros.io.cdr.stamps_from_ros gives the stamps of a bag (ns × 1e-9 can differ by
+    one unit in the last place)."""
+    return (stamp if isinstance(stamp, int) else stamp_ns(stamp)) / 1e9
 
 
 @dataclass(frozen=True)

@@ -130,8 +130,11 @@ def stamped_floats(data: bytes, count: int) -> tuple[int, FloatArray]:
     std_msgs/Header followed by float64 fields, read in place from its CDR bytes (a raw
     subscription's message; ~1 µs instead of ~23 µs for rclpy's deserialisation).
 
-    TwistWithCovarianceStamped and AccelWithCovarianceStamped: [linear, angular] with
-    ``count`` 6; WrenchStamped: [force, torque]; QuaternionStamped: [x, y, z, w] with 4.
+    TwistWithCovarianceStamped and AccelWithCovarianceStamped: [linear, angular] (6), then
+    the covariance (36); WrenchStamped: [force, torque] (6); QuaternionStamped: [x, y, z, w]
+    (4); sensor_msgs/Imu: orientation (4), its covariance (9), angular velocity (3), its
+    covariance (9), linear acceleration (3), its covariance (9); FluidPressure: pressure,
+    variance.
 
     Parameters
     ----------

@@ -40,9 +40,10 @@ from dampest_ros.ros.common import (
     diagnostic_array,
     main_for,
     seconds,
+    stamp_ns,
     to_time,
 )
-from dampest_ros.ros.convert import accel_msg, twist_msg, wrench_msg, xyz
+from dampest_ros.ros.convert import accel_msg, stamped_floats, twist_msg, wrench_msg
 from dampest_ros.ros.sim_node import _vehicle_ok
 
 
@@ -99,10 +100,12 @@ class PreprocessNode(ParamNode):
         self.pub_q = self.create_publisher(QuaternionStamped, "dampest/attitude", RELIABLE_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RELIABLE_QOS)
         self._build()
-        self.create_subscription(Imu, "imu/data", self._on_imu, SENSOR_QOS)
+        # raw: stamps and values read from the CDR bytes (the joint names need rclpy's)
+        self.create_subscription(Imu, "imu/data", self._on_imu, SENSOR_QOS, raw=True)
         self.create_subscription(TwistWithCovarianceStamped, "dvl/twist", self._on_dvl,
-                                 SENSOR_QOS)
-        self.create_subscription(FluidPressure, "pressure", self._on_pressure, SENSOR_QOS)
+                                 SENSOR_QOS, raw=True)
+        self.create_subscription(FluidPressure, "pressure", self._on_pressure, SENSOR_QOS,
+                                 raw=True)
         self.create_subscription(JointState, "thrusters/state", self._on_thrusters, SENSOR_QOS)
         self.create_timer(1.0, self._publish_diagnostics)
         self.create_timer(0.5, self._flush_if_idle)
@@ -124,23 +127,24 @@ class PreprocessNode(ParamNode):
 
     # --- subscriptions: convert, call core, publish -------------------------------------------
 
-    def _on_imu(self, m: Imu) -> None:
-        o = m.orientation
-        self._feed("imu", m.header.stamp, (np.array([o.x, o.y, o.z, o.w]),
-                                           xyz(m.angular_velocity), xyz(m.linear_acceleration)))
+    def _on_imu(self, data: bytes) -> None:
+        # orientation, its covariance, angular velocity, its covariance, linear acceleration
+        ns, v = stamped_floats(data, 28)
+        self._feed("imu", ns, (v[0:4], v[13:16], v[25:28]))
 
-    def _on_dvl(self, m: TwistWithCovarianceStamped) -> None:
-        self._feed("dvl", m.header.stamp, (xyz(m.twist.twist.linear),
-                                           np.asarray(m.twist.covariance, dtype=float)))
+    def _on_dvl(self, data: bytes) -> None:
+        ns, v = stamped_floats(data, 42)  # twist (linear, angular), covariance (36)
+        self._feed("dvl", ns, (v[0:3], v[6:42]))
 
-    def _on_pressure(self, m: FluidPressure) -> None:
-        self._feed("pressure", m.header.stamp, (m.fluid_pressure,))
+    def _on_pressure(self, data: bytes) -> None:
+        ns, v = stamped_floats(data, 1)
+        self._feed("pressure", ns, (float(v[0]),))
 
     def _on_thrusters(self, m: JointState) -> None:
-        self._feed("thrusters", m.header.stamp, (tuple(m.name),
-                                                 np.asarray(m.effort, dtype=float)))
+        self._feed("thrusters", stamp_ns(m.header.stamp), (tuple(m.name),
+                                                           np.asarray(m.effort, dtype=float)))
 
-    def _feed(self, role: str, stamp: Any, args: tuple[Any, ...]) -> None:
+    def _feed(self, role: str, stamp: int, args: tuple[Any, ...]) -> None:
         """Through the stamp-order stage to the preprocessor method of the role."""
         self._received += 1
         self._process(self.order.push(role, seconds(stamp), args))
