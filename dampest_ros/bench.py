@@ -170,15 +170,17 @@ def _publish_samples(seconds: str, speed: str, subscribers: str) -> dict[str, fl
     from dampest_ros.core.simulate import run
     from dampest_ros.io.yaml_io import load_vehicle
     from dampest_ros.ros.common import RELIABLE_QOS
-    from dampest_ros.ros.preprocess_node import sample_messages
+    from dampest_ros.ros.preprocess_node import SampleMessages
 
     v = load_vehicle(VEHICLE)
     rec = measure(run(v, make_excitation("B", v, float(seconds), seed=1)), v.body.rho,
                   v.body.gravity, seed=1)
     samples = [s for s in OnlinePreprocessor(v.thrusters, v.body.gravity, v.body.rho).run(rec)
                if s.usable]
-    msgs = [sample_messages(s, "base_link") for s in samples]
     rclpy.init()
+    from rclpy.serialization import serialize_message
+    writer = SampleMessages()  # serialised up front: publishing costs the publisher little
+    msgs = [[serialize_message(m) for m in writer.fill(s, "base_link")] for s in samples]
     node = rclpy.create_node("bench_sample_publisher")
     pubs = [node.create_publisher(kind, f"dampest/{name}", RELIABLE_QOS) for name, kind in (
         ("velocity", TwistWithCovarianceStamped), ("acceleration", AccelWithCovarianceStamped),

@@ -4,14 +4,11 @@ FRD/NED happen in dampest_ros.core (frames), never here."""
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import (
-    AccelWithCovarianceStamped,
-    TwistWithCovarianceStamped,
-    Vector3,
-    WrenchStamped,
-)
+from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3, WrenchStamped
 from nav_msgs.msg import Odometry
 from numpy.typing import NDArray
 from sensor_msgs.msg import FluidPressure, Imu, JointState
@@ -21,6 +18,7 @@ from dampest_ros.core.measurements import (
     JointSeries,
     OdometrySeries,
     PressureSeries,
+    Recording,
     Series,
     TwistSeries,
 )
@@ -39,48 +37,85 @@ def xyz(v: Vector3) -> FloatArray:
     return np.array([v.x, v.y, v.z])
 
 
-def series_messages(topic: str, s: Series) -> list[tuple[float, object]]:
-    """(stamp, message) for every row of a simulated series (the sim node publishes them)."""
-    out: list[tuple[float, object]] = []
-    for i in range(len(s)):
-        t = float(s.stamp[i])
-        out.append((t, _message(s, i, t)))
-    return out
+def publications(rec: Recording) -> Iterator[tuple[str, Any]]:
+    """(topic, message) for every row of every series of a simulated recording, in stamp
+    order (ties in the recording's topic order): what the sim node publishes.
+
+    Each topic has one message object, its constant fields (frame ids, covariances, joint
+    names) set once and the rest filled row after row, so a message is valid until the next
+    one of its topic is yielded: publish it at once (rclpy serialises on publish).
+    """
+    fills = [(topic, _filler(s)) for topic, s in rec.items() if len(s)]
+    if not fills:
+        return
+    sizes = [len(rec[topic]) for topic, _ in fills]
+    stamps = np.concatenate([rec[topic].stamp for topic, _ in fills])
+    which = np.repeat(np.arange(len(fills)), sizes).tolist()
+    rows = np.concatenate([np.arange(n) for n in sizes]).tolist()
+    for k in np.argsort(stamps, kind="stable").tolist():
+        topic, fill = fills[which[k]]
+        yield topic, fill(rows[k])
 
 
-def _message(s: Series, i: int, t: float) -> object:
+def _filler(s: Series) -> Callable[[int], Any]:
+    """A message for series ``s`` and the function that fills it with row i."""
+    fill: Callable[[int], None]
     if isinstance(s, ImuSeries):
-        m = Imu()
-        q = s.orientation[i]
-        m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w = map(float, q)
-        m.angular_velocity = vec3(s.angular_velocity[i])
-        m.linear_acceleration = vec3(s.linear_acceleration[i])
+        m: Any = Imu()
         m.orientation_covariance = s.orientation_covariance.astype(float)
         m.angular_velocity_covariance = s.angular_velocity_covariance.astype(float)
         m.linear_acceleration_covariance = s.linear_acceleration_covariance.astype(float)
+        q, w, f = (s.orientation.tolist(), s.angular_velocity.tolist(),
+                   s.linear_acceleration.tolist())
+        o, av, la = m.orientation, m.angular_velocity, m.linear_acceleration
+
+        def fill(i: int) -> None:
+            o.x, o.y, o.z, o.w = q[i]
+            av.x, av.y, av.z = w[i]
+            la.x, la.y, la.z = f[i]
     elif isinstance(s, TwistSeries):
         m = TwistWithCovarianceStamped()
-        m.twist.twist.linear = vec3(s.linear[i])
-        m.twist.twist.angular = vec3(s.angular[i])
         m.twist.covariance = s.covariance.astype(float)
+        lin, ang = s.linear.tolist(), s.angular.tolist()
+        tl, ta = m.twist.twist.linear, m.twist.twist.angular
+
+        def fill(i: int) -> None:
+            tl.x, tl.y, tl.z = lin[i]
+            ta.x, ta.y, ta.z = ang[i]
     elif isinstance(s, PressureSeries):
-        m = FluidPressure(fluid_pressure=float(s.fluid_pressure[i]), variance=float(s.variance))
+        m = FluidPressure(variance=float(s.variance))
+        p = s.fluid_pressure.tolist()
+
+        def fill(i: int) -> None:
+            m.fluid_pressure = p[i]
     elif isinstance(s, JointSeries):
-        m = JointState(name=list(s.names), velocity=s.velocity[i].tolist(),
-                       effort=s.effort[i].tolist())
+        m = JointState(name=list(s.names))
+        vel, eff = s.velocity.tolist(), s.effort.tolist()
+
+        def fill(i: int) -> None:
+            m.velocity, m.effort = vel[i], eff[i]
     elif isinstance(s, OdometrySeries):
         m = Odometry(child_frame_id=s.child_frame_id)
-        m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z = \
-            map(float, s.position[i])
-        o = m.pose.pose.orientation
-        o.x, o.y, o.z, o.w = map(float, s.orientation[i])
-        m.twist.twist.linear = vec3(s.linear[i])
-        m.twist.twist.angular = vec3(s.angular[i])
+        pos, ori, lin, ang = (s.position.tolist(), s.orientation.tolist(), s.linear.tolist(),
+                              s.angular.tolist())
+        pp, po = m.pose.pose.position, m.pose.pose.orientation
+        tl, ta = m.twist.twist.linear, m.twist.twist.angular
+
+        def fill(i: int) -> None:
+            pp.x, pp.y, pp.z = pos[i]
+            po.x, po.y, po.z, po.w = ori[i]
+            tl.x, tl.y, tl.z = lin[i]
+            ta.x, ta.y, ta.z = ang[i]
     else:
         raise TypeError(f"no message for {type(s).__name__}")
-    m.header.stamp = to_time(t)
     m.header.frame_id = s.frame_id
-    return m
+    stamps = s.stamp.tolist()
+
+    def stamped(i: int) -> Any:
+        m.header.stamp = to_time(stamps[i])
+        fill(i)
+        return m
+    return stamped
 
 
 def twist6(m: TwistWithCovarianceStamped) -> FloatArray:
@@ -92,24 +127,6 @@ def twist6(m: TwistWithCovarianceStamped) -> FloatArray:
 def wrench6(m: WrenchStamped) -> FloatArray:
     """[force, torque] of a WrenchStamped (FLU)."""
     return np.concatenate([xyz(m.wrench.force), xyz(m.wrench.torque)])
-
-
-def twist_msg(v: FloatArray, var: float = 0.0) -> TwistWithCovarianceStamped:
-    """TwistWithCovarianceStamped from [linear, angular] (FLU); diagonal variance ``var``."""
-    m = TwistWithCovarianceStamped()
-    m.twist.twist.linear = vec3(v[:3])
-    m.twist.twist.angular = vec3(v[3:])
-    m.twist.covariance = (np.eye(6) * var).ravel()
-    return m
-
-
-def accel_msg(a: FloatArray, var: float = 0.0) -> AccelWithCovarianceStamped:
-    """AccelWithCovarianceStamped from [linear, angular] (FLU)."""
-    m = AccelWithCovarianceStamped()
-    m.accel.accel.linear = vec3(a[:3])
-    m.accel.accel.angular = vec3(a[3:])
-    m.accel.covariance = (np.eye(6) * var).ravel()
-    return m
 
 
 def wrench_msg(w: FloatArray) -> WrenchStamped:

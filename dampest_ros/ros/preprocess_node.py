@@ -43,29 +43,46 @@ from dampest_ros.ros.common import (
     stamp_ns,
     to_time,
 )
-from dampest_ros.ros.convert import accel_msg, stamped_floats, twist_msg, wrench_msg
+from dampest_ros.ros.convert import stamped_floats
 from dampest_ros.ros.sim_node import _vehicle_ok
 
 
-def sample_messages(s: OnlineSample, frame_id: str) -> tuple[
-        TwistWithCovarianceStamped, AccelWithCovarianceStamped, WrenchStamped,
-        QuaternionStamped]:
-    """The four dampest/* messages of one sample (velocity, acceleration, wrench in
-    ``frame_id``, FLU; attitude base_link FLU → odom ENU), all with the sample's stamp."""
-    stamp = to_time(s.t)
-    # FRD → FLU through the core's frame conversion
-    mv = twist_msg(frames.body_twist(s.nu))
-    ma = accel_msg(frames.body_twist(s.nu_dot))
-    mw = wrench_msg(frames.body_twist(s.tau))
-    # attitude FRD → NED (Euler) to the ROS quaternion FLU → ENU
-    mq = QuaternionStamped()
-    mq.quaternion.x, mq.quaternion.y, mq.quaternion.z, mq.quaternion.w = \
-        map(float, attitude_quaternion(s.euler))
-    for msg in (mv, ma, mw, mq):
-        msg.header.stamp = stamp
-        msg.header.frame_id = frame_id
-    mq.header.frame_id = "odom"
-    return mv, ma, mw, mq
+class SampleMessages:
+    """The four dampest/* messages of a sample: velocity, acceleration and wrench (FLU, in
+    the given frame) and the attitude (base_link FLU → odom ENU), all with the sample's stamp.
+
+    One object per message, filled sample after sample (building new messages costs several
+    times more): the messages of a sample are valid until the next :meth:`fill`; publish them
+    at once (rclpy serialises on publish).
+    """
+
+    def __init__(self) -> None:
+        self.v = TwistWithCovarianceStamped()
+        self.a = AccelWithCovarianceStamped()
+        self.w = WrenchStamped()
+        self.q = QuaternionStamped()
+        self.q.header.frame_id = "odom"
+        self._vectors = (self.v.twist.twist.linear, self.v.twist.twist.angular,
+                         self.a.accel.accel.linear, self.a.accel.accel.angular,
+                         self.w.wrench.force, self.w.wrench.torque)
+
+    def fill(self, s: OnlineSample, frame_id: str) -> tuple[
+            TwistWithCovarianceStamped, AccelWithCovarianceStamped, WrenchStamped,
+            QuaternionStamped]:
+        """The messages of sample ``s`` (FRD, SI); ``frame_id`` of the first three."""
+        # FRD → FLU through the core's frame conversion
+        values = frames.body_twist(np.stack([s.nu, s.nu_dot, s.tau])).reshape(6, 3).tolist()
+        for vec, (x, y, z) in zip(self._vectors, values, strict=True):
+            vec.x, vec.y, vec.z = x, y, z
+        # attitude FRD → NED (Euler) to the ROS quaternion FLU → ENU
+        o = self.q.quaternion
+        o.x, o.y, o.z, o.w = attitude_quaternion(s.euler).tolist()
+        stamp = to_time(s.t)
+        for m in (self.v, self.a, self.w):
+            m.header.stamp = stamp
+            m.header.frame_id = frame_id
+        self.q.header.stamp = stamp
+        return self.v, self.a, self.w, self.q
 
 
 class PreprocessNode(ParamNode):
@@ -99,6 +116,7 @@ class PreprocessNode(ParamNode):
         self.pub_w = self.create_publisher(WrenchStamped, "dampest/wrench", RELIABLE_QOS)
         self.pub_q = self.create_publisher(QuaternionStamped, "dampest/attitude", RELIABLE_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RELIABLE_QOS)
+        self.messages = SampleMessages()
         self._build()
         # raw: stamps and values read from the CDR bytes (the joint names need rclpy's)
         self.create_subscription(Imu, "imu/data", self._on_imu, SENSOR_QOS, raw=True)
@@ -166,7 +184,7 @@ class PreprocessNode(ParamNode):
         for s in samples:
             if not s.usable:
                 continue
-            mv, ma, mw, mq = sample_messages(s, frame)
+            mv, ma, mw, mq = self.messages.fill(s, frame)
             self.pub_v.publish(mv)
             self.pub_a.publish(ma)
             self.pub_w.publish(mw)

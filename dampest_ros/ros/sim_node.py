@@ -34,7 +34,7 @@ from dampest_ros.ros.common import (
     main_for,
     to_time,
 )
-from dampest_ros.ros.convert import series_messages, wrench6
+from dampest_ros.ros.convert import publications, wrench6
 
 
 def _vehicle_ok(value: Any) -> str | None:
@@ -155,14 +155,13 @@ class SimNode(ParamNode):
             # cannot keep up: fly at most max_lag now and slow the pace down
             target = live.t + self.p("max_lag")
             self._sim0, self._wall0 = target, time.monotonic()
-        rec = live.advance(target)
-        msgs = [(t, name, m) for name, s in rec.items() for t, m in series_messages(name, s)]
-        msgs.sort(key=lambda x: x[0])
-        for _, name, m in msgs:
+        n = 0
+        for name, m in publications(live.advance(target)):
             self.pub[name].publish(m)
             self.counts[name] += 1
-        self.published += len(msgs)
-        if self.p("publish_clock") and msgs:
+            n += 1
+        self.published += n
+        if self.p("publish_clock") and n:
             self.clock_pub.publish(ClockMsg(clock=to_time(live.t)))
 
 
