@@ -75,6 +75,8 @@ class SensorStream:
     returned and up to the chunk's end (thruster windows up to the end of its last step).
     """
 
+    HISTORY = 256  # integration steps of thruster history kept beyond the current chunk
+
     def __init__(self, rho: float, gravity: float, config: SensorConfig | None = None,
                  bias: SensorBias | None = None, seed: int = 0) -> None:
         self.rho, self.gravity = float(rho), float(gravity)
@@ -91,9 +93,9 @@ class SensorStream:
         self._dvl_locked = True
         self._dvl_switch = math.inf
         # running integral of the thruster step means at step edges
-        self._edges: deque[float] = deque(maxlen=256)
-        self._int_speed: deque[FloatArray] = deque(maxlen=256)
-        self._int_thrust: deque[FloatArray] = deque(maxlen=256)
+        self._edges: deque[float] = deque(maxlen=self.HISTORY)
+        self._int_speed: deque[FloatArray] = deque(maxlen=self.HISTORY)
+        self._int_thrust: deque[FloatArray] = deque(maxlen=self.HISTORY)
         self._last_step_t = -math.inf
         self._names: tuple[str, ...] = ()
 
@@ -214,6 +216,13 @@ class SensorStream:
     def _integrate_steps(self, traj: Trajectory) -> None:
         t = np.asarray(traj.t, dtype=float)
         dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
+        # the history must hold the whole chunk plus the window before it: a long chunk
+        # (one advance over many steps) grows it instead of dropping the edges still needed
+        needed = len(t) + self.HISTORY
+        if needed > (self._edges.maxlen or 0):
+            self._edges = deque(self._edges, maxlen=needed)
+            self._int_speed = deque(self._int_speed, maxlen=needed)
+            self._int_thrust = deque(self._int_thrust, maxlen=needed)
         for k in range(len(t)):
             if t[k] <= self._last_step_t + 1e-12:
                 continue  # the overlap step, already integrated

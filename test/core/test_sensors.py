@@ -23,7 +23,9 @@ from dampest_ros.core.sensors import (
     measure,
     sample_times,
 )
+from dampest_ros.core.stream import LiveSimulation
 from dampest_ros.core.trajectory import Trajectory
+from dampest_ros.io.yaml_io import load_vehicle
 
 RHO, G = 1025.0, 9.81
 ATM = 101325.0
@@ -445,3 +447,18 @@ def test_single_sample_trajectory() -> None:
     p = rec["pressure"]
     assert isinstance(p, PressureSeries)
     assert p.fluid_pressure[0] == ATM + RHO * G * 2.0
+
+
+def test_live_simulation_messages_do_not_depend_on_the_advance_span() -> None:
+    """One advance over 400 integration steps (more than the stream's thruster history of
+    256) gives the same thruster telemetry as advancing 0.1 s at a time."""
+    v = load_vehicle("bluerov2_heavy")
+    one, steps = LiveSimulation(v, "B", 10.0, seed=3), LiveSimulation(v, "B", 10.0, seed=3)
+    long = one.advance(8.0)["thrusters/state"]
+    parts = [steps.advance(0.1 * (k + 1))["thrusters/state"] for k in range(80)]
+    effort = np.concatenate([p.effort for p in parts if len(p.stamp)])
+    stamp = np.concatenate([p.stamp for p in parts if len(p.stamp)])
+    assert isinstance(long, JointSeries)
+    np.testing.assert_array_equal(long.stamp, stamp)
+    np.testing.assert_allclose(long.effort, effort, rtol=0, atol=1e-9)
+    assert np.abs(long.effort).max() > 1.0  # the vehicle is being flown
