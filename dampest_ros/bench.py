@@ -91,44 +91,22 @@ def _live(duration: str) -> dict[str, float]:
     out for ``duration`` simulated seconds."""
     _ros_env()
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
 
     from dampest_ros.cli import live
     from dampest_ros.io.yaml_io import load_vehicle
-    from dampest_ros.ros.controller_node import ControllerNode
-    from dampest_ros.ros.estimator_node import EstimatorNode
-    from dampest_ros.ros.preprocess_node import PreprocessNode
-    from dampest_ros.ros.sim_node import SimNode
 
     ap = argparse.ArgumentParser()
     live.add_options(ap, "")
-    a = ap.parse_args([])  # dampest live's defaults
-    P = Parameter
+    a = ap.parse_args([])  # dampest live's defaults, but for the length and the pace:
+    a.duration = float(duration)
+    a.rate_factor = 1000.0  # beyond reach: the sim flies max_lag per tick, flat out
     context = rclpy.Context()
     rclpy.init(context=context)
     with tempfile.TemporaryDirectory() as tmp:
-        # the nodes and parameters of dampest_ros.cli.live, with a rate factor the sim
-        # cannot reach (it then flies max_lag per tick, as fast as the executor turns)
         prior = live.write_prior(load_vehicle(a.vehicle), a.prior_factor,
                                  Path(tmp) / "prior.yaml")
-        sim = SimNode(context=context, parameter_overrides=[
-            P("vehicle", value=a.vehicle), P("protocol", value=a.protocol),
-            P("duration", value=float(duration)), P("seed", value=a.seed),
-            P("rate_factor", value=1000.0), P("effects", value=a.effects)])
-        pre = PreprocessNode(context=context, parameter_overrides=[P("vehicle", value=a.vehicle)])
-        est = EstimatorNode(keep_samples=a.batch, context=context, parameter_overrides=[
-            P("vehicle", value=a.vehicle), P("use_sim_time", value=True),
-            P("forgetting_factor", value=a.forgetting_factor), P("prior", value=str(prior)),
-            P("save_path", value=f"{tmp}/model.yaml")])
-        ctrl = ControllerNode(context=context,
-                              cli_args=["--ros-args", "-r", "cmd_wrench:=controller/cmd_wrench"],
-                              parameter_overrides=[P("vehicle", value=a.vehicle),
-                                                   P("reference", value=list(a.reference))])
-        nodes = [sim, pre, est, ctrl]
-        ex = SingleThreadedExecutor(context=context)
-        for n in nodes:
-            ex.add_node(n)
+        pipe = live.build_pipeline(a, prior, Path(tmp) / "model.yaml", context)
+        sim, pre, est, ctrl, ex = pipe.sim, pipe.pre, pipe.est, pipe.ctrl, pipe.executor
         t0, c0 = time.monotonic(), time.process_time()
         while not sim.live.done:
             ex.spin_once(timeout_sec=0.05)
@@ -145,9 +123,7 @@ def _live(duration: str) -> dict[str, float]:
                "samples_lost": float(pre.published - e["attitude"]),
                "unmatched": float(e["unmatched"]), "used": float(e["used"]),
                "controller_lost": float(pre.published - ctrl.commands)}
-        ex.shutdown()
-        for n in nodes:
-            n.destroy_node()
+        pipe.close()
     rclpy.try_shutdown(context=context)
     return out
 

@@ -25,9 +25,8 @@ the vehicle; with --controller fly it flies the vehicle itself (cmd_wrench) at t
 --reference, using the model identified so far as feed-forward.
 
 Executors: rclpy's SingleThreadedExecutor by default. With the GIL the MultiThreadedExecutor
-runs the same callbacks with no parallelism and about twice the dispatch cost; on a 2-core
-machine it fell behind at 2–3x real time and dropped most of the best-effort IMU messages
-(--executor multi to see it).
+runs the same callbacks with no parallelism and about twice the dispatch cost
+(--executor multi to compare).
 """
 
 from __future__ import annotations
@@ -66,8 +65,9 @@ def add_options(p: argparse.ArgumentParser, out: str) -> None:
     p.add_argument("--out", default=out, help=f"output folder (default: {out})")
     p.add_argument("--duration", type=float, default=300.0,
                    help="simulated seconds (default: 300)")
-    p.add_argument("--rate-factor", type=float, default=2.5,
-                   help="simulated seconds per wall-clock second (default: 2.5)")
+    p.add_argument("--rate-factor", type=float, default=5.0,
+                   help="simulated seconds per wall-clock second (default: 5; flat out the "
+                        "pipeline reaches about 13 on an idle 2-core machine, make bench)")
     p.add_argument("--vehicle", default="bluerov2_heavy", help="preset (default: "
                                                                "bluerov2_heavy)")
     p.add_argument("--protocol", default="B", help="excitation protocol (default: B)")
@@ -112,7 +112,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p = sub.add_parser("live", help="online pipeline (sim, preprocess, RLS, controller) in "
                                     "one process", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter,
-                       epilog="example: dampest live --duration 300 --rate-factor 2.5")
+                       epilog="example: dampest live --duration 300 --rate-factor 5")
     add_options(p, "runs/live")
     p.set_defaults(run=run)
 
@@ -261,6 +261,66 @@ def write_prior(vehicle: Vehicle, factor: float, path: Path) -> Path:
                       damping=vehicle.damping)
 
 
+@dataclass
+class Pipeline:
+    """The nodes of the online pipeline on one executor (see :func:`build_pipeline`)."""
+
+    sim: Any
+    pre: Any
+    est: Any
+    ctrl: Any | None
+    executor: Any
+
+    @property
+    def nodes(self) -> list[Any]:
+        """The nodes, the controller included when there is one."""
+        return [n for n in (self.sim, self.pre, self.est, self.ctrl) if n is not None]
+
+    def close(self) -> None:
+        """Shut the executor down and destroy the nodes (the context stays)."""
+        self.executor.shutdown()
+        for n in self.nodes:
+            n.destroy_node()
+
+
+def build_pipeline(args: argparse.Namespace, prior: Path, path: Path, context: Any
+                   ) -> Pipeline:
+    """sim_node, preprocess_node, estimator_node (prior model file ``prior``, saving to
+    ``path``) and controller_node as ``args`` (the options of :func:`add_options`) configure
+    them, on one executor in ``context`` (an initialised rclpy context)."""
+    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from dampest_ros.ros.controller_node import ControllerNode
+    from dampest_ros.ros.estimator_node import EstimatorNode
+    from dampest_ros.ros.preprocess_node import PreprocessNode
+    from dampest_ros.ros.sim_node import SimNode
+
+    P = Parameter
+    sim = SimNode(context=context, parameter_overrides=[
+        P("vehicle", value=args.vehicle), P("protocol", value=args.protocol),
+        P("duration", value=float(args.duration)), P("seed", value=int(args.seed)),
+        P("rate_factor", value=float(args.rate_factor)), P("effects", value=args.effects)])
+    pre = PreprocessNode(context=context, parameter_overrides=[P("vehicle", value=args.vehicle)])
+    est = EstimatorNode(keep_samples=bool(args.batch), context=context, parameter_overrides=[
+        P("vehicle", value=args.vehicle), P("use_sim_time", value=True),
+        P("forgetting_factor", value=float(args.forgetting_factor)),
+        P("prior", value=str(prior)), P("save_path", value=str(path))])
+    ctrl = None
+    if args.controller != "off":
+        remap = [] if args.controller == "fly" else ["--ros-args", "-r",
+                                                     "cmd_wrench:=controller/cmd_wrench"]
+        reference = [float(x) for x in args.reference]
+        ctrl = ControllerNode(context=context, cli_args=remap or None, parameter_overrides=[
+            P("vehicle", value=args.vehicle), P("reference", value=reference)])
+    ex = (MultiThreadedExecutor(num_threads=2, context=context) if args.executor == "multi"
+          else SingleThreadedExecutor(context=context))
+    pipe = Pipeline(sim, pre, est, ctrl, ex)
+    for n in pipe.nodes:
+        ex.add_node(n)
+    return pipe
+
+
 def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float], prior: Path,
          path: Path) -> Flight:
     """Build the nodes (the estimator from the prior model file ``prior``), spin until the
@@ -272,39 +332,11 @@ def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float], p
     else:
         os.environ.setdefault("ROS_DOMAIN_ID", "77")
     import rclpy
-    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
-    from rclpy.parameter import Parameter
-
-    from dampest_ros.ros.controller_node import ControllerNode
-    from dampest_ros.ros.estimator_node import EstimatorNode
-    from dampest_ros.ros.preprocess_node import PreprocessNode
-    from dampest_ros.ros.sim_node import SimNode
 
     context = rclpy.Context()
     rclpy.init(context=context)
-    P = Parameter
-    sim = SimNode(context=context, parameter_overrides=[
-        P("vehicle", value=args.vehicle), P("protocol", value=args.protocol),
-        P("duration", value=float(args.duration)), P("seed", value=int(args.seed)),
-        P("rate_factor", value=float(args.rate_factor)), P("effects", value=args.effects)])
-    pre = PreprocessNode(context=context, parameter_overrides=[P("vehicle", value=args.vehicle)])
-    est = EstimatorNode(keep_samples=bool(args.batch), context=context, parameter_overrides=[
-        P("vehicle", value=args.vehicle), P("use_sim_time", value=True),
-        P("forgetting_factor", value=float(args.forgetting_factor)),
-        P("prior", value=str(prior)), P("save_path", value=str(path))])
-    nodes: list[Any] = [sim, pre, est]
-    ctrl = None
-    if args.controller != "off":
-        remap = [] if args.controller == "fly" else ["--ros-args", "-r",
-                                                     "cmd_wrench:=controller/cmd_wrench"]
-        reference = [float(x) for x in args.reference]
-        ctrl = ControllerNode(context=context, cli_args=remap or None, parameter_overrides=[
-            P("vehicle", value=args.vehicle), P("reference", value=reference)])
-        nodes.append(ctrl)
-    ex = (MultiThreadedExecutor(num_threads=2, context=context) if args.executor == "multi"
-          else SingleThreadedExecutor(context=context))
-    for n in nodes:
-        ex.add_node(n)
+    pipe = build_pipeline(args, prior, path, context)
+    sim, pre, est, ctrl, ex = pipe.sim, pipe.pre, pipe.est, pipe.ctrl, pipe.executor
     cpu_est = _time_callbacks(est)
     print(f"dampest {getattr(args, 'command', 'live')}: {vehicle_name}, protocol "
           f"{args.protocol}, {args.duration:.0f} s at {args.rate_factor:g}x real time, "
@@ -351,9 +383,7 @@ def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float], p
                      f"{ctrl.client.version}")
     flight = Flight(e, history, sim.live.t, wall, saved, "\n".join(lines),
                     ctrl.p("bandwidth") if ctrl is not None else DEFAULT_BANDWIDTH)
-    ex.shutdown()
-    for n in nodes:
-        n.destroy_node()
+    pipe.close()
     rclpy.try_shutdown(context=context)
     return flight
 

@@ -1,10 +1,10 @@
 """The online pipeline in one process: sim_node → preprocess_node → estimator_node, the model
 as parameters and topic, the services, parameter validation, the client and the controller.
 
-The simulator runs 2.5× faster than real time. The executor is rclpy's SingleThreadedExecutor:
-with the GIL, the MultiThreadedExecutor adds no parallelism, and its per-callback dispatch
-costs about twice the CPU, so that at 2–3× real time it fell behind and dropped most of the
-200 Hz best-effort IMU messages (measured: 1.5 k of 6 k delivered at 3×).
+The simulator runs 6× faster than real time (the pipeline reaches ~13× flat out on an idle
+2-core machine; make bench). The executor is rclpy's SingleThreadedExecutor: with the GIL, the
+MultiThreadedExecutor adds no parallelism and its per-callback dispatch costs about twice the
+CPU.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from dampest_ros.ros.preprocess_node import PreprocessNode  # noqa: E402
 from dampest_ros.ros.sim_node import SimNode  # noqa: E402
 
 SIM_SECONDS = 120.0
-RATE_FACTOR = 2.5
+RATE_FACTOR = 6.0
 
 
 @pytest.fixture(scope="module")
