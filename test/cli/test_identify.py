@@ -11,14 +11,18 @@ from dampest_ros.cli.main import main
 from dampest_ros.io.yaml_io import load_model
 
 
-@pytest.fixture(scope="module")
-def protocol_b(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """600 s of BlueROV2 Heavy, protocol B, default sensor noise, as a bag and a CSV."""
-    root = tmp_path_factory.mktemp("b600")
+def simulate_b(root: Path, duration: float, seed: int) -> Path:
+    """BlueROV2 Heavy, protocol B, default sensor noise, as ROOT/bag and ROOT/samples.csv."""
     assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B",
-                 "--duration", "600", "--seed", "1", "--out", str(root / "bag"),
+                 "--duration", str(duration), "--seed", str(seed), "--out", str(root / "bag"),
                  "--csv", str(root / "samples.csv")]) == 0
     return root
+
+
+@pytest.fixture(scope="module")
+def protocol_b(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """600 s, seed 1."""
+    return simulate_b(tmp_path_factory.mktemp("b600"), 600, 1)
 
 
 def test_bluerov2_protocol_b_within_2_percent_and_truth_in_interval(protocol_b: Path) -> None:
@@ -135,12 +139,8 @@ def test_delay_auto_finds_and_corrects_a_thrust_delay(tmp_path: Path,
 
 @pytest.fixture(scope="module")
 def short_b(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """60 s of BlueROV2 Heavy, protocol B, seed 2, as a bag and a CSV."""
-    root = tmp_path_factory.mktemp("b60")
-    assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B",
-                 "--duration", "60", "--seed", "2", "--out", str(root / "bag"),
-                 "--csv", str(root / "samples.csv")]) == 0
-    return root
+    """60 s, seed 2."""
+    return simulate_b(tmp_path_factory.mktemp("b60"), 60, 2)
 
 
 def test_rls_method_runs_the_online_path_and_agrees_with_the_batch(
