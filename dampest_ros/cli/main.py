@@ -34,7 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="dampest",
         description="Identify the hydrodynamic damping D(ν) of underwater vehicles from "
-                    "recorded ROS 2 bags or CSV, and simulate vehicles to test it.",
+                    "recorded ROS 2 bags, CSV or live topics, find where a simulator and "
+                    "measurements disagree, record and replay logs, and simulate vehicles "
+                    "to test it all.",
         epilog="Run 'dampest COMMAND --help' for the options of a command.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for module in COMMANDS:
