@@ -36,6 +36,10 @@ from dampest_ros.core.vehicle import Vehicle
 FloatArray = NDArray[np.float64]
 
 STREAMS = ("velocity", "acceleration", "wrench", "attitude")
+#: Block length (s) over which the residual correlation that widens θ's standard deviation is
+#: measured (:class:`~dampest_ros.core.rls.CorrelationFactor`): residuals stay correlated over
+#: seconds (sensor-bias drift, model error).
+CORRELATION_SECONDS = 5.0
 _WIDTH = {"velocity": 6, "acceleration": 6, "wrench": 6, "attitude": 4}
 
 
@@ -164,9 +168,14 @@ class OnlineEstimator:
         # weights: 1 % of the largest thrust per DOF as the noise level (the estimated noise
         # scales the reported uncertainty; see RLSConfig.adapt_weights)
         noise = tuple(float(x) for x in (0.01 * vehicle.thrusters.max_wrench) ** 2)
+        # the least residual correlation (the floor of the measured one): white noise through
+        # the parallel low-pass, rate / (2 · cutoff) samples per independent one (as the
+        # batch path's AIC counts n_eff = 2 · cutoff · T)
         self.rls = RecursiveLeastSquares(theta0, std0**2, RLSConfig(
             forgetting_factor=self.cfg.forgetting_factor,
-            forgetting_mode=self.cfg.forgetting_mode, noise_var=noise))
+            forgetting_mode=self.cfg.forgetting_mode, noise_var=noise,
+            correlation_block=max(1, round(CORRELATION_SECONDS * self.cfg.rate)),
+            correlation_prior=max(1.0, self.cfg.rate / (2.0 * self.cfg.cutoff))))
         self.regression = OnlineRegression(self.model, self.body, self.cfg.rate, self.cfg.cutoff)
         self.counts = {"velocity": 0, "acceleration": 0, "wrench": 0, "attitude": 0,
                        "matched": 0, "unmatched": 0, "rejected_nonfinite": 0,
@@ -253,13 +262,10 @@ class OnlineEstimator:
 
     @property
     def theta_std(self) -> FloatArray:
-        """Its standard deviations, shape (p,).
-
-        The RLS treats the samples as independent, but the parallel low-pass correlates them:
-        only n_eff = 2 · cutoff · T of the rate · T samples are (as the batch path's AIC
-        counts them), so the RLS standard deviation is scaled by √(rate / (2 · cutoff)).
-        """
-        return self.rls.std * np.sqrt(max(1.0, self.cfg.rate / (2.0 * self.cfg.cutoff)))
+        """Its standard deviations, shape (p,): the RLS sandwich standard deviation
+        (:attr:`RecursiveLeastSquares.std`: the prior's at the start, then widened by the
+        correlation of the residuals measured over blocks of :data:`CORRELATION_SECONDS`)."""
+        return self.rls.std
 
     def reset(self) -> None:
         """Back to the prior: RLS, regression filters and pending samples."""
@@ -292,10 +298,12 @@ class OnlineEstimator:
             "forgetting_factor": self.rls.lam, "frozen": self.rls.frozen,
             "cusum_max": float(np.max(d.cusum)),
         }
+        kappa = self.rls.correlation.factor  # samples per independent sample
         for i, n in enumerate(DOF_NAMES):
             out[f"excitation.{n}"] = float(d.excitation[i])
             out[f"innovation_rms.{n}"] = float(d.innovation_rms[i])
             out[f"noise_std.{n}"] = float(d.noise_std[i])
+            out[f"correlation.{n}"] = float(kappa[i])
         for k in ("matched", "unmatched", "used", "rejected_nonfinite", "attitude"):
             out[f"count.{k}"] = self.counts[k]
         return out

@@ -40,6 +40,16 @@ Against wind-up (P growing as λ⁻ⁿ in directions the data do not excite):
   excitation s_k ≈ 1 − λ, so ``rho = 0.1 (1 − λ)`` forgets wherever the excitation is at least
   about a third (RMS) of its usual level and freezes the covariance where it is not.
 
+Uncertainty (:attr:`RecursiveLeastSquares.std`): P is the covariance of θ when the residuals
+are white with the weighting variances R. They are neither: the noise level is estimated
+(c_i = r̂_i / r_i per DOF), and the residuals stay correlated over seconds (low-pass filtered
+noise, slow sensor-bias drift, model error), so that κ_i consecutive samples carry the
+information of one independent sample (:class:`CorrelationFactor`, the ratio of the
+long-run variance of the residuals to their variance). With the information split into the
+prior's Ω₀ = P₀⁻¹ and the data's P⁻¹ − Ω₀, whose score covariance is scaled by κ_i c_i, the
+sandwich covariance is P (Ω₀ + κ_i c_i (P⁻¹ − Ω₀)) P = P Ω₀ P + κ_i c_i (P − P Ω₀ P): the
+prior covariance at the start, P when the residuals are white with variance r_i.
+
 Change detection (:class:`InnovationMonitor`): two-sided CUSUM on block means of normalised
 innovations z_i = ε_i / √S_ii, in two forms per DOF: ``bias`` (z_i itself: an offset appeared)
 and ``gain`` (z_i · sign(ŷ_i), ŷ = Φθ the predicted damping force: the damping force became
@@ -381,6 +391,66 @@ class Cusum:
         self.alarm_sign[:] = 0.0
 
 
+class CorrelationFactor:
+    """Per-DOF ratio κ of the long-run variance of the residuals to their variance: the
+    number of consecutive samples that carry the information of one independent sample.
+
+    With u_n the residuals of one DOF and B_b = Σ_{n ∈ b} u_n their sums over consecutive
+    blocks of L samples, κ̂ = Σ_b B_b² / Σ_n u_n² (about 1 for white residuals, about the
+    correlation time in samples, up to L, for correlated ones; an offset counts as
+    correlation). The estimate runs over all time: the correlation is a property of the
+    sensors and of the model, not of the moment. κ = max(κ₀, κ̂): κ₀ ≥ 1 is the correlation
+    that the processing guarantees (1 for white residuals; more when the samples are
+    low-passed), and a smaller ratio from a few blocks is more likely chance than
+    anticorrelated residuals.
+
+    Parameters
+    ----------
+    block : int
+        L, samples per block (a few seconds of samples).
+    prior : float
+        κ₀, the floor (and the factor before the first block is complete).
+    """
+
+    def __init__(self, block: int, prior: float = 1.0) -> None:
+        self.block, self.prior = int(block), float(prior)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the blocks."""
+        self._sum = np.zeros(6)  # Σ u of the open block
+        self._sq = np.zeros(6)  # Σ u² of the open block
+        self._n = 0
+        self.blocks = 0
+        self._num = np.zeros(6)  # Σ_b B_b²
+        self._den = np.zeros(6)  # Σ u² over the complete blocks
+
+    def update(self, u: FloatArray) -> None:
+        """Add the residuals u (n, 6) of n consecutive samples."""
+        i = 0
+        while i < len(u):
+            k = min(len(u) - i, self.block - self._n)
+            self._sum += u[i:i + k].sum(axis=0)
+            self._sq += (u[i:i + k] ** 2).sum(axis=0)
+            self._n += k
+            i += k
+            if self._n == self.block:
+                self._num += self._sum**2
+                self._den += self._sq
+                self.blocks += 1
+                self._sum[:] = 0.0
+                self._sq[:] = 0.0
+                self._n = 0
+
+    @property
+    def factor(self) -> FloatArray:
+        """κ per DOF, shape (6,)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # κ̂ = Σ_b B_b² / Σ_n u_n²
+            ratio = np.where(self._den > 0, self._num / self._den, self.prior)
+        return np.maximum(self.prior, ratio)
+
+
 class InnovationMonitor:
     """Change detector on normalised innovations: block means → robust standardisation →
     AR(1) whitening → two-sided :class:`Cusum`.
@@ -532,6 +602,11 @@ class RLSConfig:
         Samples of the exponential window of that estimate.
     noise_floor : float
         Smallest r_i.
+    correlation_block : int
+        Samples per block of the correlation factor κ_i that widens the reported standard
+        deviations (:class:`CorrelationFactor`; a few seconds of samples).
+    correlation_prior : float
+        κ₀ ≥ 1, the floor of κ_i (1: the samples may be white).
     cusum_drift, cusum_threshold : float
         CUSUM allowance k and decision level h (see :class:`InnovationMonitor`).
     cusum_block : int
@@ -559,6 +634,8 @@ class RLSConfig:
     adapt_weights: bool = False
     noise_window: float = 5000.0
     noise_floor: float = 1e-12
+    correlation_block: int = 250
+    correlation_prior: float = 1.0
     cusum_drift: float = 1.0
     cusum_threshold: float = 15.0
     cusum_block: int = 50
@@ -580,6 +657,9 @@ class RLSConfig:
         for name in ("noise_window", "stats_window"):
             if getattr(self, name) < 1:
                 raise ConfigError(name, "must be ≥ 1 sample")
+        if self.correlation_block < 1 or not self.correlation_prior >= 1.0:
+            raise ConfigError("correlation_block", "need correlation_block ≥ 1 and "
+                                                   "correlation_prior ≥ 1")
         if self.cusum_block < 1 or self.cusum_warmup < 2 or self.cusum_window < 1:
             raise ConfigError("cusum_block", "need cusum_block ≥ 1, cusum_warmup ≥ 2 and "
                                              "cusum_window ≥ 1")
@@ -663,6 +743,7 @@ class RecursiveLeastSquares:
             raise ConfigError("prior", "theta0 and P0 must be finite")
         self.theta0 = theta0.copy()
         self.P0 = 0.5 * (P0 + P0.T)
+        self.info0 = np.linalg.inv(self.P0)  # Ω₀, the prior information
         self.scale = (np.sqrt(np.diagonal(self.P0)).copy() if scale is None
                       else np.asarray(scale, dtype=float))
         if np.any(self.scale <= 0):
@@ -698,6 +779,7 @@ class RecursiveLeastSquares:
         self._r_num = 0.01 * self.R
         self._r_den = np.full(6, 0.01)
         self._force2 = np.zeros(6)  # EW mean of (Φθ)²
+        self.correlation = CorrelationFactor(cfg.correlation_block, cfg.correlation_prior)
         self.monitor = InnovationMonitor(cfg.cusum_block, cfg.cusum_drift, cfg.cusum_threshold,
                                          cfg.cusum_window, cfg.cusum_warmup)
         self.last_innovation = np.zeros(6)
@@ -712,11 +794,21 @@ class RecursiveLeastSquares:
 
     @property
     def std(self) -> FloatArray:
-        """Standard deviations of θ, shape (p,): √diag(P) scaled by the ratio of the estimated
-        to the weighting noise variance of the DOF each parameter acts on most."""
-        c = self.R / self.R_w
-        row = np.argmax(self._phi2, axis=0)
-        return np.sqrt(np.maximum(np.diagonal(self.P), 0.0) * c[row])
+        """Standard deviations of θ, shape (p,): the diagonal of the sandwich covariance
+        P Ω₀ P + g_j (P − P Ω₀ P) (see the module notes), g_j = κ_i r̂_i / r_i for the DOF i
+        that parameter j acts on most (κ the correlation factor, r̂ the estimated and r the
+        weighting noise variance). O(p³) (one p × p product).
+
+        The prior information is taken as not forgotten: its share diag(P Ω₀ P), at most
+        P_jj, is exact at the start and with λ = 1, and negligible next to the data's once
+        they determine a parameter.
+        """
+        d = np.maximum(np.diagonal(self.P), 0.0)
+        # diag(P Ω₀ P): the prior's part of P
+        prior = np.minimum(np.einsum("jk,jk->j", self.P @ self.info0, self.P), d)
+        g = (self.correlation.factor * self.R / self.R_w)[np.argmax(self._phi2, axis=0)]
+        # P Ω₀ P + g (P − P Ω₀ P) on the diagonal
+        return np.sqrt(prior + g * (d - prior))
 
     # --- update ---------------------------------------------------------------------------
 
@@ -761,6 +853,10 @@ class RecursiveLeastSquares:
         a = 1.0 / min(self.n, cfg.stats_window)
         a_r = 1.0 / cfg.noise_window
         self._e2 += (e * e - self._e2) * a
+        if not self.frozen:
+            # residuals weighted by the noise share r_i / S_ii (the start, when the
+            # innovation is mostly parameter uncertainty, counts little)
+            self.correlation.update((self.R_w / np.diagonal(S) * e)[None])
         if cfg.adapt_noise and not self.frozen:
             # E[ε_i²] = S_ii, of which the share f_i = r_i / S_ii is noise: f_i ε_i² estimates
             # r_i, with weight f_i (a sample whose innovation is mostly parameter uncertainty
@@ -844,6 +940,7 @@ class RecursiveLeastSquares:
             return 0  # sample by sample: update() skips what is not finite
         n = len(y)
         e = b.innovation
+        u = self.R_w / b.S_diag * e  # residuals weighted by the noise share, as in update()
         if cfg.adapt_noise:
             R_prev, num, den = self._noise_path(e, b.S_diag)
         else:
@@ -864,6 +961,7 @@ class RecursiveLeastSquares:
         self._phi2 += np.einsum("jip,jip->ip", Phi[:m], Phi[:m])
         self._e2 = _ew_mean(self._e2, e[:m] ** 2, a)
         self._force2 = _ew_mean(self._force2, force[:m] ** 2, a)
+        self.correlation.update(u[:m])
         if cfg.adapt_noise:
             self._r_num, self._r_den = num[m - 1], den[m - 1]
             self.R = np.maximum(num[m - 1] / den[m - 1], cfg.noise_floor)

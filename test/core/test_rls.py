@@ -10,6 +10,7 @@ from filterpy.kalman import KalmanFilter
 
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.rls import (
+    CorrelationFactor,
     Cusum,
     InnovationMonitor,
     RecursiveLeastSquares,
@@ -292,3 +293,51 @@ def test_block_updates_equal_the_sequential_recursion() -> None:
     ds, db = seq.diagnostics(), blk.diagnostics()
     np.testing.assert_allclose(db.innovation_rms, ds.innovation_rms, rtol=1e-9)
     np.testing.assert_allclose(db.excitation, ds.excitation, rtol=1e-9)
+
+
+def ar1(rng: np.random.Generator, rho: float, n: int) -> np.ndarray:
+    """n samples of a unit-variance AR(1) process x_k = ρ x_{k−1} + √(1 − ρ²) w_k."""
+    w = rng.normal(size=n) * np.sqrt(1.0 - rho**2)
+    x = np.empty(n)
+    x[0] = rng.normal()
+    for k in range(1, n):
+        x[k] = rho * x[k - 1] + w[k]
+    return x
+
+
+def test_correlation_factor_is_the_long_run_variance_ratio() -> None:
+    """AR(1) residuals, ρ = 0.9, 400 blocks of L = 250: E[B_b²] / (L σ²) =
+    1 + 2 Σ_{k<L} (1 − k/L) ρᵏ (≈ (1 + ρ)/(1 − ρ) = 19 for L ≫ 1/(1 − ρ)); white: 1."""
+    rng = np.random.default_rng(21)
+    L, rho = 250, 0.9
+    u = rng.normal(size=(400 * L + 17, 6))
+    u[:, 0] = ar1(rng, rho, len(u))
+    k = np.arange(1, L)
+    expected = 1.0 + 2.0 * np.sum((1.0 - k / L) * rho**k)  # 18.28
+    c = CorrelationFactor(L)
+    assert np.all(c.factor == 1.0)  # before any block: the floor
+    for a, b in itertools.pairwise([0, 1, 300, 301, 5000, len(u)]):  # any chunking
+        c.update(u[a:b])
+    assert c.blocks == 400
+    assert c.factor[0] == pytest.approx(expected, rel=0.15)
+    np.testing.assert_allclose(c.factor[1:], 1.0, atol=0.15)  # white: ≈ 1, never below
+    assert np.all(CorrelationFactor(L, prior=12.5).factor == 12.5)
+
+
+def test_std_is_the_prior_at_the_start_and_the_sandwich_with_correlated_noise() -> None:
+    """θ = the mean of y per DOF (Φ = I): the variance of a sample mean of N AR(1) samples is
+    σ² (1 + ρ) / ((1 − ρ) N) to O(1/N²); the RLS P alone says σ² / N."""
+    rng = np.random.default_rng(22)
+    n, rho, sd = 40_000, 0.9, 0.3
+    e = sd * rng.normal(size=(n, 6))
+    e[:, 0] = sd * ar1(rng, rho, n)
+    P0 = np.diag([4.0, 1.0, 9.0, 1.0, 1.0, 0.25]) + 0.1  # a full prior covariance
+    rls = RecursiveLeastSquares(np.zeros(6), P0, RLSConfig(forgetting_factor=1.0))
+    np.testing.assert_allclose(rls.std, np.sqrt(np.diagonal(P0)), rtol=1e-12)
+    rls.update_many(np.broadcast_to(np.eye(6), (n, 6, 6)), 1.0 + e)
+    white = sd / np.sqrt(n)
+    np.testing.assert_allclose(rls.std[1:], white, rtol=0.1)
+    # with the correlation factor of 250-sample blocks: 18.3 instead of 19
+    assert rls.std[0] == pytest.approx(white * np.sqrt((1 + rho) / (1 - rho)), rel=0.1)
+    assert np.sqrt(np.diagonal(rls.P)[0] * rls.R[0] / rls.R_w[0]) == \
+        pytest.approx(white, rel=0.1)  # what P and the noise level alone give
