@@ -80,8 +80,8 @@ def add_options(p: argparse.ArgumentParser, out: str) -> None:
                         "coefficients, standard deviation 10 × that (default: 0.5)")
     p.add_argument("--forgetting-factor", type=float, default=0.999,
                    help="RLS forgetting factor λ (default: 0.999; at λ = 1 the RLS σ shrinks "
-                        "below the estimate's systematic error and the ±2σ band misses the "
-                        "truth most of the time)")
+                        "towards the estimate's systematic error and the ±2σ band covers the "
+                        "truth ~80 %% of the time instead of ~97 %%)")
     p.add_argument("--effects", default="", help="hidden effects as YAML, e.g. "
                    "'{damping_change_time: 200, damping_change_factor: 1.3}'")
     p.add_argument("--every", type=float, default=20.0,
