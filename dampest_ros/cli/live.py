@@ -374,7 +374,8 @@ def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float], p
         f"({cpu:.1f} s CPU); {sim.published} sensor messages, {pre.published} samples, "
         f"{e.counts['used']} used by the RLS",
         f"estimator callbacks: {cpu_est['cpu'] / used * 1e6:.0f} µs CPU per sample "
-        f"(4 messages; rclpy's own receive cost, ~200 µs per message, comes on top)",
+        f"(4 messages; rclpy's own wait and dispatch come on top: make bench compares the "
+        f"node with a bare subscriber)",
         f"preprocessing: {lost['imu']} IMU, {lost['thrusters']} thruster messages; "
         f"{lost['imu_gaps']} IMU gaps, {lost['rejected_stale']} stale, "
         f"{lost['clock_resets']} clock resets"]
