@@ -10,6 +10,7 @@ stored [x, y, z, w] as in geometry_msgs/Quaternion.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -144,3 +145,26 @@ TOPIC_TYPES: dict[str, tuple[str, type[Series]]] = {
 
 #: A recording: topic name → series.
 Recording = dict[str, Series]
+
+
+def stamp_order(stamps: Sequence[FloatArray]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The rows of several stamp arrays (one per topic) merged into one stamp order.
+
+    Parameters
+    ----------
+    stamps : sequence of ndarray, shapes (n_k,)
+        Stamps (s) of each topic.
+
+    Returns
+    -------
+    which, row : ndarray, shape (Σ n_k,)
+        Array index and row of every stamp, by stamp; equal stamps keep the order of
+        ``stamps``.
+    """
+    sizes = [len(s) for s in stamps]
+    which = np.repeat(np.arange(len(sizes), dtype=np.int64), sizes)
+    row = np.concatenate([np.arange(n, dtype=np.int64) for n in sizes] or
+                         [np.zeros(0, dtype=np.int64)])
+    t = np.concatenate([np.asarray(s, dtype=float) for s in stamps] or [np.zeros(0)])
+    order = np.argsort(t, kind="stable")
+    return which[order], row[order]

@@ -70,6 +70,7 @@ from dampest_ros.core.measurements import (
     PressureSeries,
     Recording,
     TwistSeries,
+    stamp_order,
 )
 from dampest_ros.core.preprocess import DataError, thruster_wrench
 from dampest_ros.core.rigid_body import ConfigError, RigidBody
@@ -642,20 +643,18 @@ class OnlinePreprocessor:
         Ties keep the role order imu, dvl, pressure, thrusters.
         """
         names = {**DEFAULT_TOPICS, **(topics or {})}
-        stamps, roles, rows = [], [], []
-        for k, role in enumerate(TOPIC_ROLES):
+        roles, stamps = [], []
+        for role in TOPIC_ROLES:
             s = rec.get(names[role])
             if s is None:
                 if role == "pressure":
                     continue
                 raise DataError(f"topic {names[role]!r} missing; the data has {sorted(rec)}")
+            roles.append(role)
             stamps.append(np.asarray(s.stamp, dtype=float))
-            roles.append(np.full(len(s), k))
-            rows.append(np.arange(len(s)))
-        st, ro, rw = np.concatenate(stamps), np.concatenate(roles), np.concatenate(rows)
-        order = np.lexsort((ro, st))  # by stamp, then role
-        for i in order.tolist():
-            yield TOPIC_ROLES[int(ro[i])], float(st[i]), int(rw[i])
+        which, row = stamp_order(stamps)
+        for k, i in zip(which.tolist(), row.tolist(), strict=True):
+            yield roles[k], float(stamps[k][i]), i
 
     def run(self, rec: Recording, topics: dict[str, str] | None = None) -> list[OnlineSample]:
         """Feed every message of a recording (as :func:`dampest_ros.io.bag.read_bag` returns)

@@ -21,6 +21,7 @@ from dampest_ros.core.measurements import (
     Recording,
     Series,
     TwistSeries,
+    stamp_order,
 )
 from dampest_ros.ros.common import to_time
 
@@ -46,15 +47,10 @@ def publications(rec: Recording) -> Iterator[tuple[str, Any]]:
     one of its topic is yielded: publish it at once (rclpy serialises on publish).
     """
     fills = [(topic, _filler(s)) for topic, s in rec.items() if len(s)]
-    if not fills:
-        return
-    sizes = [len(rec[topic]) for topic, _ in fills]
-    stamps = np.concatenate([rec[topic].stamp for topic, _ in fills])
-    which = np.repeat(np.arange(len(fills)), sizes).tolist()
-    rows = np.concatenate([np.arange(n) for n in sizes]).tolist()
-    for k in np.argsort(stamps, kind="stable").tolist():
-        topic, fill = fills[which[k]]
-        yield topic, fill(rows[k])
+    which, row = stamp_order([rec[topic].stamp for topic, _ in fills])
+    for k, i in zip(which.tolist(), row.tolist(), strict=True):
+        topic, fill = fills[k]
+        yield topic, fill(i)
 
 
 def _filler(s: Series) -> Callable[[int], Any]:
