@@ -32,12 +32,15 @@ STRETCH = 20000  # samples per stretch of the sensor-bias sensitivity on long lo
 
 
 def target(samples: Samples, body: RigidBody, index: slice | None = None) -> FloatArray:
-    """y = τ − M ν̇ − C(ν)ν − g(η), the force the damping must explain, shape (N, 6)."""
+    """y = τ − M ν̇ − C(ν)ν − g(η), the force the damping must explain, shape (N, 6).
+
+    M and C_A act as the vehicle's ``added_mass_terms`` say (:attr:`RigidBody.M_inertial`,
+    :meth:`RigidBody.coriolis_force`)."""
     sl = index if index is not None else slice(None)
     nu, nu_dot = samples.nu[sl], samples.nu_dot[sl]
     R = matrix_from_euler(samples.euler[sl])
     # y = τ − M ν̇ − C(ν)ν − g(η)
-    return np.asarray(samples.tau[sl] - nu_dot @ body.M.T - body.coriolis_force(nu)
+    return np.asarray(samples.tau[sl] - nu_dot @ body.M_inertial.T - body.coriolis_force(nu)
                       - body.restoring(R), dtype=float)
 
 

@@ -100,6 +100,24 @@ def coriolis_matrix(M: FloatArray, nu: FloatArray) -> FloatArray:
     return C
 
 
+def munk_moment(M_A: FloatArray, nu: FloatArray) -> FloatArray:
+    """The Munk-moment part of C_A(ν)ν: [0, v × (M_A11 v)], shape (..., 6).
+
+    The moment a body feels from its linear velocity alone through the translational added
+    mass (Fossen 2011, §6.3.1): for a diagonal M_A, e.g. N = (Y_v̇ − X_u̇) u v.
+
+    Parameters
+    ----------
+    M_A : ndarray, shape (6, 6)
+    nu : ndarray, shape (..., 6)
+    """
+    nu = np.asarray(nu, dtype=float)
+    out = np.zeros_like(nu)
+    # v × (M_A11 v), on the moment rows only
+    out[..., 3:] = np.cross(nu[..., :3], nu[..., :3] @ M_A[:3, :3].T)
+    return out
+
+
 def coriolis_force(M: FloatArray, nu: FloatArray) -> FloatArray:
     """C(ν)ν without forming C: [ν2 × a1, ν1 × a1 + ν2 × a2] with a = M ν.
 
@@ -118,6 +136,57 @@ def coriolis_force(M: FloatArray, nu: FloatArray) -> FloatArray:
     out[..., :3] = np.cross(nu[..., 3:], a[..., :3])
     out[..., 3:] = np.cross(nu[..., :3], a[..., :3]) + np.cross(nu[..., 3:], a[..., 3:])
     return out
+
+
+@dataclass(frozen=True)
+class AddedMassTerms:
+    """Which effects of the added mass M_A act on the vehicle (all by default).
+
+    Real plants differ here: gz-sim has ``disable_added_mass`` and ``disable_coriolis``,
+    MuJoCo's fluid model applies the velocity terms of added mass but not M_A ν̇, and many
+    AUV models drop the Munk moments.
+
+    Attributes
+    ----------
+    inertial : bool
+        M_A ν̇ acts (the added mass resists acceleration).
+    coriolis : bool
+        C_A(ν)ν acts (Fossen 2011, eq. 6.49), Munk moments included unless ``munk`` is off.
+    munk : bool
+        The Munk-moment part of C_A(ν)ν, v × (M_A11 v), acts; needs ``coriolis``.
+    """
+
+    inertial: bool = True
+    coriolis: bool = True
+    munk: bool = True
+
+    def __post_init__(self) -> None:
+        if self.munk and not self.coriolis:
+            raise ConfigError("added_mass_terms", "munk: true needs coriolis: true (the Munk "
+                              "moments are entries of C_A); set munk: false")
+
+    @classmethod
+    def from_dict(cls, d: Any) -> AddedMassTerms:
+        """From ``{inertial: true, coriolis: true, munk: true}`` (missing keys: true)."""
+        if not isinstance(d, dict):
+            raise ConfigError("added_mass_terms", f"must be a mapping, got {d!r}")
+        unknown = set(d) - {"inertial", "coriolis", "munk"}
+        if unknown:
+            raise ConfigError("added_mass_terms", f"unknown key(s) {sorted(unknown)}; known: "
+                              "inertial, coriolis, munk")
+        for k, v in d.items():
+            if not isinstance(v, bool):
+                raise ConfigError(f"added_mass_terms.{k}", f"must be true or false, got {v!r}")
+        return cls(**d)
+
+    def as_dict(self) -> dict[str, bool]:
+        """``{inertial, coriolis, munk}``."""
+        return {"inertial": self.inertial, "coriolis": self.coriolis, "munk": self.munk}
+
+    @property
+    def all(self) -> bool:
+        """Every effect acts (Fossen's full model)."""
+        return self.inertial and self.coriolis and self.munk
 
 
 @dataclass(frozen=True)
@@ -140,6 +209,8 @@ class RigidBody:
         Water density (kg/m³).
     gravity : float
         g (m/s²).
+    added_mass_terms : AddedMassTerms
+        Which effects of M_A act (inertial M_A ν̇, Coriolis C_A(ν)ν, Munk moments).
     """
 
     mass: float
@@ -150,6 +221,7 @@ class RigidBody:
     added_mass: FloatArray = field(default_factory=lambda: np.zeros((6, 6)))
     rho: float = 1025.0
     gravity: float = 9.81
+    added_mass_terms: AddedMassTerms = field(default_factory=AddedMassTerms)
 
     def __post_init__(self) -> None:
         for name in ("mass", "rho", "gravity"):
@@ -175,6 +247,12 @@ class RigidBody:
         return self.M_RB + self.added_mass
 
     @property
+    def M_inertial(self) -> FloatArray:
+        """The matrix that multiplies ν̇ in the plant: M_RB + M_A, or M_RB alone when the
+        inertial added-mass effect is off, shape (6, 6)."""
+        return self.M if self.added_mass_terms.inertial else self.M_RB
+
+    @property
     def weight(self) -> float:
         """W = m g (N)."""
         return self.mass * self.gravity
@@ -194,9 +272,28 @@ class RigidBody:
         nu_r : ndarray, shape (..., 6), optional
             Velocity relative to the water (defaults to ``nu``: no current).
         """
-        if nu_r is None:
+        if nu_r is None and self.added_mass_terms.all:
             return coriolis_force(self.M, nu)
-        return coriolis_force(self.M_RB, nu) + coriolis_force(self.added_mass, nu_r)
+        return coriolis_force(self.M_RB, nu) + self.added_coriolis_force(
+            nu if nu_r is None else nu_r)
+
+    def added_coriolis_force(self, nu_r: FloatArray) -> FloatArray:
+        """The acting part of C_A(ν_r)ν_r (switches ``coriolis`` and ``munk``), shape (..., 6).
+        """
+        terms = self.added_mass_terms
+        if not terms.coriolis:
+            return np.zeros(np.shape(nu_r))
+        out = coriolis_force(self.added_mass, nu_r)
+        # without Munk moments: C_A(ν)ν − [0, v × (M_A11 v)]
+        return out if terms.munk else out - munk_moment(self.added_mass, nu_r)
+
+    def added_mass_force(self, nu: FloatArray, nu_dot: FloatArray) -> FloatArray:
+        """Everything the added mass does to the vehicle, as it acts: M_A ν̇ (if inertial)
+        plus the acting part of C_A(ν)ν, shape (..., 6) (left-hand side, N and N·m)."""
+        out = self.added_coriolis_force(nu)
+        if self.added_mass_terms.inertial:
+            out = out + np.asarray(nu_dot, dtype=float) @ self.added_mass.T
+        return out
 
     def restoring(self, R: FloatArray) -> FloatArray:
         """Restoring forces g(η) from body-to-NED rotation matrices (Fossen 2011, eq. 4.6).
@@ -229,15 +326,24 @@ class RigidBody:
             inertia = _diag_or_full("inertia", d["inertia"], 3)
         except KeyError as exc:
             raise ConfigError(str(exc.args[0]), "missing") from None
+        terms = AddedMassTerms.from_dict(d.get("added_mass_terms", {}))
+        added = _diag_or_full("added_mass", d.get("added_mass", [0.0] * 6), 6)
+        if "added_mass_terms" in d and not np.any(added):
+            acting = [k for k, v in terms.as_dict().items() if v]
+            if acting:
+                raise ConfigError("added_mass_terms", f"{', '.join(acting)} set true but "
+                                  "added_mass is zero or missing; give added_mass or set them "
+                                  "false")
         return cls(
             mass=mass,
             inertia=inertia,
             r_g=np.asarray(d.get("r_g", [0.0, 0.0, 0.0]), dtype=float),
             r_b=np.asarray(d.get("r_b", [0.0, 0.0, 0.0]), dtype=float),
             volume=float(d.get("volume", mass / float(d.get("rho", 1025.0)))),
-            added_mass=_diag_or_full("added_mass", d.get("added_mass", [0.0] * 6), 6),
+            added_mass=added,
             rho=float(d.get("rho", 1025.0)),
             gravity=float(d.get("gravity", 9.81)),
+            added_mass_terms=terms,
         )
 
 

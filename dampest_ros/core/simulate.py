@@ -122,6 +122,7 @@ def true_vehicle(vehicle: Vehicle, effects: Effects) -> Vehicle:
         added_mass=b.added_mass * (1.0 + effects.added_mass_error),
         rho=b.rho,
         gravity=b.gravity,
+        added_mass_terms=b.added_mass_terms,
     )
     values = dict(zip(vehicle.damping.parameter_names, vehicle.theta, strict=True))
     terms = {t.kind: t for t in vehicle.damping.terms}
@@ -182,8 +183,11 @@ class Simulator:
         self.dt = float(dt)
         body = self.truth.body
         self._M_RB = body.M_RB
+        self._body = body
         self._M_A = body.added_mass
-        self._M_inv = np.linalg.inv(body.M)
+        self._M_A_dot = body.added_mass if body.added_mass_terms.inertial else None
+        self._C_A_all = body.added_mass_terms.all
+        self._M_inv = np.linalg.inv(body.M_inertial)
         self._W, self._B = body.weight, body.buoyancy
         self._r_g, self._r_b = body.r_g, body.r_b
         self._model: DampingModel = self.truth.damping
@@ -288,13 +292,16 @@ class Simulator:
         self._last_tau = tau
         # C_RB(ν)ν + C_A(ν_r)ν_r, with C(ν)ν = [ν2 × a1, ν1 × a1 + ν2 × a2], a = M ν
         a = (self._M_RB @ nu).tolist()
-        ar = (self._M_A @ nu_r).tolist()
-        vr, omr = nu_r[:3].tolist(), nu_r[3:].tolist()
         c1, c2, c3 = _cross(om, a[:3]), _cross(v, a[:3]), _cross(om, a[3:])
-        a1, a2, a3 = _cross(omr, ar[:3]), _cross(vr, ar[:3]), _cross(omr, ar[3:])
-        cor = np.array([c1[0] + a1[0], c1[1] + a1[1], c1[2] + a1[2],
-                        c2[0] + c3[0] + a2[0] + a3[0], c2[1] + c3[1] + a2[1] + a3[1],
-                        c2[2] + c3[2] + a2[2] + a3[2]])
+        cor = np.array([c1[0], c1[1], c1[2], c2[0] + c3[0], c2[1] + c3[1], c2[2] + c3[2]])
+        if self._C_A_all:
+            ar = (self._M_A @ nu_r).tolist()
+            vr, omr = nu_r[:3].tolist(), nu_r[3:].tolist()
+            a1, a2, a3 = _cross(omr, ar[:3]), _cross(vr, ar[:3]), _cross(omr, ar[3:])
+            cor += [a1[0], a1[1], a1[2], a2[0] + a3[0], a2[1] + a3[1], a2[2] + a3[2]]
+        else:
+            # the added-mass switches of the vehicle: only the acting part of C_A(ν_r)ν_r
+            cor += self._body.added_coriolis_force(nu_r)
         # D(ν_r)ν_r = (α(ν_r) K) ν_r plus the memory force Σ c_m z_m
         K, c_mem = (self._gain_changed if 0 <= e.damping_change_time <= t else self._gain)
         d = (self._model.alphas(nu_r[None, :]) @ K).reshape(6, 6) @ nu_r
@@ -307,10 +314,11 @@ class Simulator:
         mg, mb = _cross(self._r_g_l, fg), _cross(self._r_b_l, fb)
         g = np.array([fg[0] + fb[0], fg[1] + fb[1], fg[2] + fb[2],
                       mg[0] + mb[0], mg[1] + mb[1], mg[2] + mb[2]])
-        # (M_RB + M_A) ν̇ = τ − C_RB ν − C_A ν_r − D ν_r − g + M_A ν̇_c   (g enters as −g(η))
+        # (M_RB + M_A) ν̇ = τ − C_RB ν − C_A ν_r − D ν_r − g + M_A ν̇_c   (g enters as −g(η));
+        # without the inertial added-mass effect M_RB ν̇ = τ − C_RB ν − C_A ν_r − D ν_r − g
         rhs = tau - cor - d + g
-        if nu_c_dot is not None:
-            rhs += self._M_A @ nu_c_dot
+        if nu_c_dot is not None and self._M_A_dot is not None:
+            rhs += self._M_A_dot @ nu_c_dot
         nu_dot = self._M_inv @ rhs
         # kinematics: ṗ = R v, q̇ = ½ q ⊗ (0, ω)
         p_dot = [R[i][0] * v[0] + R[i][1] * v[1] + R[i][2] * v[2] for i in range(3)]

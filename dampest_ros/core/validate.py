@@ -453,7 +453,9 @@ def free_run(samples: Samples, model: DampingModel, body: RigidBody, theta: Floa
         F_end = F[1:]
         F_start = F[:-1]
     M = body.M
-    M_inv = np.linalg.inv(M)
+    M_inv = np.linalg.inv(body.M_inertial)
+    # the vehicle's added-mass switches: C(ν)ν by the fast form below only when all act
+    full_coriolis = body.added_mass_terms.all
     K = model.static_gain(theta)
     c_mem = model.memory_gain(theta)
     lam = model.memory_rates
@@ -470,7 +472,8 @@ def free_run(samples: Samples, model: DampingModel, body: RigidBody, theta: Floa
             q * a[2] - r * a[1], r * a[0] - p * a[2], p * a[1] - q * a[0],
             v * a[2] - w * a[1] + q * a[5] - r * a[4],
             w * a[0] - u * a[2] + r * a[3] - p * a[5],
-            u * a[1] - v * a[0] + p * a[4] - q * a[3]])
+            u * a[1] - v * a[0] + p * a[4] - q * a[3]]) if full_coriolis \
+            else body.coriolis_force(nu)
         # D(ν)ν = (α(ν) K) ν
         d = (alphas(nu[None, :]) @ K).reshape(6, 6) @ nu
         out = np.empty_like(x)
