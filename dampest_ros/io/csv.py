@@ -1,4 +1,4 @@
-"""The seed paper's CSV format of identification data.
+"""The seed paper's CSV format of identification data, and the flavours logs come in.
 
 One row per sample and a header line naming the columns, in this order::
 
@@ -8,7 +8,7 @@ One row per sample and a header line naming the columns, in this order::
 column              meaning                                                 unit
 ==================  ======================================================  ==========
 time                sample time                                             s
-u, v, w             body linear velocity relative to the water              m/s
+u, v, w             body linear velocity over ground (DVL bottom lock)      m/s
 p, q, r             body angular velocity                                   rad/s
 ax, ay, az          body linear acceleration u̇, v̇, ẇ (not specific force)  m/s²
 wx, wy, wz          body angular acceleration ṗ, q̇, ṙ                       rad/s²
@@ -20,29 +20,57 @@ roll, pitch, yaw    optional: ZYX Euler angles of FRD in NED                rad
 segment             optional: index of the gap-free stretch                 —
 ==================  ======================================================  ==========
 
+**Velocity.** u, v, w are over ground, as a DVL in bottom lock measures them and as the bag
+path fuses them. Identification and validation assume still water (no current), i.e. they
+use them as the velocity through the water too; ``dampest gap``'s ``current`` candidate
+instead estimates a constant NED current and applies the damping to ν − ν_c. A log of
+velocity through the water (a water-tracking DVL) is read the same way; gap then finds no
+current.
+
+**Flavours** (:func:`read_log`). Logs as users have them differ from the table above in
+three ways, each detected and read, or refused with one message naming the ambiguity and the
+column-map entry that settles it:
+
+- ``ax, ay, az`` as an IMU's specific force f (FRD, m/s²; mean |a| ≈ g) instead of ν̇:
+  ν̇_lin = f + g Rᵀe_z − ω × v (IMU at the body origin). The sign follows the data: a log
+  with az ≈ −g when level at rest is f itself, one with az ≈ +g is −f. A column map entry
+  ``ax: acc_x`` (``ay: acc_y``, ``az: acc_z``) declares specific force, ``ax: ax`` declares
+  ν̇;
+- ``wx, wy, wz`` as gyro rates equal to p, q, r instead of ṗ, q̇, ṙ: the angular
+  acceleration is then the time derivative of p, q, r (central differences per segment).
+  ``wx: gyro_x`` … or ``wx: wx`` … declare it;
+- no ``tau_*`` columns but ``thrust_<name>`` (N) or ``rpm_<name>`` (rev/min, through the
+  vehicle's thrust curve) per thruster: τ = T_alloc f with the vehicle's allocation matrix
+  (:class:`dampest_ros.core.thrusters.Thrusters`).
+
 **Frames.** Every body vector in the CSV (velocities, accelerations, forces) is in Fossen's
 FRD body frame (x forward, y starboard, z down), the frame of the core and of
 :class:`dampest_ros.core.samples.Samples`, which :func:`samples_to_columns` and
 :func:`samples_from_columns` convert to and from.
 
-Numbers are written with ``%.17g``, so a write/read round trip is exact. Files with other
-column names are read through a column map (``their name: our name``, see
-:func:`load_column_map`).
+Numbers are written with ``%.17g``, so a write/read round trip is exact. A file whose name
+ends in ``.csv.gz`` is gzip-compressed and otherwise the same. Files with other column names
+are read through a column map (``their name: our name``, see :func:`load_column_map`).
 """
 
 from __future__ import annotations
 
 import csv as _csv
+import gzip
 import warnings
 from collections.abc import Mapping, Sequence
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
+from numpy.typing import NDArray
 
+from dampest_ros.core.frames import matrix_from_euler
 from dampest_ros.core.measurements import FloatArray
 from dampest_ros.core.samples import Samples
+from dampest_ros.core.thrusters import Thrusters
 
 #: Body velocity ν = [u v w p q r] (FRD).
 VELOCITY_COLUMNS = ("u", "v", "w", "p", "q", "r")
@@ -52,6 +80,25 @@ ACCELERATION_COLUMNS = ("ax", "ay", "az", "wx", "wy", "wz")
 FORCE_COLUMNS = ("tau_X", "tau_Y", "tau_Z", "tau_K", "tau_M", "tau_N")
 #: Columns every file must have, in the order they are written.
 REQUIRED_COLUMNS = ("time", *VELOCITY_COLUMNS, *ACCELERATION_COLUMNS, "depth", *FORCE_COLUMNS)
+#: Columns every log must have whatever its flavour (:func:`read_log`).
+BASE_COLUMNS = ("time", *VELOCITY_COLUMNS, "depth")
+#: Our names of an IMU's specific force (FRD, m/s²), for a column map.
+SPECIFIC_FORCE_COLUMNS = ("acc_x", "acc_y", "acc_z")
+#: Our names of gyro rates (FRD, rad/s), for a column map.
+GYRO_COLUMNS = ("gyro_x", "gyro_y", "gyro_z")
+
+
+def is_csv(path: str | Path) -> bool:
+    """Whether ``path`` names a CSV log (``.csv`` or gzip-compressed ``.csv.gz``)."""
+    name = Path(path).name.lower()
+    return name.endswith((".csv", ".csv.gz"))
+
+
+def _open_text(path: Path) -> Any:
+    """``path`` opened for reading text, through gzip when its name ends in ``.gz``."""
+    if path.name.lower().endswith(".gz"):
+        return gzip.open(path, "rt", newline="")
+    return path.open(newline="")
 
 
 def write_csv(path: str | Path, columns: Mapping[str, Any]) -> Path:
@@ -60,6 +107,7 @@ def write_csv(path: str | Path, columns: Mapping[str, Any]) -> Path:
     Parameters
     ----------
     path : str or Path
+        A name ending in ``.gz`` writes a gzip-compressed file.
     columns : mapping of str to array_like, each shape (N,)
         Must hold every name of :data:`REQUIRED_COLUMNS`; units and frames as in the module
         docstring.
@@ -71,6 +119,24 @@ def write_csv(path: str | Path, columns: Mapping[str, Any]) -> Path:
     path = Path(path)
     _check_required(list(columns), REQUIRED_COLUMNS, str(path))
     names = [*REQUIRED_COLUMNS, *(c for c in columns if c not in REQUIRED_COLUMNS)]
+    return write_table(path, {n: columns[n] for n in names})
+
+
+def write_table(path: str | Path, columns: Mapping[str, Any]) -> Path:
+    """Write columns as a CSV file in the order given (``%.17g``, header line; gzip when
+    the name ends in ``.gz``).
+
+    Parameters
+    ----------
+    path : str or Path
+    columns : mapping of str to array_like, each shape (N,)
+
+    Returns
+    -------
+    Path
+    """
+    path = Path(path)
+    names = list(columns)
     bad = [n for n in names if not n or any(ch in n for ch in ',"\n\r') or n != n.strip()]
     if bad:
         raise ValueError(f"column names must be plain words, got {bad}")
@@ -90,6 +156,7 @@ def read_csv(path: str | Path, column_map: Mapping[str, str] | None = None,
     Parameters
     ----------
     path : str or Path
+        A name ending in ``.gz`` is read through gzip.
     column_map : mapping of str to str, optional
         The file's column name → our name (e.g. from :func:`load_column_map`); names not in
         the map are kept.
@@ -107,8 +174,11 @@ def read_csv(path: str | Path, column_map: Mapping[str, str] | None = None,
         Naming the file and the missing required columns, or the first unreadable line.
     """
     path = Path(path)
-    with path.open(newline="") as f:
-        header = next(_csv.reader(f), None)
+    try:
+        with _open_text(path) as f:
+            header = next(_csv.reader(f), None)
+    except (OSError, EOFError, UnicodeDecodeError) as exc:  # e.g. a corrupt .gz
+        raise ValueError(f"{path}: cannot read: {exc}") from None
     if not header:
         raise ValueError(f"{path}: empty file, expected a header line")
     names = [(column_map or {}).get(h.strip(), h.strip()) for h in header]
@@ -120,7 +190,7 @@ def read_csv(path: str | Path, column_map: Mapping[str, str] | None = None,
         with warnings.catch_warnings():  # a header-only file is a valid empty table
             warnings.filterwarnings("ignore", "loadtxt: input contained no data")
             data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, dtype=float)
-    except ValueError as exc:
+    except (ValueError, OSError, EOFError) as exc:
         raise ValueError(f"{path}: {exc}") from None
     if data.size == 0:
         data = np.zeros((0, len(names)))
@@ -229,10 +299,217 @@ def samples_from_columns(columns: Mapping[str, FloatArray], max_gap: float = 1.0
         warnings.warn("no roll, pitch, yaw columns: assuming level attitude for g(η)",
                       stacklevel=2)
         euler = np.zeros((len(t), 3))
-    if "segment" in columns:
-        segment = np.asarray(columns["segment"]).astype(np.int64)
-    else:
-        segment = np.r_[0, np.cumsum(np.diff(t) > max_gap)].astype(np.int64)
+    segment = _segment_index(columns, max_gap)
     return Samples(t, _stack(columns, VELOCITY_COLUMNS), _stack(columns, ACCELERATION_COLUMNS),
                    _stack(columns, FORCE_COLUMNS), euler,
                    np.asarray(columns["depth"], dtype=float), segment)
+
+
+def _segment_index(columns: Mapping[str, FloatArray], max_gap: float) -> NDArray[np.int64]:
+    """The ``segment`` column, or a new segment wherever time jumps by more than max_gap."""
+    if "segment" in columns:
+        return np.asarray(columns["segment"]).astype(np.int64)
+    t = np.asarray(columns["time"], dtype=float)
+    return np.r_[0, np.cumsum(np.diff(t) > max_gap)].astype(np.int64)
+
+
+# --- flavours of logs ---------------------------------------------------------------------
+
+#: mean |a| within this share of g: ax, ay, az are a specific force; below NU_DOT_SHARE · g:
+#: body acceleration; in between: ambiguous.
+SPECIFIC_FORCE_TOLERANCE = 0.2
+NU_DOT_SHARE = 0.3
+#: RMS(w − ω) / RMS(ω) at most GYRO_MATCH: wx, wy, wz are gyro rates; at least
+#: ANGULAR_ACCELERATION_MISMATCH: angular acceleration; in between: ambiguous.
+GYRO_MATCH = 0.2
+ANGULAR_ACCELERATION_MISMATCH = 0.7
+
+
+def read_log(path: str | Path, thrusters: Thrusters, gravity: float,
+             column_map: Mapping[str, str] | None = None, max_gap: float = 1.0
+             ) -> tuple[Samples, list[str]]:
+    """Identification samples from a CSV log of any flavour of the module docstring.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.csv`` or ``.csv.gz``.
+    thrusters : Thrusters
+        The vehicle's thrusters: names, allocation and thrust curve, for ``thrust_<name>``
+        and ``rpm_<name>`` columns.
+    gravity : float
+        g (m/s²), for specific force.
+    column_map : mapping of str to str, optional
+        The file's column name → our name; an entry naming ``ax`` / ``acc_x`` or ``wx`` /
+        ``gyro_x`` declares what those columns are (no detection).
+    max_gap : float
+        Without a ``segment`` column, time gaps longer than this (s) start a new segment.
+
+    Returns
+    -------
+    samples : Samples
+    notes : list of str
+        One line per flavour detected and how it was read (empty for the plain format).
+
+    Raises
+    ------
+    ValueError
+        A missing column or an ambiguous flavour, naming the column-map entry that settles it.
+    """
+    where = str(path)
+    columns = read_csv(path, column_map, required=BASE_COLUMNS)
+    declared = set(column_map.values()) if column_map else set()
+    standard, notes = interpret_columns(columns, thrusters, gravity, declared, where, max_gap)
+    return samples_from_columns(standard, max_gap), notes
+
+
+def interpret_columns(columns: Mapping[str, FloatArray], thrusters: Thrusters, gravity: float,
+                      declared: set[str] | frozenset[str] = frozenset(), where: str = "log",
+                      max_gap: float = 1.0) -> tuple[dict[str, FloatArray], list[str]]:
+    """Columns of a log of any flavour as the plain format: ν̇ in ax…wz, τ in tau_X…tau_N.
+
+    Parameters
+    ----------
+    columns : mapping of str to ndarray, each shape (N,)
+        Under our names (after the column map); at least :data:`BASE_COLUMNS`.
+    thrusters : Thrusters
+    gravity : float
+        g (m/s²).
+    declared : set of str
+        Our names the column map assigned explicitly: ``ax``/``acc_x``, ``wx``/``gyro_x``
+        there switch detection off.
+    where : str
+        Name of the log, for messages.
+    max_gap : float
+        Gap (s) that splits segments (for the derivative of gyro rates).
+
+    Returns
+    -------
+    columns : dict of str to ndarray, each shape (N,)
+        The input with ax…wz and tau_X…tau_N as the plain format defines them.
+    notes : list of str
+        How each non-plain flavour was read.
+    """
+    out = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
+    notes: list[str] = []
+    nu = _stack(out, VELOCITY_COLUMNS)
+    lin = _linear_acceleration(out, nu, gravity, declared, where, notes)
+    ang = _angular_acceleration(out, nu, declared, where, max_gap, notes)
+    tau = _generalized_force(out, thrusters, where, notes)
+    for names, arr in ((ACCELERATION_COLUMNS[:3], lin), (ACCELERATION_COLUMNS[3:], ang),
+                       (FORCE_COLUMNS, tau)):
+        out.update({n: arr[:, i] for i, n in enumerate(names)})
+    return out, notes
+
+
+def _down(columns: Mapping[str, FloatArray], n: int) -> FloatArray:
+    """Rᵀ e_z, NED down in the body frame, from roll/pitch/yaw (level without), (n, 3)."""
+    if all(c in columns for c in ATTITUDE_COLUMNS):
+        return np.asarray(matrix_from_euler(_stack(columns, ATTITUDE_COLUMNS))[:, 2, :])
+    return np.tile([0.0, 0.0, 1.0], (n, 1))
+
+
+def _linear_acceleration(columns: Mapping[str, FloatArray], nu: FloatArray, gravity: float,
+                         declared: set[str] | frozenset[str], where: str, notes: list[str]
+                         ) -> FloatArray:
+    """u̇, v̇, ẇ (n, 3) from ax…az or from a specific force."""
+    have_a = all(c in columns for c in ACCELERATION_COLUMNS[:3])
+    have_f = all(c in columns for c in SPECIFIC_FORCE_COLUMNS)
+    if have_a and have_f:
+        raise ValueError(f"{where}: both ax, ay, az and acc_x, acc_y, acc_z; map only one "
+                         "set (--columns)")
+    if not have_a and not have_f:
+        raise ValueError(f"{where}: missing ax, ay, az (u̇, v̇, ẇ) or acc_x, acc_y, acc_z "
+                         f"(IMU specific force); columns present: {list(columns)}")
+    names = SPECIFIC_FORCE_COLUMNS if have_f else ACCELERATION_COLUMNS[:3]
+    a = _stack(columns, names)
+    if have_a and not declared & set(ACCELERATION_COLUMNS[:3]) and len(a):
+        mean_norm = float(np.mean(np.linalg.norm(a, axis=1)))
+        if abs(mean_norm - gravity) <= SPECIFIC_FORCE_TOLERANCE * gravity:
+            have_f = True
+            notes.append(f"ax, ay, az read as an IMU's specific force (mean |a| = "
+                         f"{mean_norm:.3g} m/s² ≈ g); --columns 'ax: ax' (ay, az) says they "
+                         "are u̇, v̇, ẇ")
+        elif mean_norm > NU_DOT_SHARE * gravity:
+            raise ValueError(
+                f"{where}: columns ax, ay, az are ambiguous: mean |a| = {mean_norm:.3g} m/s² "
+                f"is neither small (body acceleration u̇, v̇, ẇ) nor ≈ g = {gravity:g} (IMU "
+                "specific force); say which in --columns: 'ax: ax' (and 'ay: ay', 'az: az') "
+                "for u̇, v̇, ẇ, or 'ax: acc_x' (and 'ay: acc_y', 'az: acc_z') for specific "
+                "force")
+    if not have_f:
+        return a
+    down = _down(columns, len(a))
+    # the data's sign: a true specific force points up at rest, f · down ≈ −g
+    sign = -1.0 if len(a) and float(np.mean(np.einsum("ni,ni->n", a, down))) > 0 else 1.0
+    if sign < 0:
+        notes.append("the specific force has az ≈ +g when level at rest: read as −f (the "
+                     "sign convention of this log)")
+    # v̇ = f + g Rᵀe_z − ω × v
+    return np.asarray(sign * a + gravity * down - np.cross(nu[:, 3:], nu[:, :3]))
+
+
+def _angular_acceleration(columns: Mapping[str, FloatArray], nu: FloatArray,
+                          declared: set[str] | frozenset[str], where: str, max_gap: float,
+                          notes: list[str]) -> FloatArray:
+    """ṗ, q̇, ṙ (n, 3) from wx…wz or, for gyro rates, from the derivative of p, q, r."""
+    have_w = all(c in columns for c in ACCELERATION_COLUMNS[3:])
+    have_g = all(c in columns for c in GYRO_COLUMNS)
+    if have_w and have_g:
+        raise ValueError(f"{where}: both wx, wy, wz and gyro_x, gyro_y, gyro_z; map only one "
+                         "set (--columns)")
+    if not have_w and not have_g:
+        raise ValueError(f"{where}: missing wx, wy, wz (ṗ, q̇, ṙ) or gyro_x, gyro_y, gyro_z "
+                         f"(gyro rates); columns present: {list(columns)}")
+    omega = nu[:, 3:]
+    if have_w and not declared & set(ACCELERATION_COLUMNS[3:]) and len(omega):
+        w = _stack(columns, ACCELERATION_COLUMNS[3:])
+        scale = float(np.sqrt(np.mean(omega**2)))
+        mismatch = float(np.sqrt(np.mean((w - omega) ** 2))) / scale if scale > 0 else np.inf
+        if mismatch <= GYRO_MATCH:
+            have_g = True
+            notes.append(f"wx, wy, wz read as gyro rates (equal to p, q, r within "
+                         f"{mismatch:.1%}): ṗ, q̇, ṙ by differentiating p, q, r; --columns "
+                         "'wx: wx' (wy, wz) says they are angular accelerations")
+        elif mismatch < ANGULAR_ACCELERATION_MISMATCH:
+            raise ValueError(
+                f"{where}: columns wx, wy, wz are ambiguous: they differ from p, q, r by "
+                f"{mismatch:.0%} RMS, neither equal (gyro rates) nor clearly not (angular "
+                "acceleration); say which in --columns: 'wx: wx' (and 'wy: wy', 'wz: wz') "
+                "for ṗ, q̇, ṙ, or 'wx: gyro_x' (and 'wy: gyro_y', 'wz: gyro_z') for gyro rates")
+    if not have_g:
+        return _stack(columns, ACCELERATION_COLUMNS[3:])
+    t = np.asarray(columns["time"], dtype=float)
+    out = np.zeros_like(omega)
+    seg = _segment_index(columns, max_gap)
+    edges = np.r_[0, np.flatnonzero(np.diff(seg)) + 1, len(t)]
+    for a, b in pairwise(edges.tolist()):  # segments, not samples
+        if b - a >= 2:
+            out[a:b] = np.gradient(omega[a:b], t[a:b], axis=0)
+    return out
+
+
+def _generalized_force(columns: Mapping[str, FloatArray], thrusters: Thrusters, where: str,
+                       notes: list[str]) -> FloatArray:
+    """τ (n, 6) from tau_X…tau_N or, without them, from per-thruster thrust or rpm."""
+    if all(c in columns for c in FORCE_COLUMNS):
+        return _stack(columns, FORCE_COLUMNS)
+    logged = sorted(c for c in columns if c.startswith(("thrust_", "rpm_")))
+    missing = [n for n in thrusters.names
+               if f"thrust_{n}" not in columns and f"rpm_{n}" not in columns]
+    if missing:
+        present = [c for c in FORCE_COLUMNS if c in columns]
+        raise ValueError(
+            f"{where}: no generalized force: {'only ' + ', '.join(present) if present else 'no'}"
+            f" tau_X…tau_N columns, and no thrust_<name> or rpm_<name> column for thruster(s) "
+            f"{missing} of the vehicle (thruster columns present: {logged or 'none'}); "
+            "rename them with --columns, e.g. 'T1: thrust_" + missing[0] + "'")
+    thrust = np.stack([columns[f"thrust_{n}"] if f"thrust_{n}" in columns
+                       else thrusters.thrust(np.asarray(columns[f"rpm_{n}"]) / 60.0)
+                       for n in thrusters.names], axis=-1)
+    used = ["thrust" if f"thrust_{n}" in columns else "rpm" for n in thrusters.names]
+    kinds = " and ".join(sorted(set(used)))
+    notes.append(f"no tau columns: τ from the {kinds} of {thrusters.count} thrusters through "
+                 "the vehicle's allocation matrix" + (" and thrust curve" if "rpm" in used
+                                                      else ""))
+    return np.asarray(thrusters.wrench(thrust), dtype=float)

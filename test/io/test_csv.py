@@ -116,3 +116,122 @@ def test_samples_without_attitude_or_segments_are_level_and_split_at_gaps() -> N
     cols["time"] = cols["time"][::-1].copy()
     with pytest.raises(ValueError, match="increase"):
         dcsv.samples_from_columns(cols)
+
+
+# --- .csv.gz and the flavours of logs (issue 10, section 4) ---------------------------------
+
+
+def test_gz_round_trip_is_exact_and_reads_like_csv(tmp_path: Path) -> None:
+    cols = columns()
+    plain = dcsv.write_csv(tmp_path / "s.csv", cols)
+    packed = dcsv.write_csv(tmp_path / "s.csv.gz", cols)
+    assert packed.read_bytes()[:2] == b"\x1f\x8b"  # gzip magic
+    assert dcsv.is_csv(packed) and dcsv.is_csv(plain) and not dcsv.is_csv(tmp_path / "s.gz")
+    a, b = dcsv.read_csv(plain), dcsv.read_csv(packed)
+    assert list(a) == list(b)
+    for name in a:
+        np.testing.assert_array_equal(b[name], cols[name], err_msg=name)
+    (tmp_path / "bad.csv.gz").write_bytes(b"not gzip")
+    with pytest.raises(ValueError, match=r"bad\.csv\.gz"):
+        dcsv.read_csv(tmp_path / "bad.csv.gz")
+
+
+G = 9.81
+
+
+def motion(n: int = 2000, rate: float = 100.0) -> dict[str, np.ndarray]:
+    """Smooth ν with its exact derivative, attitude and depth (FRD/NED), 20 s at 100 Hz."""
+    t = np.arange(n) / rate
+    k = np.arange(6)[None, :]
+    w = 2 * np.pi * (0.2 + 0.05 * k)  # rad/s per DOF
+    amp = np.array([[0.5, 0.3, 0.2, 0.4, 0.3, 0.6]])
+    nu = amp * np.sin(w * t[:, None] + k)
+    nu_dot = amp * w * np.cos(w * t[:, None] + k)
+    out = {"time": t, "depth": 2.0 + 0.1 * np.sin(t)}
+    out.update({c: nu[:, i] for i, c in enumerate(dcsv.VELOCITY_COLUMNS)})
+    out.update({c: nu_dot[:, i] for i, c in enumerate(dcsv.ACCELERATION_COLUMNS)})
+    out.update(roll=0.2 * np.sin(0.3 * t), pitch=0.15 * np.cos(0.2 * t), yaw=0.1 * t)
+    return out
+
+
+def specific_force(m: dict[str, np.ndarray]) -> np.ndarray:
+    """f = v̇ + ω × v − g Rᵀe_z (what an IMU at the body origin measures, FRD)."""
+    from dampest_ros.core.frames import matrix_from_euler
+
+    nu = np.stack([m[c] for c in dcsv.VELOCITY_COLUMNS], axis=1)
+    v_dot = np.stack([m[c] for c in ("ax", "ay", "az")], axis=1)
+    down = matrix_from_euler(np.stack([m["roll"], m["pitch"], m["yaw"]], axis=1))[:, 2, :]
+    return v_dot + np.cross(nu[:, 3:], nu[:, :3]) - G * down
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_seed_flavour_specific_force_gyro_rates_and_thrusts(sign: float) -> None:
+    from dampest_ros.io.yaml_io import load_vehicle
+
+    thr = load_vehicle("bluerov2_heavy").thrusters
+    m = motion()
+    rng = np.random.default_rng(5)
+    f = rng.normal(size=(len(m["time"]), thr.count)) * 10.0  # thrust per thruster, N
+    log = {k: v for k, v in m.items() if k not in dcsv.ACCELERATION_COLUMNS}
+    a = sign * specific_force(m)  # sign −1: the log's az ≈ +g when level at rest
+    log.update(ax=a[:, 0], ay=a[:, 1], az=a[:, 2], wx=m["p"], wy=m["q"], wz=m["r"])
+    log.update({f"thrust_{n}": f[:, j] for j, n in enumerate(thr.names)})
+    out, notes = dcsv.interpret_columns(log, thr, G)
+    for c in ("ax", "ay", "az"):  # u̇, v̇, ẇ recovered exactly
+        np.testing.assert_allclose(out[c], m[c], atol=1e-12, err_msg=c)
+    for c in ("wx", "wy", "wz"):  # ṗ, q̇, ṙ by central differences: O(h²) ≈ 1e-4 relative
+        err = np.max(np.abs(out[c] - m[c])[1:-1]) / np.max(np.abs(m[c]))
+        assert err < 3e-4, (c, err)
+    tau = f @ thr.allocation.T
+    for i, c in enumerate(dcsv.FORCE_COLUMNS):
+        np.testing.assert_allclose(out[c], tau[:, i], rtol=1e-12, atol=1e-12, err_msg=c)
+    text = "\n".join(notes)
+    assert "specific force" in text and "gyro rates" in text and "thrust of 8 thrusters" in text
+    assert ("read as −f" in text) == (sign < 0)
+
+
+def test_rpm_columns_go_through_the_thrust_curve() -> None:
+    from dampest_ros.io.yaml_io import load_vehicle
+
+    thr = load_vehicle("bluerov2_heavy").thrusters
+    m = motion(200)
+    n = np.random.default_rng(2).uniform(-40, 40, size=(200, thr.count))  # rev/s
+    log = dict(m)
+    log.update({f"rpm_{name}": 60.0 * n[:, j] for j, name in enumerate(thr.names)})
+    out, notes = dcsv.interpret_columns(log, thr, G)
+    # T = k_T ρ D⁴ n|n| = 0.45 · 1000 · 0.076⁴ n|n| for the BlueROV2 T200 preset
+    tau = (0.45 * 1000.0 * 0.076**4 * n * np.abs(n)) @ thr.allocation.T
+    np.testing.assert_allclose(np.stack([out[c] for c in dcsv.FORCE_COLUMNS], axis=1), tau,
+                               rtol=1e-12, atol=1e-12)
+    assert any("rpm" in x and "thrust curve" in x for x in notes)
+    del log[f"rpm_{thr.names[2]}"]
+    with pytest.raises(ValueError, match=r"thruster3.*--columns.*thrust_thruster3"):
+        dcsv.interpret_columns(log, thr, G)
+
+
+def test_plain_columns_pass_unchanged_and_ambiguity_names_the_map_entry() -> None:
+    from dampest_ros.io.yaml_io import load_vehicle
+
+    thr = load_vehicle("bluerov2_heavy").thrusters
+    m = motion(500)
+    m.update({c: np.full(500, float(i)) for i, c in enumerate(dcsv.FORCE_COLUMNS)})
+    out, notes = dcsv.interpret_columns(m, thr, G)
+    assert notes == []
+    for c in m:
+        np.testing.assert_array_equal(out[c], m[c], err_msg=c)
+    odd = dict(m, az=np.full(500, 5.0))  # mean |a| ≈ 5 m/s²: neither ν̇ nor specific force
+    with pytest.raises(ValueError, match=r"ax, ay, az are ambiguous.*'ax: acc_x'"):
+        dcsv.interpret_columns(odd, thr, G)
+    out, _ = dcsv.interpret_columns(odd, thr, G, declared={"ax", "ay", "az"})
+    np.testing.assert_array_equal(out["az"], 5.0)
+    half = dict(m, wx=m["p"] + 0.4 * m["q"], wy=m["q"] + 0.4 * m["r"], wz=m["r"] + 0.4 * m["p"])
+    with pytest.raises(ValueError, match=r"wx, wy, wz are ambiguous.*'wx: gyro_x'"):
+        dcsv.interpret_columns(half, thr, G)
+    out, notes = dcsv.interpret_columns(half, thr, G, declared={"wx", "wy", "wz"})
+    assert notes == []  # 'wx: wx' in the map: taken as ṗ, q̇, ṙ, no detection
+    np.testing.assert_array_equal(out["wx"], half["wx"])
+    gyro = {("gyro_" + c[1] if c in ("wx", "wy", "wz") else c): v for c, v in half.items()}
+    out, notes = dcsv.interpret_columns(gyro, thr, G, declared={"gyro_x", "gyro_y", "gyro_z"})
+    assert notes == []  # 'wx: gyro_x' in the map: ṗ, q̇, ṙ from the derivative of p, q, r
+    err = np.max(np.abs(out["wx"] - m["wx"])[1:-1]) / np.max(np.abs(m["wx"]))
+    assert err < 3e-4
