@@ -10,10 +10,12 @@ import numpy as np
 
 from dampest_ros.cli.common import speed_table, table
 from dampest_ros.core.excitation import PROTOCOLS, make_excitation
+from dampest_ros.core.mujoco_backend import plant_vehicle
 from dampest_ros.core.preprocess import PreprocessConfig, preprocess
 from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
-from dampest_ros.core.simulate import Effects, true_vehicle
+from dampest_ros.core.simulate import BACKENDS, Effects, true_vehicle
 from dampest_ros.core.simulate import run as run_sim
+from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import write_bag
 from dampest_ros.io.csv import samples_to_columns, write_csv
 from dampest_ros.io.yaml_io import load_vehicle, read_mapping, save_model
@@ -36,6 +38,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--out", required=True, help="bag directory to create (must not exist)")
     p.add_argument("--csv", help="also write the synchronised samples as CSV (seed format)")
     p.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
+    p.add_argument("--backend", choices=BACKENDS, default="native",
+                   help="the plant: native (our own equations, default; writes the true "
+                        "coefficients as truth_model.yaml) or mujoco (MuJoCo's ellipsoid "
+                        "fluid model, physics we did not write: the vehicle needs a geometry: "
+                        "block, e.g. --vehicle torpedo_auv; MuJoCo's own fluid wrench is "
+                        "recorded on truth/hydro_wrench)")
     p.add_argument("--dt", type=float, default=0.02, help="integration step in s (default: 0.02)")
     p.add_argument("--amplitude", type=float, default=1.0,
                    help="scale of the protocol's amplitudes (default: 1)")
@@ -57,17 +65,18 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     excitation = make_excitation(args.protocol, vehicle, args.duration, seed=args.seed,
                                  amplitude=args.amplitude)
-    traj = run_sim(vehicle, excitation, effects, dt=args.dt)
+    traj = run_sim(vehicle, excitation, effects, dt=args.dt, backend=args.backend)
     bias = SensorBias(effects.gyro_bias, effects.accel_bias, effects.dvl_bias)
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, sensors, bias, seed=args.seed)
     write_bag(out, rec, storage=args.storage)
-    truth = true_vehicle(vehicle, effects)
-    save_model(out / "truth_model.yaml", truth.damping.parameter_names, truth.theta,
-               np.zeros(truth.damping.n_params), truth.body.M,
-               extra={"source": "dampest simulate", "vehicle": vehicle.name,
-                      "protocol": args.protocol, "duration": float(args.duration),
-                      "seed": int(args.seed), "effects": str(effects.as_dict() or "none")},
-               damping=truth.damping)
+    if args.backend == "native":
+        truth = true_vehicle(vehicle, effects)
+        save_model(out / "truth_model.yaml", truth.damping.parameter_names, truth.theta,
+                   np.zeros(truth.damping.n_params), truth.body.M,
+                   extra={"source": "dampest simulate", "vehicle": vehicle.name,
+                          "protocol": args.protocol, "duration": float(args.duration),
+                          "seed": int(args.seed), "effects": str(effects.as_dict() or "none")},
+                   damping=truth.damping)
     if args.csv:
         samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
                              PreprocessConfig())
@@ -83,4 +92,24 @@ def run(args: argparse.Namespace) -> int:
     print(speed_table(traj.nu))
     if effects.as_dict():
         print(f"\nhidden effects: {effects.as_dict()}")
+    if args.backend == "mujoco":
+        print("\ntruth: MuJoCo's fluid wrench on truth/hydro_wrench (FLU); no truth_model.yaml "
+              "(MuJoCo's drag is not of our term form)")
+        _added_mass_note(vehicle)
     return 0
+
+
+def _added_mass_note(vehicle: Vehicle) -> None:
+    """Say so when the vehicle does not describe the MuJoCo plant's added mass faithfully."""
+    plant = plant_vehicle(vehicle).body
+    body = vehicle.body
+    if (body.added_mass_terms != plant.added_mass_terms
+            or not np.allclose(body.added_mass, plant.added_mass, rtol=1e-4,
+                               atol=1e-4 * np.abs(plant.added_mass).max())):
+        rows = ", ".join("[" + ", ".join(f"{x:.6g}" for x in r) + "]"
+                         for r in plant.added_mass)
+        print(f"note: {vehicle.name}'s added mass is not the plant's. To identify this bag "
+              "with a faithful description, give the vehicle\n"
+              f"  added_mass: [{rows}]\n"
+              "  added_mass_terms: {inertial: false, coriolis: true, munk: true}\n"
+              "(MuJoCo applies only the velocity terms of its geometry's added mass)")

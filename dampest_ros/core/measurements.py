@@ -138,6 +138,7 @@ TOPIC_TYPES: dict[str, tuple[str, type[Series]]] = {
     "dvl/twist": ("geometry_msgs/msg/TwistWithCovarianceStamped", TwistSeries),
     "pressure": ("sensor_msgs/msg/FluidPressure", PressureSeries),
     "thrusters/state": ("sensor_msgs/msg/JointState", JointSeries),
+    "truth/hydro_wrench": ("geometry_msgs/msg/WrenchStamped", WrenchSeries),
     "dampest/velocity": ("geometry_msgs/msg/TwistWithCovarianceStamped", TwistSeries),
     "dampest/acceleration": ("geometry_msgs/msg/AccelWithCovarianceStamped", AccelSeries),
     "dampest/wrench": ("geometry_msgs/msg/WrenchStamped", WrenchSeries),

@@ -45,6 +45,7 @@ from dampest_ros.core.measurements import (
     PressureSeries,
     Recording,
     TwistSeries,
+    WrenchSeries,
 )
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.trajectory import Trajectory
@@ -65,6 +66,7 @@ FRAME_IDS: dict[str, str] = {
     "dvl/twist": "dvl_link",
     "pressure": "pressure_link",
     "thrusters/state": "base_link",
+    "truth/hydro_wrench": "base_link",
 }
 
 #: One random stream per noise source, spawned in this order (append only: reordering would
@@ -301,6 +303,7 @@ def measure(
         "dvl/twist": _dvl(truth, config, bias, rngs),
         "pressure": _pressure(truth, rho, gravity, config, rngs),
         "thrusters/state": _thrusters(traj, config, rngs),
+        **({"truth/hydro_wrench": _hydro(traj, config)} if traj.hydro is not None else {}),
     }
 
 
@@ -558,6 +561,16 @@ def _odometry(truth: _Truth, config: SensorConfig) -> OdometrySeries:
         linear=body_vec(nu[:, :3]),
         angular=body_vec(nu[:, 3:]),
     )
+
+
+def _hydro(traj: Trajectory, config: SensorConfig) -> WrenchSeries:
+    """The plant's hydrodynamic wrench (truth, FLU), linear between steps at truth_rate."""
+    assert traj.hydro is not None
+    t = np.asarray(traj.t, dtype=float)
+    stamp = sample_times(float(t[0]), float(t[-1]), config.truth_rate)
+    hydro = np.column_stack([np.interp(stamp, t, c) for c in np.asarray(traj.hydro).T])
+    return WrenchSeries(stamp=stamp, frame_id=FRAME_IDS["truth/hydro_wrench"],
+                        force=body_vec(hydro[:, :3]), torque=body_vec(hydro[:, 3:]))
 
 
 def _check_trajectory(traj: Trajectory) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, fields, replace
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -368,14 +368,10 @@ class Simulator:
         self.x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
         self.x[3:7] /= np.linalg.norm(self.x[3:7])
         # the logged rotor follows the undelayed command exactly: n(s) = c + (n₀ − c) e^{−s/T}
-        n0 = self.rotor
-        decay = np.exp(-h / tm) if tm > 0 else 0.0
-        n_mid = cmd + (n0 - cmd) * (np.exp(-h / (2 * tm)) if tm > 0 else 0.0)
-        self.rotor = cmd + (n0 - cmd) * decay
+        n0, n_mid, self.rotor, n_mean = self._thr.lag_step(self.rotor, cmd, h)
         if self._record:
             tau_mean = (tau1 + 2 * tau2 + 2 * tau3 + self._last_tau) / 6.0
             # step means of the logged rotor speed (exact) and nominal thrust (Simpson)
-            n_mean = cmd + (n0 - cmd) * ((tm / h) * (1 - decay) if tm > 0 else 0.0)
             f = self._thr.thrust
             thrust_mean = (f(n0) + 4 * f(n_mid) + f(self.rotor)) / 6.0
             self._log.append(np.concatenate([[t], x[:13], k1[7:13], tau_mean, n_mean,
@@ -408,8 +404,58 @@ class Simulator:
                           current=cur, memory=mem, thruster_names=self._thr.names)
 
 
+#: Plants the vehicle can fly in: our own equations (``native``) or MuJoCo's fluid model.
+BACKENDS = ("native", "mujoco")
+
+
+class Plant(Protocol):
+    """What a simulator backend offers the controller loops (run, stream, track)."""
+
+    t: float
+    dt: float
+
+    @property
+    def position(self) -> FloatArray: ...
+
+    @property
+    def quaternion(self) -> FloatArray: ...
+
+    @property
+    def nu(self) -> FloatArray: ...
+
+    def current_ned(self, t: float) -> FloatArray: ...
+
+    def step(self, rotor_command: FloatArray) -> None: ...
+
+    def wrench_to_command(self, tau: FloatArray) -> FloatArray: ...
+
+    def take_log(self, keep: int = 1) -> Trajectory: ...
+
+    def trajectory(self) -> Trajectory: ...
+
+
+def make_plant(vehicle: Vehicle, effects: Effects | None = None, dt: float = 0.02,
+               backend: str = "native", position: FloatArray | None = None,
+               quaternion: FloatArray | None = None, record: bool = True) -> Plant:
+    """A simulator of ``backend`` (:data:`BACKENDS`) for the vehicle.
+
+    ``mujoco`` needs the vehicle's ``geometry:`` block and the ``mujoco`` package.
+    """
+    if backend == "native":
+        return Simulator(vehicle, effects, dt=dt, position=position, quaternion=quaternion,
+                         record=record)
+    if backend == "mujoco":
+        # imported here: MuJoCo loads a native library, and mujoco_backend builds on this
+        # module (Effects)
+        from dampest_ros.core.mujoco_backend import MujocoSimulator
+
+        return MujocoSimulator(vehicle, effects, dt=dt, position=position,
+                               quaternion=quaternion, record=record)
+    raise ConfigError("backend", f"unknown backend {backend!r}; use one of {BACKENDS}")
+
+
 def run(vehicle: Vehicle, excitation: Excitation, effects: Effects | None = None,
-        dt: float = 0.02) -> Trajectory:
+        dt: float = 0.02, backend: str = "native") -> Trajectory:
     """Fly ``excitation`` with the velocity PI controller and return the ground truth.
 
     Parameters
@@ -422,13 +468,15 @@ def run(vehicle: Vehicle, excitation: Excitation, effects: Effects | None = None
         Hidden effects in the physics.
     dt : float
         Integration step (s).
+    backend : {'native', 'mujoco'}
+        The plant (:func:`make_plant`).
 
     Returns
     -------
     Trajectory
     """
-    sim = Simulator(vehicle, effects, dt=dt, position=np.array([0.0, 0.0,
-                                                                excitation.depth_ref[0]]))
+    sim = make_plant(vehicle, effects, dt=dt, backend=backend,
+                     position=np.array([0.0, 0.0, excitation.depth_ref[0]]))
     dt_c = float(excitation.t[1] - excitation.t[0])
     sub = max(1, round(dt_c / dt))
     ctrl = VelocityPI(np.diag(vehicle.body.M), 0.9 * vehicle.thrusters.max_wrench,

@@ -49,7 +49,7 @@ from dampest_ros.core.sensors import (
     _small_rotation,
     _wxyz_to_xyzw,
 )
-from dampest_ros.core.simulate import Effects, Simulator
+from dampest_ros.core.simulate import Effects, make_plant
 from dampest_ros.core.trajectory import Trajectory
 from dampest_ros.core.vehicle import Vehicle
 
@@ -271,11 +271,14 @@ class LiveSimulation:
     sensors : SensorConfig, optional
     dt : float
         Integration step (s).
+    backend : {'native', 'mujoco'}
+        The plant (:func:`dampest_ros.core.simulate.make_plant`).
     """
 
     def __init__(self, vehicle: Vehicle, protocol: str = "B", duration: float = 300.0,
                  seed: int = 1, effects: Effects | None = None,
-                 sensors: SensorConfig | None = None, dt: float = 0.02) -> None:
+                 sensors: SensorConfig | None = None, dt: float = 0.02,
+                 backend: str = "native") -> None:
         self.vehicle = vehicle
         self.effects = effects or Effects()
         if protocol == "hover":
@@ -283,8 +286,8 @@ class LiveSimulation:
         else:
             self.excitation = make_excitation(protocol, vehicle, duration, seed=seed)
         ex = self.excitation
-        self.sim = Simulator(vehicle, self.effects, dt=dt,
-                             position=np.array([0.0, 0.0, ex.depth_ref[0]]))
+        self.sim = make_plant(vehicle, self.effects, dt=dt, backend=backend,
+                              position=np.array([0.0, 0.0, ex.depth_ref[0]]))
         self.dt_control = float(ex.t[1] - ex.t[0])
         self.sub = max(1, round(self.dt_control / dt))
         self.controller = VelocityPI(np.diag(vehicle.body.M), 0.9 * vehicle.thrusters.max_wrench,

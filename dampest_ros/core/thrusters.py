@@ -102,6 +102,35 @@ class Thrusters:
         t = (1.0 + gain_error) * self.gain * n * np.abs(n)
         return np.where(np.abs(n) < dz, 0.0, t)
 
+    def lag_step(self, n0: FloatArray, command: FloatArray, h: float
+                 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Rotor speeds over one step of length h with the command held (first-order lag).
+
+        n(s) = c + (n₀ − c) e^{−s/T}, exact; without a lag (T = 0) the rotors turn at the
+        command during the whole step.
+
+        Parameters
+        ----------
+        n0, command : ndarray, shape (n,)
+            Speeds at the start of the step and the command (rev/s).
+        h : float
+            Step length (s).
+
+        Returns
+        -------
+        start, mid, end, mean : ndarray, shape (n,)
+            n at s = 0, h/2 and h, and the mean of n over the step (rev/s).
+        """
+        tm = self.time_constant
+        if tm <= 0:
+            return command, command, command, command
+        decay = np.exp(-h / tm)
+        mid = command + (n0 - command) * np.exp(-h / (2 * tm))
+        end = command + (n0 - command) * decay
+        # mean of n over the step: c + (n₀ − c) (T/h)(1 − e^{−h/T})
+        mean = command + (n0 - command) * (tm / h) * (1 - decay)
+        return n0, mid, end, mean
+
     def speed_for_thrust(self, thrust: FloatArray) -> FloatArray:
         """Inverse curve: n = sign(T) √(|T| / k_T ρ D⁴), saturated at ±n_max (rev/s)."""
         n = np.sign(thrust) * np.sqrt(np.abs(thrust) / self.gain)

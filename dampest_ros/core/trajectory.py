@@ -39,6 +39,10 @@ class Trajectory:
     memory : ndarray, shape (N, n_states)
         Fluid-memory filter states of the true model.
     thruster_names : tuple of str
+    hydro : ndarray, shape (N, 6), optional
+        The plant's own hydrodynamic wrench on the vehicle (FRD, about the origin, N and
+        N·m, acting on it: right-hand side), where the plant reports one (MuJoCo's
+        ``qfrc_fluid``); for evaluation only.
     """
 
     t: FloatArray
@@ -52,6 +56,7 @@ class Trajectory:
     current: FloatArray
     memory: FloatArray
     thruster_names: tuple[str, ...] = ()
+    hydro: FloatArray | None = None
 
     @property
     def dt(self) -> float:

@@ -23,7 +23,7 @@ from dampest_ros.core import frames
 from dampest_ros.core.excitation import PROTOCOLS
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.sensors import SensorConfig
-from dampest_ros.core.simulate import Effects
+from dampest_ros.core.simulate import BACKENDS, Effects
 from dampest_ros.core.stream import LiveSimulation
 from dampest_ros.io.yaml_io import load_vehicle, read_mapping
 from dampest_ros.ros.common import (
@@ -78,6 +78,9 @@ class SimNode(ParamNode):
         Param("sensors", "", "YAML mapping of sensor settings (dampest_ros.core.sensors."
               "SensorConfig), e.g. '{dvl_rate: 5}'", check=_mapping_ok(SensorConfig)),
         Param("dt", 0.02, "integration step in s", low=0.001, high=0.1),
+        Param("backend", "native", "the plant: native (our equations) or mujoco (MuJoCo's "
+              "ellipsoid fluid model; the vehicle needs a geometry: block)",
+              choices=BACKENDS),
         Param("publish_clock", True, "publish /clock with the simulation time"),
         Param("cmd_timeout", 0.5, "s of simulation time a cmd_wrench stays in force",
               low=0.0, high=10.0),
@@ -116,7 +119,7 @@ class SimNode(ParamNode):
             if str(self.p("sensors")).strip() else SensorConfig()
         self.live = LiveSimulation(load_vehicle(self.p("vehicle")), self.p("protocol"),
                                    self.p("duration"), self.p("seed"), effects, sensors,
-                                   self.p("dt"))
+                                   self.p("dt"), self.p("backend"))
         self._wall0 = time.monotonic()
         self._sim0 = self.live.t
         self._rate = float(self.p("rate_factor"))
@@ -136,7 +139,7 @@ class SimNode(ParamNode):
             self._timer = self.create_timer(self.p("tick"), self._tick,
                                             clock=Clock(clock_type=ClockType.STEADY_TIME))
         if set(names) & {"vehicle", "protocol", "duration", "seed", "effects", "sensors",
-                         "dt"}:
+                         "backend", "dt"}:
             self._start()
 
     def _on_wrench(self, msg: WrenchStamped) -> None:

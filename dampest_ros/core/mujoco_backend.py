@@ -1,0 +1,491 @@
+"""The MuJoCo backend: the vehicle as a free body in MuJoCo's ellipsoid fluid model.
+
+This is the outside plant every estimation feature is tested against: its hydrodynamics are
+MuJoCo's, not our equations. The vehicle's ``geometry:`` block gives one or more ellipsoid
+geoms (hull, thruster housings, fins) with ``fluidshape="ellipsoid"``; MuJoCo computes the
+fluid wrench on each from its own velocity relative to the water (``wind`` = the current).
+
+MuJoCo's world here is NED (gravity along +z) and the body frame is FRD, so the state needs
+no frame conversion: the free joint's ``qpos`` is the NED position of the body origin and
+the FRD → NED quaternion [w, x, y, z]; ``qvel`` is [NED velocity of the body origin, FRD
+angular velocity]; generalised forces are [NED force at the origin, FRD moment about it].
+
+What the pinned MuJoCo (4.0.0) applies, measured (``test/core/test_mujoco_backend.py``)
+----------------------------------------------------------------------------------------
+- Added mass: only its velocity terms. Each geom carries a diagonal virtual mass and
+  inertia (from its ellipsoid, times the fluid density); the force −C_A(ν)ν, Coriolis and
+  Munk moments included, acts on it, with the geom's own velocity. Summed over geoms this is
+  exactly Fossen's C_A(ν)ν of the composite added mass M_A = Σ Hᵀ(r) R M_g Rᵀ H(r)
+  (:func:`plant_added_mass`). The inertial force −M_A ν̇ is **not** applied: a step force
+  accelerates the body as if M = M_RB. The faithful vehicle description is therefore
+  ``added_mass: M_A``, ``added_mass_terms: {inertial: false, coriolis: true, munk: true}``
+  (:func:`plant_vehicle`).
+- Drag on the Euclidean speed: linear drag is −(3π D_eq μ + ρ‖v‖(A_proj C_blunt +
+  C_slender(A_max − A_proj))) v, with A_proj the ellipsoid's area projected along v; so a
+  sway velocity raises the surge drag (‖v‖, not |u|). Angular drag is −(π D_eq³ μ +
+  ρ‖c ⊙ ω‖) ω, again a magnitude over all three rates.
+- Kutta lift ∝ ((n(v) × v) × v) and Magnus force ∝ ω × v (bilinear in the velocities);
+  a geom off the origin turns its force into moments and sees ω × r in its velocity.
+- Nothing else: no buoyancy (applied here at r_b), no fluid memory, no free surface.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.frames import quat_to_matrix
+from dampest_ros.core.rigid_body import AddedMassTerms, ConfigError, RigidBody, skew
+from dampest_ros.core.simulate import Effects
+from dampest_ros.core.trajectory import Trajectory
+from dampest_ros.core.vehicle import Vehicle
+
+FloatArray = NDArray[np.float64]
+
+#: MuJoCo's default ellipsoid fluid coefficients: blunt drag, slender drag, angular drag,
+#: Kutta lift, Magnus lift.
+DEFAULT_FLUIDCOEF = (0.5, 0.25, 1.5, 1.0, 1.0)
+#: Dynamic viscosity of sea water at ~15 °C (Pa·s).
+WATER_VISCOSITY = 1.2e-3
+#: Longest MuJoCo (RK4) step (s): a slender AUV's fluid damping is stiff (a roll rate decays
+#: at ~600 /s while it pitches at 0.7 rad/s), which 5 ms steps do not survive.
+MAX_STEP = 0.002
+#: Effects the MuJoCo plant can hide in its data; the others are properties of the fluid
+#: model (added mass, cross coupling, memory, damping) and are refused.
+SUPPORTED_EFFECTS = ("current", "current_variation", "current_period", "thruster_deadzone",
+                     "thrust_gain_error", "buoyancy_offset", "cg_offset", "gyro_bias",
+                     "accel_bias", "dvl_bias", "delay")
+
+
+@dataclass(frozen=True)
+class Geom:
+    """One ellipsoid of the vehicle's shape (FRD body frame).
+
+    Attributes
+    ----------
+    name : str
+    size : tuple of 3 float
+        Semi-axes (m), > 0.
+    position : tuple of 3 float
+        Centre in the body frame (m).
+    rpy : tuple of 3 float
+        Orientation of the geom's axes: roll, pitch, yaw (rad), ZYX.
+    fluidcoef : tuple of 5 float
+        MuJoCo's blunt drag, slender drag, angular drag, Kutta lift, Magnus lift.
+    """
+
+    name: str
+    size: tuple[float, ...]
+    position: tuple[float, ...] = (0.0, 0.0, 0.0)
+    rpy: tuple[float, ...] = (0.0, 0.0, 0.0)
+    fluidcoef: tuple[float, ...] = DEFAULT_FLUIDCOEF
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """The vehicle's shape for the fluid model: ellipsoid geoms and the water's viscosity.
+
+    Built from a vehicle's ``geometry:`` block::
+
+        geometry:
+          viscosity: 1.2e-3                      # Pa·s (density is vehicle.rho)
+          fluidcoef: [0.5, 0.25, 1.5, 1.0, 1.0]  # default of every geom
+          geoms:
+            - {name: hull, size: [0.23, 0.29, 0.13]}
+            - {name: fin, size: [0.06, 0.08, 0.006], position: [-0.7, 0.17, 0], rpy: [0, 0, 0]}
+    """
+
+    geoms: tuple[Geom, ...]
+    viscosity: float = WATER_VISCOSITY
+
+    @classmethod
+    def from_dict(cls, d: Any) -> Geometry:
+        """From a ``geometry:`` mapping; every bad value raises ConfigError naming it."""
+        if not isinstance(d, dict):
+            raise ConfigError("geometry", "must be a mapping with a geoms: list")
+        unknown = set(d) - {"viscosity", "fluidcoef", "geoms"}
+        if unknown:
+            raise ConfigError("geometry", f"unknown key(s) {sorted(unknown)}; known: "
+                              "viscosity, fluidcoef, geoms")
+        viscosity = _number("geometry.viscosity", d.get("viscosity", WATER_VISCOSITY))
+        if viscosity < 0:
+            raise ConfigError("geometry.viscosity", f"must be ≥ 0 (Pa·s), got {viscosity}")
+        coef = _numbers("geometry.fluidcoef", d.get("fluidcoef", DEFAULT_FLUIDCOEF), 5)
+        items = d.get("geoms")
+        if not isinstance(items, list) or not items:
+            raise ConfigError("geometry.geoms", "must be a non-empty list of ellipsoids")
+        geoms = []
+        for k, g in enumerate(items):
+            where = f"geometry.geoms[{k}]"
+            if not isinstance(g, dict):
+                raise ConfigError(where, "must be a mapping {name, size, position, rpy}")
+            bad = set(g) - {"name", "size", "position", "rpy", "fluidcoef"}
+            if bad:
+                raise ConfigError(where, f"unknown key(s) {sorted(bad)}; known: name, size, "
+                                  "position, rpy, fluidcoef")
+            if "size" not in g:
+                raise ConfigError(f"{where}.size", "missing (three semi-axes in m)")
+            size = _numbers(f"{where}.size", g["size"], 3)
+            if min(size) <= 0:
+                raise ConfigError(f"{where}.size", f"semi-axes must be > 0, got {list(size)}")
+            gc = _numbers(f"{where}.fluidcoef", g.get("fluidcoef", coef), 5)
+            if min(gc) < 0:
+                raise ConfigError(f"{where}.fluidcoef", f"must be ≥ 0, got {list(gc)}")
+            geoms.append(Geom(str(g.get("name", f"geom{k}")), size,
+                              _numbers(f"{where}.position", g.get("position", (0, 0, 0)), 3),
+                              _numbers(f"{where}.rpy", g.get("rpy", (0, 0, 0)), 3), gc))
+        names = [g.name for g in geoms]
+        if len(set(names)) != len(names):
+            raise ConfigError("geometry.geoms", f"geom names must be unique, got {names}")
+        return cls(tuple(geoms), viscosity)
+
+
+def _number(where: str, v: Any) -> float:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        raise ConfigError(where, f"not a number: {v!r}") from None
+    if not np.isfinite(x):
+        raise ConfigError(where, "is NaN or Inf")
+    return x
+
+
+def _numbers(where: str, v: Any, n: int) -> tuple[float, ...]:
+    if not isinstance(v, (list, tuple)) or len(v) != n:
+        raise ConfigError(where, f"must be a list of {n} numbers, got {v!r}")
+    return tuple(_number(f"{where}[{i}]", x) for i, x in enumerate(v))
+
+
+def geometry_of(vehicle: Vehicle) -> Geometry:
+    """The vehicle's ``geometry:`` block, or ConfigError saying how to add one."""
+    if "geometry" not in vehicle.extra:
+        raise ConfigError("geometry", f"vehicle {vehicle.name!r} has no geometry: block, "
+                          "which the mujoco backend needs (ellipsoid geoms; see "
+                          "config/vehicles/bluerov2_heavy_mujoco.yaml)")
+    return Geometry.from_dict(vehicle.extra["geometry"])
+
+
+def _quat_rpy(rpy: tuple[float, ...]) -> FloatArray:
+    """[w, x, y, z] of the ZYX rotation roll, pitch, yaw."""
+    cr, sr = np.cos(rpy[0] / 2), np.sin(rpy[0] / 2)
+    cp, sp = np.cos(rpy[1] / 2), np.sin(rpy[1] / 2)
+    cy, sy = np.cos(rpy[2] / 2), np.sin(rpy[2] / 2)
+    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
+
+
+def _vec(v: Any) -> str:
+    return " ".join(f"{float(x):.17g}" for x in np.ravel(v))
+
+
+def mjcf(body: RigidBody, geometry: Geometry, timestep: float) -> str:
+    """The MJCF model of the vehicle: a free body in water, NED world (gravity +z).
+
+    Parameters
+    ----------
+    body : RigidBody
+        Mass, inertia about the CG and r_g; ``rho`` is the fluid density.
+    geometry : Geometry
+    timestep : float
+        MuJoCo's integration step (s).
+
+    Returns
+    -------
+    str
+        The XML text. Geoms have no contacts and no mass (the ``inertial`` element sets it);
+        ``ctrl`` is the applied body wrench [X, Y, Z, K, M, N] (FRD, about the origin).
+    """
+    J = body.inertia
+    lines = [
+        '<mujoco model="dampest_vehicle">',
+        f'  <option timestep="{timestep:.17g}" integrator="RK4" density="{body.rho:.17g}" '
+        f'viscosity="{geometry.viscosity:.17g}" gravity="0 0 {body.gravity:.17g}"/>',
+        "  <worldbody>",
+        '    <body name="vehicle">',
+        "      <freejoint/>",
+        f'      <inertial pos="{_vec(body.r_g)}" mass="{body.mass:.17g}" '
+        f'fullinertia="{_vec([J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2]])}"/>',
+    ]
+    for g in geometry.geoms:
+        lines.append(
+            f'      <geom name="{g.name}" type="ellipsoid" size="{_vec(g.size)}" '
+            f'pos="{_vec(g.position)}" quat="{_vec(_quat_rpy(g.rpy))}" mass="0" '
+            f'contype="0" conaffinity="0" fluidshape="ellipsoid" '
+            f'fluidcoef="{_vec(g.fluidcoef)}"/>')
+    # the thrusters' body wrench: six actuators on a site at the origin, one per axis of
+    # [force, moment] in the body frame (MuJoCo turns them with the body within its steps)
+    lines += ['      <site name="origin"/>', "    </body>", "  </worldbody>", "  <actuator>"]
+    lines += [f'    <general name="tau_{k}" site="origin" gear="{_vec(np.eye(6)[k])}"/>'
+              for k in range(6)]
+    lines += ["  </actuator>", "</mujoco>"]
+    return "\n".join(lines)
+
+
+def compile_model(body: RigidBody, geometry: Geometry, timestep: float) -> Any:
+    """``mujoco.MjModel`` of the vehicle; MuJoCo's own complaint becomes a ConfigError."""
+    import mujoco
+
+    try:
+        return mujoco.MjModel.from_xml_string(mjcf(body, geometry, timestep))
+    except ValueError as exc:
+        raise ConfigError("geometry", f"MuJoCo rejects the model: {exc}") from None
+
+
+def plant_added_mass(model: Any, rho: float) -> FloatArray:
+    """The added mass whose velocity terms MuJoCo applies, about the body origin (FRD).
+
+    Each geom's virtual mass m_g and inertia I_g (``geom_fluid``, per unit density) make a
+    diagonal M_g = ρ diag(m_g, I_g) in the geom's axes; rotated into the body axes
+    (R M_g Rᵀ per 3×3 block) and moved to the origin with H(r) = [[I, S(r)ᵀ], [0, I]]
+    (Fossen 2011, eq. 3.42): M_A = Σ_g Hᵀ(r_g) M_g H(r_g).
+
+    Parameters
+    ----------
+    model : mujoco.MjModel
+        A model built by :func:`compile_model` (one body).
+    rho : float
+        Fluid density (kg/m³).
+
+    Returns
+    -------
+    ndarray, shape (6, 6)
+    """
+    M_A = np.zeros((6, 6))
+    for k in range(model.ngeom):
+        coef = np.asarray(model.geom_fluid[k], dtype=float)
+        R = quat_to_matrix(np.asarray(model.geom_quat[k], dtype=float))
+        # M_g in body axes: R diag(·) Rᵀ for the translational and the rotational block
+        Mg = np.zeros((6, 6))
+        Mg[:3, :3] = rho * R @ np.diag(coef[6:9]) @ R.T
+        Mg[3:, 3:] = rho * R @ np.diag(coef[9:12]) @ R.T
+        H = np.eye(6)
+        H[:3, 3:] = skew(np.asarray(model.geom_pos[k], dtype=float)).T
+        # M_A += Hᵀ M_g H
+        M_A += H.T @ Mg @ H
+    return 0.5 * (M_A + M_A.T)
+
+
+def plant_vehicle(vehicle: Vehicle) -> Vehicle:
+    """The vehicle as MuJoCo's fluid model makes it: its geometry's added mass, applied
+    through the velocity terms only (``added_mass_terms: {inertial: false}``).
+
+    The damping stays the vehicle's nominal one (a prior: MuJoCo's drag is not of that form).
+    """
+    body = vehicle.body
+    model = compile_model(body, geometry_of(vehicle), 0.01)
+    plant = replace(body, added_mass=plant_added_mass(model, body.rho),
+                    added_mass_terms=AddedMassTerms(inertial=False, coriolis=True, munk=True))
+    return replace(vehicle, body=plant)
+
+
+class PlantDivergedError(ValueError):
+    """MuJoCo's integration went unstable (NaN, Inf or huge state); the message says when."""
+
+
+#: MuJoCo's warnings of this process, collected instead of printed and written to
+#: MUJOCO_LOG.TXT in the working directory (MuJoCo's default); :meth:`MujocoSimulator.step`
+#: turns an instability warning into :class:`PlantDivergedError`.
+_WARNINGS: list[str] = []
+
+
+def _collect_warning(text: str) -> None:
+    _WARNINGS.append(str(text))
+
+
+class MujocoSimulator:
+    """The vehicle in MuJoCo, one control step at a time (same interface as
+    :class:`dampest_ros.core.simulate.Simulator`).
+
+    Thrusters and the hidden thruster effects are computed here and applied as one body
+    wrench (six actuators), held over the control step; buoyancy acts up at r_b; MuJoCo
+    integrates the rigid body with its fluid forces (RK4, ``substeps`` per control step).
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        Needs a ``geometry:`` block.
+    effects : Effects, optional
+        Only :data:`SUPPORTED_EFFECTS`; the others raise ConfigError.
+    dt : float
+        Control and logging step (s).
+    position, quaternion : ndarray, optional
+        Initial NED position (default 5 m deep) and FRD → NED attitude [w, x, y, z].
+    record : bool
+        Keep the ground truth of every step for :meth:`trajectory`.
+    substeps : int, optional
+        MuJoCo steps per control step (default: steps of at most :data:`MAX_STEP`).
+    """
+
+    def __init__(self, vehicle: Vehicle, effects: Effects | None = None, dt: float = 0.02,
+                 position: FloatArray | None = None, quaternion: FloatArray | None = None,
+                 record: bool = True, substeps: int | None = None) -> None:
+        import mujoco
+
+        if not np.isfinite(dt) or dt <= 0:
+            raise ConfigError("dt", f"must be > 0, got {dt}")
+        # MuJoCo steps of at most MAX_STEP: its RK4 must stay stable under the stiffest
+        # fluid damping (a slender body's roll damping grows with the pitch rate: ‖c ⊙ ω‖)
+        substeps = max(1, math.ceil(dt / MAX_STEP - 1e-9)) if substeps is None else substeps
+        if substeps < 1:
+            raise ConfigError("substeps", f"must be ≥ 1, got {substeps}")
+        self.nominal = vehicle
+        self.effects = effects if effects is not None else Effects()
+        refused = sorted(set(self.effects.as_dict()) - set(SUPPORTED_EFFECTS))
+        if refused:
+            raise ConfigError("effects", f"{', '.join(refused)}: not available on the mujoco "
+                              "backend (its fluid model sets the hydrodynamics); supported: "
+                              f"{', '.join(SUPPORTED_EFFECTS)}")
+        self._mj = mujoco
+        mujoco.set_mju_user_warning(_collect_warning)
+        b = vehicle.body
+        e = self.effects
+        body = replace(b, r_g=b.r_g + np.asarray(e.cg_offset),
+                       volume=b.volume + e.buoyancy_offset / (b.rho * b.gravity))
+        self.body = body
+        self.dt = float(dt)
+        self.substeps = int(substeps)
+        self.model = compile_model(body, geometry_of(vehicle), self.dt / self.substeps)
+        self.data = mujoco.MjData(self.model)
+        self._B = body.buoyancy
+        self._r_bg = (body.r_b - body.r_g).tolist()
+        self.plant = plant_vehicle(vehicle)
+        self._thr = vehicle.thrusters
+        self._deadzone = max(self._thr.deadzone, e.thruster_deadzone)
+        self._delay_steps = round(float(e.delay) / self.dt)
+        self._cmd_queue: deque[FloatArray] = deque(
+            [np.zeros(self._thr.count)] * self._delay_steps)
+        self._has_current = bool(np.any(e.current) or e.current_variation)
+        p0 = np.array([0.0, 0.0, 5.0]) if position is None else np.asarray(position, float)
+        q0 = np.array([1.0, 0.0, 0.0, 0.0]) if quaternion is None else np.asarray(quaternion,
+                                                                                   float)
+        self.data.qpos[:3] = p0
+        self.data.qpos[3:7] = q0 / np.linalg.norm(q0)
+        mujoco.mj_kinematics(self.model, self.data)
+        self.t = 0.0
+        self.rotor = np.zeros(self._thr.count)  # what the vehicle logs (undelayed)
+        self._rotor_phys = np.zeros(self._thr.count)
+        self._record = record
+        self._log: list[FloatArray] = []
+
+    # --- state access (the Simulator interface) ----------------------------------------
+
+    @property
+    def position(self) -> FloatArray:
+        """NED position of the body origin (m), shape (3,)."""
+        return np.array(self.data.qpos[:3])
+
+    @property
+    def quaternion(self) -> FloatArray:
+        """Attitude [w, x, y, z], FRD → NED, shape (4,)."""
+        return np.array(self.data.qpos[3:7])
+
+    @property
+    def nu(self) -> FloatArray:
+        """Body velocity over ground (FRD), shape (6,)."""
+        R = quat_to_matrix(self.quaternion)
+        return np.concatenate([R.T @ self.data.qvel[:3], self.data.qvel[3:6]])
+
+    def current_ned(self, t: float) -> FloatArray:
+        """Water current in NED at time t (m/s), shape (3,)."""
+        e = self.effects
+        c = np.asarray(e.current, dtype=float)
+        if e.current_variation:
+            w = 2 * np.pi / e.current_period
+            c = c + e.current_variation * np.array([np.sin(w * t), np.cos(w * t), 0.0])
+        return c
+
+    def wrench_to_command(self, tau: FloatArray) -> FloatArray:
+        """Rotor speeds (rev/s) that produce τ with the nominal thrusters, saturated."""
+        return self._thr.speed_for_thrust(self._thr.allocate(tau))
+
+    # --- dynamics ----------------------------------------------------------------------
+
+    def _buoy(self, d: Any) -> None:
+        """Buoyancy B up (−z NED) at r_b, as MuJoCo's Cartesian force on the body: the force
+        at the CG plus the moment (R (r_b − r_g)) × [0, 0, −B], with R at the start of the
+        MuJoCo step (held over it, as MuJoCo holds every applied force); ``d.xmat`` must be
+        current (:func:`mujoco.mj_kinematics` after each step)."""
+        xm = d.xmat[1]
+        a0, a1, a2 = self._r_bg
+        # world components x, y of R (r_b − r_g); (a × [0, 0, −B]) = [−B a_y, B a_x, 0]
+        ax = xm[0] * a0 + xm[1] * a1 + xm[2] * a2
+        ay = xm[3] * a0 + xm[4] * a1 + xm[5] * a2
+        B = self._B
+        d.xfrc_applied[1, 2] = -B
+        d.xfrc_applied[1, 3] = -B * ay
+        d.xfrc_applied[1, 4] = B * ax
+
+    def step(self, rotor_command: FloatArray) -> None:
+        """Advance one control step ``dt`` with the rotor speed command held (rev/s)."""
+        mj, m, d = self._mj, self.model, self.data
+        e = self.effects
+        thr = self._thr
+        cmd = np.clip(np.asarray(rotor_command, dtype=float), -thr.n_max, thr.n_max)
+        if self._delay_steps:
+            self._cmd_queue.append(cmd)
+            phys_cmd = self._cmd_queue.popleft()
+        else:
+            phys_cmd = cmd
+        h = self.dt
+        # rotor speeds over the step (first-order lag, exact) and the mean thrust (Simpson)
+        n0, n_mid, n_end, n_mean = thr.lag_step(self.rotor, cmd, h)
+        p0, p_mid, p_end, _ = thr.lag_step(self._rotor_phys, phys_cmd, h)
+
+        def physical(n: FloatArray) -> FloatArray:
+            return thr.thrust(n, e.thrust_gain_error, self._deadzone)
+
+        f_phys = (physical(p0) + 4 * physical(p_mid) + physical(p_end)) / 6.0
+        tau_thr = thr.wrench(f_phys)
+        t = self.t
+        if self._has_current:
+            # the current is MuJoCo's wind (NED), held over the step at its midpoint value
+            m.opt.wind[:] = self.current_ned(t + 0.5 * h)
+        d.ctrl[:] = tau_thr
+        self._buoy(d)
+        if self._record:
+            mj.mj_forward(m, d)
+            R = d.xmat[1].reshape(3, 3)
+            nu = np.concatenate([R.T @ d.qvel[:3], d.qvel[3:6]])
+            # ν̇ = [Rᵀ a − ω × v, ω̇] from the NED acceleration of the origin
+            nu_dot = np.concatenate([R.T @ d.qacc[:3] - np.cross(nu[3:], nu[:3]),
+                                     d.qacc[3:6]])
+            hydro = np.concatenate([R.T @ d.qfrc_fluid[:3], d.qfrc_fluid[3:6]])
+            f = thr.thrust
+            thrust_mean = (f(n0) + 4 * f(n_mid) + f(n_end)) / 6.0
+            self._log.append(np.concatenate([[t], d.qpos[:7], nu, nu_dot, tau_thr, n_mean,
+                                             thrust_mean, self.current_ned(t), hydro]))
+        for k in range(self.substeps):
+            if k:
+                self._buoy(d)
+            mj.mj_step(m, d)
+            mj.mj_kinematics(m, d)
+        if _WARNINGS or not np.all(np.isfinite(d.qvel)):
+            text = _WARNINGS[-1] if _WARNINGS else "non-finite velocity"
+            _WARNINGS.clear()
+            raise PlantDivergedError(f"MuJoCo's integration became unstable at t = {t:.2f} s "
+                                f"({text.strip()}); try a shorter --dt or gentler excitation")
+        self.rotor = n_end
+        self._rotor_phys = p_end
+        self.t = t + h
+
+    def take_log(self, keep: int = 1) -> Trajectory:
+        """The steps recorded so far, then forget all but the last ``keep`` (streaming)."""
+        traj = self.trajectory()
+        self._log = self._log[-keep:] if keep > 0 else []
+        return traj
+
+    def trajectory(self) -> Trajectory:
+        """Ground truth of every recorded step, with MuJoCo's fluid wrench as ``hydro``."""
+        nt = self._thr.count
+        log = np.array(self._log) if self._log else np.zeros((0, 26 + 2 * nt + 3 + 6))
+        cols = np.cumsum([1, 3, 4, 6, 6, 6, nt, nt, 3])
+        t, pos, quat, nu, nu_dot, tau, rotor, thrust, cur, hydro = np.split(log, cols, axis=1)
+        return Trajectory(t=t[:, 0], position=pos, quaternion=quat, nu=nu, nu_dot=nu_dot,
+                          tau=tau, rotor_speed=rotor, thrust=thrust, current=cur,
+                          memory=np.zeros((len(t), 0)), thruster_names=self._thr.names,
+                          hydro=hydro)

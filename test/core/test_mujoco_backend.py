@@ -1,0 +1,165 @@
+"""MuJoCo backend (dampest_ros.core.mujoco_backend): what MuJoCo's fluid model applies,
+measured, and the faithful vehicle description of the two presets."""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import pytest
+
+from dampest_ros.core.batch import target
+from dampest_ros.core.excitation import make_excitation
+from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.mujoco_backend import (
+    Geometry,
+    MujocoSimulator,
+    compile_model,
+    plant_added_mass,
+    plant_vehicle,
+)
+from dampest_ros.core.rigid_body import AddedMassTerms, ConfigError, coriolis_force
+from dampest_ros.core.samples import Samples
+from dampest_ros.core.simulate import Effects, run
+from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.io.yaml_io import load_vehicle
+
+mujoco = pytest.importorskip("mujoco")
+
+PRESETS = ("bluerov2_heavy_mujoco", "torpedo_auv")
+
+
+def _quiet(v: Vehicle, coef: tuple[float, ...] = (0, 0, 0, 0, 0), viscosity: float = 0.0
+           ) -> Vehicle:
+    """The vehicle with every geom's drag and lift coefficients replaced."""
+    extra = copy.deepcopy(v.extra)
+    extra["geometry"]["viscosity"] = viscosity
+    extra["geometry"]["fluidcoef"] = list(coef)
+    for g in extra["geometry"]["geoms"]:
+        g.pop("fluidcoef", None)
+    return replace(v, extra=extra)
+
+
+def _fluid(sim: MujocoSimulator, nu: np.ndarray) -> np.ndarray:
+    """MuJoCo's fluid wrench at body velocity ν (FRD), level attitude, body frame."""
+    d = sim.data
+    d.qvel[:3], d.qvel[3:] = nu[:3], nu[3:]
+    mujoco.mj_forward(sim.model, d)
+    return np.array(d.qfrc_fluid)
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_presets_carry_the_added_mass_mujoco_applies(name: str) -> None:
+    v = load_vehicle(name)
+    geo = Geometry.from_dict(v.extra["geometry"])
+    M_A = plant_added_mass(compile_model(v.body, geo, 0.005), v.body.rho)
+    assert np.allclose(v.body.added_mass, M_A, rtol=1e-5, atol=1e-5 * np.abs(M_A).max())
+    assert v.body.added_mass_terms == AddedMassTerms(inertial=False)
+    assert np.allclose(plant_vehicle(v).body.added_mass, M_A)
+
+
+def test_no_inertial_added_mass_a_step_force_sees_m_rb() -> None:
+    v = load_vehicle("torpedo_auv")
+    sim = MujocoSimulator(_quiet(v), dt=0.01)
+    sim.data.qfrc_applied[:] = [10.0, 0, 0, 0, 0, 0]
+    mujoco.mj_forward(sim.model, sim.data)
+    # M_RB ν̇ = [F, 0, W, 0, 0, 0] (gravity at r_g below the origin: no moment when level);
+    # with the inertial added mass it would be (M_RB + M_A) ν̇
+    wrench = np.array([10.0, 0, v.body.weight, 0, 0, 0])
+    assert np.allclose(sim.data.qacc, np.linalg.solve(v.body.M_RB, wrench), rtol=1e-9)
+    assert not np.allclose(sim.data.qacc, np.linalg.solve(v.body.M, wrench), rtol=1e-3)
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_velocity_terms_are_fossens_coriolis_of_the_composite_added_mass(name: str) -> None:
+    """Fins and housings off the origin, rotated: Σ per-geom forces = −C_A(ν)ν of M_A."""
+    v = load_vehicle(name)
+    sim = MujocoSimulator(_quiet(v), dt=0.01)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        nu = rng.normal(0, [0.5, 0.5, 0.5, 0.8, 0.8, 0.8])
+        expected = -coriolis_force(v.body.added_mass, nu)
+        assert np.allclose(_fluid(sim, nu), expected, rtol=1e-4, atol=1e-6)
+
+
+def test_drag_uses_the_euclidean_speed() -> None:
+    """A sphere (projected area the same in every direction) with blunt drag only:
+    X(u, v) = −ρ A C ‖v‖ u, so adding a sway speed equal to u multiplies X by √2."""
+    v = load_vehicle("bluerov2_heavy_mujoco")
+    sphere = {"geometry": {"geoms": [{"name": "ball", "size": [0.2, 0.2, 0.2]}]}}
+    sim = MujocoSimulator(_quiet(replace(v, extra=sphere), (0.5, 0, 0, 0, 0)))
+    x_alone = _fluid(sim, np.array([0.5, 0, 0, 0, 0, 0]))[0]
+    x_with_sway = _fluid(sim, np.array([0.5, 0.5, 0, 0, 0, 0]))[0]
+    assert x_alone == pytest.approx(-v.body.rho * np.pi * 0.2**2 * 0.5 * 0.5 * 0.5, rel=1e-9)
+    assert x_with_sway / x_alone == pytest.approx(np.sqrt(2.0), rel=1e-9)
+
+
+def test_no_buoyancy_from_the_fluid_model_and_the_plant_buoys() -> None:
+    v = load_vehicle("torpedo_auv")
+    sim = MujocoSimulator(_quiet(v), dt=0.02)
+    mujoco.mj_forward(sim.model, sim.data)
+    assert np.allclose(sim.data.qfrc_fluid, 0.0)
+    # W − B = 33.0 · 9.81 − 1000 · 9.81 · 0.03351 < 0: lighter than water, rises (−z NED)
+    # with ẇ = (W − B) / m (B is applied at r_b; the fluid model adds none)
+    for _ in range(25):
+        sim.step(np.zeros(v.thrusters.count))
+    net = v.body.weight - v.body.buoyancy
+    assert sim.nu[2] == pytest.approx(net / v.body.mass * 0.5, rel=1e-9)
+
+
+def _samples(traj: Any) -> Samples:
+    R = quat_to_matrix(traj.quaternion)
+    n = len(traj.t)
+    return Samples(t=traj.t, nu=traj.nu, nu_dot=traj.nu_dot, tau=traj.tau,
+                   euler=euler_from_matrix(R), depth=traj.position[:, 2],
+                   segment=np.zeros(n, dtype=np.int64))
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_faithful_description_target_equals_the_true_fluid_wrench(name: str) -> None:
+    """y = τ − M_RB ν̇ − C_RB ν − C_A ν − g(η) is what remains of the water's wrench
+    once its added-mass velocity terms are taken out: −hydro − C_A(ν)ν, to 1e-9."""
+    v = load_vehicle(name)
+    traj = run(v, make_excitation("B", v, 20.0, seed=2), dt=0.02, backend="mujoco")
+    assert traj.hydro is not None and np.abs(traj.hydro).max() > 1.0
+    y = target(_samples(traj), v.body)
+    expected = -traj.hydro - coriolis_force(v.body.added_mass, traj.nu)
+    assert np.abs(y - expected).max() < 1e-9 * max(1.0, float(np.abs(expected).max()))
+
+
+def test_current_is_mujocos_wind() -> None:
+    v = load_vehicle("bluerov2_heavy_mujoco")
+    drift = MujocoSimulator(v, Effects(current=(0.3, -0.1, 0.05)))
+    still = MujocoSimulator(v)
+    for _ in range(10):
+        drift.step(drift.wrench_to_command(np.array([20.0, 0, 0, 0, 0, 1.0])))
+    # the same state, still water, moving at the velocity relative to the water instead
+    still.data.qpos[:] = drift.data.qpos
+    still.data.qvel[:] = drift.data.qvel
+    still.data.qvel[:3] -= [0.3, -0.1, 0.05]
+    mujoco.mj_forward(still.model, still.data)
+    mujoco.mj_forward(drift.model, drift.data)
+    assert np.allclose(drift.data.qfrc_fluid, still.data.qfrc_fluid, rtol=1e-9, atol=1e-12)
+    traj = drift.trajectory()
+    assert np.allclose(traj.current, [0.3, -0.1, 0.05])
+
+
+def test_effects_of_the_fluid_model_are_refused() -> None:
+    v = load_vehicle("torpedo_auv")
+    with pytest.raises(ConfigError, match="memory: not available on the mujoco backend"):
+        MujocoSimulator(v, Effects(memory=({"dof": "u", "rate": 1.0, "c": 1.0},)))
+
+
+def test_bad_geometry_is_named() -> None:
+    v = load_vehicle("bluerov2_heavy")
+    with pytest.raises(ConfigError, match="no geometry: block"):
+        MujocoSimulator(v)
+    for geo, field in (({"geoms": [{"size": [0.1, -0.2, 0.1]}]}, r"geoms\[0\].size"),
+                       ({"geoms": [{"size": [0.1, 0.2]}]}, r"geoms\[0\].size"),
+                       ({"geoms": []}, "geometry.geoms"),
+                       ({"geoms": [{"size": [1, 1, 1]}], "viscosity": -1}, "viscosity"),
+                       ({"geoms": [{"size": [1, 1, 1], "mass": 3}]}, r"geoms\[0\]")):
+        with pytest.raises(ConfigError, match=field):
+            MujocoSimulator(replace(v, extra={"geometry": geo}))
