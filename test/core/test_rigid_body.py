@@ -283,3 +283,51 @@ def test_non_positive_or_non_numbers_rejected(value: Any) -> None:
     with pytest.raises(ConfigError) as info:
         RigidBody(mass=value, inertia=np.eye(3))
     assert info.value.field == "mass"
+
+
+# --- added-mass switches -------------------------------------------------------------------
+
+def _body(terms: dict[str, bool] | None = None) -> RigidBody:
+    d: dict[str, object] = {"mass": 30.0, "inertia": [1.0, 1.2, 1.5], "volume": 0.03,
+                            "rho": 1000.0,
+                            "added_mass": [5.0, 12.0, 14.0, 0.2, 0.9, 0.8]}
+    if terms is not None:
+        d["added_mass_terms"] = terms
+    return RigidBody.from_dict(d)
+
+
+def test_added_mass_switches_select_the_acting_terms() -> None:
+    nu = np.array([[0.8, -0.3, 0.2, 0.1, -0.4, 0.5]])
+    nu_dot = np.array([[0.1, 0.2, -0.3, 0.4, 0.0, -0.1]])
+    full = _body()
+    M_A = full.added_mass
+    C_A = coriolis_force(M_A, nu)
+    munk = np.zeros(6)
+    munk[3:] = np.cross(nu[0, :3], M_A[:3, :3] @ nu[0, :3])
+    # N_munk = (Y_v̇ − X_u̇) u v for a diagonal M_A
+    assert munk[5] == pytest.approx((12.0 - 5.0) * 0.8 * -0.3)
+    assert np.allclose(full.added_mass_force(nu, nu_dot), nu_dot @ M_A.T + C_A)
+    no_munk = _body({"munk": False})
+    assert np.allclose(no_munk.added_mass_force(nu, nu_dot), nu_dot @ M_A.T + C_A - munk)
+    vel_only = _body({"inertial": False})
+    assert np.allclose(vel_only.added_mass_force(nu, nu_dot), C_A)
+    assert np.allclose(vel_only.M_inertial, vel_only.M_RB)
+    none = _body({"inertial": False, "coriolis": False, "munk": False})
+    assert np.allclose(none.added_mass_force(nu, nu_dot), 0.0)
+    assert np.allclose(none.coriolis_force(nu), coriolis_force(none.M_RB, nu))
+
+
+@pytest.mark.parametrize(("terms", "match"), [
+    ({"coriolis": False}, "munk: true needs coriolis"),
+    ({"inertial": "yes"}, "added_mass_terms.inertial: must be true or false"),
+    ({"lift": True}, "unknown key"),
+])
+def test_contradictory_switches_are_refused(terms: dict[str, object], match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        _body(terms)  # type: ignore[arg-type]
+
+
+def test_switches_on_a_zero_added_mass_are_refused() -> None:
+    with pytest.raises(ConfigError, match="inertial, coriolis, munk set true but added_mass"):
+        RigidBody.from_dict({"mass": 1.0, "inertia": [1, 1, 1],
+                             "added_mass_terms": {"inertial": True}})
