@@ -234,7 +234,9 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
                  fit: Fit, prior: Values | None = None, truth: Values | None = None,
                  title: str = "", *, source: str = "", cutoff: float = 2.0,
                  tau_hold: str = "linear", force_seconds: float = 60.0,
-                 free_run_seconds: float = 120.0) -> Path:
+                 free_run_seconds: float = 120.0,
+                 heldout: Mapping[str, FloatArray] | None = None,
+                 heldout_note: str = "") -> Path:
     """Write ``index.html`` and its PNG figures for one identification.
 
     Parameters
@@ -266,6 +268,11 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
     force_seconds, free_run_seconds : float
         Length of the force plot and of the free run (s), from the start of the longest
         segment.
+    heldout : mapping of str to ndarray, each shape (6,), optional
+        :func:`dampest_ros.core.validate.metrics` of the damping force on data the fit did
+        not use (``nse`` is shown as R², ``rmse`` in N and N·m).
+    heldout_note : str
+        What was held out, in words.
 
     Returns
     -------
@@ -402,6 +409,7 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
         f'<p class="note">First {min(force_seconds, duration):.0f} s of the longest '
         "segment:</p>",
         f'<img src="{figs["force"]}" alt="measured vs predicted force">',
+        *_heldout_section(heldout, heldout_note),
         "<h2>Residuals</h2>",
         f'<img src="{figs["spectrum"]}" alt="residual spectrum">',
         f'<img src="{figs["acf"]}" alt="residual autocorrelation">',
@@ -421,6 +429,19 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
     index = out / "index.html"
     index.write_text("\n".join(parts), encoding="utf-8")
     return index
+
+
+def _heldout_section(scores: Mapping[str, FloatArray] | None, note: str) -> list[str]:
+    """The held-out table (R² and RMSE of the damping force per DOF), or nothing."""
+    if scores is None:
+        return []
+    rows = [[f"{FORCE_NAMES[i]} ({FORCE_UNITS[i]})", _num(scores["nse"][i], 5),
+             _num(scores["rmse"][i])] for i in range(6)]
+    return ["<h2>Held-out data</h2>",
+            f'<p class="note">Scored on {html.escape(note or "data the fit did not use")}: '
+            "y = τ − M ν̇ − C(ν)ν − g(η) against the model's D(ν)ν, low-passed as in the fit; "
+            "R² = 1 − Σr²/Σ(y − ȳ)².</p>",
+            _table(["DOF", "held-out R²", "held-out RMSE"], rows)]
 
 
 # --- online identification ------------------------------------------------------------------

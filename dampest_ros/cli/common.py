@@ -10,13 +10,15 @@ from pathlib import Path
 
 import numpy as np
 
+from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.preprocess import DataError, PreprocessConfig, preprocess
-from dampest_ros.core.rigid_body import DOF_NAMES
+from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import profile_delay
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import BagSource
-from dampest_ros.io.csv import load_column_map, read_csv, samples_from_columns
+from dampest_ros.io.csv import is_csv, load_column_map, read_log
+from dampest_ros.io.yaml_io import ModelFile, load_model
 
 #: Topic roles and their default names (DESIGN.md §3).
 DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
@@ -67,11 +69,15 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p} does not exist")
-    if p.is_file() and p.suffix.lower() == ".csv":
+    if p.is_file() and is_csv(p):
         cmap = load_column_map(args.columns) if getattr(args, "columns", None) else None
-        return samples_from_columns(read_csv(p, cmap), max_gap=args.max_gap)
+        samples, notes = read_log(p, vehicle.thrusters, vehicle.body.gravity, cmap,
+                                  max_gap=args.max_gap)
+        for note in notes:
+            print(f"{p.name}: {note}", file=sys.stderr)
+        return samples
     if not p.is_dir():
-        raise DataError(f"{p}: expected a rosbag2 directory or a .csv file")
+        raise DataError(f"{p}: expected a rosbag2 directory or a .csv / .csv.gz file")
     topics = {role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS}
     # windows are read as the preprocessing needs them: memory stays flat with bag length
     rec = BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),
@@ -92,6 +98,120 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
         samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
                              replace(cfg, delay=delay), topics)
     return samples
+
+
+def add_window_options(p: argparse.ArgumentParser) -> None:
+    """--start, --end: the part of the log to use."""
+    p.add_argument("--start", type=float, metavar="S",
+                   help="use the log from S seconds after its first sample (the first "
+                        "synchronised sample of a bag, the first row of a CSV; default: 0)")
+    p.add_argument("--end", type=float, metavar="E",
+                   help="use the log up to E seconds after its first sample (default: its end)")
+
+
+def cut(samples: Samples, args: argparse.Namespace) -> Samples:
+    """The samples between ``--start`` and ``--end`` (seconds from the first sample).
+
+    Raises
+    ------
+    ConfigError
+        Naming the option: not finite, start ≥ end, or beyond the log.
+    """
+    start, end = getattr(args, "start", None), getattr(args, "end", None)
+    if start is None and end is None:
+        return samples
+    t0, span = float(samples.t[0]), float(samples.t[-1] - samples.t[0])
+    tol = 0.5 / samples.rate if samples.rate > 0 else 1e-9
+    where = f"the log spans 0 … {span:.2f} s from its first sample"
+    for name, value in (("--start", start), ("--end", end)):
+        if value is not None and not np.isfinite(value):
+            raise ConfigError(name, f"must be a number of seconds, got {value}")
+    if start is not None and not 0 <= start < span:
+        raise ConfigError("--start", f"{start:g} s is beyond the log ({where})")
+    if end is not None and not 0 < end <= span + tol:
+        raise ConfigError("--end", f"{end:g} s is beyond the log ({where})")
+    if start is not None and end is not None and start >= end:
+        raise ConfigError("--start", f"{start:g} s is not before --end {end:g} s")
+    lo = t0 + (start or 0.0) - 1e-9
+    hi = t0 + end + 1e-9 if end is not None else np.inf
+    part = samples.take((samples.t >= lo) & (samples.t <= hi))
+    if len(part) < 2:
+        raise ConfigError("--start" if start is not None else "--end",
+                          f"--start/--end keep {len(part)} sample(s) ({where})")
+    return part
+
+
+#: Shortest stretch of data (s) a fit may be left with by ``--holdout``.
+MIN_FIT_SECONDS = 10.0
+
+
+def holdout_seconds(text: str, span: float) -> float:
+    """Seconds held out by ``--holdout``: a fraction ≤ 1 of ``span`` (s), or seconds (a
+    number > 1, or ``120s``)."""
+    s = str(text).strip().lower()
+    seconds = s.endswith("s")
+    try:
+        x = float(s[:-1] if seconds else s)
+    except ValueError:
+        raise ConfigError("--holdout", f"must be a fraction of the time (0.3) or seconds (120s),"
+                          f" got {text!r}") from None
+    if not np.isfinite(x) or x <= 0:
+        raise ConfigError("--holdout", f"must be > 0, got {text!r}")
+    return x if seconds or x > 1 else x * span
+
+
+def split_holdout(samples: Samples, text: str) -> tuple[Samples, Samples]:
+    """(fit, held out): the last ``--holdout`` of the time held out (:func:`holdout_seconds`).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``--holdout``: not positive, beyond the log, no held-out sample, or less than
+        :data:`MIN_FIT_SECONDS` of data left to fit.
+    """
+    span = float(samples.t[-1] - samples.t[0])
+    h = holdout_seconds(text, span)
+    if h >= span:
+        raise ConfigError("--holdout", f"{h:.4g} s is beyond the log, which spans {span:.2f} s")
+    held = samples.t > samples.t[-1] - h
+    rest = samples.take(~held)
+    fit_seconds = len(rest) / samples.rate if samples.rate > 0 else 0.0
+    if fit_seconds < MIN_FIT_SECONDS:
+        raise ConfigError("--holdout", f"holding out {h:.4g} s leaves {fit_seconds:.1f} s to "
+                          f"fit; at least {MIN_FIT_SECONDS:g} s are needed")
+    if held.sum() < 2:
+        raise ConfigError("--holdout", f"{h:.4g} s holds out {int(held.sum())} sample(s); "
+                          "hold out more")
+    return rest, samples.take(held)
+
+
+def believed_body(vehicle: Vehicle, mf: ModelFile) -> RigidBody:
+    """The vehicle's rigid body with the model file's M (added mass = M − M_RB), its
+    added-mass switches kept."""
+    b = vehicle.body
+    added = mf.M - b.M_RB
+    if np.allclose(mf.M, b.M, rtol=1e-9, atol=1e-9):
+        return b
+    try:
+        return RigidBody(b.mass, b.inertia, b.r_g, b.r_b, b.volume, 0.5 * (added + added.T),
+                         b.rho, b.gravity, b.added_mass_terms)
+    except ConfigError as exc:
+        raise ConfigError("model.M", f"M − M_RB of the vehicle is not a valid added mass "
+                                     f"({exc.reason}); is --vehicle the model's vehicle?"
+                          ) from None
+
+
+def load_model_for(path: str, vehicle: Vehicle) -> tuple[ModelFile, DampingModel, RigidBody]:
+    """A model file with its term structure (the vehicle preset's when the file has none and
+    the same parameters) and the body it implies (:func:`believed_body`)."""
+    mf = load_model(path)
+    model = mf.damping
+    if model is None:
+        if mf.parameter_names != vehicle.damping.parameter_names:
+            raise ConfigError("model.terms", f"{path} has no term structure and its "
+                              "parameters differ from the vehicle preset's")
+        model = vehicle.damping
+    return mf, model, believed_body(vehicle, mf)
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:

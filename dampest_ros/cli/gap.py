@@ -21,13 +21,18 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from dampest_ros.cli.common import add_preprocess_options, add_topic_options, load_samples, table
+from dampest_ros.cli.common import (
+    add_preprocess_options,
+    add_topic_options,
+    load_model_for,
+    load_samples,
+    table,
+)
 from dampest_ros.core import gap
 from dampest_ros.core.measurements import JointSeries
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.io.bag import read_bag
-from dampest_ros.io.yaml_io import ModelFile, load_model, load_vehicle, save_model
+from dampest_ros.io.yaml_io import ModelFile, load_vehicle, save_model
 
 EXAMPLE = ("example: dampest gap bags/pool_run --model sim_model.yaml --vehicle "
            "config/vehicles/bluerov2_heavy.yaml --report gap_report")
@@ -71,21 +76,6 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.set_defaults(run=run)
 
 
-def believed_body(vehicle: Vehicle, mf: ModelFile) -> RigidBody:
-    """The vehicle's rigid body with the model file's M (added mass = M − M_RB)."""
-    b = vehicle.body
-    added = mf.M - b.M_RB
-    if np.allclose(mf.M, b.M, rtol=1e-9, atol=1e-9):
-        return b
-    try:
-        return RigidBody(b.mass, b.inertia, b.r_g, b.r_b, b.volume, 0.5 * (added + added.T),
-                         b.rho, b.gravity)
-    except ConfigError as exc:
-        raise ConfigError("model.M", f"M − M_RB of the vehicle is not a valid added mass "
-                                     f"({exc.reason}); is --vehicle the model's vehicle?"
-                          ) from None
-
-
 def _joints(path: str, args: argparse.Namespace) -> JointSeries | None:
     """The logged thruster state of a bag on the samples' clock, or None for CSV input."""
     p = Path(path)
@@ -103,14 +93,7 @@ def run(args: argparse.Namespace) -> int:
     """Load, compare, localise, name the missing effects, print and write the report."""
     t0 = time.perf_counter()
     vehicle = load_vehicle(args.vehicle)
-    mf = load_model(args.model)
-    model = mf.damping
-    if model is None:
-        if mf.parameter_names != vehicle.damping.parameter_names:
-            raise ConfigError("model.terms", f"{args.model} has no term structure and its "
-                              "parameters differ from the vehicle preset's")
-        model = vehicle.damping
-    body = believed_body(vehicle, mf)
+    mf, model, body = load_model_for(args.model, vehicle)
     samples = load_samples(args.input, vehicle, args)
     joints = _joints(args.input, args)
     cands = gap.library([c.strip() for c in str(args.candidates).split(",") if c.strip()])

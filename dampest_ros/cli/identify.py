@@ -21,7 +21,10 @@ from dampest_ros.cli.common import (
     DEFAULT_TOPICS,
     add_preprocess_options,
     add_topic_options,
+    add_window_options,
+    cut,
     load_samples,
+    split_holdout,
     table,
     term_list,
 )
@@ -32,9 +35,10 @@ from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.frequency import memory_impedance
 from dampest_ros.core.online import OnlineConfig, OnlinePreprocessor
 from dampest_ros.core.preprocess import DataError
-from dampest_ros.core.rigid_body import DOF_NAMES, RigidBody
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import Selection, select_terms
+from dampest_ros.core.validate import metrics, predicted_force
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
@@ -66,13 +70,23 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="rls: forgetting factor λ in [0.9, 1] (default: 1, every sample "
                         "weighs the same)")
     p.add_argument("--select", action="store_true",
-                   help="choose extra terms by forward BIC selection: sway-yaw, heave-pitch "
-                        "and lift cross-coupling, fluid memory per DOF (rate estimated)")
+                   help="search the damping library (linear, cross-flow v|r|, bilinear u·w "
+                        "lift, speed-magnitude u‖v‖ and p‖ω‖ terms in every force row, fluid "
+                        "memory per DOF with its rate) by blocked cross-validation and BIC, "
+                        "on top of the preset's terms, and fit the sparse model found")
     p.add_argument("--prior", help="model YAML whose theta/theta_std are the MAP prior "
                                    "(rls: the RLS prior)")
     p.add_argument("--cutoff", type=float, default=2.0,
                    help="low-pass (Hz) applied to the regression (default: 2)")
-    p.add_argument("--columns", help="YAML column map for CSV input (their name: our name)")
+    p.add_argument("--columns", help="YAML column map for CSV input (their name: our name); "
+                                     "'ax: acc_x' or 'ax: ax', 'wx: gyro_x' or 'wx: wx' settle "
+                                     "what ax..az and wx..wz are (see below)")
+    add_window_options(p)
+    p.add_argument("--holdout", metavar="FRACTION|TIME",
+                   help="fit on the rest and score on the last part of the log: a fraction "
+                        "of the time (0.3 = the last 30 %%) or seconds (120s, or a number > 1); "
+                        "prints and reports the held-out R² and RMSE of the damping force "
+                        "per DOF")
     p.add_argument("--out", help="write the model YAML (a ROS 2 parameters file) here")
     p.add_argument("--report", metavar="DIR",
                    help="write an HTML report with plots (index.html + PNG) to DIR")
@@ -90,7 +104,10 @@ def run(args: argparse.Namespace) -> int:
     if args.method == "rls":
         return run_rls(args, vehicle)
     model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
-    samples = load_samples(args.input, vehicle, args)
+    samples = cut(load_samples(args.input, vehicle, args), args)
+    held = None
+    if args.holdout is not None:
+        samples, held = split_holdout(samples, args.holdout)
     if args.select:
         selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
         print(selection_table(selection))
@@ -120,8 +137,14 @@ def run(args: argparse.Namespace) -> int:
                   float(result.cv_rmse[i])) for i in range(6)]))
     for name, why in result.flags.items():
         print(f"not identified: {name}: {why}")
+    scores = None
+    if held is not None:
+        scores = heldout_scores(held, model, vehicle.body, result.theta, args.cutoff)
+        print()
+        print(heldout_text(held, scores))
     if args.out:
-        write_model(Path(args.out), result, model, vehicle.body.M, source=str(args.input))
+        write_model(Path(args.out), result, model, vehicle.body.M, source=str(args.input),
+                    heldout=scores)
         print(f"wrote {args.out}")
     if args.report:
         truth = None
@@ -130,7 +153,8 @@ def run(args: argparse.Namespace) -> int:
             truth = dict(zip(tm.parameter_names, tm.theta, strict=True))
         page = write_report(args.report, samples, model, vehicle.body, result, prior=prior,
                             truth=truth, title=f"Damping of {vehicle.name}",
-                            source=str(args.input), cutoff=args.cutoff)
+                            source=str(args.input), cutoff=args.cutoff, heldout=scores,
+                            heldout_note=heldout_note(held) if held is not None else "")
         print(f"wrote {page}")
     return 0
 
@@ -142,7 +166,10 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     delay = str(args.delay).strip().lower()
     unsupported = [opt for opt, used in (("--select", args.select), ("--report", args.report),
                                          ("--delay", delay == "auto" or float(delay) != 0.0),
-                                         ("--columns", args.columns)) if used]
+                                         ("--columns", args.columns),
+                                         ("--start", args.start is not None),
+                                         ("--end", args.end is not None),
+                                         ("--holdout", args.holdout is not None)) if used]
     if unsupported:
         raise DataError(f"--method rls does not take {', '.join(unsupported)} (batch methods "
                         "only)")
@@ -192,12 +219,28 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
 
 
 def selection_table(selection: Selection) -> str:
-    """The forward-selection path: each added term with BIC, AIC and its error reduction."""
+    """The forward-selection path (each added term with BIC, AIC, its error reduction), the
+    held-out R² per DOF before and after, and the candidates left out with the reason."""
     rows = [(st.added, st.n_params, st.bic, st.aic,
              f"{st.err:.1%}" if st.err else "") for st in selection.steps]
     rates = "".join(f"\n{k} = {v:.4g} 1/s" for k, v in selection.rates.items())
-    return ("term selection (forward, BIC; a term must remove ≥ 10 % of its DOF's residual):\n"
-            + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates + "\n")
+    before, after = selection.cv_r2
+    r2 = ("held-out R² per DOF (5 contiguous time folds, each predicted from the others):\n"
+          + table(("dof", "base", "selected"), [(FORCE_NAMES[i], f"{before[i]:.4f}",
+                                                  f"{after[i]:.4f}") for i in range(6)]))
+    dropped = ""
+    if selection.dropped:
+        groups: dict[str, list[str]] = {}
+        for name, why in selection.dropped.items():
+            # one line per reason and column (the rows differ only in the force letter)
+            groups.setdefault(why.split(" (|corr|")[0].replace(name[0] + "_", "F_"),
+                              []).append(name)
+        dropped = "\nleft out of the search (numerically the same column as another):\n" + \
+            "\n".join(f"  {', '.join(names)}: {why}" for why, names in groups.items())
+    return ("term selection (forward over the damping library, blocked cross-validation and "
+            "BIC; a term must lower both):\n"
+            + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates
+            + "\n" + r2 + dropped + "\n")
 
 
 def memory_check(samples: Samples, model: DampingModel, body: RigidBody) -> str:
@@ -228,12 +271,40 @@ def report_table(result: Fit, prior: np.ndarray) -> str:
     return table(("parameter", "estimate", "std", "95% low", "95% high", "prior"), rows)
 
 
+def heldout_scores(held: Samples, model: DampingModel, body: RigidBody, theta: np.ndarray,
+                   cutoff: float) -> dict[str, np.ndarray]:
+    """:func:`~dampest_ros.core.validate.metrics` of the damping force on held-out samples:
+    y = τ − M ν̇ − C(ν)ν − g(η) against the model's D(ν)ν, low-passed as in the fit."""
+    y, y_hat = predicted_force(held, model, body, theta, cutoff)
+    return metrics(y, y_hat)
+
+
+def heldout_note(held: Samples) -> str:
+    """What was held out, in words."""
+    return (f"the last {held.t[-1] - held.t[0]:.1f} s of the log ({len(held)} samples), not "
+            "used by the fit")
+
+
+def heldout_text(held: Samples, scores: dict[str, np.ndarray]) -> str:
+    """The held-out table: R² (NSE) and RMSE of the damping force per DOF."""
+    units = ("N", "N", "N", "N·m", "N·m", "N·m")
+    return (f"held out: {heldout_note(held)}; damping force y = τ − M ν̇ − C(ν)ν − g(η) vs "
+            "the model's D(ν)ν:\n"
+            + table(("dof", "held-out R²", "held-out RMSE", "unit"),
+                    [(FORCE_NAMES[i], float(scores["nse"][i]), float(scores["rmse"][i]),
+                      units[i]) for i in range(6)]))
+
+
 def write_model(path: Path, result: Fit, model: DampingModel, M: np.ndarray,
-                source: str) -> None:
-    """Save a fit as the model YAML with its metrics and the unidentified parameters."""
+                source: str, heldout: dict[str, np.ndarray] | None = None) -> None:
+    """Save a fit as the model YAML with its metrics, the unidentified parameters and, with
+    a held-out part, its per-DOF R² and RMSE (``heldout_r2``, ``heldout_rmse``)."""
     unidentified = list(result.flags)
     ci = result.interval()
-    save_model(path, result.names, result.theta, result.std, M, damping=model, extra={
+    more = {} if heldout is None else {
+        "heldout_r2": [float(x) for x in heldout["nse"]],
+        "heldout_rmse": [float(x) for x in heldout["rmse"]]}
+    save_model(path, result.names, result.theta, result.std, M, damping=model, extra={**more,
         "source": source, "method": result.method, "samples": int(result.n),
         "ci95_low": [float(x) for x in ci[:, 0]], "ci95_high": [float(x) for x in ci[:, 1]],
         "nse": [float(x) for x in result.r2], "rmse": [float(x) for x in result.rmse],

@@ -1,5 +1,5 @@
-"""The ``dampest`` command: simulate, identify, inspect, export/import, record, replay,
-reindex, demo, live, gap.
+"""The ``dampest`` command: simulate, identify, validate, inspect, export/import, record,
+replay, reindex, demo, live, gap.
 
 Each sub-command lives in its own module with ``add_parser(subparsers)`` and ``run(args)``.
 """
@@ -21,12 +21,14 @@ from dampest_ros.cli import (
     reindex,
     replay,
     simulate,
+    validate,
 )
 from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.io.bag import BagError, MissingTopicError
 
-COMMANDS = (simulate, identify, gap, inspect, export, record, replay, reindex, demo, live)
+COMMANDS = (simulate, identify, validate, gap, inspect, export, record, replay, reindex, demo,
+            live)
 
 
 def build_parser() -> argparse.ArgumentParser:
