@@ -297,6 +297,47 @@ class FitOptions:
             raise ConfigError("method", f"unknown method {self.method!r}; use one of {METHODS}")
 
 
+def rank_solve(A: FloatArray, b: FloatArray, tol: float = 1e-10
+               ) -> tuple[FloatArray, NDArray[np.int64]]:
+    """Solve A x = b for a symmetric PSD A that may be singular, never raising.
+
+    Cholesky when A is clearly positive definite; otherwise a rank-revealing QR with column
+    pivoting: columns whose pivot |R_kk| falls below ``tol`` · |R_00| depend (to that
+    tolerance) on the columns chosen before them and are held at 0.
+
+    Parameters
+    ----------
+    A : ndarray, shape (p, p)
+        Normal-equation matrix, best with a unit diagonal (scale the columns first).
+    b : ndarray, shape (p,)
+    tol : float
+        Relative pivot tolerance (A is a Gram matrix: 1e-10 is a column condition of 1e5).
+
+    Returns
+    -------
+    x : ndarray, shape (p,)
+    dropped : ndarray of int
+        Indices of the columns held at 0, in the order QR found them dependent.
+    """
+    p = len(b)
+    x = np.zeros(p)
+    if p == 0:
+        return x, np.zeros(0, dtype=np.int64)
+    try:
+        c = linalg.cho_factor(A)
+        if np.min(np.abs(np.diag(c[0]))) ** 2 > tol * max(float(np.max(np.diag(A))), 1e-300):
+            return np.asarray(linalg.cho_solve(c, b), dtype=float), np.zeros(0, dtype=np.int64)
+    except (linalg.LinAlgError, ValueError):
+        pass
+    _, R, piv = linalg.qr(A, pivoting=True, mode="economic")
+    d = np.abs(np.diag(R))
+    rank = int(np.sum(d > tol * max(float(d[0]), 1e-300))) if np.isfinite(d).all() else 0
+    keep = np.sort(piv[:rank])
+    if rank:
+        x[keep] = linalg.lstsq(A[np.ix_(keep, keep)], b[keep])[0]
+    return x, np.asarray(piv[rank:], dtype=np.int64)
+
+
 def _solve(A: FloatArray, b: FloatArray, free: NDArray[np.bool_], fixed: FloatArray,
            lower: FloatArray | None = None) -> FloatArray:
     """Minimise θᵀAθ − 2bᵀθ over the free parameters, the others held at ``fixed``."""
@@ -308,7 +349,7 @@ def _solve(A: FloatArray, b: FloatArray, free: NDArray[np.bool_], fixed: FloatAr
     s = 1.0 / np.sqrt(np.maximum(np.diag(Af), 1e-300))
     As = Af * np.outer(s, s)  # column-scaled: well conditioned across units
     if lower is None or not np.isfinite(lower[free]).any():
-        theta[free] = s * linalg.solve(As, s * bf, assume_a="pos")
+        theta[free] = s * rank_solve(As, s * bf)[0]
         return theta
     # bounded: ‖Lᵀx − L⁻¹b‖² has the same minimiser as xᵀAx − 2bᵀx (A = L Lᵀ)
     L = linalg.cholesky(As, lower=True)

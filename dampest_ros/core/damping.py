@@ -11,6 +11,27 @@ finite-dimensional form of ∫ K(t−s) ν(s) ds with K(t) = Σ_m c_m e^{−λ_m
 
 All velocities are in Fossen's FRD body frame, relative to the water. Coefficients are stored
 positive when dissipative (force on the left-hand side is +D(ν)ν).
+
+Parameter names (SNAME style, ASCII; F is the force letter X..N, j, k velocity letters u..r).
+A single-entry coefficient in row F acts on the column ν_j through α(ν); the names are
+
+=========================  =====================  ==========  ============================
+family (:data:`FAMILIES`)  regressor of F          name        α text (``Alpha.parse``)
+=========================  =====================  ==========  ============================
+linear                     ν_j                     ``F_j``     ``1``       (``Y_r``)
+cross-flow (quadratic)     ν_j |ν_k|               ``F_jk``    ``|k|``     (``Y_vr``,
+                                                                           ``X_uu``)
+bilinear                   ν_j ν_k, j ≤ k          ``F_jxk``   ``k``       (``Z_uxw``: lift)
+speed magnitude            ν_j ‖(u, v, w)‖         ``F_jU``    ``|U|``     (``X_uU``)
+angular speed magnitude    ν_j ‖(p, q, r)‖         ``F_jW``    ``|W|``     (``K_pW``)
+=========================  =====================  ==========  ============================
+
+The bilinear name carries an ``x`` (times) so that it never equals the cross-flow name of the
+same letters (Y_{v|r|} is ``Y_vr``, Y_{v r} is ``Y_vxr``); ν_j ν_k and ν_k ν_j are one column,
+named with the letters in u..r order. A :class:`CrossSpec` without a name keeps the older
+label (α letters without bars, e.g. ``Z_wu`` for Z ← w u); :func:`library` always names its
+candidates as above, and a model file stores every name with its row, column and α text, so
+both forms read back unchanged.
 """
 
 from __future__ import annotations
@@ -46,8 +67,9 @@ def _dof(name: str | int, what: str = "dof") -> int:
 class Alpha:
     """A scalar function α(ν) of the body velocity, from a small library.
 
-    kinds: ``one`` (1), ``abs`` (|ν_i|), ``lin`` (ν_i), ``norm`` (‖[u, v, w]‖),
-    ``prod`` (ν_i ν_j), ``absprod`` (|ν_i ν_j|), ``absproj`` (|wᵀν| for a unit 6-vector w).
+    kinds: ``one`` (1), ``abs`` (|ν_i|), ``lin`` (ν_i), ``norm`` (‖[u, v, w]‖, m/s),
+    ``anorm`` (‖[p, q, r]‖, rad/s), ``prod`` (ν_i ν_j), ``absprod`` (|ν_i ν_j|),
+    ``absproj`` (|wᵀν| for a unit 6-vector w).
     """
 
     kind: str = "one"
@@ -66,6 +88,8 @@ class Alpha:
             return nu[:, self.i].copy()
         if k == "norm":
             return np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))
+        if k == "anorm":
+            return np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))
         if k == "prod":
             return nu[:, self.i] * nu[:, self.j]
         if k == "absprod":
@@ -90,18 +114,21 @@ class Alpha:
             return float(s[self.i] * s[self.j])
         if k == "norm":
             return float(s[:3].max())
+        if k == "anorm":
+            return float(s[3:].max())
         if k == "absproj":
             return float(s[np.abs(np.asarray(self.w)) > 0].max())
         raise ConfigError("alpha", f"unknown kind {k!r}")
 
     def label(self) -> str:
-        """Short text form, e.g. ``|r|``, ``u``, ``‖v‖``."""
+        """Short text form, e.g. ``|r|``, ``u``, ``|U|`` (‖v‖), ``|W|`` (‖ω‖)."""
         n = DOF_NAMES
         return {
             "one": "1",
             "abs": f"|{n[self.i]}|" if self.i >= 0 else "",
             "lin": n[self.i] if self.i >= 0 else "",
             "norm": "|U|",
+            "anorm": "|W|",
             "prod": f"{n[self.i]}{n[self.j]}" if self.i >= 0 else "",
             "absprod": f"|{n[self.i]}{n[self.j]}|" if self.i >= 0 else "",
             "absproj": "|w'nu|",
@@ -109,12 +136,14 @@ class Alpha:
 
     @classmethod
     def parse(cls, text: str) -> Alpha:
-        """Parse ``1``, ``|r|``, ``u``, ``|U|``, ``uv``, ``|uv|``."""
+        """Parse ``1``, ``|r|``, ``u``, ``|U|`` (‖v‖), ``|W|`` (‖ω‖), ``uv``, ``|uv|``."""
         t = text.replace(" ", "")
         if t in ("1", "", "one"):
             return cls("one")
         if t in ("|U|", "norm"):
             return cls("norm")
+        if t in ("|W|", "anorm"):
+            return cls("anorm")
         bars = t.startswith("|") and t.endswith("|")
         core = t.strip("|")
         idx = [_dof(c, "alpha") for c in core]
@@ -142,6 +171,7 @@ class AlphaBank:
         self.j = np.full(p, self._ONE)
         self.absolute = np.zeros(p, dtype=bool)
         self.norm = np.zeros(p, dtype=bool)
+        self.anorm = np.zeros(p, dtype=bool)
         self.W = np.zeros((6, p))
         self.proj = np.zeros(p, dtype=bool)
         for k, a in enumerate(alphas):
@@ -151,10 +181,12 @@ class AlphaBank:
                 self.j[k] = a.j
             self.absolute[k] = a.kind in ("abs", "absprod", "absproj")
             self.norm[k] = a.kind == "norm"
+            self.anorm[k] = a.kind == "anorm"
             if a.kind == "absproj":
                 self.proj[k] = True
                 self.W[:, k] = a.w
         self.any_norm = bool(self.norm.any())
+        self.any_anorm = bool(self.anorm.any())
         self.any_proj = bool(self.proj.any())
         self.any_abs = bool(self.absolute.any())
 
@@ -168,6 +200,9 @@ class AlphaBank:
         if self.any_norm:
             speed = np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))
             a = np.where(self.norm, speed[:, None], a)
+        if self.any_anorm:
+            turn = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))
+            a = np.where(self.anorm, turn[:, None], a)
         if self.any_abs:
             a = np.where(self.absolute, np.abs(a), a)
         return a
@@ -387,6 +422,77 @@ def cross_term(specs: Sequence[CrossSpec]) -> DampingTerm:
     bases = [Basis(s.label, _unit(s.row, s.col), s.alpha) for s in specs]
     return DampingTerm("cross", "coupling between degrees of freedom from asymmetric flow, "
                        "e.g. sway–yaw", bases)
+
+
+#: Named families of the term library (see the module docstring for their names).
+FAMILIES = ("linear", "crossflow", "bilinear", "norm")
+
+
+def library_name(row: int, col: int, alpha: Alpha) -> str:
+    """The library's name of a single-entry coefficient F ← ν_col α(ν) (module docstring).
+
+    Parameters
+    ----------
+    row, col : int
+        Force row 0..5 (X..N) and velocity column 0..5 (u..r).
+    alpha : Alpha
+        ``one``, ``abs``, ``lin``, ``norm`` or ``anorm``; others fall back to
+        :attr:`CrossSpec.label`.
+    """
+    f, n = FORCE_NAMES[row], DOF_NAMES
+    k = alpha.kind
+    if k == "one":
+        return f"{f}_{n[col]}"
+    if k == "abs":
+        return f"{f}_{n[col]}{n[alpha.i]}"
+    if k == "lin":
+        a, b = sorted((col, alpha.i))
+        return f"{f}_{n[a]}x{n[b]}"
+    if k == "norm":
+        return f"{f}_{n[col]}U"
+    if k == "anorm":
+        return f"{f}_{n[col]}W"
+    return CrossSpec(row, col, alpha).label
+
+
+def library(families: Sequence[str] = FAMILIES, rows: Iterable[str | int] = DOF_NAMES
+            ) -> list[CrossSpec]:
+    """Candidate coefficients of the named families, each a named :class:`CrossSpec`.
+
+    Per force row: ``linear`` ν_j (6), ``crossflow`` ν_j|ν_k| (36, the quadratic X_uu among
+    them), ``bilinear`` ν_j ν_k for j ≤ k (21, lift u·w, Magnus-like ω × v products),
+    ``norm`` ν_j ‖v‖ and ν_j ‖ω‖ (12). Every column appears once per row (ν_j ν_k and
+    ν_k ν_j are one). Ordered simplest first, which decides which of two numerically equal
+    columns a selection keeps.
+
+    Parameters
+    ----------
+    families : sequence of str
+        A subset of :data:`FAMILIES`.
+    rows : iterable of str or int
+        Force rows (X..N or 0..5).
+
+    Returns
+    -------
+    list of CrossSpec
+    """
+    unknown = set(families) - set(FAMILIES)
+    if unknown:
+        raise ConfigError("families", f"unknown {sorted(unknown)}; use some of {FAMILIES}")
+    alphas: list[tuple[int, Alpha]] = []
+    if "linear" in families:
+        alphas += [(j, Alpha("one")) for j in range(6)]
+    if "crossflow" in families:
+        alphas += [(j, Alpha("abs", k)) for j in range(6) for k in range(6)]
+    if "bilinear" in families:
+        alphas += [(j, Alpha("lin", k)) for j in range(6) for k in range(j, 6)]
+    if "norm" in families:
+        alphas += [(j, Alpha(kind)) for kind in ("norm", "anorm") for j in range(6)]
+    out = []
+    for r in rows:
+        i = _dof(r, "rows")
+        out += [CrossSpec(i, j, a, library_name(i, j, a)) for j, a in alphas]
+    return out
 
 
 def memory_term(dof_rates: Mapping[str | int, Sequence[float]]) -> DampingTerm:
@@ -634,7 +740,7 @@ class DampingModel:
                 lo[s] = 0.0
             else:
                 psd = [np.linalg.eigvalsh(0.5 * (b.B + b.B.T)).min() >= -1e-12 and
-                       b.alpha.kind in ("one", "abs", "absprod", "absproj", "norm")
+                       b.alpha.kind in ("one", "abs", "absprod", "absproj", "norm", "anorm")
                        for b in t.bases]
                 lo[s] = np.where(psd, 0.0, -np.inf)
         return lo

@@ -1,25 +1,38 @@
 """Term selection: which damping terms do the data support?
 
-Forward selection by the Bayesian information criterion over a library of candidate terms
-(cross-coupling coefficients and fluid-memory states), on top of a base model:
+The candidates are a library of named single-entry coefficients (:func:`damping.library`:
+linear ν_j, cross-flow ν_j|ν_k|, bilinear ν_j ν_k, speed magnitude ν_j‖v‖ and ν_j‖ω‖ in every
+force row) and fluid-memory states, on top of a base model whose terms are always kept:
 
 1. For each memory candidate DOF, its rate λ is found by a profile search: the regression is
    linear in the gain c for a fixed λ, so RSS(λ) = min_c RSS(c, λ) is minimised over log λ
    (staged nonlinear least squares).
-2. The normal equations of the base model plus every candidate are accumulated once; the fit
-   of any subset is then a sub-matrix solve, so trying a candidate costs no pass over data.
-3. Greedy: add the candidate that lowers BIC most, while it lowers it by more than
-   ``min_improvement`` (10: "very strong" evidence on the Kass–Raftery scale) and removes at
-   least ``min_err`` of its DOF's residual (error-reduction ratio).
+2. Every distinct regressor column of the library is one scalar feature g_k(ν) = α_k(ν) ν_j,
+   the same in every force row. The normal equations of the features (and memory states)
+   against the target of each row are accumulated once, per contiguous time fold
+   (:func:`batch.accumulate`), so fitting, scoring and cross-validating any subset is a
+   small matrix computation: trying a candidate costs no pass over data.
+3. Columns that are zero in the data, or numerically equal (up to scale) to a column before
+   them (|corr| > 1 − ``tol``; e.g. u|u| and u·u when u > 0 throughout, or u|u| and u‖v‖
+   when only u moves), are dropped with the reason.
+4. Greedy forward search over all rows at once: each step adds the candidate with the
+   largest blocked cross-validated gain (held-out RSS of its row over the folds, each fold
+   predicted from the others), provided it also lowers BIC by more than ``min_improvement``,
+   removes at least ``min_err`` of its row's residual, and is not (to ``tol``) a combination
+   of the columns already in its row; until no candidate qualifies or the model has
+   ``max_terms`` parameters.
 
 BIC = n_eff Σ_i log(RSS_i / N) + k log n_eff, with n_eff = 2 · cutoff · T the number of
-independent samples in the low-passed regression (DESIGN: parallel filtering).
+independent samples in the low-passed regression (DESIGN: parallel filtering). Each row's
+least squares is separate (a library coefficient acts on one row only), so neither BIC nor
+the path depends on per-DOF weights, nor on the prior's magnitudes, which it never sees.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,21 +40,27 @@ from scipy import optimize
 
 from dampest_ros.core.batch import NormalEquations, _solve, accumulate, iter_regression
 from dampest_ros.core.damping import (
+    FAMILIES,
+    Alpha,
+    Basis,
     CrossSpec,
     DampingModel,
     DampingTerm,
     cross_term,
     filter_memory,
+    library,
+    library_name,
     memory_term,
 )
 from dampest_ros.core.preprocess import zero_phase
-from dampest_ros.core.rigid_body import DOF_NAMES, RigidBody
+from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 
 FloatArray = NDArray[np.float64]
 
 #: Common couplings of a box- or torpedo-shaped vehicle: sway–yaw and heave–pitch damping
 #: cross terms and the surge–heave lift (Fossen 2011, §6.4; SNAME names, |x| as in X_uu).
+#: The gap search's cross candidates; selection searches the whole :func:`damping.library`.
 DEFAULT_CROSS = (
     {"row": "Y", "col": "v", "alpha": "|r|"}, {"row": "Y", "col": "r", "alpha": "|v|"},
     {"row": "N", "col": "v", "alpha": "|r|"}, {"row": "N", "col": "r", "alpha": "|v|"},
@@ -54,7 +73,8 @@ DEFAULT_CROSS = (
 @dataclass
 class SelectionStep:
     """One row of the selection table: the model after adding ``added``; ``err`` is the
-    error-reduction ratio, the share of its DOF's residual sum of squares it removed."""
+    error-reduction ratio, the share of its DOF's residual sum of squares it removed;
+    ``cv`` the held-out (blocked cross-validated) residual sum of squares per DOF."""
 
     added: str
     n_params: int
@@ -62,15 +82,32 @@ class SelectionStep:
     bic: float
     aic: float
     err: float
+    cv: FloatArray = field(default_factory=lambda: np.zeros(6))
 
 
 @dataclass
 class Selection:
-    """Result of :func:`select_terms`: the chosen model and the path that led to it."""
+    """Result of :func:`select_terms`: the chosen model and the path that led to it.
+
+    Attributes
+    ----------
+    dropped : dict
+        Candidate name → why it was not searched (zero, or numerically equal to another
+        column in these data).
+    tss : ndarray, shape (6,)
+        Σ y² per DOF of the low-passed target (held-out R² = 1 − cv / tss).
+    """
 
     model: DampingModel
     steps: list[SelectionStep] = field(default_factory=list)
     rates: dict[str, float] = field(default_factory=dict)
+    dropped: dict[str, str] = field(default_factory=dict)
+    tss: FloatArray = field(default_factory=lambda: np.ones(6))
+
+    @property
+    def cv_r2(self) -> tuple[FloatArray, FloatArray]:
+        """Held-out R² per DOF of the base model and of the selected one, each shape (6,)."""
+        return 1.0 - self.steps[0].cv / self.tss, 1.0 - self.steps[-1].cv / self.tss
 
 
 def _criteria(ne: NormalEquations, idx: NDArray[np.int64], weights: FloatArray, n_eff: float
@@ -154,91 +191,302 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
     return float(np.exp(res.x)), float(res.fun)
 
 
+def _key(col: int, alpha: Alpha) -> tuple[Any, ...]:
+    """Canonical form of the feature α(ν) ν_col (ν_j ν_k and ν_k ν_j are one)."""
+    if alpha.kind == "lin":
+        return ("prod", *sorted((col, alpha.i)))
+    if alpha.kind == "one":
+        return ("one", col)
+    return (alpha.kind, col, alpha.i, alpha.j, alpha.w)
+
+
+def _single_entry(b: Basis) -> tuple[int, int]:
+    """(row, col) of a basis with one unit entry; ConfigError otherwise."""
+    nz = np.argwhere(b.B != 0)
+    if len(nz) != 1 or b.B[nz[0][0], nz[0][1]] != 1.0:
+        raise ConfigError("select", f"{b.name} acts on several rows; term selection keeps "
+                          "single-entry terms only (leave the residual term out with --terms)")
+    return int(nz[0][0]), int(nz[0][1])
+
+
+def _trials(G: FloatArray, bv: FloatArray, S: Sequence[int] | NDArray[np.int64],
+            C: NDArray[np.int64],
+            tol: float) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """Least squares on the columns S plus each one candidate c ∈ C, for all c at once.
+
+    With the fit β = G_SS⁻¹ b_S on S, adding c gives (bordered normal equations)
+    θ_c = (b_c − G_cS β) / d_c and θ_S = β − G_SS⁻¹ G_Sc θ_c, d_c = G_cc − G_cS G_SS⁻¹ G_Sc
+    the part of column c that S does not explain; d_c < tol · G_cc marks c as (numerically)
+    a combination of S.
+
+    Returns
+    -------
+    th_S : ndarray, shape (|S|, |C|)
+    th_c : ndarray, shape (|C|,)
+    gain : ndarray, shape (|C|,)
+        RSS(S) − RSS(S ∪ {c}).
+    ok : ndarray of bool, shape (|C|,)
+    """
+    Sx = np.asarray(S, dtype=np.int64)
+    gcc = np.diag(G)[C]
+    if len(Sx):
+        d = 1.0 / np.sqrt(np.maximum(np.diag(G)[Sx], 1e-300))
+        Gss = G[np.ix_(Sx, Sx)] * np.outer(d, d)
+        rhs = np.column_stack([G[np.ix_(Sx, C)], bv[Sx]]) * d[:, None]
+        sol = np.linalg.lstsq(Gss, rhs, rcond=1e-13)[0] * d[:, None]
+        X, beta = sol[:, :-1], sol[:, -1]
+        den = gcc - np.einsum("kc,kc->c", G[np.ix_(Sx, C)], X)
+        num = bv[C] - G[np.ix_(C, Sx)] @ beta
+    else:
+        X, beta = np.zeros((0, len(C))), np.zeros(0)
+        den, num = gcc.copy(), bv[C].copy()
+    ok = den > tol * np.maximum(gcc, 1e-300)
+    th_c = np.where(ok, num / np.where(ok, den, 1.0), 0.0)
+    th_S = beta[:, None] - X * th_c[None, :]
+    return th_S, th_c, np.where(ok, num * th_c, 0.0), ok
+
+
+def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
+              C: NDArray[np.int64], tol: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Blocked cross-validation of S and of S ∪ {c} for every c ∈ C in one row.
+
+    Parameters
+    ----------
+    A : ndarray, shape (F, m, m)
+    b : ndarray, shape (F, m)
+    c : ndarray, shape (F,)
+        Per-fold normal equations of the row.
+
+    Returns
+    -------
+    cv_S : float array, shape ()
+        Σ over folds of the held-out RSS of S, each fold predicted from the others.
+    cv_C : ndarray, shape (|C|,)
+        The same for S ∪ {c}.
+    gain : ndarray, shape (|C|,)
+        In-sample RSS(S) − RSS(S ∪ {c}) on all folds (``ok`` folded in: 0 if collinear).
+    """
+    Sx = np.asarray(S, dtype=np.int64)
+    G, bv = A.sum(0), b.sum(0)
+    _, _, gain, ok = _trials(G, bv, Sx, C, tol)
+    cv_S = np.zeros(())
+    cv_C = np.zeros(len(C))
+    for f in range(len(c)):
+        th_S, th_c, _, okf = _trials(G - A[f], bv - b[f], Sx, C, tol)
+        Af, bf = A[f], b[f]
+        # ‖y − Φθ‖² on fold f = c − 2 bᵀθ + θᵀAθ, θ = (θ_S, θ_c) for each candidate
+        quad_S = np.einsum("kc,kl,lc->c", th_S, Af[np.ix_(Sx, Sx)], th_S)
+        cross = np.einsum("ck,kc->c", Af[np.ix_(C, Sx)], th_S)
+        cv_C += (c[f] - 2.0 * (bf[Sx] @ th_S + bf[C] * th_c) + quad_S
+                 + 2.0 * th_c * cross + th_c ** 2 * np.diag(Af)[C])
+        cv_C[~okf] = np.inf
+        if len(Sx):
+            d = 1.0 / np.sqrt(np.maximum(np.diag(G - A[f])[Sx], 1e-300))
+            Gss = (G - A[f])[np.ix_(Sx, Sx)] * np.outer(d, d)
+            beta = np.linalg.lstsq(Gss, (bv - b[f])[Sx] * d, rcond=1e-13)[0] * d
+            cv_S = cv_S + c[f] - 2.0 * bf[Sx] @ beta + beta @ Af[np.ix_(Sx, Sx)] @ beta
+        else:
+            cv_S = cv_S + c[f]
+    return cv_S, np.where(ok, cv_C, np.inf), gain
+
+
 def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
-                 cross: Sequence[dict[str, str]] = DEFAULT_CROSS,
+                 cross: Sequence[dict[str, str]] | None = None,
+                 families: Sequence[str] = FAMILIES,
                  memory_dofs: Sequence[int] = (0, 1, 2, 5), cutoff: float = 2.0,
-                 min_improvement: float = 10.0, min_err: float = 0.1) -> Selection:
-    """Forward BIC selection of cross-coupling and memory terms on top of ``base``.
+                 folds: int = 5, max_terms: int = 25, min_improvement: float = 10.0,
+                 min_err: float = 0.05, tol: float = 1e-8) -> Selection:
+    """Forward selection of library terms and memory states on top of ``base``.
 
     Parameters
     ----------
     samples : Samples
     base : DampingModel
-        Terms always kept (typically linear + quadratic).
+        Terms always kept (typically the preset's linear + quadratic); single-entry bases
+        only (every kind but ``residual``).
     body : RigidBody
-    cross : sequence of dict
-        Candidate cross coefficients (:class:`CrossSpec` mappings).
+    cross : sequence of dict, optional
+        Candidate coefficients as :class:`CrossSpec` mappings instead of the library.
+    families : sequence of str
+        Library families searched when ``cross`` is not given (:data:`damping.FAMILIES`).
     memory_dofs : sequence of int
-        DOFs that may carry a fluid-memory state.
+        DOFs that may carry a fluid-memory state (none if ``base`` has a memory term).
     cutoff : float
         Parallel low-pass of the regression (Hz).
+    folds : int
+        Contiguous time blocks of the cross-validation.
+    max_terms : int
+        Largest number of parameters of the selected model (base included).
     min_improvement : float
-        BIC decrease needed to add a candidate.
+        BIC decrease needed to add a candidate (10: "very strong" on the Kass–Raftery scale).
     min_err : float
-        Share of its DOF's remaining residual sum of squares a candidate must remove: the
+        Share of its row's remaining residual sum of squares a candidate must remove: the
         residuals are correlated (model and processing errors), so BIC alone over-counts
         evidence for small terms.
+    tol : float
+        Relative tolerance below which two columns are equal (|corr| > 1 − tol) or a column
+        is a combination of those already chosen.
 
     Returns
     -------
     Selection
     """
-    base_names = set(base.parameter_names)
-    specs = [s for s in (CrossSpec.from_dict(c) for c in cross) if s.label not in base_names]
+    base_names = base.parameter_names
+    specs = library(families) if cross is None else [CrossSpec.from_dict(c) for c in cross]
+    specs = [sp for sp in specs if sp.label not in base_names]
+    # features: the base's single-entry columns first, then the candidates (simplest first)
+    keys: dict[tuple[Any, ...], int] = {}
+    feats: list[tuple[int, Alpha]] = []
+
+    def feature(col: int, alpha: Alpha) -> int:
+        k = _key(col, alpha)
+        if k not in keys:
+            keys[k] = len(feats)
+            feats.append((col, alpha))
+        return keys[k]
+
+    base_cols: list[tuple[int, int, str]] = []  # (row, feature, name)
+    for t in base.terms:
+        if t.kind != "freq":
+            for bs in t.bases:
+                r, col = _single_entry(bs)
+                base_cols.append((r, feature(col, bs.alpha), bs.name))
+    cand = [(sp.row, feature(sp.col, sp.alpha), sp) for sp in specs]
+    m = len(feats)
+    # memory: the base's states, then candidate states with profiled rates
+    mem0 = base.term("freq")
     duration = len(samples) / samples.rate
     n_eff = min(float(len(samples)), 2.0 * cutoff * duration)
-    ne0 = accumulate(samples, base, body, folds=1, cutoff=cutoff)
-    idx0 = np.arange(base.n_params)
-    rss0, _, _ = _criteria(ne0, idx0, np.ones(6), n_eff)
-    # per-DOF weights 1/σ² from the base model's residuals
-    weights = np.asarray(1.0 / np.maximum(rss0 / float(ne0.n.sum()), 1e-12))
     bounds = (0.05, 20.0)
-    rates = {d: profile_rate(samples, base, body, d, weights, cutoff, bounds)[0]
-             for d in memory_dofs}
-    # a rate at the edge of the search range is a trend or an offset, not fluid memory
-    rates = {d: lam for d, lam in rates.items()
-             if bounds[0] * 1.05 < lam < bounds[1] / 1.05}
-    superset = _with_terms(base, specs, rates)
-    ne = accumulate(samples, superset, body, folds=1, cutoff=cutoff)
-    names = superset.parameter_names
-    groups = {s.label: [names.index(s.label)] for s in specs}
-    mem = superset.term("freq")
-    if mem is not None:
-        for d, pname in zip(mem.state_dofs, mem.parameter_names, strict=True):
-            groups[f"memory on {DOF_NAMES[int(d)]} (λ = {rates[int(d)]:.3g} 1/s)"] = \
-                [names.index(pname)]
-    chosen = [names.index(n) for n in base.parameter_names]
-    rss, bic, aic = _criteria(ne, np.array(chosen), weights, n_eff)
-    steps = [SelectionStep("base: " + "+".join(base.kinds), len(chosen), rss, bic, aic, 0.0)]
-    row = {s.label: s.row for s in specs}
-    if mem is not None:
-        row.update({g: int(d) for g, d in zip(list(groups)[len(specs):], mem.state_dofs,
-                                               strict=True)})
-    remaining = dict(groups)
-    while remaining:
-        trials = {g: _criteria(ne, np.array(sorted(chosen + cols)), weights, n_eff)
-                  for g, cols in remaining.items()}
-        # evidence: BIC falls, and the term explains a share of its DOF's residual
-        err = {g: 1.0 - trials[g][0][row[g]] / steps[-1].rss[row[g]] for g in trials}
-        ok = [g for g in trials if trials[g][1] < steps[-1].bic - min_improvement
-              and err[g] >= min_err]
-        if not ok:
+    rates: dict[int, float] = {}
+    if mem0 is None and memory_dofs:
+        ne0 = accumulate(samples, base, body, folds=1, cutoff=cutoff)
+        rss0, _, _ = _criteria(ne0, np.arange(base.n_params), np.ones(6), n_eff)
+        weights = np.asarray(1.0 / np.maximum(rss0 / float(ne0.n.sum()), 1e-12))
+        rates = {d: profile_rate(samples, base, body, d, weights, cutoff, bounds)[0]
+                 for d in memory_dofs}
+        # a rate at the edge of the search range is a trend or an offset, not fluid memory
+        rates = {d: lam for d, lam in rates.items()
+                 if bounds[0] * 1.05 < lam < bounds[1] / 1.05}
+    mem_rates = np.r_[mem0.rates if mem0 is not None else [], list(rates.values())]
+    mem_dofs = np.r_[mem0.state_dofs if mem0 is not None else [], list(rates)].astype(np.int64)
+    n0 = mem0.n_states if mem0 is not None else 0
+    if mem0 is not None:
+        base_cols += [(int(d), m + k, nm) for k, (d, nm) in
+                      enumerate(zip(mem0.state_dofs, mem0.parameter_names, strict=True))]
+    # one model whose column k is feature k in every row (B = 1 e_colᵀ), plus memory states
+    ones = [Basis(f"g{k}", np.outer(np.ones(6), np.eye(6)[col]), a)
+            for k, (col, a) in enumerate(feats)]
+    terms = [DampingTerm("cross", "library features", ones)]
+    if len(mem_rates):
+        terms.append(DampingTerm("freq", "memory candidates", rates=mem_rates,
+                                 state_dofs=mem_dofs))
+    ne = accumulate(samples, DampingModel(terms), body, folds=folds, cutoff=cutoff)
+    N = float(ne.n.sum())
+    G0 = ne.A.sum(0)[0][:m, :m]  # the features' Gram matrix (the same in every row)
+    # zero and numerically equal columns (up to scale), compared with those before them
+    g = np.diag(G0)
+    zero = g <= 1e-12 * max(float(g.max()), 1e-300)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.abs(G0) / np.sqrt(np.outer(g, g))
+    same_as = np.full(m, -1)
+    for k in range(m):
+        if not zero[k]:
+            earlier = np.flatnonzero((corr[k, :k] > 1.0 - tol) & ~zero[:k] & (same_as[:k] < 0))
+            same_as[k] = earlier[0] if len(earlier) else -1
+    row_names = {(r, f): nm for r, f, nm in base_cols}
+    dropped: dict[str, str] = {}
+    usable: list[tuple[int, int, str]] = []  # (row, column, name)
+    for r, f, sp in cand:
+        if (r, f) in row_names:
+            continue  # the same column as a base parameter of this row
+        if zero[f]:
+            dropped[sp.label] = "no excitation: its column is zero in these data"
+        elif same_as[f] >= 0:
+            other = row_names.get((r, int(same_as[f])))
+            if other is None:
+                col, a = feats[int(same_as[f])]
+                other = library_name(r, col, a)
+            dropped[sp.label] = (f"equals {other} in these data (|corr| = "
+                                 f"{corr[f, same_as[f]]:.12f})")
+        else:
+            usable.append((r, f, sp.label))
+        row_names.setdefault((r, f), sp.label)
+    for k, d in enumerate(mem_dofs[n0:]):
+        usable.append((int(d), m + n0 + k, f"memory on {DOF_NAMES[int(d)]} "
+                                           f"(λ = {rates[int(d)]:.3g} 1/s)"))
+    spec_of = {sp.label: sp for _, _, sp in cand}
+    # greedy forward search, every row at once
+    chosen = {i: [f for r, f, _ in base_cols if r == i] for i in range(6)}
+    pool = {i: [(f, nm) for r, f, nm in usable if r == i] for i in range(6)}
+    rss = np.array([ne.c.sum(0)[i] - _fit_row(ne, i, chosen[i]) for i in range(6)])
+    state = {i: _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], chosen[i],
+                          np.array([f for f, _ in pool[i]], dtype=np.int64), tol)
+             for i in range(6)}
+    cv = np.array([float(state[i][0]) for i in range(6)])
+    k_now = base.n_params
+
+    def crit(r: FloatArray, k: int) -> tuple[float, float]:
+        ll = n_eff * float(np.sum(np.log(np.maximum(r, 1e-300) / N)))
+        return ll + k * float(np.log(n_eff)), ll + 2.0 * k
+
+    bic, aic = crit(rss, k_now)
+    steps = [SelectionStep("base: " + "+".join(base.kinds), k_now, rss.copy(), bic, aic, 0.0,
+                           cv.copy())]
+    while k_now < max_terms:
+        best: tuple[float, int, int] | None = None
+        for i in range(6):
+            _, cv_c, gain = state[i]
+            if not len(cv_c):
+                continue
+            new = np.maximum(rss[i] - gain, 1e-300)
+            dbic = n_eff * np.log(new / max(rss[i], 1e-300)) + float(np.log(n_eff))
+            good = ((dbic < -min_improvement) & (gain >= min_err * rss[i])
+                    & (cv_c < cv[i]) & np.isfinite(cv_c))
+            if good.any():
+                score = np.where(good, np.log(np.where(good, cv_c, 1.0) / cv[i]), np.inf)
+                j = int(np.argmin(score))
+                if best is None or score[j] < best[0]:
+                    best = (float(score[j]), i, j)
+        if best is None:
             break
-        best = min(ok, key=lambda g: trials[g][1])
-        chosen += remaining.pop(best)
-        r, b_, a_ = trials[best]
-        steps.append(SelectionStep(best, len(chosen), r, b_, a_, err[best]))
-    keep_cross = [s for s in specs if names.index(s.label) in chosen]
-    keep_mem = {int(d): rates[int(d)] for d, pname in
-                zip(mem.state_dofs, mem.parameter_names, strict=True)
-                if names.index(pname) in chosen} if mem is not None else {}
+        _, i, j = best
+        f, nm = pool[i].pop(j)
+        cv[i] = float(state[i][1][j])
+        rss[i] = max(float(rss[i] - state[i][2][j]), 0.0)
+        chosen[i].append(f)
+        k_now += 1
+        state[i] = _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], chosen[i],
+                             np.array([c for c, _ in pool[i]], dtype=np.int64), tol)
+        bic, aic = crit(rss, k_now)
+        steps.append(SelectionStep(nm, k_now, rss.copy(), bic, aic,
+                                   1.0 - rss[i] / steps[-1].rss[i], cv.copy()))
+    keep_cross = [spec_of[st.added] for st in steps[1:] if st.added in spec_of]
+    keep_mem = {int(d): rates[int(d)] for k, d in enumerate(mem_dofs[n0:])
+                if m + n0 + k in chosen[int(d)]}
     # refine each chosen memory rate with the other chosen terms in place
-    for d in list(keep_mem):
-        others = _with_terms(base, keep_cross, {k: v for k, v in keep_mem.items() if k != d})
-        keep_mem[d] = profile_rate(samples, others, body, d, weights, cutoff, bounds)[0]
+    if keep_mem:
+        ne1 = accumulate(samples, base, body, folds=1, cutoff=cutoff)
+        rss1, _, _ = _criteria(ne1, np.arange(base.n_params), np.ones(6), n_eff)
+        weights = np.asarray(1.0 / np.maximum(rss1 / float(ne1.n.sum()), 1e-12))
+        for d in list(keep_mem):
+            others = _with_terms(base, keep_cross,
+                                 {k: v for k, v in keep_mem.items() if k != d})
+            keep_mem[d] = profile_rate(samples, others, body, d, weights, cutoff, bounds)[0]
     model = _with_terms(base, keep_cross, keep_mem)
     return Selection(model, steps, {f"freq.{DOF_NAMES[d]}.lambda1": lam
-                                    for d, lam in keep_mem.items()})
+                                    for d, lam in keep_mem.items()}, dropped,
+                     np.asarray(ne.c.sum(0), dtype=float))
+
+
+def _fit_row(ne: NormalEquations, i: int, cols: Sequence[int]) -> float:
+    """Σ y² − RSS of the least-squares fit of row ``i`` on ``cols`` (all folds): bᵀθ."""
+    if not cols:
+        return 0.0
+    idx = np.asarray(cols, dtype=np.int64)
+    G, bv = ne.A[:, i].sum(0)[np.ix_(idx, idx)], ne.b[:, i].sum(0)[idx]
+    theta = _solve(G, bv, np.ones(len(idx), dtype=bool), np.zeros(len(idx)))
+    return float(bv @ theta)
 
 
 def shift_tau(samples: Samples, delay: float) -> Samples:
