@@ -70,10 +70,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="rls: forgetting factor λ in [0.9, 1] (default: 1, every sample "
                         "weighs the same)")
     p.add_argument("--select", action="store_true",
-                   help="search the damping library (linear, cross-flow v|r|, bilinear u·w "
-                        "lift, speed-magnitude u‖v‖ and p‖ω‖ terms in every force row, fluid "
-                        "memory per DOF with its rate) by blocked cross-validation and BIC, "
-                        "on top of the preset's terms, and fit the sparse model found")
+                   help="choose extra terms by forward BIC selection: sway-yaw, heave-pitch "
+                        "and lift cross-coupling, fluid memory per DOF (rate estimated)")
     p.add_argument("--prior", help="model YAML whose theta/theta_std are the MAP prior "
                                    "(rls: the RLS prior)")
     p.add_argument("--cutoff", type=float, default=2.0,
@@ -219,28 +217,12 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
 
 
 def selection_table(selection: Selection) -> str:
-    """The forward-selection path (each added term with BIC, AIC, its error reduction), the
-    held-out R² per DOF before and after, and the candidates left out with the reason."""
+    """The forward-selection path: each added term with BIC, AIC and its error reduction."""
     rows = [(st.added, st.n_params, st.bic, st.aic,
              f"{st.err:.1%}" if st.err else "") for st in selection.steps]
     rates = "".join(f"\n{k} = {v:.4g} 1/s" for k, v in selection.rates.items())
-    before, after = selection.cv_r2
-    r2 = ("held-out R² per DOF (5 contiguous time folds, each predicted from the others):\n"
-          + table(("dof", "base", "selected"), [(FORCE_NAMES[i], f"{before[i]:.4f}",
-                                                  f"{after[i]:.4f}") for i in range(6)]))
-    dropped = ""
-    if selection.dropped:
-        groups: dict[str, list[str]] = {}
-        for name, why in selection.dropped.items():
-            # one line per reason and column (the rows differ only in the force letter)
-            groups.setdefault(why.split(" (|corr|")[0].replace(name[0] + "_", "F_"),
-                              []).append(name)
-        dropped = "\nleft out of the search (numerically the same column as another):\n" + \
-            "\n".join(f"  {', '.join(names)}: {why}" for why, names in groups.items())
-    return ("term selection (forward over the damping library, blocked cross-validation and "
-            "BIC; a term must lower both):\n"
-            + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates
-            + "\n" + r2 + dropped + "\n")
+    return ("term selection (forward, BIC; a term must remove ≥ 10 % of its DOF's residual):\n"
+            + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates + "\n")
 
 
 def memory_check(samples: Samples, model: DampingModel, body: RigidBody) -> str:
