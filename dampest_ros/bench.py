@@ -34,18 +34,20 @@ from typing import Any
 from dampest_ros.cli.common import table
 
 VEHICLE = "bluerov2_heavy"
+MUJOCO_VEHICLE = "torpedo_auv"  # the stiffer of the two MuJoCo presets (slender, finned)
 
 
-def _simulate(out: str, duration: str) -> dict[str, float]:
+def _simulate(out: str, duration: str, backend: str = "native") -> dict[str, float]:
     from dampest_ros.core.excitation import make_excitation
     from dampest_ros.core.sensors import measure
     from dampest_ros.core.simulate import run
     from dampest_ros.io.bag import write_bag
     from dampest_ros.io.yaml_io import load_vehicle
 
-    vehicle = load_vehicle(VEHICLE)
+    vehicle = load_vehicle(VEHICLE if backend == "native" else MUJOCO_VEHICLE)
     t0 = time.perf_counter()
-    traj = run(vehicle, make_excitation("B", vehicle, float(duration), seed=1))
+    traj = run(vehicle, make_excitation("B", vehicle, float(duration), seed=1),
+               backend=backend)
     t1 = time.perf_counter()
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, seed=1)
     t2 = time.perf_counter()
@@ -413,6 +415,11 @@ def main(argv: list[str] | None = None) -> int:
             rows.append((f"simulate {args.sim_seconds:.0f} s → MCAP (200 Hz IMU)",
                          f"{sim['seconds']:.1f} s", f"{speed:.0f}× real time", "≥ 50×",
                          f"{sim['peak_mb']:.0f}"))
+            sim = _child("simulate", f"{tmp}/mj", str(args.sim_seconds), "mujoco")
+            speed = args.sim_seconds / sim["seconds"]
+            rows.append((f"simulate --backend mujoco {args.sim_seconds:.0f} s ({MUJOCO_VEHICLE}) "
+                         "→ MCAP", f"{sim['seconds']:.1f} s", f"{speed:.0f}× real time",
+                         "≥ 20×", f"{sim['peak_mb']:.0f}"))
         for hours in args.hours if "identify" in only else []:
             bag = f"{tmp}/bag{hours}"
             _child("simulate", bag, str(hours * 3600))
