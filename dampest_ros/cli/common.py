@@ -20,6 +20,22 @@ from dampest_ros.io.bag import BagSource
 from dampest_ros.io.csv import is_csv, load_column_map, read_log
 from dampest_ros.io.yaml_io import ModelFile, load_model
 
+#: What the CSV input of identify, validate and gap may look like (their --help).
+CSV_HELP = (
+    "CSV logs (.csv, or gzip-compressed .csv.gz) are in the seed format "
+    "time,u,v,w,p,q,r,ax,ay,az,wx,wy,wz,depth,tau_X,...,tau_N[,roll,pitch,yaw] (FRD body, "
+    "SI units), or in its flavours, which are detected and read: ax,ay,az an IMU's specific "
+    "force (mean |a| ≈ g, either sign: az ≈ -9.8 or +9.8 level at rest) instead of u̇,v̇,ẇ; "
+    "wx,wy,wz gyro rates equal to p,q,r instead of ṗ,q̇,ṙ (then differentiated); no tau "
+    "columns but thrust_<name> (N) or rpm_<name> (rev/min) per thruster of the vehicle, "
+    "turned into τ by its thrust curve and allocation matrix. An ambiguous log is refused "
+    "with the --columns entry that settles it ('ax: acc_x' specific force, 'ax: ax' u̇; "
+    "'wx: gyro_x' gyro rate, 'wx: wx' ṗ). u,v,w (and a bag's DVL velocity) are over ground "
+    "(DVL bottom lock); identify, validate and gap all assume still water, so they are used "
+    "as the velocity through the water too, except by gap's 'current' candidate, which "
+    "estimates a constant current and applies the damping to ν − ν_c. A log of velocity "
+    "through the water (water-track DVL) is read the same way.")
+
 #: Topic roles and their default names (DESIGN.md §3).
 DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
                   "thrusters": "thrusters/state"}

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import html
 import re
+import textwrap
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -22,6 +23,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from dampest_ros.cli.common import (
+    CSV_HELP,
     add_preprocess_options,
     add_topic_options,
     load_model_for,
@@ -44,10 +46,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     """Register the sub-command."""
     p = sub.add_parser("gap", help="find where a model and measured data disagree and name "
                                    "the missing effect",
-                       description=__doc__, epilog=EXAMPLE,
+                       description=__doc__ + "\n" + textwrap.fill(CSV_HELP, 92),
+                       epilog=EXAMPLE,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("input", metavar="MEASURED",
-                   help="rosbag2 directory (MCAP or SQLite3) or .csv file from the vehicle")
+                   help="rosbag2 directory (MCAP or SQLite3) or .csv / .csv.gz file from the "
+                        "vehicle")
     p.add_argument("--model", required=True,
                    help="model YAML (ROS 2 parameters file) of the damping you believe, e.g. "
                         "the simulator's; its M is used as M_RB + M_A")

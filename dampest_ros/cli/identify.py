@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from dampest_ros.cli.common import (
+    CSV_HELP,
     DEFAULT_TOPICS,
     add_preprocess_options,
     add_topic_options,
@@ -52,10 +53,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     """Register the sub-command."""
     p = sub.add_parser("identify", help="identify damping from a bag or CSV",
                        description=__doc__ + " INPUT is a rosbag2 directory (MCAP or SQLite3) "
-                       "with IMU, DVL, pressure and thruster topics, or a CSV file in the seed "
-                       "format (time,u,v,w,p,q,r,ax,ay,az,wx,wy,wz,depth,tau_X..tau_N).",
+                       "with IMU, DVL, pressure and thruster topics, or a CSV log. " + CSV_HELP,
                        epilog=EXAMPLE)
-    p.add_argument("input", help="rosbag2 directory or .csv file")
+    p.add_argument("input", help="rosbag2 directory, .csv or .csv.gz file")
     p.add_argument("--vehicle", required=True,
                    help="vehicle preset (name or YAML): mass, added mass, thrusters, "
                         "nominal damping (the prior and the term structure)")

@@ -1,6 +1,6 @@
-"""``dampest validate``: score a model YAML on another log (bag or CSV).
+"""dampest validate: score a model YAML on another log (bag or CSV).
 
-The model (written by ``dampest identify --out``, or any model file) is held fixed and
+The model (written by dampest identify --out, or any model file) is held fixed and
 compared with a log it was not identified from, in two ways, per DOF:
 
   force:    the damping force the log demands, y = tau - M nu_dot - C(nu)nu - g(eta),
@@ -28,12 +28,14 @@ at --cutoff (0: as logged):
 from __future__ import annotations
 
 import argparse
+import textwrap
 import time
 from pathlib import Path
 
 import numpy as np
 
 from dampest_ros.cli.common import (
+    CSV_HELP,
     add_preprocess_options,
     add_topic_options,
     add_window_options,
@@ -61,7 +63,8 @@ VEL_UNITS = ("m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s")
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the sub-command."""
     p = sub.add_parser("validate", help="score a model YAML on another log (bag or CSV)",
-                       description=__doc__, epilog=EXAMPLE,
+                       description=__doc__ + "\n" + textwrap.fill(CSV_HELP, 88),
+                       epilog=EXAMPLE,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("model", metavar="MODEL",
                    help="model YAML (ROS 2 parameters file), e.g. from dampest identify --out")
