@@ -33,6 +33,7 @@ from dampest_ros.core.measurements import (
     PressureSeries,
     Recording,
     TwistSeries,
+    WrenchSeries,
 )
 from dampest_ros.core.sensors import (
     _STREAMS,
@@ -194,6 +195,12 @@ class SensorStream:
             position=world_vec(p_i),
             orientation=_wxyz_to_xyzw(quat_frd_ned_to_flu_enu(_nlerp(k, q))),
             linear=body_vec(v_nu[:, :3]), angular=body_vec(v_nu[:, 3:]))
+        if traj.hydro is not None:
+            # the plant's own fluid wrench (MuJoCo), linear between steps, FLU
+            hydro = np.column_stack([np.interp(st, t, c) for c in np.asarray(traj.hydro).T])
+            out["truth/hydro_wrench"] = WrenchSeries(
+                stamp=st, frame_id=FRAME_IDS["truth/hydro_wrench"], force=body_vec(hydro[:, :3]),
+                torque=body_vec(hydro[:, 3:]))
         return out
 
     def _walk(self, stream: str, n: int, sigma: float, rate: float, attr: str) -> FloatArray:

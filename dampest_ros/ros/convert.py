@@ -21,6 +21,7 @@ from dampest_ros.core.measurements import (
     Recording,
     Series,
     TwistSeries,
+    WrenchSeries,
     stamp_order,
 )
 from dampest_ros.ros.common import to_time
@@ -102,6 +103,14 @@ def _filler(s: Series) -> Callable[[int], Any]:
             po.x, po.y, po.z, po.w = ori[i]
             tl.x, tl.y, tl.z = lin[i]
             ta.x, ta.y, ta.z = ang[i]
+    elif isinstance(s, WrenchSeries):
+        m = WrenchStamped()
+        force, torque = s.force.tolist(), s.torque.tolist()
+        wf, wt = m.wrench.force, m.wrench.torque
+
+        def fill(i: int) -> None:
+            wf.x, wf.y, wf.z = force[i]
+            wt.x, wt.y, wt.z = torque[i]
     else:
         raise TypeError(f"no message for {type(s).__name__}")
     m.header.frame_id = s.frame_id

@@ -1,11 +1,12 @@
 """sim_node: the 6-DOF vehicle simulator with its sensors, in real time or faster.
 
 Publishes truth/odom, imu/data, dvl/twist, pressure, thrusters/state (sensor-data QoS except
-the truth) and /clock (simulation time) when publish_clock is true. Flies the excitation
-protocol with its velocity controller unless cmd_wrench (geometry_msgs/WrenchStamped, FLU)
-commands arrive; each command holds for cmd_timeout seconds of simulation time.
-Changing vehicle, protocol, duration, seed, effects, sensors or dt restarts the simulation
-(its clock starts again at 0).
+the truth; with backend:=mujoco also truth/hydro_wrench, MuJoCo's fluid wrench, FLU) and
+/clock (simulation time) when publish_clock is true. Flies the excitation protocol with its
+velocity controller unless cmd_wrench (geometry_msgs/WrenchStamped, FLU) commands arrive;
+each command holds for cmd_timeout seconds of simulation time. Changing vehicle, protocol,
+duration, seed, effects, sensors, backend or dt restarts the simulation (its clock starts
+again at 0).
 """
 
 from __future__ import annotations
@@ -101,6 +102,9 @@ class SimNode(ParamNode):
             "thrusters/state": self.create_publisher(JointState, "thrusters/state",
                                                      SENSOR_QOS),
             "truth/odom": self.create_publisher(Odometry, "truth/odom", RELIABLE_QOS),
+            # the plant's own fluid wrench (mujoco backend only), for evaluation
+            "truth/hydro_wrench": self.create_publisher(WrenchStamped, "truth/hydro_wrench",
+                                                        RELIABLE_QOS),
         }
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", 10)
         self.create_subscription(WrenchStamped, "cmd_wrench", self._on_wrench, RELIABLE_QOS)
