@@ -24,6 +24,9 @@ cross-flow (quadratic)     ν_j |ν_k|               ``F_jk``    ``|k|``     (``
 bilinear                   ν_j ν_k, j ≤ k          ``F_jxk``   ``k``       (``Z_uxw``: lift)
 speed magnitude            ν_j ‖(u, v, w)‖         ``F_jU``    ``|U|``     (``X_uU``)
 angular speed magnitude    ν_j ‖(p, q, r)‖         ``F_jW``    ``|W|``     (``K_pW``)
+cross-flow speed           ν_j ‖(ν_k, ν_l)‖        ``F_jUkl``  ``|k,l|``   (``X_uUvw``,
+                           (k, l both linear or                            ``K_pWqr``)
+                           both angular; W then)
 =========================  =====================  ==========  ============================
 
 The bilinear name carries an ``x`` (times) so that it never equals the cross-flow name of the
@@ -68,7 +71,8 @@ class Alpha:
     """A scalar function α(ν) of the body velocity, from a small library.
 
     kinds: ``one`` (1), ``abs`` (|ν_i|), ``lin`` (ν_i), ``norm`` (‖[u, v, w]‖, m/s),
-    ``anorm`` (‖[p, q, r]‖, rad/s), ``prod`` (ν_i ν_j), ``absprod`` (|ν_i ν_j|),
+    ``anorm`` (‖[p, q, r]‖, rad/s), ``pnorm`` (‖[ν_i, ν_j]‖, the cross-flow speed of a body
+    slender along the third axis), ``prod`` (ν_i ν_j), ``absprod`` (|ν_i ν_j|),
     ``absproj`` (|wᵀν| for a unit 6-vector w).
     """
 
@@ -90,6 +94,8 @@ class Alpha:
             return np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))
         if k == "anorm":
             return np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))
+        if k == "pnorm":
+            return np.hypot(nu[:, self.i], nu[:, self.j])
         if k == "prod":
             return nu[:, self.i] * nu[:, self.j]
         if k == "absprod":
@@ -112,6 +118,8 @@ class Alpha:
             return float(s[self.i])
         if k in ("prod", "absprod"):
             return float(s[self.i] * s[self.j])
+        if k == "pnorm":
+            return float(max(s[self.i], s[self.j]))
         if k == "norm":
             return float(s[:3].max())
         if k == "anorm":
@@ -129,6 +137,7 @@ class Alpha:
             "lin": n[self.i] if self.i >= 0 else "",
             "norm": "|U|",
             "anorm": "|W|",
+            "pnorm": f"|{n[self.i]},{n[self.j]}|" if self.i >= 0 else "",
             "prod": f"{n[self.i]}{n[self.j]}" if self.i >= 0 else "",
             "absprod": f"|{n[self.i]}{n[self.j]}|" if self.i >= 0 else "",
             "absproj": "|w'nu|",
@@ -136,7 +145,8 @@ class Alpha:
 
     @classmethod
     def parse(cls, text: str) -> Alpha:
-        """Parse ``1``, ``|r|``, ``u``, ``|U|`` (‖v‖), ``|W|`` (‖ω‖), ``uv``, ``|uv|``."""
+        """Parse ``1``, ``|r|``, ``u``, ``|U|`` (‖v‖), ``|W|`` (‖ω‖), ``|v,w|`` (‖(v, w)‖),
+        ``uv``, ``|uv|``."""
         t = text.replace(" ", "")
         if t in ("1", "", "one"):
             return cls("one")
@@ -144,6 +154,10 @@ class Alpha:
             return cls("norm")
         if t in ("|W|", "anorm"):
             return cls("anorm")
+        if "," in t and t.startswith("|") and t.endswith("|"):
+            pair = [_dof(c, "alpha") for c in t.strip("|").split(",")]
+            if len(pair) == 2:
+                return cls("pnorm", pair[0], pair[1])
         bars = t.startswith("|") and t.endswith("|")
         core = t.strip("|")
         idx = [_dof(c, "alpha") for c in core]
@@ -172,21 +186,24 @@ class AlphaBank:
         self.absolute = np.zeros(p, dtype=bool)
         self.norm = np.zeros(p, dtype=bool)
         self.anorm = np.zeros(p, dtype=bool)
+        self.pnorm = np.zeros(p, dtype=bool)
         self.W = np.zeros((6, p))
         self.proj = np.zeros(p, dtype=bool)
         for k, a in enumerate(alphas):
-            if a.kind in ("abs", "lin", "prod", "absprod"):
+            if a.kind in ("abs", "lin", "prod", "absprod", "pnorm"):
                 self.i[k] = a.i
-            if a.kind in ("prod", "absprod"):
+            if a.kind in ("prod", "absprod", "pnorm"):
                 self.j[k] = a.j
             self.absolute[k] = a.kind in ("abs", "absprod", "absproj")
             self.norm[k] = a.kind == "norm"
             self.anorm[k] = a.kind == "anorm"
+            self.pnorm[k] = a.kind == "pnorm"
             if a.kind == "absproj":
                 self.proj[k] = True
                 self.W[:, k] = a.w
         self.any_norm = bool(self.norm.any())
         self.any_anorm = bool(self.anorm.any())
+        self.any_pnorm = bool(self.pnorm.any())
         self.any_proj = bool(self.proj.any())
         self.any_abs = bool(self.absolute.any())
 
@@ -195,6 +212,8 @@ class AlphaBank:
         aug = np.concatenate([nu, np.ones((nu.shape[0], 1))], axis=1)
         # products ν_i ν_j with ν_6 ≡ 1 cover the kinds one, lin and prod
         a = aug[:, self.i] * aug[:, self.j]
+        if self.any_pnorm:
+            a = np.where(self.pnorm, np.hypot(aug[:, self.i], aug[:, self.j]), a)
         if self.any_proj:
             a = np.where(self.proj, nu @ self.W, a)
         if self.any_norm:
@@ -436,7 +455,7 @@ def library_name(row: int, col: int, alpha: Alpha) -> str:
     row, col : int
         Force row 0..5 (X..N) and velocity column 0..5 (u..r).
     alpha : Alpha
-        ``one``, ``abs``, ``lin``, ``norm`` or ``anorm``; others fall back to
+        ``one``, ``abs``, ``lin``, ``norm``, ``anorm`` or ``pnorm``; others fall back to
         :attr:`CrossSpec.label`.
     """
     f, n = FORCE_NAMES[row], DOF_NAMES
@@ -452,6 +471,8 @@ def library_name(row: int, col: int, alpha: Alpha) -> str:
         return f"{f}_{n[col]}U"
     if k == "anorm":
         return f"{f}_{n[col]}W"
+    if k == "pnorm":
+        return f"{f}_{n[col]}{'U' if alpha.i < 3 else 'W'}{n[alpha.i]}{n[alpha.j]}"
     return CrossSpec(row, col, alpha).label
 
 
@@ -461,9 +482,10 @@ def library(families: Sequence[str] = FAMILIES, rows: Iterable[str | int] = DOF_
 
     Per force row: ``linear`` ν_j (6), ``crossflow`` ν_j|ν_k| (36, the quadratic X_uu among
     them), ``bilinear`` ν_j ν_k for j ≤ k (21, lift u·w, Magnus-like ω × v products),
-    ``norm`` ν_j ‖v‖ and ν_j ‖ω‖ (12). Every column appears once per row (ν_j ν_k and
-    ν_k ν_j are one). Ordered simplest first, which decides which of two numerically equal
-    columns a selection keeps.
+    ``norm`` ν_j ‖v‖ and ν_j ‖ω‖ (12) and the cross-flow speeds ν_j ‖(v, w)‖, ν_j ‖(u, w)‖,
+    ν_j ‖(u, v)‖, ν_j ‖(q, r)‖, ν_j ‖(p, r)‖, ν_j ‖(p, q)‖ (36). Every column appears once
+    per row (ν_j ν_k and ν_k ν_j are one). Ordered simplest first, which decides which of two
+    numerically equal columns a selection keeps.
 
     Parameters
     ----------
@@ -488,6 +510,8 @@ def library(families: Sequence[str] = FAMILIES, rows: Iterable[str | int] = DOF_
         alphas += [(j, Alpha("lin", k)) for j in range(6) for k in range(j, 6)]
     if "norm" in families:
         alphas += [(j, Alpha(kind)) for kind in ("norm", "anorm") for j in range(6)]
+        pairs = ((1, 2), (0, 2), (0, 1), (4, 5), (3, 5), (3, 4))
+        alphas += [(j, Alpha("pnorm", k, m)) for k, m in pairs for j in range(6)]
     out = []
     for r in rows:
         i = _dof(r, "rows")
@@ -740,7 +764,8 @@ class DampingModel:
                 lo[s] = 0.0
             else:
                 psd = [np.linalg.eigvalsh(0.5 * (b.B + b.B.T)).min() >= -1e-12 and
-                       b.alpha.kind in ("one", "abs", "absprod", "absproj", "norm", "anorm")
+                       b.alpha.kind in ("one", "abs", "absprod", "absproj", "norm", "anorm",
+                                        "pnorm")
                        for b in t.bases]
                 lo[s] = np.where(psd, 0.0, -np.inf)
         return lo

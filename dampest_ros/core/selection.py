@@ -295,7 +295,9 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
                  families: Sequence[str] = FAMILIES,
                  memory_dofs: Sequence[int] = (0, 1, 2, 5), cutoff: float = 2.0,
                  folds: int = 5, max_terms: int = 25, min_improvement: float = 10.0,
-                 min_err: float = 0.05, tol: float = 1e-8) -> Selection:
+                 min_err: float = 0.1, tol: float = 1e-8, strict_base: bool = True,
+                 rounds: int = 10
+                 ) -> Selection:
     """Forward selection of library terms and memory states on top of ``base``.
 
     Parameters
@@ -416,52 +418,121 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         usable.append((int(d), m + n0 + k, f"memory on {DOF_NAMES[int(d)]} "
                                            f"(λ = {rates[int(d)]:.3g} 1/s)"))
     spec_of = {sp.label: sp for _, _, sp in cand}
-    # greedy forward search, every row at once
+    # stepwise search, every row at once: forward while a candidate qualifies and the budget
+    # allows, then backward (a later term can make an earlier one redundant), repeated
     chosen = {i: [f for r, f, _ in base_cols if r == i] for i in range(6)}
-    pool = {i: [(f, nm) for r, f, nm in usable if r == i] for i in range(6)}
+    name_of = {(r, f): nm for r, f, nm in [*base_cols, *usable]}
+    # the base's memory states, and its columns the data leave at zero (the fit flags them
+    # 'no excitation' rather than the selection hiding them)
+    keep_always = {(r, f) for r, f, _ in base_cols if f >= m or zero[f]}
+    from_base = {(r, f) for r, f, _ in base_cols}
+    pool = {i: [f for r, f, _ in usable if r == i] for i in range(6)}
     rss = np.array([ne.c.sum(0)[i] - _fit_row(ne, i, chosen[i]) for i in range(6)])
-    state = {i: _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], chosen[i],
-                          np.array([f for f, _ in pool[i]], dtype=np.int64), tol)
-             for i in range(6)}
+    tss = np.maximum(ne.c.sum(0), 1e-300)
+
+    def refresh(i: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], chosen[i],
+                         np.array(pool[i], dtype=np.int64), tol)
+
+    state = {i: refresh(i) for i in range(6)}
     cv = np.array([float(state[i][0]) for i in range(6)])
     k_now = base.n_params
+    log_n = float(np.log(n_eff))
 
     def crit(r: FloatArray, k: int) -> tuple[float, float]:
         ll = n_eff * float(np.sum(np.log(np.maximum(r, 1e-300) / N)))
-        return ll + k * float(np.log(n_eff)), ll + 2.0 * k
+        return ll + k * log_n, ll + 2.0 * k
+
+    def record(label: str, i: int) -> None:
+        bic, aic = crit(rss, k_now)
+        steps.append(SelectionStep(label, k_now, rss.copy(), bic, aic,
+                                   1.0 - rss[i] / max(steps[-1].rss[i], 1e-300), cv.copy()))
 
     bic, aic = crit(rss, k_now)
     steps = [SelectionStep("base: " + "+".join(base.kinds), k_now, rss.copy(), bic, aic, 0.0,
                            cv.copy())]
-    while k_now < max_terms:
+    def best_addition() -> tuple[float, int, int] | None:
+        """(score, row, pool index) of the candidate with the largest held-out gain (score
+        = change of the row's held-out unexplained share, < 0) among those that qualify."""
         best: tuple[float, int, int] | None = None
         for i in range(6):
             _, cv_c, gain = state[i]
             if not len(cv_c):
                 continue
             new = np.maximum(rss[i] - gain, 1e-300)
-            dbic = n_eff * np.log(new / max(rss[i], 1e-300)) + float(np.log(n_eff))
+            dbic = n_eff * np.log(new / max(rss[i], 1e-300)) + log_n
             good = ((dbic < -min_improvement) & (gain >= min_err * rss[i])
                     & (cv_c < cv[i]) & np.isfinite(cv_c))
             if good.any():
-                score = np.where(good, np.log(np.where(good, cv_c, 1.0) / cv[i]), np.inf)
+                score = np.where(good, (cv_c - cv[i]) / tss[i], np.inf)
                 j = int(np.argmin(score))
                 if best is None or score[j] < best[0]:
                     best = (float(score[j]), i, j)
-        if best is None:
+        return best
+
+    def remove(i: int, col: int, rss_wo: float, cv_wo: float) -> None:
+        nonlocal k_now
+        rss[i], cv[i] = rss_wo, cv_wo
+        chosen[i].remove(col)
+        k_now -= 1
+        state[i] = refresh(i)
+        record("− " + name_of[(i, col)], i)
+
+    for _ in range(rounds):
+        changed = False
+        while k_now < max_terms:
+            best = best_addition()
+            if best is None:
+                break
+            _, i, j = best
+            f = pool[i].pop(j)
+            cv[i] = float(state[i][1][j])
+            rss[i] = max(float(rss[i] - state[i][2][j]), 0.0)
+            chosen[i].append(f)
+            k_now += 1
+            state[i] = refresh(i)
+            record(name_of[(i, f)], i)
+            changed = True
+        while True:
+            # the weakest term: a searched one that no longer passes the test it entered by,
+            # or a base one whose removal lowers BIC; it does not come back (no cycling)
+            worst: tuple[float, int, int, float, float] | None = None
+            cheapest: tuple[float, int, int, float, float] | None = None
+            for i in range(6):
+                for col in chosen[i]:
+                    if (i, col) in keep_always:
+                        continue
+                    rest = [c for c in chosen[i] if c != col]
+                    cv_wo, _, gain = _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], rest,
+                                               np.array([col], dtype=np.int64), tol)
+                    rss_wo = rss[i] + float(gain[0])
+                    dbic = n_eff * float(np.log(max(rss[i], 1e-300) / max(rss_wo, 1e-300))) \
+                        + log_n
+                    weak = dbic > 0.0 if ((i, col) in from_base and not strict_base) else not (
+                        dbic < -min_improvement and rss_wo - rss[i] >= min_err * rss_wo
+                        and cv[i] < float(cv_wo))
+                    if weak and (worst is None or dbic > worst[0]):
+                        worst = (dbic, i, col, rss_wo, float(cv_wo))
+                    loss = (float(cv_wo) - cv[i]) / tss[i]
+                    if cheapest is None or loss < cheapest[0]:
+                        cheapest = (loss, i, col, rss_wo, float(cv_wo))
+            if worst is not None:
+                remove(*worst[1:])
+                changed = True
+                continue
+            # at the budget: exchange the term whose loss costs least held-out R² for the best
+            # candidate when that gains more than twice as much
+            add = best_addition() if k_now >= max_terms else None
+            if add is not None and cheapest is not None and -add[0] > 2.0 * cheapest[0]:
+                remove(*cheapest[1:])
+                changed = True
             break
-        _, i, j = best
-        f, nm = pool[i].pop(j)
-        cv[i] = float(state[i][1][j])
-        rss[i] = max(float(rss[i] - state[i][2][j]), 0.0)
-        chosen[i].append(f)
-        k_now += 1
-        state[i] = _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], chosen[i],
-                             np.array([c for c, _ in pool[i]], dtype=np.int64), tol)
-        bic, aic = crit(rss, k_now)
-        steps.append(SelectionStep(nm, k_now, rss.copy(), bic, aic,
-                                   1.0 - rss[i] / steps[-1].rss[i], cv.copy()))
-    keep_cross = [spec_of[st.added] for st in steps[1:] if st.added in spec_of]
+        if not changed:
+            break
+    final = {name_of[(i, f)] for i in range(6) for f in chosen[i]}
+    base = _without(base, [n for n in base_names if n not in final])
+    keep_cross = [spec_of[st.added] for st in steps[1:]
+                  if st.added in spec_of and st.added in final]
     keep_mem = {int(d): rates[int(d)] for k, d in enumerate(mem_dofs[n0:])
                 if m + n0 + k in chosen[int(d)]}
     # refine each chosen memory rate with the other chosen terms in place
@@ -477,6 +548,20 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     return Selection(model, steps, {f"freq.{DOF_NAMES[d]}.lambda1": lam
                                     for d, lam in keep_mem.items()}, dropped,
                      np.asarray(ne.c.sum(0), dtype=float))
+
+
+def _without(model: DampingModel, names: Sequence[str]) -> DampingModel:
+    """The model without the static parameters ``names`` (terms left empty go)."""
+    if not names:
+        return model
+    terms = []
+    for t in model.terms:
+        if t.kind != "freq":
+            t = DampingTerm(t.kind, t.meaning, [b for b in t.bases if b.name not in names])
+            if not t.bases:
+                continue
+        terms.append(t)
+    return DampingModel(terms)
 
 
 def _fit_row(ne: NormalEquations, i: int, cols: Sequence[int]) -> float:

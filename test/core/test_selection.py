@@ -101,15 +101,17 @@ def held_out_r2(samples: Samples, model: DampingModel, body: RigidBody) -> np.nd
 def test_library_names_are_unique_documented_and_round_trip(tmp_path: Path) -> None:
     specs = library()
     names = [s.label for s in specs]
-    assert len(specs) == 450 and len(set(names)) == 450  # 75 columns in each of 6 rows
-    for name in ("X_u", "Y_r", "Y_vr", "X_uu", "Z_uxw", "Y_vxr", "X_uU", "K_pW", "N_rU"):
+    assert len(specs) == 666 and len(set(names)) == 666  # 111 columns in each of 6 rows
+    for name in ("X_u", "Y_r", "Y_vr", "X_uu", "Z_uxw", "Y_vxr", "X_uU", "K_pW", "N_rU",
+                 "X_uUvw", "K_pWqr"):
         assert name in names, name
     # α text parses back to the same α (what the model file stores)
     for s in specs:
         assert Alpha.parse(s.alpha.label()) == s.alpha, s.label
     model = DampingModel([linear_term(), quadratic_term(),
                           cross_term([s for s in specs if s.label in (
-                              "Z_uxw", "Y_vr", "X_uU", "K_pW", "N_rv", "M_wxq")])])
+                              "Z_uxw", "Y_vr", "X_uU", "K_pW", "N_rv", "M_wxq",
+                              "X_uUvw")])])
     theta = np.arange(1.0, model.n_params + 1.0)
     path = save_model(tmp_path / "m.yaml", model.parameter_names, theta,
                       np.zeros(model.n_params), np.eye(6), damping=model)
@@ -126,7 +128,9 @@ def test_angular_norm_alpha() -> None:
     a = Alpha.parse("|W|")
     assert a.kind == "anorm" and a.label() == "|W|"
     np.testing.assert_allclose(a(nu), np.linalg.norm(nu[:, 3:], axis=1))
-    alphas = [Alpha("norm"), Alpha("anorm"), Alpha("abs", 2), Alpha("lin", 4)]
+    alphas = [Alpha("norm"), Alpha("anorm"), Alpha("abs", 2), Alpha("lin", 4),
+              Alpha.parse("|v,w|")]
+    assert alphas[-1] == Alpha("pnorm", 1, 2) and alphas[-1].label() == "|v,w|"
     np.testing.assert_allclose(AlphaBank(alphas)(nu), np.stack([x(nu) for x in alphas], 1))
     assert a.scale(np.array([1.0, 1.0, 1.0, 2.0, 3.0, 0.5])) == 3.0
 
