@@ -3,8 +3,10 @@
 Fetches ``model.*`` (DESIGN.md §3) from a node (``estimator_node``, ``model_server_node``) with
 the standard ``list_parameters`` and ``get_parameters`` services, follows ``/parameter_events``
 to refresh when ``model.version`` changes, and evaluates D(ν), the damping force D(ν)ν, its
-standard deviation and C(ν)ν (FRD body frame, SI units). Without ROS,
-:meth:`ModelClient.from_yaml` reads a model file. rclpy is imported only by the ROS methods.
+standard deviation and C(ν)ν (FRD body frame, SI units), the latter with the plant's
+added-mass switches (``model.added_mass_terms``, ``model.M_A``) when the server has them.
+Without ROS, :meth:`ModelClient.from_yaml` reads a model file. rclpy is imported only by the
+ROS methods.
 
 Every static damping term is evaluated (linear, quadratic, cross, added mass, residual): the
 structure comes from ``model.terms.*`` when the server declares them (estimator_node and
@@ -46,7 +48,8 @@ MODEL_PARAMETERS = ("model.parameter_names", "model.theta", "model.theta_std", "
 
 def _identified(m: ModelFile) -> IdentifiedModel:
     """The evaluable model of a model file (structure from its terms, else from the names)."""
-    return IdentifiedModel(m.parameter_names, m.theta, m.theta_std, m.M, m.damping, m.version)
+    return IdentifiedModel(m.parameter_names, m.theta, m.theta_std, m.M, m.damping, m.version,
+                           m.M_A, m.added_mass_terms)
 
 
 class ModelUnavailableError(RuntimeError):

@@ -154,3 +154,78 @@ def test_model_server_and_estimator_parameters_give_the_same_model(tmp_path: Pat
         for n in nodes:
             n.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def test_added_mass_switches_reach_the_client_from_file_and_parameters(tmp_path: Path) -> None:
+    """A plant without Munk moments and without M_A ν̇: the client's C(ν)ν and feed-forward
+    equal the core RigidBody's to 1e-12 from the YAML file, from a model_server_node (by file
+    and by --params-file) and from an estimator_node on that vehicle (model.M_A and
+    model.added_mass_terms.* served as parameters)."""
+    import yaml
+
+    from dampest_ros.core.rigid_body import AddedMassTerms
+
+    switches = {"inertial": False, "coriolis": True, "munk": False}
+    doc = yaml.safe_load(vehicle_path("bluerov2_heavy").read_text())
+    doc["vehicle"]["added_mass_terms"] = switches
+    vehicle_file = tmp_path / "vehicle.yaml"
+    vehicle_file.write_text(yaml.safe_dump(doc, sort_keys=False))
+    v = load_vehicle(vehicle_file)
+    assert v.body.added_mass_terms == AddedMassTerms(**switches)
+    path = save_model(tmp_path / "model.yaml", v.damping.parameter_names, v.theta,
+                      np.ones(v.theta.size), v.body.M, damping=v.damping,
+                      M_A=v.body.added_mass, added_mass_terms=v.body.added_mass_terms)
+    nu = np.random.default_rng(11).normal(0.0, [0.8, 0.6, 0.4, 0.5, 0.5, 0.6], (40, 6))
+    want = v.body.coriolis_force(nu)
+    # the Munk moments are what the switch removes: N = (Y_v̇ − X_u̇) u v is large here
+    assert np.abs(coriolis_force(v.body.M, nu) - want).max() > 0.1
+
+    def check(c: ModelClient) -> None:
+        np.testing.assert_allclose(c.model.coriolis_force(nu), want, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(c.feedforward(nu), v.damping.force(nu, c.model.theta) + want,
+                                   rtol=0, atol=1e-12)
+
+    check(ModelClient.from_yaml(path))
+    rclpy = pytest.importorskip("rclpy")
+    from rclpy.executors import SingleThreadedExecutor
+
+    from dampest_ros.ros.estimator_node import EstimatorNode
+    from dampest_ros.ros.model_server_node import ModelServerNode
+
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "77")
+    ns = f"/test_switches_{os.getpid()}"
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    ex = SingleThreadedExecutor(context=context)
+    nodes: list[Any] = []
+    try:
+        by_file = ModelServerNode(context=context, cli_args=[
+            "--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={path}"])
+        by_params = ModelServerNode(context=context, cli_args=[
+            "--ros-args", "-r", f"__ns:={ns}", "-r", "__node:=params_server",
+            "--params-file", str(path)])
+        est = EstimatorNode(context=context, cli_args=["--ros-args", "-r", f"__ns:={ns}"],
+                            parameter_overrides=[rclpy.parameter.Parameter(
+                                "vehicle", value=str(vehicle_file))])
+        probe = rclpy.create_node("probe", namespace=ns, context=context)
+        nodes += [by_file, by_params, est, probe]
+        for n in nodes:
+            ex.add_node(n)
+        clients = [ModelClient(probe, s) for s in ("model_server_node", "params_server",
+                                                   "estimator_node")]
+        end = time.monotonic() + 10.0
+        while not all(c.available for c in clients) and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        for c, server in zip(clients, (by_file, by_params, est), strict=True):
+            assert c.available, c.errors
+            assert server._served["model.added_mass_terms.munk"] is False
+            assert server._served["model.added_mass_terms.inertial"] is False
+            assert len(server._served["model.M_A"]) == 36
+            assert c.model.added_mass_terms == AddedMassTerms(**switches)
+            check(c)
+    finally:
+        ex.shutdown()
+        for n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown(context=context)

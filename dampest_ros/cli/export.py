@@ -23,7 +23,7 @@ from dampest_ros.io.export import (
     ExportWarning,
     export_model,
     import_model,
-    imported_mass,
+    imported_mass_parts,
 )
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 
@@ -85,8 +85,9 @@ def _run_export(args: argparse.Namespace) -> int:
         print(f"wrote {args.out} ({args.format})", file=sys.stderr)
     else:
         sys.stdout.write(result.text)
-    if vehicle is None:
-        print("note: no --vehicle, so no added mass was exported (damping only)",
+    if vehicle is None and model.M_A is None:
+        print("note: no --vehicle and no model.M_A, so no added mass was exported (damping "
+              "only)",
               file=sys.stderr)
     for line in result.left_out:
         print(f"warning: left out {line}", file=sys.stderr)
@@ -97,12 +98,15 @@ def _run_import(args: argparse.Namespace) -> int:
     vehicle = load_vehicle(args.vehicle) if args.vehicle else None
     imp = import_model(Path(args.file), args.format, frame=args.frame,
                        link_name=args.link_name)
-    M, mass_notes = imported_mass(imp, vehicle)
+    M_RB, M_A, mass_notes = imported_mass_parts(imp, vehicle)
+    terms = imp.added_mass_terms
+    if terms is None and vehicle is not None and imp.added_mass is None:
+        terms = vehicle.body.added_mass_terms  # the vehicle's added mass, with its switches
     damping = imp.damping()
-    save_model(args.out, imp.names, imp.theta, np.zeros(len(imp.names)), M,
+    save_model(args.out, imp.names, imp.theta, np.zeros(len(imp.names)), M_RB + M_A,
                extra={"source": f"dampest import {args.file} ({args.format})",
                       "import_notes": "; ".join([*imp.notes, *mass_notes])},
-               damping=damping)
+               damping=damping, M_A=M_A, added_mass_terms=terms)
     print(f"wrote {args.out}: {len(imp.names)} parameters from {args.file} ({args.format}); "
           + "; ".join(mass_notes))
     for note in imp.notes:

@@ -227,13 +227,15 @@ def final_model(data: gap.GapData, result: gap.GapResult, mf: ModelFile,
                 "conclusion": result.conclusion, **effects}}
     return {"names": names, "theta": theta,
             "std": np.array([std.get(n, 0.0) for n in names]), "M": M, "damping": model,
+            "M_A": M - data.body.M_RB, "added_mass_terms": data.body.added_mass_terms,
             "extra": extra}
 
 
 def save_final(path: Path, final: dict[str, Any]) -> None:
     """Write the model with the named effects as a model YAML."""
     save_model(path, final["names"], final["theta"], final["std"], final["M"],
-               extra=final["extra"], damping=final["damping"])
+               extra=final["extra"], damping=final["damping"], M_A=final["M_A"],
+               added_mass_terms=final["added_mass_terms"])
 
 
 # --- report ------------------------------------------------------------------------------

@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
         print()
         print(heldout_text(held, scores))
     if args.out:
-        write_model(Path(args.out), result, model, vehicle.body.M, source=str(args.input),
+        write_model(Path(args.out), result, model, vehicle.body, source=str(args.input),
                     heldout=scores)
         print(f"wrote {args.out}")
     if args.report:
@@ -277,16 +277,18 @@ def heldout_text(held: Samples, scores: dict[str, np.ndarray]) -> str:
                       units[i]) for i in range(6)]))
 
 
-def write_model(path: Path, result: Fit, model: DampingModel, M: np.ndarray,
+def write_model(path: Path, result: Fit, model: DampingModel, body: RigidBody,
                 source: str, heldout: dict[str, np.ndarray] | None = None) -> None:
-    """Save a fit as the model YAML with its metrics, the unidentified parameters and, with
-    a held-out part, its per-DOF R² and RMSE (``heldout_r2``, ``heldout_rmse``)."""
+    """Save a fit as the model YAML with the body's mass matrix, added mass and added-mass
+    switches, its metrics, the unidentified parameters and, with a held-out part, its
+    per-DOF R² and RMSE (``heldout_r2``, ``heldout_rmse``)."""
     unidentified = list(result.flags)
     ci = result.interval()
     more = {} if heldout is None else {
         "heldout_r2": [float(x) for x in heldout["nse"]],
         "heldout_rmse": [float(x) for x in heldout["rmse"]]}
-    save_model(path, result.names, result.theta, result.std, M, damping=model, extra={**more,
+    save_model(path, result.names, result.theta, result.std, body.M, damping=model,
+               M_A=body.added_mass, added_mass_terms=body.added_mass_terms, extra={**more,
         "source": source, "method": result.method, "samples": int(result.n),
         "ci95_low": [float(x) for x in ci[:, 0]], "ci95_high": [float(x) for x in ci[:, 1]],
         "nse": [float(x) for x in result.r2], "rmse": [float(x) for x in result.rmse],

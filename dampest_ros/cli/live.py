@@ -258,7 +258,8 @@ def write_prior(vehicle: Vehicle, factor: float, path: Path) -> Path:
     std = EstimatorConfig().prior_scale * parameter_scale(vehicle.damping, theta)
     return save_model(path, vehicle.damping.parameter_names, theta, std, vehicle.body.M,
                       {"source": f"{factor:g} x the nominal damping of {vehicle.name}"},
-                      damping=vehicle.damping)
+                      damping=vehicle.damping, M_A=vehicle.body.added_mass,
+                      added_mass_terms=vehicle.body.added_mass_terms)
 
 
 @dataclass

@@ -76,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
                    extra={"source": "dampest simulate", "vehicle": vehicle.name,
                           "protocol": args.protocol, "duration": float(args.duration),
                           "seed": int(args.seed), "effects": str(effects.as_dict() or "none")},
-                   damping=truth.damping)
+                   damping=truth.damping, M_A=truth.body.added_mass,
+                   added_mass_terms=truth.body.added_mass_terms)
     if args.csv:
         samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
                              PreprocessConfig())

@@ -321,13 +321,19 @@ class OnlineEstimator:
         ``extra``: more entries (:meth:`model_extra`)."""
         from dampest_ros.io.yaml_io import save_model
         return save_model(path, self.names, self.theta, self.theta_std, self.M,
-                          self.model_extra(**extra), damping=self.model, version=version)
+                          self.model_extra(**extra), damping=self.model, version=version,
+                          **self.added_mass_kwargs())
 
     def text(self, version: int) -> str:
         """The model file text for ``dampest/model``."""
         from dampest_ros.io.yaml_io import model_text
         return model_text(self.names, self.theta, self.theta_std, self.M, self.model_extra(),
-                          damping=self.model, version=version)
+                          damping=self.model, version=version, **self.added_mass_kwargs())
+
+    def added_mass_kwargs(self) -> dict[str, Any]:
+        """The body's added mass and its switches as the model file takes them (``M_A``,
+        ``added_mass_terms`` of :func:`dampest_ros.io.yaml_io.save_model`)."""
+        return {"M_A": self.body.added_mass, "added_mass_terms": self.body.added_mass_terms}
 
 
 def config_from_dict(d: dict[str, Any]) -> EstimatorConfig:

@@ -1,5 +1,6 @@
 """An identified damping model as controllers use it: D(ν), the damping force and its
-uncertainty, and C(ν)ν from the mass matrix (FRD body frame, SI units)."""
+uncertainty, and C(ν)ν from the mass matrix with the added-mass switches of the plant (FRD body
+frame, SI units)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, coriolis_force
+from dampest_ros.core.rigid_body import (
+    DOF_NAMES,
+    FORCE_NAMES,
+    AddedMassTerms,
+    ConfigError,
+    split_coriolis_force,
+)
 from dampest_ros.core.vehicle import damping_from_spec
 
 FloatArray = NDArray[np.float64]
@@ -53,16 +60,27 @@ class IdentifiedModel:
     damping : DampingModel, optional
         Term structure; rebuilt from the names when omitted.
     version : int
+    M_A : ndarray, shape (6, 6) or (36,), optional
+        The added mass inside ``M``; needed when ``added_mass_terms`` turn an effect off.
+    added_mass_terms : AddedMassTerms, optional
+        Which effects of M_A act (None: all, C(ν)ν of M as a whole).
     """
 
     def __init__(self, names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
-                 M: FloatArray, damping: DampingModel | None = None, version: int = 0) -> None:
+                 M: FloatArray, damping: DampingModel | None = None, version: int = 0,
+                 M_A: FloatArray | None = None,
+                 added_mass_terms: AddedMassTerms | None = None) -> None:
         self.names = [str(n) for n in names]
         self.theta = np.asarray(theta, dtype=float)
         self.theta_std = np.asarray(theta_std, dtype=float)
         self.M = np.asarray(M, dtype=float).reshape(6, 6)
         self.damping = damping if damping is not None else damping_from_names(self.names)
         self.version = int(version)
+        self.M_A = None if M_A is None else np.asarray(M_A, dtype=float).reshape(6, 6)
+        self.added_mass_terms = added_mass_terms
+        if added_mass_terms is not None and not added_mass_terms.all and self.M_A is None:
+            raise ConfigError("model.M_A", f"added_mass_terms {added_mass_terms.as_dict()} "
+                                           "turn effects off and need M_A to split M")
         p = len(self.names)
         if self.theta.shape != (p,) or self.theta_std.shape != (p,):
             raise ConfigError("model.theta", f"theta and theta_std need {p} values")
@@ -97,8 +115,10 @@ class IdentifiedModel:
         return s[0] if nu.ndim == 1 else s
 
     def coriolis_force(self, nu: FloatArray) -> FloatArray:
-        """C(ν)ν from M (rigid body and added mass, no current), shape like ν."""
-        return coriolis_force(self.M, np.asarray(nu, dtype=float))
+        """C_RB(ν)ν + the acting part of C_A(ν)ν (switches ``coriolis``, ``munk``; no
+        current), N and N·m, shape like ν."""
+        return split_coriolis_force(self.M, self.M_A, self.added_mass_terms,
+                                    np.asarray(nu, dtype=float))
 
     def feedforward(self, nu: FloatArray) -> FloatArray:
         """D(ν)ν + C(ν)ν, the model-based feed-forward of a velocity controller."""

@@ -189,6 +189,57 @@ class AddedMassTerms:
         return self.inertial and self.coriolis and self.munk
 
 
+def added_coriolis_force(M_A: FloatArray, terms: AddedMassTerms,
+                         nu_r: FloatArray) -> FloatArray:
+    """The acting part of C_A(ν_r)ν_r under the switches ``coriolis`` and ``munk``.
+
+    Parameters
+    ----------
+    M_A : ndarray, shape (6, 6)
+        Added mass (kg, kg·m, kg·m²).
+    terms : AddedMassTerms
+    nu_r : ndarray, shape (..., 6)
+        Velocity relative to the water (m/s, rad/s).
+
+    Returns
+    -------
+    ndarray, shape (..., 6)
+        C_A(ν_r)ν_r, without its Munk moments when ``munk`` is off, zero when ``coriolis``
+        is off (left-hand side, N and N·m).
+    """
+    if not terms.coriolis:
+        return np.zeros(np.shape(nu_r))
+    out = coriolis_force(M_A, nu_r)
+    # without Munk moments: C_A(ν)ν − [0, v × (M_A11 v)]
+    return out if terms.munk else out - munk_moment(M_A, nu_r)
+
+
+def split_coriolis_force(M: FloatArray, M_A: FloatArray | None, terms: AddedMassTerms | None,
+                         nu: FloatArray) -> FloatArray:
+    """C_RB(ν)ν + the acting part of C_A(ν)ν from the total mass matrix and its added part.
+
+    Parameters
+    ----------
+    M : ndarray, shape (6, 6)
+        M_RB + M_A.
+    M_A : ndarray, shape (6, 6), or None
+        The added mass inside ``M``; needed only when ``terms`` turn an effect off.
+    terms : AddedMassTerms or None
+        None: all act (C(ν)ν of ``M`` as a whole).
+    nu : ndarray, shape (..., 6)
+        Body velocity, no current (m/s, rad/s).
+
+    Returns
+    -------
+    ndarray, shape (..., 6)
+    """
+    if terms is None or terms.all:
+        return coriolis_force(M, nu)
+    if M_A is None:
+        raise ConfigError("M_A", f"added-mass switches {terms.as_dict()} need M_A to split M")
+    return coriolis_force(M - M_A, nu) + added_coriolis_force(M_A, terms, nu)
+
+
 @dataclass(frozen=True)
 class RigidBody:
     """Mass, inertia, added mass and restoring data of a vehicle (FRD body frame, SI units).
@@ -280,12 +331,7 @@ class RigidBody:
     def added_coriolis_force(self, nu_r: FloatArray) -> FloatArray:
         """The acting part of C_A(ν_r)ν_r (switches ``coriolis`` and ``munk``), shape (..., 6).
         """
-        terms = self.added_mass_terms
-        if not terms.coriolis:
-            return np.zeros(np.shape(nu_r))
-        out = coriolis_force(self.added_mass, nu_r)
-        # without Munk moments: C_A(ν)ν − [0, v × (M_A11 v)]
-        return out if terms.munk else out - munk_moment(self.added_mass, nu_r)
+        return added_coriolis_force(self.added_mass, self.added_mass_terms, nu_r)
 
     def added_mass_force(self, nu: FloatArray, nu_dot: FloatArray) -> FloatArray:
         """Everything the added mass does to the vehicle, as it acts: M_A ν̇ (if inertial)

@@ -44,10 +44,14 @@ Targets (DESIGN.md §5), with the conventions read from each project's source:
     dissipative. Written as YAML (``hydrodynamic_model: {type: fossen, …}``).
 
 dampest stores D(ν)ν on the left-hand side with dissipative coefficients positive, in FRD.
-Added mass is M_A = M − M_RB: it needs the vehicle's rigid body; without a vehicle only the
-damping is exported (and the output says so). Terms a format cannot express (fluid memory,
-residual modes, |U| or product α) are listed in the output and raised as
-:class:`ExportWarning`; nothing is dropped silently.
+Added mass is the model file's ``model.M_A`` when it has one, else M_A = M − M_RB with the
+vehicle's rigid body; with neither only the damping is exported (and the output says so).
+The added-mass switches (``model.added_mass_terms``, else the vehicle's) become gz-sim's
+``<disable_added_mass>`` (``inertial: false``) and ``<disable_coriolis>`` (``coriolis:
+false``); gz-sim has no switch for the Munk moments alone (its C_A(ν)ν always holds them), and
+the URDF block and UUV Simulator have no switches at all: such a combination is listed as
+left out. Terms a format cannot express (fluid memory, residual modes, |U| or product α) are
+listed in the output and raised as :class:`ExportWarning`; nothing is dropped silently.
 """
 
 from __future__ import annotations
@@ -57,7 +61,7 @@ import re
 import warnings
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -65,7 +69,13 @@ import numpy as np
 
 from dampest_ros.core.damping import DampingModel, FloatArray
 from dampest_ros.core.frames import body_twist
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, rigid_body_mass
+from dampest_ros.core.rigid_body import (
+    DOF_NAMES,
+    FORCE_NAMES,
+    AddedMassTerms,
+    ConfigError,
+    rigid_body_mass,
+)
 from dampest_ros.core.vehicle import Vehicle, damping_from_spec
 from dampest_ros.io.yaml_io import ModelFile
 
@@ -163,6 +173,9 @@ class Imported:
         M_RB, when the file has mass and inertia (``urdf`` only).
     notes : tuple of str
         What was ignored or interpreted.
+    added_mass_terms : AddedMassTerms or None
+        The added-mass switches, when the file has any (``gz``: ``<disable_added_mass>``,
+        ``<disable_coriolis>``).
     """
 
     format: str
@@ -172,6 +185,7 @@ class Imported:
     added_mass: FloatArray | None = None
     rigid_body: FloatArray | None = None
     notes: tuple[str, ...] = field(default_factory=tuple)
+    added_mass_terms: AddedMassTerms | None = None
 
     def damping(self) -> DampingModel:
         """The damping model of ``spec`` (parameter names are ``names``)."""
@@ -266,7 +280,11 @@ def coefficients(model: DampingModel, theta: FloatArray) -> tuple[list[Coefficie
 
 
 def _added_mass(mf: ModelFile, vehicle: Vehicle | None) -> tuple[FloatArray | None, list[str]]:
-    """M_A = M − M_RB (FRD), cleaned of round-off, and notes; None without a vehicle."""
+    """M_A (FRD): the file's ``model.M_A``, else M − M_RB of the vehicle, cleaned of
+    round-off, and notes; None with neither."""
+    if mf.M_A is not None:
+        return np.asarray(mf.M_A, dtype=float).reshape(6, 6), [
+            "Added mass M_A from the model file (model.M_A)."]
     if vehicle is None:
         return None, ["Added mass not exported: M_A = M - M_RB needs the vehicle's rigid "
                       "body (pass a vehicle); the simulator's default (zero) applies."]
@@ -286,6 +304,22 @@ def _added_mass(mf: ModelFile, vehicle: Vehicle | None) -> tuple[FloatArray | No
         warnings.warn(msg, ExportWarning, stacklevel=3)
         notes.append(msg)
     return M_A, notes
+
+
+def _switches(mf: ModelFile, vehicle: Vehicle | None) -> AddedMassTerms:
+    """The added-mass switches of the model file, else of the vehicle, else all on."""
+    if mf.added_mass_terms is not None:
+        return mf.added_mass_terms
+    return vehicle.body.added_mass_terms if vehicle is not None else AddedMassTerms()
+
+
+def _switches_left_out(terms: AddedMassTerms, fmt: str) -> list[str]:
+    """The left-out line for switches a format without any cannot hold ([] when all on)."""
+    if terms.all:
+        return []
+    off = ", ".join(k for k, v in terms.as_dict().items() if not v)
+    return [f"added_mass_terms {terms.as_dict()} (the plant applies no {off} effect of the "
+            f"added mass; {fmt} has no switches and applies M_A nudot and C_A(nu)nu whole)"]
 
 
 def _merge(items: Iterable[tuple[str, Coefficient, float]],
@@ -389,6 +423,12 @@ def export_gz(mf: ModelFile, vehicle: Vehicle | None = None, *, link_name: str =
         notes.append("Signed diagonal products such as <xUU> mean X*u*u (no abs) in gz-sim; "
                      "gz warns that they may be unstable (gz-sim PR #1888).")
     M_A, mass_notes = _added_mass(mf, vehicle)
+    terms = _switches(mf, vehicle)
+    switches = {"disable_added_mass": not terms.inertial, "disable_coriolis": not terms.coriolis}
+    if terms.coriolis and not terms.munk:
+        left_out.append(f"added_mass_terms {terms.as_dict()}: gz-sim cannot drop the Munk "
+                        "moments alone (its C_A(nu)nu holds them); written with the Coriolis "
+                        "term on, Munk moments included")
     added: dict[str, float] = {}
     if M_A is not None:
         T = np.diag(_FLIP) if frame == "flu" else np.eye(6)
@@ -414,6 +454,9 @@ def export_gz(mf: ModelFile, vehicle: Vehicle | None = None, *, link_name: str =
              "negative when dissipative. Each tag = -(dampest coefficient), e.g. X_u = 13.7",
              "-> <xU>-13.7</xU>, X_uu = 141 -> <xUabsU>-141</xUabsU>.",
              *frame_text]
+    if not terms.all:
+        lines += [f"Added-mass switches {terms.as_dict()}: <disable_added_mass> drops "
+                  "M_A nudot, <disable_coriolis> drops C_A(nu)nu."]
     if M_A is not None:
         lines += ["Added mass: <iDotJ> = -M_A (SNAME X_udot < 0; gz applies +<iDotJ> nudot).",
                   "With DART, <fluid_added_mass> in the link <inertial> (positive M_A) is the",
@@ -424,6 +467,9 @@ def export_gz(mf: ModelFile, vehicle: Vehicle | None = None, *, link_name: str =
     plugin = ET.Element("plugin", {"filename": "gz-sim-hydrodynamics-system",
                                    "name": "gz::sim::systems::Hydrodynamics"})
     ET.SubElement(plugin, "link_name").text = link_name
+    for tag, off in switches.items():
+        if off:
+            ET.SubElement(plugin, tag).text = "true"
     for tag, value in [*added.items(), *damping.items()]:
         ET.SubElement(plugin, tag).text = _num(value)
     ET.indent(plugin, "  ")
@@ -467,6 +513,7 @@ def export_urdf(mf: ModelFile, vehicle: Vehicle | None = None, *,
         else:
             left_out.append(f"{c.name} = {_num(c.value)} (off-diagonal or cross coupling: "
                             f"the block holds diagonal damping only)")
+    left_out += _switches_left_out(_switches(mf, vehicle), "the block")
     lin_v, quad_v = _merge(lin, notes), _merge(quad, notes)
     for names, values, what in ((_URDF_LINEAR, lin_v, "linear"),
                                 (_URDF_QUADRATIC, quad_v, "quadratic")):
@@ -556,6 +603,7 @@ def export_uuv(mf: ModelFile, vehicle: Vehicle | None = None, *,
         else:
             left_out.append(f"{c.name} = {_num(c.value)} (UUV Simulator has quadratic damping "
                             f"on the diagonal only (|nu_i| nu_i) and products with u only)")
+    left_out += _switches_left_out(_switches(mf, vehicle), "UUV Simulator")
     mats = {}
     for key, items in (("linear_damping", lin), ("quadratic_damping", quad),
                        ("linear_damping_forward_speed", fwd)):
@@ -718,10 +766,14 @@ def import_gz(source: str | Path, *, frame: str = "flu",
     link_mass = np.zeros((6, 6))
     has_added = False
     F, V = _GZ_FORCE, _GZ_VEL
+    disabled: dict[str, bool] = {}
     for el in plugin:
         if not isinstance(el.tag, str):
             continue
         tag = el.tag
+        if tag in ("disable_added_mass", "disable_coriolis"):
+            disabled[tag] = _bool(el.text, f"<{tag}>")
+            continue
         m = re.fullmatch(f"([{F}])(Dot)?([{V}])(?:(abs)?([{V}]))?", tag)
         if m is None:
             if tag not in _GZ_OTHER:
@@ -774,7 +826,21 @@ def import_gz(source: str | Path, *, frame: str = "flu",
         added = T @ link_mass @ T
     notes.append(f"Read from link '{(plugin.findtext('link_name') or '').strip()}' as "
                  f"{frame.upper()}.")
-    return _build("gz", lin_spec, quad_spec, cross, added, None, notes)
+    terms = None
+    if disabled:
+        coriolis = not disabled.get("disable_coriolis", False)
+        terms = AddedMassTerms(inertial=not disabled.get("disable_added_mass", False),
+                               coriolis=coriolis, munk=coriolis)
+    return replace(_build("gz", lin_spec, quad_spec, cross, added, None, notes),
+                   added_mass_terms=terms)
+
+
+def _bool(text: str | None, what: str) -> bool:
+    """An SDF boolean (true/false/1/0, any case)."""
+    value = (text or "").strip().lower()
+    if value not in ("true", "false", "1", "0"):
+        raise ConfigError(what, f"must be true or false, got {text!r}")
+    return value in ("true", "1")
 
 
 def _numbers(el: ET.Element, what: str) -> list[float]:
@@ -919,7 +985,16 @@ def import_model(source: str | Path, fmt: str, *, frame: str = "flu",
 
 
 def imported_mass(imp: Imported, vehicle: Vehicle | None) -> tuple[FloatArray, list[str]]:
-    """The mass matrix M = M_RB + M_A of an imported model, and notes on where it came from.
+    """The mass matrix M = M_RB + M_A of an imported model, and notes on where it came from
+    (:func:`imported_mass_parts`)."""
+    M_RB, M_A, notes = imported_mass_parts(imp, vehicle)
+    return np.asarray(M_RB + M_A, dtype=float), notes
+
+
+def imported_mass_parts(imp: Imported, vehicle: Vehicle | None
+                        ) -> tuple[FloatArray, FloatArray, list[str]]:
+    """M_RB and M_A (each (6, 6), FRD) of an imported model, and notes on where they came
+    from.
 
     M_RB comes from ``vehicle`` when given, else from the file; M_A from the file when it has
     added-mass entries, else from ``vehicle``.
@@ -948,4 +1023,4 @@ def imported_mass(imp: Imported, vehicle: Vehicle | None) -> tuple[FloatArray, l
     else:
         M_A = np.zeros((6, 6))
         notes.append("M_A = 0 (none in the file)")
-    return np.asarray(M_RB + M_A, dtype=float), notes
+    return np.asarray(M_RB, dtype=float), np.asarray(M_A, dtype=float), notes

@@ -14,6 +14,8 @@ well as :func:`load_model` does (DESIGN.md §1, §3)::
           theta: [13.7, 0.0, ..., 141.0, ...]
           theta_std: [0.2, 0.1, ..., 1.5, ...]
           M: [...]              # 36 numbers, row-major, M_RB + M_A
+          M_A: [...]            # 36 numbers, the added mass inside M (optional)
+          added_mass_terms: {inertial: true, coriolis: true, munk: true}   # optional
           version: 1
           terms:                # structure of D(ν), enough to rebuild it (values are theta)
             linear: [X_u, Y_v, Z_w, K_p, M_q, N_r]     # SNAME names (off-diagonal: Y_r, ...)
@@ -28,6 +30,12 @@ ROS parameters allow only scalars and non-empty homogeneous arrays as leaves (ne
 mappings are namespaces), so the term structure is stored as parallel arrays, with integer
 indices where letters such as ``N`` or ``Y`` would read as booleans. Damping coefficients are
 positive when dissipative (force on the left-hand side is +D(ν)ν).
+
+``M_A`` and ``added_mass_terms`` say which effects of the added mass act on the plant the
+model describes (:class:`~dampest_ros.core.rigid_body.AddedMassTerms`: ``inertial`` M_A ν̇,
+``coriolis`` C_A(ν)ν, ``munk`` its Munk moments); the switches are a namespace of three
+booleans, so ``model.added_mass_terms.coriolis`` is a ROS parameter. Files without them (older
+ones) mean all effects act, and C(ν)ν is that of M as a whole.
 """
 
 from __future__ import annotations
@@ -45,12 +53,12 @@ import yaml
 
 from dampest_ros.core.damping import TERM_KINDS, Alpha, DampingModel
 from dampest_ros.core.measurements import FloatArray
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.vehicle import Vehicle, damping_from_spec
 
 SIGN_CONVENTION = "dissipative_positive"
-_RESERVED = ("sign_convention", "parameter_names", "theta", "theta_std", "M", "version",
-             "terms")
+_REQUIRED = ("sign_convention", "parameter_names", "theta", "theta_std", "M", "version")
+_RESERVED = (*_REQUIRED, "terms", "M_A", "added_mass_terms")
 
 
 def _read_yaml(path: Path) -> Any:
@@ -258,6 +266,11 @@ class ModelFile:
         Rebuilt from ``model.terms`` when the file has them.
     extra : dict
         Every other entry under ``model``.
+    M_A : ndarray, shape (6, 6), or None
+        The added mass inside ``M`` (``model.M_A``), when the file has it.
+    added_mass_terms : AddedMassTerms or None
+        Which effects of M_A act (``model.added_mass_terms``); None: the file does not say,
+        all act.
     """
 
     parameter_names: list[str]
@@ -268,6 +281,18 @@ class ModelFile:
     damping: DampingModel | None = None
     extra: dict[str, Any] = field(default_factory=dict)
     sign_convention: str = SIGN_CONVENTION
+    M_A: FloatArray | None = None
+    added_mass_terms: AddedMassTerms | None = None
+
+    @property
+    def acting_terms(self) -> AddedMassTerms:
+        """The added-mass switches, all true when the file has none."""
+        return self.added_mass_terms or AddedMassTerms()
+
+    def added_mass_kwargs(self) -> dict[str, Any]:
+        """``M_A`` and ``added_mass_terms`` as :func:`save_model` takes them (to write the
+        model again as it was read)."""
+        return {"M_A": self.M_A, "added_mass_terms": self.added_mass_terms}
 
 
 def _param_value(key: str, value: Any) -> Any:
@@ -313,7 +338,9 @@ def _atomic_write(path: Path, text: str) -> None:
 
 def save_model(path: str | Path, names: Sequence[str], theta: FloatArray,
                theta_std: FloatArray, M: FloatArray, extra: Mapping[str, Any] | None = None,
-               *, damping: DampingModel | None = None, version: int = 1) -> Path:
+               *, damping: DampingModel | None = None, version: int = 1,
+               M_A: FloatArray | None = None,
+               added_mass_terms: AddedMassTerms | None = None) -> Path:
     """Write the model file atomically (temporary file in the same directory + rename).
 
     Parameters
@@ -331,25 +358,33 @@ def save_model(path: str | Path, names: Sequence[str], theta: FloatArray,
         Written as ``model.terms`` so that :func:`load_model` rebuilds it; its parameter
         names must be ``names``.
     version : int
+    M_A : ndarray, shape (6, 6) or (36,), optional
+        The added mass inside ``M`` (kg, kg·m, kg·m²), written as ``model.M_A``.
+    added_mass_terms : AddedMassTerms, optional
+        Which effects of M_A act, written as ``model.added_mass_terms``; switches that turn
+        an effect off need ``M_A``.
 
     Returns
     -------
     Path
     """
     path = Path(path)
-    text = model_text(names, theta, theta_std, M, extra, damping=damping, version=version)
+    text = model_text(names, theta, theta_std, M, extra, damping=damping, version=version,
+                      M_A=M_A, added_mass_terms=added_mass_terms)
     _atomic_write(path, text)
     return path
 
 
 def model_text(names: Sequence[str], theta: FloatArray, theta_std: FloatArray, M: FloatArray,
                extra: Mapping[str, Any] | None = None, *, damping: DampingModel | None = None,
-               version: int = 1) -> str:
+               version: int = 1, M_A: FloatArray | None = None,
+               added_mass_terms: AddedMassTerms | None = None) -> str:
     """The model file's text (what :func:`save_model` writes and ``dampest/model`` carries).
 
     Parameters are those of :func:`save_model`.
     """
-    model = _model_mapping(names, theta, theta_std, M, extra, damping, version)
+    model = _model_mapping(names, theta, theta_std, M, extra, damping, version, M_A,
+                           added_mass_terms)
     return ("# dampest_ros model: a ROS 2 parameters file (--ros-args --params-file).\n"
             "# Damping coefficients are positive when dissipative; M is row-major, FRD.\n"
             + yaml.dump({"/**": {"ros__parameters": {"model": model}}}, Dumper=_Dumper,
@@ -358,7 +393,8 @@ def model_text(names: Sequence[str], theta: FloatArray, theta_std: FloatArray, M
 
 def model_parameters(names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
                      M: FloatArray, *, damping: DampingModel | None = None,
-                     version: int = 1) -> dict[str, Any]:
+                     version: int = 1, M_A: FloatArray | None = None,
+                     added_mass_terms: AddedMassTerms | None = None) -> dict[str, Any]:
     """The model as the ROS parameters a node declares from the model file.
 
     Parameters are those of :func:`save_model` (without ``extra``).
@@ -367,7 +403,8 @@ def model_parameters(names: Sequence[str], theta: FloatArray, theta_std: FloatAr
     -------
     dict
         Dotted parameter name → value (``model.theta``: list of p floats, ``model.M``: 36
-        floats, ``model.terms.cross.rows``: list of int, …), the names and values
+        floats, ``model.terms.cross.rows``: list of int, ``model.added_mass_terms.munk``:
+        bool, …), the names and values
         ``--params-file`` gives for the file :func:`save_model` writes.
     """
     flat: dict[str, Any] = {}
@@ -379,7 +416,8 @@ def model_parameters(names: Sequence[str], theta: FloatArray, theta_std: FloatAr
         else:
             flat[prefix] = value
 
-    walk("model", _model_mapping(names, theta, theta_std, M, None, damping, version))
+    walk("model", _model_mapping(names, theta, theta_std, M, None, damping, version, M_A,
+                                 added_mass_terms))
     return flat
 
 
@@ -413,7 +451,9 @@ def model_from_parameters(values: Mapping[str, Any]) -> ModelFile:
 
 def _model_mapping(names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
                    M: FloatArray, extra: Mapping[str, Any] | None,
-                   damping: DampingModel | None, version: int) -> dict[str, Any]:
+                   damping: DampingModel | None, version: int,
+                   M_A: FloatArray | None = None,
+                   added_mass_terms: AddedMassTerms | None = None) -> dict[str, Any]:
     """The ``model`` mapping of the file (checked)."""
     names = [str(n) for n in names]
     theta = np.asarray(theta, dtype=float)
@@ -428,6 +468,16 @@ def _model_mapping(names: Sequence[str], theta: FloatArray, theta_std: FloatArra
         "sign_convention": SIGN_CONVENTION, "parameter_names": names,
         "theta": theta.tolist(), "theta_std": theta_std.tolist(),
         "M": M.reshape(36).tolist(), "version": int(version)}
+    if M_A is not None:
+        M_A = np.asarray(M_A, dtype=float)
+        if M_A.size != 36:
+            raise ValueError(f"M_A must have 36 entries, got shape {M_A.shape}")
+        model["M_A"] = M_A.reshape(36).tolist()
+    if added_mass_terms is not None:
+        if not added_mass_terms.all and M_A is None:
+            raise ValueError(f"added_mass_terms {added_mass_terms.as_dict()} turn effects off: "
+                             "M_A is needed to split M")
+        model["added_mass_terms"] = added_mass_terms.as_dict()
     if damping is not None:
         if damping.parameter_names != names:
             raise ValueError("damping.parameter_names differ from names")
@@ -484,7 +534,7 @@ def _model_from_doc(doc: Any, path: Path) -> ModelFile:
 
 def _model_from_mapping(model: Mapping[str, Any], path: Path) -> ModelFile:
     """The ModelFile of a ``model`` mapping (checked; ``path`` names it in errors)."""
-    for key in _RESERVED[:-1]:
+    for key in _REQUIRED:
         if key not in model:
             raise ConfigError(f"model.{key}", f"missing in {path}")
     if model["sign_convention"] != SIGN_CONVENTION:
@@ -502,6 +552,33 @@ def _model_from_mapping(model: Mapping[str, Any], path: Path) -> ModelFile:
         if damping.parameter_names != names:
             raise ConfigError("model.terms", f"the terms give parameters "
                                              f"{damping.parameter_names}, not {names} ({path})")
+    M_A, terms = _added_mass_entries(model, path)
     return ModelFile(names, arrays["theta"], arrays["theta_std"], arrays["M"].reshape(6, 6),
                      int(model["version"]), damping,
-                     {k: v for k, v in model.items() if k not in _RESERVED})
+                     {k: v for k, v in model.items() if k not in _RESERVED}, M_A=M_A,
+                     added_mass_terms=terms)
+
+
+def _added_mass_entries(model: Mapping[str, Any], path: Path
+                        ) -> tuple[FloatArray | None, AddedMassTerms | None]:
+    """``model.M_A`` (6, 6) and ``model.added_mass_terms`` of a model mapping (checked)."""
+    M_A = None
+    if "M_A" in model:
+        try:
+            M_A = np.asarray(model["M_A"], dtype=float)
+        except (TypeError, ValueError):
+            raise ConfigError("model.M_A", f"must be 36 numbers ({path})") from None
+        if M_A.shape != (36,) or not np.all(np.isfinite(M_A)):
+            raise ConfigError("model.M_A", f"needs 36 finite numbers, got shape {M_A.shape} "
+                                           f"({path})")
+        M_A = M_A.reshape(6, 6)
+    terms = None
+    if "added_mass_terms" in model:
+        try:
+            terms = AddedMassTerms.from_dict(model["added_mass_terms"])
+        except ConfigError as exc:
+            raise ConfigError(f"model.{exc.field}", f"{exc.reason} ({path})") from None
+        if not terms.all and M_A is None:
+            raise ConfigError("model.M_A", f"missing: added_mass_terms {terms.as_dict()} turn "
+                                           f"effects off and need M_A to split M ({path})")
+    return M_A, terms

@@ -198,7 +198,7 @@ class EstimatorNode(ModelParamNode):
         """model.* of the current estimate, its term structure included."""
         e = self.estimator
         return model_parameters(e.names, e.theta, e.theta_std, e.M, damping=e.model,
-                                version=self.version)
+                                version=self.version, **e.added_mass_kwargs())
 
     def check_parameter(self, name: str, value: Any) -> str | None:
         try:

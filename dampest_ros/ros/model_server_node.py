@@ -2,10 +2,12 @@
 
 The model comes from the model_file parameter, or from model.* given directly (a model file
 is a ROS 2 parameters file: --ros-args --params-file model.yaml). Its parameters are those
-of the file: model.parameter_names, theta, theta_std, M, version, sign_convention and the
+of the file: model.parameter_names, theta, theta_std, M, version, sign_convention, the
 term structure model.terms.* (so that dampest_ros.client evaluates cross, added-mass and
-residual terms too). Publishes it on dampest/model (std_msgs/String with the YAML, transient
-local). Setting model_file loads another file (validated first) and bumps model.version.
+residual terms too) and, when the file has them, model.M_A and the added-mass switches
+model.added_mass_terms.{inertial,coriolis,munk}. Publishes it on dampest/model
+(std_msgs/String with the YAML, transient local). Setting model_file loads another file
+(validated first) and bumps model.version.
 """
 
 from __future__ import annotations
@@ -61,10 +63,11 @@ class ModelServerNode(ModelParamNode):
         """Hold the model in model.* (the terms' names may change with the file), publish."""
         m = self.model
         self.serve_model(model_parameters(m.parameter_names, m.theta, m.theta_std, m.M,
-                                          damping=m.damping, version=self.version))
+                                          damping=m.damping, version=self.version,
+                                          **m.added_mass_kwargs()))
         self.pub.publish(String(data=model_text(
             m.parameter_names, m.theta, m.theta_std, m.M, {"source": "model_server_node"},
-            damping=m.damping, version=self.version)))
+            damping=m.damping, version=self.version, **m.added_mass_kwargs())))
 
     def on_parameters(self, names: list[str]) -> None:
         if "model_file" in names and str(self.p("model_file")).strip():

@@ -46,3 +46,37 @@ def test_feedforward_from_the_model_improves_tracking() -> None:
     pid, ff = tracking_rms_60s(False), tracking_rms_60s(True)
     print(f"\nvelocity tracking RMS: PI {pid:.4f}, PI + D(ν)ν + C(ν)ν {ff:.4f}")
     assert ff < 0.5 * pid
+
+
+@pytest.mark.parametrize("switches", [
+    {"inertial": False, "coriolis": True, "munk": True},    # MuJoCo's plant
+    {"inertial": True, "coriolis": True, "munk": False},    # no Munk moments
+    {"inertial": True, "coriolis": False, "munk": False},   # no C_A at all
+])
+def test_coriolis_force_honours_the_added_mass_switches(switches: dict[str, bool]) -> None:
+    """C(ν)ν and the feed-forward of an IdentifiedModel with M_A and the switches equal the
+    core RigidBody's to 1e-12 (the Munk moment is N = (Y_v̇ − X_u̇) u v, big at these speeds).
+    """
+    from dataclasses import replace
+
+    from dampest_ros.core.rigid_body import AddedMassTerms
+
+    v = load_vehicle("torpedo_auv")
+    terms = AddedMassTerms(**switches)
+    body = replace(v.body, added_mass_terms=terms)
+    nu = np.random.default_rng(4).normal(0.0, [1.0, 0.5, 0.4, 0.6, 0.5, 0.7], (50, 6))
+    m = IdentifiedModel(v.damping.parameter_names, v.theta, np.zeros(v.theta.size), body.M,
+                        v.damping, M_A=body.added_mass, added_mass_terms=terms)
+    scale = float(np.abs(body.coriolis_force(nu)).max())
+    np.testing.assert_allclose(m.coriolis_force(nu), body.coriolis_force(nu), rtol=0,
+                               atol=1e-12 * scale)
+    np.testing.assert_allclose(m.feedforward(nu), m.damping_force(nu) + body.coriolis_force(nu),
+                               rtol=0, atol=1e-12 * scale)
+    # the velocity switches matter: the full C(ν)ν differs by far more than the tolerance
+    # (inertial acts on ν̇ only: C(ν)ν is the full one)
+    gap = np.abs(coriolis_force(body.M, nu) - m.coriolis_force(nu)).max()
+    assert gap > 1e6 * 1e-12 * scale if not terms.munk else gap < 1e-12 * scale
+    # switches that turn an effect off need M_A
+    with pytest.raises(ConfigError, match="M_A"):
+        IdentifiedModel(v.damping.parameter_names, v.theta, np.zeros(v.theta.size), body.M,
+                        v.damping, added_mass_terms=terms)

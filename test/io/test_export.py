@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
@@ -476,3 +477,92 @@ def test_cli_import_urdf_without_rigid_body_needs_a_vehicle(tmp_path: Path) -> N
     m = load_model(tmp_path / "m.yaml")
     assert m.theta.tolist() == [1.0, 2.0, 3.0, 0.0, 0.0, 0.0]
     np.testing.assert_allclose(m.M, load_vehicle("bluerov2_heavy").body.M)
+
+
+# --- added-mass switches ----------------------------------------------------------------------
+
+
+def switched_file(tmp_path: Path, heavy: Vehicle, **switches: bool) -> Path:
+    """The heavy's model with model.M_A and the given added-mass switches."""
+    from dampest_ros.core.rigid_body import AddedMassTerms
+    return save_model(tmp_path / "switched.yaml", heavy.damping.parameter_names, heavy.theta,
+                      np.zeros(heavy.damping.n_params), heavy.body.M, damping=heavy.damping,
+                      M_A=heavy.body.added_mass, added_mass_terms=AddedMassTerms(**switches))
+
+
+def plugin_flags(text: str) -> dict[str, str]:
+    plugin = ET.fromstring(text)
+    return {e.tag: (e.text or "") for e in plugin if e.tag.startswith("disable_")}
+
+
+@pytest.mark.parametrize(("switches", "flags", "munk_left_out"), [
+    ({"inertial": False, "coriolis": True, "munk": True}, {"disable_added_mass": "true"}, False),
+    ({"inertial": True, "coriolis": False, "munk": False}, {"disable_coriolis": "true"}, False),
+    ({"inertial": False, "coriolis": False, "munk": False},
+     {"disable_added_mass": "true", "disable_coriolis": "true"}, False),
+    ({"inertial": True, "coriolis": True, "munk": False}, {}, True),
+    ({"inertial": True, "coriolis": True, "munk": True}, {}, False),
+])
+def test_gz_maps_the_added_mass_switches_and_reads_them_back(
+        tmp_path: Path, heavy: Vehicle, switches: dict[str, bool], flags: dict[str, str],
+        munk_left_out: bool) -> None:
+    """inertial → <disable_added_mass>, coriolis → <disable_coriolis>; Munk moments alone
+    cannot be dropped in gz-sim (listed as left out); M_A comes from model.M_A without a
+    vehicle; the import gives the switches and M_A back."""
+    mf = load_model(switched_file(tmp_path, heavy, **switches))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ExportWarning)
+        ex = export_gz(mf)                                # no vehicle: M_A from the file
+    assert plugin_flags(ex.text) == flags
+    assert any("model.M_A" in n for n in ex.notes)
+    assert ET.fromstring(ex.text).findtext("xDotU") == "-6.36"
+    assert any("cannot drop the Munk moments" in x for x in ex.left_out) == munk_left_out
+    back = import_gz(ex.text)
+    assert back.added_mass_terms == (None if not flags else load_terms(
+        inertial=switches["inertial"], coriolis=switches["coriolis"],
+        munk=switches["coriolis"]))
+    np.testing.assert_allclose(back.added_mass, heavy.body.added_mass, atol=1e-12)
+
+
+def load_terms(**kw: bool) -> Any:
+    from dampest_ros.core.rigid_body import AddedMassTerms
+    return AddedMassTerms(**kw)
+
+
+@pytest.mark.parametrize("fmt", ["urdf", "uuv"])
+def test_formats_without_switches_list_them_as_left_out(tmp_path: Path, heavy: Vehicle,
+                                                        fmt: str) -> None:
+    mf = load_model(switched_file(tmp_path, heavy, inertial=False, coriolis=True, munk=True))
+    with pytest.warns(ExportWarning, match="added_mass_terms"):
+        ex = export_model(mf, fmt, heavy)
+    (line,) = [x for x in ex.left_out if x.startswith("added_mass_terms")]
+    assert "no inertial effect" in line and "has no switches" in line
+    assert "LEFT OUT" in ex.text and "added_mass_terms" in ex.text
+    # all switches on: nothing to say
+    on = load_model(switched_file(tmp_path, heavy, inertial=True, coriolis=True, munk=True))
+    assert not [x for x in export_model(on, fmt, heavy).left_out if "added_mass_terms" in x]
+
+
+def test_gz_bad_switch_value_is_refused() -> None:
+    text = ('<plugin filename="gz-sim-hydrodynamics-system" name="gz::sim::systems::'
+            'Hydrodynamics"><link_name>b</link_name><xU>-1</xU>'
+            '<disable_coriolis>maybe</disable_coriolis></plugin>')
+    with pytest.raises(ConfigError, match="<disable_coriolis>: must be true or false"):
+        import_gz(text)
+
+
+def test_cli_export_import_round_trip_keeps_m_a_and_switches(tmp_path: Path,
+                                                             heavy: Vehicle) -> None:
+    src = switched_file(tmp_path, heavy, inertial=False, coriolis=False, munk=False)
+    sdf, out = tmp_path / "hydro.sdf", tmp_path / "back.yaml"
+    assert cli(["export", str(src), "--format", "gz", "--out", str(sdf)]) == 0
+    text = sdf.read_text()
+    assert "<disable_added_mass>true</disable_added_mass>" in text
+    assert "<disable_coriolis>true</disable_coriolis>" in text
+    assert cli(["import", str(sdf), "--format", "gz", "--vehicle", "bluerov2_heavy",
+                "--out", str(out)]) == 0
+    back, orig = load_model(out), load_model(src)
+    assert back.added_mass_terms == orig.added_mass_terms
+    np.testing.assert_allclose(back.M_A, orig.M_A, atol=1e-12)
+    np.testing.assert_allclose(back.M, orig.M, atol=1e-12)
+    np.testing.assert_allclose(back.theta, orig.theta, rtol=1e-12)

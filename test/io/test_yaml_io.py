@@ -186,3 +186,52 @@ def test_load_model_errors_name_the_entry(tmp_path: Path) -> None:
     path.write_text("/**: {ros__parameters: {other: 1}}\n")
     with pytest.raises(ConfigError, match="no <node>: ros__parameters: model"):
         yaml_io.load_model(path)
+
+
+def test_added_mass_switches_round_trip_through_the_file_and_the_parameters(
+        tmp_path: Path) -> None:
+    """model.M_A and model.added_mass_terms go into the file and the model.* parameters and
+    come back exactly; older files without them read as all switches on, no M_A."""
+    from dampest_ros.core.rigid_body import AddedMassTerms
+
+    model, theta = damping_from_spec({"linear": {"X_u": 13.7, "N_r": 0.5}})
+    v = yaml_io.load_vehicle("bluerov2_heavy")
+    terms = AddedMassTerms(inertial=False, coriolis=True, munk=False)
+    path = yaml_io.save_model(tmp_path / "m.yaml", model.parameter_names, theta, theta,
+                              v.body.M, damping=model, M_A=v.body.added_mass,
+                              added_mass_terms=terms)
+    doc = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]["model"]
+    assert doc["added_mass_terms"] == {"inertial": False, "coriolis": True, "munk": False}
+    assert doc["M_A"][0] == 6.36 and len(doc["M_A"]) == 36
+    out = yaml_io.load_model(path)
+    assert out.added_mass_terms == terms and out.acting_terms == terms
+    np.testing.assert_array_equal(out.M_A, v.body.added_mass)
+    assert "M_A" not in out.extra and "added_mass_terms" not in out.extra
+    # the node parameters (bool leaves of a namespace) give the same model
+    params = yaml_io.model_parameters(out.parameter_names, out.theta, out.theta_std, out.M,
+                                      damping=out.damping, **out.added_mass_kwargs())
+    assert params["model.added_mass_terms.inertial"] is False
+    assert params["model.added_mass_terms.munk"] is False
+    back = yaml_io.model_from_parameters(params)
+    assert back.added_mass_terms == terms
+    np.testing.assert_array_equal(back.M_A, v.body.added_mass)
+    # an older file: no switches, no M_A → all on
+    old = yaml_io.save_model(tmp_path / "old.yaml", model.parameter_names, theta, theta,
+                             v.body.M, damping=model)
+    o = yaml_io.load_model(old)
+    assert o.added_mass_terms is None and o.M_A is None and o.acting_terms.all
+    assert "added_mass_terms" not in old.read_text()
+    # switches that turn effects off cannot be written or read without M_A
+    with pytest.raises(ValueError, match="M_A is needed"):
+        yaml_io.save_model(tmp_path / "x.yaml", model.parameter_names, theta, theta, v.body.M,
+                           added_mass_terms=terms)
+    del doc["M_A"]
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump({"/**": {"ros__parameters": {
+        "model": doc}}}))
+    with pytest.raises(ConfigError, match=r"^model\.M_A: missing"):
+        yaml_io.load_model(tmp_path / "bad.yaml")
+    doc["added_mass_terms"] = {"inertial": "no"}
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump({"/**": {"ros__parameters": {
+        "model": doc}}}))
+    with pytest.raises(ConfigError, match=r"^model\.added_mass_terms\.inertial: must be true"):
+        yaml_io.load_model(tmp_path / "bad.yaml")
