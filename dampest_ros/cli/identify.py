@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +37,7 @@ from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.frequency import memory_impedance
 from dampest_ros.core.online import OnlineConfig, OnlinePreprocessor
 from dampest_ros.core.preprocess import DataError
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, RigidBody
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import Selection, select_terms
 from dampest_ros.core.validate import metrics, predicted_force
@@ -70,8 +71,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="rls: forgetting factor λ in [0.9, 1] (default: 1, every sample "
                         "weighs the same)")
     p.add_argument("--select", action="store_true",
-                   help="choose extra terms by forward BIC selection: sway-yaw, heave-pitch "
-                        "and lift cross-coupling, fluid memory per DOF (rate estimated)")
+                   help="search the damping library (linear, cross-flow v|r|, bilinear u·w "
+                        "lift, speed-magnitude u‖v‖ and p‖ω‖ terms in every force row, fluid "
+                        "memory per DOF with its rate) by blocked cross-validation and BIC, "
+                        "on top of the preset's terms, and fit the sparse model found")
     p.add_argument("--prior", help="model YAML whose theta/theta_std are the MAP prior "
                                    "(rls: the RLS prior)")
     p.add_argument("--cutoff", type=float, default=2.0,
@@ -122,7 +125,11 @@ def run(args: argparse.Namespace) -> int:
                                                              strict=True)])
         prior_std = np.array([stds.get(n, np.inf) for n in model.parameter_names])
     options = FitOptions(method=args.method, cutoff=args.cutoff,
-                         speed_range=tuple(speed_limits(vehicle)))
+                         speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
+    if args.select:
+        # the selected terms earned their place on held-out data together; holding a wide one
+        # at its prior would make the model depend on the prior's magnitude (std shows it)
+        options = replace(options, max_rel_halfwidth=np.inf, max_vif=np.inf)
     result = fit(samples, model, vehicle.body, options, prior=prior, prior_std=prior_std)
     elapsed = time.perf_counter() - t0
     print(f"{args.input}: {len(samples)} samples ({len(samples) / samples.rate:.0f} s in "
@@ -135,6 +142,8 @@ def run(args: argparse.Namespace) -> int:
                   float(result.cv_rmse[i])) for i in range(6)]))
     for name, why in result.flags.items():
         print(f"not identified: {name}: {why}")
+    if not args.select:
+        print(misfit_check(samples, model, vehicle.body, args), end="")
     scores = None
     if held is not None:
         scores = heldout_scores(held, model, vehicle.body, result.theta, args.cutoff)
@@ -217,12 +226,55 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
 
 
 def selection_table(selection: Selection) -> str:
-    """The forward-selection path: each added term with BIC, AIC and its error reduction."""
+    """The forward-selection path (each added term with BIC, AIC, its error reduction), the
+    held-out R² per DOF before and after, and the candidates left out with the reason."""
     rows = [(st.added, st.n_params, st.bic, st.aic,
              f"{st.err:.1%}" if st.err else "") for st in selection.steps]
     rates = "".join(f"\n{k} = {v:.4g} 1/s" for k, v in selection.rates.items())
-    return ("term selection (forward, BIC; a term must remove ≥ 10 % of its DOF's residual):\n"
-            + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates + "\n")
+    before, after = selection.cv_r2
+    r2 = ("held-out R² per DOF (5 contiguous time folds, each predicted from the others):\n"
+          + table(("dof", "base", "selected"), [(FORCE_NAMES[i], f"{before[i]:.4f}",
+                                                  f"{after[i]:.4f}") for i in range(6)]))
+    dropped = ""
+    if selection.dropped:
+        groups: dict[str, list[str]] = {}
+        for name, why in selection.dropped.items():
+            # one line per reason and column (the rows differ only in the force letter)
+            groups.setdefault(why.split(" (|corr|")[0].replace(name[0] + "_", "F_"),
+                              []).append(name)
+        dropped = "\nleft out of the search (numerically the same column as another):\n" + \
+            "\n".join(f"  {', '.join(names)}: {why}" for why, names in groups.items())
+    return ("term selection (stepwise over the damping library; a term must raise the "
+            "held-out R² of 5 contiguous time folds, lower BIC by 10 and remove ≥ 10 % of its "
+            "DOF's residual; − marks a removal):\n"
+            + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates
+            + "\n" + r2 + dropped + "\n")
+
+
+def misfit_check(samples: Samples, model: DampingModel, body: RigidBody,
+                 args: argparse.Namespace, ratio: float = 3.0, floor: float = 0.999) -> str:
+    """Per DOF, a warning when the preset's structure misses what the data hold.
+
+    The library search (:func:`select_terms`, without memory) gives the held-out residual a
+    sparse model reaches on the same data: our estimate of the noise floor. A DOF whose
+    held-out R² with the preset's terms is below ``floor`` while its unexplained share is more
+    than ``ratio`` times the library's is a misfit, and the line says what to run.
+    """
+    try:
+        sel = select_terms(samples, model, body, cutoff=args.cutoff, memory_dofs=())
+    except ConfigError:
+        return ""  # a structure the library search does not take (a residual term)
+    before, after = sel.cv_r2
+    bad = [i for i in range(6) if before[i] < floor
+           and 1.0 - before[i] > ratio * max(1.0 - after[i], 1e-12)]
+    if not bad:
+        return ""
+    return "".join(
+        f"misfit: {FORCE_NAMES[i]}: held-out R² {before[i]:.3f} with the preset's terms, "
+        f"{after[i]:.3f} with {sel.model.n_params} library terms: the residual is "
+        f"{(1.0 - before[i]) / max(1.0 - after[i], 1e-12):.0f}× what the data allow\n"
+        for i in bad) + (f"the preset's damping structure misses physics in these data; run "
+                         f"dampest identify {args.input} --vehicle {args.vehicle} --select\n")
 
 
 def memory_check(samples: Samples, model: DampingModel, body: RigidBody) -> str:

@@ -1,0 +1,71 @@
+"""dampest identify: the library search (--select) and the default misfit check (issue 10)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dampest_ros.cli.main import main
+from dampest_ros.io.yaml_io import load_model
+
+HIDDEN = ("{extra_cross: [{row: Z, col: w, alpha: u, value: 40.0}, "
+          "{row: N, col: r, alpha: '|v|', value: 8.0}]}")
+
+
+@pytest.fixture(scope="module")
+def hidden(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """BlueROV2 Heavy, protocol B, 300 s, with a lift Z ← 40 u·w and a yaw cross-flow drag
+    N ← 8 r|v| the preset does not have."""
+    bag = tmp_path_factory.mktemp("hidden") / "bag"
+    assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B", "--duration",
+                 "300", "--seed", "4", "--out", str(bag), "--effects", HIDDEN]) == 0
+    return bag
+
+
+def test_default_identify_names_the_misfit_and_what_to_run(
+        hidden: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    capsys.readouterr()
+    assert main(["identify", str(hidden), "--vehicle", "bluerov2_heavy"]) == 0
+    printed = capsys.readouterr().out
+    misfit = [x for x in printed.splitlines() if x.startswith("misfit:")]
+    assert [x.split(":")[1].strip() for x in misfit] == ["Z", "N"]
+    assert f"dampest identify {hidden} --vehicle bluerov2_heavy --select" in printed
+
+
+def test_select_finds_the_hidden_terms_by_their_library_names(
+        hidden: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Exactly the two hidden terms are added, within 2 % (Z_uxw: bilinear, N_rv: cross-
+    flow); the zero linear terms of the preset (Y_v, K_p, N_r) go; the others stay within
+    2 % of the truth."""
+    out = hidden.parent / "selected.yaml"
+    capsys.readouterr()
+    assert main(["identify", str(hidden), "--vehicle", "bluerov2_heavy", "--select",
+                 "--out", str(out)]) == 0
+    est = load_model(out)
+    truth = load_model(hidden / "truth_model.yaml")
+    t = dict(zip(truth.parameter_names, truth.theta, strict=True))
+    preset = ["X_u", "Y_v", "Z_w", "K_p", "M_q", "N_r", "X_uu", "Y_vv", "Z_ww", "K_pp", "M_qq",
+              "N_rr"]
+    assert set(est.parameter_names) - set(preset) == {"Z_uxw", "N_rv"}
+    assert set(preset) - set(est.parameter_names) <= {"Y_v", "K_p", "N_r"}
+    truth_of = {**{n: t[n] for n in preset}, "Z_uxw": 40.0, "N_rv": 8.0}
+    for name, value in zip(est.parameter_names, est.theta, strict=True):
+        assert abs(value - truth_of[name]) <= 0.02 * truth_of[name], (name, value)
+    assert est.damping is not None  # the selected structure is in the file and reads back
+    nu = np.random.default_rng(0).normal(size=(10, 6)) * 0.3
+    f = est.damping.force(nu, est.theta)
+    np.testing.assert_allclose(f[:, 2] - est.damping.force(nu, np.where(
+        np.array(est.parameter_names) == "Z_uxw", 0.0, est.theta))[:, 2],
+        est.theta[est.parameter_names.index("Z_uxw")] * nu[:, 0] * nu[:, 2], rtol=1e-12)
+
+
+def test_no_misfit_on_data_the_preset_describes(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    bag = tmp_path / "bag"
+    assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B", "--duration",
+                 "300", "--seed", "4", "--out", str(bag)]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy"]) == 0
+    assert not [x for x in capsys.readouterr().out.splitlines() if x.startswith("misfit:")]
