@@ -296,7 +296,7 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
                  memory_dofs: Sequence[int] = (0, 1, 2, 5), cutoff: float = 2.0,
                  folds: int = 5, max_terms: int = 25, min_improvement: float = 10.0,
                  min_err: float = 0.1, tol: float = 1e-8, strict_base: bool = True,
-                 rounds: int = 10
+                 rounds: int = 10, exchange: float = 2.0
                  ) -> Selection:
     """Forward selection of library terms and memory states on top of ``base``.
 
@@ -328,6 +328,14 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     tol : float
         Relative tolerance below which two columns are equal (|corr| > 1 − tol) or a column
         is a combination of those already chosen.
+    strict_base : bool
+        Hold the base's terms to the test every searched term passes (else a base term goes
+        only when its removal lowers BIC). Base columns that are zero in the data stay.
+    rounds : int
+        Most forward-then-backward rounds.
+    exchange : float
+        At ``max_terms``, the term whose removal costs least held-out R² is exchanged for the
+        best candidate when that gains ``exchange`` times as much.
 
     Returns
     -------
@@ -523,7 +531,7 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
             # at the budget: exchange the term whose loss costs least held-out R² for the best
             # candidate when that gains more than twice as much
             add = best_addition() if k_now >= max_terms else None
-            if add is not None and cheapest is not None and -add[0] > 2.0 * cheapest[0]:
+            if add is not None and cheapest is not None and -add[0] > exchange * cheapest[0]:
                 remove(*cheapest[1:])
                 changed = True
             break
