@@ -42,10 +42,29 @@ DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
 
 
 def add_topic_options(p: argparse.ArgumentParser) -> None:
-    """--imu-topic, --dvl-topic, --pressure-topic, --thrusters-topic."""
+    """--imu-topic, --dvl-topic, --pressure-topic, --thrusters-topic, --wrench-topic."""
     for role, name in DEFAULT_TOPICS.items():
         p.add_argument(f"--{role}-topic", default=name, metavar="TOPIC",
                        help=f"topic of the {role} data (default: {name})")
+    p.add_argument("--wrench-topic", metavar="TOPIC",
+                   help="topic of the body wrench τ (geometry_msgs/WrenchStamped, FLU; the "
+                        "contract's 'wrench'), read instead of the thruster telemetry: the "
+                        "vehicle then needs no thrusters (default: none, τ from "
+                        "--thrusters-topic through the vehicle's allocation)")
+
+
+def topic_roles(args: argparse.Namespace) -> dict[str, str]:
+    """Role → topic of the ``--*-topic`` options; ``wrench`` only when ``--wrench-topic``
+    is given (τ then comes from it, not from the thruster telemetry)."""
+    topics = {role: str(getattr(args, f"{role}_topic")) for role in DEFAULT_TOPICS}
+    if getattr(args, "wrench_topic", None):
+        topics["wrench"] = str(args.wrench_topic)
+    return topics
+
+
+def tau_topic(topics: dict[str, str]) -> str:
+    """The topic τ comes from: the body wrench, else the thruster telemetry."""
+    return topics.get("wrench") or topics["thrusters"]
 
 
 def add_preprocess_options(p: argparse.ArgumentParser) -> None:
@@ -94,10 +113,14 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
         return samples
     if not p.is_dir():
         raise DataError(f"{p}: expected a rosbag2 directory or a .csv / .csv.gz file")
-    topics = {role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS}
+    topics = topic_roles(args)
+    if "wrench" not in topics:
+        vehicle.need_thrusters(f"τ from the thruster telemetry of {p.name} "
+                               f"({topics['thrusters']})",
+                               "give --wrench-topic TOPIC (a body wrench in the bag)")
     # windows are read as the preprocessing needs them: memory stays flat with bag length
     rec = BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),
-                    together=[topics["imu"], topics["thrusters"]])
+                    together=[topics["imu"], tau_topic(topics)])
     auto = str(args.delay).strip().lower() == "auto"
     try:
         delay = 0.0 if auto else float(args.delay)

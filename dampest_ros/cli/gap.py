@@ -33,7 +33,8 @@ from dampest_ros.cli.common import (
 from dampest_ros.core import gap
 from dampest_ros.core.measurements import JointSeries
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
-from dampest_ros.io.bag import read_bag
+from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.yaml_io import ModelFile, load_vehicle, save_model
 
 EXAMPLE = ("example: dampest gap bags/pool_run --model sim_model.yaml --vehicle "
@@ -80,12 +81,17 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.set_defaults(run=run)
 
 
-def _joints(path: str, args: argparse.Namespace) -> JointSeries | None:
-    """The logged thruster state of a bag on the samples' clock, or None for CSV input."""
+def _joints(path: str, args: argparse.Namespace, vehicle: Vehicle) -> JointSeries | None:
+    """The logged thruster state of a bag on the samples' clock, or None for CSV input, for
+    a vehicle without thrusters or a bag without the thruster topic (τ from --wrench-topic):
+    the candidates that need rotor speeds then say so."""
     p = Path(path)
-    if not p.is_dir():
+    if not p.is_dir() or vehicle.thrusters is None:
         return None
     topic = args.thrusters_topic
+    if args.wrench_topic and topic.lstrip("/") not in {
+            t.lstrip("/") for t in bag_summary(p).topics}:
+        return None
     series = read_bag(p, [topic])[topic]
     if not isinstance(series, JointSeries):
         return None
@@ -99,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     vehicle = load_vehicle(args.vehicle)
     mf, model, body = load_model_for(args.model, vehicle)
     samples = load_samples(args.input, vehicle, args)
-    joints = _joints(args.input, args)
+    joints = _joints(args.input, args, vehicle)
     cands = gap.library([c.strip() for c in str(args.candidates).split(",") if c.strip()])
     if args.max_steps < 0:
         raise ConfigError("--max-steps", "must be ≥ 0")

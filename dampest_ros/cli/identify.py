@@ -176,7 +176,8 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
                                          ("--columns", args.columns),
                                          ("--start", args.start is not None),
                                          ("--end", args.end is not None),
-                                         ("--holdout", args.holdout is not None)) if used]
+                                         ("--holdout", args.holdout is not None),
+                                         ("--wrench-topic", args.wrench_topic)) if used]
     if unsupported:
         raise DataError(f"--method rls does not take {', '.join(unsupported)} (batch methods "
                         "only)")
@@ -191,7 +192,9 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     if topics["pressure"].lstrip("/") not in have:
         del topics["pressure"]  # optional, as in the batch path
     rec = read_bag(path, list(topics.values()))
-    pre = OnlinePreprocessor(vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
+    thrusters = vehicle.need_thrusters("--method rls (the online preprocessing of the thruster "
+                                       "telemetry)", "use a batch --method")
+    pre = OnlinePreprocessor(thrusters, vehicle.body.gravity, vehicle.body.rho,
                              OnlineConfig(rate=args.rate, max_dvl_gap=args.max_gap))
     prior = None
     if args.prior:

@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from dampest_ros.cli.common import DEFAULT_TOPICS, table
+from dampest_ros.cli.common import add_topic_options, table, tau_topic, topic_roles
 from dampest_ros.io.bag import bag_summary, read_bag
 
 
@@ -17,6 +17,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("bag", help="rosbag2 directory (MCAP or SQLite3)")
     p.add_argument("--gap", type=float, default=0.5,
                    help="report gaps longer than this many seconds (default: 0.5)")
+    add_topic_options(p)
     p.set_defaults(run=run)
 
 
@@ -39,10 +40,14 @@ def run(args: argparse.Namespace) -> int:
     print(table(("topic", "type", "messages", "rate Hz", f"gaps>{args.gap}s", "longest s"),
                 rows))
     have = {n.lstrip("/") for n in summary.topics}
-    missing = [t for role, t in DEFAULT_TOPICS.items() if t not in have and role != "pressure"]
+    topics = topic_roles(args)
+    tau = "body wrench" if "wrench" in topics else "thruster"
+    needed = [topics["imu"], topics["dvl"], tau_topic(topics)]
+    missing = [t for t in needed if t.lstrip("/") not in have]
     if missing:
         print(f"not ready for identification: missing {missing} "
-              "(use --imu-topic etc. with dampest identify if they have other names)")
+              "(use --imu-topic etc. with dampest identify if they have other names, "
+              "--wrench-topic if τ is logged as a body wrench)")
         return 1
-    print("ready for identification: IMU, DVL and thruster topics present")
+    print(f"ready for identification: IMU, DVL and {tau} topics present")
     return 0

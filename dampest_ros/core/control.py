@@ -56,8 +56,8 @@ class VelocityPI:
                     ) -> VelocityPI:
         """The PI of a vehicle: gains scaled by the diagonal of its M, output limited to 90 %
         of what its thrusters can give in each DOF."""
-        return cls(np.diag(vehicle.body.M), 0.9 * vehicle.thrusters.max_wrench, bandwidth,
-                   feedforward)
+        thrusters = vehicle.need_thrusters("the velocity controller (its output limits)")
+        return cls(np.diag(vehicle.body.M), 0.9 * thrusters.max_wrench, bandwidth, feedforward)
 
     def reset(self) -> None:
         """Clear the integral state."""

@@ -31,7 +31,7 @@ from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.online import OnlineRegression, OnlineSample
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError
 from dampest_ros.core.rls import Diagnostics, RecursiveLeastSquares, RLSConfig
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.vehicle import Vehicle, measured_wrench_scale
 
 FloatArray = NDArray[np.float64]
 
@@ -166,16 +166,12 @@ class OnlineEstimator:
                         std0[j] = sd
         self.prior_theta, self.prior_std = theta0, std0
         # weights: 1 % of the largest thrust per DOF as the noise level (the estimated noise
-        # scales the reported uncertainty; see RLSConfig.adapt_weights)
-        noise = tuple(float(x) for x in (0.01 * vehicle.thrusters.max_wrench) ** 2)
-        # the least residual correlation (the floor of the measured one): white noise through
-        # the parallel low-pass, rate / (2 · cutoff) samples per independent one (as the
-        # batch path's AIC counts n_eff = 2 · cutoff · T)
-        self.rls = RecursiveLeastSquares(theta0, std0**2, RLSConfig(
-            forgetting_factor=self.cfg.forgetting_factor,
-            forgetting_mode=self.cfg.forgetting_mode, noise_var=noise,
-            correlation_block=max(1, round(CORRELATION_SECONDS * self.cfg.rate)),
-            correlation_prior=max(1.0, self.cfg.rate / (2.0 * self.cfg.cutoff))))
+        # scales the reported uncertainty; see RLSConfig.adapt_weights). Without thrusters the
+        # largest τ comes from the data: the RLS starts once the first CORRELATION_SECONDS of
+        # samples are there, with the scale of their measured τ (until then it holds the prior)
+        self._scale_from_data = vehicle.thrusters is None
+        self.rls = self._make_rls(np.ones(6) if self._scale_from_data
+                                  else vehicle.wrench_scale())
         self.regression = OnlineRegression(self.model, self.body, self.cfg.rate, self.cfg.cutoff)
         self.counts = {"velocity": 0, "acceleration": 0, "wrench": 0, "attitude": 0,
                        "matched": 0, "unmatched": 0, "rejected_nonfinite": 0,
@@ -186,6 +182,18 @@ class OnlineEstimator:
         self.last_sample_t = math.nan
         self.keep_samples = keep_samples
         self.samples_log: list[OnlineSample] = []
+
+    def _make_rls(self, wrench_scale: FloatArray) -> RecursiveLeastSquares:
+        """The RLS from the prior, with noise variances (1 % of ``wrench_scale``)², (6,)."""
+        noise = tuple(float(x) for x in (0.01 * np.asarray(wrench_scale, dtype=float)) ** 2)
+        # the least residual correlation (the floor of the measured one): white noise through
+        # the parallel low-pass, rate / (2 · cutoff) samples per independent one (as the
+        # batch path's AIC counts n_eff = 2 · cutoff · T)
+        return RecursiveLeastSquares(self.prior_theta, self.prior_std**2, RLSConfig(
+            forgetting_factor=self.cfg.forgetting_factor,
+            forgetting_mode=self.cfg.forgetting_mode, noise_var=noise,
+            correlation_block=max(1, round(CORRELATION_SECONDS * self.cfg.rate)),
+            correlation_prior=max(1.0, self.cfg.rate / (2.0 * self.cfg.cutoff))))
 
     # --- inputs ------------------------------------------------------------------------
 
@@ -239,6 +247,14 @@ class OnlineEstimator:
         all when ``force``); returns the number of samples used."""
         if not self._ready or (len(self._ready) < self.cfg.chunk and not force):
             return 0
+        if self._scale_from_data:
+            # no thrusters: wait for CORRELATION_SECONDS of samples, scale by their τ
+            if len(self._ready) < CORRELATION_SECONDS * self.cfg.rate and not force:
+                return 0
+            tau = np.array([e["wrench"] for _, e in self._ready])
+            before, self.rls = self.rls, self._make_rls(measured_wrench_scale(tau))
+            self.rls.lam, self.rls.frozen = before.lam, before.frozen  # set meanwhile
+            self._scale_from_data = False
         batch, self._ready = self._ready, []
         euler = attitude_euler(np.array([e["attitude"] for _, e in batch]))
         samples = [OnlineSample(stamp * 1e-9, e["velocity"], e["acceleration"], e["wrench"],

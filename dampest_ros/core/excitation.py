@@ -68,12 +68,26 @@ class Excitation:
         return cmd
 
 
-def speed_limits(vehicle: Vehicle, fraction: float = 0.5) -> FloatArray:
+def speed_limits(vehicle: Vehicle, fraction: float = 0.5,
+                 tau_measured: FloatArray | None = None) -> FloatArray:
     """Steady speed per DOF reached with ``fraction`` of the largest thrust, shape (6,).
 
     Solves D(ν)ν = fraction · τ_max along each axis by bisection on the nominal model.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+    fraction : float
+    tau_measured : ndarray, shape (n, 6), optional
+        Measured τ (N, N·m); gives τ_max for a vehicle without thrusters
+        (:meth:`~dampest_ros.core.vehicle.Vehicle.wrench_scale`).
+
+    Returns
+    -------
+    ndarray, shape (6,)
+        m/s and rad/s.
     """
-    tau = fraction * vehicle.thrusters.max_wrench
+    tau = fraction * vehicle.wrench_scale(tau_measured)
     out = np.empty(6)
     for i in range(6):
         lo, hi = 0.0, 20.0
@@ -139,6 +153,7 @@ def make_excitation(name: str, vehicle: Vehicle, duration: float, seed: int = 0,
     """
     if name not in PROTOCOLS:
         raise ConfigError("protocol", f"unknown protocol {name!r}; use one of {PROTOCOLS}")
+    vehicle.need_thrusters("simulating the vehicle (the thrust limits of its excitation)")
     if duration <= 0:
         raise ConfigError("duration", f"must be > 0, got {duration}")
     rng = np.random.default_rng(seed)
@@ -190,7 +205,7 @@ def make_excitation(name: str, vehicle: Vehicle, duration: float, seed: int = 0,
     elif name == "C":
         # Schroeder-phased multisine 0.1–10 Hz, interleaved frequency lines per DOF
         lines = np.geomspace(0.1, 10.0, 36)
-        f_max = vehicle.thrusters.max_wrench
+        f_max = vehicle.wrench_scale()
         for i in range(6):
             f = lines[i::6]
             phase = -np.pi * np.arange(len(f)) * (np.arange(len(f)) + 1) / len(f)

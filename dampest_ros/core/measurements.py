@@ -142,6 +142,8 @@ TOPIC_TYPES: dict[str, tuple[str, type[Series]]] = {
     "dampest/velocity": ("geometry_msgs/msg/TwistWithCovarianceStamped", TwistSeries),
     "dampest/acceleration": ("geometry_msgs/msg/AccelWithCovarianceStamped", AccelSeries),
     "dampest/wrench": ("geometry_msgs/msg/WrenchStamped", WrenchSeries),
+    # optional input: the body wrench of a vehicle that logs τ instead of thruster telemetry
+    "wrench": ("geometry_msgs/msg/WrenchStamped", WrenchSeries),
 }
 
 #: A recording: topic name → series.

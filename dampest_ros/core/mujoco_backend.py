@@ -354,7 +354,7 @@ class MujocoSimulator:
         self._B = body.buoyancy
         self._r_bg = (body.r_b - body.r_g).tolist()
         self.plant = plant_vehicle(vehicle)
-        self._thr = vehicle.thrusters
+        self._thr = vehicle.need_thrusters("simulating the vehicle")
         self._deadzone = max(self._thr.deadzone, e.thruster_deadzone)
         self._delay_steps = round(float(e.delay) / self.dt)
         self._cmd_queue: deque[FloatArray] = deque(

@@ -2,11 +2,14 @@
 
 Pipeline, all vectorised over whole segments:
 
-1. Frames: IMU, DVL and thruster data from ROS (FLU/ENU) to Fossen (FRD/NED).
+1. Frames: IMU, DVL and thruster data (or a body-wrench topic) from ROS (FLU/ENU) to
+   Fossen (FRD/NED).
 2. DVL gaps longer than ``max_gap`` split the data into segments (nothing is invented inside
    a long gap); DVL samples that disagree with the inertially fused velocity are dropped.
 3. On a common grid at ``rate`` Hz per segment: attitude, gyro and specific force from the
-   IMU, thrust through the allocation matrix into τ (optionally shifted by a known delay).
+   IMU, thrust through the allocation matrix into τ, or τ straight from a body-wrench topic
+   (geometry_msgs/WrenchStamped, FLU), optionally shifted by a known delay. A wrench message,
+   like thruster telemetry, is taken as the mean over its message period before its stamp.
 4. Linear velocity by a zero-phase complementary filter in the non-rotating NED frame: the
    DVL below ``crossover`` Hz and the integrated IMU acceleration R f + g above it
    (Butterworth pairs with |H_lp|² + |H_hp|² = 1, so the fusion is exact where both agree),
@@ -34,6 +37,7 @@ from dampest_ros.core.measurements import (
     Recording,
     Series,
     TwistSeries,
+    WrenchSeries,
 )
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.samples import Samples
@@ -273,6 +277,30 @@ def thruster_wrench(joints: JointSeries, thrusters: Thrusters) -> FloatArray:
     return np.asarray(joints.effort[:, order] @ thrusters.allocation.T, dtype=float)
 
 
+def body_wrench(series: JointSeries | WrenchSeries, thrusters: Thrusters | None) -> FloatArray:
+    """τ (N, 6) FRD of a τ topic: thruster telemetry through the allocation matrix
+    (:func:`thruster_wrench`), or a body wrench (WrenchStamped, FLU) converted to FRD.
+
+    Raises
+    ------
+    DataError
+        Thruster telemetry without the vehicle's thrusters.
+    """
+    if isinstance(series, WrenchSeries):
+        return frames.body_twist(np.concatenate([series.force, series.torque], axis=1))
+    if thrusters is None:
+        raise DataError("τ from thruster telemetry needs the vehicle's thrusters; the vehicle "
+                        "has none (give a body-wrench topic, role 'wrench', instead)")
+    return thruster_wrench(series, thrusters)
+
+
+def _tau_columns(series: JointSeries | WrenchSeries) -> tuple[FloatArray, ...]:
+    """The value arrays of a τ topic that must be finite."""
+    if isinstance(series, WrenchSeries):
+        return series.force, series.torque
+    return (series.effort,)
+
+
 class SeriesSource(Protocol):
     """Where :func:`preprocess` gets its data: whole topics or time windows of them.
 
@@ -311,7 +339,7 @@ class MemorySource:
         return s.select(np.arange(int(lo), int(hi)))
 
 
-def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters, gravity: float,
+def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravity: float,
                rho: float, config: PreprocessConfig | None = None,
                topics: dict[str, str] | None = None,
                report: dict[str, float] | None = None) -> Samples:
@@ -321,13 +349,16 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters, gravity: flo
     ----------
     rec : Recording or SeriesSource
         Topic → series, ROS frames (as read from a bag), or a source that reads windows.
-    thrusters : Thrusters
-        Allocation (names must match the JointState names).
+    thrusters : Thrusters or None
+        Allocation (names must match the JointState names); may be None with a ``wrench``
+        topic.
     gravity, rho : float
         g (m/s²) and water density (kg/m³).
     config : PreprocessConfig, optional
     topics : dict, optional
-        Role → topic name for ``imu``, ``dvl``, ``pressure``, ``thrusters``.
+        Role → topic name for ``imu``, ``dvl``, ``pressure``, ``thrusters`` and, optionally,
+        ``wrench``: a body-wrench topic (WrenchStamped, FLU) that gives τ instead of the
+        thruster telemetry (then ``thrusters`` is not read).
     report : dict, optional
         Filled with counts: ``rejected_nonfinite_or_unordered``, ``dvl_outliers``,
         ``segments``, ``dropped_seconds`` (data in gaps and too-short segments).
@@ -341,20 +372,25 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters, gravity: flo
     src: SeriesSource = MemorySource(rec) if isinstance(rec, dict) else rec
     names = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
              "thrusters": "thrusters/state", **(topics or {})}
+    # where τ comes from: a body-wrench topic, else thruster telemetry and the allocation
+    tau_topic = names.get("wrench") or names["thrusters"]
+    tau_kind: type[Series] = WrenchSeries if names.get("wrench") else JointSeries
+    if tau_kind is JointSeries and thrusters is None:
+        raise DataError("τ from thruster telemetry needs the vehicle's thrusters; the vehicle "
+                        "has none (give a body-wrench topic, role 'wrench', instead)")
     have = src.topics()
-    for role in ("imu", "dvl", "thrusters"):
-        if names[role] not in have:
-            raise DataError(f"topic {names[role]!r} missing; the data has {sorted(have)}")
-    # the small topics whole, the large ones (IMU, thrusters) per stretch below
+    for topic in (names["imu"], names["dvl"], tau_topic):
+        if topic not in have:
+            raise DataError(f"topic {topic!r} missing; the data has {sorted(have)}")
+    # the small topics whole, the large ones (IMU, τ) per stretch below
     dvl: TwistSeries = _need(src.series(names["dvl"]), names["dvl"], TwistSeries)
     pres = src.series(names["pressure"]) if names["pressure"] in have else None
     dvl_ok = _clean(dvl, dvl.linear)
     rejected = int((~dvl_ok).sum())
     dvl = dvl if dvl_ok.all() else dvl.select(dvl_ok)  # type: ignore[assignment]
     t_dvl, v_dvl = dvl.stamp, frames.body_vec(dvl.linear)
-    # thrust telemetry period and phase from the first messages
-    head: JointSeries = _need(src.series(names["thrusters"], None, t_dvl[0] + 10.0),
-                              names["thrusters"], JointSeries, minimum=2)
+    # τ telemetry period and phase from the first messages
+    head = _need(src.series(tau_topic, None, t_dvl[0] + 10.0), tau_topic, tau_kind, minimum=2)
     window = float(np.median(np.diff(head.stamp)))
     phase = float(((head.stamp[0] - window / 2) * cfg.rate) % 1.0)
     ratio = max(1, round(cfg.inertial_rate / cfg.rate))
@@ -368,21 +404,21 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters, gravity: flo
 
     def window_(t: FloatArray, core: slice) -> tuple[FloatArray, ...] | None:
         """ν, ν̇, R, τ, depth on the output grid t (one stretch of a segment with margins),
-        or None where IMU or thruster data do not cover it; counts rejections in the core."""
+        or None where IMU or τ data do not cover it; counts rejections in the core."""
         nonlocal n_outliers, rejected
         pad = 1.0
         imu: ImuSeries = _need(src.series(names["imu"], t[0] - pad, t[-1] + pad),
                                names["imu"], ImuSeries, minimum=0)
-        thr: JointSeries = _need(src.series(names["thrusters"], t[0] - pad, t[-1] + pad),
-                                 names["thrusters"], JointSeries, minimum=0)
+        thr: JointSeries | WrenchSeries = _need(src.series(tau_topic, t[0] - pad, t[-1] + pad),
+                                                tau_topic, tau_kind, minimum=0)
         t_core = (t[core.start], t[core.stop - 1])
         for series, ok in ((imu, _clean(imu, imu.orientation, imu.angular_velocity,
                                         imu.linear_acceleration)),
-                           (thr, _clean(thr, thr.effort))):
+                           (thr, _clean(thr, *_tau_columns(thr)))):
             in_core = (series.stamp >= t_core[0]) & (series.stamp <= t_core[1])
             rejected += int((~ok & in_core).sum())
         imu_ok = _clean(imu, imu.orientation, imu.angular_velocity, imu.linear_acceleration)
-        thr_ok = _clean(thr, thr.effort)
+        thr_ok = _clean(thr, *_tau_columns(thr))
         imu = imu if imu_ok.all() else imu.select(imu_ok)  # type: ignore[assignment]
         thr = thr if thr_ok.all() else thr.select(thr_ok)  # type: ignore[assignment]
         if len(imu) < 2 or len(thr) < 2 or imu.stamp[0] > t[0] or imu.stamp[-1] < t[-1] \
@@ -414,9 +450,9 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters, gravity: flo
         nu_dot = np.concatenate([zero_phase(v_dot, rate_f, cfg.cutoff, window=window),
                                  zero_phase(om, rate_f, cfg.cutoff, derivative=True,
                                             window=window)], axis=1)
-        # thruster telemetry is the mean over the message period before its stamp
+        # τ telemetry is the mean over the message period before its stamp
         tau = zero_phase(_interp(t - cfg.delay, thr.stamp - window / 2,
-                                 thruster_wrench(thr, thrusters)), cfg.rate, cfg.cutoff)
+                                 body_wrench(thr, thrusters)), cfg.rate, cfg.cutoff)
         depth = ((_interp(t, pressure.stamp, pressure.fluid_pressure[:, None])[:, 0]
                   - cfg.atmospheric_pressure) / (rho * gravity)) if pressure is not None \
             else np.full(len(t), np.nan)

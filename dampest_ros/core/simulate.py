@@ -203,7 +203,7 @@ class Simulator:
         self._mem_rates = self._model.memory_rates
         self._mem_dofs = self._model.memory_dofs
         self._has_current = bool(np.any(self.effects.current) or self.effects.current_variation)
-        self._thr = vehicle.thrusters
+        self._thr = vehicle.need_thrusters("simulating the vehicle")
         self._thrust_gain = self._thr.gain * (1.0 + self.effects.thrust_gain_error)
         self._deadzone = max(self._thr.deadzone, self.effects.thruster_deadzone)
         tm = self._thr.time_constant
@@ -479,8 +479,7 @@ def run(vehicle: Vehicle, excitation: Excitation, effects: Effects | None = None
                      position=np.array([0.0, 0.0, excitation.depth_ref[0]]))
     dt_c = float(excitation.t[1] - excitation.t[0])
     sub = max(1, round(dt_c / dt))
-    ctrl = VelocityPI(np.diag(vehicle.body.M), 0.9 * vehicle.thrusters.max_wrench,
-                      excitation.bandwidth)
+    ctrl = VelocityPI.for_vehicle(vehicle, excitation.bandwidth)
     for k in range(len(excitation.t)):
         roll, pitch, _ = euler_from_matrix(quat_to_matrix(sim.quaternion))
         cmd = excitation.command(k, sim.nu, float(roll), float(pitch), float(sim.position[2]))

@@ -297,8 +297,7 @@ class LiveSimulation:
                               position=np.array([0.0, 0.0, ex.depth_ref[0]]))
         self.dt_control = float(ex.t[1] - ex.t[0])
         self.sub = max(1, round(self.dt_control / dt))
-        self.controller = VelocityPI(np.diag(vehicle.body.M), 0.9 * vehicle.thrusters.max_wrench,
-                                     ex.bandwidth)
+        self.controller = VelocityPI.for_vehicle(vehicle, ex.bandwidth)
         bias = SensorBias(self.effects.gyro_bias, self.effects.accel_bias, self.effects.dvl_bias)
         self.stream = SensorStream(vehicle.body.rho, vehicle.body.gravity, sensors, bias, seed)
         self.k = 0

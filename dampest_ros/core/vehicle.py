@@ -1,5 +1,10 @@
 """A vehicle: rigid body + added mass, damping model with its coefficients, thrusters.
 
+The ``thrusters`` section is optional: a vehicle whose logs carry the generalised force τ
+(``tau_*`` CSV columns, a body-wrench topic) needs none. What turns thrust into τ or τ into
+thrust (simulation, thruster telemetry, the velocity controller) asks for it with
+:meth:`Vehicle.need_thrusters`, which names what is missing in one line.
+
 Built from a preset mapping (``config/vehicles/*.yaml`` loaded by :mod:`dampest_ros.io`).
 The ``damping`` section names coefficients by SNAME names, stored positive when dissipative::
 
@@ -132,7 +137,8 @@ class Vehicle:
         The term structure of D(ν).
     theta : ndarray, shape (p,)
         Damping coefficients (truth for a simulator, nominal/prior for identification).
-    thrusters : Thrusters
+    thrusters : Thrusters or None
+        None when the vehicle file has no ``thrusters`` section.
     length : float
         Reference length L (m) for nondimensionalisation.
     """
@@ -141,25 +147,53 @@ class Vehicle:
     body: RigidBody
     damping: DampingModel
     theta: FloatArray
-    thrusters: Thrusters
+    thrusters: Thrusters | None
     length: float = 1.0
     extra: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Vehicle:
-        """Build from a preset mapping with sections ``vehicle``, ``damping``, ``thrusters``."""
-        for key in ("vehicle", "damping", "thrusters"):
+        """Build from a preset mapping with sections ``vehicle``, ``damping`` and, optionally,
+        ``thrusters``."""
+        for key in ("vehicle", "damping"):
             if key not in d:
                 raise ConfigError(key, "missing section")
         body = RigidBody.from_dict(d["vehicle"])
         damping, theta = damping_from_spec(d["damping"])
-        thrusters = Thrusters.from_dict(d["thrusters"], rho=body.rho)
+        thrusters = None if d.get("thrusters") is None else \
+            Thrusters.from_dict(d["thrusters"], rho=body.rho)
         length = float(d["vehicle"].get("length", 1.0))
         if not np.isfinite(length) or length <= 0:
             raise ConfigError("vehicle.length", f"must be > 0, got {length}")
         return cls(str(d["vehicle"].get("name", "vehicle")), body, damping, theta, thrusters,
                    length, {k: v for k, v in d.items()
                             if k not in ("vehicle", "damping", "thrusters")})
+
+    def need_thrusters(self, what: str, instead: str = "") -> Thrusters:
+        """The thrusters, or ConfigError naming ``what`` needs them and how to give them
+        (``instead``: another way, e.g. ``"give --wrench-topic"``)."""
+        if self.thrusters is None:
+            raise ConfigError("thrusters", f"{what} needs the vehicle's thrusters, and vehicle "
+                              f"{self.name!r} has none: add a thrusters: section (model and "
+                              "units) to its file" + (f", or {instead}" if instead else ""))
+        return self.thrusters
+
+    def wrench_scale(self, tau: FloatArray | None = None) -> FloatArray:
+        """The largest generalised force per DOF, shape (6,) (N, N·m): the thrusters'
+        :attr:`~dampest_ros.core.thrusters.Thrusters.max_wrench`, or without thrusters that
+        of the measured τ (:func:`measured_wrench_scale`).
+
+        Parameters
+        ----------
+        tau : ndarray, shape (n, 6), optional
+            Measured τ (FRD); needed when the vehicle has no thrusters.
+        """
+        if self.thrusters is not None:
+            return np.asarray(self.thrusters.max_wrench, dtype=float)
+        if tau is None:
+            raise ConfigError("thrusters", f"vehicle {self.name!r} has no thrusters and no "
+                                           "measured τ was given for the force scale")
+        return measured_wrench_scale(tau)
 
     def reference_scales(self, v_ref: float) -> tuple[FloatArray, FloatArray]:
         """Velocity and force scales for nondimensionalisation (prime system).
@@ -172,6 +206,30 @@ class Vehicle:
         nu_scale, force_scale : ndarray, shape (6,)
         """
         return nondim_scales(v_ref, self.length, self.body.rho)
+
+
+def measured_wrench_scale(tau: FloatArray, percentile: float = 99.0) -> FloatArray:
+    """The largest generalised force per DOF that the data show, shape (6,) (N, N·m).
+
+    The ``percentile`` of |τ_i| per DOF (robust to single spikes). A DOF the data never push
+    (τ_i ≡ 0) takes 1 % of the largest value of its group (forces X, Y, Z or moments K, M,
+    N), or 1 when the whole group is zero, so that the scale is never zero.
+
+    Parameters
+    ----------
+    tau : ndarray, shape (n, 6)
+        Measured τ (FRD, N and N·m); non-finite rows are ignored.
+    percentile : float
+    """
+    tau = np.asarray(tau, dtype=float).reshape(-1, 6)
+    tau = tau[np.all(np.isfinite(tau), axis=1)]
+    if len(tau) == 0:
+        raise ConfigError("tau", "no finite measured generalised force to scale with")
+    s = np.percentile(np.abs(tau), percentile, axis=0)
+    for g in (slice(0, 3), slice(3, 6)):
+        top = float(s[g].max())
+        s[g] = np.where(s[g] > 1e-6 * top, s[g], 0.01 * top if top > 0 else 1.0)
+    return np.asarray(s, dtype=float)
 
 
 def nondim_scales(v_ref: float, L_ref: float, rho: float) -> tuple[FloatArray, FloatArray]:

@@ -325,7 +325,7 @@ GYRO_MATCH = 0.2
 ANGULAR_ACCELERATION_MISMATCH = 0.7
 
 
-def read_log(path: str | Path, thrusters: Thrusters, gravity: float,
+def read_log(path: str | Path, thrusters: Thrusters | None, gravity: float,
              column_map: Mapping[str, str] | None = None, max_gap: float = 1.0
              ) -> tuple[Samples, list[str]]:
     """Identification samples from a CSV log of any flavour of the module docstring.
@@ -334,9 +334,9 @@ def read_log(path: str | Path, thrusters: Thrusters, gravity: float,
     ----------
     path : str or Path
         ``.csv`` or ``.csv.gz``.
-    thrusters : Thrusters
+    thrusters : Thrusters or None
         The vehicle's thrusters: names, allocation and thrust curve, for ``thrust_<name>``
-        and ``rpm_<name>`` columns.
+        and ``rpm_<name>`` columns (None: the log must have tau_X…tau_N).
     gravity : float
         g (m/s²), for specific force.
     column_map : mapping of str to str, optional
@@ -363,7 +363,8 @@ def read_log(path: str | Path, thrusters: Thrusters, gravity: float,
     return samples_from_columns(standard, max_gap), notes
 
 
-def interpret_columns(columns: Mapping[str, FloatArray], thrusters: Thrusters, gravity: float,
+def interpret_columns(columns: Mapping[str, FloatArray], thrusters: Thrusters | None,
+                      gravity: float,
                       declared: set[str] | frozenset[str] = frozenset(), where: str = "log",
                       max_gap: float = 1.0) -> tuple[dict[str, FloatArray], list[str]]:
     """Columns of a log of any flavour as the plain format: ν̇ in ax…wz, τ in tau_X…tau_N.
@@ -372,7 +373,8 @@ def interpret_columns(columns: Mapping[str, FloatArray], thrusters: Thrusters, g
     ----------
     columns : mapping of str to ndarray, each shape (N,)
         Under our names (after the column map); at least :data:`BASE_COLUMNS`.
-    thrusters : Thrusters
+    thrusters : Thrusters or None
+        None when the vehicle has none (then tau_X…tau_N are needed).
     gravity : float
         g (m/s²).
     declared : set of str
@@ -489,12 +491,19 @@ def _angular_acceleration(columns: Mapping[str, FloatArray], nu: FloatArray,
     return out
 
 
-def _generalized_force(columns: Mapping[str, FloatArray], thrusters: Thrusters, where: str,
-                       notes: list[str]) -> FloatArray:
+def _generalized_force(columns: Mapping[str, FloatArray], thrusters: Thrusters | None,
+                       where: str, notes: list[str]) -> FloatArray:
     """τ (n, 6) from tau_X…tau_N or, without them, from per-thruster thrust or rpm."""
     if all(c in columns for c in FORCE_COLUMNS):
         return _stack(columns, FORCE_COLUMNS)
     logged = sorted(c for c in columns if c.startswith(("thrust_", "rpm_")))
+    if thrusters is None:
+        present = [c for c in FORCE_COLUMNS if c in columns]
+        raise ValueError(
+            f"{where}: no generalized force: {'only ' + ', '.join(present) if present else 'no'}"
+            f" tau_X…tau_N columns, and the vehicle has no thrusters to turn thruster columns "
+            f"({logged or 'none'}) into τ; add the tau columns (or map them with --columns) "
+            "or a thrusters: section to the vehicle file")
     missing = [n for n in thrusters.names
                if f"thrust_{n}" not in columns and f"rpm_{n}" not in columns]
     if missing:

@@ -135,7 +135,8 @@ class PreprocessNode(ParamNode):
         cfg = OnlineConfig(rate=self.p("rate"), max_dvl_gap=self.p("max_dvl_gap"),
                            settle=self.p("settle"), stale_after=self.p("stale_after"),
                            clock_jump=self.p("clock_jump"))
-        self.pre = OnlinePreprocessor(v.thrusters, v.body.gravity, v.body.rho, cfg)
+        thrusters = v.need_thrusters("preprocess_node (τ from thrusters/state)")
+        self.pre = OnlinePreprocessor(thrusters, v.body.gravity, v.body.rho, cfg)
         self.order = StampOrder(TOPIC_ROLES, self.p("reorder_latency"), self.p("clock_jump"))
 
     def on_parameters(self, names: list[str]) -> None:

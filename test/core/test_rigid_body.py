@@ -259,10 +259,37 @@ def test_good_config_accepts_full_matrices() -> None:
 
 def test_bad_preset_section_names_it() -> None:
     d = load(PRESET_DIR / "bluerov2_heavy.yaml")
-    del d["thrusters"]
+    del d["damping"]
     with pytest.raises(ConfigError) as info:
         Vehicle.from_dict(d)
-    assert info.value.field == "thrusters"
+    assert info.value.field == "damping"
+
+
+def test_thrusters_are_optional_and_asked_for_where_needed() -> None:
+    """A vehicle without a thrusters section loads; what needs thrusters names them in one
+    line; the force scale then comes from the measured τ (99th percentile of |τ_i|)."""
+    d = load(PRESET_DIR / "bluerov2_heavy.yaml")
+    del d["thrusters"]
+    v = Vehicle.from_dict(d)
+    assert v.thrusters is None
+    with pytest.raises(ConfigError, match=r"^thrusters: simulating needs the vehicle's "
+                                          r"thrusters, and vehicle 'bluerov2_heavy' has none: "
+                                          r"add a thrusters: section .*, or give X$"):
+        v.need_thrusters("simulating", "give X")
+    tau = np.zeros((1000, 6))
+    tau[:, 0] = np.linspace(-50.0, 50.0, 1000)   # X: |τ| up to 50 N
+    tau[:, 5] = np.linspace(0.0, 4.0, 1000)      # N: up to 4 N·m; Y, Z, K, M never pushed
+    scale = v.wrench_scale(tau)
+    np.testing.assert_allclose(scale[[0, 5]], [np.percentile(np.abs(tau[:, 0]), 99),
+                                               np.percentile(tau[:, 5], 99)])
+    # unpushed DOFs: 1 % of the largest of their group (forces, moments)
+    np.testing.assert_allclose(scale[[1, 2]], 0.01 * scale[0])
+    np.testing.assert_allclose(scale[[3, 4]], 0.01 * scale[5])
+    with pytest.raises(ConfigError, match="no measured τ"):
+        v.wrench_scale()
+    heavy = Vehicle.from_dict(load(PRESET_DIR / "bluerov2_heavy.yaml"))
+    assert heavy.thrusters is not None
+    np.testing.assert_array_equal(heavy.wrench_scale(tau), heavy.thrusters.max_wrench)
 
 
 @pytest.mark.parametrize("value", [np.int64(13), np.float32(13.5), np.float64(13.5), 13, 13.5],

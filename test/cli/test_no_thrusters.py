@@ -1,0 +1,156 @@
+"""A vehicle without thrusters (issue 10 §2): τ from tau_* CSV columns or a body-wrench topic
+(geometry_msgs/WrenchStamped, FLU, --wrench-topic) identifies as with thrusters; what needs
+thrusters (simulate, thruster telemetry) refuses with one line and exit 2. Seeded simulation
+of the BlueROV2 Heavy, protocol B."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from dampest_ros.cli.main import main
+from dampest_ros.core import frames
+from dampest_ros.core.estimator import CORRELATION_SECONDS, EstimatorConfig, OnlineEstimator
+from dampest_ros.core.measurements import JointSeries, WrenchSeries
+from dampest_ros.core.preprocess import thruster_wrench
+from dampest_ros.core.vehicle import measured_wrench_scale
+from dampest_ros.io.bag import read_bag, write_bag
+from dampest_ros.io.yaml_io import load_model, load_vehicle, vehicle_path
+
+HEAVY = load_vehicle("bluerov2_heavy")
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """150 s of protocol B (seed 5) as a bag and a tau CSV; the same bag with τ on a
+    WrenchStamped ``wrench`` topic instead of thrusters/state; the preset without thrusters."""
+    root = tmp_path_factory.mktemp("no_thrusters")
+    assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B", "--duration",
+                 "150", "--seed", "5", "--out", str(root / "sim"),
+                 "--csv", str(root / "sim.csv")]) == 0
+    rec = read_bag(root / "sim")
+    joints = rec.pop("thrusters/state")
+    assert isinstance(joints, JointSeries)
+    assert HEAVY.thrusters is not None
+    # the body wrench the thrusters gave (FRD), as a vehicle would log it: FLU, same stamps
+    tau_flu = frames.body_twist(thruster_wrench(joints, HEAVY.thrusters))
+    rec["wrench"] = WrenchSeries(joints.stamp, "base_link", tau_flu[:, :3], tau_flu[:, 3:])
+    rec.pop("truth/odom", None)
+    write_bag(root / "wrench_bag", rec)
+    doc = yaml.safe_load(vehicle_path("bluerov2_heavy").read_text())
+    del doc["thrusters"]
+    (root / "bare.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    return root
+
+
+def identify(src: Path, vehicle: str, out: Path, *extra: str) -> np.ndarray:
+    assert main(["identify", str(src), "--vehicle", vehicle, "--out", str(out), *extra]) == 0
+    return load_model(out).theta
+
+
+def test_tau_csv_identifies_without_thrusters_as_with(run: Path) -> None:
+    with_thr = identify(run / "sim.csv", "bluerov2_heavy", run / "csv_thr.yaml")
+    bare = identify(run / "sim.csv", str(run / "bare.yaml"), run / "csv_bare.yaml")
+    np.testing.assert_allclose(bare, with_thr, rtol=1e-9, atol=1e-9)
+    # and the model carries the added mass and its switches of the vehicle
+    m = load_model(run / "csv_bare.yaml")
+    np.testing.assert_array_equal(m.M_A, HEAVY.body.added_mass)
+    assert m.added_mass_terms is not None and m.added_mass_terms.all
+
+
+def test_wrench_bag_identifies_without_thrusters_as_the_thruster_bag(run: Path) -> None:
+    """τ from the wrench topic (FLU → FRD, window mean before the stamp as for thruster
+    telemetry) gives the thrusters' θ to 1e-9, within its σ of the truth."""
+    ref = identify(run / "sim", "bluerov2_heavy", run / "bag_thr.yaml")
+    got = identify(run / "wrench_bag", str(run / "bare.yaml"), run / "bag_bare.yaml",
+                   "--wrench-topic", "wrench")
+    np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9)
+    m, truth = load_model(run / "bag_bare.yaml"), load_model(run / "sim" / "truth_model.yaml")
+    assert m.parameter_names == truth.parameter_names
+    z = np.abs(m.theta - truth.theta) / m.theta_std
+    big = np.abs(truth.theta) > 1.0
+    assert np.all(z[big] < 4.0), dict(zip(np.array(m.parameter_names)[big], z[big],
+                                          strict=True))
+
+
+def test_validate_and_gap_take_a_tau_csv_and_a_wrench_bag_without_thrusters(
+        run: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    truth = str(run / "sim" / "truth_model.yaml")
+    bare = str(run / "bare.yaml")
+    assert main(["validate", truth, str(run / "sim.csv"), "--vehicle", bare]) == 0
+    assert main(["validate", truth, str(run / "wrench_bag"), "--vehicle", bare,
+                 "--wrench-topic", "wrench"]) == 0
+    out = capsys.readouterr().out
+    r2 = [float(line.split()[1]) for line in out.splitlines()
+          if line.split()[:1] and line.split()[0] in ("u/X", "w/Z", "r/N")]
+    assert len(r2) == 6 and min(r2) > 0.99, out
+    assert main(["gap", str(run / "wrench_bag"), "--model", truth, "--vehicle", bare,
+                 "--wrench-topic", "wrench", "--candidates", "thrusters,buoyancy",
+                 "--max-steps", "1"]) == 0
+    assert "rotor speeds" in capsys.readouterr().out
+
+
+def test_what_needs_thrusters_refuses_in_one_line(run: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    bare = str(run / "bare.yaml")
+    capsys.readouterr()
+    assert main(["simulate", "--vehicle", bare, "--duration", "10",
+                 "--out", str(run / "never")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "thrusters: " in err and "thrusters: section" in err
+    assert not (run / "never").exists()
+    # a bag without --wrench-topic: τ would come from thruster telemetry
+    assert main(["identify", str(run / "wrench_bag"), "--vehicle", bare]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--wrench-topic" in err
+    # the online path (RLS) reads thrusters/state
+    assert main(["identify", str(run / "wrench_bag"), "--vehicle", bare, "--method", "rls",
+                 "--wrench-topic", "wrench"]) == 2
+    assert "--wrench-topic" in capsys.readouterr().err
+    # a wrench topic that is not in the bag names the topics that are
+    assert main(["identify", str(run / "wrench_bag"), "--vehicle", bare,
+                 "--wrench-topic", "body_wrench"]) == 2
+    err = capsys.readouterr().err
+    assert "body_wrench" in err and "missing" in err
+
+
+def test_inspect_knows_the_wrench_topic(run: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", str(run / "wrench_bag")]) == 1
+    assert "thrusters/state" in capsys.readouterr().out
+    assert main(["inspect", str(run / "wrench_bag"), "--wrench-topic", "wrench"]) == 0
+    assert "IMU, DVL and body wrench topics present" in capsys.readouterr().out
+
+
+def test_estimator_without_thrusters_weights_by_the_measured_tau(run: Path) -> None:
+    """The RLS noise weights come from the first CORRELATION_SECONDS of measured τ
+    ((1 % of its 99th percentile)² per DOF), never from invented thrusters; with thrusters
+    they stay (1 % of the largest thrust)²."""
+    bare = load_vehicle(run / "bare.yaml")
+    cfg = EstimatorConfig(rate=50.0, cutoff=2.0)
+    est = OnlineEstimator(bare, config=cfg)
+    rng = np.random.default_rng(3)
+    n = int(CORRELATION_SECONDS * cfg.rate) + 20
+    tau = rng.normal(0.0, [30.0, 20.0, 40.0, 0.5, 0.4, 2.0], (n, 6))
+    q = np.array([0.0, 0.0, 0.0, 1.0])
+    used = 0
+    for k in range(n):
+        stamp = 1_000_000_000 + k * 20_000_000
+        for stream, value in (("velocity", rng.normal(0, 0.1, 6)),
+                              ("acceleration", rng.normal(0, 0.1, 6)),
+                              ("wrench", tau[k]), ("attitude", q)):
+            used += est.add(stream, stamp, value)
+        if k == n - 30:
+            assert used == 0  # the RLS waits for the data that scale it
+    assert used > 0
+    first = tau[:int(CORRELATION_SECONDS * cfg.rate)]
+    want = (0.01 * measured_wrench_scale(first)) ** 2
+    np.testing.assert_allclose(est.rls.config.noise_var, want, rtol=1e-12)
+    np.testing.assert_allclose(want[0], (0.01 * np.percentile(np.abs(first[:, 0]), 99)) ** 2,
+                               rtol=1e-12)
+    heavy = OnlineEstimator(HEAVY, config=cfg)
+    assert HEAVY.thrusters is not None
+    np.testing.assert_allclose(heavy.rls.config.noise_var,
+                               (0.01 * HEAVY.thrusters.max_wrench) ** 2, rtol=1e-12)
