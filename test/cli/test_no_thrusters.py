@@ -87,10 +87,17 @@ def test_validate_and_gap_take_a_tau_csv_and_a_wrench_bag_without_thrusters(
     r2 = [float(line.split()[1]) for line in out.splitlines()
           if line.split()[:1] and line.split()[0] in ("u/X", "w/Z", "r/N")]
     assert len(r2) == 6 and min(r2) > 0.99, out
-    assert main(["gap", str(run / "wrench_bag"), "--model", truth, "--vehicle", bare,
-                 "--wrench-topic", "wrench", "--candidates", "thrusters,buoyancy",
-                 "--max-steps", "1"]) == 0
+    # a plant without M_A ν̇ (MuJoCo-like): gap's model keeps the vehicle's switches
+    doc = yaml.safe_load((run / "bare.yaml").read_text())
+    doc["vehicle"]["added_mass_terms"] = {"inertial": False, "coriolis": True, "munk": True}
+    (run / "bare_switched.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    assert main(["gap", str(run / "wrench_bag"), "--model", truth, "--vehicle",
+                 str(run / "bare_switched.yaml"), "--wrench-topic", "wrench", "--candidates",
+                 "thrusters,buoyancy", "--max-steps", "1", "--out", str(run / "gap.yaml")]) == 0
     assert "rotor speeds" in capsys.readouterr().out
+    final = load_model(run / "gap.yaml")
+    assert final.added_mass_terms is not None and not final.added_mass_terms.inertial
+    np.testing.assert_allclose(final.M_A, HEAVY.body.added_mass, atol=1e-9)
 
 
 def test_what_needs_thrusters_refuses_in_one_line(run: Path,
@@ -150,6 +157,11 @@ def test_estimator_without_thrusters_weights_by_the_measured_tau(run: Path) -> N
     np.testing.assert_allclose(est.rls.config.noise_var, want, rtol=1e-12)
     np.testing.assert_allclose(want[0], (0.01 * np.percentile(np.abs(first[:, 0]), 99)) ** 2,
                                rtol=1e-12)
+    # the estimator's model file (~/save) carries the added mass and its switches
+    saved = load_model(est.save(run / "estimator.yaml", 3))
+    np.testing.assert_array_equal(saved.M_A, bare.body.added_mass)
+    assert saved.added_mass_terms == bare.body.added_mass_terms
+    np.testing.assert_array_equal(saved.theta, est.theta)
     heavy = OnlineEstimator(HEAVY, config=cfg)
     assert HEAVY.thrusters is not None
     np.testing.assert_allclose(heavy.rls.config.noise_var,
