@@ -459,11 +459,11 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     bic, aic = crit(rss, k_now)
     steps = [SelectionStep("base: " + "+".join(base.kinds), k_now, rss.copy(), bic, aic, 0.0,
                            cv.copy())]
-    def best_addition() -> tuple[float, int, int] | None:
+    def best_addition(rows: Sequence[int] = range(6)) -> tuple[float, int, int] | None:
         """(score, row, pool index) of the candidate with the largest held-out gain (score
         = change of the row's held-out unexplained share, < 0) among those that qualify."""
         best: tuple[float, int, int] | None = None
-        for i in range(6):
+        for i in rows:
             _, cv_c, gain = state[i]
             if not len(cv_c):
                 continue
@@ -486,26 +486,30 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         state[i] = refresh(i)
         record("− " + name_of[(i, col)], i)
 
+    def add(i: int, j: int) -> None:
+        nonlocal k_now
+        f = pool[i].pop(j)
+        cv[i] = float(state[i][1][j])
+        rss[i] = max(float(rss[i] - state[i][2][j]), 0.0)
+        chosen[i].append(f)
+        k_now += 1
+        state[i] = refresh(i)
+        record(name_of[(i, f)], i)
+
     for _ in range(rounds):
         changed = False
         while k_now < max_terms:
             best = best_addition()
             if best is None:
                 break
-            _, i, j = best
-            f = pool[i].pop(j)
-            cv[i] = float(state[i][1][j])
-            rss[i] = max(float(rss[i] - state[i][2][j]), 0.0)
-            chosen[i].append(f)
-            k_now += 1
-            state[i] = refresh(i)
-            record(name_of[(i, f)], i)
+            add(best[1], best[2])
             changed = True
         while True:
             # the weakest term: a searched one that no longer passes the test it entered by,
             # or a base one whose removal lowers BIC; it does not come back (no cycling)
             worst: tuple[float, int, int, float, float] | None = None
             cheapest: tuple[float, int, int, float, float] | None = None
+            cheapest_in: dict[int, tuple[float, int, int, float, float]] = {}
             for i in range(6):
                 for col in chosen[i]:
                     if (i, col) in keep_always:
@@ -524,16 +528,33 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
                     loss = (float(cv_wo) - cv[i]) / tss[i]
                     if cheapest is None or loss < cheapest[0]:
                         cheapest = (loss, i, col, rss_wo, float(cv_wo))
+                    if i not in cheapest_in or loss < cheapest_in[i][0]:
+                        cheapest_in[i] = (loss, i, col, rss_wo, float(cv_wo))
             if worst is not None:
                 remove(*worst[1:])
                 changed = True
                 continue
             # at the budget: exchange the term whose loss costs least held-out R² for the best
             # candidate when that gains more than twice as much
-            add = best_addition() if k_now >= max_terms else None
-            if add is not None and cheapest is not None and -add[0] > exchange * cheapest[0]:
+            if k_now < max_terms:
+                break
+            best = best_addition()
+            if best is not None and cheapest is not None and -best[0] > exchange * cheapest[0]:
                 remove(*cheapest[1:])
                 changed = True
+                break
+            # no DOF left behind: the worst-explained DOF takes the place of the cheapest term
+            # of a DOF that stays better explained than the worst one is now (the smallest
+            # held-out R² of the six rises with every such exchange, so they end)
+            r2 = 1.0 - cv / tss
+            w = int(np.argmin(r2))
+            best = best_addition([w])
+            if best is not None:
+                donors = [c for i, c in cheapest_in.items() if i != w and r2[i] - c[0] > r2[w]]
+                if donors:
+                    remove(*min(donors)[1:])
+                    add(best[1], best[2])
+                    changed = True
             break
         if not changed:
             break
