@@ -50,7 +50,8 @@ The added-mass switches (``model.added_mass_terms``, else the vehicle's) become 
 ``<disable_added_mass>`` (``inertial: false``) and ``<disable_coriolis>`` (``coriolis:
 false``); gz-sim has no switch for the Munk moments alone (its C_A(ν)ν always holds them), and
 the URDF block and UUV Simulator have no switches at all: such a combination is listed as
-left out. Terms a format cannot express (fluid memory, residual modes, |U| or product α) are
+left out, as are off-diagonal M_A entries in gz-sim's C_A(ν)ν (built from the diagonal of M_A
+only; they act in its M_A ν̇). Terms a format cannot express (fluid memory, residual modes, |U| or product α) are
 listed in the output and raised as :class:`ExportWarning`; nothing is dropped silently.
 """
 
@@ -429,6 +430,10 @@ def export_gz(mf: ModelFile, vehicle: Vehicle | None = None, *, link_name: str =
         left_out.append(f"added_mass_terms {terms.as_dict()}: gz-sim cannot drop the Munk "
                         "moments alone (its C_A(nu)nu holds them); written with the Coriolis "
                         "term on, Munk moments included")
+    if M_A is not None and terms.coriolis and np.any(M_A[~np.eye(6, dtype=bool)]):
+        left_out.append("the off-diagonal M_A entries in C_A(nu)nu: gz-sim builds its Coriolis "
+                        "term from the diagonal of M_A only (HydrodynamicsUtils.hh "
+                        "buildCoriolisMatrix); they act in M_A nudot only")
     added: dict[str, float] = {}
     if M_A is not None:
         T = np.diag(_FLIP) if frame == "flu" else np.eye(6)
