@@ -120,9 +120,11 @@ def test_model_file_round_trip(tmp_path: Path) -> None:
 def test_model_file_is_a_ros_parameters_file(tmp_path: Path) -> None:
     """rcl's own YAML parser (as for --params-file) reads every entry with the right type."""
     model, theta = damping_from_spec(FULL_SPEC)
+    from dampest_ros.core.rigid_body import AddedMassTerms
     path = yaml_io.save_model(tmp_path / "model.yaml", model.parameter_names, theta,
                               np.full(theta.size, np.inf), np.eye(6) * 2.0,
-                              {"note": "n", "flags": [True, False]}, damping=model)
+                              {"note": "n", "flags": [True, False]}, damping=model,
+                              M_A=np.eye(6), added_mass_terms=AddedMassTerms(inertial=False))
     probe = (
         "import json, sys, rclpy\n"
         "from rclpy.node import Node\n"
@@ -150,6 +152,11 @@ def test_model_file_is_a_ros_parameters_file(tmp_path: Path) -> None:
     assert params["theta"][1] == theta.tolist()
     assert params["theta_std"][1] == [np.inf] * theta.size
     assert params["terms.cross.alphas"][1] == ["|r|", "|v|", "w", "|U|"]
+    # the added-mass switches are three BOOL parameters, M_A 36 doubles
+    assert params["added_mass_terms.inertial"] == ["BOOL", False]
+    assert params["added_mass_terms.coriolis"] == params["added_mass_terms.munk"] == ["BOOL",
+                                                                                    True]
+    assert types["M_A"] == "DOUBLE_ARRAY" and params["M_A"][1] == np.eye(6).ravel().tolist()
 
 
 def test_invalid_extra_and_failed_save_keep_the_old_file(tmp_path: Path) -> None:
