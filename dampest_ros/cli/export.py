@@ -100,7 +100,7 @@ def _run_import(args: argparse.Namespace) -> int:
                        link_name=args.link_name)
     M_RB, M_A, mass_notes = imported_mass_parts(imp, vehicle)
     terms = imp.added_mass_terms
-    if terms is None and vehicle is not None and imp.added_mass is None:
+    if vehicle is not None and imp.added_mass is None and (terms is None or terms.all):
         terms = vehicle.body.added_mass_terms  # the vehicle's added mass, with its switches
     damping = imp.damping()
     save_model(args.out, imp.names, imp.theta, np.zeros(len(imp.names)), M_RB + M_A,

@@ -51,8 +51,9 @@ The added-mass switches (``model.added_mass_terms``, else the vehicle's) become 
 false``); gz-sim has no switch for the Munk moments alone (its C_A(ν)ν always holds them), and
 the URDF block and UUV Simulator have no switches at all: such a combination is listed as
 left out, as are off-diagonal M_A entries in gz-sim's C_A(ν)ν (built from the diagonal of M_A
-only; they act in its M_A ν̇). Terms a format cannot express (fluid memory, residual modes, |U| or product α) are
-listed in the output and raised as :class:`ExportWarning`; nothing is dropped silently.
+only; they act in its M_A ν̇). Terms a format cannot express (fluid memory, residual modes,
+|U| or product α) are listed in the output and raised as :class:`ExportWarning`; nothing is
+dropped silently.
 """
 
 from __future__ import annotations
@@ -175,8 +176,8 @@ class Imported:
     notes : tuple of str
         What was ignored or interpreted.
     added_mass_terms : AddedMassTerms or None
-        The added-mass switches, when the file has any (``gz``: ``<disable_added_mass>``,
-        ``<disable_coriolis>``).
+        The added-mass switches (``gz``: from ``<disable_added_mass>`` and
+        ``<disable_coriolis>``, all on without them; None for ``urdf``, which has none).
     """
 
     format: str
@@ -831,11 +832,10 @@ def import_gz(source: str | Path, *, frame: str = "flu",
         added = T @ link_mass @ T
     notes.append(f"Read from link '{(plugin.findtext('link_name') or '').strip()}' as "
                  f"{frame.upper()}.")
-    terms = None
-    if disabled:
-        coriolis = not disabled.get("disable_coriolis", False)
-        terms = AddedMassTerms(inertial=not disabled.get("disable_added_mass", False),
-                               coriolis=coriolis, munk=coriolis)
+    # gz-sim's defaults (no tag): both effects act; its C_A(ν)ν holds the Munk moments
+    coriolis = not disabled.get("disable_coriolis", False)
+    terms = AddedMassTerms(inertial=not disabled.get("disable_added_mass", False),
+                           coriolis=coriolis, munk=coriolis)
     return replace(_build("gz", lin_spec, quad_spec, cross, added, None, notes),
                    added_mass_terms=terms)
 
