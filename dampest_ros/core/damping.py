@@ -27,7 +27,15 @@ angular speed magnitude    ν_j ‖(p, q, r)‖         ``F_jW``    ``|W|``     
 cross-flow speed           ν_j ‖(ν_k, ν_l)‖        ``F_jUkl``  ``|k,l|``   (``X_uUvw``,
                            (k, l both linear or                            ``K_pWqr``)
                            both angular; W then)
+projected area (``area``)  ν_j ν_k² / ‖v‖ (k       ``F_jAk``   ``k^2/|U|`` (``X_uAv``,
+                           linear), ν_j ν_k² / ‖ω‖             ``q^2/|W|``  ``K_pAq``)
+                           (k angular)
 =========================  =====================  ==========  ============================
+
+The projected-area family is bluff-body drag with a direction-dependent area: the drag
+ρ C A(v̂) ‖v‖ ν_j with the area interpolated by the squared direction cosines,
+A(v̂) ≈ Σ_k A_k v_k² / ‖v‖², is Σ_k (ρ C A_k) ν_j v_k² / ‖v‖, linear in the A_k; the three
+columns of one ν_j sum to ν_j ‖v‖ (MuJoCo's ellipsoid drag is of this kind).
 
 The bilinear name carries an ``x`` (times) so that it never equals the cross-flow name of the
 same letters (Y_{v|r|} is ``Y_vr``, Y_{v r} is ``Y_vxr``); ν_j ν_k and ν_k ν_j are one column,
@@ -72,7 +80,8 @@ class Alpha:
 
     kinds: ``one`` (1), ``abs`` (|ν_i|), ``lin`` (ν_i), ``norm`` (‖[u, v, w]‖, m/s),
     ``anorm`` (‖[p, q, r]‖, rad/s), ``pnorm`` (‖[ν_i, ν_j]‖, the cross-flow speed of a body
-    slender along the third axis), ``prod`` (ν_i ν_j), ``absprod`` (|ν_i ν_j|),
+    slender along the third axis), ``area`` (ν_i² / ‖v‖ for a linear ν_i, ν_i² / ‖ω‖ for an
+    angular one; 0 at rest), ``prod`` (ν_i ν_j), ``absprod`` (|ν_i ν_j|),
     ``absproj`` (|wᵀν| for a unit 6-vector w).
     """
 
@@ -96,6 +105,8 @@ class Alpha:
             return np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))
         if k == "pnorm":
             return np.hypot(nu[:, self.i], nu[:, self.j])
+        if k == "area":
+            return _area(nu, np.array([self.i]))[:, 0]
         if k == "prod":
             return nu[:, self.i] * nu[:, self.j]
         if k == "absprod":
@@ -120,6 +131,8 @@ class Alpha:
             return float(s[self.i] * s[self.j])
         if k == "pnorm":
             return float(max(s[self.i], s[self.j]))
+        if k == "area":
+            return float(s[self.i] ** 2 / (s[:3].max() if self.i < 3 else s[3:].max()))
         if k == "norm":
             return float(s[:3].max())
         if k == "anorm":
@@ -138,6 +151,7 @@ class Alpha:
             "norm": "|U|",
             "anorm": "|W|",
             "pnorm": f"|{n[self.i]},{n[self.j]}|" if self.i >= 0 else "",
+            "area": f"{n[self.i]}^2/{'|U|' if self.i < 3 else '|W|'}" if self.i >= 0 else "",
             "prod": f"{n[self.i]}{n[self.j]}" if self.i >= 0 else "",
             "absprod": f"|{n[self.i]}{n[self.j]}|" if self.i >= 0 else "",
             "absproj": "|w'nu|",
@@ -154,6 +168,12 @@ class Alpha:
             return cls("norm")
         if t in ("|W|", "anorm"):
             return cls("anorm")
+        if t.endswith(("^2/|U|", "^2/|W|")):
+            i = _dof(t[:-6], "alpha")
+            if (i < 3) != t.endswith("|U|"):
+                raise ConfigError("alpha", f"{text!r}: a linear velocity goes over |U|, an "
+                                  "angular one over |W|")
+            return cls("area", i)
         if "," in t and t.startswith("|") and t.endswith("|"):
             pair = [_dof(c, "alpha") for c in t.strip("|").split(",")]
             if len(pair) == 2:
@@ -187,10 +207,11 @@ class AlphaBank:
         self.norm = np.zeros(p, dtype=bool)
         self.anorm = np.zeros(p, dtype=bool)
         self.pnorm = np.zeros(p, dtype=bool)
+        self.area = np.zeros(p, dtype=bool)
         self.W = np.zeros((6, p))
         self.proj = np.zeros(p, dtype=bool)
         for k, a in enumerate(alphas):
-            if a.kind in ("abs", "lin", "prod", "absprod", "pnorm"):
+            if a.kind in ("abs", "lin", "prod", "absprod", "pnorm", "area"):
                 self.i[k] = a.i
             if a.kind in ("prod", "absprod", "pnorm"):
                 self.j[k] = a.j
@@ -198,12 +219,14 @@ class AlphaBank:
             self.norm[k] = a.kind == "norm"
             self.anorm[k] = a.kind == "anorm"
             self.pnorm[k] = a.kind == "pnorm"
+            self.area[k] = a.kind == "area"
             if a.kind == "absproj":
                 self.proj[k] = True
                 self.W[:, k] = a.w
         self.any_norm = bool(self.norm.any())
         self.any_anorm = bool(self.anorm.any())
         self.any_pnorm = bool(self.pnorm.any())
+        self.any_area = bool(self.area.any())
         self.any_proj = bool(self.proj.any())
         self.any_abs = bool(self.absolute.any())
 
@@ -214,6 +237,8 @@ class AlphaBank:
         a = aug[:, self.i] * aug[:, self.j]
         if self.any_pnorm:
             a = np.where(self.pnorm, np.hypot(aug[:, self.i], aug[:, self.j]), a)
+        if self.any_area:
+            a[:, self.area] = _area(nu, self.i[self.area])
         if self.any_proj:
             a = np.where(self.proj, nu @ self.W, a)
         if self.any_norm:
@@ -225,6 +250,15 @@ class AlphaBank:
         if self.any_abs:
             a = np.where(self.absolute, np.abs(a), a)
         return a
+
+
+def _area(nu: FloatArray, k: NDArray[np.int64]) -> FloatArray:
+    """ν_k² / ‖v‖ for linear k, ν_k² / ‖ω‖ for angular k, 0 at rest; shape (N, len(k))."""
+    lin = np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))
+    ang = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))
+    norm = np.where(k < 3, lin[:, None], ang[:, None])
+    # ν_k² / ‖·‖ (≤ ‖·‖, so it goes to 0 with the speed)
+    return np.divide(nu[:, k] ** 2, norm, out=np.zeros_like(norm), where=norm > 0)
 
 
 @dataclass(frozen=True)
@@ -444,7 +478,7 @@ def cross_term(specs: Sequence[CrossSpec]) -> DampingTerm:
 
 
 #: Named families of the term library (see the module docstring for their names).
-FAMILIES = ("linear", "crossflow", "bilinear", "norm")
+FAMILIES = ("linear", "crossflow", "bilinear", "norm", "area")
 
 
 def library_name(row: int, col: int, alpha: Alpha) -> str:
@@ -455,7 +489,8 @@ def library_name(row: int, col: int, alpha: Alpha) -> str:
     row, col : int
         Force row 0..5 (X..N) and velocity column 0..5 (u..r).
     alpha : Alpha
-        ``one``, ``abs``, ``lin``, ``norm``, ``anorm`` or ``pnorm``; others fall back to
+        ``one``, ``abs``, ``lin``, ``norm``, ``anorm``, ``pnorm`` or ``area``; others fall
+        back to
         :attr:`CrossSpec.label`.
     """
     f, n = FORCE_NAMES[row], DOF_NAMES
@@ -473,6 +508,8 @@ def library_name(row: int, col: int, alpha: Alpha) -> str:
         return f"{f}_{n[col]}W"
     if k == "pnorm":
         return f"{f}_{n[col]}{'U' if alpha.i < 3 else 'W'}{n[alpha.i]}{n[alpha.j]}"
+    if k == "area":
+        return f"{f}_{n[col]}A{n[alpha.i]}"
     return CrossSpec(row, col, alpha).label
 
 
@@ -483,7 +520,8 @@ def library(families: Sequence[str] = FAMILIES, rows: Iterable[str | int] = DOF_
     Per force row: ``linear`` ν_j (6), ``crossflow`` ν_j|ν_k| (36, the quadratic X_uu among
     them), ``bilinear`` ν_j ν_k for j ≤ k (21, lift u·w, Magnus-like ω × v products),
     ``norm`` ν_j ‖v‖ and ν_j ‖ω‖ (12) and the cross-flow speeds ν_j ‖(v, w)‖, ν_j ‖(u, w)‖,
-    ν_j ‖(u, v)‖, ν_j ‖(q, r)‖, ν_j ‖(p, r)‖, ν_j ‖(p, q)‖ (36). Every column appears once
+    ν_j ‖(u, v)‖, ν_j ‖(q, r)‖, ν_j ‖(p, r)‖, ν_j ‖(p, q)‖ (36), ``area`` ν_j ν_k² / ‖v‖
+    and ν_j ν_k² / ‖ω‖ (36). Every column appears once
     per row (ν_j ν_k and ν_k ν_j are one). Ordered simplest first, which decides which of two
     numerically equal columns a selection keeps.
 
@@ -512,6 +550,8 @@ def library(families: Sequence[str] = FAMILIES, rows: Iterable[str | int] = DOF_
         alphas += [(j, Alpha(kind)) for kind in ("norm", "anorm") for j in range(6)]
         pairs = ((1, 2), (0, 2), (0, 1), (4, 5), (3, 5), (3, 4))
         alphas += [(j, Alpha("pnorm", k, m)) for k, m in pairs for j in range(6)]
+    if "area" in families:
+        alphas += [(j, Alpha("area", k)) for k in range(6) for j in range(6)]
     out = []
     for r in rows:
         i = _dof(r, "rows")

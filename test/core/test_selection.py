@@ -19,7 +19,7 @@ from dampest_ros.core.damping import (
     quadratic_term,
 )
 from dampest_ros.core.frames import matrix_from_euler
-from dampest_ros.core.rigid_body import RigidBody
+from dampest_ros.core.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import select_terms
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
@@ -101,9 +101,9 @@ def held_out_r2(samples: Samples, model: DampingModel, body: RigidBody) -> np.nd
 def test_library_names_are_unique_documented_and_round_trip(tmp_path: Path) -> None:
     specs = library()
     names = [s.label for s in specs]
-    assert len(specs) == 666 and len(set(names)) == 666  # 111 columns in each of 6 rows
+    assert len(specs) == 882 and len(set(names)) == 882  # 147 columns in each of 6 rows
     for name in ("X_u", "Y_r", "Y_vr", "X_uu", "Z_uxw", "Y_vxr", "X_uU", "K_pW", "N_rU",
-                 "X_uUvw", "K_pWqr"):
+                 "X_uUvw", "K_pWqr", "X_uAv", "K_pAq"):
         assert name in names, name
     # α text parses back to the same α (what the model file stores)
     for s in specs:
@@ -111,7 +111,7 @@ def test_library_names_are_unique_documented_and_round_trip(tmp_path: Path) -> N
     model = DampingModel([linear_term(), quadratic_term(),
                           cross_term([s for s in specs if s.label in (
                               "Z_uxw", "Y_vr", "X_uU", "K_pW", "N_rv", "M_wxq",
-                              "X_uUvw")])])
+                              "X_uUvw", "X_uAv", "K_pAq")])])
     theta = np.arange(1.0, model.n_params + 1.0)
     path = save_model(tmp_path / "m.yaml", model.parameter_names, theta,
                       np.zeros(model.n_params), np.eye(6), damping=model)
@@ -121,6 +121,31 @@ def test_library_names_are_unique_documented_and_round_trip(tmp_path: Path) -> N
     nu = np.random.default_rng(0).normal(size=(50, 6))
     np.testing.assert_allclose(back.damping.force(nu, back.theta), model.force(nu, theta),
                                rtol=1e-12)
+
+
+def test_projected_area_columns_sum_to_the_speed_magnitude_drag() -> None:
+    """ν_j v_k²/‖v‖ over k = u, v, w is ν_j ‖v‖ (and ν_j ω_k²/‖ω‖ sums to ν_j ‖ω‖); every
+    α of the library evaluates alike one by one and all at once (AlphaBank); 0 at rest."""
+    nu = np.random.default_rng(3).normal(size=(40, 6))
+    nu[0] = 0.0
+    specs = library(("area", "norm"), rows=["X"])
+    model = DampingModel([cross_term(specs)])
+    Phi = model.regressor(nu)[:, 0, :]
+    col = {s.label: k for k, s in enumerate(specs)}
+    for j, d in enumerate("uvwpqr"):
+        lin = sum(Phi[:, col[f"X_{d}A{k}"]] for k in "uvw")
+        ang = sum(Phi[:, col[f"X_{d}A{k}"]] for k in "pqr")
+        np.testing.assert_allclose(lin, Phi[:, col[f"X_{d}U"]], rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(ang, Phi[:, col[f"X_{d}W"]], rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(Phi[:, col[f"X_{d}Av"]],
+                                   nu[:, j] * np.divide(nu[:, 1] ** 2,
+                                                        np.linalg.norm(nu[:, :3], axis=1),
+                                                        out=np.zeros(40),
+                                                        where=np.arange(40) > 0),
+                                   rtol=1e-12)
+    assert np.all(Phi[0] == 0.0)
+    with pytest.raises(ConfigError, match="angular one over"):
+        Alpha.parse("q^2/|U|")
 
 
 def test_angular_norm_alpha() -> None:
