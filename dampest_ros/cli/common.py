@@ -62,6 +62,18 @@ def topic_roles(args: argparse.Namespace) -> dict[str, str]:
     return topics
 
 
+def bag_topics(path: Path, vehicle: Vehicle, args: argparse.Namespace) -> dict[str, str]:
+    """:func:`topic_roles` of a bag, after checking that τ can be had: without
+    ``--wrench-topic`` it comes from thruster telemetry, which needs the vehicle's thrusters
+    (ConfigError naming both ways)."""
+    topics = topic_roles(args)
+    if "wrench" not in topics:
+        vehicle.need_thrusters(f"τ from the thruster telemetry of {path.name} "
+                               f"({topics['thrusters']})",
+                               "give --wrench-topic TOPIC (a body wrench in the bag)")
+    return topics
+
+
 def tau_topic(topics: dict[str, str]) -> str:
     """The topic τ comes from: the body wrench, else the thruster telemetry."""
     return topics.get("wrench") or topics["thrusters"]
@@ -113,11 +125,7 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
         return samples
     if not p.is_dir():
         raise DataError(f"{p}: expected a rosbag2 directory or a .csv / .csv.gz file")
-    topics = topic_roles(args)
-    if "wrench" not in topics:
-        vehicle.need_thrusters(f"τ from the thruster telemetry of {p.name} "
-                               f"({topics['thrusters']})",
-                               "give --wrench-topic TOPIC (a body wrench in the bag)")
+    topics = bag_topics(p, vehicle, args)
     # windows are read as the preprocessing needs them: memory stays flat with bag length
     rec = BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),
                     together=[topics["imu"], tau_topic(topics)])

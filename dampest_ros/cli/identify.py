@@ -24,6 +24,7 @@ from dampest_ros.cli.common import (
     add_preprocess_options,
     add_topic_options,
     add_window_options,
+    bag_topics,
     cut,
     load_samples,
     split_holdout,
@@ -176,8 +177,7 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
                                          ("--columns", args.columns),
                                          ("--start", args.start is not None),
                                          ("--end", args.end is not None),
-                                         ("--holdout", args.holdout is not None),
-                                         ("--wrench-topic", args.wrench_topic)) if used]
+                                         ("--holdout", args.holdout is not None)) if used]
     if unsupported:
         raise DataError(f"--method rls does not take {', '.join(unsupported)} (batch methods "
                         "only)")
@@ -187,14 +187,14 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     if not path.is_dir():
         raise DataError(f"--method rls replays the sensor messages of a rosbag2 directory; "
                         f"{path} is not one (a CSV holds samples, not messages)")
-    topics = {role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS}
+    topics = bag_topics(path, vehicle, args)
     have = {t.lstrip("/") for t in bag_summary(path).topics}
     if topics["pressure"].lstrip("/") not in have:
         del topics["pressure"]  # optional, as in the batch path
+    if "wrench" in topics:
+        del topics["thrusters"]  # τ from the body wrench: the thruster topic is not read
     rec = read_bag(path, list(topics.values()))
-    thrusters = vehicle.need_thrusters("--method rls (the online preprocessing of the thruster "
-                                       "telemetry)", "use a batch --method")
-    pre = OnlinePreprocessor(thrusters, vehicle.body.gravity, vehicle.body.rho,
+    pre = OnlinePreprocessor(vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
                              OnlineConfig(rate=args.rate, max_dvl_gap=args.max_gap))
     prior = None
     if args.prior:
@@ -207,8 +207,9 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     est.process(force=True)
     d = est.rls.diagnostics(condition=True)
     c = pre.counts
-    print(f"{args.input}: {sum(c[r] for r in DEFAULT_TOPICS)} messages (" +
-          ", ".join(f"{c[r]} {r}" for r in DEFAULT_TOPICS) + f"), {c['samples']} samples, "
+    roles = [r for r in (*DEFAULT_TOPICS, "wrench") if r in topics or r == "pressure"]
+    print(f"{args.input}: {sum(c[r] for r in roles)} messages (" +
+          ", ".join(f"{c[r]} {r}" for r in roles) + f"), {c['samples']} samples, "
           f"{est.counts['used']} used by the RLS, λ = {args.forgetting_factor:g}, "
           f"condition number {d.condition_number:.3g}, {time.perf_counter() - t0:.1f} s")
     rejected = {k: c[k] for k in ("rejected_nonfinite", "rejected_out_of_order",

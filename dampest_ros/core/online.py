@@ -70,9 +70,10 @@ from dampest_ros.core.measurements import (
     PressureSeries,
     Recording,
     TwistSeries,
+    WrenchSeries,
     stamp_order,
 )
-from dampest_ros.core.preprocess import DataError, thruster_wrench
+from dampest_ros.core.preprocess import DataError, body_wrench
 from dampest_ros.core.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.thrusters import Thrusters
@@ -82,6 +83,12 @@ FloatArray = NDArray[np.float64]
 TOPIC_ROLES = ("imu", "dvl", "pressure", "thrusters")
 DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
                   "thrusters": "thrusters/state"}
+
+
+def topic_roles(wrench: bool) -> tuple[str, ...]:
+    """The message roles in tie order: τ from thruster telemetry (``thrusters``) or, with
+    ``wrench``, from a body-wrench topic (``wrench``) in its place."""
+    return (*TOPIC_ROLES[:3], "wrench" if wrench else "thrusters")
 
 
 @dataclass(frozen=True)
@@ -289,12 +296,14 @@ def derivative_lag(dt: float, q: float, r: float) -> float:
 
 
 class OnlinePreprocessor:
-    """Causal fusion of IMU, DVL, pressure and thruster messages into samples.
+    """Causal fusion of IMU, DVL, pressure and thruster (or body-wrench) messages into
+    samples.
 
     Parameters
     ----------
-    thrusters : Thrusters
-        Allocation (JointState names must match ``thrusters.names``).
+    thrusters : Thrusters or None
+        Allocation (JointState names must match ``thrusters.names``); None when τ comes from
+        body-wrench messages (:meth:`wrench`) only.
     gravity : float
         g (m/s²).
     rho : float
@@ -307,11 +316,11 @@ class OnlinePreprocessor:
     ``counts`` holds the statistics; ``events`` the reports of resets (newest last).
     """
 
-    _COUNTS = ("imu", "dvl", "pressure", "thrusters", "rejected_nonfinite",
+    _COUNTS = ("imu", "dvl", "pressure", "thrusters", "wrench", "rejected_nonfinite",
                "rejected_out_of_order", "rejected_stale", "dvl_outliers", "clock_resets",
                "imu_gaps", "samples", "samples_unusable", "samples_skipped")
 
-    def __init__(self, thrusters: Thrusters, gravity: float, rho: float,
+    def __init__(self, thrusters: Thrusters | None, gravity: float, rho: float,
                  config: OnlineConfig | None = None) -> None:
         self.thr = thrusters
         self.gravity = float(gravity)
@@ -562,7 +571,24 @@ class OnlinePreprocessor:
             return []
         joints = JointSeries(np.array([t]), names=tuple(names), effort=effort,
                              velocity=np.zeros_like(effort))
-        tau = thruster_wrench(joints, self.thr)[0]
+        return self._tau(t, body_wrench(joints, self.thr)[0])
+
+    def wrench(self, t: float, force: FloatArray, torque: FloatArray) -> list[OnlineSample]:
+        """geometry_msgs/WrenchStamped: the body wrench τ (N, N·m, FLU), mean over the
+        period before its stamp like thruster telemetry; used instead of :meth:`thrusters`."""
+        self.counts["wrench"] += 1
+        f = np.asarray(force, dtype=float).reshape(1, 3)
+        m = np.asarray(torque, dtype=float).reshape(1, 3)
+        if not _finite(t, f, m):
+            self.counts["rejected_nonfinite"] += 1
+            return []
+        if not self._admit("wrench", t):
+            return []
+        return self._tau(t, body_wrench(WrenchSeries(np.array([t]), force=f, torque=m),
+                                        self.thr)[0])
+
+    def _tau(self, t: float, tau: FloatArray) -> list[OnlineSample]:
+        """One τ message (FRD, (6,)) at stamp t: placed at the centre of its window."""
         w = self.cfg.thrust_window
         if w <= 0:
             gap = t - self._last_thr_stamp
@@ -640,11 +666,12 @@ class OnlinePreprocessor:
                  ) -> Iterator[tuple[str, float, int]]:
         """(role, stamp, row) of every message of a recording, in stamp order.
 
-        Ties keep the role order imu, dvl, pressure, thrusters.
+        Ties keep the role order imu, dvl, pressure, thrusters (or wrench: a ``wrench`` entry
+        in ``topics`` takes τ from that body-wrench topic instead).
         """
         names = {**DEFAULT_TOPICS, **(topics or {})}
         roles, stamps = [], []
-        for role in TOPIC_ROLES:
+        for role in topic_roles("wrench" in names):
             s = rec.get(names[role])
             if s is None:
                 if role == "pressure":
@@ -660,14 +687,17 @@ class OnlinePreprocessor:
         """Feed every message of a recording (as :func:`dampest_ros.io.bag.read_bag` returns)
         through the message methods in stamp order; returns all emitted samples."""
         names = {**DEFAULT_TOPICS, **(topics or {})}
+        tau_role = topic_roles("wrench" in names)[-1]
         imu = rec[names["imu"]]
         dvl = rec[names["dvl"]]
-        thr = rec[names["thrusters"]]
+        thr = rec[names[tau_role]]
         pres = rec.get(names["pressure"])
+        tau_kind, tau_msg = ((WrenchSeries, "WrenchStamped") if tau_role == "wrench"
+                             else (JointSeries, "JointState"))
         if not (isinstance(imu, ImuSeries) and isinstance(dvl, TwistSeries)
-                and isinstance(thr, JointSeries)):
-            raise DataError("imu, dvl and thrusters topics must be Imu, TwistWithCovariance"
-                            "Stamped and JointState series")
+                and isinstance(thr, tau_kind)):
+            raise DataError(f"imu, dvl and {tau_role} topics must be Imu, TwistWithCovariance"
+                            f"Stamped and {tau_msg} series")
         out: list[OnlineSample] = []
         for role, t, i in self.messages(rec, topics):
             if role == "imu":
@@ -675,8 +705,10 @@ class OnlinePreprocessor:
                                 imu.linear_acceleration[i])
             elif role == "dvl":
                 out += self.dvl(t, dvl.linear[i], dvl.covariance)
-            elif role == "thrusters":
+            elif role == "thrusters" and isinstance(thr, JointSeries):
                 out += self.thrusters(t, thr.names, thr.effort[i])
+            elif role == "wrench" and isinstance(thr, WrenchSeries):
+                out += self.wrench(t, thr.force[i], thr.torque[i])
             elif isinstance(pres, PressureSeries):
                 out += self.pressure(t, float(pres.fluid_pressure[i]))
         return out

@@ -1,6 +1,8 @@
 """preprocess_node: causal fusion of IMU, DVL, pressure and thruster states into samples.
 
-Subscribes imu/data, dvl/twist, pressure, thrusters/state (sensor-data QoS); publishes
+Subscribes imu/data, dvl/twist, pressure, thrusters/state (sensor-data QoS) or, with the
+parameter wrench_topic (read at start), a body wrench (geometry_msgs/WrenchStamped, FLU) on
+that topic instead of thrusters/state (the vehicle then needs no thrusters); publishes
 dampest/velocity (TwistWithCovarianceStamped), dampest/acceleration
 (AccelWithCovarianceStamped), dampest/wrench (WrenchStamped) and dampest/attitude
 (QuaternionStamped, base_link FLU → odom ENU, for the restoring forces) with identical header
@@ -29,7 +31,7 @@ from sensor_msgs.msg import FluidPressure, Imu, JointState
 
 from dampest_ros.core import frames
 from dampest_ros.core.estimator import attitude_quaternion
-from dampest_ros.core.online import TOPIC_ROLES, OnlineConfig, OnlinePreprocessor, OnlineSample
+from dampest_ros.core.online import OnlineConfig, OnlinePreprocessor, OnlineSample, topic_roles
 from dampest_ros.core.reorder import StampOrder
 from dampest_ros.io.yaml_io import load_vehicle
 from dampest_ros.ros.common import (
@@ -105,6 +107,9 @@ class PreprocessNode(ParamNode):
               "newer one of another topic and still be put in stamp order (later: counted as "
               "late); a topic gone quiet holds the others up this long", low=0.0, high=60.0),
         Param("frame_id", "base_link", "frame_id of the published samples"),
+        Param("wrench_topic", "", "topic of a body wrench τ (geometry_msgs/WrenchStamped, "
+              "FLU) read instead of thrusters/state ('': τ from thrusters/state through the "
+              "vehicle's allocation); read at start", read_only=True),
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -124,7 +129,13 @@ class PreprocessNode(ParamNode):
                                  SENSOR_QOS, raw=True)
         self.create_subscription(FluidPressure, "pressure", self._on_pressure, SENSOR_QOS,
                                  raw=True)
-        self.create_subscription(JointState, "thrusters/state", self._on_thrusters, SENSOR_QOS)
+        wrench = str(self.p("wrench_topic")).strip()
+        if wrench:
+            self.create_subscription(WrenchStamped, wrench, self._on_wrench, SENSOR_QOS,
+                                     raw=True)
+        else:
+            self.create_subscription(JointState, "thrusters/state", self._on_thrusters,
+                                     SENSOR_QOS)
         self.create_timer(1.0, self._publish_diagnostics)
         self.create_timer(0.5, self._flush_if_idle)
         self.published = 0
@@ -135,9 +146,13 @@ class PreprocessNode(ParamNode):
         cfg = OnlineConfig(rate=self.p("rate"), max_dvl_gap=self.p("max_dvl_gap"),
                            settle=self.p("settle"), stale_after=self.p("stale_after"),
                            clock_jump=self.p("clock_jump"))
-        thrusters = v.need_thrusters("preprocess_node (τ from thrusters/state)")
-        self.pre = OnlinePreprocessor(thrusters, v.body.gravity, v.body.rho, cfg)
-        self.order = StampOrder(TOPIC_ROLES, self.p("reorder_latency"), self.p("clock_jump"))
+        wrench = bool(str(self.p("wrench_topic")).strip())
+        if not wrench:
+            v.need_thrusters("preprocess_node (τ from thrusters/state)",
+                             "set the parameter wrench_topic (a body wrench)")
+        self.pre = OnlinePreprocessor(v.thrusters, v.body.gravity, v.body.rho, cfg)
+        self.order = StampOrder(topic_roles(wrench), self.p("reorder_latency"),
+                                self.p("clock_jump"))
 
     def on_parameters(self, names: list[str]) -> None:
         if set(names) - {"frame_id"}:
@@ -162,6 +177,10 @@ class PreprocessNode(ParamNode):
     def _on_thrusters(self, m: JointState) -> None:
         self._feed("thrusters", stamp_ns(m.header.stamp), (tuple(m.name),
                                                            np.asarray(m.effort, dtype=float)))
+
+    def _on_wrench(self, data: bytes) -> None:
+        ns, v = stamped_floats(data, 6)  # force, torque
+        self._feed("wrench", ns, (v[0:3], v[3:6]))
 
     def _feed(self, role: str, stamp: int, args: tuple[Any, ...]) -> None:
         """Through the stamp-order stage to the preprocessor method of the role."""

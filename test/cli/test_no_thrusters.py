@@ -76,6 +76,23 @@ def test_wrench_bag_identifies_without_thrusters_as_the_thruster_bag(run: Path) 
                                           strict=True))
 
 
+def test_rls_on_a_wrench_bag_without_thrusters_is_the_rls_on_the_thruster_bag(
+        run: Path) -> None:
+    """The online preprocessing (preprocess_node's core) takes τ from the wrench topic in
+    place of thrusters/state, message for message: with the same vehicle the RLS gives the
+    same θ to 1e-9; without thrusters (noise weights from the measured τ) within σ."""
+    ref = identify(run / "sim", "bluerov2_heavy", run / "rls_thr.yaml", "--method", "rls")
+    same = identify(run / "wrench_bag", "bluerov2_heavy", run / "rls_wrench.yaml",
+                    "--method", "rls", "--wrench-topic", "wrench")
+    np.testing.assert_allclose(same, ref, rtol=1e-9, atol=1e-9)
+    got = identify(run / "wrench_bag", str(run / "bare.yaml"), run / "rls_bare.yaml",
+                   "--method", "rls", "--wrench-topic", "wrench")
+    std = load_model(run / "rls_bare.yaml").theta_std
+    assert np.all(np.abs(got - ref) < std), (got - ref) / std
+    truth = load_model(run / "sim" / "truth_model.yaml").theta
+    np.testing.assert_allclose(got[truth > 10.0], truth[truth > 10.0], rtol=0.02)
+
+
 def test_validate_and_gap_take_a_tau_csv_and_a_wrench_bag_without_thrusters(
         run: Path, capsys: pytest.CaptureFixture[str]) -> None:
     truth = str(run / "sim" / "truth_model.yaml")
@@ -113,10 +130,10 @@ def test_what_needs_thrusters_refuses_in_one_line(run: Path,
     assert main(["identify", str(run / "wrench_bag"), "--vehicle", bare]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--wrench-topic" in err
-    # the online path (RLS) reads thrusters/state
-    assert main(["identify", str(run / "wrench_bag"), "--vehicle", bare, "--method", "rls",
-                 "--wrench-topic", "wrench"]) == 2
-    assert "--wrench-topic" in capsys.readouterr().err
+    # the online path (RLS) likewise
+    assert main(["identify", str(run / "wrench_bag"), "--vehicle", bare, "--method", "rls"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--wrench-topic" in err
     # a wrench topic that is not in the bag names the topics that are
     assert main(["identify", str(run / "wrench_bag"), "--vehicle", bare,
                  "--wrench-topic", "body_wrench"]) == 2
@@ -166,3 +183,52 @@ def test_estimator_without_thrusters_weights_by_the_measured_tau(run: Path) -> N
     assert HEAVY.thrusters is not None
     np.testing.assert_allclose(heavy.rls.config.noise_var,
                                (0.01 * HEAVY.thrusters.max_wrench) ** 2, rtol=1e-12)
+
+
+def test_preprocess_node_takes_the_wrench_topic_without_thrusters(run: Path) -> None:
+    """preprocess_node with wrench_topic on a vehicle without thrusters: the bag's messages,
+    serialized and fed to its raw callbacks (through its stamp-order stage), give the samples
+    of the offline OnlinePreprocessor on the same messages, τ included, to the last bit;
+    without wrench_topic the node refuses to start, naming the parameter."""
+    pytest.importorskip("rclpy")
+    import rclpy
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import serialize_message
+
+    from dampest_ros.core.online import OnlinePreprocessor
+    from dampest_ros.core.rigid_body import ConfigError
+    from dampest_ros.ros.convert import publications
+    from dampest_ros.ros.preprocess_node import PreprocessNode
+
+    rec = {k: s.select(np.flatnonzero(s.stamp < 40.0))
+           for k, s in read_bag(run / "wrench_bag").items()}
+    bare = load_vehicle(run / "bare.yaml")
+    want = OnlinePreprocessor(None, bare.body.gravity, bare.body.rho).run(
+        rec, {"wrench": "wrench"})
+    assert len(want) > 1000
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=71)
+    try:
+        with pytest.raises(ConfigError, match="wrench_topic"):
+            PreprocessNode(context=ctx, parameter_overrides=[
+                Parameter("vehicle", value=str(run / "bare.yaml"))])
+        node = PreprocessNode(context=ctx, parameter_overrides=[
+            Parameter("vehicle", value=str(run / "bare.yaml")),
+            Parameter("wrench_topic", value="wrench")])
+        got: list = []
+        node._publish = got.extend  # type: ignore[method-assign]
+        feed = {"imu/data": node._on_imu, "dvl/twist": node._on_dvl,
+                "pressure": node._on_pressure, "wrench": node._on_wrench}
+        for topic, msg in publications(rec):
+            feed[topic](serialize_message(msg))
+        node._process(node.order.flush())
+        assert node.pre.counts["wrench"] == len(rec["wrench"])
+        assert node.pre.counts["thrusters"] == 0
+        assert len(got) == len(want)
+        for a, b in zip(got, want, strict=True):
+            assert a.t == b.t and a.usable == b.usable
+            np.testing.assert_array_equal(a.tau, b.tau)
+            np.testing.assert_array_equal(a.nu, b.nu)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
