@@ -33,13 +33,14 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.frames import quat_to_matrix
+from dampest_ros.core.geometry import Geometry
 from dampest_ros.core.rigid_body import AddedMassTerms, ConfigError, RigidBody, skew
 from dampest_ros.core.simulate import Effects
 from dampest_ros.core.trajectory import Trajectory
@@ -47,11 +48,6 @@ from dampest_ros.core.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
 
-#: MuJoCo's default ellipsoid fluid coefficients: blunt drag, slender drag, angular drag,
-#: Kutta lift, Magnus lift.
-DEFAULT_FLUIDCOEF = (0.5, 0.25, 1.5, 1.0, 1.0)
-#: Dynamic viscosity of sea water at ~15 °C (Pa·s).
-WATER_VISCOSITY = 1.2e-3
 #: Longest MuJoCo (RK4) step (s): a slender AUV's fluid damping is stiff (a roll rate decays
 #: at ~600 /s while it pitches at 0.7 rad/s), which 5 ms steps do not survive.
 MAX_STEP = 0.002
@@ -62,112 +58,13 @@ SUPPORTED_EFFECTS = ("current", "current_variation", "current_period", "thruster
                      "accel_bias", "dvl_bias", "delay")
 
 
-@dataclass(frozen=True)
-class Geom:
-    """One ellipsoid of the vehicle's shape (FRD body frame).
-
-    Attributes
-    ----------
-    name : str
-    size : tuple of 3 float
-        Semi-axes (m), > 0.
-    position : tuple of 3 float
-        Centre in the body frame (m).
-    rpy : tuple of 3 float
-        Orientation of the geom's axes: roll, pitch, yaw (rad), ZYX.
-    fluidcoef : tuple of 5 float
-        MuJoCo's blunt drag, slender drag, angular drag, Kutta lift, Magnus lift.
-    """
-
-    name: str
-    size: tuple[float, ...]
-    position: tuple[float, ...] = (0.0, 0.0, 0.0)
-    rpy: tuple[float, ...] = (0.0, 0.0, 0.0)
-    fluidcoef: tuple[float, ...] = DEFAULT_FLUIDCOEF
-
-
-@dataclass(frozen=True)
-class Geometry:
-    """The vehicle's shape for the fluid model: ellipsoid geoms and the water's viscosity.
-
-    Built from a vehicle's ``geometry:`` block::
-
-        geometry:
-          viscosity: 1.2e-3                      # Pa·s (density is vehicle.rho)
-          fluidcoef: [0.5, 0.25, 1.5, 1.0, 1.0]  # default of every geom
-          geoms:
-            - {name: hull, size: [0.23, 0.29, 0.13]}
-            - {name: fin, size: [0.06, 0.08, 0.006], position: [-0.7, 0.17, 0], rpy: [0, 0, 0]}
-    """
-
-    geoms: tuple[Geom, ...]
-    viscosity: float = WATER_VISCOSITY
-
-    @classmethod
-    def from_dict(cls, d: Any) -> Geometry:
-        """From a ``geometry:`` mapping; every bad value raises ConfigError naming it."""
-        if not isinstance(d, dict):
-            raise ConfigError("geometry", "must be a mapping with a geoms: list")
-        unknown = set(d) - {"viscosity", "fluidcoef", "geoms"}
-        if unknown:
-            raise ConfigError("geometry", f"unknown key(s) {sorted(unknown)}; known: "
-                              "viscosity, fluidcoef, geoms")
-        viscosity = _number("geometry.viscosity", d.get("viscosity", WATER_VISCOSITY))
-        if viscosity < 0:
-            raise ConfigError("geometry.viscosity", f"must be ≥ 0 (Pa·s), got {viscosity}")
-        coef = _numbers("geometry.fluidcoef", d.get("fluidcoef", DEFAULT_FLUIDCOEF), 5)
-        items = d.get("geoms")
-        if not isinstance(items, list) or not items:
-            raise ConfigError("geometry.geoms", "must be a non-empty list of ellipsoids")
-        geoms = []
-        for k, g in enumerate(items):
-            where = f"geometry.geoms[{k}]"
-            if not isinstance(g, dict):
-                raise ConfigError(where, "must be a mapping {name, size, position, rpy}")
-            bad = set(g) - {"name", "size", "position", "rpy", "fluidcoef"}
-            if bad:
-                raise ConfigError(where, f"unknown key(s) {sorted(bad)}; known: name, size, "
-                                  "position, rpy, fluidcoef")
-            if "size" not in g:
-                raise ConfigError(f"{where}.size", "missing (three semi-axes in m)")
-            size = _numbers(f"{where}.size", g["size"], 3)
-            if min(size) <= 0:
-                raise ConfigError(f"{where}.size", f"semi-axes must be > 0, got {list(size)}")
-            gc = _numbers(f"{where}.fluidcoef", g.get("fluidcoef", coef), 5)
-            if min(gc) < 0:
-                raise ConfigError(f"{where}.fluidcoef", f"must be ≥ 0, got {list(gc)}")
-            geoms.append(Geom(str(g.get("name", f"geom{k}")), size,
-                              _numbers(f"{where}.position", g.get("position", (0, 0, 0)), 3),
-                              _numbers(f"{where}.rpy", g.get("rpy", (0, 0, 0)), 3), gc))
-        names = [g.name for g in geoms]
-        if len(set(names)) != len(names):
-            raise ConfigError("geometry.geoms", f"geom names must be unique, got {names}")
-        return cls(tuple(geoms), viscosity)
-
-
-def _number(where: str, v: Any) -> float:
-    try:
-        x = float(v)
-    except (TypeError, ValueError):
-        raise ConfigError(where, f"not a number: {v!r}") from None
-    if not np.isfinite(x):
-        raise ConfigError(where, "is NaN or Inf")
-    return x
-
-
-def _numbers(where: str, v: Any, n: int) -> tuple[float, ...]:
-    if not isinstance(v, (list, tuple)) or len(v) != n:
-        raise ConfigError(where, f"must be a list of {n} numbers, got {v!r}")
-    return tuple(_number(f"{where}[{i}]", x) for i, x in enumerate(v))
-
-
 def geometry_of(vehicle: Vehicle) -> Geometry:
-    """The vehicle's ``geometry:`` block, or ConfigError saying how to add one."""
-    if "geometry" not in vehicle.extra:
+    """The vehicle's geometry, or ConfigError saying how to add one."""
+    if vehicle.geometry is None:
         raise ConfigError("geometry", f"vehicle {vehicle.name!r} has no geometry: block, "
                           "which the mujoco backend needs (ellipsoid geoms; see "
                           "config/vehicles/bluerov2_heavy_mujoco.yaml)")
-    return Geometry.from_dict(vehicle.extra["geometry"])
+    return vehicle.geometry
 
 
 def _quat_rpy(rpy: tuple[float, ...]) -> FloatArray:
@@ -226,14 +123,18 @@ def mjcf(body: RigidBody, geometry: Geometry, timestep: float) -> str:
     return "\n".join(lines)
 
 
-def compile_model(body: RigidBody, geometry: Geometry, timestep: float) -> Any:
-    """``mujoco.MjModel`` of the vehicle; MuJoCo's own complaint becomes a ConfigError."""
+def compile_model(body: RigidBody, geometry: Geometry, timestep: float, source: str = ""
+                  ) -> Any:
+    """``mujoco.MjModel`` of the vehicle; MuJoCo's own complaint becomes a ConfigError
+    naming the vehicle file ``source``."""
     import mujoco
 
     try:
         return mujoco.MjModel.from_xml_string(mjcf(body, geometry, timestep))
     except ValueError as exc:
-        raise ConfigError("geometry", f"MuJoCo rejects the model: {exc}") from None
+        where = f" (vehicle file {source})" if source else ""
+        text = " ".join(str(exc).split())
+        raise ConfigError("geometry", f"MuJoCo rejects the vehicle{where}: {text}") from None
 
 
 def plant_added_mass(model: Any, rho: float) -> FloatArray:
@@ -277,7 +178,7 @@ def plant_vehicle(vehicle: Vehicle) -> Vehicle:
     The damping stays the vehicle's nominal one (a prior: MuJoCo's drag is not of that form).
     """
     body = vehicle.body
-    model = compile_model(body, geometry_of(vehicle), 0.01)
+    model = compile_model(body, geometry_of(vehicle), 0.01, vehicle.source)
     plant = replace(body, added_mass=plant_added_mass(model, body.rho),
                     added_mass_terms=AddedMassTerms(inertial=False, coriolis=True, munk=True))
     return replace(vehicle, body=plant)
@@ -349,7 +250,8 @@ class MujocoSimulator:
         self.body = body
         self.dt = float(dt)
         self.substeps = int(substeps)
-        self.model = compile_model(body, geometry_of(vehicle), self.dt / self.substeps)
+        self.model = compile_model(body, geometry_of(vehicle), self.dt / self.substeps,
+                                   vehicle.source)
         self.data = mujoco.MjData(self.model)
         self._B = body.buoyancy
         self._r_bg = (body.r_b - body.r_g).tolist()

@@ -36,6 +36,7 @@ from dampest_ros.core.damping import (
     quadratic_term,
     residual_term,
 )
+from dampest_ros.core.geometry import Geometry
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
 from dampest_ros.core.thrusters import Thrusters
 
@@ -141,6 +142,12 @@ class Vehicle:
         None when the vehicle file has no ``thrusters`` section.
     length : float
         Reference length L (m) for nondimensionalisation.
+    extra : dict
+        The file's other sections, as read.
+    geometry : Geometry or None
+        The shape for a fluid model (the MuJoCo backend), from a ``geometry:`` section.
+    source : str
+        The file the vehicle was read from ("" when built in code), for messages.
     """
 
     name: str
@@ -150,6 +157,8 @@ class Vehicle:
     thrusters: Thrusters | None
     length: float = 1.0
     extra: dict[str, Any] = field(default_factory=dict)
+    geometry: Geometry | None = None
+    source: str = ""
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Vehicle:
@@ -165,9 +174,11 @@ class Vehicle:
         length = float(d["vehicle"].get("length", 1.0))
         if not np.isfinite(length) or length <= 0:
             raise ConfigError("vehicle.length", f"must be > 0, got {length}")
+        geometry = None if d.get("geometry") is None else Geometry.from_dict(d["geometry"])
         return cls(str(d["vehicle"].get("name", "vehicle")), body, damping, theta, thrusters,
                    length, {k: v for k, v in d.items()
-                            if k not in ("vehicle", "damping", "thrusters")})
+                            if k not in ("vehicle", "damping", "thrusters", "geometry")},
+                   geometry)
 
     def need_thrusters(self, what: str, instead: str = "") -> Thrusters:
         """The thrusters, or ConfigError naming ``what`` needs them and how to give them

@@ -44,7 +44,7 @@ import os
 import sys
 import tempfile
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -147,7 +147,7 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
         raise ConfigError(str(path), "a vehicle file is a mapping with sections vehicle, "
                                      "damping, thrusters")
     try:
-        return Vehicle.from_dict(doc)
+        return replace(Vehicle.from_dict(doc), source=str(path))
     except ConfigError as exc:
         raise ConfigError(exc.field, f"{exc.reason} (in {path})") from None
 

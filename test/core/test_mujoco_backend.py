@@ -3,18 +3,19 @@ measured, and the faithful vehicle description of the two presets."""
 
 from __future__ import annotations
 
-import copy
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+import yaml
 
 from dampest_ros.core.batch import target
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.geometry import Geometry
 from dampest_ros.core.mujoco_backend import (
-    Geometry,
     MujocoSimulator,
     compile_model,
     plant_added_mass,
@@ -29,17 +30,16 @@ from dampest_ros.io.yaml_io import load_vehicle
 mujoco = pytest.importorskip("mujoco")
 
 PRESETS = ("bluerov2_heavy_mujoco", "torpedo_auv")
+PRESETS_DIR = Path(__file__).resolve().parents[2] / "config" / "vehicles"
 
 
 def _quiet(v: Vehicle, coef: tuple[float, ...] = (0, 0, 0, 0, 0), viscosity: float = 0.0
            ) -> Vehicle:
     """The vehicle with every geom's drag and lift coefficients replaced."""
-    extra = copy.deepcopy(v.extra)
-    extra["geometry"]["viscosity"] = viscosity
-    extra["geometry"]["fluidcoef"] = list(coef)
-    for g in extra["geometry"]["geoms"]:
-        g.pop("fluidcoef", None)
-    return replace(v, extra=extra)
+    assert v.geometry is not None
+    geoms = tuple(replace(g, fluidcoef=tuple(float(c) for c in coef))
+                  for g in v.geometry.geoms)
+    return replace(v, geometry=Geometry(geoms, viscosity))
 
 
 def _fluid(sim: MujocoSimulator, nu: np.ndarray) -> np.ndarray:
@@ -53,8 +53,8 @@ def _fluid(sim: MujocoSimulator, nu: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("name", PRESETS)
 def test_presets_carry_the_added_mass_mujoco_applies(name: str) -> None:
     v = load_vehicle(name)
-    geo = Geometry.from_dict(v.extra["geometry"])
-    M_A = plant_added_mass(compile_model(v.body, geo, 0.005), v.body.rho)
+    assert v.geometry is not None
+    M_A = plant_added_mass(compile_model(v.body, v.geometry, 0.005), v.body.rho)
     assert np.allclose(v.body.added_mass, M_A, rtol=1e-5, atol=1e-5 * np.abs(M_A).max())
     assert v.body.added_mass_terms == AddedMassTerms(inertial=False)
     assert np.allclose(plant_vehicle(v).body.added_mass, M_A)
@@ -88,8 +88,8 @@ def test_drag_uses_the_euclidean_speed() -> None:
     """A sphere (projected area the same in every direction) with blunt drag only:
     X(u, v) = −ρ A C ‖v‖ u, so adding a sway speed equal to u multiplies X by √2."""
     v = load_vehicle("bluerov2_heavy_mujoco")
-    sphere = {"geometry": {"geoms": [{"name": "ball", "size": [0.2, 0.2, 0.2]}]}}
-    sim = MujocoSimulator(_quiet(replace(v, extra=sphere), (0.5, 0, 0, 0, 0)))
+    sphere = Geometry.from_dict({"geoms": [{"name": "ball", "size": [0.2, 0.2, 0.2]}]})
+    sim = MujocoSimulator(_quiet(replace(v, geometry=sphere), (0.5, 0, 0, 0, 0)))
     x_alone = _fluid(sim, np.array([0.5, 0, 0, 0, 0, 0]))[0]
     x_with_sway = _fluid(sim, np.array([0.5, 0.5, 0, 0, 0, 0]))[0]
     assert x_alone == pytest.approx(-v.body.rho * np.pi * 0.2**2 * 0.5 * 0.5 * 0.5, rel=1e-9)
@@ -152,14 +152,42 @@ def test_effects_of_the_fluid_model_are_refused() -> None:
         MujocoSimulator(v, Effects(memory=({"dof": "u", "rate": 1.0, "c": 1.0},)))
 
 
-def test_bad_geometry_is_named() -> None:
+def test_bad_geometry_is_named_with_its_file(tmp_path: Path) -> None:
     v = load_vehicle("bluerov2_heavy")
     with pytest.raises(ConfigError, match="no geometry: block"):
         MujocoSimulator(v)
+    doc = yaml.safe_load((PRESETS_DIR / "torpedo_auv.yaml").read_text())
     for geo, field in (({"geoms": [{"size": [0.1, -0.2, 0.1]}]}, r"geoms\[0\].size"),
                        ({"geoms": [{"size": [0.1, 0.2]}]}, r"geoms\[0\].size"),
                        ({"geoms": []}, "geometry.geoms"),
                        ({"geoms": [{"size": [1, 1, 1]}], "viscosity": -1}, "viscosity"),
                        ({"geoms": [{"size": [1, 1, 1], "mass": 3}]}, r"geoms\[0\]")):
-        with pytest.raises(ConfigError, match=field):
-            MujocoSimulator(replace(v, extra={"geometry": geo}))
+        path = tmp_path / "bad.yaml"
+        path.write_text(yaml.safe_dump({**doc, "geometry": geo}))
+        with pytest.raises(ConfigError, match=f"{field}.*in {path}"):
+            load_vehicle(str(path))
+    # what MuJoCo itself rejects (an inertia that breaks the triangle inequality, which no
+    # real body has): named, with the vehicle file
+    doc["vehicle"]["inertia"] = [0.1, 4.29, 0.1]
+    path = tmp_path / "lopsided.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=f"MuJoCo rejects the vehicle \\(vehicle file {path}"):
+        MujocoSimulator(load_vehicle(str(path)))
+
+
+@pytest.mark.parametrize(("change", "match"), [
+    ({"added_mass": [[1, 2, 0, 0, 0, 0], [0, 1, 0, 0, 0, 0], [0, 0, 1, 0, 0, 0],
+                     [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1]]},
+     "added_mass: must be symmetric"),
+    ({"added_mass": [1, 1, -5, 0.1, 0.1, 0.1]}, "added_mass: must be positive semi-definite"),
+    ({"added_mass_terms": {"inertial": False, "coriolis": False, "munk": True}},
+     "munk: true needs coriolis"),
+])
+def test_bad_added_mass_is_named_with_its_file(tmp_path: Path, change: dict[str, Any],
+                                               match: str) -> None:
+    doc = yaml.safe_load((PRESETS_DIR / "torpedo_auv.yaml").read_text())
+    doc["vehicle"].update(change)
+    path = tmp_path / "v.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=f"{match}.*in {path}"):
+        load_vehicle(str(path))
