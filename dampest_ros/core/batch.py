@@ -11,7 +11,7 @@ A second pass computes block scores for a covariance that is robust to correlate
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -55,7 +55,9 @@ def memory_states(samples: Samples, model: DampingModel) -> FloatArray:
 
 def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
                     chunk: int = CHUNK, cutoff: float = 0.0, margin: float = 5.0,
-                    offset: FloatArray | None = None, decimate: bool = False
+                    offset: FloatArray | None = None, decimate: bool = False,
+                    regressor: Callable[[FloatArray, FloatArray | None], FloatArray] | None
+                    = None
                     ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
     """Yield (rows, Φ (n, 6, p), y (n, 6)) over chunks of at most ``chunk`` samples.
 
@@ -66,6 +68,9 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
     flat while the result equals filtering whole segments (to the filter's decay).
 
     ``offset`` (6,) is added to ν first: the data as a sensor bias would have made them.
+
+    ``regressor(ν, z)`` replaces ``model.regressor`` (the model still gives the memory states
+    z): any array with time on axis 0, e.g. (n, 1, m) features shared by every row.
 
     With ``decimate`` (and ``cutoff`` > 0) only every k-th sample is yielded, k the largest
     step that keeps four samples per period of the cutoff: the low-passed signals carry no
@@ -85,7 +90,7 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
             stop = min(start + chunk, s1)
             a, b = max(s0, start - pad), min(s1, stop + pad)
             ext = slice(a, b)
-            Phi = model.regressor(samples.nu[ext], z[ext] if has_z else None)
+            Phi = (regressor or model.regressor)(samples.nu[ext], z[ext] if has_z else None)
             y = target(samples, body, ext)
             if cutoff > 0:
                 Phi = zero_phase(Phi, samples.rate, cutoff)
@@ -135,6 +140,11 @@ class NormalEquations:
         return np.maximum(c - 2 * b @ theta + np.einsum("ipq,p,q->i", A, theta, theta), 0.0)
 
 
+def fold_index(n: int, folds: int) -> NDArray[np.int64]:
+    """The contiguous time fold (0..folds−1) of each of n samples, shape (n,)."""
+    return np.minimum((np.arange(n) * folds) // max(n, 1), folds - 1)
+
+
 def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: int = 5,
                chunk: int = CHUNK, cutoff: float = 0.0) -> NormalEquations:
     """Accumulate :class:`NormalEquations` over contiguous time folds in chunks.
@@ -152,7 +162,7 @@ def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: in
         Parallel low-pass of y and Φ (Hz); 0: none.
     """
     p, N = model.n_params, len(samples)
-    fold_of = np.minimum((np.arange(N) * folds) // max(N, 1), folds - 1)
+    fold_of = fold_index(N, folds)
     A = np.zeros((folds, 6, p, p))
     b = np.zeros((folds, 6, p))
     c = np.zeros((folds, 6))

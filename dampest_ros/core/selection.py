@@ -38,10 +38,17 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from dampest_ros.core.batch import NormalEquations, _solve, accumulate, iter_regression
+from dampest_ros.core.batch import (
+    NormalEquations,
+    _solve,
+    accumulate,
+    fold_index,
+    iter_regression,
+)
 from dampest_ros.core.damping import (
     FAMILIES,
     Alpha,
+    AlphaBank,
     Basis,
     CrossSpec,
     DampingModel,
@@ -384,14 +391,7 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     if mem0 is not None:
         base_cols += [(int(d), m + k, nm) for k, (d, nm) in
                       enumerate(zip(mem0.state_dofs, mem0.parameter_names, strict=True))]
-    # one model whose column k is feature k in every row (B = 1 e_colᵀ), plus memory states
-    ones = [Basis(f"g{k}", np.outer(np.ones(6), np.eye(6)[col]), a)
-            for k, (col, a) in enumerate(feats)]
-    terms = [DampingTerm("cross", "library features", ones)]
-    if len(mem_rates):
-        terms.append(DampingTerm("freq", "memory candidates", rates=mem_rates,
-                                 state_dofs=mem_dofs))
-    ne = accumulate(samples, DampingModel(terms), body, folds=folds, cutoff=cutoff)
+    ne = _feature_equations(samples, feats, mem_rates, mem_dofs, body, folds, cutoff)
     N = float(ne.n.sum())
     G0 = ne.A.sum(0)[0][:m, :m]  # the features' Gram matrix (the same in every row)
     # zero and numerically equal columns (up to scale), compared with those before them
@@ -577,6 +577,63 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     return Selection(model, steps, {f"freq.{DOF_NAMES[d]}.lambda1": lam
                                     for d, lam in keep_mem.items()}, dropped,
                      np.asarray(ne.c.sum(0), dtype=float))
+
+
+def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],
+                       mem_rates: FloatArray, mem_dofs: NDArray[np.int64], body: RigidBody,
+                       folds: int, cutoff: float) -> NormalEquations:
+    """Per-fold normal equations of the library features in every row, each feature
+    g_k(ν) = α_k(ν) ν_col computed, low-passed and multiplied once for all six rows.
+
+    Column k < m = len(feats) is feature k in every row; column m + s is memory state s
+    (ż = −λ_s z + ν_dof), which acts in the row of its DOF only. The same statistics as
+    :func:`batch.accumulate` of a model with bases 1 e_colᵀ, at a sixth of the cost and memory.
+
+    Returns
+    -------
+    NormalEquations
+        A (folds, 6, p, p), b (folds, 6, p), c (folds, 6), n (folds,), p = m + len(mem_rates).
+    """
+    m = len(feats)
+    cols = np.array([c for c, _ in feats], dtype=np.int64)
+    bank = AlphaBank([a for _, a in feats])
+    terms = [DampingTerm("freq", "memory candidates", rates=mem_rates, state_dofs=mem_dofs)] \
+        if len(mem_rates) else []
+    p = m + len(mem_rates)
+
+    def features(nu: FloatArray, z: FloatArray | None) -> FloatArray:
+        g = np.empty((len(nu), 1, p))
+        # g_k = α_k(ν) ν_col(k)
+        g[:, 0, :m] = bank(nu) * nu[:, cols]
+        if z is not None:
+            g[:, 0, m:] = z
+        return g
+
+    fold_of = fold_index(len(samples), folds)
+    G = np.zeros((folds, p, p))
+    Gy = np.zeros((folds, p, 6))
+    c = np.zeros((folds, 6))
+    n = np.zeros(folds)
+    for rows, F3, y in iter_regression(samples, DampingModel(terms), body, cutoff=cutoff,
+                                       decimate=True, regressor=features):
+        F = F3[:, 0, :]
+        fo = fold_of[rows]
+        for f in np.unique(fo):
+            k = fo == f
+            # GᵀG, Gᵀy, yᵀy per fold
+            G[f] += F[k].T @ F[k]
+            Gy[f] += F[k].T @ y[k]
+            c[f] += np.einsum("ni,ni->i", y[k], y[k])
+            n[f] += int(k.sum())
+    A = np.repeat(G[:, None], 6, axis=1)
+    b = Gy.transpose(0, 2, 1).copy()
+    for s, d in enumerate(mem_dofs):
+        # memory state s acts in row d only
+        other = [i for i in range(6) if i != int(d)]
+        A[:, other, m + s, :] = 0.0
+        A[:, other, :, m + s] = 0.0
+        b[:, other, m + s] = 0.0
+    return NormalEquations(A, b, c, n)
 
 
 def _without(model: DampingModel, names: Sequence[str]) -> DampingModel:
