@@ -294,12 +294,7 @@ class MujocoSimulator:
 
     def current_ned(self, t: float) -> FloatArray:
         """Water current in NED at time t (m/s), shape (3,)."""
-        e = self.effects
-        c = np.asarray(e.current, dtype=float)
-        if e.current_variation:
-            w = 2 * np.pi / e.current_period
-            c = c + e.current_variation * np.array([np.sin(w * t), np.cos(w * t), 0.0])
-        return c
+        return self.effects.current_at(t)
 
     def wrench_to_command(self, tau: FloatArray) -> FloatArray:
         """Rotor speeds (rev/s) that produce τ with the nominal thrusters, saturated."""

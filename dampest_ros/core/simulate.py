@@ -98,6 +98,15 @@ class Effects:
                 kw[k] = float(v)
         return cls(**kw)
 
+    def current_at(self, t: float) -> FloatArray:
+        """Water current in NED at time t (m/s), shape (3,): the constant current plus its
+        slow horizontal rotation."""
+        c = np.asarray(self.current, dtype=float)
+        if self.current_variation:
+            w = 2 * np.pi / self.current_period
+            c = c + self.current_variation * np.array([np.sin(w * t), np.cos(w * t), 0.0])
+        return c
+
     def as_dict(self) -> dict[str, Any]:
         """The effects that differ from the defaults."""
         default = Effects()
@@ -245,12 +254,7 @@ class Simulator:
 
     def current_ned(self, t: float) -> FloatArray:
         """Water current in NED at time t (m/s), shape (3,)."""
-        e = self.effects
-        c = np.asarray(e.current, dtype=float)
-        if e.current_variation:
-            w = 2 * np.pi / e.current_period
-            c = c + e.current_variation * np.array([np.sin(w * t), np.cos(w * t), 0.0])
-        return c
+        return self.effects.current_at(t)
 
     def _current_rate(self, t: float) -> FloatArray:
         e = self.effects
