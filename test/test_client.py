@@ -4,9 +4,10 @@ the structure)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -74,9 +75,15 @@ def test_yaml_client_evaluates_cross_added_and_residual_terms(tmp_path: Path) ->
     assert np.max(np.abs(full - part)) > 1.0
 
 
-def test_model_server_and_estimator_parameters_give_the_same_model(tmp_path: Path) -> None:
+@contextlib.contextmanager
+def three_servers(model_file: Path, vehicle_file: Path, tag: str
+                  ) -> Iterator[tuple[Any, list[ModelClient], list[Any],
+                                      Callable[[Callable[[], bool]], None]]]:
+    """A model_server_node with ``model_file`` as its model_file parameter, a second one
+    given it as --params-file (``params_server``) and an estimator_node on ``vehicle_file``,
+    in a namespace of their own; yields (rclpy, clients of the three, the three nodes,
+    spin_until) once all three clients are available or 10 s have passed."""
     rclpy = pytest.importorskip("rclpy")
-    import yaml
     from rclpy.executors import SingleThreadedExecutor
 
     from dampest_ros.ros.estimator_node import EstimatorNode
@@ -84,34 +91,26 @@ def test_model_server_and_estimator_parameters_give_the_same_model(tmp_path: Pat
 
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", "77")
-    path = tmp_path / "model.yaml"
-    model, theta, std, M = model_and_file(path)
-    # a vehicle whose nominal damping is that model: the estimator's prior, before any data
-    doc = yaml.safe_load(vehicle_path("bluerov2_heavy").read_text())
-    doc["damping"] = damping_spec(model, theta)
-    vehicle = tmp_path / "vehicle.yaml"
-    vehicle.write_text(yaml.safe_dump(doc, sort_keys=False))
-    ns = f"/test_client_{os.getpid()}"  # no other test run's server answers
+    ns = f"/test_{tag}_{os.getpid()}"  # no other test run's server answers
     context = rclpy.Context()
     rclpy.init(context=context)
     ex = SingleThreadedExecutor(context=context)
     nodes: list[Any] = []
     try:
-        # the file as model_file, and the same file as --params-file of a second server
         by_file = ModelServerNode(context=context, cli_args=[
-            "--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={path}"])
+            "--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={model_file}"])
         by_params = ModelServerNode(context=context, cli_args=[
             "--ros-args", "-r", f"__ns:={ns}", "-r", "__node:=params_server",
-            "--params-file", str(path)])
+            "--params-file", str(model_file)])
         est = EstimatorNode(context=context, cli_args=["--ros-args", "-r", f"__ns:={ns}"],
                             parameter_overrides=[rclpy.parameter.Parameter(
-                                "vehicle", value=str(vehicle))])
+                                "vehicle", value=str(vehicle_file))])
         probe = rclpy.create_node("probe", namespace=ns, context=context)
         nodes += [by_file, by_params, est, probe]
         for n in nodes:
             ex.add_node(n)
-        clients = [ModelClient(probe, "model_server_node"), ModelClient(probe, "params_server"),
-                   ModelClient(probe, "estimator_node")]
+        clients = [ModelClient(probe, s) for s in ("model_server_node", "params_server",
+                                                   "estimator_node")]
 
         def spin_until(done: Callable[[], bool]) -> None:
             end = time.monotonic() + 10.0
@@ -119,6 +118,27 @@ def test_model_server_and_estimator_parameters_give_the_same_model(tmp_path: Pat
                 ex.spin_once(timeout_sec=0.05)
 
         spin_until(lambda: all(c.available for c in clients))
+        yield rclpy, clients, [by_file, by_params, est], spin_until
+    finally:
+        ex.shutdown()
+        for n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_model_server_and_estimator_parameters_give_the_same_model(tmp_path: Path) -> None:
+    import yaml
+
+    path = tmp_path / "model.yaml"
+    model, theta, std, M = model_and_file(path)
+    # a vehicle whose nominal damping is that model: the estimator's prior, before any data
+    doc = yaml.safe_load(vehicle_path("bluerov2_heavy").read_text())
+    doc["damping"] = damping_spec(model, theta)
+    vehicle = tmp_path / "vehicle.yaml"
+    vehicle.write_text(yaml.safe_dump(doc, sort_keys=False))
+    # the file as model_file, and the same file as --params-file of a second server
+    with three_servers(path, vehicle, "client") as (rclpy, clients, servers, spin_until):
+        by_file, _, est = servers
         for c in clients[:2]:
             assert c.available, c.errors
             assert c.version == 4 and c.model.damping.kinds == model.kinds
@@ -149,11 +169,6 @@ def test_model_server_and_estimator_parameters_give_the_same_model(tmp_path: Pat
         assert clients[0].version == 5, clients[0].errors
         assert not by_file.has_parameter("model.terms.cross.rows")
         check_client(clients[0], v.damping, 2.0 * v.theta, np.ones(12), v.body.M)
-    finally:
-        ex.shutdown()
-        for n in nodes:
-            n.destroy_node()
-        rclpy.try_shutdown(context=context)
 
 
 def test_added_mass_switches_reach_the_client_from_file_and_parameters(tmp_path: Path) -> None:
@@ -186,46 +201,11 @@ def test_added_mass_switches_reach_the_client_from_file_and_parameters(tmp_path:
                                    rtol=0, atol=1e-12)
 
     check(ModelClient.from_yaml(path))
-    rclpy = pytest.importorskip("rclpy")
-    from rclpy.executors import SingleThreadedExecutor
-
-    from dampest_ros.ros.estimator_node import EstimatorNode
-    from dampest_ros.ros.model_server_node import ModelServerNode
-
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    os.environ.setdefault("ROS_DOMAIN_ID", "77")
-    ns = f"/test_switches_{os.getpid()}"
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    ex = SingleThreadedExecutor(context=context)
-    nodes: list[Any] = []
-    try:
-        by_file = ModelServerNode(context=context, cli_args=[
-            "--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={path}"])
-        by_params = ModelServerNode(context=context, cli_args=[
-            "--ros-args", "-r", f"__ns:={ns}", "-r", "__node:=params_server",
-            "--params-file", str(path)])
-        est = EstimatorNode(context=context, cli_args=["--ros-args", "-r", f"__ns:={ns}"],
-                            parameter_overrides=[rclpy.parameter.Parameter(
-                                "vehicle", value=str(vehicle_file))])
-        probe = rclpy.create_node("probe", namespace=ns, context=context)
-        nodes += [by_file, by_params, est, probe]
-        for n in nodes:
-            ex.add_node(n)
-        clients = [ModelClient(probe, s) for s in ("model_server_node", "params_server",
-                                                   "estimator_node")]
-        end = time.monotonic() + 10.0
-        while not all(c.available for c in clients) and time.monotonic() < end:
-            ex.spin_once(timeout_sec=0.05)
-        for c, server in zip(clients, (by_file, by_params, est), strict=True):
+    with three_servers(path, vehicle_file, "switches") as (_, clients, servers, _spin):
+        for c, server in zip(clients, servers, strict=True):
             assert c.available, c.errors
             assert server._served["model.added_mass_terms.munk"] is False
             assert server._served["model.added_mass_terms.inertial"] is False
             assert len(server._served["model.M_A"]) == 36
             assert c.model.added_mass_terms == AddedMassTerms(**switches)
             check(c)
-    finally:
-        ex.shutdown()
-        for n in nodes:
-            n.destroy_node()
-        rclpy.try_shutdown(context=context)
