@@ -332,12 +332,8 @@ class MujocoSimulator:
         # rotor speeds over the step (first-order lag, exact) and the mean thrust (Simpson)
         n0, n_mid, n_end, n_mean = thr.lag_step(self.rotor, cmd, h)
         p0, p_mid, p_end, _ = thr.lag_step(self._rotor_phys, phys_cmd, h)
-
-        def physical(n: FloatArray) -> FloatArray:
-            return thr.thrust(n, e.thrust_gain_error, self._deadzone)
-
-        f_phys = (physical(p0) + 4 * physical(p_mid) + physical(p_end)) / 6.0
-        tau_thr = thr.wrench(f_phys)
+        tau_thr = thr.wrench(thr.step_thrust(p0, p_mid, p_end, e.thrust_gain_error,
+                                             self._deadzone))
         t = self.t
         if self._has_current:
             # the current is MuJoCo's wind (NED), held over the step at its midpoint value
@@ -352,8 +348,7 @@ class MujocoSimulator:
             nu_dot = np.concatenate([R.T @ d.qacc[:3] - np.cross(nu[3:], nu[:3]),
                                      d.qacc[3:6]])
             hydro = np.concatenate([R.T @ d.qfrc_fluid[:3], d.qfrc_fluid[3:6]])
-            f = thr.thrust
-            thrust_mean = (f(n0) + 4 * f(n_mid) + f(n_end)) / 6.0
+            thrust_mean = thr.step_thrust(n0, n_mid, n_end)
             self._log.append(np.concatenate([[t], d.qpos[:7], nu, nu_dot, tau_thr, n_mean,
                                              thrust_mean, self.current_ned(t), hydro]))
         for k in range(self.substeps):

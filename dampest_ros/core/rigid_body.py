@@ -323,10 +323,9 @@ class RigidBody:
         nu_r : ndarray, shape (..., 6), optional
             Velocity relative to the water (defaults to ``nu``: no current).
         """
-        if nu_r is None and self.added_mass_terms.all:
-            return coriolis_force(self.M, nu)
-        return coriolis_force(self.M_RB, nu) + self.added_coriolis_force(
-            nu if nu_r is None else nu_r)
+        if nu_r is None:
+            return split_coriolis_force(self.M, self.added_mass, self.added_mass_terms, nu)
+        return coriolis_force(self.M_RB, nu) + self.added_coriolis_force(nu_r)
 
     def added_coriolis_force(self, nu_r: FloatArray) -> FloatArray:
         """The acting part of C_A(ν_r)ν_r (switches ``coriolis`` and ``munk``), shape (..., 6).

@@ -303,7 +303,9 @@ def measure(
         "dvl/twist": _dvl(truth, config, bias, rngs),
         "pressure": _pressure(truth, rho, gravity, config, rngs),
         "thrusters/state": _thrusters(traj, config, rngs),
-        **({"truth/hydro_wrench": _hydro(traj, config)} if traj.hydro is not None else {}),
+        **({"truth/hydro_wrench": hydro_series(
+            sample_times(float(t[0]), float(t[-1]), config.truth_rate), t, traj.hydro)}
+           if traj.hydro is not None else {}),
     }
 
 
@@ -563,14 +565,21 @@ def _odometry(truth: _Truth, config: SensorConfig) -> OdometrySeries:
     )
 
 
-def _hydro(traj: Trajectory, config: SensorConfig) -> WrenchSeries:
-    """The plant's hydrodynamic wrench (truth, FLU), linear between steps at truth_rate."""
-    assert traj.hydro is not None
-    t = np.asarray(traj.t, dtype=float)
-    stamp = sample_times(float(t[0]), float(t[-1]), config.truth_rate)
-    hydro = np.column_stack([np.interp(stamp, t, c) for c in np.asarray(traj.hydro).T])
+def hydro_series(stamp: FloatArray, t: FloatArray, hydro: FloatArray) -> WrenchSeries:
+    """The plant's hydrodynamic wrench as the truth/hydro_wrench topic (FLU).
+
+    Parameters
+    ----------
+    stamp : ndarray, shape (M,)
+        Message times (s).
+    t : ndarray, shape (N,)
+        Steps of the trajectory (s).
+    hydro : ndarray, shape (N, 6)
+        Its wrench per step (FRD, N and N·m), linear between steps.
+    """
+    w = np.column_stack([np.interp(stamp, t, c) for c in np.asarray(hydro, dtype=float).T])
     return WrenchSeries(stamp=stamp, frame_id=FRAME_IDS["truth/hydro_wrench"],
-                        force=body_vec(hydro[:, :3]), torque=body_vec(hydro[:, 3:]))
+                        force=body_vec(w[:, :3]), torque=body_vec(w[:, 3:]))
 
 
 def _check_trajectory(traj: Trajectory) -> None:

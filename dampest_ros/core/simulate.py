@@ -376,8 +376,7 @@ class Simulator:
         if self._record:
             tau_mean = (tau1 + 2 * tau2 + 2 * tau3 + self._last_tau) / 6.0
             # step means of the logged rotor speed (exact) and nominal thrust (Simpson)
-            f = self._thr.thrust
-            thrust_mean = (f(n0) + 4 * f(n_mid) + f(self.rotor)) / 6.0
+            thrust_mean = self._thr.step_thrust(n0, n_mid, self.rotor)
             self._log.append(np.concatenate([[t], x[:13], k1[7:13], tau_mean, n_mean,
                                              thrust_mean, self.current_ned(t),
                                              x[13:13 + self._n_mem]]))

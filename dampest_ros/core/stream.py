@@ -33,7 +33,6 @@ from dampest_ros.core.measurements import (
     PressureSeries,
     Recording,
     TwistSeries,
-    WrenchSeries,
 )
 from dampest_ros.core.sensors import (
     _STREAMS,
@@ -49,6 +48,7 @@ from dampest_ros.core.sensors import (
     _quat_mul,
     _small_rotation,
     _wxyz_to_xyzw,
+    hydro_series,
 )
 from dampest_ros.core.simulate import Effects, make_plant
 from dampest_ros.core.trajectory import Trajectory
@@ -196,11 +196,8 @@ class SensorStream:
             orientation=_wxyz_to_xyzw(quat_frd_ned_to_flu_enu(_nlerp(k, q))),
             linear=body_vec(v_nu[:, :3]), angular=body_vec(v_nu[:, 3:]))
         if traj.hydro is not None:
-            # the plant's own fluid wrench (MuJoCo), linear between steps, FLU
-            hydro = np.column_stack([np.interp(st, t, c) for c in np.asarray(traj.hydro).T])
-            out["truth/hydro_wrench"] = WrenchSeries(
-                stamp=st, frame_id=FRAME_IDS["truth/hydro_wrench"], force=body_vec(hydro[:, :3]),
-                torque=body_vec(hydro[:, 3:]))
+            # the plant's own fluid wrench (MuJoCo)
+            out["truth/hydro_wrench"] = hydro_series(st, t, traj.hydro)
         return out
 
     def _walk(self, stream: str, n: int, sigma: float, rate: float, attr: str) -> FloatArray:

@@ -131,6 +131,16 @@ class Thrusters:
         mean = command + (n0 - command) * (tm / h) * (1 - decay)
         return n0, mid, end, mean
 
+    def step_thrust(self, start: FloatArray, mid: FloatArray, end: FloatArray,
+                    gain_error: float = 0.0, deadzone: float | None = None) -> FloatArray:
+        """Mean thrust over a step from the rotor speeds at its start, middle and end
+        (:meth:`lag_step`), by Simpson's rule (N), shape (n,)."""
+        def f(n: FloatArray) -> FloatArray:
+            return self.thrust(n, gain_error, deadzone)
+
+        # (T(n₀) + 4 T(n_mid) + T(n_end)) / 6
+        return (f(start) + 4 * f(mid) + f(end)) / 6.0
+
     def speed_for_thrust(self, thrust: FloatArray) -> FloatArray:
         """Inverse curve: n = sign(T) √(|T| / k_T ρ D⁴), saturated at ±n_max (rev/s)."""
         n = np.sign(thrust) * np.sqrt(np.abs(thrust) / self.gain)
