@@ -35,7 +35,6 @@ from dampest_ros.core.batch import METHODS, Fit, FitOptions, fit
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.excitation import speed_limits
-from dampest_ros.core.frequency import memory_impedance
 from dampest_ros.core.online import OnlineConfig, OnlinePreprocessor
 from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
@@ -113,7 +112,6 @@ def run(args: argparse.Namespace) -> int:
     if args.select:
         selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
         print(selection_table(selection))
-        print(memory_check(samples, selection.model, vehicle.body))
         values = dict(zip(model.parameter_names, nominal, strict=True))
         model = selection.model
         nominal = np.array([values.get(n, 0.0) for n in model.parameter_names])
@@ -231,7 +229,8 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
 
 def selection_table(selection: Selection) -> str:
     """The forward-selection path (each added term with BIC, AIC, its error reduction), the
-    held-out R² per DOF before and after, and the candidates left out with the reason."""
+    held-out R² per DOF before and after, the candidates left out with the reason, and both
+    estimates of each chosen memory state."""
     rows = [(st.added, st.n_params, st.bic, st.aic,
              f"{st.err:.1%}" if st.err else "") for st in selection.steps]
     rates = "".join(f"\n{k} = {v:.4g} 1/s" for k, v in selection.rates.items())
@@ -246,13 +245,14 @@ def selection_table(selection: Selection) -> str:
             # one line per reason and column (the rows differ only in the force letter)
             groups.setdefault(why.split(" (|corr|")[0].replace(name[0] + "_", "F_"),
                               []).append(name)
-        dropped = "\nleft out of the search (numerically the same column as another):\n" + \
+        dropped = "\nleft out of the search:\n" + \
             "\n".join(f"  {', '.join(names)}: {why}" for why, names in groups.items())
     return ("term selection (stepwise over the damping library; a term must raise the "
             "held-out R² of 5 contiguous time folds, lower BIC by 10 and remove ≥ 10 % of its "
             "DOF's residual; − marks a removal):\n"
             + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates
-            + "\n" + r2 + dropped + "\n")
+            + "\n" + r2 + dropped + "".join("\n" + ev.describe() for ev in selection.memory)
+            + "\n")
 
 
 def misfit_check(samples: Samples, model: DampingModel, body: RigidBody,
@@ -279,21 +279,6 @@ def misfit_check(samples: Samples, model: DampingModel, body: RigidBody,
         f"{(1.0 - before[i]) / max(1.0 - after[i], 1e-12):.0f}× what the data allow\n"
         for i in bad) + (f"the preset's damping structure misses physics in these data; run "
                          f"dampest identify {args.input} --vehicle {args.vehicle} --select\n")
-
-
-def memory_check(samples: Samples, model: DampingModel, body: RigidBody) -> str:
-    """Frequency-domain cross-check of each selected memory rate (Welch + rational fit)."""
-    mem = model.term("freq")
-    if mem is None:
-        return ""
-    static = DampingModel([t for t in model.terms if t.kind != "freq"])
-    theta = fit(samples, static, body, FitOptions(gyro_bias=0.0, dvl_bias=0.0)).theta
-    lines = []
-    for d, lam in zip(mem.state_dofs, mem.rates, strict=True):
-        imp = memory_impedance(samples, static, body, theta, int(d))
-        lines.append(f"memory on {DOF_NAMES[int(d)]}: λ = {lam:.4g} 1/s (time domain), "
-                     f"{imp.rate:.4g} 1/s (frequency domain, c = {imp.gain:.4g})")
-    return "\n".join(lines) + "\n"
 
 
 def report_table(result: Fit, prior: np.ndarray) -> str:

@@ -9,6 +9,7 @@ weighted by the coherence. Protocol C (multisine 0.1–10 Hz) is designed for th
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,9 +52,10 @@ class ImpedanceFit:
 
 
 def memory_impedance(samples: Samples, model: DampingModel, body: RigidBody,
-                     theta: FloatArray, dof: int, window: float = 40.0,
-                     band: tuple[float, float] = (0.03, 1.0)) -> ImpedanceFit:
-    """Estimate Z(ω) of DOF ``dof`` from the residual of ``model`` and fit c/(λ + iω) − d.
+                     theta: FloatArray, dofs: Sequence[int], window: float = 40.0,
+                     band: tuple[float, float] = (0.03, 1.0)) -> list[ImpedanceFit]:
+    """Estimate Z(ω) of each DOF in ``dofs`` from the residual of ``model`` and fit
+    c/(λ + iω) − d, in one pass over the regression.
 
     Parameters
     ----------
@@ -62,7 +64,7 @@ def memory_impedance(samples: Samples, model: DampingModel, body: RigidBody,
     model, theta : DampingModel, ndarray shape (p,)
         The static model fitted to the same data (without the memory term).
     body : RigidBody
-    dof : int
+    dofs : sequence of int
         0..5.
     window : float
         Welch segment length (s).
@@ -71,24 +73,33 @@ def memory_impedance(samples: Samples, model: DampingModel, body: RigidBody,
 
     Returns
     -------
-    ImpedanceFit
+    list of ImpedanceFit
+        One per DOF of ``dofs``.
     """
+    idx = np.asarray(dofs, dtype=np.int64)
     rate = samples.rate
-    r = np.empty(len(samples))
+    r = np.empty((len(samples), len(idx)))
     for sl, Phi, y in iter_regression(samples, model, body):
         # residual force r = y − Φθ, unfiltered: the spectra do the band limiting
-        r[sl] = y[:, dof] - Phi[:, dof, :] @ theta
+        r[sl] = y[:, idx] - Phi[:, idx, :] @ theta
     nper = min(int(window * rate), min(sl.stop - sl.start for sl in samples.segments()))
+    return [_rational_fit(samples, samples.nu[:, d], r[:, k], nper, band)
+            for k, d in enumerate(idx)]
+
+
+def _rational_fit(samples: Samples, nu: FloatArray, r: FloatArray, nper: int,
+                  band: tuple[float, float]) -> ImpedanceFit:
+    """Welch estimate of Z(ω) = S_{ν r} / S_{ν ν} of one DOF and its fit c/(λ + iω) − d."""
+    rate = samples.rate
     s_vr = np.zeros(nper // 2 + 1, dtype=complex)
     s_vv = np.zeros(nper // 2 + 1)
     s_rr = np.zeros(nper // 2 + 1)
     for sl in samples.segments():
         if sl.stop - sl.start < nper:
             continue
-        v = samples.nu[sl, dof]
-        f, p_vr = signal.csd(v, r[sl], fs=rate, nperseg=nper)
+        f, p_vr = signal.csd(nu[sl], r[sl], fs=rate, nperseg=nper)
         s_vr += p_vr
-        s_vv += signal.welch(v, fs=rate, nperseg=nper)[1]
+        s_vv += signal.welch(nu[sl], fs=rate, nperseg=nper)[1]
         s_rr += signal.welch(r[sl], fs=rate, nperseg=nper)[1]
     m = (f >= band[0]) & (f <= band[1]) & (s_vv > 0)
     z = s_vr[m] / s_vv[m]  # H1 estimate Ẑ = S_{v r} / S_{v v} (scipy: S_xy = E[X* Y])

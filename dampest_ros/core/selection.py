@@ -59,6 +59,7 @@ from dampest_ros.core.damping import (
     library_name,
     memory_term,
 )
+from dampest_ros.core.frequency import memory_impedance
 from dampest_ros.core.preprocess import zero_phase
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
@@ -92,6 +93,62 @@ class SelectionStep:
     cv: FloatArray = field(default_factory=lambda: np.zeros(6))
 
 
+@dataclass(frozen=True)
+class MemoryEvidence:
+    """The two estimates of one DOF's fluid memory K(t) = c e^{−λt}: the time-domain profile
+    (staged least squares) and the frequency-domain rational fit of the residual impedance
+    (:func:`frequency.memory_impedance`).
+
+    Fluid memory is passive: Re Z(iω) = c λ / (λ² + ω²) ≥ 0 needs c ≥ 0. A rate outside the
+    search range is not memory either (a trend or an offset below it, plain damping above).
+    """
+
+    dof: int
+    rate: float
+    gain: float
+    rate_freq: float
+    gain_freq: float
+    bounds: tuple[float, float]
+
+    @property
+    def contradiction(self) -> str:
+        """Why these estimates are not fluid memory ('' if they are)."""
+        lo, hi = self.bounds
+        if not lo * 1.05 < self.rate < hi / 1.05:
+            return (f"its rate λ = {self.rate:.3g} 1/s is at the edge of the search range "
+                    f"[{lo:g}, {hi:g}]: a trend or an offset, not fluid memory")
+        if self.gain <= 0.0:
+            return (f"not passive: the best gain c = {self.gain:.3g} ≤ 0 would feed energy "
+                    "into the vehicle")
+        if self.gain_freq <= 0.0 or not lo <= self.rate_freq <= hi:
+            return (f"the frequency-domain estimate (λ = {self.rate_freq:.3g} 1/s, c = "
+                    f"{self.gain_freq:.3g}) is not passive memory in the searched range: the "
+                    "residual has another cause (a current, an offset, a sensor bias; "
+                    "see dampest gap)")
+        return ""
+
+    @property
+    def agrees(self) -> bool:
+        """Both estimates passive, their rates and their steady gains c/λ (the force per unit
+        of a slow velocity) within a factor of 2."""
+        steady = (self.gain_freq / self.rate_freq) / (self.gain / self.rate)
+        return (not self.contradiction and 0.5 <= self.rate_freq / self.rate <= 2.0
+                and 0.5 <= steady <= 2.0)
+
+    def describe(self) -> str:
+        """One line: both estimates and whether they agree."""
+        text = (f"memory on {DOF_NAMES[self.dof]}: λ = {self.rate:.4g} 1/s, c = "
+                f"{self.gain:.4g} (time domain); λ = {self.rate_freq:.4g} 1/s, c = "
+                f"{self.gain_freq:.4g} (frequency domain)")
+        if self.contradiction:
+            return f"{text}: DISAGREE: {self.contradiction}"
+        if not self.agrees:
+            return (f"{text}: DISAGREE: their rates or steady gains c/λ differ by more than a "
+                    "factor of 2; the memory is uncertain (broadband data, e.g. protocol C, "
+                    "separate it from other causes: a delay, an added-mass error)")
+        return f"{text}: agree"
+
+
 @dataclass
 class Selection:
     """Result of :func:`select_terms`: the chosen model and the path that led to it.
@@ -99,10 +156,13 @@ class Selection:
     Attributes
     ----------
     dropped : dict
-        Candidate name → why it was not searched (zero, or numerically equal to another
-        column in these data).
+        Candidate name → why it was not searched (zero, numerically equal to another column
+        in these data, or a memory state that is not passive fluid memory).
     tss : ndarray, shape (6,)
         Σ y² per DOF of the low-passed target (held-out R² = 1 − cv / tss).
+    memory : list of MemoryEvidence
+        Time- and frequency-domain estimates of each chosen memory state, with the final
+        model's static terms in place.
     """
 
     model: DampingModel
@@ -110,6 +170,7 @@ class Selection:
     rates: dict[str, float] = field(default_factory=dict)
     dropped: dict[str, str] = field(default_factory=dict)
     tss: FloatArray = field(default_factory=lambda: np.ones(6))
+    memory: list[MemoryEvidence] = field(default_factory=list)
 
     @property
     def cv_r2(self) -> tuple[FloatArray, FloatArray]:
@@ -147,12 +208,14 @@ def _with_terms(base: DampingModel, cross: Sequence[CrossSpec],
 
 def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int,
                  weights: FloatArray, cutoff: float, bounds: tuple[float, float] = (0.05, 20.0)
-                 ) -> tuple[float, float]:
-    """Memory rate λ of one DOF by minimising the profiled weighted RSS over log λ.
+                 ) -> tuple[float, float, float]:
+    """Memory rate λ of one DOF by minimising the profiled weighted RSS over log λ, among
+    passive memories (gain c ≥ 0).
 
     The memory column only acts on row ``dof``, so the base model's low-passed regressor
     row and target of that DOF are kept once; each trial λ then costs one recursive filter
-    of ν_dof and one low-pass, not a pass over the full regression.
+    of ν_dof and one low-pass, not a pass over the full regression. Where the best gain is
+    negative the passive optimum is c = 0 (no memory), whose RSS is the base model's.
 
     Returns
     -------
@@ -160,6 +223,8 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
         λ (1/s).
     rss : float
         Weighted RSS at that rate.
+    gain : float
+        The unconstrained least-squares gain c at that rate (≤ 0: no passive memory).
     """
     ne = accumulate(samples, base, body, folds=1, cutoff=cutoff)
     A = np.einsum("i,fipq->pq", weights, ne.A)
@@ -173,8 +238,9 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
     rows = np.concatenate([p[1] for p in parts])
     y_d = np.concatenate([p[2] for p in parts])
     w = float(weights[dof])
+    rss_base = c - float(b @ _solve(A, b, np.ones(len(b), dtype=bool), np.zeros(len(b))))
 
-    def cost(log_rate: float) -> float:
+    def solve(log_rate: float) -> tuple[float, float]:
         lam = np.array([np.exp(log_rate)])
         z = np.empty(len(samples))
         for sl in samples.segments():
@@ -186,7 +252,11 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
         Ab = np.block([[A, a[:, None]], [a[None, :], np.array([[w * z @ z]])]])
         bb = np.r_[b, w * z @ y_d]
         theta = _solve(Ab, bb, np.ones(len(bb), dtype=bool), np.zeros(len(bb)))
-        return c - float(bb @ theta)
+        # a negative gain is not passive: the best passive memory is none at all
+        return (c - float(bb @ theta) if theta[-1] > 0 else rss_base), float(theta[-1])
+
+    def cost(log_rate: float) -> float:
+        return solve(log_rate)[0]
 
     lo, hi = np.log(bounds[0]), np.log(bounds[1])
     grid = np.linspace(lo, hi, 13)
@@ -195,7 +265,38 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
     res = optimize.minimize_scalar(cost, bounds=(grid[max(k - 1, 0)],
                                                  grid[min(k + 1, len(grid) - 1)]),
                                    method="bounded", options={"xatol": 1e-4})
-    return float(np.exp(res.x)), float(res.fun)
+    return float(np.exp(res.x)), float(res.fun), solve(float(res.x))[1]
+
+
+def memory_evidence(samples: Samples, base: DampingModel, body: RigidBody,
+                    dofs: Sequence[int], cutoff: float,
+                    bounds: tuple[float, float] = (0.05, 20.0)) -> list[MemoryEvidence]:
+    """Both estimates of a memory state in each DOF of ``dofs`` on top of ``base``.
+
+    The time domain profiles the rate among passive memories (:func:`profile_rate`, per-DOF
+    weights 1/σ² from the residual of ``base``); the frequency domain fits the impedance of
+    the same residual (:func:`frequency.memory_impedance`, one pass for all DOFs).
+
+    Parameters
+    ----------
+    base : DampingModel
+        The static model (it may hold memory states of other DOFs).
+    dofs : sequence of int
+    cutoff : float
+        Parallel low-pass of the regression (Hz).
+    bounds : tuple of float
+        Search range of the rate (1/s).
+    """
+    ne = accumulate(samples, base, body, folds=1, cutoff=cutoff)
+    A, b, _ = ne.total(np.ones(6))
+    theta = _solve(A, b, np.ones(len(b), dtype=bool), np.zeros(len(b)))
+    # per-DOF noise variance of the base's residual → weights 1/σ²
+    weights = np.asarray(1.0 / np.maximum(ne.rss(theta) / float(ne.n.sum()), 1e-12))
+    profiles = [profile_rate(samples, base, body, int(d), weights, cutoff, bounds)
+                for d in dofs]
+    freq = memory_impedance(samples, base, body, theta, dofs)
+    return [MemoryEvidence(int(d), lam, gain, z.rate, z.gain, bounds)
+            for d, (lam, _, gain), z in zip(dofs, profiles, freq, strict=True)]
 
 
 def _key(col: int, alpha: Alpha) -> tuple[Any, ...]:
@@ -254,7 +355,8 @@ def _trials(G: FloatArray, bv: FloatArray, S: Sequence[int] | NDArray[np.int64],
 
 
 def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
-              C: NDArray[np.int64], tol: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+              C: NDArray[np.int64], tol: float
+              ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Blocked cross-validation of S and of S ∪ {c} for every c ∈ C in one row.
 
     Parameters
@@ -272,10 +374,12 @@ def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
         The same for S ∪ {c}.
     gain : ndarray, shape (|C|,)
         In-sample RSS(S) − RSS(S ∪ {c}) on all folds (``ok`` folded in: 0 if collinear).
+    coef : ndarray, shape (|C|,)
+        The coefficient of c in the fit of S ∪ {c} on all folds.
     """
     Sx = np.asarray(S, dtype=np.int64)
     G, bv = A.sum(0), b.sum(0)
-    _, _, gain, ok = _trials(G, bv, Sx, C, tol)
+    _, coef, gain, ok = _trials(G, bv, Sx, C, tol)
     cv_S = np.zeros(())
     cv_C = np.zeros(len(C))
     for f in range(len(c)):
@@ -294,7 +398,7 @@ def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
             cv_S = cv_S + c[f] - 2.0 * bf[Sx] @ beta + beta @ Af[np.ix_(Sx, Sx)] @ beta
         else:
             cv_S = cv_S + c[f]
-    return cv_S, np.where(ok, cv_C, np.inf), gain
+    return cv_S, np.where(ok, cv_C, np.inf), gain, coef
 
 
 def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
@@ -376,15 +480,14 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     n_eff = min(float(len(samples)), 2.0 * cutoff * duration)
     bounds = (0.05, 20.0)
     rates: dict[int, float] = {}
+    dropped: dict[str, str] = {}
     if mem0 is None and memory_dofs:
-        ne0 = accumulate(samples, base, body, folds=1, cutoff=cutoff)
-        rss0, _, _ = _criteria(ne0, np.arange(base.n_params), np.ones(6), n_eff)
-        weights = np.asarray(1.0 / np.maximum(rss0 / float(ne0.n.sum()), 1e-12))
-        rates = {d: profile_rate(samples, base, body, d, weights, cutoff, bounds)[0]
-                 for d in memory_dofs}
-        # a rate at the edge of the search range is a trend or an offset, not fluid memory
-        rates = {d: lam for d, lam in rates.items()
-                 if bounds[0] * 1.05 < lam < bounds[1] / 1.05}
+        evidence = memory_evidence(samples, base, body, memory_dofs, cutoff, bounds)
+        for ev in evidence:
+            if ev.contradiction:
+                dropped[f"memory on {DOF_NAMES[ev.dof]}"] = ev.contradiction
+            else:
+                rates[ev.dof] = ev.rate
     mem_rates = np.r_[mem0.rates if mem0 is not None else [], list(rates.values())]
     mem_dofs = np.r_[mem0.state_dofs if mem0 is not None else [], list(rates)].astype(np.int64)
     n0 = mem0.n_states if mem0 is not None else 0
@@ -405,7 +508,6 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
             earlier = np.flatnonzero((corr[k, :k] > 1.0 - tol) & ~zero[:k] & (same_as[:k] < 0))
             same_as[k] = earlier[0] if len(earlier) else -1
     row_names = {(r, f): nm for r, f, nm in base_cols}
-    dropped: dict[str, str] = {}
     usable: list[tuple[int, int, str]] = []  # (row, column, name)
     for r, f, sp in cand:
         if (r, f) in row_names:
@@ -438,7 +540,7 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     rss = np.array([ne.c.sum(0)[i] - _fit_row(ne, i, chosen[i]) for i in range(6)])
     tss = np.maximum(ne.c.sum(0), 1e-300)
 
-    def refresh(i: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def refresh(i: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         return _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], chosen[i],
                          np.array(pool[i], dtype=np.int64), tol)
 
@@ -464,13 +566,15 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         = change of the row's held-out unexplained share, < 0) among those that qualify."""
         best: tuple[float, int, int] | None = None
         for i in rows:
-            _, cv_c, gain = state[i]
+            _, cv_c, gain, coef = state[i]
             if not len(cv_c):
                 continue
             new = np.maximum(rss[i] - gain, 1e-300)
             dbic = n_eff * np.log(new / max(rss[i], 1e-300)) + log_n
+            # a memory state enters only as passive memory (gain c > 0)
+            passive = (np.array(pool[i]) < m) | (coef > 0)
             good = ((dbic < -min_improvement) & (gain >= min_err * rss[i])
-                    & (cv_c < cv[i]) & np.isfinite(cv_c))
+                    & (cv_c < cv[i]) & np.isfinite(cv_c) & passive)
             if good.any():
                 score = np.where(good, (cv_c - cv[i]) / tss[i], np.inf)
                 j = int(np.argmin(score))
@@ -515,14 +619,14 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
                     if (i, col) in keep_always:
                         continue
                     rest = [c for c in chosen[i] if c != col]
-                    cv_wo, _, gain = _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], rest,
-                                               np.array([col], dtype=np.int64), tol)
+                    cv_wo, _, gain, coef = _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], rest,
+                                                     np.array([col], dtype=np.int64), tol)
                     rss_wo = rss[i] + float(gain[0])
                     dbic = n_eff * float(np.log(max(rss[i], 1e-300) / max(rss_wo, 1e-300))) \
                         + log_n
                     weak = dbic > 0.0 if ((i, col) in from_base and not strict_base) else not (
                         dbic < -min_improvement and rss_wo - rss[i] >= min_err * rss_wo
-                        and cv[i] < float(cv_wo))
+                        and cv[i] < float(cv_wo) and (col < m or float(coef[0]) > 0))
                     if weak and (worst is None or dbic > worst[0]):
                         worst = (dbic, i, col, rss_wo, float(cv_wo))
                     loss = (float(cv_wo) - cv[i]) / tss[i]
@@ -564,19 +668,22 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
                   if st.added in spec_of and st.added in final]
     keep_mem = {int(d): rates[int(d)] for k, d in enumerate(mem_dofs[n0:])
                 if m + n0 + k in chosen[int(d)]}
-    # refine each chosen memory rate with the other chosen terms in place
-    if keep_mem:
-        ne1 = accumulate(samples, base, body, folds=1, cutoff=cutoff)
-        rss1, _, _ = _criteria(ne1, np.arange(base.n_params), np.ones(6), n_eff)
-        weights = np.asarray(1.0 / np.maximum(rss1 / float(ne1.n.sum()), 1e-12))
-        for d in list(keep_mem):
-            others = _with_terms(base, keep_cross,
-                                 {k: v for k, v in keep_mem.items() if k != d})
-            keep_mem[d] = profile_rate(samples, others, body, d, weights, cutoff, bounds)[0]
+    # refine each chosen memory rate with the other chosen terms in place, and check it again
+    # in both domains: a state that is no longer passive memory there goes
+    memory = []
+    for d in list(keep_mem):
+        others = _with_terms(base, keep_cross, {k: v for k, v in keep_mem.items() if k != d})
+        ev = memory_evidence(samples, others, body, [d], cutoff, bounds)[0]
+        memory.append(ev)
+        if ev.contradiction:
+            dropped[f"memory on {DOF_NAMES[d]}"] = f"removed after the search: {ev.contradiction}"
+            del keep_mem[d]
+        else:
+            keep_mem[d] = ev.rate
     model = _with_terms(base, keep_cross, keep_mem)
     return Selection(model, steps, {f"freq.{DOF_NAMES[d]}.lambda1": lam
                                     for d, lam in keep_mem.items()}, dropped,
-                     np.asarray(ne.c.sum(0), dtype=float))
+                     np.asarray(ne.c.sum(0), dtype=float), memory)
 
 
 def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],

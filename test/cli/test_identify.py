@@ -94,8 +94,10 @@ def test_selection_finds_cross_coupling_and_memory_on_platform_b(
                  "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "Y_vr" in printed and "memory on u" in printed
-    fd = float(printed.split("1/s (time domain), ")[1].split()[0])
+    line = printed.split("memory on u: λ = ")[1].split("\n")[0]
+    fd = float(line.split("(time domain); λ = ")[1].split()[0])
     assert abs(fd - 1.5) <= 0.1 * 1.5  # the frequency-domain estimate agrees
+    assert line.endswith("agree")
     est = load_model(out)
     base = ["X_u", "Y_v", "Z_w", "K_p", "M_q", "N_r", "X_uu", "Y_vv", "Z_ww", "K_pp", "M_qq",
             "N_rr"]
@@ -114,8 +116,8 @@ def test_selection_adds_nothing_to_clean_data(protocol_b: Path,
     assert main(["identify", str(protocol_b / "bag"), "--vehicle", "bluerov2_heavy",
                  "--select"]) == 0
     printed = capsys.readouterr().out
-    selection = printed.split("term selection")[1].split("\n\n")[0]
-    assert "Y_vr" not in selection and "memory on" not in selection
+    path = printed.split("term selection")[1].split("held-out R²")[0]
+    assert "Y_vr" not in path and "memory on" not in path
 
 
 def test_delay_auto_finds_and_corrects_a_thrust_delay(tmp_path: Path,

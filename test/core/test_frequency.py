@@ -21,7 +21,7 @@ def test_rational_fit_recovers_the_memory_rate_from_multisine_data() -> None:
     s = preprocess(measure(traj, v.body.rho, v.body.gravity, seed=3), v.thrusters,
                    v.body.gravity, v.body.rho)
     theta = fit(s, v.damping, v.body, FitOptions(gyro_bias=0.0, dvl_bias=0.0)).theta
-    imp = memory_impedance(s, v.damping, v.body, theta, 0)
+    imp = memory_impedance(s, v.damping, v.body, theta, [0])[0]
     assert abs(imp.rate - 2.0) <= 0.1 * 2.0
     assert abs(imp.gain - 20.0) <= 0.2 * 20.0
     assert np.median(imp.coherence) > 0.5

@@ -13,7 +13,9 @@ from dampest_ros.core.damping import (
     Alpha,
     AlphaBank,
     DampingModel,
+    added_mass_term,
     cross_term,
+    filter_memory,
     library,
     linear_term,
     quadratic_term,
@@ -220,3 +222,71 @@ def test_numerically_equal_columns_are_dropped_with_the_reason(body: RigidBody) 
     i, j = r.names.index("X_u"), r.names.index("X_uu")
     assert r.theta[i] == pytest.approx(10.0, rel=0.01)
     assert r.theta[j] == pytest.approx(80.0, rel=0.01)
+
+
+# --- memory: passive and consistent in both domains (issue 11, item 6) --------------------
+
+
+def memory_law(nu: np.ndarray, c: float, rate: float) -> np.ndarray:
+    """Surge linear + quadratic drag plus a memory force c ∫ e^{−λ(t−s)} u(s) ds."""
+    t = np.arange(len(nu)) / RATE
+    law = np.zeros_like(nu)
+    law[:] = np.array([10.0, 20.0, 20.0, 2.0, 2.0, 2.0]) * nu + 60.0 * nu * np.abs(nu)
+    law[:, 0] += c * filter_memory(t, nu[:, :1], np.array([rate]))[:, 0]
+    return law
+
+
+@pytest.fixture(scope="module")
+def moving(body: RigidBody) -> np.ndarray:
+    rng = np.random.default_rng(7)
+    return smooth(rng, int(400 * RATE), np.array([0.4, 0.3, 0.3, 0.4, 0.4, 0.4]), 0.5)
+
+
+def test_a_passive_memory_is_kept_and_both_domains_agree(moving: np.ndarray,
+                                                         body: RigidBody) -> None:
+    """K(t) = 30 e^{−t} on surge: selected, λ within 10 %, and the frequency-domain fit of
+    the residual impedance agrees (rate and steady gain within a factor of 2)."""
+    samples = synthetic(body, moving, memory_law(moving, 30.0, 1.0), 0.02, 8)
+    sel = select_terms(samples, base_model(), body, families=("linear",))
+    assert sel.rates["freq.u.lambda1"] == pytest.approx(1.0, rel=0.1)
+    (ev,) = sel.memory
+    assert ev.dof == 0 and ev.agrees and "agree" in ev.describe()
+    assert ev.gain == pytest.approx(30.0, rel=0.1)
+
+
+def test_a_memory_that_feeds_energy_in_is_never_selected(moving: np.ndarray,
+                                                         body: RigidBody) -> None:
+    """K(t) = −30 e^{−t} on surge (Re Z < 0: not passive). Before, the search took the state
+    with c = −30; now it is left out with the reason, and no chosen memory is non-passive."""
+    samples = synthetic(body, moving, memory_law(moving, -30.0, 1.0), 0.02, 9)
+    sel = select_terms(samples, base_model(), body, families=("linear",))
+    assert "freq" not in sel.model.kinds
+    assert "not passive" in sel.dropped["memory on u"]
+    assert all(ev.gain > 0 for ev in sel.memory)
+
+
+def test_an_offset_is_not_taken_for_memory(moving: np.ndarray, body: RigidBody) -> None:
+    """A constant surge force of 15 N (what a current or a thrust offset leaves): the
+    frequency domain sees no passive memory in the band, so no memory state is selected."""
+    law = memory_law(moving, 0.0, 1.0)
+    law[:, 0] += 15.0
+    samples = synthetic(body, moving, law, 0.02, 10)
+    sel = select_terms(samples, base_model(), body, families=("linear",))
+    assert "freq" not in sel.model.kinds
+    assert "memory on u" in sel.dropped
+
+
+def test_the_added_term_and_its_library_twin_do_not_make_a_singular_fit(
+        moving: np.ndarray, body: RigidBody) -> None:
+    """The preset's D_added (M ∝ u w, N ∝ u v, K ∝ v w) has the same columns as library
+    bilinear terms; before, both entered and the fit raised 'A singular matrix detected'.
+    Now the library twin is not searched and the selected model fits."""
+    base = DampingModel([linear_term(), quadratic_term(), added_mass_term()])
+    law = memory_law(moving, 0.0, 1.0)
+    law[:, 4] += 12.0 * moving[:, 0] * moving[:, 2]
+    samples = synthetic(body, moving, law, 0.02, 11)
+    sel = select_terms(samples, base, body, memory_dofs=())
+    names = sel.model.parameter_names
+    assert "M_uxw" not in names and "added.M_uw" in names
+    r = fit(samples, sel.model, body, FitOptions(method="ols", gyro_bias=0.0, dvl_bias=0.0))
+    assert r.theta[names.index("added.M_uw")] == pytest.approx(12.0, rel=0.05)
