@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, optimize, stats
+from scipy.sparse import csgraph
 
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.frames import matrix_from_euler
@@ -29,6 +30,14 @@ FloatArray = NDArray[np.float64]
 METHODS = ("ols", "wls", "ridge", "bounded", "map")
 CHUNK = 8000  # samples per chunk of Φ (n, 6, p): ~10 MB for p = 24, whatever the log length
 STRETCH = 20000  # samples per stretch of the sensor-bias sensitivity on long logs
+#: Noise floor of each DOF relative to its RMS target force: the WLS weight 1/σ_i² uses
+#: σ_i ≥ FLOOR · RMS(y_i). No thrust model or force measurement is better than 0.1 %, so a
+#: smaller residual is the structure fitting exactly, not noise; unfloored, such a DOF
+#: outweighs the others by the rounding of its residual (up to 1e12).
+FLOOR = 1e-3
+#: A parameter with more than this share of its unit vector (scaled coordinates) in the
+#: directions collinearity leaves undetermined is reported only through a combination.
+SHARE = 0.01
 
 
 def target(samples: Samples, body: RigidBody, index: slice | None = None) -> FloatArray:
@@ -180,6 +189,40 @@ def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: in
     return NormalEquations(A, b, c, n)
 
 
+@dataclass(frozen=True)
+class Combination:
+    """A linear combination of parameters that the data determine while its members are not.
+
+    Two columns the flown data cannot tell apart (X_uu and a u‖v‖ term when v stays small)
+    leave their split undetermined but their joint force known: Σ_k a_k θ_k is that force's
+    coefficient over the flown speeds.
+
+    Attributes
+    ----------
+    names : list of str
+        The members, shape (m,).
+    coef : ndarray, shape (m,)
+        Coefficients a_k, the largest |a_k| equal to 1; a_k = ‖Φ_k‖ / ‖Φ_l‖ (l the member
+        with a_l = 1) for two columns that move together, so the sum is in the units of θ_l.
+    value : float
+        Σ_k a_k θ̂_k.
+    std : float
+        √(aᵀ Σ a), Σ the covariance of θ̂.
+    """
+
+    names: list[str]
+    coef: FloatArray
+    value: float
+    std: float
+
+    def __str__(self) -> str:
+        parts = [("" if f"{abs(a):.3g}" == "1" else f"{abs(a):.3g}·") + n
+                 for a, n in zip(self.coef, self.names, strict=True)]
+        text = "".join((" − " if a < 0 else " + ") + t if k else ("−" if a < 0 else "") + t
+                       for k, (a, t) in enumerate(zip(self.coef, parts, strict=True)))
+        return f"{text} = {self.value:.4g} ± {self.std:.2g} over the flown speeds"
+
+
 @dataclass
 class Fit:
     """Result of a batch identification.
@@ -188,12 +231,26 @@ class Fit:
     ----------
     names : list of str
     theta : ndarray, shape (p,)
-        Estimate; unidentifiable parameters hold their prior (or 0) and are listed in
-        ``flags``.
+        Estimate. Parameters the data say nothing about (``held``) hold their prior (or 0)
+        and are listed in ``flags``; members of an undetermined combination hold the
+        minimum-norm split of it (``combinations``); ``constrained`` ones hold the value
+        dissipativity allows.
     cov : ndarray, shape (p, p)
-        Covariance (block-robust), NaN rows/columns for unidentifiable parameters.
+        Covariance (block-robust) of the unconstrained estimate in the directions the data
+        determine; NaN rows/columns for held parameters.
     sigma : ndarray, shape (6,)
         Residual standard deviation per DOF (N, N·m).
+    flags : dict of str to str
+        Parameter name → why the data do not determine it on its own.
+    held : ndarray of bool, shape (p,)
+        True where θ is the prior value (no excitation, poorly determined, low speed only).
+    combinations : list of Combination
+        What the data determine of collinear parameters.
+    constrained : dict of str to str
+        Parameter name → the dissipativity constraint that holds it (and the unconstrained
+        value); a structural misfit when the unconstrained estimate violated it.
+    rank : int
+        Number of directions of θ the data determine (the free parameters of AIC/BIC).
     """
 
     names: list[str]
@@ -209,6 +266,17 @@ class Fit:
     cv_rmse: FloatArray = field(default_factory=lambda: np.zeros(6))
     n_eff: float = 0.0
     blocks: int = 0
+    held: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    combinations: list[Combination] = field(default_factory=list)
+    constrained: dict[str, str] = field(default_factory=dict)
+    rank: int = 0
+
+    @property
+    def identified(self) -> NDArray[np.bool_]:
+        """True where the data alone determine the parameter, shape (p,): not held at the
+        prior, not only part of a combination, not held by a constraint."""
+        return np.array([n not in self.flags and n not in self.constrained
+                         for n in self.names], dtype=bool)
 
     @property
     def std(self) -> FloatArray:
@@ -251,8 +319,9 @@ class Fit:
 
     @property
     def n_free(self) -> int:
-        """Number of estimated parameters (unidentifiable ones are fixed)."""
-        return len(self.names) - len(self.flags)
+        """Number of estimated directions of θ (held parameters and the undetermined split
+        of collinear ones are not estimated)."""
+        return self.rank
 
     @property
     def aic(self) -> float:
@@ -277,9 +346,11 @@ class FitOptions:
     block : float
         Block length (s) for the robust covariance.
     max_rel_halfwidth : float
-        A parameter whose 95 % half-width exceeds this fraction of its scale is flagged.
+        A parameter whose 95 % half-width exceeds this fraction of its scale
+        (:func:`parameter_scale`) is flagged and held at its prior.
     max_vif : float
-        Variance inflation above this flags a parameter as collinear.
+        A direction of θ whose variance is inflated above this by collinearity is not
+        estimated; its members are reported as a :class:`Combination`.
     cutoff : float
         Parallel low-pass applied to y and Φ (Hz); 0 disables it. It also sets the effective
         sample count n_eff = 2 · cutoff · T used by AIC/BIC.
@@ -290,6 +361,9 @@ class FitOptions:
     speed_range : tuple of 6 float, optional
         Speeds the vehicle can reach per DOF; quadratic terms of DOFs flown below 15 % of
         it are flagged (:func:`speed_coverage_flags`).
+    dissipative : bool
+        Constrain the estimate to νᵀD(ν)ν ≥ 0 on the data and over the flown envelope
+        (:func:`envelope`); memory terms are left out of the constraint.
     """
 
     method: str = "wls"
@@ -301,6 +375,7 @@ class FitOptions:
     gyro_bias: float = 2e-4
     dvl_bias: float = 1e-3
     speed_range: tuple[float, ...] | None = None
+    dissipative: bool = True
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -348,58 +423,193 @@ def rank_solve(A: FloatArray, b: FloatArray, tol: float = 1e-10
     return x, np.asarray(piv[rank:], dtype=np.int64)
 
 
+def constrained_quadratic(H: FloatArray, g: FloatArray, E: FloatArray, h: FloatArray
+                          ) -> FloatArray | None:
+    """argmin βᵀHβ − 2gᵀβ subject to E β ≥ h; None when no β satisfies the constraints.
+
+    Lawson & Hanson's reduction (Solving Least Squares Problems, ch. 23): with H = RᵀR and
+    z = Rβ − R⁻ᵀg the problem is the least-distance programme min ‖z‖ subject to
+    G z ≥ f (G = E R⁻¹, f = h − G R⁻ᵀg), whose solution is z = −ρ_{1:r}/ρ_{r+1} with
+    ρ = [Gᵀ; fᵀ] u − e_{r+1} and u ≥ 0 the non-negative least-squares solution: exact,
+    no step sizes or tolerances to tune.
+
+    Parameters
+    ----------
+    H : ndarray, shape (r, r)
+        Symmetric positive definite (eigenvalues below 1e-12 of the largest are raised).
+    g : ndarray, shape (r,)
+    E : ndarray, shape (m, r)
+    h : ndarray, shape (m,)
+
+    Returns
+    -------
+    ndarray, shape (r,), or None
+    """
+    lam, V = np.linalg.eigh(H)
+    lam = np.maximum(lam, 1e-12 * max(float(lam.max()), 1e-300))
+    R_inv = V / np.sqrt(lam)  # R = √Λ Vᵀ, R⁻¹ = V Λ^{-1/2}
+    d = R_inv.T @ g  # Rᵀd = g
+    G = E @ R_inv
+    f = h - G @ d
+    # each constraint row scaled to unit length: the same feasible set, better conditioned
+    norm = np.linalg.norm(G, axis=1)
+    keep = norm > 0
+    G, f = G[keep] / norm[keep, None], f[keep] / norm[keep]
+    if np.any(~keep & (h > 0)):
+        return None  # 0 ≥ h_k > 0
+    M = np.vstack([G.T, f[None, :]])
+    e = np.zeros(M.shape[0])
+    e[-1] = 1.0
+    u = optimize.nnls(M, e, maxiter=50 * M.shape[1])[0]
+    rho = M @ u - e
+    if abs(rho[-1]) < 1e-12:
+        return None
+    z = -rho[:-1] / rho[-1]
+    return np.asarray(R_inv @ (z + d), dtype=float)
+
+
 def _solve(A: FloatArray, b: FloatArray, free: NDArray[np.bool_], fixed: FloatArray,
-           lower: FloatArray | None = None) -> FloatArray:
-    """Minimise θᵀAθ − 2bᵀθ over the free parameters, the others held at ``fixed``."""
+           lower: FloatArray | None = None, basis: FloatArray | None = None,
+           power: FloatArray | None = None) -> FloatArray:
+    """Minimise θᵀAθ − 2bᵀθ over the free parameters, the others held at ``fixed``.
+
+    Parameters
+    ----------
+    A : ndarray, shape (p, p)
+    b : ndarray, shape (p,)
+    free : ndarray of bool, shape (p,)
+    fixed : ndarray, shape (p,)
+        Values of the parameters that are not free.
+    lower : ndarray, shape (p,), optional
+        Lower bounds (−inf: none).
+    basis : ndarray, shape (p_free, r), optional
+        θ_free = T β: only the directions T spans are estimated, the rest of θ_free is 0 in
+        them (minimum norm). Default: the column scaling, T = diag(1/√diag A_free).
+    power : ndarray, shape (m, p), optional
+        Rows g_k with νᵀD(ν)ν = g_kᵀθ at m velocities; the solution keeps g_kᵀθ ≥ 0.
+    """
     theta = fixed.copy()
     if not free.any():
         return theta
     Af = A[np.ix_(free, free)]
     bf = b[free] - A[np.ix_(free, ~free)] @ fixed[~free]
-    s = 1.0 / np.sqrt(np.maximum(np.diag(Af), 1e-300))
-    As = Af * np.outer(s, s)  # column-scaled: well conditioned across units
-    if lower is None or not np.isfinite(lower[free]).any():
-        theta[free] = s * rank_solve(As, s * bf)[0]
-        return theta
-    # bounded: ‖Lᵀx − L⁻¹b‖² has the same minimiser as xᵀAx − 2bᵀx (A = L Lᵀ)
-    L = linalg.cholesky(As, lower=True)
-    rhs = linalg.solve_triangular(L, s * bf, lower=True)
-    lo = lower[free] / s
-    res = optimize.lsq_linear(L.T, rhs, bounds=(lo, np.full(len(lo), np.inf)),
-                              method="bvls", tol=1e-12)
-    theta[free] = s * res.x
+    T = basis if basis is not None else np.diag(1.0 / np.sqrt(np.maximum(np.diag(Af),
+                                                                         1e-300)))
+    H, g = T.T @ Af @ T, T.T @ bf  # column-scaled: well conditioned across units
+    beta = rank_solve(H, g)[0]
+    rows, h = [], []
+    if lower is not None and np.isfinite(lower[free]).any():
+        fin = np.isfinite(lower[free])
+        rows.append(T[fin])  # θ_free = Tβ ≥ lower
+        h.append(lower[free][fin])
+    if power is not None and len(power):
+        rows.append(power[:, free] @ T)  # g_kᵀθ ≥ 0 with the fixed part moved right
+        h.append(-power[:, ~free] @ fixed[~free])
+    if rows:
+        E, hh = np.vstack(rows), np.concatenate(h)
+        slack = 1e-12 * (np.abs(E) @ np.abs(beta) + np.abs(hh))
+        if np.any(E @ beta < hh - slack):
+            bounded = constrained_quadratic(H, g, E, hh)
+            beta = beta if bounded is None else bounded
+    theta[free] = T @ beta
+    if lower is not None:
+        # the active bounds exactly (the reduction meets them to rounding)
+        theta[free] = np.maximum(theta[free], lower[free])
     return theta
 
 
-def _flags(A: FloatArray, theta: FloatArray, cov: FloatArray, names: list[str],
-           scale: FloatArray, opts: FitOptions) -> dict[str, str]:
-    """Named reasons why parameters cannot be determined from the data."""
-    flags: dict[str, str] = {}
-    d = np.diag(A)
-    dmax = float(d.max()) if len(d) else 0.0
+def determined_directions(A: FloatArray, free: NDArray[np.bool_], max_vif: float
+                          ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Split θ_free into the directions the data determine and those collinearity hides.
+
+    In column-scaled coordinates x = θ/s (s_j = 1/√A_jj, so G = S A S has a unit diagonal)
+    an eigenvector v_k of G with eigenvalue λ_k is a combination whose variance is σ²/λ_k,
+    and the variance inflation of parameter j is VIF_j = Σ_k V_jk²/λ_k. Directions with
+    λ_k < 1/``max_vif`` (or below 1e-10: numerically singular) are not determined: the data
+    fix x only in the others, and x = 0 along these (the minimum-norm split).
+
+    Parameters
+    ----------
+    A : ndarray, shape (p, p)
+        Weighted normal-equation matrix.
+    free : ndarray of bool, shape (p,)
+    max_vif : float
+
+    Returns
+    -------
+    T : ndarray, shape (p_free, r)
+        θ_free = T β over the determined directions (T = S V_determined).
+    W : ndarray, shape (p_free, k)
+        The undetermined directions in scaled coordinates (orthonormal columns).
+    s : ndarray, shape (p_free,)
+        The column scaling.
+    """
+    Af = A[np.ix_(free, free)]
+    s = 1.0 / np.sqrt(np.maximum(np.diag(Af), 1e-300))
+    lam, V = np.linalg.eigh(Af * np.outer(s, s))
+    weak = lam < max(1.0 / max_vif, 1e-10)
+    return s[:, None] * V[:, ~weak], V[:, weak], s
+
+
+def combinations_of(W: FloatArray, s: FloatArray, names: list[str], theta: FloatArray,
+                    cov: FloatArray, share: float = SHARE) -> list[Combination]:
+    """What the data determine of the parameters in undetermined directions.
+
+    A parameter belongs to an undetermined direction when more than ``share`` of its unit
+    vector lies in the undetermined subspace (its min-norm value then moves with what the
+    data cannot fix); members that share a direction form a group. Within the span of a
+    group's members, the directions orthogonal to its undetermined ones are determined:
+    each is reported as Σ a_k θ_k (a = u / s, u a unit vector in scaled coordinates).
+
+    Parameters
+    ----------
+    W : ndarray, shape (p_free, k)
+        Undetermined directions (scaled coordinates), from :func:`determined_directions`.
+    s : ndarray, shape (p_free,)
+    names : list of str
+        Names of the free parameters, shape (p_free,).
+    theta : ndarray, shape (p_free,)
+    cov : ndarray, shape (p_free, p_free)
+    """
+    out: list[Combination] = []
+    if not W.shape[1]:
+        return out
+    member = np.sum(W**2, axis=1) > share  # share of e_j in the undetermined subspace
+    links = (W**2 > share / W.shape[1]) & member[:, None]
+    # groups: members connected through a shared undetermined direction
+    _, label = csgraph.connected_components(links.astype(float) @ links.T.astype(float) > 0,
+                                            directed=False)
+    for lab in np.unique(label[member]):
+        group = np.flatnonzero((label == lab) & member)
+        k = np.flatnonzero(links[group].any(axis=0))
+        # the determined directions within the group's span: the null space of W_gᵀ
+        U = linalg.null_space(W[np.ix_(group, k)].T)
+        for u in U.T:
+            a = u / s[group]
+            a = a / a[np.argmax(np.abs(u))]  # the member with the largest share gets 1
+            a = np.where(np.abs(a) < 1e-3, 0.0, a)
+            used = a != 0
+            idx = group[used]
+            out.append(Combination([names[i] for i in idx], a[used],
+                                   float(a[used] @ theta[idx]),
+                                   float(np.sqrt(abs(a[used] @ cov[np.ix_(idx, idx)]
+                                                     @ a[used])))))
+    return out
+
+
+def _flags(theta: FloatArray, cov: FloatArray, names: list[str], scale: FloatArray,
+           opts: FitOptions, candidates: NDArray[np.bool_]) -> dict[str, str]:
+    """Parameters among ``candidates`` whose 95 % half-width exceeds
+    ``opts.max_rel_halfwidth`` of their data scale (:func:`parameter_scale`)."""
     z = float(stats.norm.ppf(0.975))
-    live = d > 1e-12 * max(dmax, 1e-300)
-    s = 1.0 / np.sqrt(np.maximum(d, 1e-300))
-    As = A * np.outer(s, s)
-    vif = np.full(len(d), np.inf)
-    try:
-        vif[live] = np.diag(linalg.inv(As[np.ix_(live, live)]))
-    except linalg.LinAlgError:
-        pass
-    corr = As.copy()
-    np.fill_diagonal(corr, 0.0)
-    for j, name in enumerate(names):
-        if d[j] <= 1e-12 * max(dmax, 1e-300):
-            flags[name] = "no excitation: its regressor column is zero in these data"
-        elif vif[j] > opts.max_vif:
-            k = int(np.argmax(np.abs(corr[j])))
-            flags[name] = (f"collinear with {names[k]} (variance inflation {vif[j]:.3g}); "
-                           "the data cannot separate them")
-        elif z * np.sqrt(abs(cov[j, j])) > opts.max_rel_halfwidth * scale[j]:
-            flags[name] = (f"poorly determined: 95 % half-width {z * np.sqrt(abs(cov[j, j])):.3g}"
-                           f" exceeds {opts.max_rel_halfwidth:.0%} of its scale {scale[j]:.3g}"
-                           "; excite this degree of freedom more (speed range, amplitude)")
-    return flags
+    half = z * np.sqrt(np.abs(np.diag(cov)))
+    return {name: (f"poorly determined: 95 % half-width {half[j]:.3g} exceeds "
+                   f"{opts.max_rel_halfwidth:.0%} of {scale[j]:.3g} (the larger of |estimate| "
+                   "and the value giving 10 % of the force its DOF explains); the data's "
+                   "estimate is kept with its interval; excite this degree of freedom more "
+                   "(speed range, amplitude)")
+            for j, name in enumerate(names)
+            if candidates[j] and half[j] > opts.max_rel_halfwidth * scale[j]}
 
 
 def speed_coverage_flags(model: DampingModel, samples: Samples, speed_range: FloatArray,
@@ -430,20 +640,81 @@ def speed_coverage_flags(model: DampingModel, samples: Samples, speed_range: Flo
     return flags
 
 
-def parameter_scale(ne: NormalEquations, theta: FloatArray, prior: FloatArray) -> FloatArray:
-    """The size a parameter must be known to, shape (p,).
+def parameter_scale(ne: NormalEquations, theta: FloatArray) -> FloatArray:
+    """The size a parameter must be known to, from the data alone, shape (p,).
 
-    |prior| where the prior is nonzero (an estimate that is inflated by confounding must not
-    raise its own bar); otherwise max(|θ̂|, force scale), the force scale being the value
-    whose force is 10 % of the RMS target force in the DOF the parameter acts on, so that
-    parameters whose truth may be zero are judged on what they could contribute.
+    max(|θ̂_j|, F_j): a parameter is determined when its value is known relative to itself,
+    or when the force it contributes is known relative to the force the model explains in
+    the DOF i it acts on (the row of its largest column): F_j = 0.1 ‖Φ_i θ̂‖ / ‖Φ_ij‖ is the
+    value whose force is 10 % of that, RMS over the flown data. A small coefficient whose
+    force is pinned down is identified; a column of sensor noise in a DOF that did not move
+    is not, as its DOF explains no force. No prior enters: the same data give the same scale.
     """
-    Ad = np.einsum("ipp->ip", ne.A.sum(0))  # Σ Φ_{·,i,j}² per DOF i and parameter j
-    c = ne.c.sum(0)
+    A = ne.A.sum(0)  # (6, p, p)
+    Ad = np.einsum("ipp->ip", A)  # Σ Φ_{·,i,j}² per DOF i and parameter j
     i = np.argmax(Ad, axis=0)
+    # ‖Φ_i θ‖² = θᵀ (Σ Φ_iᵀΦ_i) θ: the force the model explains in DOF i
+    explained = np.sqrt(np.maximum(np.einsum("ipq,p,q->i", A, theta, theta), 0.0))
     col = np.sqrt(np.maximum(Ad[i, np.arange(len(i))], 1e-300))
-    force = 0.1 * np.sqrt(c[i]) / col
-    return np.where(prior != 0, np.abs(prior), np.maximum(np.abs(theta), force))
+    return np.asarray(np.maximum(np.abs(theta), 0.1 * explained[i] / col))
+
+
+def power_rows(model: DampingModel, nu: FloatArray) -> FloatArray:
+    """g(ν) with νᵀD(ν)ν = g(ν)ᵀθ for the static terms, shape (n, p).
+
+    g(ν) = Φ(ν)ᵀν with zero memory states: the memory columns are 0, so fluid memory is left
+    out of the dissipativity constraint (its passivity is c ≥ 0 on its own).
+
+    Parameters
+    ----------
+    nu : ndarray, shape (n, 6)
+        Velocities (m/s, rad/s).
+    """
+    z = np.zeros((len(nu), len(model.memory_rates)))
+    # Σ_i ν_i (Φ(ν)θ)_i = (Φ(ν)ᵀν)ᵀθ
+    return np.einsum("nip,ni->np", model.regressor(nu, z if z.shape[1] else None), nu)
+
+
+def envelope(nu: FloatArray) -> FloatArray:
+    """Grid over the flown envelope, shape (2 · 5⁶, 6) (m/s, rad/s).
+
+    Per DOF its smallest, half of it, 0, half its largest and its largest flown value, all
+    combinations; and the same grid at 1 % of that size, where the terms of lowest order
+    (linear) carry the power: a negative linear coefficient that the quadratic hides at
+    speed still generates energy there.
+
+    Parameters
+    ----------
+    nu : ndarray, shape (N, 6)
+        Flown velocities.
+    """
+    lo, hi = nu.min(axis=0), nu.max(axis=0)
+    axes = np.stack([lo, lo / 2, np.zeros(6), hi / 2, hi], axis=1)
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 6)
+    return np.concatenate([grid, 0.01 * grid])
+
+
+def dissipation_points(samples: Samples, model: DampingModel, theta: FloatArray,
+                       chunk: int = CHUNK) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Velocities where ``theta`` generates energy, worst first, shape (n, 6), with whether
+    each is a data sample (else an :func:`envelope` grid point), shape (n,).
+
+    The check covers every sample and the whole grid; a point counts when νᵀD(ν)ν < 0 by
+    more than 1e-9 of the power its terms carry (rounding of an active constraint).
+    """
+    grid = envelope(samples.nu)
+    pts, power, data = [], [], []
+    for src, is_data in ((samples.nu, True), (grid, False)):
+        for start in range(0, len(src), chunk):
+            nu = src[start:start + chunk]
+            g = power_rows(model, nu)
+            P = g @ theta
+            bad = P < -1e-9 * (np.abs(g) @ np.abs(theta))
+            pts.append(nu[bad])
+            power.append(P[bad])
+            data.append(np.full(int(bad.sum()), is_data))
+    order = np.argsort(np.concatenate(power))
+    return np.concatenate(pts)[order], np.concatenate(data)[order]
 
 
 def fit(samples: Samples, model: DampingModel, body: RigidBody,
@@ -451,6 +722,20 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
         prior_std: FloatArray | None = None, normal: NormalEquations | None = None,
         chunk: int = CHUNK) -> Fit:
     """Identify θ from samples.
+
+    1. Per-DOF weights 1/σ_i² from the residuals (``wls``), σ_i floored at
+       :data:`FLOOR` of the DOF's RMS target force.
+    2. Columns that are zero in these data, and quadratic terms of DOFs flown too slowly
+       (``speed_range``), hold their prior: the data say nothing about them.
+    3. Directions of θ whose variance collinearity inflates above ``max_vif`` are not
+       estimated (minimum norm); their members are reported with the combination the data
+       determine (:class:`Combination`).
+    4. Parameters whose 95 % half-width exceeds ``max_rel_halfwidth`` of their data scale
+       (:func:`parameter_scale`) are flagged; their estimate is the data's. No step uses the
+       prior's magnitude, so a prior scaled by any factor gives the same flags and the same
+       θ but for the held parameters.
+    5. With ``dissipative``, the estimate is constrained to νᵀD(ν)ν ≥ 0 on every sample and
+       over the flown envelope; parameters an active constraint moved are reported.
 
     Parameters
     ----------
@@ -461,8 +746,7 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
         Known M (rigid body + added mass) and restoring data.
     options : FitOptions, optional
     prior : ndarray, shape (p,), optional
-        Prior mean (MAP), the value of unidentifiable parameters, and the scale that judges
-        whether a parameter is determined.
+        Prior mean (MAP) and the value of the parameters the data say nothing about.
     prior_std : ndarray, shape (p,), optional
         Prior standard deviations for MAP.
     normal : NormalEquations, optional
@@ -482,12 +766,11 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     ne = normal or accumulate(samples, model, body, chunk=chunk, cutoff=opts.cutoff)
     prior_v = np.zeros(p) if prior is None else np.asarray(prior, dtype=float)
     N = int(ne.n.sum())
-    w = np.ones(6)
-    free = np.ones(p, dtype=bool)
     lower = model.lower_bounds() if opts.method == "bounded" else None
+    force_rms = np.sqrt(ne.c.sum(0) / N)  # RMS target force per DOF (N, N·m)
 
-    def solve(weights: FloatArray, free_: NDArray[np.bool_], exclude: int | None = None
-              ) -> FloatArray:
+    def solve(weights: FloatArray, free_: NDArray[np.bool_], basis: FloatArray | None = None,
+              exclude: int | None = None, power: FloatArray | None = None) -> FloatArray:
         A, b, _ = ne.total(weights, exclude)
         if opts.method == "ridge":
             A = A + opts.ridge * np.diag(np.diag(A))
@@ -497,36 +780,61 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
             P = 1.0 / np.maximum(np.asarray(prior_std, float), 1e-12) ** 2
             A = A + np.diag(P)
             b = b + P * prior_v
-        return _solve(A, b, free_, prior_v, lower)
+        return _solve(A, b, free_, prior_v, lower, basis, power)
 
     def weights_for(theta: FloatArray) -> FloatArray:
         if opts.method == "ols":
             return np.ones(6)
-        # per-DOF noise variances from the residuals → weights 1/σ²
-        s2 = np.maximum(ne.rss(theta) / N, 1e-12)
-        return np.asarray(1.0 / s2)
+        # σ_i² = max(RSS_i / N, (FLOOR · RMS y_i)²): the DOF's noise variance, never below
+        # what its own force scale makes credible → weights 1/σ_i²
+        s2 = np.maximum(ne.rss(theta) / N, (FLOOR * force_rms) ** 2)
+        return np.asarray(1.0 / np.maximum(s2, 1e-300))
 
-    # columns that are zero in these data cannot be estimated at all: hold them from the start
-    d = np.diag(ne.total(w)[0])
-    free = d > 1e-12 * max(float(d.max()), 1e-300)
-    theta = solve(w, free)
+    # columns that are zero in these data (unweighted: the weights do not excite anything)
+    d = np.diag(ne.total(np.ones(6))[0])
+    live = d > 1e-12 * max(float(d.max()), 1e-300)
+    flags = {n: "no excitation: its regressor column is zero in these data"
+             for n, ok in zip(names, live, strict=True) if not ok}
+    w = np.ones(6)
+    theta = solve(w, live)
     for _ in range(3):
         w = weights_for(theta)
-        theta = solve(w, free)
-    cov = robust_covariance(samples, model, body, theta, w, ne, free, opts, chunk) \
-        + bias_covariance(samples, model, body, theta, w, free, opts, chunk)
-    A_w, _, _ = ne.total(w)
-    flags = _flags(A_w, theta, cov, names, parameter_scale(ne, theta, prior_v), opts)
+        theta = solve(w, live)
     if opts.speed_range is not None:
         flags.update(speed_coverage_flags(model, samples, np.asarray(opts.speed_range)))
-    if flags:
-        free = np.array([n not in flags for n in names])
-        theta = solve(w, free)
-        cov = robust_covariance(samples, model, body, theta, w, ne, free, opts, chunk) \
-            + bias_covariance(samples, model, body, theta, w, free, opts, chunk)
+    free = live & np.array([n not in flags for n in names])
+    held = ~free
+    for j in np.flatnonzero(held):
+        flags[names[j]] = f"held at prior {prior_v[j]:.4g} ({flags[names[j]]})"
+    T, W, s = determined_directions(ne.total(w)[0], free, opts.max_vif)
+    theta = solve(w, free, T)
+    cov = robust_covariance(samples, model, body, theta, w, ne, free, T, opts, chunk) \
+        + bias_covariance(samples, model, body, theta, w, free, T, opts, chunk)
+    fi = np.flatnonzero(free)
+    combos = combinations_of(W, s, [names[j] for j in fi], theta[fi], cov[np.ix_(fi, fi)])
+    for c in combos:
+        for n in c.names:
+            flags.setdefault(n, f"not identified on its own: only {c} is")
+    flags.update(_flags(theta, cov, names, parameter_scale(ne, theta), opts,
+                        free & np.array([n not in flags for n in names])))
+    constrained: dict[str, str] = {}
+    power = np.zeros((0, p))
+    if opts.dissipative and model.n_params:
+        # impose νᵀD(ν)ν ≥ 0 where the estimate violates it, worst points first, until it
+        # holds on every sample and grid point (≤ 5 rounds of ≤ 100 points)
+        unconstrained = theta
+        for _ in range(5):
+            pts, on_data = dissipation_points(samples, model, theta, chunk)
+            if not len(pts):
+                break
+            if not len(power):
+                constrained = misfit_report(model, names, unconstrained, pts[:1000],
+                                            on_data[:1000], cov, free)
+            power = np.vstack([power, power_rows(model, pts[:100])])
+            theta = solve(w, free, T, power=power)
     cv = np.zeros(6)
     for f in range(len(ne.n)):
-        th_f = solve(w, free, exclude=f)
+        th_f = solve(w, free, T, exclude=f, power=power)
         cv += ne.rss(th_f, fold=f)
     rss = ne.rss(theta)
     tss = total_sum_of_squares(ne)
@@ -538,7 +846,36 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
                n=N, rss=rss, tss=tss, cond=float(max(ev) / max(min(ev), 1e-300)), flags=flags,
                cv_rmse=np.sqrt(cv / N),
                n_eff=min(float(N), 2 * opts.cutoff * duration) if opts.cutoff > 0 else float(N),
-               blocks=block_count(samples, opts.block))
+               blocks=block_count(samples, opts.block), held=held, combinations=combos,
+               constrained=constrained, rank=T.shape[1])
+
+
+def misfit_report(model: DampingModel, names: list[str], theta: FloatArray, pts: FloatArray,
+                  on_data: NDArray[np.bool_], cov: FloatArray, free: NDArray[np.bool_]
+                  ) -> dict[str, str]:
+    """Name the parameters that make the unconstrained ``theta`` generate energy.
+
+    At each violating velocity (``pts``, worst first) the parameter with the most negative
+    share θ_j g_j(ν) of νᵀD(ν)ν is the one the constraint holds; the first point that names
+    it gives the reason.
+    """
+    z = float(stats.norm.ppf(0.975))
+    std = np.sqrt(np.abs(np.diag(cov)))
+    share = power_rows(model, pts) * theta  # (n, p): θ_j g_j(ν)
+    share[:, ~free] = 0.0
+    out: dict[str, str] = {}
+    for k in range(len(pts)):
+        j = int(np.argmin(share[k]))
+        if share[k, j] >= 0 or names[j] in out:
+            continue
+        where = ", ".join(f"{n} {v:+.2g}" for n, v in zip(DOF_NAMES, pts[k], strict=True)
+                          if v) or "rest"
+        out[names[j]] = (
+            f"held by dissipativity: unconstrained {names[j]} = {theta[j]:.4g} ± "
+            f"{z * std[j]:.2g} gives νᵀD(ν)ν = {share[k].sum():.3g} W < 0 at ν = ({where}"
+            f"{', a sample' if on_data[k] else ', flown envelope'}); a structural misfit: the "
+            "terms lack what the data need (run the structure search, identify --select)")
+    return out
 
 
 def total_sum_of_squares(ne: NormalEquations) -> FloatArray:
@@ -564,9 +901,12 @@ def block_count(samples: Samples, block: float) -> int:
 
 def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
                       theta: FloatArray, weights: FloatArray, ne: NormalEquations,
-                      free: NDArray[np.bool_], opts: FitOptions, chunk: int = CHUNK
-                      ) -> FloatArray:
-    """Block sandwich covariance A⁻¹ (Σ_b s_b s_bᵀ) A⁻¹ of the free parameters.
+                      free: NDArray[np.bool_], basis: FloatArray, opts: FitOptions,
+                      chunk: int = CHUNK) -> FloatArray:
+    """Block sandwich covariance A⁺ (Σ_b s_b s_bᵀ) A⁺ of the free parameters.
+
+    A⁺ = T (Tᵀ A T)⁻¹ Tᵀ is the inverse of A over the directions ``basis`` (T, shape
+    (p_free, r)) spans, 0 in those the data do not determine (:func:`determined_directions`).
 
     s_b = Σ_{n ∈ block b} Σ_i w_i Φ_{n,i}ᵀ r_{n,i} is the weighted score of a block of
     ``opts.block`` seconds; summing within blocks makes the estimate robust to residuals
@@ -588,20 +928,21 @@ def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
         np.add.at(S, block_idx[sl], g)
     B = len(S)
     meat = S.T @ S * (B / max(B - 1, 1))
-    Ainv = linalg.inv(Af)
+    Ainv = basis @ linalg.inv(basis.T @ Af @ basis) @ basis.T
     cov[np.ix_(free, free)] = Ainv @ meat @ Ainv
     return cov
 
 
 def bias_covariance(samples: Samples, model: DampingModel, body: RigidBody,
                     theta: FloatArray, weights: FloatArray, free: NDArray[np.bool_],
-                    opts: FitOptions, chunk: int = CHUNK) -> FloatArray:
+                    basis: FloatArray, opts: FitOptions, chunk: int = CHUNK) -> FloatArray:
     """Covariance of θ caused by unknown constant sensor biases (the error budget).
 
     For each axis k of the gyro (σ = ``opts.gyro_bias``) and of the DVL (``opts.dvl_bias``)
     the data are refitted with ν offset by σ e_k; the change Δθ_k is one standard deviation
     of the error that bias causes, and Σ_k Δθ_k Δθ_kᵀ is the covariance (biases independent).
-    Such errors are constant over the record, so the residuals cannot reveal them.
+    Such errors are constant over the record, so the residuals cannot reveal them. The
+    refits estimate the directions ``basis`` spans (:func:`determined_directions`).
     """
     p = model.n_params
     cov = np.zeros((p, p))
@@ -624,7 +965,7 @@ def bias_covariance(samples: Samples, model: DampingModel, body: RigidBody,
                                          offset=offset, decimate=True):
             A += np.einsum("nip,niq,i->pq", Phi, Phi, weights)
             b += np.einsum("nip,ni,i->p", Phi, y, weights)
-        return _solve(A, b, free, theta)
+        return _solve(A, b, free, theta, basis=basis)
 
     base = theta if data is samples else refit(None)
     for k in np.flatnonzero(sigma > 0):

@@ -108,7 +108,7 @@ def test_estimate_matches_batch_on_the_same_samples(pipeline: dict[str, Any]) ->
     v = load_vehicle("bluerov2_heavy")
     s = to_samples(est.samples_log, 50.0)
     f = fit(s, est.model, v.body, prior=est.nominal)
-    scale = parameter_scale(accumulate(s, est.model, v.body, cutoff=2.0), f.theta, est.nominal)
+    scale = parameter_scale(accumulate(s, est.model, v.body, cutoff=2.0), f.theta)
     rows = []
     for j, name in enumerate(est.names):
         rls, batch = float(est.theta[j]), float(f.theta[j])
