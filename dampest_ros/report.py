@@ -127,8 +127,11 @@ def _acf_figure(w: validate.Whiteness, path: Path) -> str:
     return _save(fig, path)
 
 
-def _coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray, flags: Mapping[str, str],
+def _coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray,
+                 held: NDArray[np.bool_], identified: NDArray[np.bool_],
                  prior: FloatArray | None, truth: FloatArray | None, path: Path) -> str:
+    """One panel per parameter: estimate with its 95 % interval, prior, truth; a parameter
+    held at its prior shows no estimate, one the data do not determine has a red title."""
     nrows, ncols = _grid(len(names), 6)
     fig = Figure(figsize=(13, 1.9 * nrows + 0.8))
     axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
@@ -137,14 +140,13 @@ def _coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray, flags: M
             ax.set_visible(False)
             continue
         name = names[j]
-        flagged = name in flags
-        if not flagged and np.all(np.isfinite(ci[j])):
+        if not held[j] and np.all(np.isfinite(ci[j])):
             ax.errorbar([0], [est[j]], yerr=[[est[j] - ci[j, 0]], [ci[j, 1] - est[j]]],
                         fmt="o", color="tab:blue", capsize=4, label="estimate, 95 %")
-        elif not flagged:
+        elif not held[j]:
             ax.plot([0], [est[j]], "o", color="tab:blue", label="estimate")
         else:
-            ax.text(0.5, 0.5, "not identified", transform=ax.transAxes, ha="center",
+            ax.text(0.5, 0.5, "held at prior", transform=ax.transAxes, ha="center",
                     va="center", color="tab:red", fontsize=9)
         if prior is not None and np.isfinite(prior[j]):
             ax.plot([-0.3], [prior[j]], "s", color="0.4", label="prior")
@@ -154,7 +156,7 @@ def _coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray, flags: M
         ax.set_xticks([])
         if not ax.lines and not ax.collections:
             ax.set_yticks([])  # nothing to show: no meaningless 0…1 scale
-        ax.set_title(name, fontsize=10, color="tab:red" if flagged else "k")
+        ax.set_title(name, fontsize=10, color="k" if identified[j] else "tab:red")
         ax.grid(alpha=0.3, axis="y")
         ax.tick_params(labelsize=8)
     handles, labels = [], []
@@ -315,8 +317,8 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
         "force": _force_figure(samples.t[seg] - t0, y[seg], y_hat[seg], out / "force.png"),
         "spectrum": _spectrum_figure(f, p_y, p_r, cutoff, out / "residual_spectrum.png"),
         "acf": _acf_figure(white, out / "residual_acf.png"),
-        "coef": _coef_figure(names, theta, fit.interval(), fit.flags, prior_v, truth_v,
-                             out / "coefficients.png"),
+        "coef": _coef_figure(names, theta, fit.interval(), fit.held, fit.identified, prior_v,
+                             truth_v, out / "coefficients.png"),
         "free_run": _free_run_figure(samples.t[rows] - float(samples.t[rows.start]),
                                      samples.nu[rows], sim, out / "free_run.png"),
         "coverage": _coverage_figure(samples.nu, out / "coverage.png"),
@@ -331,10 +333,10 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
     header.append("note")
     coef_rows, coef_cls = [], []
     for j, name in enumerate(names):
-        flagged = name in fit.flags
+        flagged = not fit.identified[j]
         row = [html.escape(name)]
-        if flagged:
-            row += ["not identified", "", "", ""]
+        if fit.held[j]:
+            row += ["held at prior", "", "", ""]
         else:
             row += [_num(theta[j]), _num(std[j], 3), _num(ci[j, 0]), _num(ci[j, 1])]
         row.append(_num(prior_v[j]) if prior_v is not None else "—")
@@ -343,8 +345,8 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
             inside = (not flagged and np.isfinite(truth_v[j])
                       and ci[j, 0] <= truth_v[j] <= ci[j, 1])
             row.append("" if flagged else ("yes" if inside else "<b>no</b>"))
-        row.append(f'<span class="reason">{html.escape(fit.flags[name])}</span>'
-                   if flagged else "")
+        why = fit.flags.get(name) or fit.constrained.get(name, "")
+        row.append(f'<span class="reason">{html.escape(why)}</span>')
         coef_rows.append(row)
         coef_cls.append("flag" if flagged else "")
 
@@ -373,7 +375,10 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
         ["condition number (scaled)", _num(fit.cond, 3)],
         ["effective samples n_eff", _num(fit.n_eff, 4)],
         ["AIC / BIC", f"{_num(fit.aic, 6)} / {_num(fit.bic, 6)}"],
-        ["parameters not identified", str(len(fit.flags)) + " of " + str(len(names))],
+        ["parameters not identified",
+         f"{int(np.sum(~fit.identified))} of {len(names)} ({int(np.sum(fit.held))} held at "
+         "the prior)"],
+        *[["identified combination", html.escape(str(c))] for c in fit.combinations],
         ["energy consistency νᵀD(ν)ν ≥ 0",
          f"{neg_share:.2%} of samples negative, minimum {_num(min_power, 3)} W"],
     ])

@@ -27,8 +27,10 @@ def test_report_files_names_and_pngs(tmp_path: Path) -> None:
                       np.zeros(len(traj), dtype=np.int64))
     prior = 1.2 * vehicle.theta
     result = fit(samples, vehicle.damping, vehicle.body, prior=prior)
-    # one parameter marked unidentifiable: shown with its reason, not as a number
-    result = dataclasses.replace(result, flags={"K_pp": "low speed only: test reason"})
+    # one parameter held at its prior: shown with its reason, not as a number
+    held = np.array([n == "K_pp" for n in result.names])
+    result = dataclasses.replace(result, flags={"K_pp": "low speed only: test reason"},
+                                 held=held)
     truth = dict(zip(vehicle.damping.parameter_names, vehicle.theta, strict=True))
 
     out = tmp_path / "report"
@@ -43,7 +45,7 @@ def test_report_files_names_and_pngs(tmp_path: Path) -> None:
     assert "BlueROV2 Heavy &lt;test&gt;" in text and "sim/b60.csv" in text
     assert re.search(r"generated \d{4}-\d\d-\d\d \d\d:\d\d:\d\d UTC", text)
     row = next(r for r in text.split("<tr") if "<td>K_pp</td>" in r)
-    assert "not identified" in row and "test reason" in row
+    assert "held at prior" in row and "test reason" in row
     pngs = re.findall(r'<img src="([^"]+)"', text)
     assert len(pngs) == 6
     for name in pngs:

@@ -141,6 +141,10 @@ def run(args: argparse.Namespace) -> int:
                   float(result.cv_rmse[i])) for i in range(6)]))
     for name, why in result.flags.items():
         print(f"not identified: {name}: {why}")
+    for combination in result.combinations:
+        print(f"identified combination: {combination}")
+    for name, why in result.constrained.items():
+        print(f"constrained: {name}: {why}")
     if not args.select:
         print(misfit_check(samples, model, vehicle.body, args), end="")
     scores = None
@@ -282,16 +286,27 @@ def misfit_check(samples: Samples, model: DampingModel, body: RigidBody,
 
 
 def report_table(result: Fit, prior: np.ndarray) -> str:
-    """Parameter table: estimate, std, 95 % interval, prior; unidentified ones marked."""
+    """Parameter table: estimate, std, 95 % interval, prior and what the data determine.
+
+    A parameter held at its prior shows no estimate ("held at prior"); one that is only part
+    of a combination, poorly determined or held by the dissipativity constraint shows its
+    value with the status (not identified); the reasons follow the table."""
     ci = result.interval()
-    rows = []
+    members = {n for c in result.combinations for n in c.names}
+    rows: list[tuple[str | float, ...]] = []
     for j, name in enumerate(result.names):
-        if name in result.flags:
-            rows.append((name, "not identified", "", "", "", float(prior[j])))
-        else:
-            rows.append((name, float(result.theta[j]), float(result.std[j]), float(ci[j, 0]),
-                         float(ci[j, 1]), float(prior[j])))
-    return table(("parameter", "estimate", "std", "95% low", "95% high", "prior"), rows)
+        if result.held[j]:
+            rows.append((name, "held at prior", "", "", "", float(prior[j]),
+                         "not identified"))
+            continue
+        status = ("identified" if result.identified[j] else
+                  "constrained, not identified" if name in result.constrained else
+                  "combination only, not identified" if name in members else
+                  "poorly determined, not identified")
+        rows.append((name, float(result.theta[j]), float(result.std[j]), float(ci[j, 0]),
+                     float(ci[j, 1]), float(prior[j]), status))
+    return table(("parameter", "estimate", "std", "95% low", "95% high", "prior", "status"),
+                 rows)
 
 
 def heldout_scores(held: Samples, model: DampingModel, body: RigidBody, theta: np.ndarray,

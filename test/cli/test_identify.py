@@ -183,3 +183,24 @@ def test_rls_forgetting_factor_and_unsupported_inputs(
         assert main(["identify", *argv, "--vehicle", "bluerov2_heavy", "--method",
                      "rls"]) == 2
         assert needle in capsys.readouterr().err
+
+
+def test_table_says_what_the_data_determine_on_foreign_physics(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """MuJoCo's torpedo (120 s, protocol B, seed 1) with the preset's linear + quadratic
+    terms: the best fit of that structure makes X_u < 0 (energy generated in slow surge); the
+    table marks it constrained, the line after it says structural misfit and what to run, and
+    every row carries its status; nothing is held at the prior, as every column is excited."""
+    bag = tmp_path / "bag"
+    assert main(["simulate", "--backend", "mujoco", "--vehicle", "torpedo_auv", "--protocol",
+                 "B", "--duration", "120", "--seed", "1", "--out", str(bag)]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(bag), "--vehicle", "torpedo_auv"]) == 0
+    printed = capsys.readouterr().out
+    rows = {x.split()[0]: x for x in printed.split("status\n")[1].split("\n\n")[0]
+            .splitlines()[1:]}
+    assert len(rows) == 12 and all(x.endswith("identified") for x in rows.values())
+    assert "constrained, not identified" in rows["X_u"]
+    assert not any("held at prior" in x for x in rows.values())
+    line = next(x for x in printed.splitlines() if x.startswith("constrained: X_u:"))
+    assert "structural misfit" in line and "--select" in line
