@@ -100,15 +100,18 @@ def _joints(path: str, args: argparse.Namespace, vehicle: Vehicle) -> JointSerie
 
 
 def run(args: argparse.Namespace) -> int:
-    """Load, compare, localise, name the missing effects, print and write the report."""
+    """Load, compare, localise, name the missing effects, print and write the report.
+
+    The model file (``--out``) and the report (``--report``) are written whatever the free
+    run does: a run that diverges or fails is explained in them and on the terminal."""
     t0 = time.perf_counter()
+    if args.max_steps < 0:
+        raise ConfigError("--max-steps", f"must be ≥ 0, got {args.max_steps}")
     vehicle = load_vehicle(args.vehicle)
     mf, model, body = load_model_for(args.model, vehicle)
+    cands = gap.library([c.strip() for c in str(args.candidates).split(",") if c.strip()])
     samples = load_samples(args.input, vehicle, args)
     joints = _joints(args.input, args, vehicle)
-    cands = gap.library([c.strip() for c in str(args.candidates).split(",") if c.strip()])
-    if args.max_steps < 0:
-        raise ConfigError("--max-steps", "must be ≥ 0")
     data = gap.GapData(samples, model, mf.theta, body, vehicle.thrusters, joints,
                        cutoff=args.cutoff, split=args.split)
     seconds = len(samples) / samples.rate
@@ -132,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     for key, why in result.skipped.items():
         print(f"  skipped {key}: {why}")
     print()
-    print(steps_table(result) if result.steps else "no effect named.")
+    print(steps_table(data, result) if result.steps else "no effect named.")
     print(f"\n{result.conclusion}.")
     free = gap.free_run_errors(data, result.effects)
     print()
@@ -168,29 +171,56 @@ def concentration_text(rows: list[gap.LocalRow], top: int = 3) -> str:
     return "\n".join(lines)
 
 
-def steps_table(result: gap.GapResult) -> str:
-    """The steps: effect, magnitude ± σ, held-out RMS per DOF before → after, ΔBIC."""
+def final_magnitudes(data: gap.GapData, result: gap.GapResult) -> list[str]:
+    """Per named effect, its magnitude ± σ after the final joint refit (what the model file
+    holds) and, for a damping coefficient, the model's value before → after."""
+    values = dict(zip(data.model.parameter_names, data.theta.tolist(), strict=True))
+    upd = gap.updated_model(data, result.effects)
+    after = dict(zip(upd.model.parameter_names, upd.theta.tolist(), strict=True))
+    lines = []
+    for (e, p), cov in zip(result.effects, result.covs, strict=True):
+        u = e.model_update(data, p)
+        names = [*u.get("theta", {}), *(c["name"] for c in u.get("cross", []))]
+        text = e.describe(p, cov)
+        if names:
+            text += "; in the model: " + ", ".join(
+                f"{n} {values[n]:.4g} → {after[n]:.4g}" if n in values else
+                f"{n} {after[n]:.4g} (added)" for n in names)
+        if "terms" in u:
+            text += "; written as added_mass_terms " + ", ".join(
+                f"{k}: {str(v).lower()}" for k, v in u["terms"].items())
+        lines.append(text)
+    return lines
+
+
+def steps_table(data: gap.GapData, result: gap.GapResult) -> str:
+    """The steps: effect, held-out reduction, ΔBIC; the final magnitudes ± σ; held-out RMS
+    per DOF before → after each step."""
     rows = []
     for k, st in enumerate(result.steps, 1):
         rows.append((k, st.effect.title, f"{100 * st.screen.heldout:.1f} %",
                      f"{st.bic_after - st.bic_before:.0f}"))
     head = table(("step", "effect named", "held-out reduction", "ΔBIC"), rows)
-    mags = "\n".join(f"  step {k}: {st.description}" for k, st in enumerate(result.steps, 1))
+    mags = "\n".join(f"  step {k}: {text}"
+                     for k, text in enumerate(final_magnitudes(data, result), 1))
     rms = table(("step", *(f"{f} before→after" for f in FORCE_NAMES)),
                 [(k, *(f"{st.rms_before[i]:.3g}→{st.rms_after[i]:.3g}" for i in range(6)))
                  for k, st in enumerate(result.steps, 1)])
-    return (head + "\n\nmagnitudes (± 1σ, block-robust):\n" + mags
+    return (head + "\n\nmagnitudes after the final joint refit (± 1σ, block-robust; "
+            "as written to the model):\n" + mags
             + "\n\nheld-out residual RMS per DOF (N, N·m):\n" + rms)
 
 
 def free_run_text(free: dict[str, Any] | str) -> str:
-    """The free-run comparison, or why it was skipped."""
+    """The free-run comparison (with why a run diverged), or why it was skipped."""
     if isinstance(free, str):
         return free
     text = (f"free run over {free['seconds']:.0f} s (velocity RMSE, m/s and rad/s):\n"
             + table(("model", *DOF_NAMES),
                     [("believed", *map(float, free["nominal"])),
                      ("with the named effects", *map(float, free["final"]))]))
+    for name, why in free["notes"].items():
+        text += f"\nthe {name} model {why}"
     if free["omitted"]:
         text += "\n(not representable in the free run: " + "; ".join(free["omitted"]) + ")"
     return text
@@ -203,37 +233,33 @@ def _param_key(key: str) -> str:
 def final_model(data: gap.GapData, result: gap.GapResult, mf: ModelFile,
                 args: argparse.Namespace) -> dict[str, Any]:
     """Names, θ, std, M, damping model and extra entries of the model with the effects."""
-    model, theta, M, _ = gap.updated_model(data, result.effects)
+    upd = gap.updated_model(data, result.effects)
     std = dict(zip(mf.parameter_names, mf.theta_std.tolist(), strict=True))
     effects: dict[str, Any] = {}
+    mem = upd.model.term("freq")
     for (e, p), cov in zip(result.effects, result.covs, strict=True):
         s = np.sqrt(np.abs(np.diag(cov)))
-        upd = e.model_update(data, p)
-        for name in upd.get("theta", {}):
+        u = e.model_update(data, p)
+        for name in [*u.get("theta", {}), *(c["name"] for c in u.get("cross", []))]:
             std[name] = float(s[0])
-        for c in upd.get("cross", []):
-            std[c["name"]] = float(s[0])
+        if isinstance(e, gap.Memory) and mem is not None:
+            for name, d in zip(mem.parameter_names, mem.state_dofs, strict=True):
+                if int(d) == e.dof:
+                    std[name] = float(s[0])
         entry: dict[str, Any] = {}
         for name, v, sd in zip(e.params, p, s, strict=True):
             entry[_param_key(name)] = float(v)
             entry[_param_key(name) + "_std"] = float(sd)
         entry["title"] = e.title
         effects[_param_key(e.key)] = entry
-    mem = model.term("freq")
-    if mem is not None:
-        for (e, _), cov in zip(result.effects, result.covs, strict=True):
-            if isinstance(e, gap.Memory):
-                for name, d in zip(mem.parameter_names, mem.state_dofs, strict=True):
-                    if int(d) == e.dof:
-                        std[name] = float(np.sqrt(abs(cov[0, 0])))
-    names = model.parameter_names
+    names = upd.model.parameter_names
     extra: dict[str, Any] = {
         "source": f"dampest gap {args.input} --model {args.model}",
         "gap": {"named": [e.key for e, _ in result.effects] or ["none"],
-                "conclusion": result.conclusion, **effects}}
-    return {"names": names, "theta": theta,
-            "std": np.array([std.get(n, 0.0) for n in names]), "M": M, "damping": model,
-            "M_A": M - data.body.M_RB, "added_mass_terms": data.body.added_mass_terms,
+                "conclusion": result.conclusion, **effects, **upd.extra}}
+    return {"names": names, "theta": upd.theta,
+            "std": np.array([std.get(n, 0.0) for n in names]), "M": upd.M,
+            "damping": upd.model, "M_A": upd.M_A, "added_mass_terms": upd.added_mass_terms,
             "extra": extra}
 
 
@@ -336,6 +362,8 @@ def write_report(out: Path, data: gap.GapData, result: gap.GapResult,
         parts.append(_html_table(["model", *DOF_NAMES], [
             ["believed", *(f"{x:.4g}" for x in free["nominal"])],
             ["with the named effects", *(f"{x:.4g}" for x in free["final"])]]))
+        for name, why in free["notes"].items():
+            parts.append(f"<p><b>The {html.escape(name)} model {html.escape(why)}.</b></p>")
         if free["omitted"]:
             parts.append("<p class='note'>Not representable in the free run: "
                          + html.escape("; ".join(free["omitted"])) + "</p>")
@@ -359,25 +387,29 @@ def write_report(out: Path, data: gap.GapData, result: gap.GapResult,
     parts.append("<h2>3–4. Effects named</h2>")
     if result.steps:
         srows = []
-        for k, st in enumerate(result.steps, 1):
-            srows.append([str(k), html.escape(st.effect.title), html.escape(st.description),
+        mags = final_magnitudes(data, result)
+        for k, (st, mag) in enumerate(zip(result.steps, mags, strict=True), 1):
+            srows.append([str(k), html.escape(st.effect.title), html.escape(mag),
                           *(f"{st.rms_before[i]:.3g} → {st.rms_after[i]:.3g}" for i in range(6)),
                           f"{st.bic_before:.0f} → {st.bic_after:.0f}",
                           f"{100 * st.screen.heldout:.1f} %"])
-        parts.append(_html_table(["step", "effect", "magnitude ± σ",
+        parts.append(_html_table(["step", "effect", "magnitude ± σ (final joint refit)",
                                   *(f"{f} held-out RMS" for f in FORCE_NAMES), "BIC",
                                   "held-out reduction"], srows))
         r_prev = result.r0
-        for k, st in enumerate(result.steps, 1):
+        for k, (st, mag) in enumerate(zip(result.steps, mags, strict=True), 1):
             r_after = data.r0 - gap.correction(data, result.effects[:k]) \
                 if k < len(result.steps) else result.r
             name = _residual_figure(data, r_prev, r_after,
                                     f"step {k}: {st.effect.title}", out / f"step{k}.png")
             parts.append(f"<h3>Step {k}: {html.escape(st.effect.title)}</h3>"
-                         f"<p>{html.escape(st.description)}; runner-up: "
+                         f"<p>{html.escape(mag)}; runner-up: "
                          f"{html.escape(st.runner_up)}</p><img src='{name}'>")
             r_prev = r_after
     parts.append(f"<p><b>{html.escape(result.conclusion)}.</b></p>")
+    if result.rejected:
+        parts.append("<p>Significant but rejected: " + html.escape("; ".join(
+            f"{k} ({v})" for k, v in result.rejected.items())) + "</p>")
     if result.skipped:
         parts.append("<p class='note'>Not tested: " + html.escape("; ".join(
             f"{k} ({v})" for k, v in result.skipped.items())) + "</p>")

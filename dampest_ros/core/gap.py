@@ -51,7 +51,9 @@ from dampest_ros.core.damping import (
     DampingTerm,
     cross_term,
     filter_memory,
+    linear_term,
     memory_term,
+    quadratic_term,
 )
 from dampest_ros.core.frames import matrix_from_euler
 from dampest_ros.core.measurements import JointSeries
@@ -59,8 +61,10 @@ from dampest_ros.core.preprocess import zero_phase
 from dampest_ros.core.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,
+    AddedMassTerms,
     ConfigError,
     RigidBody,
+    added_coriolis_force,
     coriolis_force,
     rigid_body_mass,
 )
@@ -253,15 +257,31 @@ class GapData:
         return out
 
     def static_force(self, nu: FloatArray) -> FloatArray:
-        """C(ν)ν + D(ν)ν of the believed model without memory states, shape (n, 6)."""
+        """C(ν)ν + D(ν)ν of the believed model without memory states, C_A acting as the
+        vehicle's added-mass switches say, shape (n, 6)."""
         z = np.zeros((nu.shape[0], self.n_states))
-        return np.asarray(coriolis_force(self.body.M, nu)
+        return np.asarray(self.body.coriolis_force(nu)
                           + self.model.force(nu, self.theta, z), dtype=float)
 
     def damping_force(self, nu: FloatArray) -> FloatArray:
         """D(ν)ν of the believed model without memory states, shape (n, 6)."""
         z = np.zeros((nu.shape[0], self.n_states))
         return self.model.force(nu, self.theta, z)
+
+    @property
+    def power_points(self) -> FloatArray:
+        """Velocities where dissipativity is checked, shape (n, 6): every 5th sample and a
+        grid over the flown envelope (per DOF its smallest, half of it, 0, half its largest
+        and its largest flown value; all 5⁶ combinations) (m/s, rad/s)."""
+        def make() -> FloatArray:
+            nu = self.samples.nu
+            lo, hi = nu.min(axis=0), nu.max(axis=0)
+            axes = np.stack([lo, lo / 2, np.zeros(6), hi / 2, hi], axis=1)
+            grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 6)
+            return np.concatenate([nu[::5], grid])
+
+        out: FloatArray = self.memo(("power_points",), make)
+        return out
 
     def theta_of(self, name: str) -> float:
         """The believed value of a damping parameter (0 when the model lacks it)."""
@@ -358,7 +378,8 @@ class Effect:
 
     def model_update(self, data: GapData, p: FloatArray) -> dict[str, Any]:
         """How the effect enters the model: ``{'theta': {name: Δ}}``, ``{'cross': [...]}``,
-        ``{'freq': [...]}``, ``{'M': ΔM (6×6)}`` or ``{'extra': {...}}``."""
+        ``{'freq': [...]}``, ``{'M': ΔM (6×6)}``, ``{'terms': {switch: bool}}`` (added-mass
+        switches) and/or ``{'extra': {...}}``."""
         return {"extra": self.magnitude(p)}
 
 
@@ -378,7 +399,10 @@ class Current(Effect):
 
     With M_A ν̇_r in the true equation and ν̇_c = −ω × Rᵀ v_c for a constant NED current,
 
-        ρ = C_A(ν_r)ν_r − C_A(ν)ν + D(ν_r)ν_r − D(ν)ν − M_A ν̇_c.
+        ρ = C_A(ν_r)ν_r − C_A(ν)ν + D(ν_r)ν_r − D(ν)ν − M_A ν̇_c,
+
+    the added-mass terms acting as the vehicle's switches say (no M_A ν̇_c without the
+    inertial term, no C_A without the Coriolis term, C_A without Munk moments without them).
 
     Horizontal by default (north, east; m/s); ``vertical`` adds the down component.
     Memory states (if the model has them) are left out of the difference.
@@ -401,10 +425,12 @@ class Current(Effect):
         nu_c = np.concatenate([vcb, np.zeros_like(vcb)], axis=1)
         nu_r = ch.nu - nu_c
         nu_c_dot = np.concatenate([-np.cross(ch.nu[:, 3:], vcb), np.zeros_like(vcb)], axis=1)
-        M_A = data.M_A
-        return np.asarray(coriolis_force(M_A, nu_r) - coriolis_force(M_A, ch.nu)
-                          + data.damping_force(nu_r) - data.damping_force(ch.nu)
-                          - nu_c_dot @ M_A.T, dtype=float)
+        b = data.body
+        out = (b.added_coriolis_force(nu_r) - b.added_coriolis_force(ch.nu)
+               + data.damping_force(nu_r) - data.damping_force(ch.nu))
+        if b.added_mass_terms.inertial:
+            out -= nu_c_dot @ data.M_A.T
+        return np.asarray(out, dtype=float)
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
         m = self.magnitude(p)
@@ -624,30 +650,99 @@ class DeadZone(Effect):
 
 
 
-class AddedMassScale(LinearEffect):
-    """True M_A = (1 + ε) × believed M_A: ρ = ε (M_A ν̇ + C_A(ν)ν)."""
+#: Ways an added-mass error can act: as the vehicle's switches say, or through one term only
+ADDED_MASS_FORMS = ("acting", "inertial", "coriolis")
 
-    key = "added_mass_scale"
+
+def _form_terms(terms: AddedMassTerms, form: str) -> AddedMassTerms:
+    """The added-mass switches of a candidate's ``form`` on a vehicle with ``terms``.
+
+    ``acting``: the vehicle's; ``inertial``: M_A ν̇ only; ``coriolis``: C_A(ν)ν only, with
+    the vehicle's Munk switch when its Coriolis term acts, else with the Munk moments (the
+    whole C_A, as gz-sim applies it).
+    """
+    if form == "acting":
+        return terms
+    if form == "inertial":
+        return AddedMassTerms(inertial=True, coriolis=False, munk=False)
+    return AddedMassTerms(inertial=False, coriolis=True,
+                          munk=terms.munk or not terms.coriolis)
+
+
+def _added_mass_force(M_A: FloatArray, terms: AddedMassTerms, ch: Chunk) -> FloatArray:
+    """M_A ν̇ (if ``terms.inertial``) + the acting part of C_A(ν)ν, shape (n, 6)."""
+    out = added_coriolis_force(M_A, terms, ch.nu)
+    if terms.inertial:
+        out = out + ch.nu_dot @ M_A.T
+    return np.asarray(out, dtype=float)
+
+
+def _form_available(terms: AddedMassTerms, form: str, acting_key: str) -> str:
+    """Why an added-mass ``form`` is not a separate candidate on a vehicle with ``terms``."""
+    t = _form_terms(terms, form)
+    if not (t.inertial or t.coriolis):
+        return "the vehicle's added-mass switches turn every added-mass effect off"
+    if form != "acting" and t == terms:
+        return f"the same as {acting_key} under the vehicle's added-mass switches"
+    return ""
+
+
+class AddedMassScale(LinearEffect):
+    """M_A scaled by (1 + ε) in the terms of ``form``: ρ = ε × (those terms of M_A).
+
+    ``acting``: the terms the vehicle's ``added_mass_terms`` switch on (M_A changes);
+    ``inertial``: ε M_A ν̇ only; ``coriolis``: ε C_A(ν)ν only. The model file has one M_A for
+    all its terms, so a one-term form is written as the nearest switch: the term acts
+    (factor [on] + ε ≥ ½) or not; the factor itself is kept under ``model.gap``. A plant
+    without the inertial term analysed with a model that has it shows ε ≈ −1 in the
+    inertial form (MuJoCo's fluid model, gz-sim's ``disable_added_mass``).
+    """
+
     family = "added_mass"
-    title = "added-mass error (all of M_A scaled)"
     params = ("epsilon",)
     units = ("",)
     steps = (0.02,)
 
+    def __init__(self, form: str = "acting") -> None:
+        if form not in ADDED_MASS_FORMS:
+            raise ConfigError("form", f"unknown added-mass form {form!r}; use one of "
+                              f"{ADDED_MASS_FORMS}")
+        self.form = form
+        self.key = "added_mass_scale" if form == "acting" else f"added_mass_{form}"
+        self.title = {"acting": "added-mass error (all of M_A scaled)",
+                      "inertial": "inertial added-mass error (M_A ν̇ scaled, C_A(ν)ν not)",
+                      "coriolis": "added-mass Coriolis error (C_A(ν)ν scaled, M_A ν̇ not)",
+                      }[form]
+
+    def available(self, data: GapData) -> str:
+        if not np.any(data.M_A):
+            return "the model has no added mass to scale"
+        return _form_available(data.body.added_mass_terms, self.form, "added_mass_scale")
+
     def columns(self, data: GapData, ch: Chunk, p: FloatArray) -> FloatArray:
-        M_A = data.M_A
-        return (ch.nu_dot @ M_A.T + coriolis_force(M_A, ch.nu))[:, :, None]
+        t = _form_terms(data.body.added_mass_terms, self.form)
+        return _added_mass_force(data.M_A, t, ch)[:, :, None]
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
+        what = {"acting": "M_A", "inertial": "M_A ν̇", "coriolis": "C_A(ν)ν"}[self.form]
         return (f"ε = {100 * float(p[0]):+.2f} ± {100 * float(np.sqrt(abs(cov[0, 0]))):.2g} % "
-                "of M_A")
+                f"of {what}")
 
     def model_update(self, data: GapData, p: FloatArray) -> dict[str, Any]:
-        return {"M": float(p[0]) * data.M_A}
+        if self.form == "acting":
+            return {"M": float(p[0]) * data.M_A}
+        terms = data.body.added_mass_terms
+        factor = float(getattr(terms, self.form)) + float(p[0])
+        on = factor >= 0.5
+        switch = {self.form: on}
+        if self.form == "coriolis":
+            switch["munk"] = on and (terms.munk or not terms.coriolis)
+        return {"terms": switch, "extra": {f"added_mass_{self.form}_factor": factor}}
 
 
 class AddedMassDof(LinearEffect):
-    """Added mass of one DOF wrong by Δm (kg or kg·m²): ρ = Δm (e_i ν̇_i + C(E_ii, ν)ν)."""
+    """Added mass of one DOF wrong by Δm (kg or kg·m²), acting as the vehicle's switches say:
+    ρ = Δm e_i ν̇_i (if inertial) + the acting part of C(Δm E_ii, ν)ν."""
 
     family = "added_mass"
     units = ("kg",)
@@ -662,10 +757,13 @@ class AddedMassDof(LinearEffect):
         self.steps = (0.5,) if dof < 3 else (0.01,)
         self.dofs = (dof,)
 
+    def available(self, data: GapData) -> str:
+        return _form_available(data.body.added_mass_terms, "acting", self.key)
+
     def columns(self, data: GapData, ch: Chunk, p: FloatArray) -> FloatArray:
         E = np.zeros((6, 6))
         E[self.dof, self.dof] = 1.0
-        return (ch.nu_dot @ E + coriolis_force(E, ch.nu))[:, :, None]
+        return _added_mass_force(E, data.body.added_mass_terms, ch)[:, :, None]
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
         return (f"Δ{self.params[0]} = {float(p[0]):+.4g} ± {float(np.sqrt(abs(cov[0, 0]))):.2g} "
@@ -819,7 +917,8 @@ class GyroBias(Effect):
     """Constant gyro bias b (rad/s, FRD): the logs hold ω + b, and the body-frame
     acceleration the preprocessing forms (Rᵀ d/dt(Rv) − ω × v) holds −b × v.
 
-    ρ = M [b × v; 0] + F(ν − [0; b]) − F(ν), F(ν) = C(ν)ν + D(ν)ν.
+    ρ = M [b × v; 0] + F(ν − [0; b]) − F(ν), F(ν) = C(ν)ν + D(ν)ν (M and C_A acting as
+    the vehicle's added-mass switches say).
     """
 
     key = "gyro_bias"
@@ -834,7 +933,7 @@ class GyroBias(Effect):
         beta = np.concatenate([np.zeros(3), p])
         acc = np.zeros((len(ch), 6))
         acc[:, :3] = np.cross(p, ch.nu[:, :3])
-        return np.asarray(acc @ data.body.M.T + data.static_force(ch.nu - beta)
+        return np.asarray(acc @ data.body.M_inertial.T + data.static_force(ch.nu - beta)
                           - data.static_force(ch.nu), dtype=float)
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
@@ -854,7 +953,9 @@ class DvlBias(Effect):
     derivative carry β = Rᵀ LP_c(R b) and β̇ = Rᵀ d/dt LP_c(R b) − ω × β (both → b and 0
     when the attitude changes slowly):
 
-        ρ = −M [β̇; 0] + F(ν − [β; 0]) − F(ν),   F(ν) = C(ν)ν + D(ν)ν.
+        ρ = −M [β̇; 0] + F(ν − [β; 0]) − F(ν),   F(ν) = C(ν)ν + D(ν)ν
+
+    (M and C_A acting as the vehicle's added-mass switches say).
     """
 
     key = "dvl_bias"
@@ -873,7 +974,7 @@ class DvlBias(Effect):
         beta_dot = np.einsum("nji,nj->ni", ch.R, lp_dot) - np.cross(ch.nu[:, 3:], beta)
         acc = np.concatenate([beta_dot, np.zeros_like(beta)], axis=1)
         shift = np.concatenate([beta, np.zeros_like(beta)], axis=1)
-        return np.asarray(-acc @ data.body.M.T + data.static_force(ch.nu - shift)
+        return np.asarray(-acc @ data.body.M_inertial.T + data.static_force(ch.nu - shift)
                           - data.static_force(ch.nu), dtype=float)
 
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
@@ -900,7 +1001,8 @@ def library(names: Sequence[str] | None = None) -> list[Effect]:
     list of Effect
     """
     effects: list[Effect] = [Current(), Buoyancy(), CGOffset(), ThrustGain(), DeadZone(),
-                             Delay(), AddedMassScale()]
+                             Delay()]
+    effects += [AddedMassScale(form) for form in ADDED_MASS_FORMS]
     effects += [AddedMassDof(i) for i in range(6)]
     effects += [Coefficient(i, q) for i in range(6) for q in (False, True)]
     effects += [Cross(CrossSpec.from_dict(c)) for c in DEFAULT_CROSS]
@@ -1031,6 +1133,8 @@ class GapResult:
     skipped : dict of str to str
         Candidates that could not be tested, with the reason.
     conclusion : str
+    rejected : dict of str to str
+        Significant candidates that were not added, with the reason (:func:`rejection`).
     """
 
     steps: list[Step]
@@ -1041,6 +1145,7 @@ class GapResult:
     screens: list[list[Screen]] = field(default_factory=list)
     skipped: dict[str, str] = field(default_factory=dict)
     conclusion: str = NO_FURTHER
+    rejected: dict[str, str] = field(default_factory=dict)
 
     @property
     def named(self) -> list[str]:
@@ -1065,6 +1170,9 @@ class GapOptions:
         force scale: effects far below the force level are real but do not matter (e.g. the
         drift of a gyro's bias within its specification).
     max_steps : int
+    max_tries : int
+        Significant candidates tried per round before the search stops (each is refitted
+        and may be rejected, :func:`rejection`).
     refit_nfev : int
         Function evaluations of the exact refit.
     """
@@ -1074,6 +1182,7 @@ class GapOptions:
     min_bic: float = 10.0
     min_relevance: float = 0.0025
     max_steps: int = 6
+    max_tries: int = 6
     refit_nfev: int = 30
 
 
@@ -1278,10 +1387,13 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
     """Name the missing effects one at a time until none is significant.
 
     Each round: weights 1/σ_i² from the current residual on the training part; every
-    candidate not yet added is screened (:func:`screen`); the significant one with the
-    largest held-out log-likelihood gain, less ½ log n_eff per unknown, is added; all added
-    effects are refitted jointly on their exact models (:func:`refit`); the held-out RMS per
-    DOF before and after and the training BIC are recorded.
+    candidate not yet added (nor rejected) is screened (:func:`screen`); the significant ones
+    are tried in order of their held-out log-likelihood gain, less ½ log n_eff per unknown:
+    all added effects and the candidate are refitted jointly on their exact models
+    (:func:`refit`), and the candidate is added unless :func:`rejection` finds a reason
+    (a DOF's held-out residual grows, M would not be positive definite, D(ν) would generate
+    energy), in which case the next one is tried (at most ``options.max_tries`` per round).
+    The held-out RMS per DOF before and after and the training BIC are recorded.
 
     Parameters
     ----------
@@ -1290,7 +1402,7 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
         Default: :func:`library`.
     options : GapOptions, optional
     progress : callable, optional
-        Receives one line of text per round.
+        Receives one line of text per step and per rejected candidate.
 
     Returns
     -------
@@ -1304,6 +1416,7 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
     covs: list[FloatArray] = []
     steps: list[Step] = []
     screens: list[list[Screen]] = []
+    rejected: dict[str, str] = {}
     r = data.r0.copy()
     tr, te = data.train, data.test
     n_tr = float(tr.sum())
@@ -1311,33 +1424,108 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
     conclusion = NO_FURTHER
     while True:
         w = _weights(r, tr)
-        round_ = [screen(data, e, r, w, opts) for e in cands
-                  if e.key not in {a.key for a, _ in added}]
+        done = {a.key for a, _ in added} | set(rejected)
+        round_ = [screen(data, e, r, w, opts) for e in cands if e.key not in done]
         round_.sort(key=lambda s: -s.score(data.n_eff_test))
         screens.append(round_)
         ok = [s for s in round_ if s.significant]
-        if not ok:
-            break
-        if len(steps) >= opts.max_steps:
+        if ok and len(steps) >= opts.max_steps:
             conclusion = (f"stopped after --max-steps {opts.max_steps}; "
                           f"{ok[0].effect.title} is still significant")
             break
-        best = ok[0]
+        chosen = None
+        for cand in ok[:opts.max_tries]:
+            trial = [*added, (cand.effect, cand.p)]
+            ps, cs = refit(data, trial, w, opts.refit_nfev)
+            new = [(e, p) for (e, _), p in zip(trial, ps, strict=True)]
+            r_new = data.r0 - correction(data, new)
+            why = rejection(data, new, r, r_new, cand.effect.k)
+            if not why:
+                chosen = cand, new, cs, r_new
+                break
+            rejected[cand.effect.key] = why
+            if progress:
+                progress(f"rejected: {cand.effect.title}: {why}")
+        if chosen is None:
+            break
+        best, new, cs, r_new = chosen
         if progress:
             progress(f"step {len(steps) + 1}: {best.effect.title} (held-out −"
                      f"{100 * best.heldout:.1f} %, ΔBIC {best.dbic:.0f})")
-        trial = [*added, (best.effect, best.p)]
-        ps, cs = refit(data, trial, w, opts.refit_nfev)
-        new = [(e, p) for (e, _), p in zip(trial, ps, strict=True)]
-        r_new = data.r0 - correction(data, new)
         bic_before = _bic(np.sum(r[tr] ** 2, axis=0), n_tr, data.n_eff_train, k_total)
         k_total += best.effect.k
         bic_after = _bic(np.sum(r_new[tr] ** 2, axis=0), n_tr, data.n_eff_train, k_total)
         runner = next((s.effect.title for s in round_ if s is not best), "")
-        steps.append(Step(best.effect, best, ps[-1], cs[-1], _rms(r, te), _rms(r_new, te),
+        steps.append(Step(best.effect, best, new[-1][1], cs[-1], _rms(r, te), _rms(r_new, te),
                           bic_before, bic_after, runner))
         added, covs, r = new, cs, r_new
-    return GapResult(steps, added, covs, data.r0, r, screens, skipped, conclusion)
+    return GapResult(steps, added, covs, data.r0, r, screens, skipped, conclusion, rejected)
+
+
+def rejection(data: GapData, effects: Sequence[tuple[Effect, FloatArray]], r_before: FloatArray,
+              r_after: FloatArray, k: int) -> str:
+    """Why the model with ``effects`` (the last one new) must not be accepted; empty if it may.
+
+    Reasons, in this order:
+
+    - a DOF's held-out residual grows: its mean square rises by more than the
+      4 k / n_eff,train an effect with k unknowns fitted to noise alone is expected to add
+      (an effect that is there lowers the residual of every DOF it acts on; one that trades
+      a DOF against another describes a modelling error, not itself);
+    - the updated M_RB + M_A is not symmetric positive definite (or M_A not positive
+      semi-definite);
+    - the updated D(ν) generates energy: νᵀD(ν)ν below the believed model's smallest value
+      (and below 0) on the data or on a grid over the flown envelope
+      (:meth:`GapData.power_points`), or a fluid-memory gain c < 0 (an active kernel).
+
+    Parameters
+    ----------
+    data : GapData
+    effects : sequence of (Effect, ndarray)
+    r_before, r_after : ndarray, shape (N, 6)
+        Residual before and after the step (N, N·m).
+    k : int
+        Unknowns of the new effect.
+    """
+    te = data.test
+    ms0 = np.mean(r_before[te] ** 2, axis=0)
+    ms1 = np.mean(r_after[te] ** 2, axis=0)
+    worse = ms1 > ms0 * (1.0 + 4.0 * k / max(data.n_eff_train, 1.0))
+    if worse.any():
+        i = int(np.argmax(np.where(worse, ms1 / np.maximum(ms0, 1e-300), 0.0)))
+        return (f"the held-out residual of {FORCE_NAMES[i]} grows (RMS "
+                f"{np.sqrt(ms0[i]):.3g} → {np.sqrt(ms1[i]):.3g} {FORCE_UNITS[i]})")
+    upd = updated_model(data, effects)
+    try:
+        upd.body(data)
+    except ConfigError as exc:
+        return f"the mass matrix would be invalid: {exc.field} {exc.reason}"
+    return dissipation_violation(data, upd.model, upd.theta)
+
+
+def dissipation_violation(data: GapData, model: DampingModel, theta: FloatArray) -> str:
+    """Where ``model`` with ``theta`` generates energy and the believed model does not;
+    empty if nowhere.
+
+    νᵀD(ν)ν (static terms, W) is evaluated on :meth:`GapData.power_points`; the bound is the
+    believed model's smallest value there when that is negative, else 0 (less 1e-9 of the
+    believed model's largest |νᵀD(ν)ν| for rounding). Fluid-memory gains must be ≥ 0 (or not
+    below the believed model's smallest).
+    """
+    pts = data.power_points
+    P0 = data.model.dissipation(pts, data.theta)
+    P = model.dissipation(pts, theta)
+    floor = min(float(P0.min()), 0.0) - 1e-9 * max(float(np.abs(P0).max()), 1.0)
+    if float(P.min()) < floor:
+        j = int(np.argmin(P))
+        nu = ", ".join(f"{n} {v:+.2g}" for n, v in zip(DOF_NAMES, pts[j], strict=True) if v)
+        return (f"D(ν) would generate energy: νᵀD(ν)ν = {float(P[j]):.3g} W at ν = "
+                f"({nu or 'rest'})")
+    c0, c = data.model.memory_gain(data.theta), model.memory_gain(theta)
+    c_floor = min(float(c0.min()) if c0.size else 0.0, 0.0)
+    if c.size and float(c.min()) < c_floor:
+        return f"a fluid-memory gain c = {float(c.min()):.3g} < 0 would generate energy"
+    return ""
 
 
 # --- localisation -----------------------------------------------------------------------------
@@ -1508,78 +1696,153 @@ def concentration(rows: Sequence[LocalRow], top: int = 3) -> list[tuple[int, str
 # --- the model with the effects ------------------------------------------------------------
 
 
-def updated_model(data: GapData, effects: Sequence[tuple[Effect, FloatArray]]
-                  ) -> tuple[DampingModel, FloatArray, FloatArray, dict[str, Any]]:
-    """The believed model with the named effects added.
+@dataclass
+class UpdatedModel:
+    """The believed model with named effects added (:func:`updated_model`).
 
-    Damping coefficients change θ (a coefficient the model lacks is added to its term),
-    cross-coupling and memory become terms, added-mass errors change M; every other effect
-    (current, buoyancy, CG, thrusters, delay, sensor bias) is returned in ``extra``.
-
-    Returns
-    -------
+    Attributes
+    ----------
     model : DampingModel
     theta : ndarray, shape (p',)
     M : ndarray, shape (6, 6)
+        M_RB + M_A (kg, kg·m, kg·m²).
+    M_A : ndarray, shape (6, 6)
+        Its added mass.
+    added_mass_terms : AddedMassTerms
+        Which effects of M_A act.
     extra : dict
+        The effects that are not part of the damping or the mass (current, buoyancy, …).
     """
-    from dampest_ros.core.damping import linear_term, quadratic_term
 
+    model: DampingModel
+    theta: FloatArray
+    M: FloatArray
+    M_A: FloatArray
+    added_mass_terms: AddedMassTerms
+    extra: dict[str, Any]
+
+    def body(self, data: GapData) -> RigidBody:
+        """The believed rigid body with this M_A and these switches (ConfigError when M_A is
+        not symmetric positive semi-definite or M not positive definite)."""
+        b = data.body
+        return RigidBody(b.mass, b.inertia, b.r_g, b.r_b, b.volume, self.M_A, b.rho, b.gravity,
+                         self.added_mass_terms)
+
+
+def _with_bases(old: DampingTerm | None, new: DampingTerm) -> DampingTerm:
+    """``old`` (if any) with the bases of ``new`` appended."""
+    return DampingTerm(new.kind, (old or new).meaning, (old.bases if old else []) + new.bases)
+
+
+def updated_model(data: GapData, effects: Sequence[tuple[Effect, FloatArray]]) -> UpdatedModel:
+    """The believed model with the named effects added.
+
+    Damping coefficients change θ: a coefficient or cross-coupling the model already has
+    (by name, in any of its terms) is updated by the effect's Δ; one it lacks is added to its
+    term. Memory becomes a state (a state of the same DOF and rate is updated); added-mass
+    errors change M or the added-mass switches; every other effect (current, buoyancy, CG,
+    thrusters, delay, sensor bias) is returned in ``extra``.
+
+    Returns
+    -------
+    UpdatedModel
+    """
     values = dict(zip(data.model.parameter_names, data.theta.tolist(), strict=True))
     terms: dict[str, DampingTerm] = {t.kind: t for t in data.model.terms}
     M = data.body.M.copy()
+    switches = data.body.added_mass_terms.as_dict()
     extra: dict[str, Any] = {}
-    cross: list[dict[str, Any]] = []
-    freq: list[dict[str, Any]] = []
+    freq: dict[tuple[int, float], float] = {}
+    old = terms.get("freq")
+    if old is not None:
+        freq = {(int(d), float(r)): values[n] for d, r, n in
+                zip(old.state_dofs, old.rates, old.parameter_names, strict=True)}
     for e, p in effects:
         u = e.model_update(data, p)
         for name, d in u.get("theta", {}).items():
             if name not in values:
-                kind = "quadratic" if name.split("_")[1][:1] * 2 == name.split("_")[1] \
-                    else "linear"
-                old = terms.get(kind)
-                dofs = [int(np.argmax(np.abs(np.diag(b.B)))) for b in (old.bases if old else [])
-                        if np.any(np.diag(b.B))]
                 dof = FORCE_NAMES.index(name.split("_")[0])
-                if kind == "linear":
-                    off = [(int(np.argwhere(b.B)[0][0]), int(np.argwhere(b.B)[0][1]))
-                           for b in (old.bases if old else []) if not np.any(np.diag(b.B))]
-                    terms[kind] = linear_term(sorted({*dofs, dof}), off)
-                else:
-                    terms[kind] = quadratic_term(sorted({*dofs, dof}))
+                quad = name.split("_")[1] == DOF_NAMES[dof] * 2
+                kind = "quadratic" if quad else "linear"
+                terms[kind] = _with_bases(terms.get(kind), quadratic_term([dof]) if quad
+                                          else linear_term([dof]))
             values[name] = values.get(name, 0.0) + float(d)
-        cross += u.get("cross", [])
-        freq += u.get("freq", [])
+        for c in u.get("cross", []):
+            if c["name"] not in values:
+                terms["cross"] = _with_bases(terms.get("cross"),
+                                             cross_term([CrossSpec.from_dict(c)]))
+            values[c["name"]] = values.get(c["name"], 0.0) + float(c["value"])
+        for f in u.get("freq", []):
+            key = (DOF_NAMES.index(f["dof"]), float(f["rate"]))
+            freq[key] = freq.get(key, 0.0) + float(f["c"])
         if "M" in u:
             M = M + np.asarray(u["M"], dtype=float)
+        switches.update(u.get("terms", {}))
         extra.update(u.get("extra", {}))
-    if cross:
-        specs = [CrossSpec.from_dict(c) for c in cross]
-        new = cross_term(specs)
-        old = terms.get("cross")
-        terms["cross"] = DampingTerm("cross", new.meaning, (old.bases if old else []) + new.bases)
-        values.update({s.label: float(c["value"]) + values.get(s.label, 0.0)
-                       for s, c in zip(specs, cross, strict=True)})
     if freq:
-        old = terms.get("freq")
-        items = ([{"dof": DOF_NAMES[int(d)], "rate": float(r), "c": values[n]}
-                  for d, r, n in zip(old.state_dofs, old.rates, old.parameter_names,
-                                     strict=True)] if old else []) + freq
         rates: dict[str | int, list[float]] = {}
-        for it in items:
-            rates.setdefault(str(it["dof"]), []).append(float(it["rate"]))
+        for d, r in freq:
+            rates.setdefault(d, []).append(r)
         mem = memory_term(rates)
-        by = {(str(it["dof"]), float(it["rate"])): float(it["c"]) for it in items}
         terms["freq"] = mem
-        values.update({n: by[(DOF_NAMES[int(d)], float(r))] for n, d, r in
+        values.update({n: freq[(int(d), float(r))] for n, d, r in
                        zip(mem.parameter_names, mem.state_dofs, mem.rates, strict=True)})
     order = ("linear", "quadratic", "cross", "freq", "added", "residual")
     model = DampingModel([terms[k] for k in order if k in terms])
     theta = np.array([values.get(n, 0.0) for n in model.parameter_names])
-    return model, theta, M, extra
+    switches["munk"] = switches["munk"] and switches["coriolis"]
+    return UpdatedModel(model, theta, M, M - data.M_RB, AddedMassTerms(**switches), extra)
 
 
 # --- free run ----------------------------------------------------------------------------------
+
+
+DOF_WORDS = ("surge", "sway", "heave", "roll", "pitch", "yaw")
+
+
+def divergence_reason(model: DampingModel, theta: FloatArray, nu: FloatArray,
+                      reach: float = 3.0, points: int = 400) -> str:
+    """Why a free run of ``model`` can run away: a DOF whose steady damping force stops
+    growing with speed.
+
+    Along each DOF axis and sign, the steady force f(s) = ±[D(s e_i) s e_i]_i (memory
+    states at their steady value ν/λ) is evaluated from rest to ``reach`` × the largest
+    flown speed; where it peaks and then falls, a thrust above the peak has no steady speed.
+
+    Parameters
+    ----------
+    model : DampingModel
+    theta : ndarray, shape (p,)
+    nu : ndarray, shape (N, 6)
+        Flown velocities (m/s, rad/s).
+    reach : float
+    points : int
+
+    Returns
+    -------
+    str
+        E.g. ``diverges: Z_ww < 0 leaves no steady heave speed above 62 N``; empty when
+        every axis' force grows with speed.
+    """
+    s = np.linspace(0.0, reach * max(float(np.abs(nu).max()), 1e-3), points)
+    rates, dofs = model.memory_rates, model.memory_dofs
+    for i in range(6):
+        for sign in (1.0, -1.0):
+            v = np.zeros((points, 6))
+            v[:, i] = sign * s
+            z = v[:, dofs] / rates if len(rates) else None
+            f = sign * model.force(v, theta, z)[:, i]
+            k = int(np.argmax(f))
+            if k == points - 1 and f[1] >= 0:
+                continue
+            Phi = model.regressor(v[-1:], z[-1:] if z is not None else None)[0, i]
+            names = [n for n, th, x in zip(model.parameter_names, theta, Phi, strict=True)
+                     if th < 0 and x != 0]
+            what = " and ".join(names) + " < 0" if names else "the damping"
+            return (f"diverges: {what} leaves no steady {DOF_WORDS[i]} speed above "
+                    f"{float(f[k]):.3g} {FORCE_UNITS[i]} ({'+' if sign > 0 else '−'}"
+                    f"{DOF_NAMES[i]})")
+    return ""
 
 
 def free_run_errors(data: GapData, effects: Sequence[tuple[Effect, FloatArray]],
@@ -1587,14 +1850,16 @@ def free_run_errors(data: GapData, effects: Sequence[tuple[Effect, FloatArray]],
     """Free-run velocity RMSE of the believed model and of the model with the effects.
 
     Uses :func:`dampest_ros.core.validate.free_run_error` when that module exists. The model
-    with the effects has the changed damping terms and M; effects that change the applied
-    force (thrust gain, buoyancy, delay, dead-zone) enter as a corrected τ. Current, CG
-    offset and sensor biases depend on the state and are not represented in the free run.
+    with the effects has the changed damping terms, M and added-mass switches; effects that
+    change the applied force (thrust gain, buoyancy, delay, dead-zone) enter as a corrected
+    τ. Current, CG offset and sensor biases depend on the state and are not represented in
+    the free run. A run that diverges has RMSE inf and a reason (:func:`divergence_reason`).
 
     Returns
     -------
-    dict with ``nominal`` and ``final`` (RMSE per DOF, shape (6,)), ``seconds`` and
-    ``omitted`` (titles of effects left out), or a string saying why it was skipped.
+    dict with ``nominal`` and ``final`` (RMSE per DOF, shape (6,)), ``seconds``,
+    ``omitted`` (titles of effects left out) and ``notes`` (model → why its run diverged),
+    or a string saying why it was skipped or failed.
     """
     try:
         validate = importlib.import_module("dampest_ros.core.validate")
@@ -1604,14 +1869,11 @@ def free_run_errors(data: GapData, effects: Sequence[tuple[Effect, FloatArray]],
         return "free run skipped: dampest_ros.core.validate.free_run is not available"
     s = data.samples
     rows = longest(s, seconds)
-    nominal = free_run_error(s, data.model, data.body, data.theta, rows)["rmse"]
-    model, theta, M, _ = updated_model(data, effects)
-    b = data.body
+    upd = updated_model(data, effects)
     try:
-        body = RigidBody(b.mass, b.inertia, b.r_g, b.r_b, b.volume, M - b.M_RB, b.rho,
-                         b.gravity)
+        body = upd.body(data)
     except ConfigError as exc:
-        return f"free run skipped: the corrected added mass is invalid ({exc})"
+        return f"free run skipped: the corrected mass matrix is invalid ({exc})"
     dtau = np.zeros((len(s), 6))
     omitted = []
     for e, p in effects:
@@ -1623,6 +1885,20 @@ def free_run_errors(data: GapData, effects: Sequence[tuple[Effect, FloatArray]],
     # the filtered correction is applied to the sampled τ (which is not filtered at 2 Hz);
     # the difference is the correction's content above the cutoff, which is small
     fixed = Samples(s.t, s.nu, s.nu_dot, s.tau + dtau, s.euler, s.depth, s.segment)
-    final = free_run_error(fixed, model, body, theta, rows)["rmse"]
-    return {"nominal": np.asarray(nominal, dtype=float), "final": np.asarray(final, dtype=float),
-            "seconds": float((rows.stop - rows.start) / s.rate), "omitted": omitted}
+    runs = {"believed": (s, data.model, data.body, data.theta),
+            "with the named effects": (fixed, upd.model, body, upd.theta)}
+    rmse: dict[str, FloatArray] = {}
+    notes: dict[str, str] = {}
+    with np.errstate(all="ignore"):
+        for name, (smp, model, b, theta) in runs.items():
+            try:
+                rmse[name] = np.asarray(free_run_error(smp, model, b, theta, rows)["rmse"],
+                                        dtype=float)
+            except (ValueError, ArithmeticError, linalg.LinAlgError) as exc:
+                return f"free run failed for the {name} model: {exc}"
+            if not np.all(np.isfinite(rmse[name])):
+                notes[name] = (divergence_reason(model, theta, s.nu[rows])
+                               or "diverges (no single degree of freedom explains it)")
+    return {"nominal": rmse["believed"], "final": rmse["with the named effects"],
+            "seconds": float((rows.stop - rows.start) / s.rate), "omitted": omitted,
+            "notes": notes}

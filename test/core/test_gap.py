@@ -339,14 +339,14 @@ def test_updated_model_adds_terms_and_mass() -> None:
     effects = [(lib["quadratic.X_uu"], np.array([10.0])), (lib["cross.Y_vr"], np.array([4.0])),
                (lib["memory.u"], np.array([2.0, 1.5])), (lib["added_mass.w"], np.array([3.0])),
                (lib["buoyancy"], np.array([1.0]))]
-    model, theta, M, extra = gap.updated_model(data, effects)
-    values = dict(zip(model.parameter_names, theta, strict=True))
+    upd = gap.updated_model(data, effects)
+    values = dict(zip(upd.model.parameter_names, upd.theta, strict=True))
     assert values["X_uu"] == pytest.approx(151.0)
     assert values["Y_vr"] == pytest.approx(4.0)
     assert values["freq.u.c1"] == pytest.approx(2.0)
-    assert float(model.memory_rates[0]) == pytest.approx(1.5)
-    assert M[2, 2] == pytest.approx(v.body.M[2, 2] + 3.0)
-    assert extra == {"buoyancy_offset": 1.0}
+    assert float(upd.model.memory_rates[0]) == pytest.approx(1.5)
+    assert upd.M[2, 2] == pytest.approx(v.body.M[2, 2] + 3.0)
+    assert upd.extra == {"buoyancy_offset": 1.0}
 
 
 def test_csv_like_data_skips_the_dead_zone() -> None:
