@@ -16,7 +16,7 @@ from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import profile_delay
 from dampest_ros.core.vehicle import Vehicle
-from dampest_ros.io.bag import BagSource
+from dampest_ros.io.bag import BagSource, check_role_types
 from dampest_ros.io.csv import is_csv, load_column_map, read_log
 from dampest_ros.io.yaml_io import ModelFile, load_model
 
@@ -71,6 +71,7 @@ def bag_topics(path: Path, vehicle: Vehicle, args: argparse.Namespace) -> dict[s
         vehicle.need_thrusters(f"τ from the thruster telemetry of {path.name} "
                                f"({topics['thrusters']})",
                                "give --wrench-topic TOPIC (a body wrench in the bag)")
+    check_role_types(path, topics)
     return topics
 
 

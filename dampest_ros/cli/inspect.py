@@ -7,7 +7,7 @@ import argparse
 import numpy as np
 
 from dampest_ros.cli.common import add_topic_options, table, tau_topic, topic_roles
-from dampest_ros.io.bag import bag_summary, read_bag
+from dampest_ros.io.bag import bag_summary, read_bag, role_type_errors
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -22,7 +22,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 
 def run(args: argparse.Namespace) -> int:
-    """Print the summary; exit 1 when the bag lacks a topic identification needs."""
+    """Print the summary; exit 1 when the bag lacks a topic identification needs or one of
+    them carries another message type."""
     summary = bag_summary(args.bag)
     data = read_bag(args.bag)
     rows = []
@@ -44,10 +45,13 @@ def run(args: argparse.Namespace) -> int:
     tau = "body wrench" if "wrench" in topics else "thruster"
     needed = [topics["imu"], topics["dvl"], tau_topic(topics)]
     missing = [t for t in needed if t.lstrip("/") not in have]
+    problems = role_type_errors(summary, topics)
     if missing:
-        print(f"not ready for identification: missing {missing} "
-              "(use --imu-topic etc. with dampest identify if they have other names, "
-              "--wrench-topic if τ is logged as a body wrench)")
+        problems.insert(0, f"missing {missing} (use --imu-topic etc. with dampest identify "
+                           "if they have other names, --wrench-topic if τ is logged as a "
+                           "body wrench)")
+    if problems:
+        print(f"not ready for identification: {'; '.join(problems)}")
         return 1
     print(f"ready for identification: IMU, DVL and {tau} topics present")
     return 0

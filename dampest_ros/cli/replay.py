@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -41,8 +40,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.set_defaults(run=run)
 
 
-def ros_arguments(args: argparse.Namespace) -> list[str]:
-    """The node's --ros-args for the options."""
+def node_parameters(args: argparse.Namespace) -> dict[str, object]:
+    """The replay node's parameters for the options."""
     params: dict[str, object] = {
         "bag": str(args.bag), "rate": float(args.rate),
         "topics": list(args.topics) or [""], "remap": list(args.remap) or [""],
@@ -52,17 +51,29 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
         "wait_for_subscribers": int(args.wait_for_subscribers), "delay": float(args.delay)}
     if args.clock is not None:
         params["clock_rate"] = float(args.clock)
+    return params
+
+
+def ros_arguments(args: argparse.Namespace) -> list[str]:
+    """The node's --ros-args for the options."""
     out = ["--ros-args"]
-    for name, value in params.items():
+    for name, value in node_parameters(args).items():
         out += ["-p", f"{name}:={json.dumps(value)}"]
     return out
 
 
 def run(args: argparse.Namespace) -> int:
-    """Play the bag."""
-    if not Path(args.bag).exists():
-        raise FileNotFoundError(f"{args.bag} does not exist")
+    """Check the options against the node's parameter specs (a bag that cannot be read, a
+    rate out of range: ValueError naming the option), then play the bag."""
     from dampest_ros.ros import replay_node  # rclpy only for this command
+    from dampest_ros.ros.common import validate
 
+    params = node_parameters(args)
+    options = {"bag": "BAG", "clock_rate": "--clock"}
+    for spec in replay_node.ReplayNode.PARAMS:
+        reason = validate(spec, params[spec.name]) if spec.name in params else None
+        if reason is not None:
+            option = options.get(spec.name, "--" + spec.name.replace("_", "-"))
+            raise ValueError(f"{option}: {reason}")
     replay_node.main(["dampest replay", *ros_arguments(args)])
     return 0

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import shutil
 import warnings
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import suppress
 from dataclasses import dataclass, fields
 from itertools import chain
@@ -55,6 +55,17 @@ class BagError(RuntimeError):
 
 class MissingTopicError(LookupError):
     """A requested topic is not in the bag; the message lists the topics that are."""
+
+
+class TopicTypeError(BagError):
+    """A topic given for an input role of identification carries another message type."""
+
+
+#: Input roles of identification → the message type each needs: the type of the contract
+#: topic that plays the role by default (DESIGN.md §3).
+ROLE_TYPES = {role: TOPIC_TYPES[topic][0] for role, topic in (
+    ("imu", "imu/data"), ("dvl", "dvl/twist"), ("pressure", "pressure"),
+    ("thrusters", "thrusters/state"), ("wrench", "wrench"))}
 
 
 def _relative(topic: str) -> str:
@@ -184,6 +195,8 @@ class _Bag:
 
     def messages(self, conns: Sequence[Connection], start: int | None = None,
                  stop: int | None = None) -> Iterator[tuple[Connection, bytes]]:
+        if not conns:  # rosbags reads every topic for an empty selection
+            return
         try:
             for conn, _, data in self.reader.messages(connections=conns, start=start,
                                                       stop=stop):
@@ -372,6 +385,58 @@ def bag_summary(path: str | Path) -> BagSummary:
         files = [bag.path] if bag.path.is_file() else list(bag.path.iterdir())
         storage = "mcap" if any(f.suffix == ".mcap" for f in files) else "sqlite3"
     return BagSummary(bag.path, storage, start / 1e9, end / 1e9, topics)
+
+
+def role_type_errors(summary: BagSummary, roles: Mapping[str, str]) -> list[str]:
+    """What is wrong with the message types of the topics given for identification's roles.
+
+    Parameters
+    ----------
+    summary : BagSummary
+    roles : mapping of str to str
+        Role (a key of :data:`ROLE_TYPES`) → topic, as ``--imu-topic`` etc. give them.
+
+    Returns
+    -------
+    list of str
+        One sentence per role whose topic is in the bag with another type than the role
+        needs, naming the topic, the type found, the type needed and the ``--ROLE-topic``
+        option that names another topic; empty when all match. Topics absent from the bag
+        are not reported here (reading them raises :class:`MissingTopicError`), nor is the
+        ``thrusters`` topic when a ``wrench`` topic gives τ instead.
+    """
+    found = {_relative(name): t.msgtype for name, t in summary.topics.items()}
+    errors = []
+    for role, topic in roles.items():
+        if role == "thrusters" and "wrench" in roles:
+            continue
+        have, need = found.get(_relative(topic)), ROLE_TYPES[role]
+        if have is not None and have != need:
+            carriers = [name for name, msgtype in found.items() if msgtype == need]
+            which = carriers[0] if len(carriers) == 1 else "TOPIC"
+            errors.append(f"topic {topic} ({role}) carries {have}, not the {need} "
+                          f"identification needs; give the {role} topic with "
+                          f"--{role}-topic {which}")
+    return errors
+
+
+def check_role_types(path: str | Path, roles: Mapping[str, str]) -> None:
+    """Refuse a bag whose topics for identification's roles carry other message types.
+
+    Parameters
+    ----------
+    path : str or Path
+    roles : mapping of str to str
+        Role → topic (see :func:`role_type_errors`).
+
+    Raises
+    ------
+    TopicTypeError
+        With every mismatch of :func:`role_type_errors`, in one line naming the bag.
+    """
+    errors = role_type_errors(bag_summary(path), roles)
+    if errors:
+        raise TopicTypeError(f"bag {path}: {'; '.join(errors)}")
 
 
 class BagSource:

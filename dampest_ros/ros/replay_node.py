@@ -22,6 +22,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
 
+from dampest_ros.io.bag import BagError, bag_summary
 from dampest_ros.ros.bag_interop import compatible_qos, import_message_type
 from dampest_ros.ros.common import Param, ParamNode, main_for
 
@@ -31,6 +32,10 @@ def _bag_ok(value: Any) -> str | None:
         return "bag: give the bag directory (or .mcap/.db3 file) to play"
     if not Path(str(value)).exists():
         return f"bag {value} does not exist"
+    try:
+        bag_summary(str(value))  # a truncated bag: the reason and the reindex hint
+    except BagError as exc:
+        return str(exc)
     return None
 
 
