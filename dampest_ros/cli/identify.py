@@ -216,6 +216,8 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
           f"condition number {d.condition_number:.3g}, {time.perf_counter() - t0:.1f} s")
     rejected = {k: c[k] for k in ("rejected_nonfinite", "rejected_out_of_order",
                                   "rejected_stale", "dvl_outliers", "clock_resets") if c[k]}
+    if d.outliers:
+        rejected["samples beyond the innovation gate (outliers)"] = d.outliers
     if rejected:
         print("rejected: " + ", ".join(f"{n} {k}" for k, n in rejected.items()))
     ci = 1.959964 * est.theta_std
@@ -224,7 +226,9 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
                  for n, th, sd, w, p0 in zip(est.names, est.theta, est.theta_std, ci,
                                              est.prior_theta, strict=True)]))
     for dof in d.unexcited:
-        print(f"not excited: {dof} (its coefficients stay near the prior)")
+        print(f"not excited: {dof} (none of its coefficients is "
+              f"{est.rls.config.min_excitation:g} standard deviations from zero: the data do "
+              "not determine its damping)")
     if args.out:
         est.save(Path(args.out), 1, source=str(args.input), method="rls")
         print(f"wrote {args.out}")

@@ -30,7 +30,7 @@ from dampest_ros.core import frames
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.online import OnlineRegression, OnlineSample
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError
-from dampest_ros.core.rls import Diagnostics, RecursiveLeastSquares, RLSConfig
+from dampest_ros.core.rls import OUTLIER_GATE, Diagnostics, RecursiveLeastSquares, RLSConfig
 from dampest_ros.core.vehicle import Vehicle, measured_wrench_scale
 
 FloatArray = NDArray[np.float64]
@@ -63,6 +63,11 @@ class EstimatorConfig:
         scale (|nominal θ|, or the largest |θ| of its term when the nominal is 0).
     max_pending : float
         Partial samples (not all streams seen) older than this (s) are dropped.
+    outlier_gate : float
+        Squared Mahalanobis distance above which a raw sample is rejected
+        (:class:`~dampest_ros.core.rls.OutlierGate`; ≤ 0: none). The gate opens after
+        :data:`CORRELATION_SECONDS` of samples and its innovation variances average over
+        twice that.
     """
 
     forgetting_factor: float = 0.999
@@ -72,6 +77,7 @@ class EstimatorConfig:
     chunk: int = 10
     prior_scale: float = 10.0
     max_pending: float = 1.0
+    outlier_gate: float = OUTLIER_GATE
 
     def __post_init__(self) -> None:
         RLSConfig(forgetting_factor=self.forgetting_factor,
@@ -193,7 +199,10 @@ class OnlineEstimator:
             forgetting_factor=self.cfg.forgetting_factor,
             forgetting_mode=self.cfg.forgetting_mode, noise_var=noise,
             correlation_block=max(1, round(CORRELATION_SECONDS * self.cfg.rate)),
-            correlation_prior=max(1.0, self.cfg.rate / (2.0 * self.cfg.cutoff))))
+            correlation_prior=max(1.0, self.cfg.rate / (2.0 * self.cfg.cutoff)),
+            outlier_gate=self.cfg.outlier_gate,
+            gate_warmup=max(1, round(CORRELATION_SECONDS * self.cfg.rate)),
+            gate_window=max(1.0, 2.0 * CORRELATION_SECONDS * self.cfg.rate)))
 
     # --- inputs ------------------------------------------------------------------------
 
@@ -262,7 +271,8 @@ class OnlineEstimator:
                    for k, (stamp, e) in enumerate(batch)]
         if self.keep_samples:
             self.samples_log += samples
-        T, Phi, y = self.regression.process(samples)
+        # raw samples whose innovation the RLS finds implausible enter the filter as zeros
+        T, Phi, y = self.regression.process(samples, self.rls.outliers)
         self.rls.update_many(Phi, y, T)
         self.counts["used"] += len(T)
         if samples:
@@ -312,7 +322,7 @@ class OnlineEstimator:
             "alarm_time": self.rls.alarm_time if self.rls.alarm_time is not None else "none",
             "unexcited": ",".join(d.unexcited) or "none",
             "forgetting_factor": self.rls.lam, "frozen": self.rls.frozen,
-            "cusum_max": float(np.max(d.cusum)),
+            "cusum_max": float(np.max(d.cusum)), "count.rejected_outliers": d.outliers,
         }
         kappa = self.rls.correlation.factor  # samples per independent sample
         for i, n in enumerate(DOF_NAMES):

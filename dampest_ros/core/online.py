@@ -52,7 +52,7 @@ from __future__ import annotations
 import functools
 import math
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -79,6 +79,9 @@ from dampest_ros.core.samples import Samples
 from dampest_ros.core.thrusters import Thrusters
 
 FloatArray = NDArray[np.float64]
+
+#: ``gate(Φ, y)``: which raw regression rows, Φ (n, 6, p) and y (n, 6), to reject, (n,) bool.
+Gate = Callable[[FloatArray, FloatArray], NDArray[np.bool_]]
 
 TOPIC_ROLES = ("imu", "dvl", "pressure", "thrusters")
 DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
@@ -827,13 +830,25 @@ class OnlineRegression:
         if self.lp is not None:
             self.lp.reset()
 
-    def __call__(self, s: OnlineSample) -> tuple[FloatArray, FloatArray] | None:
+    def __call__(self, s: OnlineSample, gate: Gate | None = None
+                 ) -> tuple[FloatArray, FloatArray] | None:
         """Filtered (Φ (6, p), y (6,)) of one sample, or None (settling or unusable)."""
-        _, Phi, y = self.process([s])
+        _, Phi, y = self.process([s], gate)
         return (Phi[0], y[0]) if len(y) else None
 
-    def process(self, samples: list[OnlineSample]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def process(self, samples: list[OnlineSample], gate: Gate | None = None
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Filtered regression of consecutive samples.
+
+        Parameters
+        ----------
+        samples : list of OnlineSample
+        gate : callable, optional
+            ``gate(Φ, y)`` of raw (unfiltered) rows, Φ (n, 6, p) and y (n, 6), returns which
+            to reject, shape (n,) bool (e.g.
+            :meth:`~dampest_ros.core.rls.RecursiveLeastSquares.outliers`). A rejected row
+            enters the low-pass as zeros: y = Φθ + e holds for it with any θ, so the filtered
+            regression stays exact, and the sample adds nothing else.
 
         Returns
         -------
@@ -849,24 +864,24 @@ class OnlineRegression:
         run: list[OnlineSample] = []
         for s in samples:
             if not s.usable:
-                self._flush(run, ts, Phis, ys)
+                self._flush(run, ts, Phis, ys, gate)
                 run = []
                 self.reset()
                 continue
             last = run[-1].t if run else self._t_prev
             if s.t - last > 1.5 / self.rate or s.t <= last:
-                self._flush(run, ts, Phis, ys)
+                self._flush(run, ts, Phis, ys, gate)
                 run = []
                 self.reset()
                 self._t_start = s.t
             run.append(s)
-        self._flush(run, ts, Phis, ys)
+        self._flush(run, ts, Phis, ys, gate)
         if not ts:
             return np.zeros(0), np.zeros((0, 6, p)), np.zeros((0, 6))
         return np.concatenate(ts), np.concatenate(Phis), np.concatenate(ys)
 
     def _flush(self, run: list[OnlineSample], ts: list[FloatArray], Phis: list[FloatArray],
-               ys: list[FloatArray]) -> None:
+               ys: list[FloatArray], gate: Gate | None) -> None:
         """Regression of one gap-free run that continues the current segment."""
         if not run:
             return
@@ -893,6 +908,9 @@ class OnlineRegression:
         self._t_prev = float(t[-1])
         y = target(smp, self.body)
         Phi = self.model.regressor(smp.nu, states)
+        if gate is not None:
+            bad = gate(Phi, y)
+            y[bad], Phi[bad] = 0.0, 0.0
         if self.lp is not None:
             out = self.lp.filter(np.concatenate([y, Phi.reshape(n, -1)], axis=1))
             y, Phi = out[:, :6], out[:, 6:].reshape(n, 6, -1)

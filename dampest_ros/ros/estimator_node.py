@@ -7,10 +7,10 @@ model.version (bumped at each publish) and the term structure model.terms.* (rea
 outside; the layout of the model file, as model_server_node has it), publishes it on dampest/model
 (std_msgs/String with the model file YAML, transient local) and diagnostics
 (diagnostic_msgs/DiagnosticArray: excitation per DOF, condition number, covariance trace,
-innovation RMS, CUSUM change alarm) at publish_rate. Services: ~/reset (std_srvs/Trigger,
-back to the prior), ~/save (Trigger, atomic write of the model file to save_path),
-~/freeze (std_srvs/SetBool: stop or resume updating). The work is done by
-dampest_ros.core.estimator.OnlineEstimator.
+innovation RMS, CUSUM change alarm, samples rejected by the outlier gate) at publish_rate.
+Services: ~/reset (std_srvs/Trigger, back to the prior), ~/save (Trigger, atomic write of the
+model file to save_path), ~/freeze (std_srvs/SetBool: stop or resume updating). The work is
+done by dampest_ros.core.estimator.OnlineEstimator.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from std_srvs.srv import SetBool, Trigger
 from dampest_ros.core import frames
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator
 from dampest_ros.core.rigid_body import ConfigError
-from dampest_ros.core.rls import FORGETTING_MODES
+from dampest_ros.core.rls import FORGETTING_MODES, OUTLIER_GATE
 from dampest_ros.io.yaml_io import load_model, load_vehicle, model_parameters
 from dampest_ros.ros.common import (
     LATCHED_QOS,
@@ -146,6 +146,10 @@ class EstimatorNode(ModelParamNode):
               high=100.0),
         Param("chunk", 25, "samples processed at once (the estimate lags by up to chunk / rate)",
               low=1, high=1000),
+        Param("outlier_gate", OUTLIER_GATE, "squared Mahalanobis distance of a sample's "
+              "innovation (predicted covariance C½ΦPΦᵀC½ + V) above which the sample is "
+              "rejected and counted (count.rejected_outliers); χ²(6) quantiles: 22.5 at "
+              "p = 1e-3, 53.3 at p = 1e-9; 0: no gate", low=0.0, high=1e12),
         Param("prior", "", "model YAML whose theta/theta_std are the prior ('' : nominal "
               "damping of the preset with wide uncertainty)", check=_prior_ok),
         Param("save_path", "dampest_model.yaml", "where ~/save writes the model YAML",
@@ -190,7 +194,8 @@ class EstimatorNode(ModelParamNode):
             prior = (pm.parameter_names, pm.theta, pm.theta_std)
         cfg = EstimatorConfig(forgetting_factor=self.p("forgetting_factor"),
                               forgetting_mode=self.p("forgetting_mode"), rate=self.p("rate"),
-                              cutoff=self.p("cutoff"), chunk=self.p("chunk"))
+                              cutoff=self.p("cutoff"), chunk=self.p("chunk"),
+                              outlier_gate=self.p("outlier_gate"))
         self.estimator = OnlineEstimator(load_vehicle(self.p("vehicle")), terms, cfg, prior,
                                          keep_samples=self.keep_samples)
 
@@ -222,7 +227,7 @@ class EstimatorNode(ModelParamNode):
             self._timer.cancel()
             self._timer = self.create_timer(1.0 / self.p("publish_rate"), self._publish)
         if set(names) & {"vehicle", "terms", "forgetting_factor", "forgetting_mode", "rate",
-                         "cutoff", "chunk", "prior"}:
+                         "cutoff", "chunk", "prior", "outlier_gate"}:
             self._build()
             self.get_logger().info(f"estimator restarted from the prior ({', '.join(names)} "
                                    "changed)")

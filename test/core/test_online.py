@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from dampest_ros.core.batch import fit, iter_regression
+from dampest_ros.core.batch import FitOptions, fit, iter_regression
 from dampest_ros.core.damping import filter_memory
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
-from dampest_ros.core.excitation import Excitation, make_excitation
+from dampest_ros.core.excitation import Excitation, make_excitation, speed_limits
 from dampest_ros.core.measurements import Recording, TwistSeries
 from dampest_ros.core.online import (
     LowPass,
@@ -372,3 +372,83 @@ def test_estimator_std_starts_at_the_prior_and_covers_the_truth(
           f"old {np.round(100 * old_cover)}")
     assert new_cover.mean() >= 0.95 and new_cover.min() >= 0.9  # seed 3: 100 %, 100 %
     assert old_cover.mean() < 0.95 and old_cover.min() < 0.7  # seed 3: 91 %, 65 %
+
+
+def test_one_1e6_newton_sample_is_gated_counted_and_leaves_the_estimate(
+        vehicle: Vehicle, flight: tuple[Trajectory, Recording]) -> None:
+    """A 1e6 N surge wrench in one sample at t = 30 s of 60 s: without the gate it moves X_u
+    by thousands of σ; with it the sample is rejected, counted once, and θ is the run
+    without it to 0.1σ (the sample enters the low-pass as zeros instead of its value)."""
+    samples = [s for s in preprocessor(vehicle).run(flight[1]) if s.usable]
+    k = int(np.searchsorted([s.t for s in samples], 30.0))
+    bad = list(samples)
+    bad[k] = replace(samples[k], tau=samples[k].tau + np.array([1e6, 0, 0, 0, 0, 0]))
+
+    def estimate(data: list, **cfg: float) -> OnlineEstimator:
+        est = OnlineEstimator(vehicle, config=EstimatorConfig(forgetting_factor=1.0, **cfg))
+        for s in data:
+            est.add_sample(s)
+        est.process(force=True)
+        return est
+
+    clean, gated, open_ = estimate(samples), estimate(bad), estimate(bad, outlier_gate=0.0)
+    assert clean.diagnostics().outliers == 0
+    assert gated.diagnostics().outliers == 1
+    assert gated.diagnostic_values()["count.rejected_outliers"] == 1
+    np.testing.assert_array_less(np.abs(gated.theta - clean.theta), 0.1 * clean.theta_std)
+    assert abs(open_.theta[0] - clean.theta[0]) > 1e3 * clean.theta_std[0]  # the failure
+
+
+#: Noiseless sensors: no white noise, bias walk or DVL dropout.
+CLEAN = SensorConfig(gyro_noise=0.0, gyro_bias_walk=0.0, accel_noise=0.0, accel_bias_walk=0.0,
+                     orientation_noise=0.0, dvl_noise=0.0, dvl_dropout_rate=0.0,
+                     pressure_noise=0.0, rpm_noise=0.0)
+
+
+def rls_against_batch(vehicle: Vehicle, rec: Recording) -> np.ndarray:
+    """The RLS final estimate (λ = 1) minus the batch estimate of ``dampest identify`` (its
+    default options) on the very samples the RLS used, in batch standard deviations, for the
+    coefficients the batch identifies."""
+    est = OnlineEstimator(vehicle, config=EstimatorConfig(forgetting_factor=1.0),
+                          keep_samples=True)
+    for s in preprocessor(vehicle).run(rec):
+        est.add_sample(s)
+    est.process(force=True)
+    s = to_samples(est.samples_log, 50.0)
+    f = fit(s, est.model, vehicle.body, FitOptions(
+        speed_range=tuple(speed_limits(vehicle, tau_measured=s.tau))), prior=est.nominal)
+    assert f.identified.sum() >= 6  # at least a coefficient per DOF to compare
+    z = (est.theta - f.theta) / f.std
+    for n, a, b, sd, zz, ok in zip(est.names, est.theta, f.theta, f.std, z, f.identified,
+                                   strict=True):
+        print(f"{n:5s} rls {a:10.4g} batch {b:10.4g} ± {sd:8.2g} z {zz:6.2f} "
+              f"{'' if ok else 'not identified by the batch'}")
+    return np.asarray(z[f.identified])
+
+
+def test_rls_is_the_batch_estimate_on_the_same_samples(
+        vehicle: Vehicle, flight: tuple[Trajectory, Recording]) -> None:
+    """Native BlueROV2 Heavy, protocol B, 60 s, seed 3, default sensor noise."""
+    assert np.all(np.abs(rls_against_batch(vehicle, flight[1])) <= 3.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name,backend,sensors", [
+    ("bluerov2_heavy", "native", CLEAN),
+    ("bluerov2_heavy_mujoco", "mujoco", SensorConfig()),
+    ("bluerov2_heavy_mujoco", "mujoco", CLEAN),
+], ids=["native-clean", "rov-mujoco-noisy", "rov-mujoco-clean"])
+def test_rls_is_the_batch_estimate_on_both_backends(name: str, backend: str,
+                                                    sensors: SensorConfig) -> None:
+    """Protocol B, 300 s, seed 1, as ``dampest simulate`` flies it (MuJoCo: the vehicle
+    file's geometry through MuJoCo's ellipsoid fluid model, physics the preset's terms do
+    not span).
+
+    Not yet torpedo_auv: there the batch holds X_u = 0 by dissipativity (the unconstrained
+    X_u = −61 generates energy at low speed) and refits X_uu = 74 where the RLS, which
+    publishes the unconstrained estimate, has 199 (9σ); the RLS output is not yet projected
+    onto the batch's dissipativity constraint."""
+    v = load_vehicle(name)
+    traj = run(v, make_excitation("B", v, 300.0, seed=1), backend=backend)
+    rec = measure(traj, v.body.rho, v.body.gravity, sensors, seed=1)
+    assert np.all(np.abs(rls_against_batch(v, rec)) <= 3.0)

@@ -341,3 +341,48 @@ def test_std_is_the_prior_at_the_start_and_the_sandwich_with_correlated_noise() 
     assert rls.std[0] == pytest.approx(white * np.sqrt((1 + rho) / (1 - rho)), rel=0.1)
     assert np.sqrt(np.diagonal(rls.P)[0] * rls.R[0] / rls.R_w[0]) == \
         pytest.approx(white, rel=0.1)  # what P and the noise level alone give
+
+
+def test_outlier_gate_rejects_a_gross_error_and_not_gaussian_innovations() -> None:
+    """χ²(6) gate at p = 1e-6 on Gaussian innovations: of 20000 samples about 0.02 cross it
+    by chance (none allowed here); a 1000σ spike after the warm-up is rejected and counted, a
+    spike during the warm-up is not judged."""
+    from scipy import stats
+
+    from dampest_ros.core.rls import OutlierGate
+    Phi, y, theta = random_problem(9, 20000, 4, noise=0.5)
+    gate = OutlierGate(float(stats.chi2.isf(1e-6, 6)), warmup=200, window=500.0)
+    P = np.eye(4) * 1e-6  # the estimate is the truth, well known
+    y[100, 2] += 500.0  # in the warm-up: only initialises V (winsorised)
+    y[5000, 3] += 500.0
+    rejected = np.concatenate([gate(Phi[k:k + 10], y[k:k + 10], theta, P, np.ones(6))
+                               for k in range(0, len(y), 10)])
+    assert np.flatnonzero(rejected).tolist() == [5000]
+    assert gate.rejected == 1
+    np.testing.assert_allclose(np.sqrt(gate.v), 0.5, rtol=0.1)  # the innovation noise
+
+
+def test_excitation_counts_terms_a_misfit_sets_against_each_other() -> None:
+    """Surge flown hard, y = −61 u + 199 u|u| plus a misfit 10× the weighting noise (the
+    MuJoCo torpedo's surge fit): the predicted force Φθ nearly cancels and the innovations
+    are large, yet u is excited (its coefficients are many σ from zero); sway, not flown, is
+    not."""
+    rng = np.random.default_rng(4)
+    n = 5000
+    u = 0.3 * np.sin(np.linspace(0.0, 60.0, n)) + 0.1 * rng.normal(size=n)
+    Phi = np.zeros((n, 6, 4))
+    Phi[:, 0, 0], Phi[:, 0, 1] = u, u * np.abs(u)  # X_u, X_uu
+    Phi[:, 1, 2], Phi[:, 1, 3] = 1e-4, 1e-8  # Y_v, Y_vv: sway barely moves
+    theta = np.array([-61.0, 199.0, 5.0, 100.0])
+    y = np.einsum("nip,p->ni", Phi, theta) + 5.0 * rng.normal(size=(n, 6))
+    rls = RecursiveLeastSquares(np.array([1.0, 70.0, 5.0, 100.0]),
+                                (10.0 * np.array([1.0, 70.0, 5.0, 100.0])) ** 2,
+                                RLSConfig(forgetting_factor=1.0, noise_var=(0.25,) * 6))
+    rls.update_many(Phi, y)
+    d = rls.diagnostics(condition=False)
+    assert d.noise_std[0] == pytest.approx(5.0, rel=0.1)  # the misfit, 10× the weights' 0.5
+    # the former measure, RMS(Φθ) over the noise, called this DOF not excited
+    force = Phi[:, 0] @ rls.theta
+    assert np.sqrt(np.mean(force**2)) < rls.config.min_excitation * d.noise_std[0]
+    assert d.excitation[0] > 10.0 and d.excited[0]
+    assert not d.excited[1] and d.unexcited == ["v", "w", "p", "q", "r"]
