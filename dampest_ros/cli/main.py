@@ -29,10 +29,12 @@ from dampest_ros.cli import (
 from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.io.bag import BagError, MissingTopicError
+from dampest_ros.io.recorder import RecorderError
 
 #: Failures whose message says what is wrong and how to fix it; any other exception is
 #: reported with its type as an unexpected failure.
-EXPECTED = (ConfigError, DataError, BagError, MissingTopicError, OSError, ValueError)
+EXPECTED = (ConfigError, DataError, BagError, MissingTopicError, RecorderError, OSError,
+            ValueError)
 
 COMMANDS = (simulate, identify, validate, gap, inspect, export, record, replay, reindex, demo,
             live)

@@ -1,7 +1,8 @@
 """``dampest record``: record topics to a rosbag2 MCAP bag (runs the recorder node here).
 
 Stops on Ctrl-C or SIGTERM, which close the bag; a bag whose recording was killed is
-recovered with ``dampest reindex``.
+recovered with ``dampest reindex``. A full disk stops the recording with the bag closed and
+every message received kept (exit status 1).
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--chunk-size", type=int, default=None, metavar="BYTES",
                    help="MCAP chunk size; each chunk is flushed to disk (default: 262144)")
     p.add_argument("--flush-period", type=float, default=None, metavar="S",
-                   help="flush a chunk at least this often (default: 1)")
+                   help="flush a chunk at least this often; a killed recording loses at most "
+                        "1.25 times this (default: 0.2)")
     p.add_argument("--compression", choices=("none", "zstd", "lz4"), default="none",
                    help="chunk compression (default: none)")
     p.add_argument("--namespace", default="", metavar="NS",

@@ -1,7 +1,9 @@
 """``dampest reindex``: rebuild metadata.yaml of an MCAP bag from its storage files.
 
-For a recording that was killed, the storage file without a summary is read up to its last
-complete chunk and rewritten; the damaged original is kept as ``<file>.damaged``.
+Every chunk is checked. A storage file without a summary (the recording was killed) or with
+damaged chunks is read up to its last readable record, damaged chunks skipped and counted, and
+rewritten; the damaged original is kept as ``<file>.damaged``. A bag still being recorded is
+refused.
 """
 
 from __future__ import annotations
@@ -23,10 +25,16 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 
 def run(args: argparse.Namespace) -> int:
-    """Reindex and print what each file held."""
+    """Reindex and print what each file held and what could not be read."""
     report = reindex(args.bag)
+    if report.removed:
+        print(f"removed partial files left by a killed recorder or reindex: "
+              f"{', '.join(report.removed)}")
     rows = [(f.name, f.messages, "complete" if f.complete else "recovered" if f.messages
-             else "unreadable", f.lost_bytes, f.error or "") for f in report.files]
-    print(table(("file", "messages", "state", "bytes lost", "stopped at"), rows))
-    print(f"wrote {report.path / 'metadata.yaml'}: {report.messages} messages")
+             else "unreadable", f.lost_messages, f.lost_bytes, f.error or "")
+            for f in report.files]
+    print(table(("file", "messages", "state", "messages lost", "bytes lost", "stopped at"),
+                rows))
+    print(f"wrote {report.path / 'metadata.yaml'}: {report.messages} messages; unreadable: "
+          f"{report.lost_messages} messages counted by the indexes, {report.lost_bytes} bytes")
     return 0

@@ -5,9 +5,13 @@ discovery_period), with a QoS compatible with every publisher (reliable only if 
 are), receives the serialized bytes (no deserialisation) and writes them with their receive
 time (the node clock: simulation time under use_sim_time) through
 dampest_ros.io.recorder.BagRecorder. The QoS each publisher offers is stored in the bag
-metadata. Chunks reach the disk every chunk_size bytes or flush_period seconds, so a killed
-recorder loses at most that; SIGINT/SIGTERM close the bag (summary, metadata.yaml). A killed
-recording is recovered with 'dampest reindex BAG'.
+metadata. Chunks reach the disk every chunk_size bytes or flush_period seconds (checked
+every flush_period / 4), so a killed recorder loses at most the last 0.25 s by default;
+SIGINT/SIGTERM close the bag (summary, metadata.yaml). A killed recording is recovered with
+'dampest reindex BAG'. While recording, the bag holds a lock that reindex and another recorder
+respect. A full disk stops the recording: the bag is closed with every message received (from
+the space the recorder keeps in reserve), an error line gives the count and the node exits
+with status 1.
 """
 
 from __future__ import annotations
@@ -22,7 +26,13 @@ from typing import Any
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.subscription import Subscription
 
-from dampest_ros.io.recorder import DEFAULT_CHUNK_SIZE, BagRecorder
+from dampest_ros.io.recorder import (
+    DEFAULT_CHUNK_INTERVAL,
+    DEFAULT_CHUNK_SIZE,
+    BagRecorder,
+    RecorderError,
+    StorageError,
+)
 from dampest_ros.ros.bag_interop import compatible_qos, import_message_type, to_bag_qos
 from dampest_ros.ros.common import DRAIN_LIMIT, Param, ParamNode, main_for
 
@@ -66,9 +76,9 @@ class RecorderNode(ParamNode):
               "log time; 0: never", low=0.0, high=1e9, read_only=True),
         Param("chunk_size", DEFAULT_CHUNK_SIZE, "bytes of messages per MCAP chunk; each "
               "chunk is flushed to disk when complete", low=1024, high=2**30, read_only=True),
-        Param("flush_period", 1.0, "a chunk is also flushed once it is this many seconds old "
-              "(a crash loses at most this much); 0: by size only", low=0.0, high=3600.0,
-              read_only=True),
+        Param("flush_period", DEFAULT_CHUNK_INTERVAL, "a chunk is also flushed once it is this "
+              "many seconds old (checked every quarter of it: a crash loses at most 1.25 "
+              "times this much); 0: by size only", low=0.0, high=3600.0, read_only=True),
         Param("compression", "none", "chunk compression", choices=("none", "zstd", "lz4"),
               read_only=True),
         Param("queue_depth", 2000, "subscription queue (messages) absorbing bursts",
@@ -89,7 +99,11 @@ class RecorderNode(ParamNode):
             chunk_interval=float(self.p("flush_period")),
             max_bag_size=int(self.p("max_bag_size")),
             max_bag_duration=float(self.p("max_bag_duration")),
-            compression=str(self.p("compression"))).open()
+            compression=str(self.p("compression")))
+        try:
+            self.recorder.open()
+        except (OSError, RecorderError) as exc:  # a refusal at start: one line, status 2
+            raise ValueError(f"output {output}: {exc}") from None
         self.p_drain = bool(self.p("drain"))
         wanted = [t for t in self.p("topics") if t]
         self.all_topics = wanted == ["all"]
@@ -106,7 +120,7 @@ class RecorderNode(ParamNode):
         self.discovery_timer = self.create_timer(float(self.p("discovery_period")),
                                                  self._discover)
         period = float(self.p("flush_period"))
-        self.flush_timer = self.create_timer(max(period / 4, 0.05), self.recorder.flush_if_due)
+        self.flush_timer = self.create_timer(max(period / 4, 0.05), self._flush_if_due)
         self.status_timer = None
         if self.p("status_period") > 0:
             self.status_timer = self.create_timer(float(self.p("status_period")), self._status)
@@ -168,9 +182,23 @@ class RecorderNode(ParamNode):
                 span[0] = seq
             span[1] = max(span[1], seq)
             span[2] += 1
-        self.recorder.write(conn, self.get_clock().now().nanoseconds, data,
-                            publish_time=int(info.get("source_timestamp") or 0) or None,
-                            sequence=seq)
+        try:
+            self.recorder.write(conn, self.get_clock().now().nanoseconds, data,
+                                publish_time=int(info.get("source_timestamp") or 0) or None,
+                                sequence=seq)
+        except StorageError as exc:
+            self._stopped(exc)
+
+    def _flush_if_due(self) -> None:
+        try:
+            self.recorder.flush_if_due()
+        except StorageError as exc:
+            self._stopped(exc)
+
+    def _stopped(self, exc: StorageError) -> None:
+        """The storage refused a write: the recorder closed the bag; say so and exit 1."""
+        self.get_logger().error(f"{exc}")
+        raise SystemExit(1)
 
     def _on_lost(self, topic: str, info: Any) -> None:
         self.lost[topic] = int(info.total_count)
