@@ -107,6 +107,12 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     if args.max_steps < 0:
         raise ConfigError("--max-steps", f"must be ≥ 0, got {args.max_steps}")
+    if not 0.2 <= args.split <= 0.9:
+        raise ConfigError("--split", f"must be in [0.2, 0.9] (the share of the time fitted), "
+                                     f"got {args.split:g}")
+    if not 0.0 <= args.min_heldout < 1.0:
+        raise ConfigError("--min-heldout", f"must be in [0, 1) (a share of the residual "
+                                           f"power), got {args.min_heldout:g}")
     vehicle = load_vehicle(args.vehicle)
     mf, model, body = load_model_for(args.model, vehicle)
     cands = gap.library([c.strip() for c in str(args.candidates).split(",") if c.strip()])
@@ -137,12 +143,14 @@ def run(args: argparse.Namespace) -> int:
     print()
     print(steps_table(data, result) if result.steps else "no effect named.")
     print(f"\n{result.conclusion}.")
-    free = gap.free_run_errors(data, result.effects)
-    print()
-    print(free_run_text(free))
+    # the model file first: it does not depend on the free run
     final = final_model(data, result, mf, args)
     if args.out:
         save_final(Path(args.out), final)
+    free = gap.free_run_errors(data, result.effects)
+    print()
+    print(free_run_text(free))
+    if args.out:
         print(f"wrote {args.out}")
     if args.report:
         out = Path(args.report)

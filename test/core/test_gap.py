@@ -26,6 +26,8 @@ memory             λ = 1.5 1/s, c/λ ≈ 30 % of     radiation/wake memory
                    damping
 model mismatch     X_uu 141 → 100, Z_w 33 → 20,   coefficients from literature for a
                    Z_ẇ 18.7 → 14 in the model     different build
+plant switches     no M_A ν̇ / no C_A(ν)ν in the   MuJoCo's fluid model; gz-sim's
+                   plant, both in the model       disable_added_mass / disable_coriolis
 =================  =============================  ============================================
 
 The fast tests (unmarked) run one seed of the most common effects; ``-m slow`` sweeps every
@@ -36,7 +38,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from typing import Any
 
@@ -44,11 +46,17 @@ import numpy as np
 import pytest
 
 from dampest_ros.core import gap
-from dampest_ros.core.damping import CrossSpec
+from dampest_ros.core.damping import (
+    CrossSpec,
+    DampingModel,
+    cross_term,
+    linear_term,
+    quadratic_term,
+)
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.measurements import JointSeries
 from dampest_ros.core.preprocess import PreprocessConfig, preprocess
-from dampest_ros.core.rigid_body import RigidBody
+from dampest_ros.core.rigid_body import DOF_NAMES, AddedMassTerms, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import DEFAULT_CROSS
 from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
@@ -65,9 +73,14 @@ def vehicle() -> Vehicle:
     return load_vehicle(VEHICLE)
 
 
-def _simulate(effects: dict[str, Any], seed: int) -> tuple[Samples, JointSeries]:
-    """Protocol B with hidden ``effects``: what the vehicle logs, preprocessed."""
+def _simulate(effects: dict[str, Any], seed: int, plant: dict[str, bool] | None = None
+              ) -> tuple[Samples, JointSeries]:
+    """Protocol B with hidden ``effects`` (and the plant's added-mass switches ``plant``,
+    e.g. ``{'inertial': False}``): what the vehicle logs, preprocessed."""
     v = vehicle()
+    if plant:
+        terms = AddedMassTerms(**{**v.body.added_mass_terms.as_dict(), **plant})
+        v = replace(v, body=replace(v.body, added_mass_terms=terms))
     e = Effects.from_dict(effects)
     traj = run(v, make_excitation("B", v, DURATION, seed=seed), e)
     rec = measure(traj, v.body.rho, v.body.gravity, SensorConfig(),
@@ -84,8 +97,8 @@ def clean(seed: int) -> tuple[Samples, JointSeries]:
 
 
 @lru_cache(maxsize=2)
-def hidden(effects_json: str, seed: int) -> tuple[Samples, JointSeries]:
-    return _simulate(json.loads(effects_json), seed)
+def hidden(effects_json: str, seed: int, plant_json: str = "{}") -> tuple[Samples, JointSeries]:
+    return _simulate(json.loads(effects_json), seed, json.loads(plant_json))
 
 
 @dataclass
@@ -96,6 +109,7 @@ class Case:
     effects: dict[str, Any] = field(default_factory=dict)
     theta: dict[str, float] = field(default_factory=dict)  # believed damping values
     added_mass: dict[int, float] = field(default_factory=dict)  # believed diagonal M_A
+    plant: dict[str, bool] = field(default_factory=dict)  # the plant's added-mass switches
     key: str = ""
     error: Callable[[dict[str, float]], float] = lambda m: 0.0
 
@@ -160,6 +174,12 @@ CASES: dict[str, Case] = {
     "dvl_bias": Case({"dvl_bias": [0.01, -0.01, 0.0]}, key="dvl_bias",
                      error=lambda m: rel(_vec(m, "bias_u", "bias_v", "bias_w"),
                                          [0.01, -0.01, 0.0])),
+    # the plant applies no M_A ν̇ (MuJoCo) / no C_A(ν)ν (gz-sim's disable_coriolis); the
+    # believed model has both
+    "plant_no_inertial": Case(plant={"inertial": False}, key="added_mass_inertial",
+                              error=lambda m: rel(m["epsilon"], -1.0)),
+    "plant_no_coriolis": Case(plant={"coriolis": False, "munk": False},
+                              key="added_mass_coriolis", error=lambda m: rel(m["epsilon"], -1.0)),
     "added_mass.w": Case(added_mass={2: 14.0}, key="added_mass.w",
                          error=lambda m: rel(m["Z_wdot"], 18.68 - 14.0)),
     "added_mass.u": Case(added_mass={0: 4.5}, key="added_mass.u",
@@ -205,7 +225,8 @@ def analyse_named(name: str, seed: int) -> tuple[gap.GapData, gap.GapResult]:
 
 def analyse(case: Case, seed: int) -> tuple[gap.GapData, gap.GapResult]:
     v = vehicle()
-    samples, joints = hidden(json.dumps(case.effects), seed) if case.effects else clean(seed)
+    samples, joints = (hidden(json.dumps(case.effects), seed, json.dumps(case.plant))
+                       if case.effects or case.plant else clean(seed))
     theta, body = believed(case)
     data = gap.GapData(samples, v.damping, theta, body, v.thrusters, joints)
     return data, gap.find_gap(data)
@@ -383,3 +404,109 @@ def test_two_effects_all_seeds(pair: tuple[str, str], seed: int) -> None:
     a, b = CASES[pair[0]], CASES[pair[1]]
     _, result = analyse(Case({**a.effects, **b.effects}), seed)
     assert {a.key, b.key} <= set(result.named[:3]), result.named
+
+
+# --- issue 11: what gap writes is a valid model, and what it says is what it writes ----------
+
+
+def _short(rows: int = 6000, body: RigidBody | None = None,
+           theta: np.ndarray | None = None) -> gap.GapData:
+    """GapData on the first ``rows`` samples of clean seed 1 (the believed model: nominal)."""
+    v = vehicle()
+    samples, _ = clean(1)
+    return gap.GapData(samples.take(slice(0, rows)), v.damping,
+                       v.theta if theta is None else theta, body or v.body)
+
+
+def test_naming_a_term_the_model_has_updates_it() -> None:
+    """Before: a cross term the model already had (here N_rv, and Y_r as an off-diagonal
+    linear entry) was added a second time: 'terms: duplicate parameter names'."""
+    v = vehicle()
+    samples, _ = clean(1)
+    lin = linear_term(DOF_NAMES, [("Y", "r")])
+    model = DampingModel([lin, quadratic_term(), cross_term([CrossSpec.from_dict(
+        {"row": "N", "col": "r", "alpha": "|v|"})])])
+    theta = model.theta_from_dict({**NOMINAL, "Y_r": 2.0, "N_rv": 3.0})
+    data = gap.GapData(samples.take(slice(0, 1000)), model, theta, v.body)
+    lib = {e.key: e for e in gap.library()}
+    upd = gap.updated_model(data, [(lib["cross.N_rv"], np.array([-1.0])),
+                                   (lib["cross.Y_r"], np.array([0.5])),
+                                   (lib["linear.X_u"], np.array([1.0]))])
+    assert upd.model.parameter_names == model.parameter_names
+    values = dict(zip(upd.model.parameter_names, upd.theta, strict=True))
+    assert values["N_rv"] == pytest.approx(2.0)
+    assert values["Y_r"] == pytest.approx(2.5)
+    assert values["X_u"] == pytest.approx(NOMINAL["X_u"] + 1.0)
+
+
+def test_an_update_that_breaks_M_or_D_is_rejected() -> None:
+    """Before: an added mass with a negative eigenvalue and a negative quadratic drag were
+    written as found. Now the step is rejected with the reason."""
+    data = _short()
+    lib = {e.key: e for e in gap.library()}
+    r = data.r0
+    # Z_ẇ of 18.68 lowered by 25: M_A has the eigenvalue −6.3
+    why = gap.rejection(data, [(lib["added_mass.w"], np.array([-25.0]))], r, r, 1)
+    assert "mass matrix" in why and "-6.32" in why, why
+    # Z_ww 190 → −10 with Z_w 33: energy is generated above w = 3.3 m/s... and on the grid
+    # of the flown envelope wherever |w| > 33/10 · ... — the data reach |w| ≈ 0.5 m/s, so
+    # take Z_w to 0 as well
+    why = gap.rejection(data, [(lib["quadratic.Z_ww"], np.array([-200.0])),
+                               (lib["linear.Z_w"], np.array([-33.0]))], r, r, 1)
+    assert why.startswith("D(ν) would generate energy"), why
+    # a positive correction of both is accepted
+    assert gap.rejection(data, [(lib["quadratic.Z_ww"], np.array([20.0]))], r, r, 1) == ""
+
+
+def test_an_effect_that_worsens_a_dof_held_out_is_rejected() -> None:
+    data = _short()
+    lib = {e.key: e for e in gap.library()}
+    r = data.r0
+    worse = r.copy()
+    worse[data.test, 3] *= 1.05  # roll's held-out mean square +10 %
+    why = gap.rejection(data, [(lib["thrust_gain"], np.array([0.0]))], r, worse, 1)
+    assert why.startswith("the held-out residual of K grows"), why
+    # within what an effect fitted to noise adds (4 k / n_eff), it is not
+    slight = r.copy()
+    slight[data.test, 3] *= 1.0 + 1.0 / data.n_eff_train
+    assert gap.rejection(data, [(lib["thrust_gain"], np.array([0.0]))], r, slight, 1) == ""
+
+
+def test_current_uses_the_vehicles_added_mass_switches() -> None:
+    """MuJoCo applies C_A(ν_r)ν_r but no M_A ν̇: the current's prediction has no M_A ν̇_c
+    then (before it always had)."""
+    b = vehicle().body
+    off = replace(b, added_mass_terms=AddedMassTerms(inertial=False, coriolis=True, munk=True))
+    p = np.array([0.2, -0.1])
+    on_data, off_data = _short(3000), _short(3000, off)
+    ch = on_data.chunk_at(slice(0, 3000))
+    rho_on = gap.Current().predict(on_data, ch, p)
+    rho_off = gap.Current().predict(off_data, ch, p)
+    vcb = np.einsum("nji,j->ni", ch.R, np.array([0.2, -0.1, 0.0]))
+    nu_c_dot = np.concatenate([-np.cross(ch.nu[:, 3:], vcb), np.zeros_like(vcb)], axis=1)
+    np.testing.assert_allclose(rho_off - rho_on, nu_c_dot @ b.added_mass.T, atol=1e-12)
+
+
+def test_a_diverging_free_run_is_explained() -> None:
+    v = vehicle()
+    theta = v.damping.theta_from_dict({**NOMINAL, "Z_ww": -61.0})
+    samples, _ = clean(1)
+    why = gap.divergence_reason(v.damping, theta, samples.nu)
+    # Z_w w − 61 w²: the heave force peaks at Z_w² / (4 · 61) at w = Z_w / 122
+    peak = NOMINAL["Z_w"] ** 2 / (4 * 61.0)
+    assert why == f"diverges: Z_ww < 0 leaves no steady heave speed above {peak:.3g} N (+w)"
+    assert gap.divergence_reason(v.damping, v.theta, samples.nu) == ""
+
+
+@pytest.mark.parametrize("switch", ["inertial", pytest.param("coriolis", marks=pytest.mark.slow)])
+def test_a_plant_without_an_added_mass_term_is_named_in_that_form(switch: str) -> None:
+    """The plant applies no M_A ν̇ (MuJoCo, gz-sim's disable_added_mass) or no C_A(ν)ν
+    (disable_coriolis); the model has both. Before: a delay of 0.0 ms and a per-DOF added
+    mass (M_A's smallest eigenvalue 0), or four cross terms and added masses were named."""
+    data, result = analyse_named(f"plant_no_{switch}", 1)
+    assert result.named == [f"added_mass_{switch}"], result.named
+    assert float(result.effects[0][1][0]) == pytest.approx(-1.0, abs=0.01)
+    upd = gap.updated_model(data, result.effects)
+    assert getattr(upd.added_mass_terms, switch) is False
+    np.testing.assert_array_equal(upd.M, data.body.M)
+    upd.body(data)  # a valid rigid body
