@@ -226,9 +226,9 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
                  for n, th, sd, w, p0 in zip(est.names, est.theta, est.theta_std, ci,
                                              est.prior_theta, strict=True)]))
     for dof in d.unexcited:
-        print(f"not excited: {dof} (none of its coefficients is "
-              f"{est.rls.config.min_excitation:g} standard deviations from zero: the data do "
-              "not determine its damping)")
+        print(f"not excited: {dof} (no term's force reaches {est.rls.config.min_excitation:g} "
+              "residual standard deviations; a large residual is a model misfit: try dampest "
+              "identify --select)")
     if args.out:
         est.save(Path(args.out), 1, source=str(args.input), method="rls")
         print(f"wrote {args.out}")

@@ -704,7 +704,7 @@ class RLSConfig:
     stats_window : float
         Samples of the exponential window of the innovation RMS and the excitation measure.
     min_excitation : float
-        A DOF none of whose coefficients is this many standard deviations from zero is
+        A DOF whose largest term force is below this many noise standard deviations is
         reported as not excited (see :attr:`Diagnostics.excitation`).
     outlier_gate : float
         Squared Mahalanobis distance of a raw sample's innovation above which the sample is
@@ -772,12 +772,11 @@ class Diagnostics:
     noise_std : ndarray, shape (6,)
         √r_i (N, N·m).
     excitation : ndarray, shape (6,)
-        Per DOF, the largest |θ_j| / std_j of the coefficients acting on it (the sandwich
-        standard deviation, :attr:`RecursiveLeastSquares.std`): how far the data have
-        determined the DOF's damping, from all the samples the estimate remembers. Not the
-        predicted force over the innovation RMS: a misfit inflates the innovations and sets
-        terms against each other (X_u < 0 with X_uu > 0, whose sum Φθ is small however hard
-        the DOF is flown); both read as no excitation.
+        Per DOF i, the largest RMS of a term's force θ_j Φ_ij over the samples the estimate
+        remembers (an exponential window of 1 / (1 − λ) samples; all of them at λ = 1), over
+        the noise standard deviation. Per term, not the sum Φθ: terms that a misfit sets
+        against each other (X_u < 0 with X_uu > 0) cancel in the sum however hard the DOF is
+        flown; and over the estimate's memory, not the last ``stats_window`` samples.
     excited : ndarray of bool, shape (6,)
     covariance_trace : float
         Σ_j P_jj / s_j².
@@ -876,6 +875,7 @@ class RecursiveLeastSquares:
         self.R = np.array(cfg.noise_var, dtype=float)  # estimated noise variances
         self.R_w = self.R.copy()  # variances that weight the update
         self._phi2 = np.zeros((6, self.n_params))  # Σ Φ² per row and parameter
+        self._term2 = np.zeros((6, self.n_params))  # mean of (θ_j Φ_ij)² over the memory
         self.n = 0
         self._e2 = self.R.copy()  # EW mean of ε², seeded with the prior noise
         # weighted EW estimate of r; the prior counts as 1 % of one informative sample
@@ -894,6 +894,11 @@ class RecursiveLeastSquares:
         if not 0.9 <= lam <= 1.0:
             raise ConfigError("forgetting_factor", f"must be in [0.9, 1.0], got {lam}")
         self.lam = float(lam)
+
+    @property
+    def memory(self) -> float:
+        """Samples the estimate remembers, 1 / (1 − λ) (inf at λ = 1)."""
+        return 1.0 / (1.0 - self.lam) if self.lam < 1.0 else np.inf
 
     @property
     def parameter_dof(self) -> NDArray[np.int64]:
@@ -991,6 +996,8 @@ class RecursiveLeastSquares:
             if cfg.adapt_weights:
                 self.R_w = self.R.copy()
         force = Phi @ self.theta
+        term = Phi * self.theta
+        self._term2 += (term * term - self._term2) / min(self.n, self.memory)
         new = self.monitor.update(e / np.sqrt(s_diag), np.sign(force), t)
         if cfg.boost_on_alarm and new.any() and not self.frozen:
             self._boost()
@@ -1067,6 +1074,7 @@ class RecursiveLeastSquares:
             R_prev = np.broadcast_to(self.R, (n, 6))
         s_diag = b.S_diag * (R_prev / self.R_w)
         force = np.einsum("jip,jp->ji", Phi, b.thetas)
+        term = (Phi * b.thetas[:, None, :]).reshape(n, -1)
         m, alarm = self.monitor.update_many(e / np.sqrt(s_diag), np.sign(force), t,
                                             stop_at_alarm=cfg.boost_on_alarm)
         if m < n:  # the state after sample m, boosted below; the rest is a new block
@@ -1079,6 +1087,8 @@ class RecursiveLeastSquares:
         out[:m] = e[:m]
         self.last_innovation = e[m - 1].copy()
         self._phi2 += np.einsum("jip,jip->ip", Phi[:m], Phi[:m])
+        self._term2 = _ew_mean(self._term2.ravel(), term[:m] ** 2, 1.0 / np.minimum(
+            self.n - m + 1 + np.arange(m), self.memory)).reshape(self._term2.shape)
         self._e2 = _ew_mean(self._e2, e[:m] ** 2, a)
         self.correlation.update(u[:m])
         if cfg.adapt_noise:
@@ -1145,9 +1155,7 @@ class RecursiveLeastSquares:
     def diagnostics(self, condition: bool = True) -> Diagnostics:
         """Current diagnostics; ``condition`` computes the condition number (O(p³))."""
         noise_std = np.sqrt(self.R)
-        t = np.abs(self.theta) / self.std  # O(p³)
-        dof = self.parameter_dof
-        excitation = np.array([t[dof == i].max(initial=0.0) for i in range(6)])
+        excitation = np.sqrt(self._term2.max(axis=1, initial=0.0)) / noise_std
         return Diagnostics(
             samples=self.n, innovation_rms=np.sqrt(self._e2), noise_std=noise_std,
             excitation=excitation, excited=excitation >= self.config.min_excitation,
