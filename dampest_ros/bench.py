@@ -14,7 +14,9 @@ groups of rows. The online rows (ROS 2 nodes; the environment's ROS_DOMAIN_ID, l
   node (the same four dampest/* subscriptions, callbacks that do nothing) in another, both
   receiving the same samples from a third process at 10× real time;
 - ``recorder``: recorder_node in its own process records the sim topic set while sim_node
-  runs at 20× real time: messages lost and the recorder's CPU per message.
+  runs at 20× real time: messages lost and the recorder's CPU per message; then
+  ``--kills`` recordings killed with SIGKILL at a random moment and recovered with reindex:
+  the share of the messages published before the kill that the bag keeps (min / median).
 """
 
 from __future__ import annotations
@@ -272,14 +274,17 @@ def _proc_cpu(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _recorder(rate_factor: str, seconds: str) -> dict[str, float]:
-    """recorder_node (own process) records the sim topics; sim_node here at ``rate_factor``."""
+def _recorder(rate_factor: str, seconds: str, kill_at: str = "") -> dict[str, float]:
+    """recorder_node (own process) records the sim topics; sim_node here at ``rate_factor``.
+    With ``kill_at`` (simulated seconds) the recorder is killed with SIGKILL then and the bag
+    recovered with reindex; ``published`` counts the messages published before the kill."""
     _ros_env()
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
     from dampest_ros.io.bag import bag_summary
+    from dampest_ros.io.recorder import reindex
     from dampest_ros.ros.sim_node import SimNode
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -303,16 +308,23 @@ def _recorder(rate_factor: str, seconds: str) -> dict[str, float]:
         sim.set_parameters([Parameter("seed", value=2)])  # restart now that the recorder listens
         sim.published = 0
         cpu0, wall0 = _proc_cpu(rec.pid), time.monotonic()
-        while not sim.live.done:
+        stop = float(kill_at) if kill_at else float("inf")
+        while not sim.live.done and sim.live.t < stop:
             ex.spin_once(timeout_sec=0.05)
         wall = time.monotonic() - wall0
-        time.sleep(1.5)
-        cpu = _proc_cpu(rec.pid) - cpu0
-        rec.send_signal(signal.SIGINT)
-        rec.wait(60)
-        recorded = bag_summary(out).message_count
-        sim_s = sim.live.t
         published = sim.published
+        if kill_at:
+            rec.kill()
+            rec.wait(60)
+            cpu = 0.0
+            recorded = reindex(out).messages
+        else:
+            time.sleep(1.5)
+            cpu = _proc_cpu(rec.pid) - cpu0
+            rec.send_signal(signal.SIGINT)
+            rec.wait(60)
+            recorded = bag_summary(out).message_count
+        sim_s = sim.live.t
         ex.shutdown()
         sim.destroy_node()
         rclpy.shutdown()
@@ -386,7 +398,20 @@ def _online_rows(args: argparse.Namespace, only: set[str]) -> list[tuple[str, ..
                      f"lost {r['published'] - n:.0f}; {r['cpu'] / max(n, 1) * 1e6:.0f} µs CPU "
                      f"per message ({100 * r['cpu'] / r['wall']:.0f} % of a core)",
                      "none lost", ""))
+        kept = sorted(_killed_share(args.recorder_seconds, k) for k in range(args.kills))
+        rows.append((f"  SIGKILL at a random moment, reindex ({args.kills} kills at 20×)", "",
+                     f"kept of the messages published before the kill: min "
+                     f"{100 * kept[0]:.1f} %, median {100 * kept[len(kept) // 2]:.1f} %",
+                     "≥ 99 %", ""))
     return rows
+
+
+def _killed_share(seconds: float, seed: int) -> float:
+    """Share of the published messages a recording killed at a random moment (between 20 %
+    and 90 % of ``seconds``, reproducible by ``seed``) keeps after reindex."""
+    kill_at = seconds * (0.2 + 0.7 * ((seed * 0.618034) % 1.0))
+    r = _child("recorder", "20", str(seconds), f"{kill_at:.3f}")
+    return r["recorded"] / max(r["published"], 1.0)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -403,6 +428,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="seconds of samples for the estimator CPU rows (default: 60)")
     ap.add_argument("--recorder-seconds", type=float, default=120.0,
                     help="simulated seconds recorded by the recorder rows (default: 120)")
+    ap.add_argument("--kills", type=int, default=10,
+                    help="recordings killed with SIGKILL in the recorder rows (default: 10)")
     ap.add_argument("--only", nargs="+", choices=GROUPS, default=list(GROUPS),
                     help="groups of rows to run (default: all)")
     args = ap.parse_args(argv)
