@@ -1134,7 +1134,8 @@ class GapResult:
         Candidates that could not be tested, with the reason.
     conclusion : str
     rejected : dict of str to str
-        Significant candidates that were not added, with the reason (:func:`rejection`).
+        Significant candidates that were not added, with the reason of their last rejection
+        (:func:`rejection`).
     """
 
     steps: list[Step]
@@ -1387,13 +1388,15 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
     """Name the missing effects one at a time until none is significant.
 
     Each round: weights 1/σ_i² from the current residual on the training part; every
-    candidate not yet added (nor rejected) is screened (:func:`screen`); the significant ones
+    candidate not yet added is screened (:func:`screen`); the significant ones
     are tried in order of their held-out log-likelihood gain, less ½ log n_eff per unknown:
     all added effects and the candidate are refitted jointly on their exact models
     (:func:`refit`), and the candidate is added unless :func:`rejection` finds a reason
     (a DOF's held-out residual grows, M would not be positive definite, D(ν) would generate
-    energy), in which case the next one is tried (at most ``options.max_tries`` per round).
-    The held-out RMS per DOF before and after and the training BIC are recorded.
+    energy), in which case the next one is tried (at most ``options.max_tries`` per round;
+    a candidate rejected in one round is tried again in the next, when another effect may
+    have taken the share of the residual it traded against). The held-out RMS per DOF
+    before and after and the training BIC are recorded.
 
     Parameters
     ----------
@@ -1424,7 +1427,7 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
     conclusion = NO_FURTHER
     while True:
         w = _weights(r, tr)
-        done = {a.key for a, _ in added} | set(rejected)
+        done = {a.key for a, _ in added}
         round_ = [screen(data, e, r, w, opts) for e in cands if e.key not in done]
         round_.sort(key=lambda s: -s.score(data.n_eff_test))
         screens.append(round_)
@@ -1439,9 +1442,10 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
             ps, cs = refit(data, trial, w, opts.refit_nfev)
             new = [(e, p) for (e, _), p in zip(trial, ps, strict=True)]
             r_new = data.r0 - correction(data, new)
-            why = rejection(data, new, r, r_new, cand.effect.k)
+            why = rejection(data, new, r, r_new, cand.effect.k, opts.min_relevance)
             if not why:
                 chosen = cand, new, cs, r_new
+                rejected.pop(cand.effect.key, None)
                 break
             rejected[cand.effect.key] = why
             if progress:
@@ -1463,15 +1467,18 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
 
 
 def rejection(data: GapData, effects: Sequence[tuple[Effect, FloatArray]], r_before: FloatArray,
-              r_after: FloatArray, k: int) -> str:
+              r_after: FloatArray, k: int, min_change: float = GapOptions.min_relevance
+              ) -> str:
     """Why the model with ``effects`` (the last one new) must not be accepted; empty if it may.
 
     Reasons, in this order:
 
     - a DOF's held-out residual grows: its mean square rises by more than the
-      4 k / n_eff,train an effect with k unknowns fitted to noise alone is expected to add
-      (an effect that is there lowers the residual of every DOF it acts on; one that trades
-      a DOF against another describes a modelling error, not itself);
+      4 k / n_eff,train an effect with k unknowns fitted to noise alone is expected to add,
+      and its RMS by more than ``min_change`` × the DOF's force scale (a change that does
+      not matter, as in :attr:`GapOptions.min_relevance`) (an effect that is there lowers
+      the residual of every DOF it acts on; one that trades a DOF against another
+      describes a modelling error, not itself);
     - the updated M_RB + M_A is not symmetric positive definite (or M_A not positive
       semi-definite);
     - the updated D(ν) generates energy: νᵀD(ν)ν below the believed model's smallest value
@@ -1486,11 +1493,14 @@ def rejection(data: GapData, effects: Sequence[tuple[Effect, FloatArray]], r_bef
         Residual before and after the step (N, N·m).
     k : int
         Unknowns of the new effect.
+    min_change : float
+        Smallest rise of a DOF's held-out RMS that counts, as a share of its force scale.
     """
     te = data.test
     ms0 = np.mean(r_before[te] ** 2, axis=0)
     ms1 = np.mean(r_after[te] ** 2, axis=0)
-    worse = ms1 > ms0 * (1.0 + 4.0 * k / max(data.n_eff_train, 1.0))
+    worse = ((ms1 > ms0 * (1.0 + 4.0 * k / max(data.n_eff_train, 1.0)))
+             & (np.sqrt(ms1) - np.sqrt(ms0) > min_change * data.force_scale))
     if worse.any():
         i = int(np.argmax(np.where(worse, ms1 / np.maximum(ms0, 1e-300), 0.0)))
         return (f"the held-out residual of {FORCE_NAMES[i]} grows (RMS "

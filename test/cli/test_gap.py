@@ -13,7 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from dampest_ros.cli.common import load_model_for
 from dampest_ros.cli.main import main
+from dampest_ros.core.damping import CrossSpec, DampingModel, cross_term
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 
 
@@ -84,3 +86,85 @@ def test_unknown_candidate_is_an_error(measured: Path,
                  "--candidates", "warp_drive"]) == 2
     err = capsys.readouterr().err
     assert "warp_drive" in err and "current" in err
+
+
+# --- issue 11 -------------------------------------------------------------------------------
+
+
+def test_printed_magnitudes_are_what_the_model_file_holds(
+        measured: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: each step printed its own refit (ΔX_uu +40.6 at step 2) while the file held
+    the final joint refit of all three effects."""
+    out = measured / "final_printed.yaml"
+    capsys.readouterr()
+    assert main(["gap", str(measured / "samples.csv"), "--model",
+                 str(measured / "sim_model.yaml"), "--vehicle", "bluerov2_heavy",
+                 "--candidates", "thrusters,buoyancy,damping", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    final = load_model(out)
+    gap = final.extra["gap"]
+    x_uu = final.theta[final.parameter_names.index("X_uu")]
+    assert f"ΔX_uu = {gap['quadratic_X_uu']['X_uu']:+.4g}" in printed
+    assert f"in the model: X_uu 100 → {x_uu:.4g}" in printed
+    assert f"ε = {100 * gap['thrust_gain']['epsilon']:+.2f}" in printed
+    assert f"ΔB = {gap['buoyancy']['delta_B']:+.3g}" in printed
+
+
+def test_naming_a_cross_term_the_model_has_updates_it_and_writes_the_files(
+        measured: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: 'terms: duplicate parameter names', exit 2, neither --out nor --report."""
+    v = load_vehicle("bluerov2_heavy")
+    model = DampingModel([*v.damping.terms, cross_term([CrossSpec.from_dict(
+        {"row": "Y", "col": "v", "alpha": "|r|"})])])
+    theta = model.theta_from_dict({**dict(zip(v.damping.parameter_names, v.theta,
+                                              strict=True)), "Y_vr": 60.0})
+    believed = measured / "cross_model.yaml"
+    save_model(believed, model.parameter_names, theta, np.zeros(len(theta)), v.body.M,
+               damping=model)
+    out, report = measured / "cross_final.yaml", measured / "cross_report"
+    capsys.readouterr()
+    assert main(["gap", str(measured / "samples.csv"), "--model", str(believed),
+                 "--vehicle", "bluerov2_heavy", "--candidates", "cross.Y_vr,buoyancy,thrusters",
+                 "--out", str(out), "--report", str(report)]) == 0
+    final = load_model(out)
+    assert "cross.Y_vr" in final.extra["gap"]["named"]
+    assert final.parameter_names == model.parameter_names  # updated, not added again
+    # the simulated vehicle has no Y_v|r|: the update brings it back to about 0
+    assert abs(final.theta[final.parameter_names.index("Y_vr")]) < 3.0
+    assert (report / "index.html").exists()
+    load_model_for(str(out), v)
+
+
+def test_a_diverging_believed_model_is_explained_and_the_files_are_written(
+        measured: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    v = load_vehicle("bluerov2_heavy")
+    theta = v.damping.theta_from_dict({**dict(zip(v.damping.parameter_names, v.theta,
+                                                  strict=True)), "Z_ww": -61.0})
+    believed = measured / "zww_model.yaml"
+    save_model(believed, v.damping.parameter_names, theta, np.zeros(len(theta)), v.body.M,
+               damping=v.damping)
+    out, report = measured / "zww_final.yaml", measured / "zww_report"
+    capsys.readouterr()
+    assert main(["gap", str(measured / "samples.csv"), "--model", str(believed),
+                 "--vehicle", "bluerov2_heavy", "--candidates", "thrusters,buoyancy,damping",
+                 "--out", str(out), "--report", str(report)]) == 0
+    printed = capsys.readouterr().out
+    line = "the believed model diverges: Z_ww < 0 leaves no steady heave speed above 4.46 N"
+    assert line in printed
+    assert "diverges: Z_ww &lt; 0 leaves no steady heave speed" in (report / "index.html"
+                                                                    ).read_text()
+    final = load_model(out)
+    assert final.theta[final.parameter_names.index("Z_ww")] == pytest.approx(190.0, rel=0.05)
+    load_model_for(str(out), v)
+
+
+@pytest.mark.parametrize(("option", "value"), [("--split", "1.5"), ("--min-heldout", "2"),
+                                               ("--max-steps", "-1"), ("--split", "nan")])
+def test_bad_options_are_one_line_and_exit_2(measured: Path, option: str, value: str,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    capsys.readouterr()
+    assert main(["gap", str(measured / "samples.csv"), "--model",
+                 str(measured / "sim_model.yaml"), "--vehicle", "bluerov2_heavy",
+                 option, value]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"dampest gap: error: {option}: ") and err.count("\n") == 1, err

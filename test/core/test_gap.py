@@ -462,14 +462,20 @@ def test_an_effect_that_worsens_a_dof_held_out_is_rejected() -> None:
     data = _short()
     lib = {e.key: e for e in gap.library()}
     r = data.r0
+    rms = np.sqrt(np.mean(r[data.test] ** 2, axis=0))
     worse = r.copy()
-    worse[data.test, 3] *= 1.05  # roll's held-out mean square +10 %
+    worse[data.test, 3] *= 1.5  # roll's held-out RMS +50 %
+    assert 0.5 * rms[3] > 0.0025 * data.force_scale[3]  # a change that matters
     why = gap.rejection(data, [(lib["thrust_gain"], np.array([0.0]))], r, worse, 1)
     assert why.startswith("the held-out residual of K grows"), why
     # within what an effect fitted to noise adds (4 k / n_eff), it is not
     slight = r.copy()
     slight[data.test, 3] *= 1.0 + 1.0 / data.n_eff_train
     assert gap.rejection(data, [(lib["thrust_gain"], np.array([0.0]))], r, slight, 1) == ""
+    # nor is a rise far below the DOF's force scale (a DOF at its noise floor)
+    tiny = r.copy()
+    tiny[data.test, 3] *= 1.0 + 0.5 * 0.0025 * data.force_scale[3] / rms[3]
+    assert gap.rejection(data, [(lib["thrust_gain"], np.array([0.0]))], r, tiny, 1) == ""
 
 
 def test_current_uses_the_vehicles_added_mass_switches() -> None:
