@@ -8,6 +8,12 @@ added-mass switches (``model.added_mass_terms``, ``model.M_A``) when the server 
 Without ROS, :meth:`ModelClient.from_yaml` reads a model file. rclpy is imported only by the
 ROS methods.
 
+:attr:`ModelClient.identified` says per coefficient whether the data determined it
+(``model.identified``; :attr:`ModelClient.held` gives the reason for those that hold their
+prior). An update whose numbers are not finite (θ, M, the σ of an identified coefficient) is
+refused: the client keeps the last good model and says why (:attr:`ModelClient.errors`, the
+node's log).
+
 Every static damping term is evaluated (linear, quadratic, cross, added mass, residual): the
 structure comes from ``model.terms.*`` when the server declares them (estimator_node and
 model_server_node do, as the model file has them), otherwise it is rebuilt from the
@@ -49,7 +55,7 @@ MODEL_PARAMETERS = ("model.parameter_names", "model.theta", "model.theta_std", "
 def _identified(m: ModelFile) -> IdentifiedModel:
     """The evaluable model of a model file (structure from its terms, else from the names)."""
     return IdentifiedModel(m.parameter_names, m.theta, m.theta_std, m.M, m.damping, m.version,
-                           m.M_A, m.added_mass_terms)
+                           m.M_A, m.added_mass_terms, m.held)
 
 
 class ModelUnavailableError(RuntimeError):
@@ -164,7 +170,7 @@ class ModelClient:
             if missing:
                 raise ModelUnavailableError(f"{self.server} has no {', '.join(missing)}")
         except Exception as exc:  # a bad answer must not kill the caller's executor
-            self.errors.append(f"{type(exc).__name__}: {exc}")
+            self._refuse(exc)
             return
         get = self._cli.call_async(GetParameters.Request(names=names))
         get.add_done_callback(lambda f: self._on_response(names, f))
@@ -180,7 +186,15 @@ class ModelClient:
                                        for n, v in zip(names, values, strict=True)})
             self._set(_identified(m))
         except Exception as exc:  # a bad answer must not kill the caller's executor
-            self.errors.append(f"{type(exc).__name__}: {exc}")
+            self._refuse(exc)
+
+    def _refuse(self, exc: Exception) -> None:
+        """Keep the last good model; record and log why an update was refused."""
+        kept = (f"keeping version {self._model.version}" if self._model is not None
+                else "no model yet")
+        text = f"{type(exc).__name__}: {exc}"
+        self.errors.append(text)
+        self.node.get_logger().error(f"model from {self.server} refused ({kept}): {text}")
 
     def _on_event(self, event: Any) -> None:
         if event.node != self._full_name:
@@ -223,6 +237,17 @@ class ModelClient:
     def version(self) -> int:
         """model.version of the latest model (-1: none)."""
         return self._model.version if self._model is not None else -1
+
+    @property
+    def identified(self) -> NDArray[np.bool_]:
+        """Per coefficient of the latest model (θ order), True when the data determined it;
+        False: its value is the prior (``model.identified``)."""
+        return self.model.identified
+
+    @property
+    def held(self) -> dict[str, str]:
+        """The coefficients of the latest model held at their prior, with the reason."""
+        return dict(self.model.held)
 
     def D(self, nu: FloatArray) -> FloatArray:
         """D(ν) (6, 6) for ν (6,), FRD."""

@@ -16,7 +16,7 @@ import pytest
 
 from dampest_ros.client import ModelClient
 from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.rigid_body import coriolis_force
+from dampest_ros.core.rigid_body import ConfigError, coriolis_force
 from dampest_ros.core.vehicle import damping_from_spec
 from dampest_ros.io.yaml_io import damping_spec, load_vehicle, save_model, vehicle_path
 
@@ -209,3 +209,118 @@ def test_added_mass_switches_reach_the_client_from_file_and_parameters(tmp_path:
             assert len(server._served["model.M_A"]) == 36
             assert c.model.added_mass_terms == AddedMassTerms(**switches)
             check(c)
+
+
+def nan_file(path: Path, good: Path) -> Path:
+    """``good`` with model.theta[0] = NaN (written as YAML's .nan)."""
+    import yaml
+
+    doc = yaml.safe_load(good.read_text())
+    doc["/**"]["ros__parameters"]["model"]["theta"][0] = float("nan")
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_model_server_refuses_a_non_finite_model_at_start(tmp_path: Path) -> None:
+    """Issue 11: a NaN in a model file's theta was served by model_server_node. At start, by
+    model_file or by --params-file, the node logs one error naming the entry and exits with
+    status 2, no traceback."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("rclpy")
+    good = tmp_path / "good.yaml"
+    model_and_file(good)
+    bad = nan_file(tmp_path / "bad.yaml", good)
+    env = dict(os.environ, ROS_DOMAIN_ID="78", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    for args in (["-p", f"model_file:={bad}"], ["--params-file", str(bad)]):
+        proc = subprocess.run([sys.executable, "-m", "dampest_ros.ros.model_server_node",
+                               "--ros-args", *args], capture_output=True, text=True,
+                              timeout=60, env=env)
+        out = proc.stdout + proc.stderr
+        assert proc.returncode == 2, out
+        assert "Traceback" not in out and "cannot start" in out, out
+        assert "model.theta: not finite: X_u = nan" in out, out
+        assert len([x for x in out.splitlines() if x.strip()]) == 1, out
+
+
+def test_bad_model_at_runtime_is_refused_and_the_client_keeps_the_last_good_one(
+        tmp_path: Path) -> None:
+    """At runtime model_server_node rejects a model_file with a NaN (the reason in the
+    result) and keeps serving its model; a client whose server publishes a NaN theta refuses
+    that update, keeps the last good model and says why. The client exposes which
+    coefficients the data determined (model.identified, served as a parameter)."""
+    rclpy = pytest.importorskip("rclpy")
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from dampest_ros.io.yaml_io import load_model, model_parameters
+    from dampest_ros.ros.model_server_node import ModelServerNode
+
+    v = load_vehicle("bluerov2_heavy")
+    names = v.damping.parameter_names
+    held = {"Y_vv": "poorly determined", "K_pp": "no excitation"}
+    std = np.array([np.nan if n in held else 0.5 for n in names])
+    good = save_model(tmp_path / "good.yaml", names, v.theta, std, v.body.M,
+                      damping=v.damping, version=4, held=held)
+    bad = nan_file(tmp_path / "bad.yaml", good)
+    with pytest.raises(ConfigError, match=r"model\.theta: not finite: X_u = nan"):
+        ModelClient.from_yaml(bad)
+    mask = [n not in held for n in names]
+    assert ModelClient.from_yaml(good).identified.tolist() == mask
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "77")
+    ns = f"/test_refuse_{os.getpid()}"
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    ex = SingleThreadedExecutor(context=context)
+    nodes: list[Any] = []
+    try:
+        server = ModelServerNode(context=context, cli_args=[
+            "--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={good}"])
+        # a server that publishes whatever it is given (as a faulty estimator would)
+        m = load_model(good)
+        fake = rclpy.create_node("fake_server", namespace=ns, context=context)
+        for name, value in model_parameters(names, m.theta, m.theta_std, m.M,
+                                            damping=m.damping, version=4, held=held).items():
+            fake.declare_parameter(name, value)
+        probe = rclpy.create_node("probe", namespace=ns, context=context)
+        nodes += [server, fake, probe]
+        for n in nodes:
+            ex.add_node(n)
+        clients = [ModelClient(probe, s) for s in ("model_server_node", "fake_server")]
+
+        def spin_until(done: Callable[[], bool]) -> None:
+            end = time.monotonic() + 10.0
+            while not done() and time.monotonic() < end:
+                ex.spin_once(timeout_sec=0.05)
+
+        spin_until(lambda: all(c.available for c in clients))
+        nu = np.array([0.5, -0.2, 0.1, 0.3, 0.0, -0.4])
+        want = v.damping.force(nu[None, :], v.theta)[0]
+        for c in clients:
+            assert c.available, c.errors
+            assert c.identified.tolist() == mask and c.held == held
+            np.testing.assert_allclose(c.damping_force(nu), want, rtol=1e-12)
+        assert server._served["model.identified"] == mask
+        assert server._served["model.held.names"] == list(held)
+        # model_server_node: the bad file is rejected with the reason, the model stays
+        result = server.set_parameters([Parameter("model_file", value=str(bad))])[0]
+        assert not result.successful
+        assert result.reason.startswith("model_file: model.theta: not finite: X_u = nan")
+        assert server.version == 4 and server.p("model_file") == str(good)
+        # the faulty server publishes a NaN theta: the client keeps version 4 and says why
+        theta = list(fake.get_parameter("model.theta").value)
+        theta[0] = float("nan")
+        fake.set_parameters([Parameter("model.theta", value=theta),
+                             Parameter("model.version", value=5)])
+        spin_until(lambda: bool(clients[1].errors))
+        assert clients[1].errors and "model.theta: not finite: X_u = nan" in \
+            clients[1].errors[-1]
+        assert clients[1].version == 4
+        np.testing.assert_allclose(clients[1].damping_force(nu), want, rtol=1e-12)
+    finally:
+        ex.shutdown()
+        for n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown(context=context)

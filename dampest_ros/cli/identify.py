@@ -340,18 +340,19 @@ def heldout_text(held: Samples, scores: dict[str, np.ndarray]) -> str:
 def write_model(path: Path, result: Fit, model: DampingModel, body: RigidBody,
                 source: str, heldout: dict[str, np.ndarray] | None = None) -> None:
     """Save a fit as the model YAML with the body's mass matrix, added mass and added-mass
-    switches, its metrics, the unidentified parameters and, with a held-out part, its
-    per-DOF R² and RMSE (``heldout_r2``, ``heldout_rmse``)."""
-    unidentified = list(result.flags)
+    switches, its metrics, the coefficients the data did not determine (``model.identified``
+    false, ``model.held`` with the reason) and, with a held-out part, its per-DOF R² and
+    RMSE (``heldout_r2``, ``heldout_rmse``)."""
     ci = result.interval()
     more = {} if heldout is None else {
         "heldout_r2": [float(x) for x in heldout["nse"]],
         "heldout_rmse": [float(x) for x in heldout["rmse"]]}
     save_model(path, result.names, result.theta, result.std, body.M, damping=model,
-               M_A=body.added_mass, added_mass_terms=body.added_mass_terms, extra={**more,
+               M_A=body.added_mass, added_mass_terms=body.added_mass_terms,
+               held={n: result.flags.get(n) or result.constrained[n]
+                     for n, ok in zip(result.names, result.identified, strict=True) if not ok},
+               extra={**more,
         "source": source, "method": result.method, "samples": int(result.n),
         "ci95_low": [float(x) for x in ci[:, 0]], "ci95_high": [float(x) for x in ci[:, 1]],
         "nse": [float(x) for x in result.r2], "rmse": [float(x) for x in result.rmse],
-        "condition_number": float(result.cond),
-        "unidentified": unidentified or ["none"],
-        "unidentified_reason": [result.flags[n] for n in unidentified] or ["none"]})
+        "condition_number": float(result.cond)})

@@ -1,10 +1,15 @@
 """An identified damping model as controllers use it: D(ν), the damping force and its
 uncertainty, and C(ν)ν from the mass matrix with the added-mass switches of the plant (FRD body
-frame, SI units)."""
+frame, SI units).
+
+Every reader of a model refuses numbers no controller can use (:func:`check_model_numbers`: θ,
+M and the σ of the identified coefficients finite). A model says per coefficient whether the
+data determined it (``held``: name → why it did not; :attr:`IdentifiedModel.identified`).
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,7 +25,7 @@ from dampest_ros.core.rigid_body import (
 from dampest_ros.core.vehicle import damping_from_spec
 
 FloatArray = NDArray[np.float64]
-
+BoolArray = NDArray[np.bool_]
 
 def damping_from_names(names: Sequence[str]) -> DampingModel:
     """Rebuild a damping model from SNAME names alone (linear ``X_u``, ``Y_r``; quadratic
@@ -47,6 +52,57 @@ def damping_from_names(names: Sequence[str]) -> DampingModel:
     return model
 
 
+def identified_mask(names: Sequence[str], held: Mapping[str, str]) -> BoolArray:
+    """Per coefficient, True when the data determined it (its name is not in ``held``)."""
+    return np.array([n not in held for n in names], dtype=bool)
+
+
+def check_model_numbers(names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
+                        M: FloatArray, held: Mapping[str, str] | None = None,
+                        where: str = "") -> None:
+    """Refuse a model whose numbers no controller or simulator can use.
+
+    θ and every entry of M must be finite; σ must be finite for each identified
+    coefficient (one in ``held`` stayed at its prior: its σ may be NaN, not estimated);
+    ``held`` names parameters of the model.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Parameter names, θ order.
+    theta, theta_std : ndarray, shape (p,)
+    M : ndarray, 36 entries
+    held : mapping of str to str, optional
+        The coefficients held at their prior, with the reason.
+    where : str
+        Appended to the message (e.g. `` (in model.yaml)``).
+
+    Raises
+    ------
+    ConfigError
+        Naming the entry and its value, e.g. ``model.theta: Z_ww = nan (in m.yaml)``.
+    """
+    theta = np.asarray(theta, dtype=float)
+    std = np.asarray(theta_std, dtype=float)
+    M = np.asarray(M, dtype=float).reshape(-1)
+    unknown = sorted(set(held or {}) - set(names))
+    if unknown:
+        raise ConfigError("model.held", f"names no parameter of the model: {unknown}{where}")
+    bad = [f"{n} = {v}" for n, v in zip(names, theta, strict=True) if not np.isfinite(v)]
+    if bad:
+        raise ConfigError("model.theta", f"not finite: {', '.join(bad)}{where}")
+    mask = identified_mask(names, held or {})
+    bad = [f"{n} = {v}" for n, v, ok in zip(names, std, mask, strict=True)
+           if ok and not np.isfinite(v)]
+    if bad:
+        raise ConfigError("model.theta_std", f"not finite for an identified coefficient: "
+                                             f"{', '.join(bad)}{where}")
+    bad = [f"M[{FORCE_NAMES[k // 6]},{DOF_NAMES[k % 6]}] = {v}" for k, v in enumerate(M)
+           if not np.isfinite(v)]
+    if bad:
+        raise ConfigError("model.M", f"not finite: {', '.join(bad)}{where}")
+
+
 class IdentifiedModel:
     """θ of a damping model with its standard deviations and the mass matrix.
 
@@ -64,16 +120,25 @@ class IdentifiedModel:
         The added mass inside ``M``; needed when ``added_mass_terms`` turn an effect off.
     added_mass_terms : AddedMassTerms, optional
         Which effects of M_A act (None: all, C(ν)ν of M as a whole).
+    held : mapping of str to str, optional
+        Coefficients the data did not determine (their θ is the prior), with the reason.
+
+    Raises
+    ------
+    ConfigError
+        Shapes that disagree, or numbers :func:`check_model_numbers` refuses.
     """
 
     def __init__(self, names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
                  M: FloatArray, damping: DampingModel | None = None, version: int = 0,
                  M_A: FloatArray | None = None,
-                 added_mass_terms: AddedMassTerms | None = None) -> None:
+                 added_mass_terms: AddedMassTerms | None = None,
+                 held: Mapping[str, str] | None = None) -> None:
         self.names = [str(n) for n in names]
         self.theta = np.asarray(theta, dtype=float)
         self.theta_std = np.asarray(theta_std, dtype=float)
         self.M = np.asarray(M, dtype=float).reshape(6, 6)
+        self.held = dict(held or {})
         self.damping = damping if damping is not None else damping_from_names(self.names)
         self.version = int(version)
         self.M_A = None if M_A is None else np.asarray(M_A, dtype=float).reshape(6, 6)
@@ -84,11 +149,18 @@ class IdentifiedModel:
         p = len(self.names)
         if self.theta.shape != (p,) or self.theta_std.shape != (p,):
             raise ConfigError("model.theta", f"theta and theta_std need {p} values")
+        check_model_numbers(self.names, self.theta, self.theta_std, self.M, self.held)
         if self.damping.parameter_names != self.names:
             raise ConfigError("model.terms", "the terms do not give model.parameter_names")
         if self.damping.term("freq") is not None:
             raise ConfigError("model.terms", "a memory (freq) term needs its filter states; "
                                              "evaluate it with DampingModel.force")
+
+    @property
+    def identified(self) -> BoolArray:
+        """Per coefficient (θ order), True when the data determined it; False: θ is the
+        prior (the reason is in :attr:`held`)."""
+        return identified_mask(self.names, self.held)
 
     def value(self, name: str) -> float:
         """θ of one named parameter."""

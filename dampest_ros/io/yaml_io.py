@@ -12,7 +12,9 @@ well as :func:`load_model` does (DESIGN.md §1, §3)::
           sign_convention: dissipative_positive
           parameter_names: [X_u, Y_v, ..., X_uu, ...]
           theta: [13.7, 0.0, ..., 141.0, ...]
-          theta_std: [0.2, 0.1, ..., 1.5, ...]
+          theta_std: [0.2, 0.1, ..., 1.5, ...]   # .nan allowed only for held coefficients
+          identified: [true, true, ..., false, ...]  # did the data determine it (optional)
+          held: {names: [Y_vv], reasons: [...]}    # those not identified: θ is the prior
           M: [...]              # 36 numbers, row-major, M_RB + M_A
           M_A: [...]            # 36 numbers, the added mass inside M (optional)
           added_mass_terms: {inertial: true, coriolis: true, munk: true}   # optional
@@ -36,6 +38,14 @@ model describes (:class:`~dampest_ros.core.rigid_body.AddedMassTerms`: ``inertia
 ``coriolis`` C_A(ν)ν, ``munk`` its Munk moments); the switches are a namespace of three
 booleans, so ``model.added_mass_terms.coriolis`` is a ROS parameter. Files without them (older
 ones) mean all effects act, and C(ν)ν is that of M as a whole.
+
+``identified`` says per coefficient whether the data determined it; one that is ``false``
+holds its prior value (never an estimate) and ``held`` gives the reason, as parallel arrays
+(parameter names need not be valid ROS parameter names). Files without ``identified`` read as
+all identified, except those written by earlier ``dampest identify`` versions, whose
+``unidentified`` / ``unidentified_reason`` lists are read as ``held``. Every reader refuses a
+non-finite θ, M or σ of an identified coefficient
+(:func:`~dampest_ros.core.identified.check_model_numbers`).
 """
 
 from __future__ import annotations
@@ -52,13 +62,14 @@ import numpy as np
 import yaml
 
 from dampest_ros.core.damping import TERM_KINDS, Alpha, DampingModel
+from dampest_ros.core.identified import BoolArray, check_model_numbers, identified_mask
 from dampest_ros.core.measurements import FloatArray
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.vehicle import Vehicle, damping_from_spec
 
 SIGN_CONVENTION = "dissipative_positive"
 _REQUIRED = ("sign_convention", "parameter_names", "theta", "theta_std", "M", "version")
-_RESERVED = (*_REQUIRED, "terms", "M_A", "added_mass_terms")
+_RESERVED = (*_REQUIRED, "terms", "M_A", "added_mass_terms", "identified", "held")
 
 
 def _read_yaml(path: Path) -> Any:
@@ -271,6 +282,9 @@ class ModelFile:
     added_mass_terms : AddedMassTerms or None
         Which effects of M_A act (``model.added_mass_terms``); None: the file does not say,
         all act.
+    held : dict of str to str
+        The coefficients the data did not determine (θ is their prior), with the reason
+        (``model.held``); empty: all identified.
     """
 
     parameter_names: list[str]
@@ -283,16 +297,23 @@ class ModelFile:
     sign_convention: str = SIGN_CONVENTION
     M_A: FloatArray | None = None
     added_mass_terms: AddedMassTerms | None = None
+    held: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def identified(self) -> BoolArray:
+        """Per coefficient (θ order), True when the data determined it."""
+        return identified_mask(self.parameter_names, self.held)
 
     @property
     def acting_terms(self) -> AddedMassTerms:
         """The added-mass switches, all true when the file has none."""
         return self.added_mass_terms or AddedMassTerms()
 
-    def added_mass_kwargs(self) -> dict[str, Any]:
-        """``M_A`` and ``added_mass_terms`` as :func:`save_model` takes them (to write the
-        model again as it was read)."""
-        return {"M_A": self.M_A, "added_mass_terms": self.added_mass_terms}
+    def file_kwargs(self) -> dict[str, Any]:
+        """``M_A``, ``added_mass_terms`` and ``held`` as :func:`save_model` takes them (to
+        write the model again as it was read)."""
+        return {"M_A": self.M_A, "added_mass_terms": self.added_mass_terms,
+                "held": self.held}
 
 
 def _param_value(key: str, value: Any) -> Any:
@@ -340,7 +361,8 @@ def save_model(path: str | Path, names: Sequence[str], theta: FloatArray,
                theta_std: FloatArray, M: FloatArray, extra: Mapping[str, Any] | None = None,
                *, damping: DampingModel | None = None, version: int = 1,
                M_A: FloatArray | None = None,
-               added_mass_terms: AddedMassTerms | None = None) -> Path:
+               added_mass_terms: AddedMassTerms | None = None,
+               held: Mapping[str, str] | None = None) -> Path:
     """Write the model file atomically (temporary file in the same directory + rename).
 
     Parameters
@@ -363,14 +385,23 @@ def save_model(path: str | Path, names: Sequence[str], theta: FloatArray,
     added_mass_terms : AddedMassTerms, optional
         Which effects of M_A act, written as ``model.added_mass_terms``; switches that turn
         an effect off need ``M_A``.
+    held : mapping of str to str, optional
+        Coefficients the data did not determine (``theta`` holds their prior), with the
+        reason: written as ``model.identified`` (false for them) and ``model.held``.
 
     Returns
     -------
     Path
+
+    Raises
+    ------
+    ValueError
+        Shapes that disagree; ConfigError (a ValueError) for numbers no reader would take
+        (:func:`~dampest_ros.core.identified.check_model_numbers`).
     """
     path = Path(path)
     text = model_text(names, theta, theta_std, M, extra, damping=damping, version=version,
-                      M_A=M_A, added_mass_terms=added_mass_terms)
+                      M_A=M_A, added_mass_terms=added_mass_terms, held=held)
     _atomic_write(path, text)
     return path
 
@@ -378,13 +409,14 @@ def save_model(path: str | Path, names: Sequence[str], theta: FloatArray,
 def model_text(names: Sequence[str], theta: FloatArray, theta_std: FloatArray, M: FloatArray,
                extra: Mapping[str, Any] | None = None, *, damping: DampingModel | None = None,
                version: int = 1, M_A: FloatArray | None = None,
-               added_mass_terms: AddedMassTerms | None = None) -> str:
+               added_mass_terms: AddedMassTerms | None = None,
+               held: Mapping[str, str] | None = None) -> str:
     """The model file's text (what :func:`save_model` writes and ``dampest/model`` carries).
 
     Parameters are those of :func:`save_model`.
     """
     model = _model_mapping(names, theta, theta_std, M, extra, damping, version, M_A,
-                           added_mass_terms)
+                           added_mass_terms, held)
     return ("# dampest_ros model: a ROS 2 parameters file (--ros-args --params-file).\n"
             "# Damping coefficients are positive when dissipative; M is row-major, FRD.\n"
             + yaml.dump({"/**": {"ros__parameters": {"model": model}}}, Dumper=_Dumper,
@@ -394,7 +426,8 @@ def model_text(names: Sequence[str], theta: FloatArray, theta_std: FloatArray, M
 def model_parameters(names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
                      M: FloatArray, *, damping: DampingModel | None = None,
                      version: int = 1, M_A: FloatArray | None = None,
-                     added_mass_terms: AddedMassTerms | None = None) -> dict[str, Any]:
+                     added_mass_terms: AddedMassTerms | None = None,
+                     held: Mapping[str, str] | None = None) -> dict[str, Any]:
     """The model as the ROS parameters a node declares from the model file.
 
     Parameters are those of :func:`save_model` (without ``extra``).
@@ -403,8 +436,8 @@ def model_parameters(names: Sequence[str], theta: FloatArray, theta_std: FloatAr
     -------
     dict
         Dotted parameter name → value (``model.theta``: list of p floats, ``model.M``: 36
-        floats, ``model.terms.cross.rows``: list of int, ``model.added_mass_terms.munk``:
-        bool, …), the names and values
+        floats, ``model.identified``: list of p bool, ``model.terms.cross.rows``: list of
+        int, ``model.added_mass_terms.munk``: bool, …), the names and values
         ``--params-file`` gives for the file :func:`save_model` writes.
     """
     flat: dict[str, Any] = {}
@@ -417,7 +450,7 @@ def model_parameters(names: Sequence[str], theta: FloatArray, theta_std: FloatAr
             flat[prefix] = value
 
     walk("model", _model_mapping(names, theta, theta_std, M, None, damping, version, M_A,
-                                 added_mass_terms))
+                                 added_mass_terms, held))
     return flat
 
 
@@ -453,7 +486,8 @@ def _model_mapping(names: Sequence[str], theta: FloatArray, theta_std: FloatArra
                    M: FloatArray, extra: Mapping[str, Any] | None,
                    damping: DampingModel | None, version: int,
                    M_A: FloatArray | None = None,
-                   added_mass_terms: AddedMassTerms | None = None) -> dict[str, Any]:
+                   added_mass_terms: AddedMassTerms | None = None,
+                   held: Mapping[str, str] | None = None) -> dict[str, Any]:
     """The ``model`` mapping of the file (checked)."""
     names = [str(n) for n in names]
     theta = np.asarray(theta, dtype=float)
@@ -464,10 +498,15 @@ def _model_mapping(names: Sequence[str], theta: FloatArray, theta_std: FloatArra
                          f"{len(names)}, {theta.shape}, {theta_std.shape}")
     if M.size != 36:
         raise ValueError(f"M must have 36 entries, got shape {M.shape}")
+    held = {str(k): str(v) for k, v in (held or {}).items()}
+    check_model_numbers(names, theta, theta_std, M, held)
     model: dict[str, Any] = {
         "sign_convention": SIGN_CONVENTION, "parameter_names": names,
         "theta": theta.tolist(), "theta_std": theta_std.tolist(),
+        "identified": identified_mask(names, held).tolist(),
         "M": M.reshape(36).tolist(), "version": int(version)}
+    if held:
+        model["held"] = {"names": list(held), "reasons": list(held.values())}
     if M_A is not None:
         M_A = np.asarray(M_A, dtype=float)
         if M_A.size != 36:
@@ -553,10 +592,46 @@ def _model_from_mapping(model: Mapping[str, Any], path: Path) -> ModelFile:
             raise ConfigError("model.terms", f"the terms give parameters "
                                              f"{damping.parameter_names}, not {names} ({path})")
     M_A, terms = _added_mass_entries(model, path)
+    held = _held_entries(model, names, path)
+    check_model_numbers(names, arrays["theta"], arrays["theta_std"], arrays["M"], held,
+                        f" ({path})")
     return ModelFile(names, arrays["theta"], arrays["theta_std"], arrays["M"].reshape(6, 6),
                      int(model["version"]), damping,
                      {k: v for k, v in model.items() if k not in _RESERVED}, M_A=M_A,
-                     added_mass_terms=terms)
+                     added_mass_terms=terms, held=held)
+
+
+def _held_entries(model: Mapping[str, Any], names: list[str], path: Path) -> dict[str, str]:
+    """The coefficients a model mapping marks as held at the prior, with the reason
+    (``model.identified`` and ``model.held``; the ``unidentified`` lists of files written by
+    earlier ``dampest identify`` versions; none without either)."""
+    if "identified" not in model:
+        old = [str(n) for n in model.get("unidentified", [])]
+        if not old or old == ["none"]:
+            return {}
+        why = [str(r) for r in model.get("unidentified_reason", [])]
+        if len(why) != len(old):
+            why = ["not identified"] * len(old)
+        return dict(zip(old, why, strict=True))
+    flags = model["identified"]
+    if not (isinstance(flags, list) and len(flags) == len(names)
+            and all(isinstance(f, bool) for f in flags)):
+        raise ConfigError("model.identified", f"needs {len(names)} booleans (true: the data "
+                                              f"determined the coefficient) ({path})")
+    given = model.get("held", {})
+    try:
+        reasons = dict(zip([str(n) for n in given.get("names", [])],
+                           [str(r) for r in given.get("reasons", [])], strict=True))
+    except (AttributeError, TypeError, ValueError):
+        raise ConfigError("model.held", f"must be names: [...] and reasons: [...] of one "
+                                        f"length ({path})") from None
+    held = {n: reasons.get(n, "held at the prior (the file gives no reason)")
+            for n, ok in zip(names, flags, strict=True) if not ok}
+    extra = sorted(set(reasons) - set(held))
+    if extra:
+        raise ConfigError("model.held", f"{extra} are identified (model.identified) or not "
+                                        f"parameters of the model ({path})")
+    return held
 
 
 def _added_mass_entries(model: Mapping[str, Any], path: Path

@@ -34,6 +34,8 @@ from rclpy.subscription import Subscription
 from rclpy.utilities import remove_ros_args
 
 from dampest_ros.core.estimator import wire_stamp
+from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.io.yaml_io import load_model
 
 #: Sensor topics: the sensor-data policies (best effort, volatile) with a deeper queue than
 #: its 5, for the bursts of a simulator running faster than real time.
@@ -206,6 +208,23 @@ def validate(p: Param, value: Any) -> str | None:
     return None
 
 
+def model_file_check(name: str) -> Callable[[Any], str | None]:
+    """A :class:`Param` check for a parameter holding a model file path: '' passes, else the
+    reason :func:`~dampest_ros.io.yaml_io.load_model` refuses the file (missing, not a model,
+    non-finite numbers, …), prefixed with the parameter's name."""
+
+    def check(value: Any) -> str | None:
+        if not str(value).strip():
+            return None
+        try:
+            load_model(str(value))
+        except (ConfigError, FileNotFoundError, ValueError, OSError) as exc:
+            return f"{name}: {exc}"
+        return None
+
+    return check
+
+
 class ParamNode(Node):
     """A node whose parameters are declared from :class:`Param` specs and validated on set;
     accepted changes go to :meth:`on_parameters` (after they are set)."""
@@ -286,7 +305,11 @@ def _text(v: Any) -> str:
 
 def main_for(node_class: Callable[[], Node], doc: str) -> Callable[[list[str] | None], None]:
     """A console-script main(): ``--help`` lists the node's parameters; otherwise init, spin,
-    stop on Ctrl-C or external shutdown, destroy the node, shut down (as demo_nodes_py)."""
+    stop on Ctrl-C or external shutdown, destroy the node, shut down (as demo_nodes_py).
+
+    A node that cannot start on its parameters (a ValueError while it is built: an invalid
+    parameter, a model file no reader takes) logs one error line and exits with status 2,
+    without a traceback."""
 
     def main(args: list[str] | None = None) -> None:
         argv = sys.argv if args is None else args
@@ -298,15 +321,23 @@ def main_for(node_class: Callable[[], Node], doc: str) -> Callable[[list[str] | 
         parser.parse_args(remove_ros_args(argv)[1:])
         rclpy.init(args=argv)
         node = None
+        refused = False
         try:
             node = node_class()
             rclpy.spin(node)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
+        except ValueError as exc:  # ConfigError included
+            if node is not None:
+                raise
+            rclpy.logging.get_logger(name).error(f"cannot start: {exc}")
+            refused = True
         finally:
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()
+        if refused:
+            raise SystemExit(2)
 
     return main
 

@@ -5,9 +5,12 @@ is a ROS 2 parameters file: --ros-args --params-file model.yaml). Its parameters
 of the file: model.parameter_names, theta, theta_std, M, version, sign_convention, the
 term structure model.terms.* (so that dampest_ros.client evaluates cross, added-mass and
 residual terms too) and, when the file has them, model.M_A and the added-mass switches
-model.added_mass_terms.{inertial,coriolis,munk}. Publishes it on dampest/model
-(std_msgs/String with the YAML, transient local). Setting model_file loads another file
-(validated first) and bumps model.version.
+model.added_mass_terms.{inertial,coriolis,munk}, and model.identified (per coefficient:
+did the data determine it) with model.held.{names,reasons} for those that hold their prior.
+Publishes it on dampest/model (std_msgs/String with the YAML, transient local). Setting
+model_file loads another file (validated first: a file no reader takes, e.g. a non-finite
+theta, is rejected with the reason and the served model stays) and bumps model.version. A
+model refused at start ends the node with one logged error and exit status 2.
 """
 
 from __future__ import annotations
@@ -25,8 +28,8 @@ from dampest_ros.io.yaml_io import (
     model_parameters,
     model_text,
 )
-from dampest_ros.ros.common import LATCHED_QOS, Param, main_for
-from dampest_ros.ros.estimator_node import ModelParamNode, _prior_ok
+from dampest_ros.ros.common import LATCHED_QOS, Param, main_for, model_file_check
+from dampest_ros.ros.estimator_node import ModelParamNode
 
 
 class ModelServerNode(ModelParamNode):
@@ -35,7 +38,7 @@ class ModelServerNode(ModelParamNode):
     NODE_NAME = "model_server_node"
     PARAMS = (
         Param("model_file", "", "model YAML to serve ('': the model.* parameters given at "
-              "start, e.g. with --params-file)", check=_prior_ok),
+              "start, e.g. with --params-file)", check=model_file_check("model_file")),
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -64,10 +67,10 @@ class ModelServerNode(ModelParamNode):
         m = self.model
         self.serve_model(model_parameters(m.parameter_names, m.theta, m.theta_std, m.M,
                                           damping=m.damping, version=self.version,
-                                          **m.added_mass_kwargs()))
+                                          **m.file_kwargs()))
         self.pub.publish(String(data=model_text(
             m.parameter_names, m.theta, m.theta_std, m.M, {"source": "model_server_node"},
-            damping=m.damping, version=self.version, **m.added_mass_kwargs())))
+            damping=m.damping, version=self.version, **m.file_kwargs())))
 
     def on_parameters(self, names: list[str]) -> None:
         if "model_file" in names and str(self.p("model_file")).strip():

@@ -31,7 +31,7 @@ def test_bluerov2_protocol_b_within_2_percent_and_truth_in_interval(protocol_b: 
                  "config/vehicles/bluerov2_heavy.yaml", "--out", str(out)]) == 0
     est, truth = load_model(out), load_model(protocol_b / "bag" / "truth_model.yaml")
     assert est.parameter_names == truth.parameter_names
-    assert list(est.extra["unidentified"]) == ["none"]
+    assert est.held == {} and est.identified.all()
     lo, hi = np.array(est.extra["ci95_low"]), np.array(est.extra["ci95_high"])
     for name, value, t, a, b in zip(est.parameter_names, est.theta, truth.theta, lo, hi,
                                     strict=True):
@@ -60,7 +60,8 @@ def test_low_speed_protocol_a_flags_quadratic_terms(tmp_path: Path,
     printed = capsys.readouterr().out
     quadratic = ["X_uu", "Y_vv", "Z_ww", "K_pp", "M_qq", "N_rr"]
     est, truth = load_model(out), load_model(bag / "truth_model.yaml")
-    assert set(quadratic) <= set(est.extra["unidentified"])
+    assert set(quadratic) <= set(est.held)
+    assert not est.identified[[est.parameter_names.index(n) for n in quadratic]].any()
     for name in quadratic:
         assert f"not identified: {name}:" in printed
         line = next(x for x in printed.splitlines() if x.split()[:1] == [name])
@@ -204,3 +205,29 @@ def test_table_says_what_the_data_determine_on_foreign_physics(
     assert not any("held at prior" in x for x in rows.values())
     line = next(x for x in printed.splitlines() if x.startswith("constrained: X_u:"))
     assert "structural misfit" in line and "--select" in line
+
+
+# --- bad numbers (issue 11) ------------------------------------------------------------------
+
+
+def test_every_model_reader_refuses_a_non_finite_model(
+        short_b: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 11: a NaN in a model file was taken as a number. identify --prior, validate,
+    gap --model and export refuse it with exit status 2 and one line naming the entry."""
+    import yaml
+
+    good = short_b / "bag" / "truth_model.yaml"
+    doc = yaml.safe_load(good.read_text())
+    doc["/**"]["ros__parameters"]["model"]["theta"][5] = float("nan")  # N_r
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(doc))
+    log = str(short_b / "samples.csv")
+    capsys.readouterr()
+    for argv in (["identify", log, "--method", "map", "--prior", str(bad)],
+                 ["validate", str(bad), log], ["gap", log, "--model", str(bad)],
+                 ["export", str(bad), "--format", "gz"]):
+        vehicle = [] if argv[0] == "export" else ["--vehicle", "bluerov2_heavy"]
+        assert main([*argv, *vehicle]) == 2, argv
+        captured = capsys.readouterr()
+        assert captured.err == (f"dampest {argv[0]}: error: model.theta: not finite: "
+                                f"N_r = nan ({bad})\n"), argv

@@ -121,10 +121,13 @@ def test_model_file_is_a_ros_parameters_file(tmp_path: Path) -> None:
     """rcl's own YAML parser (as for --params-file) reads every entry with the right type."""
     model, theta = damping_from_spec(FULL_SPEC)
     from dampest_ros.core.rigid_body import AddedMassTerms
-    path = yaml_io.save_model(tmp_path / "model.yaml", model.parameter_names, theta,
-                              np.full(theta.size, np.inf), np.eye(6) * 2.0,
-                              {"note": "n", "flags": [True, False]}, damping=model,
-                              M_A=np.eye(6), added_mass_terms=AddedMassTerms(inertial=False))
+    # σ of the two coefficients held at their prior: not estimated (inf, nan)
+    std = np.r_[np.inf, np.nan, np.full(theta.size - 2, 0.5)]
+    held = dict(zip(model.parameter_names[:2], ["no data", "n"], strict=True))
+    path = yaml_io.save_model(tmp_path / "model.yaml", model.parameter_names, theta, std,
+                              np.eye(6) * 2.0, {"note": "n", "flags": [True, False]},
+                              damping=model, M_A=np.eye(6),
+                              added_mass_terms=AddedMassTerms(inertial=False), held=held)
     probe = (
         "import json, sys, rclpy\n"
         "from rclpy.node import Node\n"
@@ -150,7 +153,12 @@ def test_model_file_is_a_ros_parameters_file(tmp_path: Path) -> None:
     assert types["terms.added"] == "BOOL" and types["flags"] == "BOOL_ARRAY"
     assert params["note"] == ["STRING", "n"]  # not the boolean "n"
     assert params["theta"][1] == theta.tolist()
-    assert params["theta_std"][1] == [np.inf] * theta.size
+    assert params["theta_std"][1][0] == np.inf and np.isnan(params["theta_std"][1][1])
+    assert params["theta_std"][1][2:] == [0.5] * (theta.size - 2)
+    # per coefficient: did the data determine it; the reasons of those held at the prior
+    assert params["identified"] == ["BOOL_ARRAY", [False, False] + [True] * (theta.size - 2)]
+    assert params["held.names"] == ["STRING_ARRAY", model.parameter_names[:2]]
+    assert params["held.reasons"] == ["STRING_ARRAY", ["no data", "n"]]
     assert params["terms.cross.alphas"][1] == ["|r|", "|v|", "w", "|U|"]
     # the added-mass switches are three BOOL parameters, M_A 36 doubles
     assert params["added_mass_terms.inertial"] == ["BOOL", False]
@@ -216,7 +224,7 @@ def test_added_mass_switches_round_trip_through_the_file_and_the_parameters(
     assert "M_A" not in out.extra and "added_mass_terms" not in out.extra
     # the node parameters (bool leaves of a namespace) give the same model
     params = yaml_io.model_parameters(out.parameter_names, out.theta, out.theta_std, out.M,
-                                      damping=out.damping, **out.added_mass_kwargs())
+                                      damping=out.damping, **out.file_kwargs())
     assert params["model.added_mass_terms.inertial"] is False
     assert params["model.added_mass_terms.munk"] is False
     back = yaml_io.model_from_parameters(params)
@@ -242,3 +250,91 @@ def test_added_mass_switches_round_trip_through_the_file_and_the_parameters(
         "model": doc}}}))
     with pytest.raises(ConfigError, match=r"^model\.added_mass_terms\.inertial: must be true"):
         yaml_io.load_model(tmp_path / "bad.yaml")
+
+
+def test_model_file_says_which_coefficients_the_data_determined(tmp_path: Path) -> None:
+    """Issue 11: a coefficient flagged 'not identified' was written as theta (its prior, std
+    NaN) like any estimate. The file now carries model.identified and the reasons
+    (model.held); the node parameters carry the same; files without the field read as all
+    identified, and the unidentified lists earlier identify versions wrote are read as held."""
+    model, theta = damping_from_spec({"linear": {"X_u": 13.7, "Y_v": 2.0},
+                                      "quadratic": {"X_uu": 141.0, "Y_vv": 217.0}})
+    std = np.array([0.2, 0.1, 1.5, np.nan])  # Y_vv held at its prior: no σ
+    held = {"Y_vv": "no excitation: its regressor column is zero"}
+    path = yaml_io.save_model(tmp_path / "m.yaml", model.parameter_names, theta, std,
+                              np.eye(6), damping=model, held=held)
+    doc = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]["model"]
+    assert doc["identified"] == [True, True, True, False]
+    assert doc["held"] == {"names": ["Y_vv"], "reasons": [held["Y_vv"]]}
+    m = yaml_io.load_model(path)
+    assert m.held == held and m.identified.tolist() == [True, True, True, False]
+    assert "identified" not in m.extra and "held" not in m.extra
+    params = yaml_io.model_parameters(m.parameter_names, m.theta, m.theta_std, m.M,
+                                      damping=m.damping, **m.file_kwargs())
+    assert params["model.identified"] == [True, True, True, False]
+    assert params["model.held.names"] == ["Y_vv"]
+    assert yaml_io.model_from_parameters(params).held == held
+    # a file that does not say: all identified
+    del doc["identified"], doc["held"]
+    doc["theta_std"] = [0.2, 0.1, 1.5, 3.0]
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"model": doc}}}))
+    assert yaml_io.load_model(path).identified.all()
+    # earlier identify versions: unidentified / unidentified_reason lists, σ NaN
+    doc["theta_std"][3] = float("nan")
+    doc["unidentified"], doc["unidentified_reason"] = ["Y_vv"], ["poorly determined"]
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"model": doc}}}))
+    assert yaml_io.load_model(path).held == {"Y_vv": "poorly determined"}
+    # a held name the model does not have, or a mask of the wrong length, is refused
+    with pytest.raises(ConfigError, match=r"^model\.held: .*Z_ww"):
+        yaml_io.save_model(tmp_path / "x.yaml", model.parameter_names, theta, std, np.eye(6),
+                           held={"Z_ww": "?", **held})
+    doc["identified"] = [True, False]
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"model": doc}}}))
+    with pytest.raises(ConfigError, match=r"^model\.identified: needs 4 booleans"):
+        yaml_io.load_model(path)
+
+
+@pytest.mark.parametrize(("entry", "index", "value", "match"), [
+    ("theta", 2, float("nan"), r"^model\.theta: not finite: X_uu = nan"),
+    ("theta", 0, float("inf"), r"^model\.theta: not finite: X_u = inf"),
+    ("theta_std", 1, float("nan"), r"^model\.theta_std: not finite for an identified "
+                                   r"coefficient: Y_v = nan"),
+    ("M", 7, float("-inf"), r"^model\.M: not finite: M\[Y,v\] = -inf"),
+])
+def test_every_reader_refuses_non_finite_numbers(tmp_path: Path, entry: str, index: int,
+                                                  value: float, match: str) -> None:
+    """Issue 11: a NaN in a model file's theta was served by model_server_node and the client
+    returned a NaN feed-forward. The file, its text, its node parameters and the evaluable
+    model all refuse it, naming the entry; a held coefficient's σ may be NaN."""
+    from dampest_ros.core.identified import IdentifiedModel
+
+    model, theta = damping_from_spec({"linear": {"X_u": 13.7, "Y_v": 2.0},
+                                      "quadratic": {"X_uu": 141.0, "Y_vv": 217.0}})
+    std, M = np.array([0.2, 0.1, 1.5, np.nan]), 20.0 * np.eye(6)
+    held = {"Y_vv": "poorly determined"}
+    path = yaml_io.save_model(tmp_path / "m.yaml", model.parameter_names, theta, std, M,
+                              damping=model, held=held)
+    good = yaml_io.load_model(path)
+    assert np.isnan(good.theta_std[3]) and good.theta[3] == 217.0
+    doc = yaml.safe_load(path.read_text())
+    doc["/**"]["ros__parameters"]["model"][entry][index] = value
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=match + r".* \(.*m\.yaml\)$"):
+        yaml_io.load_model(path)
+    with pytest.raises(ConfigError, match=match):
+        yaml_io.loads_model(path.read_text())
+    params = yaml_io.model_parameters(good.parameter_names, good.theta, good.theta_std,
+                                      good.M, damping=good.damping, held=held)
+    params[f"model.{entry}"] = list(params[f"model.{entry}"])
+    params[f"model.{entry}"][index] = value
+    with pytest.raises(ConfigError, match=match):
+        yaml_io.model_from_parameters(params)
+    bad = {"theta": good.theta.copy(), "theta_std": good.theta_std.copy(),
+           "M": good.M.reshape(36).copy()}
+    bad[entry][index] = value
+    with pytest.raises(ConfigError, match=match):
+        IdentifiedModel(good.parameter_names, bad["theta"], bad["theta_std"], bad["M"],
+                        good.damping, held=held)
+    with pytest.raises(ConfigError, match=match):  # and no writer
+        yaml_io.save_model(tmp_path / "w.yaml", good.parameter_names, bad["theta"],
+                           bad["theta_std"], bad["M"], held=held)
