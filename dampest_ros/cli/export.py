@@ -5,6 +5,10 @@
 signs (SNAME, negative when dissipative) and, for ``gz``, the frame (FRD to the link's FLU).
 ``import`` reads ``gz`` or ``urdf`` back into a model file. See :mod:`dampest_ros.io.export`
 for the conventions and where they come from.
+
+``export`` refuses a model that generates energy somewhere in its flown speed envelope
+(exit status 2, one line naming the coefficient and the velocity) unless ``--force``; it
+warns about, and lists in the file, every coefficient the data did not determine.
 """
 
 from __future__ import annotations
@@ -49,6 +53,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="gz: <link_name> of the plugin (default: base_link)")
     p.add_argument("--frame", choices=FRAMES, default="flu",
                    help="gz: frame of that link, flu (Gazebo/REP-103, default) or frd")
+    p.add_argument("--force", action="store_true",
+                   help="export a model that is not dissipative (nu'D(nu)nu < 0 somewhere in "
+                        "its flown speeds); the file then says so")
     p.set_defaults(run=run)
 
     q = sub.add_parser("import", help="read gz-sim or URDF hydrodynamics into a model file",
@@ -79,7 +86,7 @@ def _run_export(args: argparse.Namespace) -> int:
         # the left-out list is printed below, once
         warnings.simplefilter("ignore", ExportWarning)
         result = export_model(model, args.format, vehicle, link_name=args.link_name,
-                              frame=args.frame, source=str(args.model))
+                              frame=args.frame, source=str(args.model), force=args.force)
     if args.out:
         Path(args.out).write_text(result.text, encoding="utf-8")
         print(f"wrote {args.out} ({args.format})", file=sys.stderr)
@@ -91,6 +98,10 @@ def _run_export(args: argparse.Namespace) -> int:
               file=sys.stderr)
     for line in result.left_out:
         print(f"warning: left out {line}", file=sys.stderr)
+    for line in result.held:
+        print(f"warning: not identified, exported at its prior: {line}", file=sys.stderr)
+    for line in result.non_dissipative:
+        print(f"warning: not dissipative (--force): {line}", file=sys.stderr)
     return 0
 
 

@@ -15,6 +15,7 @@ import argparse
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -154,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
         print(heldout_text(held, scores))
     if args.out:
         write_model(Path(args.out), result, model, vehicle.body, source=str(args.input),
-                    heldout=scores)
+                    heldout=scores, flown=samples.nu)
         print(f"wrote {args.out}")
     if args.report:
         truth = None
@@ -338,15 +339,21 @@ def heldout_text(held: Samples, scores: dict[str, np.ndarray]) -> str:
 
 
 def write_model(path: Path, result: Fit, model: DampingModel, body: RigidBody,
-                source: str, heldout: dict[str, np.ndarray] | None = None) -> None:
+                source: str, heldout: dict[str, np.ndarray] | None = None,
+                flown: np.ndarray | None = None) -> None:
     """Save a fit as the model YAML with the body's mass matrix, added mass and added-mass
     switches, its metrics, the coefficients the data did not determine (``model.identified``
-    false, ``model.held`` with the reason) and, with a held-out part, its per-DOF R² and
-    RMSE (``heldout_r2``, ``heldout_rmse``)."""
+    false, ``model.held`` with the reason), the flown speeds (``flown_speeds``: per-DOF
+    smallest and largest of ``flown``, ν of the fitted samples, the envelope exports check
+    dissipativity on) and, with a held-out part, its per-DOF R² and RMSE (``heldout_r2``,
+    ``heldout_rmse``)."""
     ci = result.interval()
-    more = {} if heldout is None else {
+    more: dict[str, Any] = {} if heldout is None else {
         "heldout_r2": [float(x) for x in heldout["nse"]],
         "heldout_rmse": [float(x) for x in heldout["rmse"]]}
+    if flown is not None:
+        more["flown_speeds"] = {"min": [float(x) for x in flown.min(axis=0)],
+                                "max": [float(x) for x in flown.max(axis=0)]}
     save_model(path, result.names, result.theta, result.std, body.M, damping=model,
                M_A=body.added_mass, added_mass_terms=body.added_mass_terms,
                held={n: result.flags.get(n) or result.constrained[n]

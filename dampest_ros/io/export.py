@@ -54,6 +54,15 @@ left out, as are off-diagonal M_A entries in gz-sim's C_A(ν)ν (built from the 
 only; they act in its M_A ν̇). Terms a format cannot express (fluid memory, residual modes,
 |U| or product α) are listed in the output and raised as :class:`ExportWarning`; nothing is
 dropped silently.
+
+Two things are never exported silently. Coefficients the data did not determine
+(``model.identified`` false, :attr:`~dampest_ros.io.yaml_io.ModelFile.held`) are written with
+the value the model holds (their prior) and listed as such in the file's header, with an
+:class:`ExportWarning`. A model that generates energy somewhere on a grid over its flown
+speeds (``model.flown_speeds``, else a default box; see
+:func:`~dampest_ros.core.identified.non_dissipative`) is refused with
+:class:`NotDissipativeError`, which names the coefficient and the velocity; with
+``force=True`` it is exported and the header says that it is not dissipative.
 """
 
 from __future__ import annotations
@@ -71,6 +80,7 @@ import numpy as np
 
 from dampest_ros.core.damping import DampingModel, FloatArray
 from dampest_ros.core.frames import body_twist
+from dampest_ros.core.identified import non_dissipative
 from dampest_ros.core.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,
@@ -102,7 +112,13 @@ _URDF_QUADRATIC = ("Xuu", "Yvv", "Zww", "Kpp", "Mqq", "Nrr")
 
 
 class ExportWarning(UserWarning):
-    """Part of a model could not be written in the target format (listed in the message)."""
+    """Part of a model could not be written in the target format, or holds values the data did
+    not determine (listed in the message)."""
+
+
+class NotDissipativeError(ValueError):
+    """The model generates energy (νᵀD(ν)ν < 0) somewhere in its speed envelope: a simulator
+    built from it gains energy and can diverge. The message names the coefficient and ν."""
 
 
 @dataclass(frozen=True)
@@ -148,12 +164,19 @@ class Exported:
         Parameters (or added-mass entries) the format cannot hold, with the reason.
     notes : tuple of str
         Other remarks written in the header (frame, added mass, merged tags, …).
+    held : tuple of str
+        ``"name = value (reason)"`` of the coefficients the data did not determine, written
+        with the model's value (the prior) and listed in the header.
+    non_dissipative : tuple of str
+        Where the model generates energy (only with ``force=True``; stated in the header).
     """
 
     format: str
     text: str
     left_out: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
+    held: tuple[str, ...] = ()
+    non_dissipative: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -338,10 +361,39 @@ def _merge(items: Iterable[tuple[str, Coefficient, float]],
     return values
 
 
-def _warn_left_out(fmt: str, left_out: Sequence[str]) -> None:
+def _checked(mf: ModelFile, force: bool, source: str | None) -> tuple[list[str], list[str]]:
+    """The held-at-prior coefficients (``"name = value (reason)"``) and where the model
+    generates energy (:func:`~dampest_ros.core.identified.non_dissipative` over
+    :attr:`ModelFile.flown <dampest_ros.io.yaml_io.ModelFile.flown>`).
+
+    Raises
+    ------
+    NotDissipativeError
+        When the model generates energy and ``force`` is False.
+    """
+    held = [f"{n} = {_num(mf.theta[mf.parameter_names.index(n)])} ({why})"
+            for n, why in mf.held.items()]
+    model, theta, _ = _model_damping(mf)
+    unsafe = non_dissipative(model, theta, mf.flown) if model is not None else []
+    if unsafe and not force:
+        raise NotDissipativeError(f"{source or 'the model'} is not dissipative: "
+                                  f"{'; '.join(unsafe)}; a simulator built from it gains "
+                                  "energy and can diverge (fix the model, e.g. identify "
+                                  "with --select, or export anyway with --force)")
+    return held, unsafe
+
+
+def _exported(fmt: str, text: str, left_out: Sequence[str], notes: Sequence[str],
+              held: Sequence[str], unsafe: Sequence[str]) -> Exported:
+    """The result, with an :class:`ExportWarning` for what was left out or held."""
     if left_out:
         warnings.warn(f"{fmt} export left out {len(left_out)} parameter(s): "
                       + "; ".join(left_out), ExportWarning, stacklevel=3)
+    if held:
+        warnings.warn(f"{fmt} export holds {len(held)} coefficient(s) the data did not "
+                      "determine, at their prior: " + "; ".join(held), ExportWarning,
+                      stacklevel=3)
+    return Exported(fmt, text, tuple(left_out), tuple(notes), tuple(held), tuple(unsafe))
 
 
 def _comment(lines: Sequence[str]) -> str:
@@ -350,10 +402,23 @@ def _comment(lines: Sequence[str]) -> str:
     return "\n" + text.replace("--", "- -") + "\n"
 
 
-def _header(mf: ModelFile, source: str | None) -> list[str]:
+def _header(mf: ModelFile, source: str | None, held: Sequence[str],
+            unsafe: Sequence[str]) -> list[str]:
+    """The first lines of every export: origin, what is not an estimate, and dissipativity."""
     where = f" from {source}" if source else ""
-    return [f"Exported by dampest_ros{where} (model version {mf.version}, "
-            f"dampest convention {mf.sign_convention}: +D(nu)nu on the left-hand side, FRD)."]
+    lines = [f"Exported by dampest_ros{where} (model version {mf.version}, "
+             f"dampest convention {mf.sign_convention}: +D(nu)nu on the left-hand side, FRD)."]
+    if unsafe:
+        lines += ["NON-DISSIPATIVE, exported on request (force): the model generates energy,",
+                  "a simulator built from it can diverge:", *(f"  {x}" for x in unsafe)]
+    else:
+        lines.append("Dissipative: nu'D(nu)nu >= 0 on a grid over the "
+                     + ("flown speeds." if mf.flown is not None else
+                        "default speed box (the model file has no flown speeds)."))
+    if held:
+        lines += ["HELD AT PRIOR (not identified: the data did not determine them; the value",
+                  "written is the prior, not an estimate):", *(f"  {x}" for x in held)]
+    return lines
 
 
 # --- gz-sim Hydrodynamics ----------------------------------------------------------------------
@@ -393,7 +458,7 @@ def _check_frame(frame: str) -> str:
 
 
 def export_gz(mf: ModelFile, vehicle: Vehicle | None = None, *, link_name: str = "base_link",
-              frame: str = "flu", source: str | None = None) -> Exported:
+              frame: str = "flu", source: str | None = None, force: bool = False) -> Exported:
     """The gz-sim Hydrodynamics plugin element for a model.
 
     Parameters
@@ -407,14 +472,22 @@ def export_gz(mf: ModelFile, vehicle: Vehicle | None = None, *, link_name: str =
         Frame of that link: ``flu`` (Gazebo/REP-103; coefficients are converted) or ``frd``.
     source : str, optional
         Where the model came from, for the header comment.
+    force : bool
+        Export a model that is not dissipative (the header says so).
 
     Returns
     -------
     Exported
         ``text`` is a ``<plugin>`` element (with a comment) to paste into the model's SDF
         (or into a URDF ``<gazebo>`` block).
+
+    Raises
+    ------
+    NotDissipativeError
+        The model generates energy and ``force`` is False.
     """
     frame = _check_frame(frame)
+    held, unsafe = _checked(mf, force, source)
     model, theta, left_out = _model_damping(mf)
     coefs, other = coefficients(model, theta) if model is not None else ([], [])
     left_out += other
@@ -453,7 +526,7 @@ def export_gz(mf: ModelFile, vehicle: Vehicle | None = None, *, link_name: str =
         if frame == "flu" else
         ["Frame: coefficients are in the frame of link '" + link_name + "', taken as FRD "
          "(x forward, y right, z down), as dampest: no conversion."])
-    lines = [*_header(mf, source),
+    lines = [*_header(mf, source, held, unsafe),
              "Target: gz-sim Hydrodynamics system (gz-sim >= 7, e.g. Harmonic with ROS 2 Jazzy).",
              "Signs: gz applies F_i = sum_j (<iJ> + sum_k <iJabsK>|nu_k| + <iJK> nu_k) nu_j",
              "(HydrodynamicsUtils.hh buildDampingMatrix, wrench = -D nu): SNAME derivatives,",
@@ -480,15 +553,14 @@ def export_gz(mf: ModelFile, vehicle: Vehicle | None = None, *, link_name: str =
         ET.SubElement(plugin, tag).text = _num(value)
     ET.indent(plugin, "  ")
     text = f"<!--{_comment(lines)}-->\n{ET.tostring(plugin, encoding='unicode')}\n"
-    _warn_left_out("gz", left_out)
-    return Exported("gz", text, tuple(left_out), tuple(mass_notes + notes))
+    return _exported("gz", text, left_out, mass_notes + notes, held, unsafe)
 
 
 # --- URDF <hydrodynamics> block ----------------------------------------------------------------
 
 
 def export_urdf(mf: ModelFile, vehicle: Vehicle | None = None, *,
-                source: str | None = None) -> Exported:
+                source: str | None = None, force: bool = False) -> Exported:
     """The ``<hydrodynamics>`` block (RDML ``hydrodynamics`` / ``auv_controllers`` / ``blue``).
 
     Parameters
@@ -499,12 +571,20 @@ def export_urdf(mf: ModelFile, vehicle: Vehicle | None = None, *,
         ``<weight>``, ``<buoyancy>`` and the centres of gravity and buoyancy.
     source : str, optional
         Where the model came from, for the header comment.
+    force : bool
+        Export a model that is not dissipative (the header says so).
 
     Returns
     -------
     Exported
         ``text`` is the block (FRD, SNAME signs), to paste inside ``<robot>``.
+
+    Raises
+    ------
+    NotDissipativeError
+        The model generates energy and ``force`` is False.
     """
+    held, unsafe = _checked(mf, force, source)
     model, theta, left_out = _model_damping(mf)
     coefs, other = coefficients(model, theta) if model is not None else ([], [])
     left_out += other
@@ -551,7 +631,7 @@ def export_urdf(mf: ModelFile, vehicle: Vehicle | None = None, *,
         ET.SubElement(block, "buoyancy").text = _num(body.buoyancy)
         for tag, r in (("center_of_gravity", body.r_g), ("center_of_buoyancy", body.r_b)):
             ET.SubElement(block, tag, {a: _num(x) for a, x in zip("xyz", r, strict=True)})
-    lines = [*_header(mf, source),
+    lines = [*_header(mf, source, held, unsafe),
              "Target: <hydrodynamics> block of the Robotic Decision Making Lab 'hydrodynamics'",
              "library (auv_controllers, blue): Fossen FRD body frame (base_link_fsd), SNAME",
              "signs: D(nu) = -diag(linear_damping) - diag(quadratic_damping)|nu| and",
@@ -562,8 +642,7 @@ def export_urdf(mf: ModelFile, vehicle: Vehicle | None = None, *,
         lines += ["LEFT OUT (the block has no place for them):", *(f"  {x}" for x in left_out)]
     ET.indent(block, "  ")
     text = f"<!--{_comment(lines)}-->\n{ET.tostring(block, encoding='unicode')}\n"
-    _warn_left_out("urdf", left_out)
-    return Exported("urdf", text, tuple(left_out), tuple(mass_notes + notes))
+    return _exported("urdf", text, left_out, mass_notes + notes, held, unsafe)
 
 
 # --- UUV Simulator -----------------------------------------------------------------------------
@@ -575,7 +654,7 @@ def _yaml_matrix(key: str, A: FloatArray) -> list[str]:
 
 
 def export_uuv(mf: ModelFile, vehicle: Vehicle | None = None, *,
-               source: str | None = None) -> Exported:
+               source: str | None = None, force: bool = False) -> Exported:
     """UUV Simulator ``fossen`` hydrodynamic model as YAML (6×6 row-major matrices, FRD).
 
     Parameters
@@ -585,12 +664,20 @@ def export_uuv(mf: ModelFile, vehicle: Vehicle | None = None, *,
         Gives ``added_mass`` (M_A = M − M_RB, positive); without it the key is omitted.
     source : str, optional
         Where the model came from, for the header comment.
+    force : bool
+        Export a model that is not dissipative (the header says so).
 
     Returns
     -------
     Exported
         ``text`` is YAML with ``hydrodynamic_model: {type: fossen, …}``.
+
+    Raises
+    ------
+    NotDissipativeError
+        The model generates energy and ``force`` is False.
     """
+    held, unsafe = _checked(mf, force, source)
     model, theta, left_out = _model_damping(mf)
     coefs, other = coefficients(model, theta) if model is not None else ([], [])
     left_out += other
@@ -619,7 +706,7 @@ def export_uuv(mf: ModelFile, vehicle: Vehicle | None = None, *,
             A[i, j] = v
         mats[key] = A
     M_A, mass_notes = _added_mass(mf, vehicle)
-    lines = [*_header(mf, source),
+    lines = [*_header(mf, source, held, unsafe),
              "Target: UUV Simulator HMFossen (HydrodynamicModel.cc). FRD body frame (the",
              "plugin converts Gazebo's FLU with ToNEDConvention). D = -linear_damping",
              "- u*linear_damping_forward_speed, D_ii += -quadratic_damping_ii |nu_i|, force",
@@ -635,13 +722,12 @@ def export_uuv(mf: ModelFile, vehicle: Vehicle | None = None, *,
     out += _yaml_matrix("quadratic_damping", mats["quadratic_damping"])
     if fwd:
         out += _yaml_matrix("linear_damping_forward_speed", mats["linear_damping_forward_speed"])
-    _warn_left_out("uuv", left_out)
-    return Exported("uuv", "\n".join(out) + "\n", tuple(left_out), tuple(mass_notes + notes))
+    return _exported("uuv", "\n".join(out) + "\n", left_out, mass_notes + notes, held, unsafe)
 
 
 def export_model(mf: ModelFile, fmt: str, vehicle: Vehicle | None = None, *,
                  link_name: str = "base_link", frame: str = "flu",
-                 source: str | None = None) -> Exported:
+                 source: str | None = None, force: bool = False) -> Exported:
     """Export a model in one of :data:`FORMATS`.
 
     Parameters
@@ -654,6 +740,8 @@ def export_model(mf: ModelFile, fmt: str, vehicle: Vehicle | None = None, *,
         ``gz`` only; see :func:`export_gz`.
     source : str, optional
         Where the model came from, for the header comment.
+    force : bool
+        Export a model that is not dissipative (the header says so).
 
     Returns
     -------
@@ -663,13 +751,16 @@ def export_model(mf: ModelFile, fmt: str, vehicle: Vehicle | None = None, *,
     ------
     ValueError
         Unknown format or frame.
+    NotDissipativeError
+        The model generates energy and ``force`` is False.
     """
     if fmt == "gz":
-        return export_gz(mf, vehicle, link_name=link_name, frame=frame, source=source)
+        return export_gz(mf, vehicle, link_name=link_name, frame=frame, source=source,
+                         force=force)
     if fmt == "urdf":
-        return export_urdf(mf, vehicle, source=source)
+        return export_urdf(mf, vehicle, source=source, force=force)
     if fmt == "uuv":
-        return export_uuv(mf, vehicle, source=source)
+        return export_uuv(mf, vehicle, source=source, force=force)
     raise ValueError(f"unknown export format {fmt!r}; use one of {FORMATS}")
 
 

@@ -15,6 +15,7 @@ well as :func:`load_model` does (DESIGN.md §1, §3)::
           theta_std: [0.2, 0.1, ..., 1.5, ...]   # .nan allowed only for held coefficients
           identified: [true, true, ..., false, ...]  # did the data determine it (optional)
           held: {names: [Y_vv], reasons: [...]}    # those not identified: θ is the prior
+          flown_speeds: {min: [...], max: [...]}   # per DOF, the fit's data (optional)
           M: [...]              # 36 numbers, row-major, M_RB + M_A
           M_A: [...]            # 36 numbers, the added mass inside M (optional)
           added_mass_terms: {inertial: true, coriolis: true, munk: true}   # optional
@@ -303,6 +304,28 @@ class ModelFile:
     def identified(self) -> BoolArray:
         """Per coefficient (θ order), True when the data determined it."""
         return identified_mask(self.parameter_names, self.held)
+
+    @property
+    def flown(self) -> FloatArray | None:
+        """The smallest and largest velocity per DOF of the data the model was fitted on,
+        shape (2, 6) (``model.flown_speeds.min``, ``max``; m/s, rad/s), or None.
+
+        Raises
+        ------
+        ConfigError
+            When the entry is not two lists of 6 finite numbers.
+        """
+        given = self.extra.get("flown_speeds")
+        if given is None:
+            return None
+        try:
+            flown = np.array([given["min"], given["max"]], dtype=float)
+        except (KeyError, TypeError, ValueError):
+            flown = np.zeros(0)
+        if flown.shape != (2, 6) or not np.all(np.isfinite(flown)):
+            raise ConfigError("model.flown_speeds", "needs min: and max: of 6 finite "
+                                                    "numbers each")
+        return flown
 
     @property
     def acting_terms(self) -> AddedMassTerms:

@@ -136,7 +136,9 @@ def test_gz_frame_conversion_small_example(tmp_path: Path) -> None:
                                           "value": 3.0},
                                          {"row": "Y", "col": "r", "alpha": "u",
                                           "value": -2.5}]})
-    flu, frd = tags(export_gz(mf).text), tags(export_gz(mf, frame="frd").text)
+    # couplings without the diagonal terms that would make them dissipative: force
+    flu = tags(export_gz(mf, force=True).text)
+    frd = tags(export_gz(mf, frame="frd", force=True).text)
     assert flu["xU"] == frd["xU"] == -1.0
     assert frd["xW"] == -2.0 and flu["xW"] == 2.0
     assert frd["kV"] == -0.25 and flu["kV"] == 0.25
@@ -425,7 +427,7 @@ def test_model_file_without_terms_is_read_from_the_names(tmp_path: Path) -> None
     mf = load_model(path)
     assert mf.damping is None
     with pytest.warns(ExportWarning, match="Y_vr"):
-        out = export_gz(mf)
+        out = export_gz(mf, force=True)  # Y_r without Y_v: not dissipative
     t = tags(out.text)
     assert t == {"xU": -13.7, "yR": -1.5, "xUabsU": -141.0}
     assert out.left_out[0].startswith("Y_vr = 3.0 (the model file has no model.terms")
@@ -570,3 +572,93 @@ def test_cli_export_import_round_trip_keeps_m_a_and_switches(tmp_path: Path,
     np.testing.assert_allclose(back.M_A, orig.M_A, atol=1e-12)
     np.testing.assert_allclose(back.M, orig.M, atol=1e-12)
     np.testing.assert_allclose(back.theta, orig.theta, rtol=1e-12)
+
+
+# --- honest exports (issue 11) ----------------------------------------------------------------
+
+
+def heavy_with(tmp_path: Path, heavy: Vehicle, values: dict[str, float],
+               held: dict[str, str] | None = None, flown: float | None = None) -> Path:
+    """The heavy's model with some coefficients changed, some held at the prior (σ NaN) and
+    flown speeds ±``flown`` × (1, 0.5, 0.8, 1, 1, 1)."""
+    theta = heavy.theta.copy()
+    names = heavy.damping.parameter_names
+    for n, v in values.items():
+        theta[names.index(n)] = v
+    std = np.array([np.nan if n in (held or {}) else 0.5 for n in names])
+    extra = {} if flown is None else {"flown_speeds": {
+        "min": (-flown * np.array([1, 0.5, 0.8, 1, 1, 1])).tolist(),
+        "max": (flown * np.array([1, 0.5, 0.8, 1, 1, 1])).tolist()}}
+    return save_model(tmp_path / "heavy_changed.yaml", names, theta, std, heavy.body.M,
+                      extra, damping=heavy.damping, **({"held": held} if held else {}))
+
+
+@pytest.mark.parametrize("fmt", ["gz", "urdf", "uuv"])
+def test_export_refuses_a_non_dissipative_model_unless_forced(
+        tmp_path: Path, heavy: Vehicle, fmt: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 11: Z_ww = −61 was exported (zWabsW +61.25) and the simulator built from it
+    diverged. Every format refuses it with exit status 2 and one line naming Z_ww and the
+    velocity on the flown envelope; --force writes it, saying so in the file."""
+    from dampest_ros.cli.main import main
+
+    path = heavy_with(tmp_path, heavy, {"Z_ww": -61.25}, flown=1.0)
+    out = tmp_path / f"hydro.{fmt}"
+    capsys.readouterr()
+    assert main(["export", str(path), "--format", fmt, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    # the power at w = ±0.8 (the flown edge): (Z_w + Z_ww |w|) w² = (33 − 61.25·0.8)·0.64
+    assert "not dissipative" in err and "Z_ww = -61.25 contributes -31.36 W" in err
+    assert "at ν = [0, 0, -0.8, 0, 0, 0]" in err and "νᵀD(ν)ν = -10.24 W" in err
+    assert "--force" in err and not out.exists()
+    assert main(["export", str(path), "--format", fmt, "--out", str(out), "--force"]) == 0
+    text = out.read_text()
+    assert "NON-DISSIPATIVE, exported on request" in text and "Z_ww = -61.25" in text
+    assert "warning: not dissipative (--force)" in capsys.readouterr().err
+    if fmt == "gz":
+        assert tags(text)["zWabsW"] == 61.25
+
+
+def test_dissipativity_covers_low_speed_and_memory_and_defaults_to_a_speed_box(
+        tmp_path: Path, heavy: Vehicle) -> None:
+    """Without flown speeds in the file the default box ±(2, 2, 2, 1, 1, 1) is checked: a
+    negative sway coefficient shows at its edge; a negative memory gain feeds energy back; a
+    dissipative model says which grid it passed."""
+    from dampest_ros.io.export import NotDissipativeError
+
+    low = load_model(heavy_with(tmp_path, heavy, {"Y_v": -500.0}))
+    assert low.flown is None
+    # (Y_v + Y_vv |v|) v² at v = ±1: (−500 + 217)·1, the worst grid point
+    with pytest.raises(NotDissipativeError, match=r"νᵀD\(ν\)ν = -283 W at ν = \[0, -1, 0, "
+                                                  r"0, 0, 0\]: Y_v = -500 contributes -500 W"):
+        export_gz(low)
+    mem = model_file(tmp_path, {"linear": {"X_u": 13.7}, "freq": [{"dof": "u", "rate": 2.0,
+                                                                    "c": -5.0}]})
+    with pytest.raises(NotDissipativeError, match=r"freq\.u\.c1 = -5 < 0"):
+        export_urdf(mem)
+    fine = load_model(heavy_with(tmp_path, heavy, {}, flown=1.0))
+    assert "Dissipative: nu'D(nu)nu >= 0 on a grid over the flown speeds." in \
+        export_uuv(fine).text
+    fine = load_model(heavy_with(tmp_path, heavy, {}))
+    assert "default speed box" in export_uuv(fine).text
+
+
+@pytest.mark.parametrize("fmt", ["gz", "urdf", "uuv"])
+def test_export_lists_coefficients_held_at_prior(
+        tmp_path: Path, heavy: Vehicle, fmt: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 11: a coefficient the data did not determine was exported as if measured. Its
+    prior value is written, listed under HELD AT PRIOR in the file with the reason, warned
+    about (ExportWarning, and a line on stderr from the command)."""
+    from dampest_ros.cli.main import main
+
+    held = {"Y_vv": "poorly determined: 95 % half-width 274 exceeds 50% of its scale"}
+    path = heavy_with(tmp_path, heavy, {}, held=held, flown=1.0)
+    with pytest.warns(ExportWarning, match=r"holds 1 coefficient\(s\) .*Y_vv = 217\.0"):
+        ex = export_model(load_model(path), fmt)
+    assert ex.held == (f"Y_vv = 217.0 ({held['Y_vv']})",)
+    assert "HELD AT PRIOR (not identified" in ex.text and f"Y_vv = 217.0 ({held['Y_vv']})" \
+        in ex.text
+    capsys.readouterr()
+    assert main(["export", str(path), "--format", fmt, "--out", str(tmp_path / "x")]) == 0
+    assert "warning: not identified, exported at its prior: Y_vv = 217.0 (poorly " \
+        "determined" in capsys.readouterr().err
