@@ -26,6 +26,7 @@ from dampest_ros.cli.common import (
     add_topic_options,
     add_window_options,
     bag_topics,
+    check_options,
     cut,
     load_samples,
     split_holdout,
@@ -190,8 +191,10 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     if not path.is_dir():
         raise DataError(f"--method rls replays the sensor messages of a rosbag2 directory; "
                         f"{path} is not one (a CSV holds samples, not messages)")
+    summary = bag_summary(path)
+    check_options(args, args.rate, summary.duration, resample=True)
     topics = bag_topics(path, vehicle, args)
-    have = {t.lstrip("/") for t in bag_summary(path).topics}
+    have = {t.lstrip("/") for t in summary.topics}
     if topics["pressure"].lstrip("/") not in have:
         del topics["pressure"]  # optional, as in the batch path
     if "wrench" in topics:

@@ -48,6 +48,11 @@ FRD body frame (x forward, y starboard, z down), the frame of the core and of
 :class:`dampest_ros.core.samples.Samples`, which :func:`samples_to_columns` and
 :func:`samples_from_columns` convert to and from.
 
+**Bad cells.** A row with a non-finite value (``nan``, ``inf``, an empty cell read as nan) in a
+column the log uses is dropped by :func:`read_log`, which counts the rows per column in its
+notes; the log is split into segments where rows were dropped (filters and derivatives never
+run across the hole), and a stretch of one row left between drops goes too.
+
 Numbers are written with ``%.17g``, so a write/read round trip is exact. A file whose name
 ends in ``.csv.gz`` is gzip-compressed and otherwise the same. Files with other column names
 are read through a column map (``their name: our name``, see :func:`load_column_map`).
@@ -357,10 +362,67 @@ def read_log(path: str | Path, thrusters: Thrusters | None, gravity: float,
         A missing column or an ambiguous flavour, naming the column-map entry that settles it.
     """
     where = str(path)
-    columns = read_csv(path, column_map, required=BASE_COLUMNS)
+    columns, dropped = drop_nonfinite(read_csv(path, column_map, required=BASE_COLUMNS),
+                                      max_gap)
     declared = set(column_map.values()) if column_map else set()
     standard, notes = interpret_columns(columns, thrusters, gravity, declared, where, max_gap)
-    return samples_from_columns(standard, max_gap), notes
+    return samples_from_columns(standard, max_gap), dropped + notes
+
+
+def _used(name: str) -> bool:
+    """Whether :func:`read_log` reads a column (our name)."""
+    return name in (*BASE_COLUMNS, *ACCELERATION_COLUMNS, *FORCE_COLUMNS,
+                    *SPECIFIC_FORCE_COLUMNS, *GYRO_COLUMNS, *ATTITUDE_COLUMNS, "segment") \
+        or name.startswith(("thrust_", "rpm_"))
+
+
+def drop_nonfinite(columns: Mapping[str, FloatArray], max_gap: float = 1.0
+                   ) -> tuple[dict[str, FloatArray], list[str]]:
+    """The rows whose used columns are all finite, the log split where rows went.
+
+    Parameters
+    ----------
+    columns : mapping of str to ndarray, each shape (N,)
+        Under our names; columns :func:`read_log` does not read are not looked at.
+    max_gap : float
+        Without a ``segment`` column, time gaps longer than this (s) start a new segment.
+
+    Returns
+    -------
+    columns : dict of str to ndarray
+        Without the dropped rows; with a ``segment`` column that starts a new segment after
+        every dropped stretch (and drops a one-row segment left between two of them).
+    notes : list of str
+        One line counting the dropped rows per column (empty when none was dropped).
+
+    Raises
+    ------
+    ValueError
+        When fewer than two rows are left.
+    """
+    out = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
+    n = len(out["time"])
+    bad = {k: ~np.isfinite(v) for k, v in out.items() if _used(k)}
+    keep = ~np.logical_or.reduce(list(bad.values())) if bad else np.ones(n, dtype=bool)
+    if keep.all():
+        return out, []
+    # a new segment after each dropped stretch, on top of the log's own segments
+    segment = _segment_index(out, max_gap) + np.cumsum(~keep)
+    _, segment = np.unique(segment[keep], return_inverse=True)
+    sizes = np.bincount(segment)
+    alone = sizes[segment] < 2  # a single row between drops: no filter or derivative
+    kept = np.flatnonzero(keep)[~alone]
+    if kept.size < 2:
+        raise ValueError(f"{n - kept.size} of {n} rows have a non-finite value in a column "
+                         f"the log uses: fewer than 2 rows are left")
+    result = {k: v[kept] for k, v in out.items()}
+    result["segment"] = np.unique(segment[~alone], return_inverse=True)[1].astype(float)
+    cells = ", ".join(f"{k} {int(b.sum())}" for k, b in bad.items() if b.any())
+    note = (f"{n - kept.size} of {n} rows dropped: non-finite values ({cells})"
+            + (f", and {int(alone.sum())} row(s) left alone between them" if alone.any()
+               else "") + f"; the log is split there ({int(result['segment'].max()) + 1} "
+            "segments)")
+    return result, [note]
 
 
 def interpret_columns(columns: Mapping[str, FloatArray], thrusters: Thrusters | None,

@@ -207,7 +207,31 @@ def test_table_says_what_the_data_determine_on_foreign_physics(
     assert "structural misfit" in line and "--select" in line
 
 
-# --- bad numbers (issue 11) ------------------------------------------------------------------
+# --- bad numbers and absurd options (issue 11) -------------------------------------------------
+
+
+def test_nan_cell_in_a_csv_drops_the_row_and_says_so(
+        short_b: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 11: one NaN cell in a 1300-row CSV made every coefficient 'collinear (variance
+    inflation inf)', and the model was written with exit status 0. The row is dropped and
+    counted; the fit is that of the clean log to a fraction of its σ."""
+    lines = (short_b / "samples.csv").read_text().splitlines()[:1301]
+    clean, dirty = tmp_path / "clean.csv", tmp_path / "dirty.csv"
+    clean.write_text("\n".join(lines) + "\n")
+    row = lines[700].split(",")
+    row[2] = "nan"  # v
+    dirty.write_text("\n".join([*lines[:700], ",".join(row), *lines[701:]]) + "\n")
+    a, b = tmp_path / "clean.yaml", tmp_path / "dirty.yaml"
+    assert main(["identify", str(clean), "--vehicle", "bluerov2_heavy", "--out", str(a)]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(dirty), "--vehicle", "bluerov2_heavy", "--out", str(b)]) == 0
+    captured = capsys.readouterr()
+    assert "dirty.csv: 1 of 1300 rows dropped: non-finite values (v 1)" in captured.err
+    assert "collinear" not in captured.out and "inf" not in captured.out
+    ca, cb = load_model(a), load_model(b)
+    assert cb.held == ca.held
+    assert np.all(np.abs(cb.theta - ca.theta) <= 0.25 * ca.theta_std), \
+        (cb.theta - ca.theta) / ca.theta_std
 
 
 def test_every_model_reader_refuses_a_non_finite_model(
@@ -246,3 +270,47 @@ def test_identified_model_carries_its_flown_speeds_to_the_export(
     np.testing.assert_array_equal(load_model(out).flown, [nu.min(axis=0), nu.max(axis=0)])
     assert main(["export", str(out), "--format", "gz", "--out", str(sdf)]) == 0
     assert "Dissipative: nu'D(nu)nu >= 0 on a grid over the flown speeds." in sdf.read_text()
+
+
+@pytest.mark.parametrize(("argv", "option"), [
+    (["--delay", "-0.1"], "--delay: -0.1 s: must be ≥ 0 and shorter than the log (60.0 s)"),
+    (["--delay", "1e6"], "--delay: 1e+06 s: must be ≥ 0 and shorter than the log"),
+    (["--cutoff", "25"], "--cutoff: 25 Hz: must be above 0 and below the Nyquist frequency "
+                         "25 Hz (half the 50 Hz sample rate)"),
+    (["--cutoff", "0"], "--cutoff: 0 Hz: must be above 0"),
+    (["--rate", "1e9"], "--rate: 1e+09 Hz over 60 s of log would need about 9e+04 GB"),
+    (["--rate", "10"], "--rate: 10 Hz: must be above 20 Hz (the preprocessing low-passes"),
+    (["--method", "rls", "--rate", "1e9"], "--rate: 1e+09 Hz over 60 s of log"),
+    (["--method", "rls", "--cutoff", "-1"], "--cutoff: -1 Hz: must be above 0"),
+])
+def test_absurd_options_are_refused_with_one_line(
+        short_b: Path, argv: list[str], option: str,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 11: a delay beyond the log or negative, a cutoff at or above Nyquist or ≤ 0, a
+    rate that needs gigabytes: one line naming the option and the fix, exit status 2, before
+    any work (the 1e9 Hz rate would take 90 TB)."""
+    capsys.readouterr()
+    assert main(["identify", str(short_b / "bag"), "--vehicle", "bluerov2_heavy",
+                 *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"dampest identify: error: {option}") and err.count("\n") == 1, err
+
+
+def test_option_checks_are_shared_by_csv_validate_and_gap(
+        short_b: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """One check for every command that reads a log: a CSV's own rate sets the Nyquist
+    frequency, a CSV takes no --delay; validate keeps --cutoff 0 (no low-pass)."""
+    log, model = str(short_b / "samples.csv"), str(short_b / "bag" / "truth_model.yaml")
+    vehicle = ["--vehicle", "bluerov2_heavy"]
+    capsys.readouterr()
+    for argv, line in (
+            (["identify", log, "--cutoff", "30"], "--cutoff: 30 Hz: must be above 0 and "
+                                                  "below the Nyquist frequency 25 Hz"),
+            (["identify", log, "--delay", "0.1"], "--delay: a CSV's tau is used as logged"),
+            (["validate", model, log, "--delay", "-1"], "--delay: -1 s: must be ≥ 0"),
+            (["gap", log, "--model", model, "--cutoff", "-2"], "--cutoff: -2 Hz: must be "
+                                                               "above 0")):
+        assert main([*argv, *vehicle]) == 2, argv
+        err = capsys.readouterr().err
+        assert err.startswith(f"dampest {argv[0]}: error: {line}") and err.count("\n") == 1
+    assert main(["validate", model, log, *vehicle, "--cutoff", "0"]) == 0

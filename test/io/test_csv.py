@@ -235,3 +235,30 @@ def test_plain_columns_pass_unchanged_and_ambiguity_names_the_map_entry() -> Non
     assert notes == []  # 'wx: gyro_x' in the map: ṗ, q̇, ṙ from the derivative of p, q, r
     err = np.max(np.abs(out["wx"] - m["wx"])[1:-1]) / np.max(np.abs(m["wx"]))
     assert err < 3e-4
+
+
+def test_rows_with_non_finite_cells_are_dropped_counted_and_split(tmp_path: Path) -> None:
+    """Issue 11: one NaN cell made every coefficient 'collinear (variance inflation inf)'.
+    read_log drops the rows whose used columns are not finite, counts them per column and
+    starts a new segment after each hole (a single row left between two holes goes too);
+    columns the log does not read are not looked at."""
+    n = 20
+    cols = {c: np.ones(n) for c in dcsv.REQUIRED_COLUMNS}
+    cols["time"] = np.arange(n) / 50.0
+    cols["u"] = np.arange(n, dtype=float)
+    cols["notes"] = np.full(n, np.nan)  # not read by read_log
+    cols["v"][5] = np.nan
+    cols["tau_Z"][[12, 14]] = [np.inf, -np.inf]  # row 13 alone between them
+    path = dcsv.write_csv(tmp_path / "holes.csv", cols)
+    with pytest.warns(UserWarning, match="level attitude"):
+        samples, notes = dcsv.read_log(path, None, 9.81)
+    assert notes[0] == ("4 of 20 rows dropped: non-finite values (v 1, tau_Z 2), and 1 "
+                        "row(s) left alone between them; the log is split there (3 segments)")
+    np.testing.assert_array_equal(samples.nu[:, 0], [0, 1, 2, 3, 4, 6, 7, 8, 9, 10, 11, 15,
+                                                     16, 17, 18, 19])
+    np.testing.assert_array_equal(samples.segment, [0] * 5 + [1] * 6 + [2] * 5)
+    assert samples.rate == 50.0 and np.all(np.isfinite(samples.tau))
+    cols["u"][:] = np.nan
+    dcsv.write_csv(path, cols)
+    with pytest.raises(ValueError, match="20 of 20 rows have a non-finite value"):
+        dcsv.read_log(path, None, 9.81)
