@@ -244,16 +244,19 @@ def final_model(data: gap.GapData, result: gap.GapResult, mf: ModelFile,
     upd = gap.updated_model(data, result.effects)
     std = dict(zip(mf.parameter_names, mf.theta_std.tolist(), strict=True))
     effects: dict[str, Any] = {}
+    updated: set[str] = set()
     mem = upd.model.term("freq")
     for (e, p), cov in zip(result.effects, result.covs, strict=True):
         s = np.sqrt(np.abs(np.diag(cov)))
         u = e.model_update(data, p)
         for name in [*u.get("theta", {}), *(c["name"] for c in u.get("cross", []))]:
             std[name] = float(s[0])
+            updated.add(name)
         if isinstance(e, gap.Memory) and mem is not None:
             for name, d in zip(mem.parameter_names, mem.state_dofs, strict=True):
                 if int(d) == e.dof:
                     std[name] = float(s[0])
+                    updated.add(name)
         entry: dict[str, Any] = {}
         for name, v, sd in zip(e.params, p, s, strict=True):
             entry[_param_key(name)] = float(v)
@@ -265,17 +268,19 @@ def final_model(data: gap.GapData, result: gap.GapResult, mf: ModelFile,
         "source": f"dampest gap {args.input} --model {args.model}",
         "gap": {"named": [e.key for e, _ in result.effects] or ["none"],
                 "conclusion": result.conclusion, **effects, **upd.extra}}
+    # a coefficient the believed model held at its prior stays held unless an effect set it
+    held = {n: why for n, why in mf.held.items() if n in names and n not in updated}
     return {"names": names, "theta": upd.theta,
             "std": np.array([std.get(n, 0.0) for n in names]), "M": upd.M,
             "damping": upd.model, "M_A": upd.M_A, "added_mass_terms": upd.added_mass_terms,
-            "extra": extra}
+            "extra": extra, "held": held}
 
 
 def save_final(path: Path, final: dict[str, Any]) -> None:
     """Write the model with the named effects as a model YAML."""
     save_model(path, final["names"], final["theta"], final["std"], final["M"],
                extra=final["extra"], damping=final["damping"], M_A=final["M_A"],
-               added_mass_terms=final["added_mass_terms"])
+               added_mass_terms=final["added_mass_terms"], held=final["held"])
 
 
 # --- report ------------------------------------------------------------------------------

@@ -314,3 +314,25 @@ def test_option_checks_are_shared_by_csv_validate_and_gap(
         err = capsys.readouterr().err
         assert err.startswith(f"dampest {argv[0]}: error: {line}") and err.count("\n") == 1
     assert main(["validate", model, log, *vehicle, "--cutoff", "0"]) == 0
+
+
+def test_gap_keeps_the_held_coefficients_of_the_model_it_was_given(
+        short_b: Path, tmp_path: Path) -> None:
+    """A model with a coefficient held at its prior (σ NaN) through dampest gap --out: the
+    written model still says it is held (was: refused on write, σ NaN of an 'identified'
+    coefficient), and it loads back."""
+    import yaml
+
+    doc = yaml.safe_load((short_b / "bag" / "truth_model.yaml").read_text())
+    model = doc["/**"]["ros__parameters"]["model"]
+    j = model["parameter_names"].index("K_pp")
+    model["theta_std"][j] = float("nan")
+    model["identified"] = [k != j for k in range(len(model["parameter_names"]))]
+    model["held"] = {"names": ["K_pp"], "reasons": ["no excitation"]}
+    given, out = tmp_path / "given.yaml", tmp_path / "final.yaml"
+    given.write_text(yaml.safe_dump(doc))
+    assert main(["gap", str(short_b / "samples.csv"), "--model", str(given), "--vehicle",
+                 "bluerov2_heavy", "--max-steps", "0", "--out", str(out)]) == 0
+    final = load_model(out)
+    assert final.held == {"K_pp": "no excitation"} and np.isnan(final.theta_std[j])
+    np.testing.assert_array_equal(final.theta, load_model(given).theta)
