@@ -619,7 +619,7 @@ def test_export_refuses_a_non_dissipative_model_unless_forced(
         assert tags(text)["zWabsW"] == 61.25
 
 
-def test_dissipativity_covers_low_speed_and_memory_and_defaults_to_a_speed_box(
+def test_dissipativity_checks_memory_gains_and_defaults_to_a_speed_box(
         tmp_path: Path, heavy: Vehicle) -> None:
     """Without flown speeds in the file the default box ±(2, 2, 2, 1, 1, 1) is checked: a
     negative sway coefficient shows at its edge; a negative memory gain feeds energy back; a
