@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -127,10 +126,6 @@ def run(args: argparse.Namespace) -> int:
         prior_std = np.array([stds.get(n, np.inf) for n in model.parameter_names])
     options = FitOptions(method=args.method, cutoff=args.cutoff,
                          speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
-    if args.select:
-        # the selected terms earned their place on held-out data together; holding a wide one
-        # at its prior would make the model depend on the prior's magnitude (std shows it)
-        options = replace(options, max_rel_halfwidth=np.inf, max_vif=np.inf)
     result = fit(samples, model, vehicle.body, options, prior=prior, prior_std=prior_std)
     elapsed = time.perf_counter() - t0
     print(f"{args.input}: {len(samples)} samples ({len(samples) / samples.rate:.0f} s in "
