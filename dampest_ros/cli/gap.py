@@ -228,10 +228,15 @@ def free_run_text(free: dict[str, Any] | str) -> str:
                     [("believed", *map(float, free["nominal"])),
                      ("with the named effects", *map(float, free["final"]))]))
     for name, why in free["notes"].items():
-        text += f"\nthe {name} model {why}"
+        text += f"\n{_model_label(name)} {why}"
     if free["omitted"]:
         text += "\n(not representable in the free run: " + "; ".join(free["omitted"]) + ")"
     return text
+
+
+def _model_label(name: str) -> str:
+    """'the believed model', 'the model with the named effects' (free-run row names)."""
+    return f"the {name} model" if name == "believed" else f"the model {name}"
 
 
 def _param_key(key: str) -> str:
@@ -376,7 +381,8 @@ def write_report(out: Path, data: gap.GapData, result: gap.GapResult,
             ["believed", *(f"{x:.4g}" for x in free["nominal"])],
             ["with the named effects", *(f"{x:.4g}" for x in free["final"])]]))
         for name, why in free["notes"].items():
-            parts.append(f"<p><b>The {html.escape(name)} model {html.escape(why)}.</b></p>")
+            parts.append(f"<p><b>{html.escape(_model_label(name).capitalize())} "
+                         f"{html.escape(why)}.</b></p>")
         if free["omitted"]:
             parts.append("<p class='note'>Not representable in the free run: "
                          + html.escape("; ".join(free["omitted"])) + "</p>")
