@@ -207,8 +207,8 @@ def _with_terms(base: DampingModel, cross: Sequence[CrossSpec],
 
 
 def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int,
-                 weights: FloatArray, cutoff: float, bounds: tuple[float, float] = (0.05, 20.0)
-                 ) -> tuple[float, float, float]:
+                 weights: FloatArray, cutoff: float, ne: NormalEquations,
+                 bounds: tuple[float, float] = (0.05, 20.0)) -> tuple[float, float, float]:
     """Memory rate λ of one DOF by minimising the profiled weighted RSS over log λ, among
     passive memories (gain c ≥ 0).
 
@@ -216,6 +216,12 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
     row and target of that DOF are kept once; each trial λ then costs one recursive filter
     of ν_dof and one low-pass, not a pass over the full regression. Where the best gain is
     negative the passive optimum is c = 0 (no memory), whose RSS is the base model's.
+
+    Parameters
+    ----------
+    ne : NormalEquations
+        The base model's low-passed, decimated normal equations on ``samples``
+        (:func:`batch.accumulate`), shared by the DOFs profiled.
 
     Returns
     -------
@@ -226,10 +232,7 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
     gain : float
         The unconstrained least-squares gain c at that rate (≤ 0: no passive memory).
     """
-    ne = accumulate(samples, base, body, folds=1, cutoff=cutoff)
-    A = np.einsum("i,fipq->pq", weights, ne.A)
-    b = np.einsum("i,fip->p", weights, ne.b)
-    c = float(np.einsum("i,fi->", weights, ne.c))
+    A, b, c = ne.total(weights)
     # the same (decimated) samples as the normal equations
     parts = [(np.arange(len(samples))[sl], Phi[:, dof, :], y[:, dof])
              for sl, Phi, y in iter_regression(samples, base, body, cutoff=cutoff,
@@ -292,7 +295,7 @@ def memory_evidence(samples: Samples, base: DampingModel, body: RigidBody,
     theta = _solve(A, b, np.ones(len(b), dtype=bool), np.zeros(len(b)))
     # per-DOF noise variance of the base's residual → weights 1/σ²
     weights = np.asarray(1.0 / np.maximum(ne.rss(theta) / float(ne.n.sum()), 1e-12))
-    profiles = [profile_rate(samples, base, body, int(d), weights, cutoff, bounds)
+    profiles = [profile_rate(samples, base, body, int(d), weights, cutoff, ne, bounds)
                 for d in dofs]
     freq = memory_impedance(samples, base, body, theta, dofs)
     return [MemoryEvidence(int(d), lam, gain, z.rate, z.gain, bounds)
