@@ -473,18 +473,29 @@ def _down(columns: Mapping[str, FloatArray], n: int) -> FloatArray:
     return np.tile([0.0, 0.0, 1.0], (n, 1))
 
 
+def _which_set(columns: Mapping[str, FloatArray], ours: Sequence[str], theirs: Sequence[str],
+               meaning: tuple[str, str], where: str) -> bool:
+    """Whether the log carries the sensor's set ``theirs`` rather than our set ``ours`` of
+    three columns; ValueError when it has both or neither (``meaning`` describes each set)."""
+    have_ours = all(c in columns for c in ours)
+    have_theirs = all(c in columns for c in theirs)
+    if have_ours and have_theirs:
+        raise ValueError(f"{where}: both {', '.join(ours)} and {', '.join(theirs)}; map only "
+                         "one set (--columns)")
+    if not have_ours and not have_theirs:
+        raise ValueError(f"{where}: missing {', '.join(ours)} ({meaning[0]}) or "
+                         f"{', '.join(theirs)} ({meaning[1]}); columns present: "
+                         f"{list(columns)}")
+    return have_theirs
+
+
 def _linear_acceleration(columns: Mapping[str, FloatArray], nu: FloatArray, gravity: float,
                          declared: set[str] | frozenset[str], where: str, notes: list[str]
                          ) -> FloatArray:
     """u̇, v̇, ẇ (n, 3) from ax…az or from a specific force."""
-    have_a = all(c in columns for c in ACCELERATION_COLUMNS[:3])
-    have_f = all(c in columns for c in SPECIFIC_FORCE_COLUMNS)
-    if have_a and have_f:
-        raise ValueError(f"{where}: both ax, ay, az and acc_x, acc_y, acc_z; map only one "
-                         "set (--columns)")
-    if not have_a and not have_f:
-        raise ValueError(f"{where}: missing ax, ay, az (u̇, v̇, ẇ) or acc_x, acc_y, acc_z "
-                         f"(IMU specific force); columns present: {list(columns)}")
+    have_f = _which_set(columns, ACCELERATION_COLUMNS[:3], SPECIFIC_FORCE_COLUMNS,
+                        ("u̇, v̇, ẇ", "IMU specific force"), where)
+    have_a = not have_f
     names = SPECIFIC_FORCE_COLUMNS if have_f else ACCELERATION_COLUMNS[:3]
     a = _stack(columns, names)
     if have_a and not declared & set(ACCELERATION_COLUMNS[:3]) and len(a):
@@ -517,14 +528,9 @@ def _angular_acceleration(columns: Mapping[str, FloatArray], nu: FloatArray,
                           declared: set[str] | frozenset[str], where: str, max_gap: float,
                           notes: list[str]) -> FloatArray:
     """ṗ, q̇, ṙ (n, 3) from wx…wz or, for gyro rates, from the derivative of p, q, r."""
-    have_w = all(c in columns for c in ACCELERATION_COLUMNS[3:])
-    have_g = all(c in columns for c in GYRO_COLUMNS)
-    if have_w and have_g:
-        raise ValueError(f"{where}: both wx, wy, wz and gyro_x, gyro_y, gyro_z; map only one "
-                         "set (--columns)")
-    if not have_w and not have_g:
-        raise ValueError(f"{where}: missing wx, wy, wz (ṗ, q̇, ṙ) or gyro_x, gyro_y, gyro_z "
-                         f"(gyro rates); columns present: {list(columns)}")
+    have_g = _which_set(columns, ACCELERATION_COLUMNS[3:], GYRO_COLUMNS,
+                        ("ṗ, q̇, ṙ", "gyro rates"), where)
+    have_w = not have_g
     omega = nu[:, 3:]
     if have_w and not declared & set(ACCELERATION_COLUMNS[3:]) and len(omega):
         w = _stack(columns, ACCELERATION_COLUMNS[3:])
