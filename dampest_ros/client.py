@@ -1,10 +1,11 @@
 """Client of the model service: what a controller imports to use the identified damping.
 
-Fetches ``model.*`` (DESIGN.md §3) from a node (``estimator_node``, ``model_server_node``) with
-the standard ``list_parameters`` and ``get_parameters`` services, follows ``/parameter_events``
-to refresh when ``model.version`` changes, and evaluates D(ν), the damping force D(ν)ν, its
-standard deviation and C(ν)ν (FRD body frame, SI units), the latter with the plant's
-added-mass switches (``model.added_mass_terms``, ``model.M_A``) when the server has them.
+Fetches ``model.*`` (docs/architecture.md §3) from a node (``estimator_node``,
+``model_server_node``) with the standard ``list_parameters`` and ``get_parameters`` services,
+follows ``/parameter_events`` to refresh when ``model.version`` changes, and evaluates D(ν),
+the damping force D(ν)ν, its standard deviation and C(ν)ν (FRD body frame, SI units), the
+latter with the plant's added-mass switches (``model.added_mass_terms``, ``model.M_A``) when
+the server has them.
 Without ROS, :meth:`ModelClient.from_yaml` reads a model file. rclpy is imported only by the
 ROS methods.
 
@@ -23,7 +24,7 @@ its filter states and is refused (:class:`dampest_ros.core.identified.Identified
 The service is called with ``call_async``; the caller's node must be spun by an executor
 (its own, or the background thread :meth:`ModelClient.standalone` starts). Blocking on
 ``rclpy.spin_until_future_complete`` is avoided: in this rclpy it slows down with every call
-(DESIGN.md §6).
+(docs/architecture.md §6).
 
 Example::
 
@@ -47,7 +48,8 @@ from dampest_ros.io.yaml_io import ModelFile, load_model, model_from_parameters
 
 FloatArray = NDArray[np.float64]
 
-#: The parameters every model server holds (DESIGN.md §3); ``model.terms.*`` may come too.
+#: The parameters every model server holds (docs/architecture.md §3); ``model.terms.*`` may
+#: come too.
 MODEL_PARAMETERS = ("model.parameter_names", "model.theta", "model.theta_std", "model.M",
                     "model.version")
 

@@ -1,4 +1,4 @@
-"""Layering rule (DESIGN.md section 2): dampest_ros.core and dampest_ros.io never load rclpy."""
+"""Layering rule (docs/architecture.md §2): dampest_ros.core and dampest_ros.io never load rclpy."""
 
 import os
 import subprocess

@@ -38,7 +38,7 @@ CSV_HELP = (
     "estimates a constant current and applies the damping to ν − ν_c. A log of velocity "
     "through the water (water-track DVL) is read the same way.")
 
-#: Topic roles and their default names (DESIGN.md §3).
+#: Topic roles and their default names (docs/architecture.md §3).
 DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
                   "thrusters": "thrusters/state"}
 

@@ -23,9 +23,9 @@ force row) and fluid-memory states, on top of a base model whose terms are alway
    ``max_terms`` parameters.
 
 BIC = n_eff Σ_i log(RSS_i / N) + k log n_eff, with n_eff = 2 · cutoff · T the number of
-independent samples in the low-passed regression (DESIGN: parallel filtering). Each row's
-least squares is separate (a library coefficient acts on one row only), so neither BIC nor
-the path depends on per-DOF weights, nor on the prior's magnitudes, which it never sees.
+independent samples in the low-passed regression. Each row's least squares is separate (a
+library coefficient acts on one row only), so neither BIC nor the path depends on per-DOF
+weights, nor on the prior's magnitudes, which it never sees.
 """
 
 from __future__ import annotations

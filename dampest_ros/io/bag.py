@@ -62,7 +62,7 @@ class TopicTypeError(BagError):
 
 
 #: Input roles of identification → the message type each needs: the type of the contract
-#: topic that plays the role by default (DESIGN.md §3).
+#: topic that plays the role by default (docs/architecture.md §3).
 ROLE_TYPES = {role: TOPIC_TYPES[topic][0] for role, topic in (
     ("imu", "imu/data"), ("dvl", "dvl/twist"), ("pressure", "pressure"),
     ("thrusters", "thrusters/state"), ("wrench", "wrench"))}
@@ -98,7 +98,7 @@ def _message_type(topic: str, series: Series) -> str:
     msgtype = cdr.message_type(series)
     contract = TOPIC_TYPES.get(_relative(topic))
     if contract is not None and contract[0] != msgtype:
-        raise ValueError(f"topic {topic!r} carries {contract[0]} (DESIGN.md §3), "
+        raise ValueError(f"topic {topic!r} carries {contract[0]} (docs/architecture.md §3), "
                          f"got a {type(series).__name__} ({msgtype})")
     return msgtype
 

@@ -1,6 +1,6 @@
 """Export a model to simulator and controller formats, and import it back.
 
-Targets (DESIGN.md §5), with the conventions read from each project's source:
+Targets (docs/architecture.md §5), with the conventions read from each project's source:
 
 ``gz``
     gz-sim ``Hydrodynamics`` system plugin (``gz-sim-hydrodynamics-system``). Tags

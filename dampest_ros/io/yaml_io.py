@@ -4,7 +4,7 @@ Vehicle presets (``config/vehicles/<name>.yaml``) are loaded by name or path int
 :class:`dampest_ros.core.vehicle.Vehicle`.
 
 The model file is a valid ROS 2 parameters file, so ``--ros-args --params-file`` loads it as
-well as :func:`load_model` does (DESIGN.md §1, §3)::
+well as :func:`load_model` does (docs/architecture.md §1, §3)::
 
     /**:
       ros__parameters:

@@ -102,7 +102,8 @@ class ModelParamNode(ParamNode):
         try:
             for prm in params:
                 self.declare_parameter(prm.name, prm.value, ParameterDescriptor(
-                    description="identified damping model (DESIGN.md §3); set by this node"))
+                    description="identified damping model (docs/architecture.md §3); set by "
+                                "this node"))
         finally:
             self._internal.on = False
 

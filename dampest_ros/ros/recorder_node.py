@@ -36,7 +36,7 @@ from dampest_ros.io.recorder import (
 from dampest_ros.ros.bag_interop import compatible_qos, import_message_type, to_bag_qos
 from dampest_ros.ros.common import DRAIN_LIMIT, Param, ParamNode, main_for
 
-#: The topics of DESIGN.md §3 (relative: resolved in the node's namespace).
+#: The topics of docs/architecture.md §3 (relative: resolved in the node's namespace).
 DEFAULT_TOPICS = ["truth/odom", "imu/data", "dvl/twist", "pressure", "thrusters/state",
                   "dampest/velocity", "dampest/acceleration", "dampest/wrench", "dampest/model",
                   "diagnostics"]

@@ -1,7 +1,7 @@
 """recorder_node and replay_node as separate processes against in-process rclpy publishers and
 subscribers: every message recorded (SIGINT), recovery after SIGKILL, replay timing and bytes.
 
-Runs on its own ROS_DOMAIN_ID, localhost only (DESIGN.md §6)."""
+Runs on its own ROS_DOMAIN_ID, localhost only (docs/architecture.md §6)."""
 
 from __future__ import annotations
 
