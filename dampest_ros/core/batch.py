@@ -11,7 +11,7 @@ A second pass computes block scores for a covariance that is robust to correlate
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -675,23 +675,25 @@ def power_rows(model: DampingModel, nu: FloatArray) -> FloatArray:
     return np.einsum("nip,ni->np", model.regressor(nu, z if z.shape[1] else None), nu)
 
 
-def envelope(nu: FloatArray) -> FloatArray:
-    """Grid over the flown envelope, shape (2 · 5⁶, 6) (m/s, rad/s).
+def envelope(nu: FloatArray, scales: Sequence[float] = (1.0, 0.01)) -> FloatArray:
+    """Grid over the flown envelope, shape (len(scales) · 5⁶, 6) (m/s, rad/s).
 
     Per DOF its smallest, half of it, 0, half its largest and its largest flown value, all
-    combinations; and the same grid at 1 % of that size, where the terms of lowest order
-    (linear) carry the power: a negative linear coefficient that the quadratic hides at
-    speed still generates energy there.
+    combinations, once per scale. The default adds the same grid at 1 % of that size, where
+    the terms of lowest order (linear) carry the power: a negative linear coefficient that the
+    quadratic hides at speed still generates energy there.
 
     Parameters
     ----------
     nu : ndarray, shape (N, 6)
         Flown velocities.
+    scales : sequence of float
+        Sizes of the grid relative to the flown range.
     """
     lo, hi = nu.min(axis=0), nu.max(axis=0)
     axes = np.stack([lo, lo / 2, np.zeros(6), hi / 2, hi], axis=1)
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 6)
-    return np.concatenate([grid, 0.01 * grid])
+    return np.concatenate([s * grid for s in scales])
 
 
 def dissipation_points(samples: Samples, model: DampingModel, theta: FloatArray,

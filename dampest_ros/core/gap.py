@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, optimize, signal
 
-from dampest_ros.core.batch import CHUNK, iter_regression
+from dampest_ros.core.batch import CHUNK, envelope, iter_regression
 from dampest_ros.core.damping import (
     CrossSpec,
     DampingModel,
@@ -270,15 +270,11 @@ class GapData:
 
     @property
     def power_points(self) -> FloatArray:
-        """Velocities where dissipativity is checked, shape (n, 6): every 5th sample and a
-        grid over the flown envelope (per DOF its smallest, half of it, 0, half its largest
-        and its largest flown value; all 5⁶ combinations) (m/s, rad/s)."""
+        """Velocities where dissipativity is checked, shape (n, 6): every 5th sample and the
+        5⁶ grid over the flown envelope at full size (:func:`batch.envelope`) (m/s, rad/s)."""
         def make() -> FloatArray:
             nu = self.samples.nu
-            lo, hi = nu.min(axis=0), nu.max(axis=0)
-            axes = np.stack([lo, lo / 2, np.zeros(6), hi / 2, hi], axis=1)
-            grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 6)
-            return np.concatenate([nu[::5], grid])
+            return np.concatenate([nu[::5], envelope(nu, scales=(1.0,))])
 
         out: FloatArray = self.memo(("power_points",), make)
         return out
