@@ -11,24 +11,25 @@ A second pass computes block scores for a covariance that is robust to correlate
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, optimize, stats
+from scipy import linalg, stats
 from scipy.sparse import csgraph
 
 from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.dissipative import dissipation_points, impose, misfit_report
 from dampest_ros.core.frames import matrix_from_euler
 from dampest_ros.core.preprocess import zero_phase
+from dampest_ros.core.quadratic import solve_normal
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.samples import CHUNK, Samples
 
 FloatArray = NDArray[np.float64]
 
 METHODS = ("ols", "wls", "ridge", "bounded", "map")
-CHUNK = 8000  # samples per chunk of Φ (n, 6, p): ~10 MB for p = 24, whatever the log length
 STRETCH = 20000  # samples per stretch of the sensor-bias sensitivity on long logs
 #: Noise floor of each DOF relative to its RMS target force: the WLS weight 1/σ_i² uses
 #: σ_i ≥ FLOOR · RMS(y_i). No thrust model or force measurement is better than 0.1 %, so a
@@ -382,140 +383,7 @@ class FitOptions:
             raise ConfigError("method", f"unknown method {self.method!r}; use one of {METHODS}")
 
 
-def rank_solve(A: FloatArray, b: FloatArray, tol: float = 1e-10
-               ) -> tuple[FloatArray, NDArray[np.int64]]:
-    """Solve A x = b for a symmetric PSD A that may be singular, never raising.
 
-    Cholesky when A is clearly positive definite; otherwise a rank-revealing QR with column
-    pivoting: columns whose pivot |R_kk| falls below ``tol`` · |R_00| depend (to that
-    tolerance) on the columns chosen before them and are held at 0.
-
-    Parameters
-    ----------
-    A : ndarray, shape (p, p)
-        Normal-equation matrix, best with a unit diagonal (scale the columns first).
-    b : ndarray, shape (p,)
-    tol : float
-        Relative pivot tolerance (A is a Gram matrix: 1e-10 is a column condition of 1e5).
-
-    Returns
-    -------
-    x : ndarray, shape (p,)
-    dropped : ndarray of int
-        Indices of the columns held at 0, in the order QR found them dependent.
-    """
-    p = len(b)
-    x = np.zeros(p)
-    if p == 0:
-        return x, np.zeros(0, dtype=np.int64)
-    try:
-        c = linalg.cho_factor(A)
-        if np.min(np.abs(np.diag(c[0]))) ** 2 > tol * max(float(np.max(np.diag(A))), 1e-300):
-            return np.asarray(linalg.cho_solve(c, b), dtype=float), np.zeros(0, dtype=np.int64)
-    except (linalg.LinAlgError, ValueError):
-        pass
-    _, R, piv = linalg.qr(A, pivoting=True, mode="economic")
-    d = np.abs(np.diag(R))
-    rank = int(np.sum(d > tol * max(float(d[0]), 1e-300))) if np.isfinite(d).all() else 0
-    keep = np.sort(piv[:rank])
-    if rank:
-        x[keep] = linalg.lstsq(A[np.ix_(keep, keep)], b[keep])[0]
-    return x, np.asarray(piv[rank:], dtype=np.int64)
-
-
-def constrained_quadratic(H: FloatArray, g: FloatArray, E: FloatArray, h: FloatArray
-                          ) -> FloatArray | None:
-    """argmin βᵀHβ − 2gᵀβ subject to E β ≥ h; None when no β satisfies the constraints.
-
-    Lawson & Hanson's reduction (Solving Least Squares Problems, ch. 23): with H = RᵀR and
-    z = Rβ − R⁻ᵀg the problem is the least-distance programme min ‖z‖ subject to
-    G z ≥ f (G = E R⁻¹, f = h − G R⁻ᵀg), whose solution is z = −ρ_{1:r}/ρ_{r+1} with
-    ρ = [Gᵀ; fᵀ] u − e_{r+1} and u ≥ 0 the non-negative least-squares solution: exact,
-    no step sizes or tolerances to tune.
-
-    Parameters
-    ----------
-    H : ndarray, shape (r, r)
-        Symmetric positive definite (eigenvalues below 1e-12 of the largest are raised).
-    g : ndarray, shape (r,)
-    E : ndarray, shape (m, r)
-    h : ndarray, shape (m,)
-
-    Returns
-    -------
-    ndarray, shape (r,), or None
-    """
-    lam, V = np.linalg.eigh(H)
-    lam = np.maximum(lam, 1e-12 * max(float(lam.max()), 1e-300))
-    R_inv = V / np.sqrt(lam)  # R = √Λ Vᵀ, R⁻¹ = V Λ^{-1/2}
-    d = R_inv.T @ g  # Rᵀd = g
-    G = E @ R_inv
-    f = h - G @ d
-    # each constraint row scaled to unit length: the same feasible set, better conditioned
-    norm = np.linalg.norm(G, axis=1)
-    keep = norm > 0
-    G, f = G[keep] / norm[keep, None], f[keep] / norm[keep]
-    if np.any(~keep & (h > 0)):
-        return None  # 0 ≥ h_k > 0
-    M = np.vstack([G.T, f[None, :]])
-    e = np.zeros(M.shape[0])
-    e[-1] = 1.0
-    u = optimize.nnls(M, e, maxiter=50 * M.shape[1])[0]
-    rho = M @ u - e
-    if abs(rho[-1]) < 1e-12:
-        return None
-    z = -rho[:-1] / rho[-1]
-    return np.asarray(R_inv @ (z + d), dtype=float)
-
-
-def _solve(A: FloatArray, b: FloatArray, free: NDArray[np.bool_], fixed: FloatArray,
-           lower: FloatArray | None = None, basis: FloatArray | None = None,
-           power: FloatArray | None = None) -> FloatArray:
-    """Minimise θᵀAθ − 2bᵀθ over the free parameters, the others held at ``fixed``.
-
-    Parameters
-    ----------
-    A : ndarray, shape (p, p)
-    b : ndarray, shape (p,)
-    free : ndarray of bool, shape (p,)
-    fixed : ndarray, shape (p,)
-        Values of the parameters that are not free.
-    lower : ndarray, shape (p,), optional
-        Lower bounds (−inf: none).
-    basis : ndarray, shape (p_free, r), optional
-        θ_free = T β: only the directions T spans are estimated, the rest of θ_free is 0 in
-        them (minimum norm). Default: the column scaling, T = diag(1/√diag A_free).
-    power : ndarray, shape (m, p), optional
-        Rows g_k with νᵀD(ν)ν = g_kᵀθ at m velocities; the solution keeps g_kᵀθ ≥ 0.
-    """
-    theta = fixed.copy()
-    if not free.any():
-        return theta
-    Af = A[np.ix_(free, free)]
-    bf = b[free] - A[np.ix_(free, ~free)] @ fixed[~free]
-    T = basis if basis is not None else np.diag(1.0 / np.sqrt(np.maximum(np.diag(Af),
-                                                                         1e-300)))
-    H, g = T.T @ Af @ T, T.T @ bf  # column-scaled: well conditioned across units
-    beta = rank_solve(H, g)[0]
-    rows, h = [], []
-    if lower is not None and np.isfinite(lower[free]).any():
-        fin = np.isfinite(lower[free])
-        rows.append(T[fin])  # θ_free = Tβ ≥ lower
-        h.append(lower[free][fin])
-    if power is not None and len(power):
-        rows.append(power[:, free] @ T)  # g_kᵀθ ≥ 0 with the fixed part moved right
-        h.append(-power[:, ~free] @ fixed[~free])
-    if rows:
-        E, hh = np.vstack(rows), np.concatenate(h)
-        slack = 1e-12 * (np.abs(E) @ np.abs(beta) + np.abs(hh))
-        if np.any(E @ beta < hh - slack):
-            bounded = constrained_quadratic(H, g, E, hh)
-            beta = beta if bounded is None else bounded
-    theta[free] = T @ beta
-    if lower is not None:
-        # the active bounds exactly (the reduction meets them to rounding)
-        theta[free] = np.maximum(theta[free], lower[free])
-    return theta
 
 
 def determined_directions(A: FloatArray, free: NDArray[np.bool_], max_vif: float
@@ -659,64 +527,7 @@ def parameter_scale(ne: NormalEquations, theta: FloatArray) -> FloatArray:
     return np.asarray(np.maximum(np.abs(theta), 0.1 * explained[i] / col))
 
 
-def power_rows(model: DampingModel, nu: FloatArray) -> FloatArray:
-    """g(ν) with νᵀD(ν)ν = g(ν)ᵀθ for the static terms, shape (n, p).
 
-    g(ν) = Φ(ν)ᵀν with zero memory states: the memory columns are 0, so fluid memory is left
-    out of the dissipativity constraint (its passivity is c ≥ 0 on its own).
-
-    Parameters
-    ----------
-    nu : ndarray, shape (n, 6)
-        Velocities (m/s, rad/s).
-    """
-    z = np.zeros((len(nu), len(model.memory_rates)))
-    # Σ_i ν_i (Φ(ν)θ)_i = (Φ(ν)ᵀν)ᵀθ
-    return np.einsum("nip,ni->np", model.regressor(nu, z if z.shape[1] else None), nu)
-
-
-def envelope(nu: FloatArray, scales: Sequence[float] = (1.0, 0.01)) -> FloatArray:
-    """Grid over the flown envelope, shape (len(scales) · 5⁶, 6) (m/s, rad/s).
-
-    Per DOF its smallest, half of it, 0, half its largest and its largest flown value, all
-    combinations, once per scale. The default adds the same grid at 1 % of that size, where
-    the terms of lowest order (linear) carry the power: a negative linear coefficient that the
-    quadratic hides at speed still generates energy there.
-
-    Parameters
-    ----------
-    nu : ndarray, shape (N, 6)
-        Flown velocities.
-    scales : sequence of float
-        Sizes of the grid relative to the flown range.
-    """
-    lo, hi = nu.min(axis=0), nu.max(axis=0)
-    axes = np.stack([lo, lo / 2, np.zeros(6), hi / 2, hi], axis=1)
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 6)
-    return np.concatenate([s * grid for s in scales])
-
-
-def dissipation_points(samples: Samples, model: DampingModel, theta: FloatArray,
-                       chunk: int = CHUNK) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """Velocities where ``theta`` generates energy, worst first, shape (n, 6), with whether
-    each is a data sample (else an :func:`envelope` grid point), shape (n,).
-
-    The check covers every sample and the whole grid; a point counts when νᵀD(ν)ν < 0 by
-    more than 1e-9 of the power its terms carry (rounding of an active constraint).
-    """
-    grid = envelope(samples.nu)
-    pts, power, data = [], [], []
-    for src, is_data in ((samples.nu, True), (grid, False)):
-        for start in range(0, len(src), chunk):
-            nu = src[start:start + chunk]
-            g = power_rows(model, nu)
-            P = g @ theta
-            bad = P < -1e-9 * (np.abs(g) @ np.abs(theta))
-            pts.append(nu[bad])
-            power.append(P[bad])
-            data.append(np.full(int(bad.sum()), is_data))
-    order = np.argsort(np.concatenate(power))
-    return np.concatenate(pts)[order], np.concatenate(data)[order]
 
 
 def fit(samples: Samples, model: DampingModel, body: RigidBody,
@@ -782,7 +593,7 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
             P = 1.0 / np.maximum(np.asarray(prior_std, float), 1e-12) ** 2
             A = A + np.diag(P)
             b = b + P * prior_v
-        return _solve(A, b, free_, prior_v, lower, basis, power)
+        return solve_normal(A, b, free_, prior_v, lower, basis, power)
 
     def weights_for(theta: FloatArray) -> FloatArray:
         if opts.method == "ols":
@@ -822,18 +633,13 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     constrained: dict[str, str] = {}
     power = np.zeros((0, p))
     if opts.dissipative and model.n_params:
-        # impose νᵀD(ν)ν ≥ 0 where the estimate violates it, worst points first, until it
-        # holds on every sample and grid point (≤ 5 rounds of ≤ 100 points)
-        unconstrained = theta
-        for _ in range(5):
-            pts, on_data = dissipation_points(samples, model, theta, chunk)
-            if not len(pts):
-                break
-            if not len(power):
-                constrained = misfit_report(model, names, unconstrained, pts[:1000],
-                                            on_data[:1000], cov, free)
-            power = np.vstack([power, power_rows(model, pts[:100])])
-            theta = solve(w, free, T, power=power)
+        # impose νᵀD(ν)ν ≥ 0 where the estimate violates it, on every sample and grid point
+        pts, on_data = dissipation_points(model, theta, samples.nu, chunk=chunk)
+        if len(pts):
+            constrained = misfit_report(model, theta, pts[:1000], on_data[:1000], cov, free)
+            theta, power = impose(
+                theta, pts, model, lambda E: solve(w, free, T, power=E),
+                lambda th: dissipation_points(model, th, samples.nu, chunk=chunk)[0])
     cv = np.zeros(6)
     for f in range(len(ne.n)):
         th_f = solve(w, free, T, exclude=f, power=power)
@@ -851,33 +657,6 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
                blocks=block_count(samples, opts.block), held=held, combinations=combos,
                constrained=constrained, rank=T.shape[1])
 
-
-def misfit_report(model: DampingModel, names: list[str], theta: FloatArray, pts: FloatArray,
-                  on_data: NDArray[np.bool_], cov: FloatArray, free: NDArray[np.bool_]
-                  ) -> dict[str, str]:
-    """Name the parameters that make the unconstrained ``theta`` generate energy.
-
-    At each violating velocity (``pts``, worst first) the parameter with the most negative
-    share θ_j g_j(ν) of νᵀD(ν)ν is the one the constraint holds; the first point that names
-    it gives the reason.
-    """
-    z = float(stats.norm.ppf(0.975))
-    std = np.sqrt(np.abs(np.diag(cov)))
-    share = power_rows(model, pts) * theta  # (n, p): θ_j g_j(ν)
-    share[:, ~free] = 0.0
-    out: dict[str, str] = {}
-    for k in range(len(pts)):
-        j = int(np.argmin(share[k]))
-        if share[k, j] >= 0 or names[j] in out:
-            continue
-        where = ", ".join(f"{n} {v:+.2g}" for n, v in zip(DOF_NAMES, pts[k], strict=True)
-                          if v) or "rest"
-        out[names[j]] = (
-            f"held by dissipativity: unconstrained {names[j]} = {theta[j]:.4g} ± "
-            f"{z * std[j]:.2g} gives νᵀD(ν)ν = {share[k].sum():.3g} W < 0 at ν = ({where}"
-            f"{', a sample' if on_data[k] else ', flown envelope'}); a structural misfit: the "
-            "terms lack what the data need (run the structure search, identify --select)")
-    return out
 
 
 def total_sum_of_squares(ne: NormalEquations) -> FloatArray:
@@ -967,7 +746,7 @@ def bias_covariance(samples: Samples, model: DampingModel, body: RigidBody,
                                          offset=offset, decimate=True):
             A += np.einsum("nip,niq,i->pq", Phi, Phi, weights)
             b += np.einsum("nip,ni,i->p", Phi, y, weights)
-        return _solve(A, b, free, theta, basis=basis)
+        return solve_normal(A, b, free, theta, basis=basis)
 
     base = theta if data is samples else refit(None)
     for k in np.flatnonzero(sigma > 0):
@@ -976,9 +755,4 @@ def bias_covariance(samples: Samples, model: DampingModel, body: RigidBody,
         d = refit(offset) - base
         cov += np.outer(d, d)
     return cov
-
-
-def dof_excitation(samples: Samples) -> FloatArray:
-    """RMS of each velocity component (m/s, rad/s), shape (6,)."""
-    return np.asarray(np.sqrt(np.mean(samples.nu**2, axis=0)))
 

@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, optimize, signal
 
-from dampest_ros.core.batch import CHUNK, envelope, iter_regression
+from dampest_ros.core.batch import iter_regression
 from dampest_ros.core.damping import (
     CrossSpec,
     DampingModel,
@@ -55,6 +55,7 @@ from dampest_ros.core.damping import (
     memory_term,
     quadratic_term,
 )
+from dampest_ros.core.dissipative import envelope
 from dampest_ros.core.frames import matrix_from_euler
 from dampest_ros.core.measurements import JointSeries
 from dampest_ros.core.preprocess import zero_phase
@@ -68,7 +69,7 @@ from dampest_ros.core.rigid_body import (
     coriolis_force,
     rigid_body_mass,
 )
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.samples import CHUNK, Samples
 from dampest_ros.core.selection import DEFAULT_CROSS
 from dampest_ros.core.thrusters import Thrusters
 

@@ -15,8 +15,8 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.batch import envelope, power_rows
 from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.dissipative import envelope, power_rows
 from dampest_ros.core.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,

@@ -14,6 +14,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
+#: Samples per chunk of the regressor Φ (n, 6, p) in batch passes: ~10 MB for p = 24, whatever
+#: the length of the log.
+CHUNK = 8000
 
 
 @dataclass

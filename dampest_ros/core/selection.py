@@ -40,7 +40,6 @@ from scipy import optimize
 
 from dampest_ros.core.batch import (
     NormalEquations,
-    _solve,
     accumulate,
     fold_index,
     iter_regression,
@@ -61,6 +60,7 @@ from dampest_ros.core.damping import (
 )
 from dampest_ros.core.frequency import memory_impedance
 from dampest_ros.core.preprocess import zero_phase
+from dampest_ros.core.quadratic import solve_normal
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 
@@ -183,7 +183,7 @@ def _criteria(ne: NormalEquations, idx: NDArray[np.int64], weights: FloatArray, 
     """RSS per DOF, BIC and AIC of the least-squares fit on the columns ``idx``."""
     A = np.einsum("i,fipq->pq", weights, ne.A)[np.ix_(idx, idx)]
     b = np.einsum("i,fip->p", weights, ne.b)[idx]
-    theta = _solve(A, b, np.ones(len(idx), dtype=bool), np.zeros(len(idx)))
+    theta = solve_normal(A, b, np.ones(len(idx), dtype=bool), np.zeros(len(idx)))
     full = np.zeros(ne.A.shape[-1])
     full[idx] = theta
     rss = np.maximum(ne.rss(full), 1e-300)
@@ -241,7 +241,7 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
     rows = np.concatenate([p[1] for p in parts])
     y_d = np.concatenate([p[2] for p in parts])
     w = float(weights[dof])
-    rss_base = c - float(b @ _solve(A, b, np.ones(len(b), dtype=bool), np.zeros(len(b))))
+    rss_base = c - float(b @ solve_normal(A, b, np.ones(len(b), dtype=bool), np.zeros(len(b))))
 
     def solve(log_rate: float) -> tuple[float, float]:
         lam = np.array([np.exp(log_rate)])
@@ -254,7 +254,7 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
         a = w * rows.T @ z
         Ab = np.block([[A, a[:, None]], [a[None, :], np.array([[w * z @ z]])]])
         bb = np.r_[b, w * z @ y_d]
-        theta = _solve(Ab, bb, np.ones(len(bb), dtype=bool), np.zeros(len(bb)))
+        theta = solve_normal(Ab, bb, np.ones(len(bb), dtype=bool), np.zeros(len(bb)))
         # a negative gain is not passive: the best passive memory is none at all
         return (c - float(bb @ theta) if theta[-1] > 0 else rss_base), float(theta[-1])
 
@@ -292,7 +292,7 @@ def memory_evidence(samples: Samples, base: DampingModel, body: RigidBody,
     """
     ne = accumulate(samples, base, body, folds=1, cutoff=cutoff)
     A, b, _ = ne.total(np.ones(6))
-    theta = _solve(A, b, np.ones(len(b), dtype=bool), np.zeros(len(b)))
+    theta = solve_normal(A, b, np.ones(len(b), dtype=bool), np.zeros(len(b)))
     # per-DOF noise variance of the base's residual → weights 1/σ²
     weights = np.asarray(1.0 / np.maximum(ne.rss(theta) / float(ne.n.sum()), 1e-12))
     profiles = [profile_rate(samples, base, body, int(d), weights, cutoff, ne, bounds)
@@ -766,7 +766,7 @@ def _fit_row(ne: NormalEquations, i: int, cols: Sequence[int]) -> float:
         return 0.0
     idx = np.asarray(cols, dtype=np.int64)
     G, bv = ne.A[:, i].sum(0)[np.ix_(idx, idx)], ne.b[:, i].sum(0)[idx]
-    theta = _solve(G, bv, np.ones(len(idx), dtype=bool), np.zeros(len(idx)))
+    theta = solve_normal(G, bv, np.ones(len(idx), dtype=bool), np.zeros(len(idx)))
     return float(bv @ theta)
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dampest_ros.core.batch import FitOptions, accumulate, fit, rank_solve
+from dampest_ros.core.batch import FitOptions, accumulate, fit
 from dampest_ros.core.damping import (
     Alpha,
     AlphaBank,
@@ -21,6 +21,7 @@ from dampest_ros.core.damping import (
     quadratic_term,
 )
 from dampest_ros.core.frames import matrix_from_euler
+from dampest_ros.core.quadratic import rank_solve
 from dampest_ros.core.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import select_terms
