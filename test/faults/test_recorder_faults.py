@@ -71,7 +71,7 @@ def test_bit_rot_in_a_chunk_is_reported_in_bytes_and_messages(
     with mcap.open("r+b") as f:
         f.seek(chunk.chunk_start_offset + 200)
         f.write(np.random.default_rng(4).bytes(4096))
-    assert main(["reindex", str(path)]) == 0
+    assert main(["reindex", str(path)]) == 1  # was 0
     out = capsys.readouterr().out.splitlines()
     kept = len(messages) - in_chunk
     assert out[-1] == (f"wrote {path / 'metadata.yaml'}: {kept} messages; unreadable: "
@@ -96,6 +96,32 @@ def _message_index_counts(mcap: Path, chunk: Any) -> list[list[Any]]:
             f.seek(offset + 9)  # opcode and record length
             out.append(MessageIndex.read(ReadDataStream(f)).records)
     return out
+
+
+def test_reindex_exit_status_says_whether_every_byte_was_read(
+        tmp_path: Path, messages: list[Msg], capsys: pytest.CaptureFixture[str]) -> None:
+    """Exit 0 for an intact bag; 1 for a file cut 100 bytes into a chunk (what a SIGKILL
+    during a chunk write leaves), with the 100 bytes printed."""
+    path = tmp_path / "cut"
+    record(path, messages, chunk_size=64 * 1024).close()
+    assert main(["reindex", str(path)]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == (
+        f"wrote {path / 'metadata.yaml'}: {len(messages)} messages; unreadable: 0 messages "
+        "counted by the indexes, 0 bytes")
+    (mcap,) = path.glob("*.mcap")
+    with mcap.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    k = len(chunks) // 2
+    before = sum(sum(len(o) for o in _message_index_counts(mcap, c)) for c in chunks[:k])
+    os.truncate(mcap, chunks[k].chunk_start_offset + 100)
+    assert main(["reindex", str(path)]) == 1
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1] == (f"wrote {path / 'metadata.yaml'}: {before} messages; unreadable: 0 "
+                       "messages counted by the indexes, 100 bytes")
+    assert leftovers(path) == [] and stored(path) == [
+        (topic, t, d) for topic, _, t, d in messages[:before]]
 
 
 def test_reindex_refuses_a_bag_being_recorded_and_so_does_a_second_recorder(
