@@ -78,6 +78,20 @@ def predicted_force(samples: Samples, model: DampingModel, body: RigidBody,
     return y, y_hat
 
 
+def force_scores(samples: Samples, model: DampingModel, body: RigidBody, theta: FloatArray,
+                 cutoff: float) -> dict[str, FloatArray]:
+    """:func:`metrics` of the damping force on (held-out) samples: y = τ − M ν̇ − C(ν)ν − g(η)
+    against the model's D(ν)ν, low-passed as in the fit (``cutoff``, Hz; 0: none).
+
+    Returns
+    -------
+    dict of str to ndarray, each shape (6,)
+        ``nse`` is the per-DOF R², ``rmse`` in N and N·m; see :func:`metrics`.
+    """
+    y, y_hat = predicted_force(samples, model, body, theta, cutoff)
+    return metrics(y, y_hat)
+
+
 def steady_mask(nu_dot: FloatArray, rate: float, level: float = 0.1,
                 min_duration: float = 1.0) -> NDArray[np.bool_]:
     """Samples inside quasi-steady stretches, per DOF.

@@ -1,0 +1,175 @@
+"""The damping estimator as one object, with the conventions of scikit-learn and pysindy:
+``DampingIdentifier(vehicle, terms, method).fit(samples)`` for the batch path,
+``partial_fit(samples)`` for the recursive one, ``predict`` for the damping force D(ν)ν and
+``score`` for its per-DOF R²; the result in the attributes that end in ``_``.
+
+- :meth:`DampingIdentifier.fit` is ``dampest identify``'s batch path: the vehicle's terms
+  (:func:`~dampest_ros.core.estimator.restrict`), its nominal θ as the prior (the value of what
+  the data do not determine), the speeds the thrusters reach for the speed-coverage check
+  (:func:`~dampest_ros.core.excitation.speed_limits`), :func:`~dampest_ros.core.batch.fit`.
+- :meth:`DampingIdentifier.partial_fit` is the estimator node's path
+  (:class:`~dampest_ros.core.estimator.OnlineEstimator`: parallel-filtered regression and
+  recursive least squares with forgetting factor λ); successive calls continue the estimate.
+- :meth:`DampingIdentifier.score` is ``dampest identify --holdout``'s score
+  (:func:`~dampest_ros.core.validate.force_scores`).
+
+All quantities FRD body frame, SI units.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.batch import Fit, FitOptions, fit, memory_states
+from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
+from dampest_ros.core.excitation import speed_limits
+from dampest_ros.core.online import OnlineSample
+from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.samples import Samples
+from dampest_ros.core.validate import force_scores
+from dampest_ros.core.vehicle import Vehicle
+
+FloatArray = NDArray[np.float64]
+
+
+class DampingIdentifier:
+    """Identify the damping coefficients θ of one vehicle from samples.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        Body (M, C(ν), g(η)) and nominal damping: the term structure and the prior.
+    terms : sequence of str, optional
+        Term kinds to identify, e.g. ``("linear", "quadratic")`` (default: all the
+        vehicle's).
+    method : {'ols', 'wls', 'ridge', 'bounded', 'map'}
+        Batch solver of :meth:`fit` (:class:`~dampest_ros.core.batch.FitOptions`);
+        :meth:`partial_fit` is always the RLS.
+    cutoff : float
+        Parallel low-pass of the regression (Hz), for both paths and :meth:`score`.
+    forgetting_factor : float
+        λ in [0.9, 1] of :meth:`partial_fit` (1: every sample weighs the same).
+    **fit_options
+        Further :class:`~dampest_ros.core.batch.FitOptions` fields (``ridge``, ``block``,
+        ``max_vif``, ``dissipative``, …).
+
+    Attributes
+    ----------
+    model_ : DampingModel
+        The identified term structure (θ order of ``coef_``).
+    coef_ : ndarray, shape (p,)
+        θ.
+    cov_ : ndarray, shape (p, p)
+        Covariance of θ: the batch fit's (NaN rows for coefficients held at their prior), or
+        the RLS's correlation scaled by its standard deviations
+        (:attr:`~dampest_ros.core.rls.RecursiveLeastSquares.std`).
+    names_ : list of str
+        Parameter names, θ order (also :attr:`feature_names`).
+    fit_ : Fit or None
+        The batch result (flags, combinations, metrics), after :meth:`fit`.
+    estimator_ : OnlineEstimator or None
+        The recursive estimator, after :meth:`partial_fit`.
+    """
+
+    def __init__(self, vehicle: Vehicle, terms: Sequence[str] | None = None,
+                 method: str = "wls", *, cutoff: float = 2.0, forgetting_factor: float = 1.0,
+                 **fit_options: Any) -> None:
+        self.vehicle = vehicle
+        self.terms = list(terms) if terms else None
+        self.method = method
+        self.cutoff = float(cutoff)
+        self.forgetting_factor = float(forgetting_factor)
+        self.fit_options = fit_options
+        FitOptions(method=method, cutoff=cutoff, **fit_options)  # validates them now
+        self.fit_: Fit | None = None
+        self.estimator_: OnlineEstimator | None = None
+
+    # --- fitting ---------------------------------------------------------------------------
+
+    def fit(self, samples: Samples) -> DampingIdentifier:
+        """Batch identification over all ``samples`` (forgets any earlier fit); returns self."""
+        model, nominal = restrict(self.vehicle.damping, self.vehicle.theta, self.terms)
+        options = FitOptions(method=self.method, cutoff=self.cutoff,
+                             speed_range=tuple(speed_limits(self.vehicle,
+                                                            tau_measured=samples.tau)),
+                             **self.fit_options)
+        self.fit_ = fit(samples, model, self.vehicle.body, options, prior=nominal)
+        self.estimator_ = None
+        self.model_ = model
+        self.coef_ = self.fit_.theta
+        self.cov_ = self.fit_.cov
+        self.names_ = list(self.fit_.names)
+        return self
+
+    def partial_fit(self, samples: Samples) -> DampingIdentifier:
+        """Recursive identification: feed ``samples`` in time order to the estimator node's
+        RLS, continuing from the previous call (the first one starts from the prior);
+        returns self. Every call must bring samples of the same rate."""
+        est = self.estimator_
+        if est is None:
+            est = OnlineEstimator(self.vehicle, self.terms, EstimatorConfig(
+                forgetting_factor=self.forgetting_factor, rate=samples.rate,
+                cutoff=self.cutoff))
+            self.fit_ = None
+        elif not math.isclose(samples.rate, est.cfg.rate, rel_tol=1e-6):
+            raise ConfigError("samples", f"rate {samples.rate:g} Hz differs from the "
+                              f"{est.cfg.rate:g} Hz the estimate was started with")
+        for k in range(len(samples)):  # the node's path, one sample at a time
+            est.add_sample(OnlineSample(float(samples.t[k]), samples.nu[k], samples.nu_dot[k],
+                                        samples.tau[k], samples.euler[k],
+                                        float(samples.depth[k]), True))
+        est.process(force=True)
+        self.estimator_ = est
+        self.model_ = est.model
+        self.coef_ = est.theta.copy()
+        std = est.theta_std
+        d = np.sqrt(np.maximum(np.diagonal(est.rls.P), 1e-300))
+        # cov = diag(σ) · corr(P) · diag(σ): the RLS's correlation at its sandwich std
+        self.cov_ = est.rls.P / np.outer(d, d) * np.outer(std, std)
+        self.names_ = list(est.names)
+        return self
+
+    # --- using the fit ---------------------------------------------------------------------
+
+    @property
+    def feature_names(self) -> list[str]:
+        """Parameter names, θ order (pysindy's spelling of :attr:`names_`)."""
+        return self._fitted().parameter_names
+
+    def _fitted(self) -> DampingModel:
+        if not hasattr(self, "model_"):
+            raise ConfigError("DampingIdentifier", "not fitted yet: call fit or partial_fit "
+                              "first")
+        return self.model_
+
+    def predict(self, X: Samples | FloatArray) -> FloatArray:
+        """Damping force D(ν)ν (+ the memory force of a ``freq`` term) of the fitted θ.
+
+        Parameters
+        ----------
+        X : Samples or ndarray, shape (n, 6)
+            Samples (their ν, and their time for memory states) or body velocities
+            ν (m/s, rad/s); a model with memory needs Samples.
+
+        Returns
+        -------
+        ndarray, shape (n, 6)
+            N and N·m, FRD.
+        """
+        model = self._fitted()
+        if isinstance(X, Samples):
+            return model.force(X.nu, self.coef_, memory_states(X, model))
+        return model.force(np.asarray(X, dtype=float), self.coef_)
+
+    def score(self, samples: Samples) -> FloatArray:
+        """Per-DOF R² (Nash–Sutcliffe) of the damping force on ``samples``, shape (6,): the
+        force the data demand, y = τ − M ν̇ − C(ν)ν − g(η), against Φ(ν)θ, both low-passed
+        at ``cutoff`` (:func:`~dampest_ros.core.validate.force_scores`)."""
+        model = self._fitted()
+        return force_scores(samples, model, self.vehicle.body, self.coef_, self.cutoff)["nse"]
