@@ -18,9 +18,11 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.control import VelocityPI
 from dampest_ros.core.damping import CrossSpec, DampingModel, cross_term, memory_term
-from dampest_ros.core.excitation import Excitation
+from dampest_ros.core.excitation import Excitation, make_excitation
 from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.measurements import Recording
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
+from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
 from dampest_ros.core.trajectory import Trajectory
 from dampest_ros.core.vehicle import Vehicle
 
@@ -491,3 +493,41 @@ def run(vehicle: Vehicle, excitation: Excitation, effects: Effects | None = None
         for _ in range(sub):
             sim.step(rotor)
     return sim.trajectory()
+
+
+def simulate(vehicle: Vehicle, protocol: str = "B", duration: float = 600.0, seed: int = 1,
+             effects: Effects | None = None, sensors: SensorConfig | None = None,
+             dt: float = 0.02, backend: str = "native", amplitude: float = 1.0) -> Recording:
+    """Fly a protocol and log what the vehicle's sensors measure: ``dampest simulate``
+    without the bag (write the result with :func:`dampest_ros.io.bag.write_bag`).
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+    protocol : {'A', 'B', 'C', 'fourier'}
+        Excitation (:func:`~dampest_ros.core.excitation.make_excitation`).
+    duration : float
+        Seconds flown.
+    seed : int
+        Seed of the excitation and of the sensor noise.
+    effects : Effects, optional
+        Hidden effects in the physics; their sensor biases bias the sensors.
+    sensors : SensorConfig, optional
+        Rates and noise levels.
+    dt : float
+        Integration step (s).
+    backend : {'native', 'mujoco'}
+    amplitude : float
+        Scale of the protocol's amplitudes.
+
+    Returns
+    -------
+    Recording
+        Topic → series in ROS frames, as :func:`dampest_ros.io.bag.read_bag` returns a bag.
+    """
+    fx = effects or Effects()
+    excitation = make_excitation(protocol, vehicle, duration, seed=seed, amplitude=amplitude)
+    traj = run(vehicle, excitation, fx, dt=dt, backend=backend)
+    bias = SensorBias(fx.gyro_bias, fx.accel_bias, fx.dvl_bias)
+    return measure(traj, vehicle.body.rho, vehicle.body.gravity, sensors or SensorConfig(),
+                   bias, seed=seed)
