@@ -9,14 +9,11 @@ integral is clamped (anti-windup) and the output saturated to what the thrusters
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-if TYPE_CHECKING:  # simulate imports this module: no import at run time
-    from dampest_ros.core.simulate import Simulator
-    from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
 
@@ -73,35 +70,6 @@ class VelocityPI:
         if self.feedforward is not None:
             tau = tau + self.feedforward(np.asarray(nu_ref))
         return np.asarray(np.clip(tau, -self.tau_max, self.tau_max), dtype=float)
-
-
-def track(sim: Simulator, controller: VelocityPI, nu_ref: FloatArray, dt: float) -> FloatArray:
-    """Fly a velocity reference on the simulator with a controller, closed loop.
-
-    Parameters
-    ----------
-    sim : Simulator
-        Flown from its current state; advanced by ``len(nu_ref) * dt`` seconds.
-    controller : VelocityPI
-    nu_ref : ndarray, shape (N, 6)
-        Reference ν_ref (FRD, m/s and rad/s) at each control step.
-    dt : float
-        Control period (s), a multiple of ``sim.dt``.
-
-    Returns
-    -------
-    ndarray, shape (N, 6)
-        ν (FRD, m/s and rad/s) at each control step, measured before the command.
-    """
-    nu_ref = np.asarray(nu_ref, dtype=float)
-    nu = np.empty_like(nu_ref)
-    sub = max(1, round(dt / sim.dt))
-    for k, ref in enumerate(nu_ref):  # closed loop: each command needs the last state
-        nu[k] = sim.nu
-        rotor = sim.wrench_to_command(controller(ref, nu[k], dt))
-        for _ in range(sub):
-            sim.step(rotor)
-    return nu
 
 
 def tracking_rms(nu_ref: FloatArray, nu: FloatArray, dofs: Sequence[int],

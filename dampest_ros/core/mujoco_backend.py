@@ -39,10 +39,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dampest_ros.core.effects import Effects
 from dampest_ros.core.frames import quat_to_matrix
 from dampest_ros.core.geometry import Geometry
 from dampest_ros.core.rigid_body import AddedMassTerms, ConfigError, RigidBody, skew
-from dampest_ros.core.simulate import Effects
 from dampest_ros.core.trajectory import Trajectory
 from dampest_ros.core.vehicle import Vehicle
 

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.control import VelocityPI
+from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import Excitation, make_excitation
 from dampest_ros.core.frames import (
     body_vec,
@@ -50,7 +51,7 @@ from dampest_ros.core.sensors import (
     _wxyz_to_xyzw,
     hydro_series,
 )
-from dampest_ros.core.simulate import Effects, make_plant
+from dampest_ros.core.simulate import make_plant
 from dampest_ros.core.trajectory import Trajectory
 from dampest_ros.core.vehicle import Vehicle
 

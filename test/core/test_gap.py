@@ -53,6 +53,7 @@ from dampest_ros.core.damping import (
     linear_term,
     quadratic_term,
 )
+from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.measurements import JointSeries
 from dampest_ros.core.preprocess import PreprocessConfig, preprocess
@@ -60,7 +61,7 @@ from dampest_ros.core.rigid_body import DOF_NAMES, AddedMassTerms, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import DEFAULT_CROSS
 from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
-from dampest_ros.core.simulate import Effects, run
+from dampest_ros.core.simulate import run
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dampest_ros.core.control import VelocityPI, track, tracking_rms
+from dampest_ros.core.control import VelocityPI, tracking_rms
 from dampest_ros.core.identified import IdentifiedModel, damping_from_names
 from dampest_ros.core.rigid_body import ConfigError, coriolis_force
-from dampest_ros.core.simulate import Simulator
+from dampest_ros.core.simulate import Simulator, track
 from dampest_ros.io.yaml_io import load_vehicle
 
 

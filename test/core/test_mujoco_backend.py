@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 from dampest_ros.core.batch import target
+from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.geometry import Geometry
@@ -23,7 +24,7 @@ from dampest_ros.core.mujoco_backend import (
 )
 from dampest_ros.core.rigid_body import AddedMassTerms, ConfigError, coriolis_force
 from dampest_ros.core.samples import Samples
-from dampest_ros.core.simulate import Effects, run
+from dampest_ros.core.simulate import run
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 

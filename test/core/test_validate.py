@@ -7,10 +7,11 @@ import pytest
 
 from dampest_ros.core import frames
 from dampest_ros.core import validate as val
+from dampest_ros.core.effects import Effects, true_vehicle
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.samples import Samples
-from dampest_ros.core.simulate import Effects, run, true_vehicle
+from dampest_ros.core.simulate import run
 from dampest_ros.core.trajectory import Trajectory
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
