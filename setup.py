@@ -35,6 +35,8 @@ setup(
     name=PACKAGE_NAME,
     version="0.1.0",
     packages=find_packages(exclude=["test*"]),
+    # the shipped arm descriptions (URDF + MJCF), read with importlib.resources
+    package_data={PACKAGE_NAME: ["data/arm/*.urdf", "data/arm/*.xml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE_NAME]),
         ("share/" + PACKAGE_NAME, ["package.xml"]),

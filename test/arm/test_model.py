@@ -1,0 +1,74 @@
+"""The shipped UR5-class arm: URDF (Pinocchio) and MJCF (MuJoCo) are the same arm, and the
+three regressors (vectorised, Pinocchio's analytic one, MuJoCo's mj_inverse) agree."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from dampest_ros.core.arm.mjinverse import inverse_dynamics, numerical_regressor
+from dampest_ros.core.arm.model import mjcf
+from dampest_ros.core.arm.regressor import (
+    full_parameters,
+    pinocchio_regressor,
+    regressor,
+    rigid_regressor,
+)
+from dampest_ros.io.arm import ArmDataError, arm_presets, load_arm
+
+
+@pytest.fixture(scope="module")
+def ur5():  # type: ignore[no-untyped-def]
+    return load_arm("ur5")
+
+
+def _states(n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return (rng.uniform(-np.pi, np.pi, (n, 6)), rng.uniform(-3, 3, (n, 6)),
+            rng.uniform(-10, 10, (n, 6)))
+
+
+def test_presets_and_shipped_mjcf_is_written_from_the_urdf(ur5) -> None:  # type: ignore[no-untyped-def]
+    assert "ur5" in arm_presets()
+    assert ur5.model.names[0] == "shoulder_pan_joint" and ur5.model.n == 6
+    assert np.allclose(ur5.dynamics.damping, [2.0, 2.0, 1.5, 0.5, 0.5, 0.3])
+    assert mjcf(ur5.model, ur5.dynamics, name="ur5") == ur5.mjcf
+
+
+def test_mass_matrices_agree(ur5) -> None:  # type: ignore[no-untyped-def]
+    m = mujoco.MjModel.from_xml_string(ur5.mjcf)
+    d = mujoco.MjData(m)
+    pm, pd = ur5.model.pinocchio()
+    M = np.zeros((6, 6))
+    for q in _states(20, 1)[0]:
+        d.qpos[:] = q
+        mujoco.mj_forward(m, d)
+        mujoco.mj_fullM(m, d, M)
+        Mp = pin.crba(pm, pd, q)
+        Mp = np.triu(Mp) + np.triu(Mp, 1).T + np.diag(ur5.dynamics.armature)
+        assert np.abs(M - Mp).max() < 1e-8
+
+
+def test_regressors_agree(ur5) -> None:  # type: ignore[no-untyped-def]
+    q, qd, qdd = _states(12, 2)
+    Y = rigid_regressor(ur5.model, q, qd, qdd)
+    assert np.abs(Y - pinocchio_regressor(ur5.model, q, qd, qdd)).max() < 1e-10
+    assert np.abs(Y - numerical_regressor(ur5.mjcf, ur5.model.names, q, qd, qdd)).max() < 1e-8
+    # the full regressor with MuJoCo's armature and damping as joint columns is mj_inverse
+    m = mujoco.MjModel.from_xml_string(ur5.mjcf)
+    m.dof_frictionloss[:] = 0.0
+    pi = full_parameters(ur5.model, ur5.dynamics)
+    pi[6 * 10 + 2::4] = 0.0  # no Coulomb term: MuJoCo's friction loss is switched off
+    tau = inverse_dynamics(m, q, qd, qdd)
+    assert np.abs(regressor(ur5.model, q, qd, qdd) @ pi - tau).max() < 1e-8
+
+
+def test_bad_arm_is_refused(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(ArmDataError, match="neither a preset"):
+        load_arm("ur6")
+    urdf = tmp_path / "a.urdf"
+    urdf.write_text("<robot name='x'/>")
+    with pytest.raises(ArmDataError, match="no MJCF"):
+        load_arm(urdf)
