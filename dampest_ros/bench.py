@@ -97,10 +97,11 @@ def _live(duration: str) -> dict[str, float]:
     import rclpy
 
     from dampest_ros.cli import live
+    from dampest_ros.cli.live_options import add_options
     from dampest_ros.io.yaml_io import load_vehicle
 
     ap = argparse.ArgumentParser()
-    live.add_options(ap, "")
+    add_options(ap, "")
     a = ap.parse_args([])  # dampest live's defaults, but for the length and the pace:
     a.duration = float(duration)
     a.rate_factor = 1000.0  # beyond reach: the sim flies max_lag per tick, flat out

@@ -1,85 +1,82 @@
-"""``dampest export`` and ``dampest import``: a model to and from simulator formats.
+"""dampest export and dampest import: a model to and from simulator formats.
 
-``export`` writes a model file as gz-sim Hydrodynamics plugin tags (``gz``), a URDF
-``<hydrodynamics>`` block (``urdf``) or UUV Simulator ``fossen`` matrices (``uuv``), converting
-signs (SNAME, negative when dissipative) and, for ``gz``, the frame (FRD to the link's FLU).
-``import`` reads ``gz`` or ``urdf`` back into a model file. See :mod:`dampest_ros.io.export`
-for the conventions and where they come from.
+export writes a model file as gz-sim Hydrodynamics plugin tags (gz), a URDF <hydrodynamics>
+block (urdf) or the UUV Simulator hydrodynamic plugin block of an SDF (uuv), converting signs
+(SNAME, negative when dissipative) and, for gz, the frame (FRD to the link's FLU). import
+reads gz or urdf back into a model file. The conventions and where they come from:
+dampest_ros/io/export/.
 
-``export`` refuses a model that generates energy somewhere in its flown speed envelope
-(exit status 2, one line naming the coefficient and the velocity) unless ``--force``; it
-warns about, and lists in the file, every coefficient the data did not determine.
+export refuses a model that generates energy somewhere in its flown speed envelope (exit
+status 2, one line naming the coefficient and the velocity) unless --force; it warns about,
+and lists in the file, every coefficient the data did not determine.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-import warnings
 from pathlib import Path
 
-import numpy as np
+from dampest_ros.cli.common import describe
+from dampest_ros.io.export import FORMATS, FRAMES, IMPORT_FORMATS
 
-from dampest_ros.io.export import (
-    FORMATS,
-    FRAMES,
-    IMPORT_FORMATS,
-    ExportWarning,
-    export_model,
-    import_model,
-    imported_mass_parts,
-)
-from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
-
-EXPORT_EXAMPLE = ("example: dampest export model.yaml --format gz --vehicle bluerov2_heavy "
-                  "--out hydrodynamics.sdf")
-IMPORT_EXAMPLE = ("example: dampest import model.sdf --format gz --vehicle bluerov2_heavy "
-                  "--out model.yaml")
+EXPORT_EXAMPLE = ("examples:\n"
+                  "  dampest export model.yaml --format gz --vehicle bluerov2_heavy "
+                  "--out hydrodynamics.sdf\n"
+                  "  dampest export model.yaml --format uuv --vehicle bluerov2_heavy "
+                  "--out uuv_hydrodynamics.sdf")
+IMPORT_EXAMPLE = ("example:\n  dampest import hydrodynamics.sdf --format gz --vehicle "
+                  "bluerov2_heavy --out model.yaml")
 
 
-def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the sub-commands ``export`` and ``import``."""
-    p = sub.add_parser("export", help="write a model as gz-sim, URDF or UUV Simulator "
-                                      "hydrodynamics", description=__doc__,
-                       epilog=EXPORT_EXAMPLE)
-    p.add_argument("model", help="model file (ROS 2 parameters YAML written by dampest)")
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of dampest export."""
+    describe(p, __doc__, EXPORT_EXAMPLE)
+    p.add_argument("model", metavar="MODEL",
+                   help="model file (ROS 2 parameters YAML written by dampest)")
     p.add_argument("--format", required=True, choices=FORMATS,
                    help="gz: Hydrodynamics plugin tags; urdf: <hydrodynamics> block; "
-                        "uuv: UUV Simulator fossen matrices (YAML)")
-    p.add_argument("--out", help="file to write (default: standard output)")
-    p.add_argument("--vehicle", help="preset name or YAML path; its rigid body gives the "
-                                     "added mass M_A = M - M_RB (without it: damping only)")
+                        "uuv: UUV Simulator <plugin> with its <hydrodynamic_model> (SDF)")
+    p.add_argument("--out", metavar="FILE", help="file to write (default: standard output)")
+    p.add_argument("--vehicle", metavar="NAME|YAML",
+                   help="vehicle preset name or YAML path; its rigid body gives the added "
+                        "mass M_A = M - M_RB when the model file has no model.M_A (without "
+                        "either: damping only)")
     p.add_argument("--link-name", default="base_link",
-                   help="gz: <link_name> of the plugin (default: base_link)")
+                   help="gz, uuv: the link the plugin acts on (default: base_link)")
     p.add_argument("--frame", choices=FRAMES, default="flu",
                    help="gz: frame of that link, flu (Gazebo/REP-103, default) or frd")
     p.add_argument("--force", action="store_true",
                    help="export a model that is not dissipative (nu'D(nu)nu < 0 somewhere in "
                         "its flown speeds); the file then says so")
-    p.set_defaults(run=run)
 
-    q = sub.add_parser("import", help="read gz-sim or URDF hydrodynamics into a model file",
-                       description=__doc__, epilog=IMPORT_EXAMPLE)
-    q.add_argument("file", help="SDF/URDF/XML file holding the plugin or the block")
-    q.add_argument("--format", required=True, choices=IMPORT_FORMATS)
-    q.add_argument("--out", required=True, help="model file to write (YAML)")
-    q.add_argument("--vehicle", help="preset name or YAML path for the rigid body M_RB "
-                                     "(needed when the file has no mass and inertia) and the "
-                                     "added mass when the file has none")
+
+def add_import_arguments(q: argparse.ArgumentParser) -> None:
+    """The options of dampest import."""
+    describe(q, __doc__, IMPORT_EXAMPLE)
+    q.add_argument("file", metavar="FILE",
+                   help="SDF/URDF/XML file holding the plugin or the block")
+    q.add_argument("--format", required=True, choices=IMPORT_FORMATS,
+                   help="gz: a Hydrodynamics plugin; urdf: a <hydrodynamics> block")
+    q.add_argument("--out", required=True, metavar="MODEL",
+                   help="model file to write (YAML)")
+    q.add_argument("--vehicle", metavar="NAME|YAML",
+                   help="vehicle preset name or YAML path for the rigid body M_RB (needed "
+                        "when the file has no mass and inertia) and the added mass when the "
+                        "file has none")
     q.add_argument("--link-name", help="gz: which plugin to read when there are several")
     q.add_argument("--frame", choices=FRAMES, default="flu",
                    help="gz: frame of the plugin's link, flu (default) or frd")
-    q.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``export`` or ``import`` (by ``args.command``)."""
-    if args.command == "import":
-        return _run_import(args)
-    return _run_export(args)
+    """Write the model in the format asked for; the warnings on stderr."""
+    import warnings
 
+    from dampest_ros.io.export.common import ExportWarning
+    from dampest_ros.io.export.convert import export_model
+    from dampest_ros.io.yaml_io import load_model, load_vehicle
 
-def _run_export(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     vehicle = load_vehicle(args.vehicle) if args.vehicle else None
     with warnings.catch_warnings():
@@ -105,7 +102,14 @@ def _run_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_import(args: argparse.Namespace) -> int:
+def run_import(args: argparse.Namespace) -> int:
+    """Read the file's hydrodynamics into a model file."""
+    import numpy as np
+
+    from dampest_ros.io.export.common import imported_mass_parts
+    from dampest_ros.io.export.convert import import_model
+    from dampest_ros.io.yaml_io import load_vehicle, save_model
+
     vehicle = load_vehicle(args.vehicle) if args.vehicle else None
     imp = import_model(Path(args.file), args.format, frame=args.frame,
                        link_name=args.link_name)

@@ -1,19 +1,11 @@
-"""``dampest gap``: where do a simulator model and measured data disagree, and what is missing?
-
-Compares the model (``--model``, the damping model the user believes, with ``--vehicle`` for
-mass, restoring data and thrusters) with a measured bag or CSV through the one-step
-inverse-dynamics residual and a free run, localises the residual, then names the missing
-physical effects one at a time by their held-out evidence (:mod:`dampest_ros.core.gap`),
-until no candidate is significant. Uses only what a real vehicle logs (IMU, DVL, pressure,
-thruster state, or the CSV columns): never truth topics or simulator settings.
-"""
+"""The work of dampest gap (its options and --help: cli/gap_options.py): the comparison,
+the text tables and the HTML report."""
 
 from __future__ import annotations
 
 import argparse
 import html
 import re
-import textwrap
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -22,63 +14,21 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from dampest_ros.cli.common import (
-    CSV_HELP,
-    add_preprocess_options,
-    add_topic_options,
-    load_model_for,
-    load_samples,
-    table,
-)
-from dampest_ros.core import gap
+from dampest_ros.cli.common import table
+from dampest_ros.cli.inputs import load_model_for, load_samples
+from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData
+from dampest_ros.core.gap.library import library
+from dampest_ros.core.gap.localise import LocalRow, concentration, localise, residual_psd
+from dampest_ros.core.gap.model_effects import Memory
+from dampest_ros.core.gap.search import GapOptions, GapResult, correction, find_gap
+from dampest_ros.core.gap.update import free_run_errors, updated_model
 from dampest_ros.core.measurements import JointSeries
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.yaml_io import ModelFile, load_vehicle, save_model
 
-EXAMPLE = ("example: dampest gap bags/pool_run --model sim_model.yaml --vehicle "
-           "config/vehicles/bluerov2_heavy.yaml --report gap_report")
-
 DPI = 90
-
-
-def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the sub-command."""
-    p = sub.add_parser("gap", help="find where a model and measured data disagree and name "
-                                   "the missing effect",
-                       description=__doc__ + "\n" + textwrap.fill(CSV_HELP, 92),
-                       epilog=EXAMPLE,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("input", metavar="MEASURED",
-                   help="rosbag2 directory (MCAP or SQLite3) or .csv / .csv.gz file from the "
-                        "vehicle")
-    p.add_argument("--model", required=True,
-                   help="model YAML (ROS 2 parameters file) of the damping you believe, e.g. "
-                        "the simulator's; its M is used as M_RB + M_A")
-    p.add_argument("--vehicle", required=True,
-                   help="vehicle preset (name or YAML): mass, restoring data, thrusters")
-    p.add_argument("--report", metavar="DIR",
-                   help="write index.html, PNG figures and final_model.yaml here")
-    p.add_argument("--out", help="write the model with the named effects (YAML) here")
-    p.add_argument("--candidates", default="all",
-                   help="comma list of candidate keys or families (current, buoyancy, "
-                        "cg_offset, thrusters, added_mass, damping, memory, sensor_bias, "
-                        "or keys such as thrust_gain, delay, linear.X_u, cross.Y_vr); "
-                        "default: all")
-    p.add_argument("--max-steps", type=int, default=6,
-                   help="name at most this many effects (default: 6)")
-    p.add_argument("--cutoff", type=float, default=2.0,
-                   help="low-pass (Hz) applied to the regression, as in identify (default: 2)")
-    p.add_argument("--split", type=float, default=0.7,
-                   help="share of the time used to fit; the rest is held out (default: 0.7)")
-    p.add_argument("--min-heldout", type=float, default=gap.GapOptions.min_heldout,
-                   help="smallest held-out reduction of the weighted residual power for an "
-                        f"effect to count (default: {gap.GapOptions.min_heldout})")
-    p.add_argument("--columns", help="YAML column map for CSV input (their name: our name)")
-    add_topic_options(p)
-    add_preprocess_options(p)
-    p.set_defaults(run=run)
 
 
 def _joints(path: str, args: argparse.Namespace, vehicle: Vehicle) -> JointSeries | None:
@@ -115,10 +65,10 @@ def run(args: argparse.Namespace) -> int:
                                            f"power), got {args.min_heldout:g}")
     vehicle = load_vehicle(args.vehicle)
     mf, model, body = load_model_for(args.model, vehicle)
-    cands = gap.library([c.strip() for c in str(args.candidates).split(",") if c.strip()])
+    cands = library([c.strip() for c in str(args.candidates).split(",") if c.strip()])
     samples = load_samples(args.input, vehicle, args)
     joints = _joints(args.input, args, vehicle)
-    data = gap.GapData(samples, model, mf.theta, body, vehicle.thrusters, joints,
+    data = GapData(samples, model, mf.theta, body, vehicle.thrusters, joints,
                        cutoff=args.cutoff, split=args.split)
     seconds = len(samples) / samples.rate
     print(f"{args.input}: {len(samples)} samples ({seconds:.0f} s in "
@@ -130,14 +80,14 @@ def run(args: argparse.Namespace) -> int:
     print("\n1. one-step residual r = τ − (M ν̇ + C ν + D ν + g) of the model "
           f"(low-passed at {args.cutoff:g} Hz):")
     print(table(("dof", "damping force RMS", "residual RMS", "residual / force"),
-                [(f"{FORCE_NAMES[i]} ({gap.FORCE_UNITS[i]})", float(y_rms[i]), float(r_rms[i]),
+                [(f"{FORCE_NAMES[i]} ({FORCE_UNITS[i]})", float(y_rms[i]), float(r_rms[i]),
                   f"{100 * r_rms[i] / max(y_rms[i], 1e-300):.1f} %") for i in range(6)]))
-    rows = gap.localise(samples, data.r0, passband=args.cutoff)
+    rows = localise(samples, data.r0, passband=args.cutoff)
     print("\n2. where the residual is concentrated (RMS in the subset / overall RMS):")
     print(concentration_text(rows))
     print("\n3-4. candidate effects, ranked by held-out evidence:")
-    opts = gap.GapOptions(min_heldout=args.min_heldout, max_steps=args.max_steps)
-    result = gap.find_gap(data, cands, opts, progress=lambda s: print("  " + s))
+    opts = GapOptions(min_heldout=args.min_heldout, max_steps=args.max_steps)
+    result = find_gap(data, cands, opts, progress=lambda s: print("  " + s))
     for key, why in result.skipped.items():
         print(f"  skipped {key}: {why}")
     print()
@@ -147,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     final = final_model(data, result, mf, args)
     if args.out:
         save_final(Path(args.out), final)
-    free = gap.free_run_errors(data, result.effects)
+    free = free_run_errors(data, result.effects)
     print()
     print(free_run_text(free))
     if args.out:
@@ -160,30 +110,30 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _model_force(data: gap.GapData) -> np.ndarray:
+def _model_force(data: GapData) -> np.ndarray:
     """Φθ of the model, low-passed like the residual (for the force scale)."""
-    def force(ch: gap.Chunk) -> np.ndarray:
+    def force(ch: Chunk) -> np.ndarray:
         z = np.zeros((len(ch), data.n_states))
         return data.model.force(ch.nu, data.theta, z)
     return data.filtered(force)
 
 
-def concentration_text(rows: list[gap.LocalRow], top: int = 3) -> str:
+def concentration_text(rows: list[LocalRow], top: int = 3) -> str:
     """Per DOF, the subsets where the residual RMS is most above its overall RMS."""
-    conc = gap.concentration(rows, top)
+    conc = concentration(rows, top)
     lines = []
     for i in range(6):
         items = [f"{label} {ratio:.2f}×" for d, label, ratio in conc if d == i]
-        lines.append(f"  {FORCE_NAMES[i]} (RMS {rows[0].rms[i]:.3g} {gap.FORCE_UNITS[i]}): "
+        lines.append(f"  {FORCE_NAMES[i]} (RMS {rows[0].rms[i]:.3g} {FORCE_UNITS[i]}): "
                      + ", ".join(items))
     return "\n".join(lines)
 
 
-def final_magnitudes(data: gap.GapData, result: gap.GapResult) -> list[str]:
+def final_magnitudes(data: GapData, result: GapResult) -> list[str]:
     """Per named effect, its magnitude ± σ after the final joint refit (what the model file
     holds) and, for a damping coefficient, the model's value before → after."""
     values = dict(zip(data.model.parameter_names, data.theta.tolist(), strict=True))
-    upd = gap.updated_model(data, result.effects)
+    upd = updated_model(data, result.effects)
     after = dict(zip(upd.model.parameter_names, upd.theta.tolist(), strict=True))
     lines = []
     for (e, p), cov in zip(result.effects, result.covs, strict=True):
@@ -201,7 +151,7 @@ def final_magnitudes(data: gap.GapData, result: gap.GapResult) -> list[str]:
     return lines
 
 
-def steps_table(data: gap.GapData, result: gap.GapResult) -> str:
+def steps_table(data: GapData, result: GapResult) -> str:
     """The steps: effect, held-out reduction, ΔBIC; the final magnitudes ± σ; held-out RMS
     per DOF before → after each step."""
     rows = []
@@ -243,10 +193,10 @@ def _param_key(key: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]", "_", key)
 
 
-def final_model(data: gap.GapData, result: gap.GapResult, mf: ModelFile,
+def final_model(data: GapData, result: GapResult, mf: ModelFile,
                 args: argparse.Namespace) -> dict[str, Any]:
     """Names, θ, std, M, damping model and extra entries of the model with the effects."""
-    upd = gap.updated_model(data, result.effects)
+    upd = updated_model(data, result.effects)
     std = dict(zip(mf.parameter_names, mf.theta_std.tolist(), strict=True))
     effects: dict[str, Any] = {}
     updated: set[str] = set()
@@ -257,7 +207,7 @@ def final_model(data: gap.GapData, result: gap.GapResult, mf: ModelFile,
         for name in [*u.get("theta", {}), *(c["name"] for c in u.get("cross", []))]:
             std[name] = float(s[0])
             updated.add(name)
-        if isinstance(e, gap.Memory) and mem is not None:
+        if isinstance(e, Memory) and mem is not None:
             for name, d in zip(mem.parameter_names, mem.state_dofs, strict=True):
                 if int(d) == e.dof:
                     std[name] = float(s[0])
@@ -315,7 +265,7 @@ def _html_table(header: list[str], rows: list[list[str]], classes: list[list[str
     return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
 
 
-def _residual_figure(data: gap.GapData, before: np.ndarray, after: np.ndarray, title: str,
+def _residual_figure(data: GapData, before: np.ndarray, after: np.ndarray, title: str,
                      path: Path, seconds: float = 60.0) -> str:
     """Held-out residual before/after over ``seconds`` and its spectrum, per DOF."""
     before_all = before
@@ -330,13 +280,13 @@ def _residual_figure(data: gap.GapData, before: np.ndarray, after: np.ndarray, t
     after_s = np.insert(after[idx], cut, np.nan, axis=0)
     fig = Figure(figsize=(12, 9))
     axes = fig.subplots(6, 2, gridspec_kw={"width_ratios": [2.2, 1]})
-    f_b, P_b = gap.residual_psd(data.samples, before_all, data.test)
-    f_a, P_a = gap.residual_psd(data.samples, after, data.test)
+    f_b, P_b = residual_psd(data.samples, before_all, data.test)
+    f_a, P_a = residual_psd(data.samples, after, data.test)
     for i in range(6):
         ax = axes[i, 0]
         ax.plot(t, before[:, i], lw=0.9, color="0.55", label="before")
         ax.plot(t, after_s[:, i], lw=0.9, color="tab:red", label="after")
-        ax.set_ylabel(f"{FORCE_NAMES[i]} ({gap.FORCE_UNITS[i]})")
+        ax.set_ylabel(f"{FORCE_NAMES[i]} ({FORCE_UNITS[i]})")
         ax.grid(alpha=0.3)
         ax = axes[i, 1]
         ax.loglog(f_b[1:], np.maximum(P_b[1:, i], 1e-300), lw=0.9, color="0.55")
@@ -353,8 +303,8 @@ def _residual_figure(data: gap.GapData, before: np.ndarray, after: np.ndarray, t
     return path.name
 
 
-def write_report(out: Path, data: gap.GapData, result: gap.GapResult,
-                 rows: list[gap.LocalRow], free: dict[str, Any] | str,
+def write_report(out: Path, data: GapData, result: GapResult,
+                 rows: list[LocalRow], free: dict[str, Any] | str,
                  final: dict[str, Any], args: argparse.Namespace) -> Path:
     """index.html, residual figures per step and final_model.yaml in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
@@ -417,7 +367,7 @@ def write_report(out: Path, data: gap.GapData, result: gap.GapResult,
                                   "held-out reduction"], srows))
         r_prev = result.r0
         for k, (st, mag) in enumerate(zip(result.steps, mags, strict=True), 1):
-            r_after = data.r0 - gap.correction(data, result.effects[:k]) \
+            r_after = data.r0 - correction(data, result.effects[:k]) \
                 if k < len(result.steps) else result.r
             name = _residual_figure(data, r_prev, r_after,
                                     f"step {k}: {st.effect.title}", out / f"step{k}.png")

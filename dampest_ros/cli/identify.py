@@ -1,13 +1,4 @@
-"""``dampest identify``: identify the damping model from a bag or a CSV file.
-
-Batch methods (``--method ols|wls|ridge|bounded|map``) preprocess the whole log at once
-(:mod:`dampest_ros.core.preprocess`, :mod:`dampest_ros.core.batch`). ``--method rls`` instead
-replays the bag's sensor messages through the online path of the nodes: the causal
-preprocessor (:class:`~dampest_ros.core.online.OnlinePreprocessor`, messages in stamp order),
-the samples as the dampest/* topics carry them, and the estimator node's recursive least
-squares with its default prior and settings (:class:`~dampest_ros.core.estimator.
-OnlineEstimator`), so that its result is the estimator node's on the same data.
-"""
+"""The work of dampest identify (its options and --help: cli/identify_options.py)."""
 
 from __future__ import annotations
 
@@ -18,21 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from dampest_ros.cli.common import (
-    CSV_HELP,
-    DEFAULT_TOPICS,
-    add_preprocess_options,
-    add_topic_options,
-    add_window_options,
-    bag_topics,
-    check_options,
-    cut,
-    load_samples,
-    split_holdout,
-    table,
-    term_list,
-)
-from dampest_ros.core.batch import METHODS, Fit, FitOptions, fit
+from dampest_ros.cli.common import DEFAULT_TOPICS, table, term_list
+from dampest_ros.cli.inputs import bag_topics, check_options, cut, load_samples, split_holdout
+from dampest_ros.core.batch import Fit, FitOptions, fit
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.excitation import speed_limits
@@ -41,62 +20,11 @@ from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import Selection, select_terms
-from dampest_ros.core.validate import metrics, predicted_force
+from dampest_ros.core.validate import force_scores
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 from dampest_ros.report import write_report
-
-EXAMPLE = ("example: dampest identify bags/b600 --vehicle config/vehicles/bluerov2_heavy.yaml "
-           "--out model.yaml")
-
-
-def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the sub-command."""
-    p = sub.add_parser("identify", help="identify damping from a bag or CSV",
-                       description=__doc__ + " INPUT is a rosbag2 directory (MCAP or SQLite3) "
-                       "with IMU, DVL, pressure and thruster topics, or a CSV log. " + CSV_HELP,
-                       epilog=EXAMPLE)
-    p.add_argument("input", help="rosbag2 directory, .csv or .csv.gz file")
-    p.add_argument("--vehicle", required=True,
-                   help="vehicle preset (name or YAML): mass, added mass, thrusters, "
-                        "nominal damping (the prior and the term structure)")
-    p.add_argument("--terms", help="comma list of the preset's terms to identify, e.g. "
-                                   "linear,quadratic (default: all terms of the preset)")
-    p.add_argument("--method", choices=(*METHODS, "rls"), default="wls",
-                   help="ols, wls (per-DOF noise weights, default), ridge, bounded "
-                        "(physical signs), map (Gaussian prior from --prior); rls: the "
-                        "estimator node's recursive least squares on the bag's messages "
-                        "replayed through the online preprocessing (bags only)")
-    p.add_argument("--forgetting-factor", type=float, default=1.0, metavar="LAMBDA",
-                   help="rls: forgetting factor λ in [0.9, 1] (default: 1, every sample "
-                        "weighs the same)")
-    p.add_argument("--select", action="store_true",
-                   help="search the damping library (linear, cross-flow v|r|, bilinear u·w "
-                        "lift, speed-magnitude u‖v‖ and p‖ω‖ terms in every force row, fluid "
-                        "memory per DOF with its rate) by blocked cross-validation and BIC, "
-                        "on top of the preset's terms, and fit the sparse model found")
-    p.add_argument("--prior", help="model YAML whose theta/theta_std are the MAP prior "
-                                   "(rls: the RLS prior)")
-    p.add_argument("--cutoff", type=float, default=2.0,
-                   help="low-pass (Hz) applied to the regression (default: 2)")
-    p.add_argument("--columns", help="YAML column map for CSV input (their name: our name); "
-                                     "'ax: acc_x' or 'ax: ax', 'wx: gyro_x' or 'wx: wx' settle "
-                                     "what ax..az and wx..wz are (see below)")
-    add_window_options(p)
-    p.add_argument("--holdout", metavar="FRACTION|TIME",
-                   help="fit on the rest and score on the last part of the log: a fraction "
-                        "of the time (0.3 = the last 30 %%) or seconds (120s, or a number > 1); "
-                        "prints and reports the held-out R² and RMSE of the damping force "
-                        "per DOF")
-    p.add_argument("--out", help="write the model YAML (a ROS 2 parameters file) here")
-    p.add_argument("--report", metavar="DIR",
-                   help="write an HTML report with plots (index.html + PNG) to DIR")
-    p.add_argument("--truth", help="model YAML of the true coefficients (simulated data), "
-                                   "shown in the report")
-    add_topic_options(p)
-    add_preprocess_options(p)
-    p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -146,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         print(misfit_check(samples, model, vehicle.body, args), end="")
     scores = None
     if held is not None:
-        scores = heldout_scores(held, model, vehicle.body, result.theta, args.cutoff)
+        scores = force_scores(held, model, vehicle.body, result.theta, args.cutoff)
         print()
         print(heldout_text(held, scores))
     if args.out:
@@ -310,14 +238,6 @@ def report_table(result: Fit, prior: np.ndarray) -> str:
                      float(ci[j, 1]), float(prior[j]), status))
     return table(("parameter", "estimate", "std", "95% low", "95% high", "prior", "status"),
                  rows)
-
-
-def heldout_scores(held: Samples, model: DampingModel, body: RigidBody, theta: np.ndarray,
-                   cutoff: float) -> dict[str, np.ndarray]:
-    """:func:`~dampest_ros.core.validate.metrics` of the damping force on held-out samples:
-    y = τ − M ν̇ − C(ν)ν − g(η) against the model's D(ν)ν, low-passed as in the fit."""
-    y, y_hat = predicted_force(held, model, body, theta, cutoff)
-    return metrics(y, y_hat)
 
 
 def heldout_note(held: Samples) -> str:

@@ -1,29 +1,35 @@
-"""``dampest inspect``: what a bag holds and whether it can feed identification."""
+"""dampest inspect: what a bag holds and whether it can feed identification.
+
+Prints every topic with its message type, count, rate, gaps and longest gap, then whether
+the topics identification needs (IMU, DVL and thruster state or a body wrench) are there
+with the right types; exit status 1 when they are not.
+"""
 
 from __future__ import annotations
 
 import argparse
 
-import numpy as np
+from dampest_ros.cli.common import add_topic_options, describe, table, tau_topic, topic_roles
 
-from dampest_ros.cli.common import add_topic_options, table, tau_topic, topic_roles
-from dampest_ros.io.bag import bag_summary, read_bag, role_type_errors
+EXAMPLE = "example:\n  dampest inspect bags/sample"
 
 
-def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the sub-command."""
-    p = sub.add_parser("inspect", help="topics, rates, gaps and readiness of a bag",
-                       description=__doc__, epilog="example: dampest inspect bags/sample")
-    p.add_argument("bag", help="rosbag2 directory (MCAP or SQLite3)")
-    p.add_argument("--gap", type=float, default=0.5,
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of dampest inspect."""
+    describe(p, __doc__, EXAMPLE)
+    p.add_argument("bag", metavar="BAG", help="rosbag2 directory (MCAP or SQLite3)")
+    p.add_argument("--gap", type=float, default=0.5, metavar="S",
                    help="report gaps longer than this many seconds (default: 0.5)")
     add_topic_options(p)
-    p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the summary; exit 1 when the bag lacks a topic identification needs or one of
     them carries another message type."""
+    import numpy as np
+
+    from dampest_ros.io.bag import bag_summary, read_bag, role_type_errors
+
     summary = bag_summary(args.bag)
     data = read_bag(args.bag)
     rows = []

@@ -1,7 +1,7 @@
-"""``dampest record``: record topics to a rosbag2 MCAP bag (runs the recorder node here).
+"""dampest record: record topics to a rosbag2 MCAP bag (runs the recorder node here).
 
 Stops on Ctrl-C or SIGTERM, which close the bag; a bag whose recording was killed is
-recovered with ``dampest reindex``. A full disk stops the recording with the bag closed and
+recovered with dampest reindex. A full disk stops the recording with the bag closed and
 every message received kept (exit status 1).
 """
 
@@ -11,15 +11,16 @@ import argparse
 import json
 from pathlib import Path
 
+from dampest_ros.cli.common import describe
 
-def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the sub-command."""
-    p = sub.add_parser("record", help="record topics to an MCAP bag (recorder_node)",
-                       description=__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter,
-                       epilog="examples:\n  dampest record -o trial1\n"
-                              "  dampest record -o trial1 --all --max-bag-duration 600\n"
-                              "  dampest record -o t imu/data dvl/twist --namespace /vehicle")
+EXAMPLE = ("examples:\n  dampest record -o trial1\n"
+           "  dampest record -o trial1 --all --max-bag-duration 600\n"
+           "  dampest record -o t imu/data dvl/twist --namespace /vehicle")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of dampest record."""
+    describe(p, __doc__, EXAMPLE)
     p.add_argument("topics", nargs="*", metavar="TOPIC",
                    help="topics to record (default: every topic of the dampest contract: "
                         "imu/data, dvl/twist, pressure, thrusters/state, truth/odom, "
@@ -47,7 +48,6 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="name of the recorder node (default: recorder_node)")
     p.add_argument("--use-sim-time", action="store_true",
                    help="log times from /clock instead of the system clock")
-    p.set_defaults(run=run)
 
 
 def ros_arguments(args: argparse.Namespace) -> list[str]:

@@ -1,8 +1,8 @@
-"""``dampest reindex``: rebuild metadata.yaml of an MCAP bag from its storage files.
+"""dampest reindex: rebuild metadata.yaml of an MCAP bag from its storage files.
 
 Every chunk is checked. A storage file without a summary (the recording was killed) or with
 damaged chunks is read up to its last readable record, damaged chunks skipped and counted, and
-rewritten; the damaged original is kept as ``<file>.damaged``. A bag still being recorded is
+rewritten; the damaged original is kept as <file>.damaged. A bag still being recorded is
 refused. Exit status 1 when bytes or messages could not be read (the counts are printed), 0
 when everything was.
 """
@@ -11,22 +11,21 @@ from __future__ import annotations
 
 import argparse
 
-from dampest_ros.cli.common import table
-from dampest_ros.io.recorder import reindex
+from dampest_ros.cli.common import describe, table
+
+EXAMPLE = "example:\n  dampest reindex rosbag2_2024_05_01-10_00_00"
 
 
-def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the sub-command."""
-    p = sub.add_parser("reindex", help="rebuild metadata.yaml, recover a killed recording",
-                       description=__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter,
-                       epilog="example: dampest reindex rosbag2_2024_05_01-10_00_00")
-    p.add_argument("bag", help="rosbag2 directory with .mcap files")
-    p.set_defaults(run=run)
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of dampest reindex."""
+    describe(p, __doc__, EXAMPLE)
+    p.add_argument("bag", metavar="BAG", help="rosbag2 directory with .mcap files")
 
 
 def run(args: argparse.Namespace) -> int:
     """Reindex and print what each file held and what could not be read."""
+    from dampest_ros.io.recorder import reindex
+
     report = reindex(args.bag)
     if report.removed:
         print(f"removed partial files left by a killed recorder or reindex: "

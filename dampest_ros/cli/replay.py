@@ -1,4 +1,4 @@
-"""``dampest replay``: play a rosbag2 bag (MCAP or SQLite3) with its timing (runs the replay
+"""dampest replay: play a rosbag2 bag (MCAP or SQLite3) with its timing (runs the replay
 node here). Messages are published as recorded, byte for byte; stops at the end of the bag
 (unless --loop) or on Ctrl-C.
 """
@@ -8,15 +8,16 @@ from __future__ import annotations
 import argparse
 import json
 
+from dampest_ros.cli.common import describe
 
-def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the sub-command."""
-    p = sub.add_parser("replay", help="play a bag with its timing (replay_node)",
-                       description=__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter,
-                       epilog="examples:\n  dampest replay trial1 --rate 10\n"
-                              "  dampest replay trial1 --clock --topics imu/data dvl/twist\n"
-                              "  dampest replay trial1 --remap /imu/data:=/vehicle/imu/data")
+EXAMPLE = ("examples:\n  dampest replay trial1 --rate 10\n"
+           "  dampest replay trial1 --clock --topics imu/data dvl/twist\n"
+           "  dampest replay trial1 --remap /imu/data:=/vehicle/imu/data")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of dampest replay."""
+    describe(p, __doc__, EXAMPLE)
     p.add_argument("bag", help="rosbag2 directory (MCAP or SQLite3) or .mcap/.db3 file")
     p.add_argument("-r", "--rate", type=float, default=1.0,
                    help="playback speed factor (default: 1, real time)")
@@ -37,7 +38,6 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="start once every topic has N subscribers")
     p.add_argument("--delay", type=float, default=0.0, metavar="S",
                    help="wait this long before playing (default: 0)")
-    p.set_defaults(run=run)
 
 
 def node_parameters(args: argparse.Namespace) -> dict[str, object]:

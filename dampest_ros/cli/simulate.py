@@ -1,60 +1,77 @@
-"""``dampest simulate``: fly a protocol in the simulator and write a rosbag2 (MCAP) bag."""
+"""dampest simulate: fly a protocol in the simulator and write a rosbag2 (MCAP) bag.
+
+The bag holds what a vehicle's sensors would log (IMU, DVL, pressure, thruster state) and the
+truth (truth/odom); with the native backend the true coefficients are written next to it as
+truth_model.yaml, for comparing an identification with.
+"""
 
 from __future__ import annotations
 
 import argparse
-import time
-from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+from dampest_ros.cli.common import add_protocol_option, add_vehicle_option, describe
 
-from dampest_ros.cli.common import speed_table, table
-from dampest_ros.core.excitation import PROTOCOLS, make_excitation
-from dampest_ros.core.mujoco_backend import plant_vehicle
-from dampest_ros.core.preprocess import PreprocessConfig, preprocess
-from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
-from dampest_ros.core.simulate import BACKENDS, Effects, true_vehicle
-from dampest_ros.core.simulate import run as run_sim
-from dampest_ros.core.vehicle import Vehicle
-from dampest_ros.io.bag import write_bag
-from dampest_ros.io.csv import samples_to_columns, write_csv
-from dampest_ros.io.yaml_io import load_vehicle, read_mapping, save_model
+if TYPE_CHECKING:
+    from dampest_ros.core.vehicle import Vehicle
 
-EXAMPLE = ("example: dampest simulate --vehicle bluerov2_heavy --protocol B --duration 600 "
+EXAMPLE = ("example:\n  dampest simulate --vehicle bluerov2_heavy --protocol B --duration 600 "
            "--seed 1 --out bags/b600")
 
+#: The plants (dampest_ros.core.simulate.BACKENDS; a test checks the two agree).
+BACKENDS = ("native", "mujoco")
 
-def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the sub-command."""
-    p = sub.add_parser("simulate", help="simulate a vehicle and write a rosbag2 bag",
-                       description=__doc__, epilog=EXAMPLE)
-    p.add_argument("--vehicle", default="bluerov2_heavy",
-                   help="preset name in config/vehicles or a YAML path (default: bluerov2_heavy)")
-    p.add_argument("--protocol", choices=PROTOCOLS, default="B",
-                   help="A: low-speed steps and sines; B: ramped surge + PRBS on all DOFs; "
-                        "C: multisine 0.1-10 Hz; fourier: Fourier-series trajectories")
-    p.add_argument("--duration", type=float, default=600.0, help="seconds (default: 600)")
-    p.add_argument("--seed", type=int, default=1, help="random seed (default: 1)")
-    p.add_argument("--out", required=True, help="bag directory to create (must not exist)")
-    p.add_argument("--csv", help="also write the synchronised samples as CSV (seed format)")
-    p.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of dampest simulate."""
+    describe(p, __doc__, EXAMPLE)
+    add_vehicle_option(p, "bluerov2_heavy")
+    add_protocol_option(p)
+    p.add_argument("--duration", type=float, default=600.0, metavar="S",
+                   help="simulated seconds (default: 600)")
+    p.add_argument("--seed", type=int, default=1,
+                   help="seed of the excitation and the sensor noise (default: 1)")
+    p.add_argument("--out", required=True, metavar="BAG",
+                   help="bag directory to create (must not exist)")
+    p.add_argument("--csv", metavar="FILE",
+                   help="also write the synchronised samples as CSV (seed format)")
+    p.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap",
+                   help="rosbag2 storage format (default: mcap)")
     p.add_argument("--backend", choices=BACKENDS, default="native",
                    help="the plant: native (our own equations, default; writes the true "
                         "coefficients as truth_model.yaml) or mujoco (MuJoCo's ellipsoid "
                         "fluid model, physics we did not write: the vehicle needs a geometry: "
                         "block, e.g. --vehicle torpedo_auv; MuJoCo's own fluid wrench is "
                         "recorded on truth/hydro_wrench)")
-    p.add_argument("--dt", type=float, default=0.02, help="integration step in s (default: 0.02)")
+    p.add_argument("--dt", type=float, default=0.02, metavar="S",
+                   help="integration step in s (default: 0.02)")
     p.add_argument("--amplitude", type=float, default=1.0,
                    help="scale of the protocol's amplitudes (default: 1)")
-    p.add_argument("--effects", help="YAML mapping of hidden effects to switch on, e.g. "
-                                     "'current: [0.2, 0, 0]' (see dampest_ros.core.simulate)")
-    p.add_argument("--sensors", help="YAML mapping of sensor settings (rates, noise)")
-    p.set_defaults(run=run)
+    p.add_argument("--effects", metavar="YAML",
+                   help="hidden effects to switch on, a YAML mapping (file or inline), e.g. "
+                        "'current: [0.2, 0, 0]' (the fields of Effects in "
+                        "dampest_ros/core/effects.py)")
+    p.add_argument("--sensors", metavar="YAML",
+                   help="sensor settings (rates, noise), a YAML mapping (file or inline)")
 
 
 def run(args: argparse.Namespace) -> int:
     """Simulate, measure, write the bag, the truth model and optionally the CSV."""
+    import time
+    from pathlib import Path
+
+    import numpy as np
+
+    from dampest_ros.cli.common import speed_table, table
+    from dampest_ros.core.effects import Effects, true_vehicle
+    from dampest_ros.core.excitation import make_excitation
+    from dampest_ros.core.preprocess import PreprocessConfig, preprocess
+    from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
+    from dampest_ros.core.simulate import run as run_sim
+    from dampest_ros.io.bag import write_bag
+    from dampest_ros.io.csv import samples_to_columns, write_csv
+    from dampest_ros.io.yaml_io import load_vehicle, read_mapping, save_model
+
     out = Path(args.out)
     if out.exists():
         raise FileExistsError(f"{out} exists; choose a new --out")
@@ -102,6 +119,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _added_mass_note(vehicle: Vehicle) -> None:
     """Say so when the vehicle does not describe the MuJoCo plant's added mass faithfully."""
+    import numpy as np
+
+    from dampest_ros.core.mujoco_backend import plant_vehicle
+
     plant = plant_vehicle(vehicle).body
     body = vehicle.body
     if (body.added_mass_terms != plant.added_mass_terms

@@ -28,65 +28,53 @@ at --cutoff (0: as logged):
 from __future__ import annotations
 
 import argparse
-import textwrap
-import time
-from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from dampest_ros.cli.common import (
     CSV_HELP,
+    add_columns_option,
+    add_cutoff_option,
     add_preprocess_options,
     add_topic_options,
+    add_vehicle_option,
     add_window_options,
-    cut,
-    load_model_for,
-    load_samples,
-    table,
+    describe,
 )
-from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.preprocess import zero_phase
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
-from dampest_ros.core.samples import Samples
-from dampest_ros.core.validate import free_run_error, longest_segment, metrics, predicted_force
-from dampest_ros.io.csv import write_table
-from dampest_ros.io.yaml_io import load_vehicle
 
-EXAMPLE = ("example: dampest identify bags/run1 --vehicle bluerov2_heavy --out model.yaml\n"
-           "         dampest validate model.yaml bags/run2 --vehicle bluerov2_heavy "
-           "--out forces.csv")
+if TYPE_CHECKING:
+    import numpy as np
+
+    from dampest_ros.core.damping import DampingModel
+    from dampest_ros.core.rigid_body import RigidBody
+    from dampest_ros.core.samples import Samples
+
+EXAMPLE = ("example:\n"
+           "  dampest identify bags/run1 --vehicle bluerov2_heavy --out model.yaml\n"
+           "  dampest validate model.yaml bags/run2 --vehicle bluerov2_heavy --out forces.csv")
 
 FORCE_UNITS = ("N", "N", "N", "N·m", "N·m", "N·m")
 VEL_UNITS = ("m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s")
 
 
-def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the sub-command."""
-    p = sub.add_parser("validate", help="score a model YAML on another log (bag or CSV)",
-                       description=__doc__ + "\n" + textwrap.fill(CSV_HELP, 88),
-                       epilog=EXAMPLE,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of dampest validate."""
+    describe(p, __doc__, EXAMPLE, CSV_HELP)
     p.add_argument("model", metavar="MODEL",
                    help="model YAML (ROS 2 parameters file), e.g. from dampest identify --out")
     p.add_argument("input", metavar="LOG",
                    help="rosbag2 directory (MCAP or SQLite3) or .csv / .csv.gz file in any "
                         "flavour identify reads")
-    p.add_argument("--vehicle", required=True,
-                   help="vehicle preset (name or YAML): mass, restoring data, thrusters, "
-                        "added-mass switches")
+    add_vehicle_option(p)
     p.add_argument("--out", metavar="FORCES.csv",
                    help="write time, damping_X..N, hydro_X..N, target_X..N per sample here")
-    p.add_argument("--cutoff", type=float, default=2.0,
-                   help="low-pass (Hz) of force scores and --out, as in identify (default: 2; "
-                        "0: none)")
+    add_cutoff_option(p, "none, the scores as logged")
     p.add_argument("--free-run", type=float, default=120.0, metavar="SECONDS",
                    help="length of the free run (s) from the start of the longest segment "
                         "(default: 120)")
-    p.add_argument("--columns", help="YAML column map for CSV input (their name: our name)")
+    add_columns_option(p)
     add_window_options(p)
     add_topic_options(p)
     add_preprocess_options(p)
-    p.set_defaults(run=run)
 
 
 def model_forces(samples: Samples, model: DampingModel, body: RigidBody, theta: np.ndarray,
@@ -98,6 +86,11 @@ def model_forces(samples: Samples, model: DampingModel, body: RigidBody, theta: 
     (:meth:`RigidBody.added_mass_force`) + damping + memory. Body FRD, N and N·m, all
     low-passed at ``cutoff`` (Hz, 0: none) within each segment, as the fit sees them.
     """
+    import numpy as np
+
+    from dampest_ros.core.preprocess import zero_phase
+    from dampest_ros.core.validate import predicted_force
+
     theta = np.asarray(theta, dtype=float)
     static = theta.copy()
     if model.term("freq") is not None:
@@ -116,6 +109,18 @@ def model_forces(samples: Samples, model: DampingModel, body: RigidBody, theta: 
 
 def run(args: argparse.Namespace) -> int:
     """Load model and log, print the per-DOF scores, write the forces."""
+    import time
+    from pathlib import Path
+
+    import numpy as np
+
+    from dampest_ros.cli.common import table
+    from dampest_ros.cli.inputs import cut, load_model_for, load_samples
+    from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
+    from dampest_ros.core.validate import free_run_error, longest_segment, metrics
+    from dampest_ros.io.csv import write_table
+    from dampest_ros.io.yaml_io import load_vehicle
+
     t0 = time.perf_counter()
     vehicle = load_vehicle(args.vehicle)
     mf, model, body = load_model_for(args.model, vehicle)

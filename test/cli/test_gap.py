@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dampest_ros.cli.common import load_model_for
+from dampest_ros.cli.inputs import load_model_for
 from dampest_ros.cli.main import main
 from dampest_ros.core.damping import CrossSpec, DampingModel, cross_term
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model

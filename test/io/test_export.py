@@ -8,7 +8,6 @@ the conversion (signs and frame), not only that export and import agree with eac
 
 from __future__ import annotations
 
-import argparse
 import re
 import warnings
 import xml.etree.ElementTree as ET
@@ -19,20 +18,14 @@ import numpy as np
 import pytest
 import yaml
 
-from dampest_ros.cli import export as cli_export
+from dampest_ros.cli.main import main
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.vehicle import Vehicle, damping_from_spec
-from dampest_ros.io.export import (
-    ExportWarning,
-    export_gz,
-    export_model,
-    export_urdf,
-    export_uuv,
-    import_gz,
-    import_model,
-    import_urdf,
-    imported_mass,
-)
+from dampest_ros.io.export.common import ExportWarning, NotDissipativeError, imported_mass
+from dampest_ros.io.export.convert import export_model, import_model
+from dampest_ros.io.export.gz import export_gz, import_gz
+from dampest_ros.io.export.urdf import export_urdf, import_urdf
+from dampest_ros.io.export.uuv import export_uuv
 from dampest_ros.io.yaml_io import ModelFile, load_model, load_vehicle, save_model
 
 T6 = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])  # FRD <-> FLU for a 6-vector
@@ -360,22 +353,54 @@ def test_urdf_import_of_the_nested_auv_controllers_layout_and_of_text() -> None:
 # --- uuv --------------------------------------------------------------------------------------
 
 
-def test_uuv_matrices_and_force_law(tmp_path: Path, heavy: Vehicle) -> None:
+def uuv_plugin(text: str) -> ET.Element:
+    """The exported <plugin> element (after its header comment), as the plugin parses it."""
+    return ET.fromstring(text)
+
+
+def uuv_matrix(hm: ET.Element, tag: str) -> np.ndarray:
+    """A HMFossen matrix as HydrodynamicModel.cc reads it: 36 numbers row-major, or 6 for the
+    diagonal."""
+    values = [float(x) for x in (hm.findtext(tag) or "").split()]
+    assert len(values) in (6, 36), (tag, len(values))
+    return np.diag(values) if len(values) == 6 else np.array(values).reshape(6, 6)
+
+
+def test_uuv_sdf_plugin_numbers_and_force_law(tmp_path: Path, heavy: Vehicle) -> None:
     spec = {"linear": COUPLED["linear"], "quadratic": COUPLED["quadratic"],
             "cross": [c for c in COUPLED["cross"] if c["alpha"] == "u"]}
     mf = model_file(tmp_path, spec, M=heavy.body.M)
-    out = export_uuv(mf, heavy)
-    hm = yaml.safe_load(out.text)["hydrodynamic_model"]
-    assert hm["type"] == "fossen"
-    DLin, DNon, DFwd, Ma = (np.array(hm[k]).reshape(6, 6) for k in (
+    out = export_uuv(mf, heavy, link_name="bluerov2/base_link")
+    plugin = uuv_plugin(out.text)
+    assert plugin.tag == "plugin"
+    assert plugin.get("filename") == "libuuv_underwater_object_ros_plugin.so"
+    assert float(plugin.findtext("fluid_density") or "nan") == heavy.body.rho
+    link = plugin.find("link")
+    assert link is not None and link.get("name") == "bluerov2/base_link"
+    assert float(link.findtext("volume") or "nan") == heavy.body.volume
+    cob = [float(x) for x in (link.findtext("center_of_buoyancy") or "").split()]
+    np.testing.assert_allclose(cob, heavy.body.r_b * T6[:3], atol=0)  # FRD -> FLU
+    hm = link.find("hydrodynamic_model")
+    assert hm is not None and hm.findtext("type") == "fossen"
+    DLin, DNon, DFwd, Ma = (uuv_matrix(hm, k) for k in (
         "linear_damping", "quadratic_damping", "linear_damping_forward_speed", "added_mass"))
     assert DLin[0, 0] == -13.7 and DNon[0, 0] == -141.0 and DLin[0, 2] == -2.0  # FRD, as is
     np.testing.assert_allclose(Ma, heavy.body.added_mass, atol=1e-12)          # positive
+    # every number is the model's: −(coefficient) at its place
+    assert mf.damping is not None
+    for name, value in zip(mf.parameter_names, mf.theta, strict=True):
+        row = "XYZKMN".index(name[0])
+        col = "uvwpqr".index(name[2])
+        if len(name) == 3:
+            assert DLin[row, col] == -value, name
+        elif name[3] == name[2] and row == col:
+            assert DNon[row, row] == -value, name
+        else:
+            assert DFwd[row, col] == -value, name
     # HMFossen: D = -DLin - u DFwd, D_ii += -DNon_ii |ν_i|; applied -D ν
     nu = random_nu()
     D = -DLin - nu[:, 0, None, None] * DFwd
     D[:, range(6), range(6)] -= np.diag(DNon) * np.abs(nu)
-    assert mf.damping is not None
     np.testing.assert_allclose(np.einsum("nij,nj->ni", D, nu), mf.damping.force(nu, mf.theta),
                                rtol=1e-12, atol=1e-12)
     assert out.left_out == ()
@@ -386,7 +411,21 @@ def test_uuv_leaves_out_cross_quadratic_terms(tmp_path: Path) -> None:
     with pytest.warns(ExportWarning):
         out = export_uuv(mf)
     assert [x.split(" =")[0] for x in out.left_out] == ["Y_vr", "N_vr", "X_uw"]
-    assert "added_mass" not in yaml.safe_load(out.text)["hydrodynamic_model"]
+    link = uuv_plugin(out.text).find("link")
+    assert link is not None and link.find("volume") is None  # no vehicle: damping only
+    hm = link.find("hydrodynamic_model")
+    assert hm is not None and hm.find("added_mass") is None
+    assert "LEFT OUT" in out.text and "Y_vr" in out.text
+
+
+def test_uuv_held_at_prior_is_an_xml_comment(tmp_path: Path, heavy: Vehicle) -> None:
+    held = {"Y_vv": "poorly determined"}
+    with pytest.warns(ExportWarning):
+        out = export_uuv(load_model(heavy_with(tmp_path, heavy, {}, held=held, flown=1.0)))
+    comment = out.text[out.text.index("<!--"):out.text.index("-->")]
+    assert "HELD AT PRIOR" in comment and "Y_vv = 217.0 (poorly determined)" in comment
+    hm = uuv_plugin(out.text).find("link/hydrodynamic_model")
+    assert hm is not None and uuv_matrix(hm, "quadratic_damping")[1, 1] == -217.0
 
 
 # --- common -----------------------------------------------------------------------------------
@@ -437,11 +476,8 @@ def test_model_file_without_terms_is_read_from_the_names(tmp_path: Path) -> None
 
 
 def cli(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="dampest")
-    sub = parser.add_subparsers(dest="command", required=True)
-    cli_export.add_parser(sub)
-    args = parser.parse_args(argv)
-    return int(args.run(args))
+    """dampest with --debug: a failure raises instead of exiting 2."""
+    return main(["--debug", *argv])
 
 
 def test_cli_export_then_import(tmp_path: Path, heavy_file: ModelFile,
@@ -599,8 +635,6 @@ def test_export_refuses_a_non_dissipative_model_unless_forced(
     """Issue 11: Z_ww = −61 was exported (zWabsW +61.25) and the simulator built from it
     diverged. Every format refuses it with exit status 2 and one line naming Z_ww and the
     velocity on the flown envelope; --force writes it, saying so in the file."""
-    from dampest_ros.cli.main import main
-
     path = heavy_with(tmp_path, heavy, {"Z_ww": -61.25}, flown=1.0)
     out = tmp_path / f"hydro.{fmt}"
     capsys.readouterr()
@@ -624,8 +658,6 @@ def test_dissipativity_checks_memory_gains_and_defaults_to_a_speed_box(
     """Without flown speeds in the file the default box ±(2, 2, 2, 1, 1, 1) is checked: a
     negative sway coefficient shows at its edge; a negative memory gain feeds energy back; a
     dissipative model says which grid it passed."""
-    from dampest_ros.io.export import NotDissipativeError
-
     low = load_model(heavy_with(tmp_path, heavy, {"Y_v": -500.0}))
     assert low.flown is None
     # (Y_v + Y_vv |v|) v² at v = ±1: (−500 + 217)·1, the worst grid point
@@ -649,8 +681,6 @@ def test_export_lists_coefficients_held_at_prior(
     """Issue 11: a coefficient the data did not determine was exported as if measured. Its
     prior value is written, listed under HELD AT PRIOR in the file with the reason, warned
     about (ExportWarning, and a line on stderr from the command)."""
-    from dampest_ros.cli.main import main
-
     held = {"Y_vv": "poorly determined: 95 % half-width 274 exceeds 50% of its scale"}
     path = heavy_with(tmp_path, heavy, {}, held=held, flown=1.0)
     with pytest.warns(ExportWarning, match=r"holds 1 coefficient\(s\) .*Y_vv = 217\.0"):

@@ -1,0 +1,77 @@
+"""dampest identify: identify the damping model from a bag or a CSV file.
+
+Batch methods (--method ols, wls, ridge, bounded, map) preprocess the whole log at once
+(dampest_ros/core/preprocess.py, dampest_ros/core/batch.py). --method rls instead replays
+the bag's sensor messages through the online path of the nodes: the causal preprocessor
+(messages in stamp order), the samples as the dampest/* topics carry them, and the
+estimator node's recursive least squares with its default prior and settings, so that its
+result is the estimator node's on the same data.
+
+INPUT is a rosbag2 directory (MCAP or SQLite3) with IMU, DVL, pressure and thruster topics,
+or a CSV log.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from dampest_ros.cli.common import (
+    CSV_HELP,
+    add_columns_option,
+    add_cutoff_option,
+    add_preprocess_options,
+    add_topic_options,
+    add_vehicle_option,
+    add_window_options,
+    describe,
+)
+
+EXAMPLE = ("examples:\n"
+           "  dampest identify bags/b600 --vehicle bluerov2_heavy --out model.yaml\n"
+           "  dampest identify bags/b600 --vehicle bluerov2_heavy --select --holdout 0.3 "
+           "--report report")
+
+#: Batch methods (dampest_ros.core.batch.METHODS; a test checks the two agree).
+METHODS = ("ols", "wls", "ridge", "bounded", "map")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of dampest identify (its work: dampest_ros.cli.identify.run)."""
+    describe(p, __doc__, EXAMPLE, CSV_HELP)
+    p.add_argument("input", metavar="INPUT", help="rosbag2 directory, .csv or .csv.gz file")
+    add_vehicle_option(p)
+    p.add_argument("--terms", help="comma list of the preset's terms to identify, e.g. "
+                                   "linear,quadratic (default: all terms of the preset)")
+    p.add_argument("--method", choices=(*METHODS, "rls"), default="wls",
+                   help="ols, wls (per-DOF noise weights, default), ridge, bounded "
+                        "(physical signs), map (Gaussian prior from --prior); rls: the "
+                        "estimator node's recursive least squares on the bag's messages "
+                        "replayed through the online preprocessing (bags only)")
+    p.add_argument("--forgetting-factor", type=float, default=1.0, metavar="LAMBDA",
+                   help="rls: forgetting factor λ in [0.9, 1] (default: 1, every sample "
+                        "weighs the same)")
+    p.add_argument("--select", action="store_true",
+                   help="search the damping library (linear, cross-flow v|r|, bilinear u·w "
+                        "lift, speed-magnitude u‖v‖ and p‖ω‖ terms in every force row, fluid "
+                        "memory per DOF with its rate) by blocked cross-validation and BIC, "
+                        "on top of the preset's terms, and fit the sparse model found")
+    p.add_argument("--prior", metavar="MODEL",
+                   help="model YAML whose theta/theta_std are the MAP prior (rls: the RLS "
+                        "prior)")
+    add_cutoff_option(p)
+    add_columns_option(p)
+    add_window_options(p)
+    p.add_argument("--holdout", metavar="FRACTION|TIME",
+                   help="fit on the rest and score on the last part of the log: a fraction "
+                        "of the time (0.3 = the last 30 %%) or seconds (120s, or a number > 1); "
+                        "prints and reports the held-out R² and RMSE of the damping force "
+                        "per DOF")
+    p.add_argument("--out", metavar="MODEL",
+                   help="write the model YAML (a ROS 2 parameters file) here")
+    p.add_argument("--report", metavar="DIR",
+                   help="write an HTML report with plots (index.html + PNG) to DIR")
+    p.add_argument("--truth", metavar="MODEL",
+                   help="model YAML of the true coefficients (simulated data), shown in the "
+                        "report")
+    add_topic_options(p)
+    add_preprocess_options(p)

@@ -1,0 +1,83 @@
+"""The dispatch by format: :func:`export_model` and :func:`import_model`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.io.export import FORMATS, IMPORT_FORMATS
+from dampest_ros.io.export.common import Exported, Imported
+from dampest_ros.io.export.gz import export_gz, import_gz
+from dampest_ros.io.export.urdf import export_urdf, import_urdf
+from dampest_ros.io.export.uuv import export_uuv
+from dampest_ros.io.yaml_io import ModelFile
+
+
+def export_model(mf: ModelFile, fmt: str, vehicle: Vehicle | None = None, *,
+                 link_name: str = "base_link", frame: str = "flu",
+                 source: str | None = None, force: bool = False) -> Exported:
+    """Export a model in one of :data:`~dampest_ros.io.export.FORMATS`.
+
+    Parameters
+    ----------
+    mf : ModelFile
+    fmt : {'gz', 'urdf', 'uuv'}
+    vehicle : Vehicle, optional
+        For the added mass M_A = M − M_RB (and, for ``urdf``, the rigid-body entries; for
+        ``uuv``, the volume, centre of buoyancy and water density).
+    link_name : str
+        ``gz``, ``uuv``: the link the plugin acts on.
+    frame : str
+        ``gz`` only; see :func:`~dampest_ros.io.export.gz.export_gz`.
+    source : str, optional
+        Where the model came from, for the header comment.
+    force : bool
+        Export a model that is not dissipative (the header says so).
+
+    Returns
+    -------
+    Exported
+
+    Raises
+    ------
+    ValueError
+        Unknown format or frame.
+    NotDissipativeError
+        The model generates energy and ``force`` is False.
+    """
+    if fmt == "gz":
+        return export_gz(mf, vehicle, link_name=link_name, frame=frame, source=source,
+                         force=force)
+    if fmt == "urdf":
+        return export_urdf(mf, vehicle, source=source, force=force)
+    if fmt == "uuv":
+        return export_uuv(mf, vehicle, link_name=link_name, source=source, force=force)
+    raise ValueError(f"unknown export format {fmt!r}; use one of {FORMATS}")
+
+
+def import_model(source: str | Path, fmt: str, *, frame: str = "flu",
+                 link_name: str | None = None) -> Imported:
+    """Import a model from one of :data:`~dampest_ros.io.export.IMPORT_FORMATS`.
+
+    Parameters
+    ----------
+    source : str or Path
+        File or XML text.
+    fmt : {'gz', 'urdf'}
+    frame, link_name
+        ``gz`` only; see :func:`~dampest_ros.io.export.gz.import_gz`.
+
+    Returns
+    -------
+    Imported
+
+    Raises
+    ------
+    ValueError
+        Unknown format.
+    """
+    if fmt == "gz":
+        return import_gz(source, frame=frame, link_name=link_name)
+    if fmt == "urdf":
+        return import_urdf(source)
+    raise ValueError(f"unknown import format {fmt!r}; use one of {IMPORT_FORMATS}")
