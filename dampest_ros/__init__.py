@@ -28,7 +28,7 @@ _HOME = {
     "read_csv": "dampest_ros.io.csv",
     "preprocess": "dampest_ros.core.preprocess",
     "DampingIdentifier": "dampest_ros.core.identifier",
-    "find_gap": "dampest_ros.core.gap",
+    "find_gap": "dampest_ros.core.gap.search",
     "simulate": "dampest_ros.core.simulate",
 }
 
@@ -36,7 +36,7 @@ __all__ = ["DampingIdentifier", "find_gap", "load_vehicle", "preprocess", "read_
            "read_csv", "simulate"]
 
 if TYPE_CHECKING:
-    from dampest_ros.core.gap import find_gap
+    from dampest_ros.core.gap.search import find_gap
     from dampest_ros.core.identifier import DampingIdentifier
     from dampest_ros.core.preprocess import preprocess
     from dampest_ros.core.simulate import simulate

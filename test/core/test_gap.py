@@ -45,7 +45,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from dampest_ros.core import gap
 from dampest_ros.core.damping import (
     CrossSpec,
     DampingModel,
@@ -55,6 +54,12 @@ from dampest_ros.core.damping import (
 )
 from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import make_excitation
+from dampest_ros.core.gap.data import GapData
+from dampest_ros.core.gap.effects import Buoyancy, Current
+from dampest_ros.core.gap.library import library
+from dampest_ros.core.gap.localise import concentration, localise
+from dampest_ros.core.gap.search import NO_FURTHER, GapResult, find_gap, rejection
+from dampest_ros.core.gap.update import divergence_reason, updated_model
 from dampest_ros.core.measurements import JointSeries
 from dampest_ros.core.preprocess import PreprocessConfig, preprocess
 from dampest_ros.core.rigid_body import DOF_NAMES, AddedMassTerms, RigidBody
@@ -220,24 +225,24 @@ def believed(case: Case) -> tuple[np.ndarray, RigidBody]:
 
 
 @lru_cache(maxsize=2)
-def analyse_named(name: str, seed: int) -> tuple[gap.GapData, gap.GapResult]:
+def analyse_named(name: str, seed: int) -> tuple[GapData, GapResult]:
     return analyse(CASES[name], seed)
 
 
-def analyse(case: Case, seed: int) -> tuple[gap.GapData, gap.GapResult]:
+def analyse(case: Case, seed: int) -> tuple[GapData, GapResult]:
     v = vehicle()
     samples, joints = (hidden(json.dumps(case.effects), seed, json.dumps(case.plant))
                        if case.effects or case.plant else clean(seed))
     theta, body = believed(case)
-    data = gap.GapData(samples, v.damping, theta, body, v.thrusters, joints)
-    return data, gap.find_gap(data)
+    data = GapData(samples, v.damping, theta, body, v.thrusters, joints)
+    return data, find_gap(data)
 
 
 def floor(seed: int) -> np.ndarray:
     """Held-out residual RMS per DOF of the nominal model on clean data (the noise floor)."""
     v = vehicle()
     samples, joints = clean(seed)
-    data = gap.GapData(samples, v.damping, v.theta, v.body, v.thrusters, joints)
+    data = GapData(samples, v.damping, v.theta, v.body, v.thrusters, joints)
     return np.sqrt(np.mean(data.r0[data.test] ** 2, axis=0))
 
 
@@ -257,7 +262,7 @@ def check_hidden(name: str, seed: int) -> None:
     e, p = next((e, p) for e, p in result.effects if e.key == case.key)
     err = case.error(e.magnitude(p))
     assert err <= 0.2, (name, e.magnitude(p), err)
-    assert result.conclusion == gap.NO_FURTHER
+    assert result.conclusion == NO_FURTHER
 
 
 # --- fast, representative ------------------------------------------------------------------
@@ -266,7 +271,7 @@ def check_hidden(name: str, seed: int) -> None:
 def test_clean_data_names_nothing() -> None:
     data, result = analyse(Case(), 1)
     assert result.named == [], [s.description for s in result.steps]
-    assert result.conclusion == gap.NO_FURTHER
+    assert result.conclusion == NO_FURTHER
     best = result.screens[0][0]
     assert best.heldout < 0.02
     # the residual of the exact model is the noise floor: a few tenths of a newton
@@ -302,11 +307,11 @@ def test_linear_effects_are_linear_and_columns_match_predict() -> None:
     effects, to first order for the others."""
     v = vehicle()
     samples, joints = clean(1)
-    data = gap.GapData(samples.take(slice(0, 3000)), v.damping, v.theta, v.body, v.thrusters,
+    data = GapData(samples.take(slice(0, 3000)), v.damping, v.theta, v.body, v.thrusters,
                        joints)
     ch = data.chunk_at(slice(0, 3000))
     rng = np.random.default_rng(0)
-    for e in gap.library():
+    for e in library():
         p0 = e.starts(data)[len(e.starts(data)) // 2]
         dp = 0.1 * np.asarray(e.steps) * rng.choice([-1.0, 1.0], e.k)
         if e.key.startswith("memory"):
@@ -325,12 +330,12 @@ def test_linear_effects_are_linear_and_columns_match_predict() -> None:
 def test_buoyancy_prediction_is_the_restoring_force_of_a_lighter_body() -> None:
     v = vehicle()
     samples, _ = clean(1)
-    data = gap.GapData(samples.take(slice(0, 1000)), v.damping, v.theta, v.body)
+    data = GapData(samples.take(slice(0, 1000)), v.damping, v.theta, v.body)
     ch = data.chunk_at(slice(0, 1000))
     b = v.body
     lighter = RigidBody(b.mass, b.inertia, b.r_g, b.r_b, b.volume + 2.0 / (b.rho * b.gravity),
                         b.added_mass, b.rho, b.gravity)
-    rho = gap.Buoyancy().predict(data, ch, np.array([2.0]))
+    rho = Buoyancy().predict(data, ch, np.array([2.0]))
     np.testing.assert_allclose(rho, lighter.restoring(ch.R) - b.restoring(ch.R), atol=1e-9)
 
 
@@ -339,15 +344,15 @@ def test_localise_finds_residual_at_high_speed_and_low_frequency() -> None:
     r = np.zeros((len(samples), 6))
     u = samples.nu[:, 0]
     r[:, 0] = 5.0 * np.abs(u) * u * (np.abs(u) > np.median(np.abs(u)))
-    rows = gap.localise(samples, r, passband=2.0)
+    rows = localise(samples, r, passband=2.0)
     by = {(row.group, row.label.split(" (")[0]): row for row in rows}
     assert by[("speed", "|u| high")].rms[0] > 3 * max(by[("speed", "|u| low")].rms[0], 1e-9)
-    top = [label for d, label, _ in gap.concentration(rows) if d == 0]
+    top = [label for d, label, _ in concentration(rows) if d == 0]
     assert top[0].startswith("|u| high") or top[0].startswith("0–0.05 Hz")
     assert [row for row in rows if row.group == "band"][-1].label.endswith("–2 Hz")
     # over the whole spectrum the band powers add up to the total power (Parseval, within
     # the Welch estimate)
-    band_rows = [row for row in gap.localise(samples, r) if row.group == "band"]
+    band_rows = [row for row in localise(samples, r) if row.group == "band"]
     assert band_rows[-1].label.endswith("–25 Hz")
     total = np.sqrt(sum(float(row.rms[0]) ** 2 for row in band_rows))
     assert total == pytest.approx(rows[0].rms[0], rel=0.1)
@@ -356,12 +361,12 @@ def test_localise_finds_residual_at_high_speed_and_low_frequency() -> None:
 def test_updated_model_adds_terms_and_mass() -> None:
     v = vehicle()
     samples, _ = clean(1)
-    data = gap.GapData(samples.take(slice(0, 1000)), v.damping, v.theta, v.body)
-    lib = {e.key: e for e in gap.library()}
+    data = GapData(samples.take(slice(0, 1000)), v.damping, v.theta, v.body)
+    lib = {e.key: e for e in library()}
     effects = [(lib["quadratic.X_uu"], np.array([10.0])), (lib["cross.Y_vr"], np.array([4.0])),
                (lib["memory.u"], np.array([2.0, 1.5])), (lib["added_mass.w"], np.array([3.0])),
                (lib["buoyancy"], np.array([1.0]))]
-    upd = gap.updated_model(data, effects)
+    upd = updated_model(data, effects)
     values = dict(zip(upd.model.parameter_names, upd.theta, strict=True))
     assert values["X_uu"] == pytest.approx(151.0)
     assert values["Y_vr"] == pytest.approx(4.0)
@@ -374,8 +379,8 @@ def test_updated_model_adds_terms_and_mass() -> None:
 def test_csv_like_data_skips_the_dead_zone() -> None:
     v = vehicle()
     samples, _ = clean(1)
-    data = gap.GapData(samples, v.damping, v.theta, v.body)  # no rotor speeds
-    result = gap.find_gap(data, gap.library(["thrusters"]))
+    data = GapData(samples, v.damping, v.theta, v.body)  # no rotor speeds
+    result = find_gap(data, library(["thrusters"]))
     assert "deadzone" in result.skipped and "rotor speeds" in result.skipped["deadzone"]
     assert result.named == []
 
@@ -411,11 +416,11 @@ def test_two_effects_all_seeds(pair: tuple[str, str], seed: int) -> None:
 
 
 def _short(rows: int = 6000, body: RigidBody | None = None,
-           theta: np.ndarray | None = None) -> gap.GapData:
+           theta: np.ndarray | None = None) -> GapData:
     """GapData on the first ``rows`` samples of clean seed 1 (the believed model: nominal)."""
     v = vehicle()
     samples, _ = clean(1)
-    return gap.GapData(samples.take(slice(0, rows)), v.damping,
+    return GapData(samples.take(slice(0, rows)), v.damping,
                        v.theta if theta is None else theta, body or v.body)
 
 
@@ -428,9 +433,9 @@ def test_naming_a_term_the_model_has_updates_it() -> None:
     model = DampingModel([lin, quadratic_term(), cross_term([CrossSpec.from_dict(
         {"row": "N", "col": "r", "alpha": "|v|"})])])
     theta = model.theta_from_dict({**NOMINAL, "Y_r": 2.0, "N_rv": 3.0})
-    data = gap.GapData(samples.take(slice(0, 1000)), model, theta, v.body)
-    lib = {e.key: e for e in gap.library()}
-    upd = gap.updated_model(data, [(lib["cross.N_rv"], np.array([-1.0])),
+    data = GapData(samples.take(slice(0, 1000)), model, theta, v.body)
+    lib = {e.key: e for e in library()}
+    upd = updated_model(data, [(lib["cross.N_rv"], np.array([-1.0])),
                                    (lib["cross.Y_r"], np.array([0.5])),
                                    (lib["linear.X_u"], np.array([1.0]))])
     assert upd.model.parameter_names == model.parameter_names
@@ -444,39 +449,39 @@ def test_an_update_that_breaks_M_or_D_is_rejected() -> None:
     """Before: an added mass with a negative eigenvalue and a negative quadratic drag were
     written as found. Now the step is rejected with the reason."""
     data = _short()
-    lib = {e.key: e for e in gap.library()}
+    lib = {e.key: e for e in library()}
     r = data.r0
     # Z_ẇ of 18.68 lowered by 25: M_A has the eigenvalue −6.3
-    why = gap.rejection(data, [(lib["added_mass.w"], np.array([-25.0]))], r, r, 1)
+    why = rejection(data, [(lib["added_mass.w"], np.array([-25.0]))], r, r, 1)
     assert "mass matrix" in why and "-6.32" in why, why
     # Z_ww 190 → −10 with Z_w 33: energy is generated above w = 3.3 m/s... and on the grid
     # of the flown envelope wherever |w| > 33/10 · ... — the data reach |w| ≈ 0.5 m/s, so
     # take Z_w to 0 as well
-    why = gap.rejection(data, [(lib["quadratic.Z_ww"], np.array([-200.0])),
+    why = rejection(data, [(lib["quadratic.Z_ww"], np.array([-200.0])),
                                (lib["linear.Z_w"], np.array([-33.0]))], r, r, 1)
     assert why.startswith("D(ν) would generate energy"), why
     # a positive correction of both is accepted
-    assert gap.rejection(data, [(lib["quadratic.Z_ww"], np.array([20.0]))], r, r, 1) == ""
+    assert rejection(data, [(lib["quadratic.Z_ww"], np.array([20.0]))], r, r, 1) == ""
 
 
 def test_an_effect_that_worsens_a_dof_held_out_is_rejected() -> None:
     data = _short()
-    lib = {e.key: e for e in gap.library()}
+    lib = {e.key: e for e in library()}
     r = data.r0
     rms = np.sqrt(np.mean(r[data.test] ** 2, axis=0))
     worse = r.copy()
     worse[data.test, 3] *= 1.5  # roll's held-out RMS +50 %
     assert 0.5 * rms[3] > 0.0025 * data.force_scale[3]  # a change that matters
-    why = gap.rejection(data, [(lib["thrust_gain"], np.array([0.0]))], r, worse, 1)
+    why = rejection(data, [(lib["thrust_gain"], np.array([0.0]))], r, worse, 1)
     assert why.startswith("the held-out residual of K grows"), why
     # within what an effect fitted to noise adds (4 k / n_eff), it is not
     slight = r.copy()
     slight[data.test, 3] *= 1.0 + 1.0 / data.n_eff_train
-    assert gap.rejection(data, [(lib["thrust_gain"], np.array([0.0]))], r, slight, 1) == ""
+    assert rejection(data, [(lib["thrust_gain"], np.array([0.0]))], r, slight, 1) == ""
     # nor is a rise far below the DOF's force scale (a DOF at its noise floor)
     tiny = r.copy()
     tiny[data.test, 3] *= 1.0 + 0.5 * 0.0025 * data.force_scale[3] / rms[3]
-    assert gap.rejection(data, [(lib["thrust_gain"], np.array([0.0]))], r, tiny, 1) == ""
+    assert rejection(data, [(lib["thrust_gain"], np.array([0.0]))], r, tiny, 1) == ""
 
 
 def test_current_uses_the_vehicles_added_mass_switches() -> None:
@@ -487,8 +492,8 @@ def test_current_uses_the_vehicles_added_mass_switches() -> None:
     p = np.array([0.2, -0.1])
     on_data, off_data = _short(3000), _short(3000, off)
     ch = on_data.chunk_at(slice(0, 3000))
-    rho_on = gap.Current().predict(on_data, ch, p)
-    rho_off = gap.Current().predict(off_data, ch, p)
+    rho_on = Current().predict(on_data, ch, p)
+    rho_off = Current().predict(off_data, ch, p)
     vcb = np.einsum("nji,j->ni", ch.R, np.array([0.2, -0.1, 0.0]))
     nu_c_dot = np.concatenate([-np.cross(ch.nu[:, 3:], vcb), np.zeros_like(vcb)], axis=1)
     np.testing.assert_allclose(rho_off - rho_on, nu_c_dot @ b.added_mass.T, atol=1e-12)
@@ -498,11 +503,11 @@ def test_a_diverging_free_run_is_explained() -> None:
     v = vehicle()
     theta = v.damping.theta_from_dict({**NOMINAL, "Z_ww": -61.0})
     samples, _ = clean(1)
-    why = gap.divergence_reason(v.damping, theta, samples.nu)
+    why = divergence_reason(v.damping, theta, samples.nu)
     # Z_w w − 61 w²: the heave force peaks at Z_w² / (4 · 61) at w = Z_w / 122
     peak = NOMINAL["Z_w"] ** 2 / (4 * 61.0)
     assert why == f"diverges: Z_ww < 0 leaves no steady heave speed above {peak:.3g} N (+w)"
-    assert gap.divergence_reason(v.damping, v.theta, samples.nu) == ""
+    assert divergence_reason(v.damping, v.theta, samples.nu) == ""
 
 
 @pytest.mark.parametrize("switch", ["inertial", pytest.param("coriolis", marks=pytest.mark.slow)])
@@ -513,7 +518,7 @@ def test_a_plant_without_an_added_mass_term_is_named_in_that_form(switch: str) -
     data, result = analyse_named(f"plant_no_{switch}", 1)
     assert result.named == [f"added_mass_{switch}"], result.named
     assert float(result.effects[0][1][0]) == pytest.approx(-1.0, abs=0.01)
-    upd = gap.updated_model(data, result.effects)
+    upd = updated_model(data, result.effects)
     assert getattr(upd.added_mass_terms, switch) is False
     np.testing.assert_array_equal(upd.M, data.body.M)
     upd.body(data)  # a valid rigid body
