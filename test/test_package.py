@@ -6,6 +6,7 @@ import os
 import shutil
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -122,3 +123,50 @@ def test_share_files_installed(install: Path) -> None:
         if path.is_file():
             rel = path.relative_to(REPO)
             assert (share / rel).is_file(), f"{rel} not installed"
+
+
+#: rosdep key of each third-party top-level import of dampest_ros (a ROS 2 package's key is
+#: its own name, the default). Pip keys (-pip) are those of rosdistro's rosdep/python.yaml
+#: for packages Ubuntu does not ship; the mcap package comes with mcap-ros2-support.
+ROSDEP_KEYS = {
+    "numpy": "python3-numpy",
+    "scipy": "python3-scipy",
+    "matplotlib": "python3-matplotlib",
+    "yaml": "python3-yaml",
+    "filterpy": "python3-filterpy-pip",
+    "rosbags": "python3-rosbags-pip",
+    "mcap": "mcap-ros2-support",
+    "mcap_ros2": "mcap-ros2-support",
+    "mujoco": "python3-mujoco-pip",
+    "pinocchio": "pinocchio",
+}
+
+
+def third_party_imports() -> dict[str, str]:
+    """Top-level name → a file importing it, for every import in dampest_ros/ that is
+    neither the standard library nor dampest_ros (lazy imports inside functions included)."""
+    found: dict[str, str] = {}
+    for path in sorted((REPO / PACKAGE).rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            else:
+                continue
+            for name in names:
+                top = name.split(".")[0]
+                if top not in sys.stdlib_module_names and top != PACKAGE:
+                    found.setdefault(top, str(path.relative_to(REPO)))
+    return found
+
+
+def test_package_xml_declares_every_third_party_import() -> None:
+    """rosdep install on a full ROS 2 install must leave no import failing (issue 15)."""
+    root = ET.parse(REPO / "package.xml").getroot()
+    run = {e.text for e in root if e.tag in ("exec_depend", "depend") and e.text}
+    imports = third_party_imports()
+    assert {"numpy", "rclpy", "rosbags", "yaml"} <= set(imports)  # the scan sees imports
+    missing = {name: (ROSDEP_KEYS.get(name, name), where) for name, where in imports.items()
+               if ROSDEP_KEYS.get(name, name) not in run}
+    assert not missing, f"package.xml lacks exec_depend for (import: (key, file)) {missing}"
