@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -28,9 +28,15 @@ from numpy.typing import NDArray
 
 from dampest_ros.core import frames
 from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.dissipative import project
 from dampest_ros.core.online import OnlineRegression, OnlineSample
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError
-from dampest_ros.core.rls import OUTLIER_GATE, Diagnostics, RecursiveLeastSquares, RLSConfig
+from dampest_ros.core.rls.least_squares import (
+    OUTLIER_GATE,
+    Diagnostics,
+    RecursiveLeastSquares,
+    RLSConfig,
+)
 from dampest_ros.core.vehicle import Vehicle, measured_wrench_scale
 
 FloatArray = NDArray[np.float64]
@@ -68,6 +74,10 @@ class EstimatorConfig:
         (:class:`~dampest_ros.core.rls.OutlierGate`; ≤ 0: none). The gate opens after
         :data:`CORRELATION_SECONDS` of samples and its innovation variances average over
         twice that.
+    dissipative : bool
+        Publish the estimate projected onto νᵀD(ν)ν ≥ 0 over the flown envelope
+        (:func:`~dampest_ros.core.dissipative.project`), the constraint the batch fit imposes;
+        the coefficients it moves are marked as not identified. False: the raw RLS estimate.
     """
 
     forgetting_factor: float = 0.999
@@ -78,6 +88,7 @@ class EstimatorConfig:
     prior_scale: float = 10.0
     max_pending: float = 1.0
     outlier_gate: float = OUTLIER_GATE
+    dissipative: bool = True
 
     def __post_init__(self) -> None:
         RLSConfig(forgetting_factor=self.forgetting_factor,
@@ -188,6 +199,9 @@ class OnlineEstimator:
         self.last_sample_t = math.nan
         self.keep_samples = keep_samples
         self.samples_log: list[OnlineSample] = []
+        # per-DOF smallest and largest velocity of the samples used (m/s, rad/s)
+        self.flown = np.array([np.full(6, np.inf), np.full(6, -np.inf)])
+        self._published: tuple[FloatArray, FloatArray, dict[str, str]] | None = None
 
     def _make_rls(self, wrench_scale: FloatArray) -> RecursiveLeastSquares:
         """The RLS from the prior, with noise variances (1 % of ``wrench_scale``)², (6,)."""
@@ -275,6 +289,9 @@ class OnlineEstimator:
         T, Phi, y = self.regression.process(samples, self.rls.outliers)
         self.rls.update_many(Phi, y, T)
         self.counts["used"] += len(T)
+        nu = np.array([s.nu for s in samples])
+        self.flown = np.array([np.minimum(self.flown[0], nu.min(axis=0)),
+                               np.maximum(self.flown[1], nu.max(axis=0))])
         if samples:
             self.last_sample_t = samples[-1].t
         return len(T)
@@ -283,8 +300,38 @@ class OnlineEstimator:
 
     @property
     def theta(self) -> FloatArray:
-        """Current estimate, shape (p,)."""
-        return self.rls.theta
+        """Current estimate, shape (p,): the RLS estimate, projected onto the dissipativity
+        constraint over the flown envelope unless the config says otherwise (the raw one is
+        ``rls.theta``)."""
+        return self._projection()[0]
+
+    @property
+    def constrained(self) -> dict[str, str]:
+        """The coefficients the dissipativity constraint holds in :attr:`theta`, with the
+        reason (empty when the RLS estimate is dissipative over the flown envelope)."""
+        return self._projection()[1]
+
+    @property
+    def held(self) -> dict[str, str]:
+        """The coefficients the data have not determined, with the reason: those of a DOF
+        the samples do not excite (they stay at the prior) and those the dissipativity
+        constraint holds (:attr:`constrained`)."""
+        d = self.rls.diagnostics(condition=False)
+        dof = self.rls.parameter_dof
+        out = {n: f"not excited: the samples do not excite DOF {DOF_NAMES[dof[j]]}, so the "
+                  "RLS estimate stays at its prior"
+               for j, n in enumerate(self.names) if not d.excited[dof[j]]}
+        return {**out, **self.constrained}
+
+    def _projection(self) -> tuple[FloatArray, dict[str, str]]:
+        """(θ, constrained) for the current RLS estimate, computed once per estimate."""
+        raw = self.rls.theta
+        if not self.cfg.dissipative or not np.all(np.isfinite(self.flown)):
+            return raw, {}
+        if self._published is None or not np.array_equal(self._published[0], raw):
+            theta, why = project(raw, self.rls.P, self.model, self.flown)
+            self._published = (raw.copy(), theta, why)
+        return self._published[1], self._published[2]
 
     @property
     def theta_std(self) -> FloatArray:
@@ -300,6 +347,7 @@ class OnlineEstimator:
         self._pending.clear()
         self._ready.clear()
         self._last_matched = -1
+        self.flown = np.array([np.full(6, np.inf), np.full(6, -np.inf)])
 
     def restart_clock(self) -> None:
         """Forget the stamps seen (after a clock jump), keep the estimate."""
@@ -330,7 +378,7 @@ class OnlineEstimator:
             out[f"innovation_rms.{n}"] = float(d.innovation_rms[i])
             out[f"noise_std.{n}"] = float(d.noise_std[i])
             out[f"correlation.{n}"] = float(kappa[i])
-        for k in ("matched", "unmatched", "used", "rejected_nonfinite", "attitude"):
+        for k in self.counts:  # every message and drop counter
             out[f"count.{k}"] = self.counts[k]
         return out
 
@@ -348,24 +396,17 @@ class OnlineEstimator:
         from dampest_ros.io.yaml_io import save_model
         return save_model(path, self.names, self.theta, self.theta_std, self.M,
                           self.model_extra(**extra), damping=self.model, version=version,
-                          **self.added_mass_kwargs())
+                          **self.file_kwargs())
 
     def text(self, version: int) -> str:
         """The model file text for ``dampest/model``."""
         from dampest_ros.io.yaml_io import model_text
         return model_text(self.names, self.theta, self.theta_std, self.M, self.model_extra(),
-                          damping=self.model, version=version, **self.added_mass_kwargs())
+                          damping=self.model, version=version, **self.file_kwargs())
 
-    def added_mass_kwargs(self) -> dict[str, Any]:
-        """The body's added mass and its switches as the model file takes them (``M_A``,
-        ``added_mass_terms`` of :func:`dampest_ros.io.yaml_io.save_model`)."""
-        return {"M_A": self.body.added_mass, "added_mass_terms": self.body.added_mass_terms}
-
-
-def config_from_dict(d: dict[str, Any]) -> EstimatorConfig:
-    """EstimatorConfig from a mapping; unknown keys raise ConfigError."""
-    known = {f.name: f for f in fields(EstimatorConfig)}
-    unknown = set(d) - set(known)
-    if unknown:
-        raise ConfigError("estimator", f"unknown key(s) {sorted(unknown)}")
-    return EstimatorConfig(**d)
+    def file_kwargs(self) -> dict[str, Any]:
+        """The body's added mass, its switches and the coefficients not identified
+        (:attr:`held`) as the model file takes them (``M_A``, ``added_mass_terms``, ``held``
+        of :func:`dampest_ros.io.yaml_io.save_model`)."""
+        return {"M_A": self.body.added_mass, "added_mass_terms": self.body.added_mass_terms,
+                "held": self.held}

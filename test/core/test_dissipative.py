@@ -1,0 +1,60 @@
+"""The dissipativity constraint: the projection of an estimate onto νᵀD(ν)ν ≥ 0."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import optimize
+
+from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.dissipative import dissipation_points, envelope, power_rows, project
+from dampest_ros.core.estimator import restrict
+from dampest_ros.io.yaml_io import load_vehicle
+
+# flown extremes (m/s, rad/s): min and max per DOF
+FLOWN = np.array([[-0.6, -0.4, -0.3, -0.5, -0.5, -0.8], [0.8, 0.4, 0.3, 0.5, 0.5, 0.8]])
+
+
+def linear_quadratic() -> tuple[DampingModel, np.ndarray]:
+    v = load_vehicle("bluerov2_heavy")
+    return restrict(v.damping, v.theta, ["linear", "quadratic"])
+
+
+def correlated_cov(p: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(p, p))
+    return np.asarray(A @ A.T / p + 0.1 * np.eye(p))
+
+
+def test_a_dissipative_estimate_is_returned_unchanged() -> None:
+    model, theta = linear_quadratic()
+    projected, why = project(theta, correlated_cov(len(theta), 1), model, FLOWN)
+    assert why == {}
+    assert projected is theta
+
+
+def test_the_projection_is_the_information_weighted_nearest_dissipative_estimate() -> None:
+    """KKT conditions checked independently of the solver: the projected θ is dissipative on
+    the grid, and H (θ − θ̂) = Σ μ_k g_k with μ ≥ 0 over the active constraints only."""
+    model, theta = linear_quadratic()
+    names = model.parameter_names
+    bad = theta.copy()
+    bad[names.index("X_u")] = -30.0  # generates energy at slow surge
+    bad[names.index("N_rr")] = -2.0  # and in fast yaw
+    cov = correlated_cov(len(theta), 2)
+    projected, why = project(bad, cov, model, FLOWN)
+    assert {"X_u", "N_rr"} <= set(why)
+    assert "held by dissipativity" in why["X_u"]
+    G = power_rows(model, envelope(FLOWN))
+    P = G @ projected
+    scale = np.abs(G) @ np.abs(projected)
+    assert np.all(P >= -1e-9 * scale)
+    assert len(dissipation_points(model, projected, np.zeros((0, 6)), FLOWN)[0]) == 0
+    H = np.linalg.inv(cov)
+    grad = H @ (projected - bad)
+    active = P <= 1e-7 * scale
+    assert active.any()
+    _, res = optimize.nnls(G[active].T, grad)
+    assert res <= 1e-6 * np.linalg.norm(grad)
+    # the truth is dissipative, so it is no nearer to θ̂ in the metric H
+    d_proj, d_true = projected - bad, theta - bad
+    assert d_proj @ H @ d_proj <= d_true @ H @ d_true
