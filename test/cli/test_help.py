@@ -61,15 +61,15 @@ def test_shared_options_have_one_help_text() -> None:
 def test_choices_of_the_parsers_are_the_cores() -> None:
     """The parsers spell out choices the core defines (importing the core would load scipy
     for --help); they must agree."""
-    from dampest_ros.core import gap
     from dampest_ros.core.batch import METHODS
     from dampest_ros.core.excitation import PROTOCOLS
+    from dampest_ros.core.gap.search import GapOptions
     from dampest_ros.core.simulate import BACKENDS
 
     assert identify_options.METHODS == METHODS
     assert common.PROTOCOLS == PROTOCOLS
     assert simulate.BACKENDS == BACKENDS
-    assert gap_options.MIN_HELDOUT == gap.GapOptions.min_heldout
+    assert gap_options.MIN_HELDOUT == GapOptions.min_heldout
 
 
 def _modules_after(argv: list[str]) -> set[str]:
