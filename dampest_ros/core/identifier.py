@@ -68,7 +68,7 @@ class DampingIdentifier:
     cov_ : ndarray, shape (p, p)
         Covariance of θ: the batch fit's (NaN rows for coefficients held at their prior), or
         the RLS's correlation scaled by its standard deviations
-        (:attr:`~dampest_ros.core.rls.RecursiveLeastSquares.std`).
+        (:attr:`~dampest_ros.core.rls.least_squares.RecursiveLeastSquares.std`).
     names_ : list of str
         Parameter names, θ order (also :attr:`feature_names`).
     fit_ : Fit or None
