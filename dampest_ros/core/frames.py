@@ -208,3 +208,26 @@ def matrix_from_euler(angles: FloatArray) -> FloatArray:
     R[..., 2, 1] = ct * sf
     R[..., 2, 2] = ct * cf
     return R
+
+
+def wxyz_to_xyzw(q: FloatArray) -> FloatArray:
+    """Quaternions [w, x, y, z] (M, 4) reordered as ROS stores them, [x, y, z, w]."""
+    return q[:, [1, 2, 3, 0]]
+
+
+def quat_mul(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Hamilton products a ⊗ b of quaternions [w, x, y, z], shapes (M, 4)."""
+    aw, av = a[:, :1], a[:, 1:]
+    bw, bv = b[:, :1], b[:, 1:]
+    # (a_w b_w − a_v·b_v, a_w b_v + b_w a_v + a_v × b_v)
+    w = aw * bw - np.sum(av * bv, axis=1, keepdims=True)
+    v = aw * bv + bw * av + np.cross(av, bv)
+    return np.concatenate([w, v], axis=1)
+
+
+def small_rotation(dtheta: FloatArray) -> FloatArray:
+    """Unit quaternions [w, x, y, z] (M, 4) of rotation vectors (M, 3) (rad)."""
+    angle = np.linalg.norm(dtheta, axis=1, keepdims=True)
+    # exp(δθ/2) = [cos(|δθ|/2), sin(|δθ|/2) δθ/|δθ|]; sin(a/2)/a = ½ sinc(a / 2π), safe at 0
+    return np.concatenate([np.cos(angle / 2.0), 0.5 * np.sinc(angle / (2.0 * np.pi)) * dtheta],
+                          axis=1)

@@ -23,7 +23,7 @@ trajectory holds step means over [t_k, t_k + dt], and the message stamped s repo
 mean over the window [s − 1/thruster_rate, s] (first stamp t[0] + 1/thruster_rate).
 
 Noise comes from independent random streams, one per noise source, spawned from
-``np.random.default_rng(seed)`` in the fixed order of ``_STREAMS``: changing one sensor's
+``np.random.default_rng(seed)`` in the fixed order of ``NOISE_STREAMS``: changing one sensor's
 settings never changes another sensor's noise.
 """
 
@@ -37,7 +37,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.frames import body_vec, quat_frd_ned_to_flu_enu, quat_to_matrix, world_vec
+from dampest_ros.core.frames import (
+    body_vec,
+    quat_frd_ned_to_flu_enu,
+    quat_mul,
+    quat_to_matrix,
+    small_rotation,
+    world_vec,
+    wxyz_to_xyzw,
+)
+from dampest_ros.core.interpolate import continuous, hermite, locate, nlerp
 from dampest_ros.core.measurements import (
     ImuSeries,
     JointSeries,
@@ -51,7 +60,6 @@ from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.trajectory import Trajectory
 
 FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.intp]
 BoolArray = NDArray[np.bool_]
 
 #: Variance (m²/s² or rad²/s²) put on covariance entries a sensor does not measure (the DVL's
@@ -71,7 +79,7 @@ FRAME_IDS: dict[str, str] = {
 
 #: One random stream per noise source, spawned in this order (append only: reordering would
 #: change every seeded recording).
-_STREAMS = (
+NOISE_STREAMS = (
     "gyro_noise",
     "gyro_walk",
     "accel_noise",
@@ -287,11 +295,11 @@ def measure(
     for name, value in (("rho", rho), ("gravity", gravity)):
         if not math.isfinite(value) or value <= 0:
             raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
-    children = np.random.default_rng(seed).spawn(len(_STREAMS))
-    rngs = dict(zip(_STREAMS, children, strict=True))
+    children = np.random.default_rng(seed).spawn(len(NOISE_STREAMS))
+    rngs = dict(zip(NOISE_STREAMS, children, strict=True))
 
     t = np.asarray(traj.t, dtype=float)
-    q = _continuous(np.asarray(traj.quaternion, dtype=float))
+    q = continuous(np.asarray(traj.quaternion, dtype=float))
     nu = np.asarray(traj.nu, dtype=float)
     # ṗ = R(q) v: NED velocity of the body origin, the slope of the position interpolant
     p_dot = np.einsum("nij,nj->ni", quat_to_matrix(q), nu[:, :3])
@@ -307,73 +315,6 @@ def measure(
             sample_times(float(t[0]), float(t[-1]), config.truth_rate), t, traj.hydro)}
            if traj.hydro is not None else {}),
     }
-
-
-# --- interpolation -------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class _Knots:
-    """Where query times fall among the trajectory steps: t = t[i] + s h, s ∈ [0, 1]."""
-
-    i: IntArray  # (M,) left step
-    j: IntArray  # (M,) right step (= i when the trajectory has one sample)
-    s: FloatArray  # (M, 1) normalised position in the step
-    h: FloatArray  # (M, 1) step length (s)
-
-
-def _locate(t: FloatArray, ts: FloatArray) -> _Knots:
-    """Steps containing the query times ``ts`` (clamped to [t[0], t[-1]])."""
-    ts = np.clip(ts, t[0], t[-1])
-    if len(t) == 1:
-        zero = np.zeros(len(ts), dtype=np.intp)
-        return _Knots(zero, zero, np.zeros((len(ts), 1)), np.ones((len(ts), 1)))
-    i = np.clip(np.searchsorted(t, ts, side="right") - 1, 0, len(t) - 2)
-    h = t[i + 1] - t[i]
-    # s = (t − t_i) / h
-    s = (ts - t[i]) / h
-    return _Knots(i, i + 1, s[:, None], h[:, None])
-
-
-def _hermite(k: _Knots, y: FloatArray, yd: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Cubic Hermite interpolant through values ``y`` and slopes ``yd`` (both (N, d)).
-
-    Returns the interpolated values and their time derivatives, both (M, d).
-    """
-    s, h = k.s, k.h
-    y0, y1, d0, d1 = y[k.i], y[k.j], yd[k.i], yd[k.j]
-    h01 = s * s * (3.0 - 2.0 * s)
-    h10 = s * (s - 1.0) ** 2
-    h11 = s * s * (s - 1.0)
-    # y(s) = y0 + h01 (y1 − y0) + h (h10 d0 + h11 d1), using h00 = 1 − h01
-    value = y0 + h01 * (y1 - y0) + h * (h10 * d0 + h11 * d1)
-    # dy/dt = h01' (y1 − y0) / h + h10' d0 + h11' d1, with ' = d/ds
-    slope = (6.0 * s * (1.0 - s)) * (y1 - y0) / h + (3.0 * s * s - 4.0 * s + 1.0) * d0 \
-        + (3.0 * s * s - 2.0 * s) * d1
-    return value, slope
-
-
-def _linear(k: _Knots, y: FloatArray) -> FloatArray:
-    """Linear interpolation of ``y`` (N, d) → (M, d)."""
-    # y(s) = y0 + s (y1 − y0)
-    return y[k.i] + k.s * (y[k.j] - y[k.i])
-
-
-def _continuous(q: FloatArray) -> FloatArray:
-    """Flip quaternion signs so that consecutive ones have a non-negative dot product."""
-    if len(q) < 2:
-        return q
-    flip = np.where(np.einsum("ni,ni->n", q[1:], q[:-1]) < 0.0, -1.0, 1.0)
-    # sign_k = Π_{j ≤ k} sign(q_{j−1} · q_j): the running product of the flips
-    sign = np.concatenate([[1.0], np.cumprod(flip)])
-    return q * sign[:, None]
-
-
-def _nlerp(k: _Knots, q: FloatArray) -> FloatArray:
-    """Normalised linear interpolation of sign-continuous quaternions (N, 4) → (M, 4)."""
-    qs = _linear(k, q)
-    # q(s) = ((1 − s) q0 + s q1) / ‖·‖
-    return qs / np.linalg.norm(qs, axis=1, keepdims=True)
 
 
 @dataclass(frozen=True)
@@ -407,35 +348,13 @@ def _white(rng: np.random.Generator, shape: tuple[int, ...], sigma: float) -> Fl
     return rng.standard_normal(shape) * sigma
 
 
-def _wxyz_to_xyzw(q: FloatArray) -> FloatArray:
-    return q[:, [1, 2, 3, 0]]
-
-
-def _quat_mul(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Hamilton products a ⊗ b of quaternions [w, x, y, z], shapes (M, 4)."""
-    aw, av = a[:, :1], a[:, 1:]
-    bw, bv = b[:, :1], b[:, 1:]
-    # (a_w b_w − a_v·b_v, a_w b_v + b_w a_v + a_v × b_v)
-    w = aw * bw - np.sum(av * bv, axis=1, keepdims=True)
-    v = aw * bv + bw * av + np.cross(av, bv)
-    return np.concatenate([w, v], axis=1)
-
-
-def _small_rotation(dtheta: FloatArray) -> FloatArray:
-    """Unit quaternions [w, x, y, z] (M, 4) of rotation vectors (M, 3) (rad)."""
-    angle = np.linalg.norm(dtheta, axis=1, keepdims=True)
-    # exp(δθ/2) = [cos(|δθ|/2), sin(|δθ|/2) δθ/|δθ|]; sin(a/2)/a = ½ sinc(a / 2π), safe at 0
-    return np.concatenate([np.cos(angle / 2.0), 0.5 * np.sinc(angle / (2.0 * np.pi)) * dtheta],
-                          axis=1)
-
-
 def _imu(truth: _Truth, gravity: float, config: SensorConfig, bias: SensorBias,
          rngs: dict[str, np.random.Generator]) -> ImuSeries:
     stamp = truth.times(config.imu_rate)
     n = len(stamp)
-    k = _locate(truth.t, stamp)
-    nu, nu_dot = _hermite(k, truth.nu, truth.nu_dot)
-    q = _nlerp(k, truth.q)
+    k = locate(truth.t, stamp)
+    nu, nu_dot = hermite(k, truth.nu, truth.nu_dot)
+    q = nlerp(k, truth.q)
     v, w, v_dot = nu[:, :3], nu[:, 3:], nu_dot[:, :3]
     # Rᵀ [0, 0, g] = g × (third row of R): gravity in the body frame
     g_body = gravity * quat_to_matrix(q)[:, 2, :]
@@ -449,21 +368,21 @@ def _imu(truth: _Truth, gravity: float, config: SensorConfig, bias: SensorBias,
              + _white(rngs["accel_noise"], (n, 3), config.accel_noise))
     dtheta = _white(rngs["orientation"], (n, 3), config.orientation_noise)
     # q_meas = q_flu_enu ⊗ exp(δθ / 2): perturbation about the sensor (FLU) axes
-    q_meas = _quat_mul(quat_frd_ned_to_flu_enu(q), _small_rotation(dtheta))
+    q_meas = quat_mul(quat_frd_ned_to_flu_enu(q), small_rotation(dtheta))
     q_meas *= np.where(q_meas[:, :1] < 0.0, -1.0, 1.0)
     return ImuSeries(
         stamp=stamp,
         frame_id=FRAME_IDS["imu/data"],
-        orientation=_wxyz_to_xyzw(q_meas),
+        orientation=wxyz_to_xyzw(q_meas),
         angular_velocity=body_vec(gyro),
         linear_acceleration=body_vec(accel),
-        orientation_covariance=_diag3(config.orientation_noise**2),
-        angular_velocity_covariance=_diag3(config.gyro_noise**2),
-        linear_acceleration_covariance=_diag3(config.accel_noise**2),
+        orientation_covariance=diag3(config.orientation_noise**2),
+        angular_velocity_covariance=diag3(config.gyro_noise**2),
+        linear_acceleration_covariance=diag3(config.accel_noise**2),
     )
 
 
-def _diag3(variance: float) -> FloatArray:
+def diag3(variance: float) -> FloatArray:
     """Row-major 3×3 covariance σ² I, shape (9,)."""
     return (np.eye(3) * variance).ravel()
 
@@ -492,7 +411,7 @@ def _dvl(truth: _Truth, config: SensorConfig, bias: SensorBias,
          rngs: dict[str, np.random.Generator]) -> TwistSeries:
     stamp = truth.times(config.dvl_rate)
     n = len(stamp)
-    nu, _ = _hermite(_locate(truth.t, stamp), truth.nu, truth.nu_dot)
+    nu, _ = hermite(locate(truth.t, stamp), truth.nu, truth.nu_dot)
     # v_dvl = v + b_dvl + noise (bottom lock: velocity over ground, FRD)
     v = nu[:, :3] + np.asarray(bias.dvl) + _white(rngs["dvl_noise"], (n, 3), config.dvl_noise)
     keep = _dropout_keep(float(truth.t[0]), stamp, config.dvl_dropout_rate,
@@ -510,7 +429,7 @@ def _dvl(truth: _Truth, config: SensorConfig, bias: SensorBias,
 def _pressure(truth: _Truth, rho: float, gravity: float, config: SensorConfig,
               rngs: dict[str, np.random.Generator]) -> PressureSeries:
     stamp = truth.times(config.pressure_rate)
-    position, _ = _hermite(_locate(truth.t, stamp), truth.position, truth.p_dot)
+    position, _ = hermite(locate(truth.t, stamp), truth.position, truth.p_dot)
     noise = _white(rngs["pressure"], (len(stamp),), config.pressure_noise)
     # p = p_atm + ρ g z + noise, z the NED depth
     pressure = config.atmospheric_pressure + rho * gravity * position[:, 2] + noise
@@ -551,15 +470,15 @@ def _thrusters(traj: Trajectory, config: SensorConfig,
 
 def _odometry(truth: _Truth, config: SensorConfig) -> OdometrySeries:
     stamp = truth.times(config.truth_rate)
-    k = _locate(truth.t, stamp)
-    position, _ = _hermite(k, truth.position, truth.p_dot)
-    nu, _ = _hermite(k, truth.nu, truth.nu_dot)
+    k = locate(truth.t, stamp)
+    position, _ = hermite(k, truth.position, truth.p_dot)
+    nu, _ = hermite(k, truth.nu, truth.nu_dot)
     return OdometrySeries(
         stamp=stamp,
         frame_id=FRAME_IDS["truth/odom"],
         child_frame_id="base_link",
         position=world_vec(position),
-        orientation=_wxyz_to_xyzw(quat_frd_ned_to_flu_enu(_nlerp(k, truth.q))),
+        orientation=wxyz_to_xyzw(quat_frd_ned_to_flu_enu(nlerp(k, truth.q))),
         linear=body_vec(nu[:, :3]),
         angular=body_vec(nu[:, 3:]),
     )

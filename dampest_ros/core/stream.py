@@ -24,9 +24,13 @@ from dampest_ros.core.frames import (
     body_vec,
     euler_from_matrix,
     quat_frd_ned_to_flu_enu,
+    quat_mul,
     quat_to_matrix,
+    small_rotation,
     world_vec,
+    wxyz_to_xyzw,
 )
+from dampest_ros.core.interpolate import continuous, hermite, locate, nlerp
 from dampest_ros.core.measurements import (
     ImuSeries,
     JointSeries,
@@ -36,19 +40,12 @@ from dampest_ros.core.measurements import (
     TwistSeries,
 )
 from dampest_ros.core.sensors import (
-    _STREAMS,
     FRAME_IDS,
+    NOISE_STREAMS,
     UNUSED_VARIANCE,
     SensorBias,
     SensorConfig,
-    _continuous,
-    _diag3,
-    _hermite,
-    _locate,
-    _nlerp,
-    _quat_mul,
-    _small_rotation,
-    _wxyz_to_xyzw,
+    diag3,
     hydro_series,
 )
 from dampest_ros.core.simulate import make_plant
@@ -84,8 +81,8 @@ class SensorStream:
         self.rho, self.gravity = float(rho), float(gravity)
         self.cfg = config or SensorConfig()
         self.bias = bias or SensorBias()
-        children = np.random.default_rng(seed).spawn(len(_STREAMS))
-        self.rng = dict(zip(_STREAMS, children, strict=True))
+        children = np.random.default_rng(seed).spawn(len(NOISE_STREAMS))
+        self.rng = dict(zip(NOISE_STREAMS, children, strict=True))
         self.t0 = math.nan
         # last stamp index emitted per sensor
         self._next: dict[str, int] = {}
@@ -125,7 +122,7 @@ class SensorStream:
             self._int_thrust.append(np.zeros(n))
             self._names = tuple(traj.thruster_names)
         cfg = self.cfg
-        q = _continuous(np.asarray(traj.quaternion, dtype=float))
+        q = continuous(np.asarray(traj.quaternion, dtype=float))
         nu = np.asarray(traj.nu, dtype=float)
         nu_dot = np.asarray(traj.nu_dot, dtype=float)
         pos = np.asarray(traj.position, dtype=float)
@@ -134,9 +131,9 @@ class SensorStream:
         out: Recording = {}
         # --- IMU
         st = self._stamps("imu", cfg.imu_rate, a, b)
-        k = _locate(t, st)
-        v_nu, v_nud = _hermite(k, nu, nu_dot)
-        qs = _nlerp(k, q)
+        k = locate(t, st)
+        v_nu, v_nud = hermite(k, nu, nu_dot)
+        qs = nlerp(k, q)
         n = len(st)
         g_body = self.gravity * quat_to_matrix(qs)[:, 2, :]
         sf = v_nud[:, :3] + np.cross(v_nu[:, 3:], v_nu[:, :3]) - g_body
@@ -148,17 +145,17 @@ class SensorStream:
         accel = (sf + np.asarray(self.bias.accel) + accel_walk
                  + self.rng["accel_noise"].standard_normal((n, 3)) * cfg.accel_noise)
         dtheta = self.rng["orientation"].standard_normal((n, 3)) * cfg.orientation_noise
-        q_meas = _quat_mul(quat_frd_ned_to_flu_enu(qs), _small_rotation(dtheta))
+        q_meas = quat_mul(quat_frd_ned_to_flu_enu(qs), small_rotation(dtheta))
         q_meas *= np.where(q_meas[:, :1] < 0.0, -1.0, 1.0)
         out["imu/data"] = ImuSeries(
-            stamp=st, frame_id=FRAME_IDS["imu/data"], orientation=_wxyz_to_xyzw(q_meas),
+            stamp=st, frame_id=FRAME_IDS["imu/data"], orientation=wxyz_to_xyzw(q_meas),
             angular_velocity=body_vec(gyro), linear_acceleration=body_vec(accel),
-            orientation_covariance=_diag3(cfg.orientation_noise**2),
-            angular_velocity_covariance=_diag3(cfg.gyro_noise**2),
-            linear_acceleration_covariance=_diag3(cfg.accel_noise**2))
+            orientation_covariance=diag3(cfg.orientation_noise**2),
+            angular_velocity_covariance=diag3(cfg.gyro_noise**2),
+            linear_acceleration_covariance=diag3(cfg.accel_noise**2))
         # --- DVL
         st = self._stamps("dvl", cfg.dvl_rate, a, b)
-        v_nu, _ = _hermite(_locate(t, st), nu, nu_dot)
+        v_nu, _ = hermite(locate(t, st), nu, nu_dot)
         v = (v_nu[:, :3] + np.asarray(self.bias.dvl)
              + self.rng["dvl_noise"].standard_normal((len(st), 3)) * cfg.dvl_noise)
         keep = np.array([self._locked(s) for s in st], dtype=bool)
@@ -168,7 +165,7 @@ class SensorStream:
                                        angular=np.zeros((int(keep.sum()), 3)), covariance=cov)
         # --- pressure
         st = self._stamps("pressure", cfg.pressure_rate, a, b)
-        p_i, _ = _hermite(_locate(t, st), pos, p_dot)
+        p_i, _ = hermite(locate(t, st), pos, p_dot)
         pressure = (cfg.atmospheric_pressure + self.rho * self.gravity * p_i[:, 2]
                     + self.rng["pressure"].standard_normal(len(st)) * cfg.pressure_noise)
         out["pressure"] = PressureSeries(stamp=st, frame_id=FRAME_IDS["pressure"],
@@ -188,13 +185,13 @@ class SensorStream:
             effort=thrust)
         # --- truth
         st = self._stamps("truth", cfg.truth_rate, a, b)
-        k = _locate(t, st)
-        p_i, _ = _hermite(k, pos, p_dot)
-        v_nu, _ = _hermite(k, nu, nu_dot)
+        k = locate(t, st)
+        p_i, _ = hermite(k, pos, p_dot)
+        v_nu, _ = hermite(k, nu, nu_dot)
         out["truth/odom"] = OdometrySeries(
             stamp=st, frame_id=FRAME_IDS["truth/odom"], child_frame_id="base_link",
             position=world_vec(p_i),
-            orientation=_wxyz_to_xyzw(quat_frd_ned_to_flu_enu(_nlerp(k, q))),
+            orientation=wxyz_to_xyzw(quat_frd_ned_to_flu_enu(nlerp(k, q))),
             linear=body_vec(v_nu[:, :3]), angular=body_vec(v_nu[:, 3:]))
         if traj.hydro is not None:
             # the plant's own fluid wrench (MuJoCo)
