@@ -186,11 +186,13 @@ def mjcf(arm: ArmModel, dynamics: JointDynamics, timestep: float = 0.001,
         the torques), no joint limits, gravity along the URDF's -z, motors without control
         limits (the commanded torque is the applied one). The friction loss is a soft
         constraint with MuJoCo's shortest time constant (two steps), so it reaches its
-        Coulomb value within |q̇| ≈ 0.05 rad/s of a velocity reversal.
+        Coulomb value within |q̇| ≈ 0.05 rad/s of a velocity reversal; the constraint solver
+        runs to round-off (tolerance 1e-12), so a sliding joint's friction is exactly it.
     """
     lines = [f'<mujoco model="{name}">',
              '  <compiler angle="radian" autolimits="true"/>',
-             f'  <option timestep="{timestep!r}" gravity="{_num(arm.gravity)}">',
+             f'  <option timestep="{timestep!r}" gravity="{_num(arm.gravity)}" '
+             'tolerance="1e-12">',
              '    <flag contact="disable"/>',
              '  </option>',
              '  <worldbody>']

@@ -1,0 +1,116 @@
+"""Base parameters: the combinations of the full parameters that joint torques determine.
+
+A serial arm's regressor has dependent columns whatever the motion (a link's inertia about
+an axis that never turns, parameters that only ever act together with the next link's).
+QR with column pivoting of the regressor stacked over random states, W P = Q R, splits the
+columns into r independent and p − r dependent ones; with R = [[R11, R12], [0, ~0]],
+
+    Y_dep = Y_ind β,  β = R11⁻¹ R12,   so   Y π = Y_ind (π_ind + β π_dep) = Y_b π_b
+
+(Gautier 1991). The base regressor is Y_b = Y[:, ind]; π_b = π_ind + β π_dep.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import NDArray
+
+from dampest_ros.core.arm.model import ArmModel
+from dampest_ros.core.arm.regressor import parameter_names, regressor
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class BaseParameters:
+    """The split of the full parameters into base combinations.
+
+    Attributes
+    ----------
+    names : list of str, length p
+        Full parameter names.
+    independent : ndarray of int, shape (b,)
+        Columns kept (ascending).
+    dependent : ndarray of int, shape (p − b,)
+        Columns folded into the kept ones.
+    beta : ndarray, shape (b, p − b)
+        π_b = π[independent] + beta @ π[dependent].
+    """
+
+    names: list[str]
+    independent: NDArray[np.int64]
+    dependent: NDArray[np.int64]
+    beta: FloatArray
+
+    @property
+    def size(self) -> int:
+        """b, the number of base parameters."""
+        return len(self.independent)
+
+    def of(self, full: FloatArray) -> FloatArray:
+        """Base parameters of a full parameter vector, shape (p,) → (b,)."""
+        full = np.asarray(full, dtype=float)
+        return full[self.independent] + self.beta @ full[self.dependent]
+
+    def columns(self, Y: FloatArray) -> FloatArray:
+        """The base regressor: the independent columns of Y, shape (..., p) → (..., b)."""
+        return Y[..., self.independent]
+
+    def mapping(self, tol: float = 1e-10) -> list[str]:
+        """One line per base parameter: its name and the full parameters it combines,
+        e.g. ``b3 = elbow_joint.Izz + 0.425 wrist_1_joint.my + 0.18 wrist_1_joint.m``."""
+        lines = []
+        for k, i in enumerate(self.independent):
+            terms = [self.names[i]]
+            for c, d in zip(self.beta[k], self.dependent, strict=True):
+                if abs(c) > tol:
+                    terms.append(f"{'+' if c > 0 else '-'} {abs(c):.6g} {self.names[d]}")
+            lines.append(f"b{k + 1} = " + " ".join(terms))
+        return lines
+
+    def unidentifiable(self, tol: float = 1e-10) -> list[str]:
+        """Full parameters that no base parameter contains (no motion excites them)."""
+        used = np.abs(self.beta).max(axis=0) > tol if self.beta.size else np.zeros(0, bool)
+        return [self.names[d] for d, u in zip(self.dependent, used, strict=True) if not u]
+
+
+def base_parameters(arm: ArmModel, samples: int = 400, seed: int = 0,
+                    tol: float = 1e-8) -> BaseParameters:
+    """Base parameters of an arm's full regressor (rigid body and joint columns), from
+    ``samples`` random states (positions within ±π, velocities and accelerations of unit
+    scale: structural dependencies only, not those of one trajectory).
+
+    Parameters
+    ----------
+    arm : ArmModel
+    samples : int
+        Random states stacked.
+    seed : int
+    tol : float
+        A pivot |R_kk| below tol · |R_00| ends the independent set.
+
+    Returns
+    -------
+    BaseParameters
+    """
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-np.pi, np.pi, (samples, arm.n))
+    qd = rng.normal(size=(samples, arm.n))
+    qdd = rng.normal(size=(samples, arm.n))
+    W = regressor(arm, q, qd, qdd).reshape(samples * arm.n, -1)
+    # scale columns to unit norm so the pivoting ranks directions, not units
+    norm = np.linalg.norm(W, axis=0)
+    norm[norm == 0] = 1.0
+    _, R, perm = scipy.linalg.qr(W / norm, mode="economic", pivoting=True)
+    diag = np.abs(np.diag(R))
+    r = int(np.sum(diag > tol * diag[0]))
+    ind, dep = perm[:r], perm[r:]
+    # β in the scaled columns, then back: Y_dep = Y_ind β  (β = R11⁻¹ R12, unscaled)
+    beta_s = scipy.linalg.solve_triangular(R[:r, :r], R[:r, r:])
+    beta = beta_s * norm[dep][None, :] / norm[ind][:, None]
+    order = np.argsort(ind)
+    return BaseParameters(parameter_names(arm), ind[order].astype(np.int64),
+                          dep.astype(np.int64), beta[order])

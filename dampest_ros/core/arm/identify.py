@@ -1,0 +1,280 @@
+"""Arm identification from measured joint positions and torques, and its validation.
+
+1. q, q̇ by the zero-phase low-pass of :func:`dampest_ros.core.preprocess.zero_phase` (its
+   derivative option), q̈ by differencing the filtered q̇; τ through the same filter, so
+   both sides of τ = Y π see the same gain and no delay.
+2. The first and last 3 / cutoff seconds dropped (the filter's end effects), decimation to
+   ``rate_out`` (the filtered signals hold nothing above the cutoff).
+3. The regressor in chunks into per-joint normal equations (rows with |q̇_j| ≥ v_min).
+4. OLS, WLS and the physically consistent fit (:mod:`dampest_ros.core.arm.fit`); the
+   covariance counts the rows the filtered noise makes dependent.
+
+The noise floor of a joint's torque is estimated from the measurement itself: the power of
+τ − τ_filtered, divided by the share of a white noise's power the filter stops.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.arm.base import BaseParameters
+from dampest_ros.core.arm.fit import (
+    BaseFit,
+    ConsistentFit,
+    JointNormals,
+    fit_base,
+    fit_consistent,
+)
+from dampest_ros.core.arm.model import ArmModel
+from dampest_ros.core.arm.regressor import regressor
+from dampest_ros.core.preprocess import zero_phase
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class IdentifyConfig:
+    """Options of arm identification.
+
+    Attributes
+    ----------
+    cutoff : float
+        Low-pass −6 dB frequency (Hz) for q and τ.
+    rate_out : float
+        Rate the filtered signals are decimated to (Hz); at least 2 × cutoff.
+    min_speed : float
+        Rows of joint j with |q̇_j| below this (rad/s) are not used.
+    coulomb_width : float
+        0: sign(q̇); > 0: tanh(q̇ / width) (rad/s).
+    chunk : int
+        Samples per regressor chunk.
+    """
+
+    cutoff: float = 10.0
+    rate_out: float = 50.0
+    min_speed: float = 0.1
+    coulomb_width: float = 0.0
+    chunk: int = 20_000
+
+
+@dataclass(frozen=True)
+class Filtered:
+    """Zero-phase filtered, decimated joint signals.
+
+    Attributes
+    ----------
+    t : ndarray, shape (M,)
+        Time (s).
+    q, qd, qdd : ndarray, shape (M, n)
+        rad, rad/s, rad/s².
+    tau : ndarray, shape (M, n)
+        Filtered torque (N m).
+    noise : ndarray, shape (n,)
+        Estimated torque noise standard deviation per joint at the input rate (N m); an
+        upper bound (dry friction's steps at velocity reversals count as noise here).
+    index : ndarray of int, shape (M,)
+        Rows of the input the samples are.
+    """
+
+    t: FloatArray
+    q: FloatArray
+    qd: FloatArray
+    qdd: FloatArray
+    tau: FloatArray
+    noise: FloatArray
+    index: NDArray[np.int64]
+
+
+def _stop_share(rate: float, cutoff: float, order: int = 4) -> float:
+    """Share of a white noise's power that the zero-phase filter's complement passes:
+    mean over [0, rate/2] of (1 − H(f))², H = 1 / (1 + (f/f_c)^{2·order})."""
+    f = np.linspace(0.0, rate / 2.0, 20_001)
+    H = 1.0 / (1.0 + (f / cutoff) ** (2 * order))
+    return float(np.mean((1.0 - H) ** 2))
+
+
+def _noise_bandwidth(cutoff: float, order: int = 4) -> float:
+    """Equivalent noise bandwidth ∫₀^∞ H(f)² df of the zero-phase filter (Hz)."""
+    f = np.linspace(0.0, 20.0 * cutoff, 200_001)
+    H = 1.0 / (1.0 + (f / cutoff) ** (2 * order))
+    return float(np.trapezoid(H * H, f))
+
+
+def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
+                  config: IdentifyConfig) -> Filtered:
+    """Filter, differentiate and decimate measured joint data.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times (s), uniformly spaced.
+    position, effort : ndarray, shape (N, n)
+        Measured joint positions (rad) and torques (N m).
+    config : IdentifyConfig
+
+    Returns
+    -------
+    Filtered
+
+    Raises
+    ------
+    ValueError
+        If the samples are not uniformly spaced, too few, or the rates do not fit.
+    """
+    t = np.asarray(t, dtype=float)
+    if len(t) < 10:
+        raise ValueError(f"{len(t)} samples; identification needs a run of many periods")
+    dt = np.diff(t)
+    rate = 1.0 / float(np.median(dt))
+    if np.any(np.abs(dt * rate - 1.0) > 0.01):
+        raise ValueError("joint samples are not uniformly spaced (gaps or jitter > 1 %); "
+                         "resample them or give one gap-free stretch")
+    if not 0.0 < config.cutoff < rate / 2.0:
+        raise ValueError(f"cutoff {config.cutoff} Hz must be in (0, {rate / 2:g}) Hz, the "
+                         f"Nyquist frequency of the {rate:g} Hz samples")
+    if not 2.0 * config.cutoff <= config.rate_out <= rate:
+        raise ValueError(f"output rate {config.rate_out} Hz must be in [2 × cutoff, "
+                         f"{rate:g}] Hz")
+    q = zero_phase(position, rate, config.cutoff)
+    qd = zero_phase(position, rate, config.cutoff, derivative=True)
+    qdd = np.gradient(qd, 1.0 / rate, axis=0)  # q̈ of the already filtered q̇
+    tau = zero_phase(effort, rate, config.cutoff)
+    # σ² ≈ mean((τ − τ_f)²) / share of white noise above the cutoff (the trajectory's own
+    # content is far below it)
+    noise = np.sqrt(np.mean((effort - tau) ** 2, axis=0) / _stop_share(rate, config.cutoff))
+    # the ends see the filter's mirror images: drop 3 / cutoff seconds at each
+    edge = int(np.ceil(3.0 * rate / config.cutoff))
+    if len(t) <= 4 * edge:
+        raise ValueError(f"{len(t) / rate:.3g} s of joint data; at least "
+                         f"{4 * edge / rate:.3g} s are needed at a {config.cutoff:g} Hz cutoff")
+    keep = np.arange(edge, len(t) - edge, max(1, round(rate / config.rate_out)))
+    return Filtered(t[keep], q[keep], qd[keep], qdd[keep], tau[keep], noise,
+                    keep.astype(np.int64))
+
+
+def accumulate(arm: ArmModel, data: Filtered, config: IdentifyConfig,
+               normals: JointNormals | None = None) -> JointNormals:
+    """Per-joint normal equations of filtered data, regressor built in chunks.
+
+    Parameters
+    ----------
+    arm : ArmModel
+    data : Filtered
+    config : IdentifyConfig
+    normals : JointNormals, optional
+        Sums to add to (a second run, a window of a long log).
+
+    Returns
+    -------
+    JointNormals
+    """
+    p = 14 * arm.n
+    normals = normals or JointNormals.empty(arm.n, p)
+    for s in range(0, len(data.t), config.chunk):
+        k = slice(s, s + config.chunk)
+        Y = regressor(arm, data.q[k], data.qd[k], data.qdd[k], config.coulomb_width)
+        normals.add(Y, data.tau[k], np.abs(data.qd[k]) >= config.min_speed)
+    return normals
+
+
+@dataclass(frozen=True)
+class ArmIdentification:
+    """Result of :func:`identify_arm`.
+
+    Attributes
+    ----------
+    base : BaseParameters
+    ols, wls : BaseFit
+    consistent : ConsistentFit
+    noise : ndarray, shape (n,)
+        Estimated torque noise per joint (N m).
+    rows : ndarray of int, shape (n,)
+        Rows used per joint.
+    """
+
+    base: BaseParameters
+    ols: BaseFit
+    wls: BaseFit
+    consistent: ConsistentFit
+    noise: FloatArray
+    rows: NDArray[np.int64]
+
+
+def identify_arm(arm: ArmModel, base: BaseParameters, data: Filtered, nominal: FloatArray,
+                 config: IdentifyConfig) -> ArmIdentification:
+    """OLS, WLS and physically consistent fits of filtered joint data.
+
+    Parameters
+    ----------
+    arm : ArmModel
+    base : BaseParameters
+    data : Filtered
+    nominal : ndarray, shape (14 n,)
+        Nominal full parameters (the physically consistent fit's start and tie-break).
+    config : IdentifyConfig
+
+    Returns
+    -------
+    ArmIdentification
+    """
+    normals = accumulate(arm, data, config)
+    # filtered noise has 2 B independent samples per second (B its noise bandwidth)
+    per = config.rate_out / (2.0 * _noise_bandwidth(config.cutoff))
+    ols = fit_base(normals, base, weighted=False, rows_per_independent=per)
+    wls = fit_base(normals, base, weighted=True, rows_per_independent=per)
+    return ArmIdentification(base, ols, wls, fit_consistent(normals, base, wls, nominal),
+                             data.noise, normals.count)
+
+
+def predict(arm: ArmModel, base: BaseParameters, theta: FloatArray, q: FloatArray,
+            qd: FloatArray, qdd: FloatArray, config: IdentifyConfig) -> FloatArray:
+    """Joint torques of base parameters θ along a motion, in chunks.
+
+    Parameters
+    ----------
+    arm : ArmModel
+    base : BaseParameters
+    theta : ndarray, shape (b,)
+    q, qd, qdd : ndarray, shape (N, n)
+    config : IdentifyConfig
+        Its chunk size and Coulomb width.
+
+    Returns
+    -------
+    ndarray, shape (N, n)
+        τ (N m).
+    """
+    out = np.empty_like(np.asarray(q, dtype=float))
+    for s in range(0, len(q), config.chunk):
+        k = slice(s, s + config.chunk)
+        Yb = base.columns(regressor(arm, q[k], qd[k], qdd[k], config.coulomb_width))
+        out[k] = Yb @ theta
+    return out
+
+
+def torque_rmse(measured: FloatArray, predicted: FloatArray, qd: FloatArray,
+                min_speed: float) -> tuple[FloatArray, FloatArray]:
+    """RMS of measured − predicted torque per joint, on all rows and on the rows the
+    friction model covers (|q̇_j| ≥ min_speed).
+
+    Parameters
+    ----------
+    measured, predicted : ndarray, shape (N, n)
+        N m.
+    qd : ndarray, shape (N, n)
+        rad/s.
+    min_speed : float
+        rad/s.
+
+    Returns
+    -------
+    all_rows, moving_rows : ndarray, shape (n,)
+        N m.
+    """
+    e2 = (measured - predicted) ** 2
+    use = np.abs(qd) >= min_speed
+    moving = np.sqrt(np.sum(e2 * use, axis=0) / np.maximum(use.sum(axis=0), 1))
+    return np.sqrt(e2.mean(axis=0)), moving
