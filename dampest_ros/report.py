@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core import validate
 from dampest_ros.core.batch import Fit
+from dampest_ros.core.control import tracking_rms
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, RigidBody
 from dampest_ros.core.samples import Samples
@@ -38,6 +39,72 @@ FloatArray = NDArray[np.float64]
 FORCE_UNITS = ("N", "N", "N", "N·m", "N·m", "N·m")
 VEL_UNITS = ("m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s")
 DPI = 90
+#: Most decades a PSD axis shows below its largest value (beyond: filter roll-off and
+#: round-off, of no interest).
+PSD_DECADES = 8
+
+#: SI dimensions as exponents of (N, m, s, rad): a force row's unit and a velocity's.
+_Dims = tuple[int, int, int, int]
+_FORCE_DIMS: tuple[_Dims, ...] = ((1, 0, 0, 0),) * 3 + ((1, 1, 0, 0),) * 3
+_VEL_DIMS: tuple[_Dims, ...] = ((0, 1, -1, 0),) * 3 + ((0, 0, -1, 1),) * 3
+_SUPERSCRIPT = {2: "²", 3: "³", 4: "⁴"}
+
+
+def _unit_text(dims: _Dims) -> str:
+    """``N·s/m``-style text of exponents of (N, m, s, rad); ``1`` when dimensionless."""
+    def part(sign: int) -> str:
+        return "·".join(sym + _SUPERSCRIPT.get(abs(e), "" if abs(e) == 1 else f"^{abs(e)}")
+                        for sym, e in zip(("N", "m", "s", "rad"), dims, strict=True)
+                        if e * sign > 0)
+    top, bottom = part(1) or "1", part(-1)
+    return f"{top}/{bottom}" if bottom else top
+
+
+def _sub(a: _Dims, b: _Dims) -> _Dims:
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2], a[3] - b[3])
+
+
+def _alpha_dims(alpha: object) -> _Dims | None:
+    """Dimensions of a velocity function α(ν) (None: mixes units, e.g. a 6-D mode)."""
+    kind, i, j = (getattr(alpha, "kind", ""), int(getattr(alpha, "i", -1)),
+                  int(getattr(alpha, "j", -1)))
+    if kind == "one":
+        return (0, 0, 0, 0)
+    if kind in ("abs", "lin", "area") or (kind == "pnorm" and _VEL_DIMS[i] == _VEL_DIMS[j]):
+        return _VEL_DIMS[i]
+    if kind == "norm":
+        return _VEL_DIMS[0]
+    if kind == "anorm":
+        return _VEL_DIMS[3]
+    if kind in ("prod", "absprod"):
+        a, b = _VEL_DIMS[i], _VEL_DIMS[j]
+        return (a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3])
+    return None
+
+
+def parameter_units(model: DampingModel) -> dict[str, str]:
+    """SI unit of every parameter of a damping model, by name.
+
+    A static coefficient θ multiplies α(ν) ν_c in force row r: its unit is
+    [F_r] / ([α] [ν_c]) (e.g. X_u N·s/m, X_uu N·s²/m², N_r N·m·s/rad); a memory gain c of
+    K(t) = c e^(−λt) acting on ν_d in row d has [F_d] / ([ν_d] s). Bases that mix units
+    (a residual mode over several DOFs) are ``SI``.
+    """
+    units: dict[str, str] = {}
+    for term in model.terms:
+        if term.kind == "freq":
+            for name, d in zip(term.parameter_names, term.state_dofs, strict=True):
+                dims = _sub(_sub(_FORCE_DIMS[int(d)], _VEL_DIMS[int(d)]), (0, 0, 1, 0))
+                units[name] = _unit_text(dims)
+            continue
+        for b in term.bases:
+            rows, cols = np.nonzero(np.asarray(b.B))
+            a = _alpha_dims(b.alpha)
+            found = {_sub(_FORCE_DIMS[r], _VEL_DIMS[c]) for r, c in zip(rows, cols,
+                                                                          strict=True)}
+            units[b.name] = (_unit_text(_sub(found.pop(), a)) if len(found) == 1
+                             and a is not None else "SI")
+    return units
 
 Values = FloatArray | Sequence[float] | Mapping[str, float]
 
@@ -93,14 +160,12 @@ def _spectrum_figure(f: FloatArray, p_y: FloatArray, p_r: FloatArray, cutoff: fl
         ax.loglog(f[1:], p_r[1:, i], lw=1.0, color="tab:red", label="residual")
         if cutoff > 0:
             ax.axvline(cutoff, color="k", ls=":", lw=0.8)
-        top = float(np.nanmax(p_y[1:, i])) if len(f) > 1 else 0.0
-        if np.isfinite(top) and top > 0:
-            # nine decades below the force: the filter's roll-off beyond is not of interest
-            ax.set_ylim(1e-9 * top, 10 * top)
+        f_hi = min(float(f[-1]), 5 * cutoff) if cutoff > 0 and len(f) > 1 else float(f[-1])
+        band = (f > 0) & (f <= f_hi)
+        ax.set_ylim(*psd_limits([p_y[band, i], p_r[band, i]]))
         if cutoff > 0 and len(f) > 1:
-            ax.set_xlim(f[1], min(float(f[-1]), 5 * cutoff))
-        unit = FORCE_UNITS[i] if i < 3 else f"({FORCE_UNITS[i]})"
-        ax.set_ylabel(f"{FORCE_NAMES[i]} ({unit}²/Hz)")
+            ax.set_xlim(f[1], f_hi)
+        ax.set_ylabel(f"{FORCE_NAMES[i]} PSD ({psd_unit(i)})")
         ax.grid(alpha=0.3, which="both")
     axes[2].set_xlabel("frequency (Hz)")
     axes[5].set_xlabel("frequency (Hz)")
@@ -117,7 +182,7 @@ def _acf_figure(w: validate.Whiteness, path: Path) -> str:
         ax.vlines(w.lags[1:], 0, w.acf[1:, i], color="tab:blue", lw=1.5)
         ax.axhspan(-w.bound, w.bound, color="tab:green", alpha=0.2, lw=0)
         ax.axhline(0, color="k", lw=0.6)
-        ax.set_ylabel(f"ACF {FORCE_NAMES[i]}")
+        ax.set_ylabel(f"ACF {FORCE_NAMES[i]} (unitless)")
         ax.set_title(f"{w.fraction_outside[i]:.0%} of lags outside ±{w.bound:.3f}",
                      fontsize=9)
         ax.grid(alpha=0.3)
@@ -127,11 +192,33 @@ def _acf_figure(w: validate.Whiteness, path: Path) -> str:
     return _save(fig, path)
 
 
+def psd_limits(curves: Sequence[FloatArray]) -> tuple[float, float]:
+    """y limits of a log PSD axis for the given spectra (each the values in the frequency
+    band shown): from just under the lowest curve's 5th percentile, at most
+    :data:`PSD_DECADES` below the peak, to 3 × the peak."""
+    values = np.concatenate([np.asarray(c, dtype=float).ravel() for c in curves])
+    values = values[np.isfinite(values) & (values > 0)]
+    if values.size == 0:
+        return 1e-12, 1.0
+    top = float(values.max())
+    floor = min(float(np.percentile(np.asarray(c)[np.asarray(c) > 0], 5))
+                for c in curves if np.any(np.asarray(c) > 0))
+    return max(top * 10.0 ** -PSD_DECADES, 0.5 * floor), 3.0 * top
+
+
+def psd_unit(i: int) -> str:
+    """Unit of the power spectral density of force row i: N²/Hz or (N·m)²/Hz."""
+    unit = FORCE_UNITS[i] if i < 3 else f"({FORCE_UNITS[i]})"
+    return f"{unit}²/Hz"
+
+
 def _coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray,
                  held: NDArray[np.bool_], identified: NDArray[np.bool_],
-                 prior: FloatArray | None, truth: FloatArray | None, path: Path) -> str:
-    """One panel per parameter: estimate with its 95 % interval, prior, truth; a parameter
-    held at its prior shows no estimate, one the data do not determine has a red title."""
+                 prior: FloatArray | None, truth: FloatArray | None,
+                 units: Mapping[str, str], path: Path) -> str:
+    """One panel per parameter (its unit on the y axis): estimate with its 95 % interval,
+    prior, truth; a parameter held at its prior shows no estimate, one the data do not
+    determine has a red title."""
     nrows, ncols = _grid(len(names), 6)
     fig = Figure(figsize=(13, 1.9 * nrows + 0.8))
     axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
@@ -149,13 +236,17 @@ def _coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray,
             ax.text(0.5, 0.5, "held at prior", transform=ax.transAxes, ha="center",
                     va="center", color="tab:red", fontsize=9)
         if prior is not None and np.isfinite(prior[j]):
-            ax.plot([-0.3], [prior[j]], "s", color="0.4", label="prior")
+            ax.plot([-0.6], [prior[j]], "s", color="0.4", label="prior")
         if truth is not None and np.isfinite(truth[j]):
-            ax.plot([0.3], [truth[j]], "*", color="tab:orange", ms=11, label="truth")
+            ax.plot([0.6], [truth[j]], "*", color="tab:orange", ms=11, label="truth")
         ax.set_xlim(-1, 1)
-        ax.set_xticks([])
+        ticks = [(x, lab) for x, lab, shown in ((-0.6, "prior", prior is not None),
+                                                 (0.0, "est.", True),
+                                                 (0.6, "truth", truth is not None)) if shown]
+        ax.set_xticks([x for x, _ in ticks], [lab for _, lab in ticks], fontsize=7)
         if not ax.lines and not ax.collections:
             ax.set_yticks([])  # nothing to show: no meaningless 0…1 scale
+        ax.set_ylabel(f"({units.get(name, 'SI')})", fontsize=8, labelpad=1)
         ax.set_title(name, fontsize=10, color="k" if identified[j] else "tab:red")
         ax.grid(alpha=0.3, axis="y")
         ax.tick_params(labelsize=8)
@@ -167,8 +258,9 @@ def _coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray,
                 labels.append(lab)
     if handles:
         fig.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=9)
-    fig.suptitle("Coefficients (SI, positive = dissipative)")
-    return _save(fig, path, bottom=0.5 / fig.get_figheight() + 0.02, wspace=0.5)
+    fig.suptitle("Coefficients (SI units on each axis, positive = dissipative)")
+    return _save(fig, path, bottom=0.5 / fig.get_figheight() + 0.05, wspace=0.6,
+                 hspace=0.45)
 
 
 def _free_run_figure(t: FloatArray, nu: FloatArray, sim: FloatArray, path: Path) -> str:
@@ -195,10 +287,9 @@ def _coverage_figure(nu: FloatArray, path: Path) -> str:
         ax.axvline(lo, color="k", ls=":", lw=0.8)
         ax.axvline(hi, color="k", ls=":", lw=0.8)
         ax.set_xlabel(f"{DOF_NAMES[i]} ({VEL_UNITS[i]})")
+        ax.set_ylabel("samples (count)")
         ax.set_title(f"1–99 %: [{lo:.3g}, {hi:.3g}]", fontsize=9)
         ax.grid(alpha=0.3)
-    axes[0].set_ylabel("samples")
-    axes[3].set_ylabel("samples")
     fig.suptitle("Excitation coverage: distribution of each velocity component")
     return _save(fig, path, bottom=0.1, hspace=0.5)
 
@@ -318,7 +409,7 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
         "spectrum": _spectrum_figure(f, p_y, p_r, cutoff, out / "residual_spectrum.png"),
         "acf": _acf_figure(white, out / "residual_acf.png"),
         "coef": _coef_figure(names, theta, fit.interval(), fit.held, fit.identified, prior_v,
-                             truth_v, out / "coefficients.png"),
+                             truth_v, parameter_units(model), out / "coefficients.png"),
         "free_run": _free_run_figure(samples.t[rows] - float(samples.t[rows.start]),
                                      samples.nu[rows], sim, out / "free_run.png"),
         "coverage": _coverage_figure(samples.nu, out / "coverage.png"),
@@ -463,8 +554,9 @@ class Tracking:
     nu_ref : ndarray, shape (N, 6)
     nu : mapping label → ndarray, shape (N, 6)
         The velocity of each run (e.g. ``PI``, ``PI + D(ν)ν + C(ν)ν``).
-    rms : mapping label → float
-        RMS tracking error of each run over ``dofs`` after ``skip`` steps.
+    rms : mapping label → (mapping unit → float)
+        RMS tracking error of each run after ``skip`` steps, over the DOFs of each velocity
+        unit apart (``m/s``, ``rad/s``; :func:`rms_by_unit`): never m/s and rad/s mixed.
     dofs : sequence of int
         The DOFs with a reference (0..5 = u..r).
     skip : int
@@ -476,10 +568,40 @@ class Tracking:
     t: FloatArray
     nu_ref: FloatArray
     nu: Mapping[str, FloatArray]
-    rms: Mapping[str, float]
+    rms: Mapping[str, Mapping[str, float]]
     dofs: Sequence[int]
     skip: int
     bandwidth: float
+
+
+def rms_by_unit(nu_ref: FloatArray, nu: FloatArray, dofs: Sequence[int], skip: int = 0
+                ) -> dict[str, float]:
+    """RMS tracking error over the given DOFs, one value per velocity unit.
+
+    Parameters
+    ----------
+    nu_ref, nu : ndarray, shape (N, 6)
+        Reference and flown body velocity (m/s, rad/s).
+    dofs : sequence of int
+        Columns (0..5 = u..r) with a reference.
+    skip : int
+        Steps of transient left out.
+
+    Returns
+    -------
+    dict
+        ``{"m/s": RMS over the linear DOFs, "rad/s": RMS over the angular ones}``, only the
+        units among ``dofs``.
+    """
+    units = dict.fromkeys(VEL_UNITS[i] for i in dofs)
+    return {u: tracking_rms(nu_ref, nu, [i for i in dofs if VEL_UNITS[i] == u], skip)
+            for u in units}
+
+
+def _rms_text(rms: Mapping[str, float], dofs: Sequence[int]) -> str:
+    """'0.0123 m/s (u, w), 0.0456 rad/s (r)'."""
+    return ", ".join(f"{v:.4f} {u} ({', '.join(DOF_NAMES[i] for i in dofs if VEL_UNITS[i] == u)})"
+                     for u, v in rms.items())
 
 
 def band_coverage(t: FloatArray, theta: FloatArray, std: FloatArray, truth: FloatArray
@@ -508,7 +630,8 @@ def band_coverage(t: FloatArray, theta: FloatArray, std: FloatArray, truth: Floa
 
 
 def _convergence_figure(kind: str, names: Sequence[str], t: FloatArray, theta: FloatArray,
-                        std: FloatArray, truth: FloatArray | None, path: Path) -> str:
+                        std: FloatArray, truth: FloatArray | None, units: Mapping[str, str],
+                        path: Path) -> str:
     nrows, ncols = _grid(len(names), 3)
     fig = Figure(figsize=(11, 2.3 * nrows + 0.9))
     axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False, sharex=True).ravel())
@@ -528,6 +651,7 @@ def _convergence_figure(kind: str, names: Sequence[str], t: FloatArray, theta: F
         a, b = float(np.min(np.concatenate(span))), float(np.max(np.concatenate(span)))
         pad = 0.15 * (b - a) if b > a else 0.05 * max(abs(a), 1e-6)
         ax.set_ylim(a - pad, b + pad)
+        ax.set_ylabel(f"({units.get(names[j], 'SI')})", fontsize=8)
         ax.set_title(names[j], fontsize=10)
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=8)
@@ -535,8 +659,8 @@ def _convergence_figure(kind: str, names: Sequence[str], t: FloatArray, theta: F
         ax.set_xlabel("simulation time (s)")
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=9)
-    fig.suptitle(f"{kind} term: RLS estimate over time with ±2σ and the truth (SI, "
-                 "positive = dissipative)")
+    fig.suptitle(f"{kind} term: RLS estimate over time with ±2σ and the truth (positive = "
+                 "dissipative)")
     return _save(fig, path, bottom=0.55 / fig.get_figheight() + 0.06, wspace=0.3, hspace=0.4)
 
 
@@ -550,7 +674,7 @@ def _tracking_figure(tr: Tracking, path: Path) -> str:
         for (label, nu), c in zip(tr.nu.items(), colours, strict=False):
             ax.plot(tr.t, nu[:, i], color=c, lw=1.1, label=label)
             e = tr.nu_ref[tr.skip:, i] - nu[tr.skip:, i]
-            per_dof.append(f"{label} {np.sqrt(np.mean(e * e)):.4f}")
+            per_dof.append(f"{label} {np.sqrt(np.mean(e * e)):.4f} {VEL_UNITS[i]}")
         ax.axvspan(tr.t[0], tr.t[tr.skip], color="0.9", lw=0)
         ax.set_ylabel(f"{DOF_NAMES[i]} ({VEL_UNITS[i]})")
         ax.set_title("RMS error: " + ", ".join(per_dof), fontsize=9)
@@ -558,11 +682,10 @@ def _tracking_figure(tr: Tracking, path: Path) -> str:
     axes[-1].set_xlabel("time (s)")
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=9)
-    total = ", ".join(f"{k} {v:.4f}" for k, v in tr.rms.items())
+    total = "; ".join(f"{k}: {_rms_text(v, tr.dofs)}" for k, v in tr.rms.items())
     fig.suptitle(f"Velocity PI (bandwidth {tr.bandwidth:g} rad/s) on the simulator, without "
-                 f"and with the model feed-forward\nRMS error over "
-                 f"{', '.join(DOF_NAMES[i] for i in tr.dofs)}: {total} (grey: transient, "
-                 "not counted)", fontsize=11)
+                 f"and with the model feed-forward (grey: transient, not counted)\nRMS error "
+                 f"{total}", fontsize=10)
     return _save(fig, path, bottom=0.45 / fig.get_figheight() + 0.05, hspace=0.35,
                  title_height=0.85)
 
@@ -571,7 +694,8 @@ def write_convergence_report(out_dir: str | Path, names: Sequence[str], t: Float
                              theta: FloatArray, std: FloatArray,
                              groups: Mapping[str, Sequence[str]], truth: Values | None = None,
                              batch: Values | None = None, tracking: Tracking | None = None,
-                             summary: Sequence[tuple[str, str]] = (), title: str = "") -> Path:
+                             summary: Sequence[tuple[str, str]] = (), title: str = "",
+                             units: Mapping[str, str] | None = None) -> Path:
     """Write ``index.html``, PNG figures and ``convergence.csv`` for an online identification.
 
     Parameters
@@ -595,6 +719,9 @@ def write_convergence_report(out_dir: str | Path, names: Sequence[str], t: Float
         Rows of the summary table.
     title : str
         Heading of the report.
+    units : mapping name → str, optional
+        SI unit of each parameter (:func:`parameter_units`), shown on the axes; ``SI``
+        where not given.
 
     Returns
     -------
@@ -617,7 +744,7 @@ def write_convergence_report(out_dir: str | Path, names: Sequence[str], t: Float
         idx = [names.index(n) for n in members]
         png = _convergence_figure(kind, members, t, theta[:, idx], std[:, idx],
                                   truth_v[idx] if truth_v is not None else None,
-                                  out / f"convergence_{kind}.png")
+                                  units or {}, out / f"convergence_{kind}.png")
         figs.append(f'<img src="{png}" alt="{html.escape(kind)} coefficients over time">')
     head = ["parameter", "estimate", "std", "truth", "error %", "truth within ±2σ",
             "±2σ coverage, last half"]
@@ -659,15 +786,20 @@ def write_convergence_report(out_dir: str | Path, names: Sequence[str], t: Float
     ]
     if tracking is not None:
         dofs = ", ".join(DOF_NAMES[i] for i in tracking.dofs)
+        by_unit = list(dict.fromkeys(u for r in tracking.rms.values() for u in r))
         parts += [
             "<h2>Velocity tracking with the identified model</h2>",
             '<p class="note">The per-DOF velocity PI of <code>controller_node</code> flies sine '
             f"references in {html.escape(dofs)} on the simulator (the true vehicle), alone "
             "and with the feed-forward D(ν<sub>ref</sub>)ν<sub>ref</sub> + "
-            "C(ν<sub>ref</sub>)ν<sub>ref</sub> of the final model. RMS over those DOFs "
-            f"after the first {tracking.t[tracking.skip] - tracking.t[0]:.0f} s.</p>",
-            _table(["controller", "RMS error"],
-                   [[html.escape(k), _num(v, 4)] for k, v in tracking.rms.items()]),
+            "C(ν<sub>ref</sub>)ν<sub>ref</sub> of the final model. RMS over the DOFs of "
+            "each unit apart (m/s and rad/s are not added) after the first "
+            f"{tracking.t[tracking.skip] - tracking.t[0]:.0f} s.</p>",
+            _table(["controller", *(f"RMS error ({u}; " + ", ".join(
+                DOF_NAMES[i] for i in tracking.dofs if VEL_UNITS[i] == u) + ")"
+                for u in by_unit)],
+                   [[html.escape(k), *(_num(v.get(u, np.nan), 4) for u in by_unit)]
+                    for k, v in tracking.rms.items()]),
             f'<img src="{_tracking_figure(tracking, out / "tracking.png")}" '
             'alt="velocity tracking">',
         ]

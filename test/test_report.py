@@ -5,8 +5,11 @@ from __future__ import annotations
 import dataclasses
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import pytest
+from matplotlib.figure import Figure
 
 from dampest_ros.core import frames
 from dampest_ros.core.batch import fit
@@ -14,7 +17,14 @@ from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle
-from dampest_ros.report import write_report
+from dampest_ros.report import (
+    PSD_DECADES,
+    Tracking,
+    parameter_units,
+    rms_by_unit,
+    write_convergence_report,
+    write_report,
+)
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -53,3 +63,99 @@ def test_report_files_names_and_pngs(tmp_path: Path) -> None:
         assert path.parent == out and path.is_file(), name  # relative links
         data = path.read_bytes()
         assert len(data) > 1000 and data[:8] == PNG_MAGIC, name
+
+
+# --- units on every axis ----------------------------------------------------------------------
+
+#: A unit in brackets or parentheses, e.g. (N), (N·s/m), [m/s], (N²/Hz), (unitless).
+UNIT = re.compile(r"[(\[][^()\[\]]*[A-Za-z²][^()\[\]]*[)\]]")
+
+
+def _figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
+    """Every Figure saved from now on (Figure.savefig wrapped)."""
+    saved: list[Figure] = []
+    original = Figure.savefig
+
+    def savefig(self: Figure, *args: Any, **kwargs: Any) -> None:
+        saved.append(self)
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
+    return saved
+
+
+def _label_problems(figures: list[Figure]) -> list[str]:
+    """Axes whose x or y axis lacks a label with a unit. An x axis shared with a labelled
+    one (the bottom row of a column) counts as labelled; categorical x ticks (words, no
+    scale) need no unit."""
+    problems = []
+    for fig in figures:
+        for ax in fig.axes:
+            if not ax.get_visible():
+                continue
+            where = f"{fig.texts[0].get_text() if fig.texts else ''}/{ax.get_title()}"
+            if not UNIT.search(ax.get_ylabel()):
+                problems.append(f"{where}: y label {ax.get_ylabel()!r}")
+            siblings = ax.get_shared_x_axes().get_siblings(ax)
+            ticks = [t.get_text() for t in ax.get_xticklabels()]
+            categorical = bool(ticks) and all(re.fullmatch(r"[a-z .]+", t) for t in ticks)
+            if not categorical and not any(UNIT.search(s.get_xlabel()) for s in siblings):
+                problems.append(f"{where}: x label {ax.get_xlabel()!r}")
+    return problems
+
+
+def test_every_axis_of_the_report_has_a_unit(tmp_path: Path,
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    vehicle = load_vehicle("bluerov2_heavy")
+    traj = run(vehicle, make_excitation("B", vehicle, 40.0, seed=3))
+    euler = frames.euler_from_matrix(frames.quat_to_matrix(traj.quaternion))
+    samples = Samples(traj.t, traj.nu, traj.nu_dot, traj.tau, euler, traj.position[:, 2],
+                      np.zeros(len(traj), dtype=np.int64))
+    result = fit(samples, vehicle.damping, vehicle.body, prior=vehicle.theta)
+    figures = _figures(monkeypatch)
+    write_report(tmp_path / "batch", samples, vehicle.damping, vehicle.body, result,
+                 prior=vehicle.theta, truth=vehicle.theta)
+    assert len(figures) == 6
+    assert _label_problems(figures) == []
+    coef = next(f for f in figures if "Coefficients" in f.texts[0].get_text())
+    labels = {ax.get_title(): ax.get_ylabel() for ax in coef.axes if ax.get_visible()}
+    assert labels["X_u"] == "(N·s/m)" and labels["N_rr"] == "(N·m·s²/rad²)"
+    # the PSD axis spans at most PSD_DECADES (8) decades below the force's peak, not 20,
+    # and reaches down to the residual
+    spectrum = next(f for f in figures if "PSD" in f.texts[0].get_text())
+    assert spectrum.axes[0].get_ylabel() == "X PSD (N²/Hz)"
+    for ax in spectrum.axes:
+        lo, hi = ax.get_ylim()
+        assert 1.0 < np.log10(hi / lo) <= PSD_DECADES + np.log10(3.0) + 1e-9
+        residual = np.asarray(ax.get_lines()[1].get_ydata(), dtype=float)
+        assert lo <= np.percentile(residual[residual > 0], 5) or \
+            np.log10(hi / lo) > PSD_DECADES
+
+
+def test_convergence_report_axes_and_tracking_rms_per_unit(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    vehicle = load_vehicle("bluerov2_heavy")
+    names = vehicle.damping.parameter_names
+    t = np.linspace(0.0, 100.0, 51)
+    theta = vehicle.theta * (1 - 0.5 * np.exp(-t / 20.0))[:, None]
+    std = 0.1 * np.abs(vehicle.theta) * np.exp(-t / 40.0)[:, None]
+    # tracking: the reference in u, w (m/s) and r (rad/s); errors 0.01 m/s, 0.1 rad/s
+    tt = np.linspace(0.0, 19.9, 200)
+    ref = np.zeros((200, 6))
+    ref[:, [0, 2, 5]] = np.sin(tt)[:, None]
+    flown = ref.copy()
+    flown[:, [0, 2]] += 0.01
+    flown[:, 5] += 0.1
+    rms = rms_by_unit(ref, flown, (0, 2, 5), skip=10)
+    assert rms == pytest.approx({"m/s": 0.01, "rad/s": 0.1})
+    tracking = Tracking(tt, ref, {"PI": flown}, {"PI": rms}, (0, 2, 5), 10, 2.0)
+    groups = {term.kind: term.parameter_names for term in vehicle.damping.terms}
+    figures = _figures(monkeypatch)
+    index = write_convergence_report(tmp_path / "online", names, t, theta, std, groups,
+                                     truth=vehicle.theta, tracking=tracking,
+                                     units=parameter_units(vehicle.damping))
+    assert len(figures) == len(groups) + 1
+    assert _label_problems(figures) == []
+    text = index.read_text(encoding="utf-8")
+    assert "RMS error (m/s; u, w)" in text and "RMS error (rad/s; r)" in text
+    assert "<td>0.01</td><td>0.1</td>" in text

@@ -27,6 +27,7 @@ from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.yaml_io import ModelFile, load_vehicle, save_model
+from dampest_ros.report import psd_limits, psd_unit
 
 DPI = 90
 
@@ -279,9 +280,11 @@ def _residual_figure(data: GapData, before: np.ndarray, after: np.ndarray, title
     before = np.insert(before[idx], cut, np.nan, axis=0)
     after_s = np.insert(after[idx], cut, np.nan, axis=0)
     fig = Figure(figsize=(12, 9))
-    axes = fig.subplots(6, 2, gridspec_kw={"width_ratios": [2.2, 1]})
+    axes = fig.subplots(6, 2, sharex="col", gridspec_kw={"width_ratios": [2.2, 1]})
     f_b, P_b = residual_psd(data.samples, before_all, data.test)
     f_a, P_a = residual_psd(data.samples, after, data.test)
+    f_hi = max(2 * data.cutoff, 1.0)
+    shown = (f_b > 0) & (f_b <= f_hi)
     for i in range(6):
         ax = axes[i, 0]
         ax.plot(t, before[:, i], lw=0.9, color="0.55", label="before")
@@ -289,16 +292,19 @@ def _residual_figure(data: GapData, before: np.ndarray, after: np.ndarray, title
         ax.set_ylabel(f"{FORCE_NAMES[i]} ({FORCE_UNITS[i]})")
         ax.grid(alpha=0.3)
         ax = axes[i, 1]
-        ax.loglog(f_b[1:], np.maximum(P_b[1:, i], 1e-300), lw=0.9, color="0.55")
-        ax.loglog(f_a[1:], np.maximum(P_a[1:, i], 1e-300), lw=0.9, color="tab:red")
-        ax.set_xlim(f_b[1], max(2 * data.cutoff, 1.0))
+        low, high = psd_limits([P_b[shown, i], P_a[shown, i]])
+        ax.loglog(f_b[1:], np.maximum(P_b[1:, i], low), lw=0.9, color="0.55")
+        ax.loglog(f_a[1:], np.maximum(P_a[1:, i], low), lw=0.9, color="tab:red")
+        ax.set_xlim(f_b[1], f_hi)
+        ax.set_ylim(low, high)
+        ax.set_ylabel(f"PSD ({psd_unit(i)})", fontsize=8)
         ax.grid(alpha=0.3, which="both")
     axes[0, 0].legend(loc="upper right", fontsize=8)
     axes[5, 0].set_xlabel("time (s), held-out part")
     axes[5, 1].set_xlabel("frequency (Hz)")
     axes[0, 1].set_title("residual PSD", fontsize=9)
     fig.suptitle(title, fontsize=11)
-    fig.subplots_adjust(left=0.07, right=0.985, bottom=0.06, top=0.94, hspace=0.35, wspace=0.2)
+    fig.subplots_adjust(left=0.07, right=0.985, bottom=0.06, top=0.94, hspace=0.35, wspace=0.3)
     fig.savefig(path, dpi=DPI, format="png")
     return path.name
 
