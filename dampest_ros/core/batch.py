@@ -85,7 +85,8 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
     With ``decimate`` (and ``cutoff`` > 0) only every k-th sample is yielded, k the largest
     step that keeps four samples per period of the cutoff: the low-passed signals carry no
     more information than that, and the normal equations cost k times less. Rows are then
-    global sample indices (the same whatever the chunking).
+    global sample indices, every k-th from each segment's first (the same whatever the
+    chunking and whatever segments precede).
     """
     if offset is not None:
         samples = Samples(samples.t, samples.nu + offset, samples.nu_dot, samples.tau,
@@ -106,7 +107,9 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
                 Phi = zero_phase(Phi, samples.rate, cutoff)
                 y = zero_phase(y, samples.rate, cutoff)
             if step > 1:
-                rows = np.arange(start + (-start) % step, stop, step)
+                # every k-th sample counted from the segment's first: a segment gives the
+                # same rows whatever comes before it (a log pooled with others included)
+                rows = np.arange(start + (s0 - start) % step, stop, step)
                 yield rows, Phi[rows - a], y[rows - a]
             else:
                 core = slice(start - a, stop - a)
@@ -345,7 +348,8 @@ class FitOptions:
     ridge : float
         Ridge strength relative to the diagonal of the information matrix.
     block : float
-        Block length (s) for the robust covariance.
+        Longest block (s) of the robust covariance; a log too short for 2 r + 1 such blocks
+        (r the directions estimated) gets shorter ones (:func:`block_length`).
     max_rel_halfwidth : float
         A parameter whose 95 % half-width exceeds this fraction of its scale
         (:func:`parameter_scale`) is flagged and held at its prior.
@@ -654,7 +658,8 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
                n=N, rss=rss, tss=tss, cond=float(max(ev) / max(min(ev), 1e-300)), flags=flags,
                cv_rmse=np.sqrt(cv / N),
                n_eff=min(float(N), 2 * opts.cutoff * duration) if opts.cutoff > 0 else float(N),
-               blocks=block_count(samples, opts.block), held=held, combinations=combos,
+               blocks=block_count(samples, block_length(samples, opts, T.shape[1])),
+               held=held, combinations=combos,
                constrained=constrained, rank=T.shape[1])
 
 
@@ -675,6 +680,21 @@ def block_index(samples: Samples, block: float) -> NDArray[np.int64]:
     return np.unique(block_of, return_inverse=True)[1].astype(np.int64)
 
 
+def block_length(samples: Samples, opts: FitOptions, rank: int) -> float:
+    """Length (s) of the robust covariance's blocks: ``opts.block``, shorter when the samples
+    span fewer than 2 r + 1 of them, but never below two periods of the low-pass (``4 /
+    cutoff``; 10 samples without one), over which filtered residuals stay correlated.
+
+    The block sandwich's middle factor Σ_b s_b s_bᵀ has rank ≤ B: with fewer blocks than
+    estimated directions r some directions get no variance at all (a 60 s log in 10 s blocks
+    has 7 blocks for 12 parameters, and a σ six times too small on one of them).
+    """
+    span = sum(float(samples.t[sl][-1] - samples.t[sl][0]) + 1.0 / samples.rate
+               for sl in samples.segments()) if len(samples) > 1 else 0.0
+    floor = 4.0 / opts.cutoff if opts.cutoff > 0 else 10.0 / max(samples.rate, 1e-300)
+    return float(max(min(opts.block, span / (2 * rank + 1)), floor))
+
+
 def block_count(samples: Samples, block: float) -> int:
     """Number of blocks B of the robust covariance."""
     return int(block_index(samples, block).max()) + 1 if len(samples) else 0
@@ -690,8 +710,9 @@ def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
     (p_free, r)) spans, 0 in those the data do not determine (:func:`determined_directions`).
 
     s_b = Σ_{n ∈ block b} Σ_i w_i Φ_{n,i}ᵀ r_{n,i} is the weighted score of a block of
-    ``opts.block`` seconds; summing within blocks makes the estimate robust to residuals
-    that are correlated over less than a block (filtered noise, unmodelled slow effects).
+    :func:`block_length` seconds; summing within blocks makes the estimate robust to
+    residuals that are correlated over less than a block (filtered noise, unmodelled slow
+    effects).
     """
     p = model.n_params
     cov = np.full((p, p), np.nan)
@@ -699,7 +720,7 @@ def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
         return cov
     A, _, _ = ne.total(weights)
     Af = A[np.ix_(free, free)]
-    block_idx = block_index(samples, opts.block)
+    block_idx = block_index(samples, block_length(samples, opts, basis.shape[1]))
     S = np.zeros((int(block_idx.max()) + 1, int(free.sum())))
     for sl, Phi, y in iter_regression(samples, model, body, chunk, opts.cutoff,
                                       decimate=True):

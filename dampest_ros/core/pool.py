@@ -1,0 +1,212 @@
+"""Many logs of one vehicle: the pooled fit and the drift of the damping between logs.
+
+The batch fit's normal equations are sufficient statistics: the statistics of several logs
+add up to those of all their samples at once, A = Σ_b A_b, b = Σ_b b_b, c = Σ_b c_b. Each log
+is therefore preprocessed and reduced on its own (in parallel, anywhere: :class:`LogStatistics`
+is all a worker returns), and the pooled fit solves the summed statistics; its second passes
+(block-robust covariance, sensor-bias sensitivity, the dissipativity check) run over the logs'
+samples as segments of one set. Cross-validation folds of the pooled fit are the k-th fifths of
+every log (:func:`pooled_normal`), so each fold holds some of every trial.
+
+Drift: each log's own estimate θ_b ± σ_b, ordered by its start time, is tested for a change
+per coefficient (:func:`drift`): a χ² test of homogeneity against the precision-weighted mean,
+Bonferroni-corrected over the coefficients, and for those that moved, the split between two
+consecutive logs that separates the two weighted means the most.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from dampest_ros.core.batch import Fit, FitOptions, NormalEquations, accumulate, fit
+from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.rigid_body import ConfigError, RigidBody
+from dampest_ros.core.samples import Samples
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass
+class LogStatistics:
+    """What one log contributes to a pooled fit.
+
+    Attributes
+    ----------
+    name : str
+        The log (path or URL), for reports.
+    start : float
+        Time of its first sample (s; the log's own clock, e.g. UNIX time for a recorded bag).
+    samples : Samples
+        Its preprocessed samples.
+    normal : NormalEquations
+        Their statistics (:func:`~dampest_ros.core.batch.accumulate`, 5 folds).
+    fit : Fit
+        The log's own estimate (for the drift).
+    """
+
+    name: str
+    start: float
+    samples: Samples
+    normal: NormalEquations
+    fit: Fit
+
+
+def log_statistics(name: str, samples: Samples, model: DampingModel, body: RigidBody,
+                   options: FitOptions, prior: FloatArray | None = None,
+                   prior_std: FloatArray | None = None) -> LogStatistics:
+    """Reduce one log: its normal equations and its own fit (the map step).
+
+    Parameters
+    ----------
+    name : str
+    samples : Samples
+    model : DampingModel
+    body : RigidBody
+    options : FitOptions
+        Those of the pooled fit (the same cutoff); the speed range is the log's own.
+    prior, prior_std : ndarray, shape (p,), optional
+    """
+    ne = accumulate(samples, model, body, cutoff=options.cutoff)
+    own = fit(samples, model, body, options, prior=prior, prior_std=prior_std, normal=ne)
+    return LogStatistics(name, float(samples.t[0]), samples, ne, own)
+
+
+def pooled_normal(normals: Sequence[NormalEquations]) -> NormalEquations:
+    """Σ of the logs' statistics, fold by fold: fold k is the k-th fifth of every log."""
+    if not normals:
+        raise ConfigError("logs", "no log to pool")
+    shapes = {n.A.shape for n in normals}
+    if len(shapes) != 1:
+        raise ConfigError("logs", f"statistics of different shapes {sorted(shapes)}: the "
+                                  "logs were reduced with different models")
+    return NormalEquations(sum((n.A for n in normals), np.zeros_like(normals[0].A)),
+                           sum((n.b for n in normals), np.zeros_like(normals[0].b)),
+                           sum((n.c for n in normals), np.zeros_like(normals[0].c)),
+                           sum((n.n for n in normals), np.zeros_like(normals[0].n)))
+
+
+def pooled_samples(logs: Sequence[LogStatistics]) -> Samples:
+    """The logs' samples as one set, one segment (or more) per log, in the given order."""
+    return Samples.concatenate([g.samples for g in logs])
+
+
+def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBody,
+               options: FitOptions, prior: FloatArray | None = None,
+               prior_std: FloatArray | None = None) -> Fit:
+    """The fit of all the logs' samples at once, from their summed statistics (the reduce).
+
+    θ, its covariance and every per-DOF figure equal those of
+    :func:`~dampest_ros.core.batch.fit` on :func:`pooled_samples` to rounding; only the
+    cross-validation folds differ (see :func:`pooled_normal`).
+    """
+    return fit(pooled_samples(logs), model, body, options, prior=prior, prior_std=prior_std,
+               normal=pooled_normal([g.normal for g in logs]))
+
+
+@dataclass
+class Drift:
+    """Per-log estimates and the test of change, for B logs and p coefficients.
+
+    Attributes
+    ----------
+    names : list of str
+    logs : list of str
+        In start-time order, shape (B,).
+    start : ndarray, shape (B,)
+        Start times (s).
+    theta, std : ndarray, shape (B, p)
+        Each log's estimate and standard deviation (NaN where that log does not identify
+        the coefficient).
+    chi2 : ndarray, shape (p,)
+        Σ_b ((θ_b − θ̄)/σ_b)² over the logs that identify it, θ̄ the precision-weighted mean.
+    dof : ndarray of int, shape (p,)
+        Its degrees of freedom (logs that identify it − 1).
+    p_value : ndarray, shape (p,)
+    moved : ndarray of bool, shape (p,)
+        p_value below ``alpha`` / p (Bonferroni over the coefficients).
+    change_after : ndarray of int, shape (p,)
+        For a moved coefficient, the index of the last log before the change (the split
+        whose before/after weighted means differ most in their σ), −1 otherwise.
+    shift : ndarray, shape (p,)
+        After − before of those means (NaN when not moved).
+    shift_std : ndarray, shape (p,)
+        Its standard deviation.
+    alpha : float
+    """
+
+    names: list[str]
+    logs: list[str]
+    start: FloatArray
+    theta: FloatArray
+    std: FloatArray
+    chi2: FloatArray
+    dof: NDArray[np.int64]
+    p_value: FloatArray
+    moved: NDArray[np.bool_]
+    change_after: NDArray[np.int64]
+    shift: FloatArray
+    shift_std: FloatArray
+    alpha: float
+
+
+def _weighted(theta: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Precision-weighted means over axis 0 and their σ, NaN-free inputs with w = 0 for
+    missing entries."""
+    sw = w.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        # θ̄ = Σ w_b θ_b / Σ w_b, σ(θ̄) = 1/√Σ w_b (w_b = 1/σ_b²)
+        return (w * theta).sum(axis=0) / sw, 1.0 / np.sqrt(sw)
+
+
+def drift(logs: Sequence[LogStatistics], alpha: float = 0.01) -> Drift:
+    """Test each coefficient for a change between the logs (ordered by start time).
+
+    Parameters
+    ----------
+    logs : sequence of LogStatistics
+        At least two.
+    alpha : float
+        Family-wise false-alarm probability over the coefficients.
+    """
+    if len(logs) < 2:
+        raise ConfigError("logs", "a drift needs at least two logs")
+    order = sorted(range(len(logs)), key=lambda k: (logs[k].start, k))
+    fits = [logs[k].fit for k in order]
+    names = fits[0].names
+    theta = np.array([f.theta for f in fits])
+    std = np.array([f.std for f in fits])
+    ok = np.array([f.identified for f in fits]) & np.isfinite(std) & (std > 0)
+    w = np.where(ok, 1.0 / np.where(ok, std, 1.0) ** 2, 0.0)  # 1/σ_b², 0 where missing
+    th = np.where(ok, theta, 0.0)
+    mean, _ = _weighted(th, w)
+    # χ² = Σ_b w_b (θ_b − θ̄)², B_j − 1 degrees of freedom
+    chi2 = np.where(ok, w * (th - mean) ** 2, 0.0).sum(axis=0)
+    dof = ok.sum(axis=0) - 1
+    p_value = np.where(dof > 0, stats.chi2.sf(chi2, np.maximum(dof, 1)), 1.0)
+    moved = (dof > 0) & (p_value < alpha / max(len(names), 1))
+    B, p = theta.shape
+    change_after = np.full(p, -1, dtype=np.int64)
+    shift = np.full(p, np.nan)
+    shift_std = np.full(p, np.nan)
+    for j in np.flatnonzero(moved):
+        best = -1.0
+        for k in range(B - 1):
+            m0, s0 = _weighted(th[:k + 1, j:j + 1], w[:k + 1, j:j + 1])
+            m1, s1 = _weighted(th[k + 1:, j:j + 1], w[k + 1:, j:j + 1])
+            if not (np.isfinite(m0[0]) and np.isfinite(m1[0])):
+                continue
+            # z of the difference of the two means
+            z = abs(m1[0] - m0[0]) / np.hypot(s0[0], s1[0])
+            if z > best:
+                best, change_after[j] = z, k
+                shift[j], shift_std[j] = m1[0] - m0[0], np.hypot(s0[0], s1[0])
+    return Drift(names=list(names), logs=[logs[k].name for k in order],
+                 start=np.array([logs[k].start for k in order]),
+                 theta=np.where(ok, theta, np.nan), std=np.where(ok, std, np.nan),
+                 chi2=chi2, dof=dof.astype(np.int64), p_value=p_value, moved=moved,
+                 change_after=change_after, shift=shift, shift_std=shift_std, alpha=alpha)

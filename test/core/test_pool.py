@@ -1,0 +1,70 @@
+"""Pooled identification over several logs and the drift test (dampest_ros.core.pool)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dampest_ros.core.batch import FitOptions, fit
+from dampest_ros.core.excitation import make_excitation
+from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.pool import drift, log_statistics, pooled_fit, pooled_samples
+from dampest_ros.core.samples import Samples
+from dampest_ros.core.simulate import run
+from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.io.yaml_io import load_vehicle
+
+OPTIONS = FitOptions(method="wls", cutoff=2.0, gyro_bias=0.0, dvl_bias=0.0)
+
+
+@pytest.fixture(scope="module")
+def vehicle() -> Vehicle:
+    return load_vehicle("bluerov2_heavy")
+
+
+def noisy_log(vehicle: Vehicle, seed: int, scale: float = 1.0, start: float = 0.0
+              ) -> Samples:
+    """60 s of protocol B whose τ satisfies Fossen's equation with damping ``scale`` × the
+    vehicle's, plus white force noise of 2 % of each DOF's RMS force (seeded)."""
+    traj = run(vehicle, make_excitation("B", vehicle, 60.0, seed=seed), dt=0.02)
+    R = quat_to_matrix(traj.quaternion)
+    tau = (traj.nu_dot @ vehicle.body.M.T + vehicle.body.coriolis_force(traj.nu)
+           + vehicle.damping.force(traj.nu, scale * vehicle.theta) + vehicle.body.restoring(R))
+    rng = np.random.default_rng(seed)
+    tau = tau + 0.02 * np.sqrt(np.mean(tau**2, axis=0)) * rng.standard_normal(tau.shape)
+    return Samples(traj.t + start, traj.nu, traj.nu_dot, tau, euler_from_matrix(R),
+                   traj.position[:, 2], np.zeros(len(traj.t), dtype=np.int64))
+
+
+def test_the_pooled_fit_is_the_fit_of_all_samples_at_once(vehicle: Vehicle) -> None:
+    logs = [log_statistics(f"log{k}", noisy_log(vehicle, k, start=100.0 * k),
+                           vehicle.damping, vehicle.body, OPTIONS) for k in range(3)]
+    pooled = pooled_fit(logs, vehicle.damping, vehicle.body, OPTIONS)
+    once = fit(pooled_samples(logs), vehicle.damping, vehicle.body, OPTIONS)
+    np.testing.assert_allclose(pooled.theta, once.theta, rtol=1e-10, atol=0)
+    np.testing.assert_allclose(pooled.std, once.std, rtol=1e-10, atol=0)
+    np.testing.assert_allclose(pooled.r2, once.r2, rtol=1e-12)
+    assert pooled.n == once.n == sum(g.fit.n for g in logs)  # decimated samples
+
+
+def test_a_20_percent_change_is_found_between_the_right_logs(vehicle: Vehicle) -> None:
+    """Five logs a day apart; from the fourth on the damping is 1.2 × (a new payload)."""
+    day = 86400.0
+    changed = [log_statistics(f"day{k}", noisy_log(vehicle, 10 + k, 1.2 if k >= 3 else 1.0,
+                                                   day * k), vehicle.damping, vehicle.body,
+                              OPTIONS) for k in range(5)]
+    d = drift(changed)
+    names = d.names
+    # the coefficients that carry the force (quadratic surge, sway, heave, linear heave)
+    for n in ("X_uu", "Y_vv", "Z_ww", "Z_w"):
+        j = names.index(n)
+        assert d.moved[j], n
+        assert d.change_after[j] == 2, n
+        before = vehicle.theta[j]
+        assert d.shift[j] == pytest.approx(0.2 * before, abs=4 * d.shift_std[j]), n
+    same = [log_statistics(f"day{k}", noisy_log(vehicle, 10 + k, 1.0, day * k),
+                           vehicle.damping, vehicle.body, OPTIONS) for k in range(5)]
+    quiet = drift(same)
+    assert not quiet.moved.any(), [n for n, m in zip(quiet.names, quiet.moved, strict=True)
+                                   if m]
+    assert np.all(quiet.change_after == -1)
