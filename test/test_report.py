@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import re
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -67,56 +67,20 @@ def test_report_files_names_and_pngs(tmp_path: Path) -> None:
 
 # --- units on every axis ----------------------------------------------------------------------
 
-#: A unit in brackets or parentheses, e.g. (N), (N·s/m), [m/s], (N²/Hz), (unitless).
-UNIT = re.compile(r"[(\[][^()\[\]]*[A-Za-z²][^()\[\]]*[)\]]")
-
-
-def _figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
-    """Every Figure saved from now on (Figure.savefig wrapped)."""
-    saved: list[Figure] = []
-    original = Figure.savefig
-
-    def savefig(self: Figure, *args: Any, **kwargs: Any) -> None:
-        saved.append(self)
-        original(self, *args, **kwargs)
-
-    monkeypatch.setattr(Figure, "savefig", savefig)
-    return saved
-
-
-def _label_problems(figures: list[Figure]) -> list[str]:
-    """Axes whose x or y axis lacks a label with a unit. An x axis shared with a labelled
-    one (the bottom row of a column) counts as labelled; categorical x ticks (words, no
-    scale) need no unit."""
-    problems = []
-    for fig in figures:
-        for ax in fig.axes:
-            if not ax.get_visible():
-                continue
-            where = f"{fig.texts[0].get_text() if fig.texts else ''}/{ax.get_title()}"
-            if not UNIT.search(ax.get_ylabel()):
-                problems.append(f"{where}: y label {ax.get_ylabel()!r}")
-            siblings = ax.get_shared_x_axes().get_siblings(ax)
-            ticks = [t.get_text() for t in ax.get_xticklabels()]
-            categorical = bool(ticks) and all(re.fullmatch(r"[a-z .]+", t) for t in ticks)
-            if not categorical and not any(UNIT.search(s.get_xlabel()) for s in siblings):
-                problems.append(f"{where}: x label {ax.get_xlabel()!r}")
-    return problems
-
-
-def test_every_axis_of_the_report_has_a_unit(tmp_path: Path,
-                                             monkeypatch: pytest.MonkeyPatch) -> None:
+def test_every_axis_of_the_report_has_a_unit(
+        tmp_path: Path, saved_figures: list[Figure],
+        axis_unit_problems: Callable[[list[Figure]], list[str]]) -> None:
     vehicle = load_vehicle("bluerov2_heavy")
     traj = run(vehicle, make_excitation("B", vehicle, 40.0, seed=3))
     euler = frames.euler_from_matrix(frames.quat_to_matrix(traj.quaternion))
     samples = Samples(traj.t, traj.nu, traj.nu_dot, traj.tau, euler, traj.position[:, 2],
                       np.zeros(len(traj), dtype=np.int64))
     result = fit(samples, vehicle.damping, vehicle.body, prior=vehicle.theta)
-    figures = _figures(monkeypatch)
+    figures = saved_figures
     write_report(tmp_path / "batch", samples, vehicle.damping, vehicle.body, result,
                  prior=vehicle.theta, truth=vehicle.theta)
     assert len(figures) == 6
-    assert _label_problems(figures) == []
+    assert axis_unit_problems(figures) == []
     coef = next(f for f in figures if "Coefficients" in f.texts[0].get_text())
     labels = {ax.get_title(): ax.get_ylabel() for ax in coef.axes if ax.get_visible()}
     assert labels["X_u"] == "(N·s/m)" and labels["N_rr"] == "(N·m·s²/rad²)"
@@ -133,7 +97,8 @@ def test_every_axis_of_the_report_has_a_unit(tmp_path: Path,
 
 
 def test_convergence_report_axes_and_tracking_rms_per_unit(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+        tmp_path: Path, saved_figures: list[Figure],
+        axis_unit_problems: Callable[[list[Figure]], list[str]]) -> None:
     vehicle = load_vehicle("bluerov2_heavy")
     names = vehicle.damping.parameter_names
     t = np.linspace(0.0, 100.0, 51)
@@ -150,12 +115,12 @@ def test_convergence_report_axes_and_tracking_rms_per_unit(
     assert rms == pytest.approx({"m/s": 0.01, "rad/s": 0.1})
     tracking = Tracking(tt, ref, {"PI": flown}, {"PI": rms}, (0, 2, 5), 10, 2.0)
     groups = {term.kind: term.parameter_names for term in vehicle.damping.terms}
-    figures = _figures(monkeypatch)
+    figures = saved_figures
     index = write_convergence_report(tmp_path / "online", names, t, theta, std, groups,
                                      truth=vehicle.theta, tracking=tracking,
                                      units=parameter_units(vehicle.damping))
     assert len(figures) == len(groups) + 1
-    assert _label_problems(figures) == []
+    assert axis_unit_problems(figures) == []
     text = index.read_text(encoding="utf-8")
     assert "RMS error (m/s; u, w)" in text and "RMS error (rad/s; r)" in text
     assert "<td>0.01</td><td>0.1</td>" in text

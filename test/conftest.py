@@ -1,0 +1,55 @@
+"""Fixtures shared by the tests: the figures a report saves, and the check that every axis
+of them carries a unit."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+from matplotlib.figure import Figure
+
+#: A unit in brackets or parentheses, e.g. (N), (N·s/m), [m/s], (N²/Hz), (unitless).
+UNIT = re.compile(r"[(\[][^()\[\]]*[A-Za-z²][^()\[\]]*[)\]]")
+
+
+@pytest.fixture
+def saved_figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
+    """Every Figure saved from now on (Figure.savefig wrapped)."""
+    saved: list[Figure] = []
+    original = Figure.savefig
+
+    def savefig(self: Figure, *args: Any, **kwargs: Any) -> None:
+        saved.append(self)
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
+    return saved
+
+
+def label_problems(figures: list[Figure]) -> list[str]:
+    """Axes whose x or y axis lacks a label with a unit. An x axis shared with a labelled
+    one (the bottom row of a column) counts as labelled; categorical x ticks (words, no
+    scale) need no unit."""
+    problems = []
+    for fig in figures:
+        for ax in fig.axes:
+            if not ax.get_visible():
+                continue
+            where = f"{fig.texts[0].get_text() if fig.texts else ''}/{ax.get_title()}"
+            if not UNIT.search(ax.get_ylabel()):
+                problems.append(f"{where}: y label {ax.get_ylabel()!r}")
+            siblings = ax.get_shared_x_axes().get_siblings(ax)
+            ticks = [t.get_text() for t in ax.get_xticklabels()]
+            categorical = bool(ticks) and all(re.fullmatch(r"[a-z .]+", t) for t in ticks)
+            if not categorical and not any(UNIT.search(s.get_xlabel()) for s in siblings):
+                problems.append(f"{where}: x label {ax.get_xlabel()!r}")
+    return problems
+
+
+
+@pytest.fixture
+def axis_unit_problems() -> Callable[[list[Figure]], list[str]]:
+    """:func:`label_problems`, for tests that check figures."""
+    return label_problems
