@@ -30,9 +30,10 @@ def run(args: argparse.Namespace) -> int:
     if report.removed:
         print(f"removed partial files left by a killed recorder or reindex: "
               f"{', '.join(report.removed)}")
-    rows = [(f.name, f.messages, "complete" if f.complete else "recovered" if f.messages
-             else "unreadable", f.lost_messages, f.lost_bytes, f.error or "")
-            for f in report.files]
+    rows = [(f.name, f.messages, "complete" if f.complete else
+             f"recovered ({f.journal} from the journal)" if f.journal else
+             "recovered" if f.messages else "unreadable", f.lost_messages, f.lost_bytes,
+             f.error or "") for f in report.files]
     print(table(("file", "messages", "state", "messages lost", "bytes lost", "stopped at"),
                 rows))
     print(f"wrote {report.path / 'metadata.yaml'}: {report.messages} messages; unreadable: "

@@ -17,14 +17,19 @@ with statistics and chunk indexes. They read back with rosbags (and so with
 The writer writes into memory (:class:`_Spool`); the recorder writes each finished chunk to
 the file, so a write the storage refuses (a full disk) is cut off again and retried from the
 disk space the recorder keeps in reserve: the bag is closed with every message. A
-:class:`BagLock` marks a bag being recorded.
+:class:`BagLock` marks a bag being recorded. Each message of the chunk in progress is also
+appended at once to the file's journal (``<file>.journal``, :class:`_Journal`, emptied when
+the chunk reaches the file): a killed process loses no message it had handed to the
+recorder, since what it wrote is in the operating system's cache.
 
 :func:`reindex` rebuilds ``metadata.yaml`` from the storage files, checking every chunk. A
 file without a valid footer (the recording was killed) or with damaged chunks is scanned
 record by record with the mcap stream reader; the messages of every intact chunk, up to the
 first unreadable record outside a chunk, are written to a new, well-formed file that replaces
 it, and the damaged original is kept beside it as ``<file>.damaged``. What could not be read
-is reported in bytes and, where the indexes count them, in messages.
+is reported in bytes and, where the indexes count them, in messages. The messages of a
+journal whose chunk never reached the file are added (the bytes of that cut-off chunk are
+then not counted as lost).
 
 No rclpy here: the recorder node (:mod:`dampest_ros.ros.recorder_node`) feeds it the
 serialized messages it receives.
@@ -33,6 +38,7 @@ serialized messages it receives.
 from __future__ import annotations
 
 import fcntl
+import itertools
 import os
 import re
 import struct
@@ -44,9 +50,11 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from mcap.data_stream import RecordBuilder
 from mcap.exceptions import McapError
+from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Footer, Message, MessageIndex, Schema
+from mcap.records import Channel, Chunk, Footer, Message, MessageIndex, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
@@ -73,6 +81,10 @@ LOCK_NAME = ".dampest.lock"
 #: Disk space the recorder keeps allocated in its bag directory, so that a full disk still
 #: leaves room to write the chunk in progress, the summary and ``metadata.yaml``.
 RESERVE_NAME = ".dampest.reserve"
+#: Suffix of a storage file's journal (the messages of its chunk in progress).
+JOURNAL_SUFFIX = ".journal"
+#: Name of the journal's first record (an MCAP metadata record): which chunk it holds.
+_JOURNAL_HEADER = "dampest journal"
 #: Partial files a killed recorder or reindex may leave; reindex removes them.
 TEMP_PATTERNS = ("*.recovering", "metadata.yaml.tmp", RESERVE_NAME)
 #: Bytes of the reserve besides one chunk, the largest message and the summary estimate.
@@ -303,8 +315,74 @@ class _Spool:
         os.close(self.fd)
 
 
+class _Journal:
+    """The messages of a storage file's chunk in progress, each appended to
+    ``<file>.journal`` as it is written (MCAP records, no magic): a metadata record naming
+    the chunk (its index among the file's chunks), the file's schema and channel records,
+    then the messages. :meth:`restart` empties it when the chunk has reached the file.
+
+    A write the storage refuses ends the journal (the recording goes on without it)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        self.definitions = b""  # schema and channel records, written again on each restart
+        self.restart(0)
+
+    def _write(self, *parts: bytes) -> None:
+        if self.fd < 0:
+            return
+        try:
+            os.writev(self.fd, parts)
+        except OSError:  # (a full disk) the bag itself still keeps every complete chunk
+            self.remove()
+
+    def define(self, record: Schema | Channel) -> None:
+        """Add a schema or channel record (kept for every restart)."""
+        data = _record_bytes(record)
+        self.definitions += data
+        self._write(data)
+
+    def message(self, channel: int, sequence: int, log_time: int, publish_time: int,
+                data: bytes) -> None:
+        """Append a message record (the layout of mcap.records.Message)."""
+        self._write(struct.pack("<BQHIQQ", Opcode.MESSAGE, 22 + len(data), channel,
+                                sequence, log_time, publish_time), data)
+
+    def restart(self, chunk: int) -> None:
+        """Empty the journal for the chunk of index ``chunk`` of the file."""
+        if self.fd < 0:
+            return
+        header = _record_bytes(Metadata(name=_JOURNAL_HEADER, metadata={"chunk": str(chunk)}))
+        try:
+            os.ftruncate(self.fd, 0)
+        except OSError:
+            self.remove()
+        self._write(header, self.definitions)
+
+    def remove(self) -> None:
+        """Close and delete the journal (idempotent)."""
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1
+            self.path.unlink(missing_ok=True)
+
+
+def _record_bytes(record: Schema | Channel | Metadata) -> bytes:
+    """One MCAP record as the file holds it (opcode, length, fields)."""
+    b: Any = RecordBuilder()  # (mcap 1.6 carries no annotations)
+    record.write(b)
+    return bytes(b.end())
+
+
+def journal_path(mcap_path: Path) -> Path:
+    """The journal of a storage file."""
+    return mcap_path.with_name(mcap_path.name + JOURNAL_SUFFIX)
+
+
 class _OpenFile:
-    """One storage file being written: spool, mcap writer, ids of its schemas/channels."""
+    """One storage file being written: spool, mcap writer, ids of its schemas/channels,
+    journal of its chunk in progress."""
 
     def __init__(self, path: Path, chunk_size: int, compression: CompressionType) -> None:
         self.path = path
@@ -317,15 +395,22 @@ class _OpenFile:
         self.schemas: dict[str, int] = {}
         self.channels: dict[int, int] = {}
         self.record = FileRecord(path.name)
+        self.journal = _Journal(journal_path(path))
+        self.chunks = 0  # chunks written to the file
 
     def add(self, t: TopicRecord) -> None:
         if t.msgtype not in self.schemas:
             encoding = "ros2msg" if t.msgdef else ""
-            self.schemas[t.msgtype] = self.writer.register_schema(
-                t.msgtype, encoding, t.msgdef.encode())
+            data = t.msgdef.encode()
+            self.schemas[t.msgtype] = self.writer.register_schema(t.msgtype, encoding, data)
+            self.journal.define(Schema(id=self.schemas[t.msgtype], name=t.msgtype,
+                                       encoding=encoding, data=data))
+        metadata = {"offered_qos_profiles": _qos_yaml(t.qos), "topic_type_hash": t.type_hash}
         self.channels[t.id] = self.writer.register_channel(
-            t.topic, "cdr", self.schemas[t.msgtype],
-            {"offered_qos_profiles": _qos_yaml(t.qos), "topic_type_hash": t.type_hash})
+            t.topic, "cdr", self.schemas[t.msgtype], metadata)
+        self.journal.define(Channel(id=self.channels[t.id], topic=t.topic,
+                                    message_encoding="cdr",
+                                    schema_id=self.schemas[t.msgtype], metadata=metadata))
 
     def size(self) -> int:
         return self.stream.tell()
@@ -440,6 +525,7 @@ class BagRecorder:
         try:
             f.writer.finish()
             f.stream.commit(self.fsync)
+            f.journal.remove()  # every message is in the file
         finally:
             f.stream.close()
         self._pending = 0
@@ -577,9 +663,9 @@ class BagRecorder:
             rec = f.record
         if self._pending == 0:
             self._chunk_opened = self._clock()
-        f.writer.add_message(f.channels[conn], timestamp, bytes(data),
-                             timestamp if publish_time is None else publish_time,
-                             sequence & 0xFFFFFFFF)
+        data, sent = bytes(data), timestamp if publish_time is None else publish_time
+        f.writer.add_message(f.channels[conn], timestamp, data, sent, sequence & 0xFFFFFFFF)
+        f.journal.message(f.channels[conn], sequence & 0xFFFFFFFF, timestamp, sent, data)
         self._pending += len(data) + _RECORD_OVERHEAD
         self._largest = max(self._largest, len(data))
         self.topics[conn - 1].count += 1
@@ -610,10 +696,13 @@ class BagRecorder:
         """
         if self._file is None or self._pending == 0:
             return
-        self._file.writer.flush()
+        f = self._file
+        f.writer.flush()
         self._pending = 0
         self.chunks += 1
-        self._commit()
+        f.chunks += 1
+        self._commit()  # (a refused write raises: the journal then stays)
+        f.journal.restart(f.chunks)
 
     def flush_if_due(self) -> None:
         """Flush when the chunk in progress is older than ``chunk_interval`` (call from a
@@ -694,6 +783,7 @@ class FileReport:
     lost_bytes: int = 0
     lost_messages: int = 0
     error: str = ""
+    journal: int = 0  # messages of the chunk in progress, recovered from the journal
 
 
 @dataclass
@@ -746,6 +836,8 @@ class _Scan:
     damaged_bytes: int = 0      # bytes of chunks skipped as damaged
     damaged_messages: int = 0   # messages in them, by their message indexes
     untyped: int = 0            # messages of a channel whose record was lost
+    chunks: int = 0             # chunk records met (intact or not)
+    journal: int = 0            # messages taken from the journal
 
     @property
     def damaged(self) -> bool:
@@ -775,6 +867,7 @@ def _records(path: Path, scan: _Scan) -> Iterator[Message]:
             for record in reader.records:
                 inner: list[Any] | None = [record]
                 if isinstance(record, Chunk):
+                    scan.chunks += 1
                     scan.compression = record.compression
                     inner = _chunk_records(record, scan)
                     skipped = inner is None
@@ -798,6 +891,32 @@ def _records(path: Path, scan: _Scan) -> Iterator[Message]:
             scan.error = "truncated record"
         except Exception as exc:  # any other parse failure of damaged bytes stops the scan
             scan.error = f"{type(exc).__name__}: {exc}"
+
+
+def _journal_records(path: Path, scan: _Scan) -> Iterator[Message]:
+    """The messages of the journal of storage file ``path`` when its chunk is not in the
+    file (its index is not below the chunks ``scan`` met), up to its first incomplete
+    record; its schemas and channels join ``scan``'s."""
+    journal = journal_path(path)
+    if not journal.exists():
+        return
+    with journal.open("rb") as f:
+        reader = StreamReader(f, skip_magic=True, validate_crcs=False,
+                              record_size_limit=max(journal.stat().st_size, 1))
+        try:
+            for r in reader.records:
+                if isinstance(r, Metadata) and r.name == _JOURNAL_HEADER:
+                    if int(r.metadata["chunk"]) < scan.chunks:
+                        return  # its chunk reached the file
+                elif isinstance(r, Schema):
+                    scan.schemas.setdefault(r.id, r)
+                elif isinstance(r, Channel):
+                    scan.channels.setdefault(r.id, r)
+                elif isinstance(r, Message):
+                    scan.journal += 1
+                    yield r
+        except (McapError, ValueError, EOFError, struct.error):
+            return  # the record being appended when the recorder was killed
 
 
 @dataclass
@@ -856,7 +975,7 @@ def _copy_readable(path: Path, tmp: Path, chunk_size: int, scan: _Scan, tally: _
                     ch.topic, ch.message_encoding, schema_ids.get(ch.schema_id, 0), ch.metadata)
             return channel_ids[cid]
 
-        for m in _records(path, scan):
+        for m in itertools.chain(_records(path, scan), _journal_records(path, scan)):
             if m.channel_id not in scan.channels:
                 scan.untyped += 1  # a message whose channel record was lost cannot be typed
                 continue
@@ -910,10 +1029,11 @@ def _index(mcap_path: Path, chunk_size: int) -> tuple[_Scan, _Tally, FileReport]
     scan, tally = _recover(mcap_path, chunk_size, known)
     readable = sum(tally.counts.values())
     lost = max(scan.damaged_messages + scan.untyped, sum(counted.counts.values()) - readable)
-    tail = 0 if scan.complete else size - scan.end
+    # a cut-off last chunk whose messages the journal held loses no message
+    tail = 0 if scan.complete or scan.journal else size - scan.end
     return scan, tally, FileReport(mcap_path.name, readable, complete=False, recovered=True,
                                    lost_bytes=scan.damaged_bytes + tail, lost_messages=lost,
-                                   error=scan.error)
+                                   error=scan.error, journal=scan.journal)
 
 
 def reindex(path: str | Path, *, chunk_size: int = DEFAULT_CHUNK_SIZE) -> ReindexReport:
@@ -977,6 +1097,7 @@ def _reindex(path: Path, chunk_size: int) -> ReindexReport:
     reports: list[FileReport] = []
     for mcap_path in mcaps:
         scan, tally, report = _index(mcap_path, chunk_size)
+        journal_path(mcap_path).unlink(missing_ok=True)  # used, or its chunk is in the file
         reports.append(report)
         if not scan.channels:
             continue  # nothing readable: left out of the metadata, kept on disk

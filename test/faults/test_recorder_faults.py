@@ -34,13 +34,18 @@ def messages(sim_bag: Path) -> list[Msg]:
         return [(c.topic, c.msgtype, t, bytes(d)) for c, t, d in r.messages()]
 
 
-def record(path: Path, messages: list[Msg], **kw: Any) -> BagRecorder:
-    """Open a recorder and write ``messages`` (not closed)."""
+def record(path: Path, messages: list[Msg], handed: list[Msg] | None = None,
+           **kw: Any) -> BagRecorder:
+    """Open a recorder and write ``messages`` (not closed); each message is appended to
+    ``handed`` before it is written."""
     rec = BagRecorder(path, **kw).open()
     conns: dict[str, int] = {}
-    for topic, msgtype, t, data in messages:
+    for m in messages:
+        topic, msgtype, t, data = m
         if topic not in conns:
             conns[topic] = rec.add_connection(topic, msgtype, bag.offered_qos(topic))
+        if handed is not None:
+            handed.append(m)
         rec.write(conns[topic], t, data)
     return rec
 
@@ -52,9 +57,10 @@ def stored(path: Path) -> list[tuple[str, int, bytes]]:
 
 
 def leftovers(path: Path) -> list[str]:
-    """Lock, reserve and partial files in a bag directory."""
+    """Lock, reserve, journals and partial files in a bag directory."""
     return sorted(p.name for p in path.iterdir()
-                  if p.name in (LOCK_NAME, RESERVE_NAME) or p.suffix in (".tmp", ".recovering"))
+                  if p.name in (LOCK_NAME, RESERVE_NAME)
+                  or p.suffix in (".tmp", ".recovering", ".journal"))
 
 
 def test_bit_rot_in_a_chunk_is_reported_in_bytes_and_messages(
@@ -139,7 +145,8 @@ def test_reindex_refuses_a_bag_being_recorded_and_so_does_a_second_recorder(
     with pytest.raises(FileExistsError, match="being recorded by a recorder"):
         BagRecorder(path).open()
     assert sorted(p.name for p in path.iterdir()) == sorted([mcap.name, LOCK_NAME,
-                                                             RESERVE_NAME])
+                                                             RESERVE_NAME,
+                                                             mcap.name + ".journal"])
     rec.close()
     assert leftovers(path) == []
     assert bag.bag_summary(path).message_count == 3000
@@ -180,7 +187,7 @@ def full_disk(monkeypatch: pytest.MonkeyPatch, path: Path, limit: int, *,
         written[0] += n
         return n
 
-    monkeypatch.setattr(recorder.os, "pwrite", pwrite)
+    monkeypatch.setattr(os, "pwrite", pwrite)  # (the os module recorder writes with)
     return lambda: written[0]
 
 
@@ -199,19 +206,26 @@ def test_disk_full_stops_cleanly_with_every_message_kept(
     assert (path / "metadata.yaml").exists() and leftovers(path) == []
 
 
-def test_disk_full_even_after_the_reserve_keeps_complete_chunks_for_reindex(
+def test_disk_full_even_after_the_reserve_keeps_every_message_for_reindex(
         tmp_path: Path, messages: list[Msg], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The complete chunks are in the file, the chunk that could not be written is in the
+    journal (the journal's writes are not refused here): reindex recovers every message
+    the recorder was given."""
     path = tmp_path / "full"
     full_disk(monkeypatch, path, 1_000_000, reserve_helps=False)
+    handed: list[Msg] = []
     with pytest.raises(StorageError, match=f"free space, then 'dampest reindex {path}'"):
-        record(path, messages, chunk_size=64 * 1024)
-    assert leftovers(path) == [] and not (path / "metadata.yaml").exists()
+        record(path, messages, handed, chunk_size=64 * 1024)
+    assert leftovers(path) == ["full_0.mcap.journal"]
+    assert not (path / "metadata.yaml").exists()
     monkeypatch.undo()  # space freed
     report = reindex(path)
     # the failed write was cut off: the file ends at a record boundary
-    assert report.messages > 1000 and report.files[0].recovered
-    assert report.files[0].lost_bytes == 0 and report.files[0].error == "EndOfFile"
-    assert stored(path) == [(topic, t, d) for topic, _, t, d in messages[:report.messages]]
+    assert report.files[0].recovered and report.files[0].error == "EndOfFile"
+    assert report.files[0].lost_bytes == 0 and 0 < report.files[0].journal < 1000
+    assert 1000 < report.messages == len(handed) < len(messages)
+    assert stored(path) == [(topic, t, d) for topic, _, t, d in handed]
+    assert leftovers(path) == []
 
 
 def test_reindex_that_fails_leaves_no_partial_file(tmp_path: Path, messages: list[Msg],
@@ -255,3 +269,47 @@ def test_chunks_reach_the_file_within_a_quarter_second(tmp_path: Path,
         on_disk = mcap.stat().st_size
         assert now[0] - written_at <= 0.25 + 1e-9, k
     rec.close()
+
+
+def killed_copy(path: Path, to: Path, journal_from: Path | None = None) -> Path:
+    """The bag directory as a SIGKILL would leave it now: its files as they are on disk
+    (the journal taken from ``journal_from`` when given)."""
+    to.mkdir()
+    for f in path.iterdir():
+        (to / f.name.replace(path.name, to.name)).write_bytes(f.read_bytes())
+    if journal_from is not None:
+        (journal,) = journal_from.glob("*.journal")
+        (to / journal.name.replace(journal_from.name, to.name)).write_bytes(
+            journal.read_bytes())
+    return to
+
+
+def test_a_killed_recorder_keeps_every_message_it_was_given(tmp_path: Path,
+                                                          messages: list[Msg]) -> None:
+    """Was: the chunk in progress lost (up to 0.25 s of messages). Its messages are in the
+    journal: reindex recovers all 5000 (none lost, exit status 0); a journal cut inside its
+    last record gives all but that message; a journal whose chunk did reach the file (killed
+    between the chunk's write and the journal's restart) adds nothing twice."""
+    now = [0.0]  # no flush by age: chunks by size only
+    rec = record(tmp_path / "run", messages[:5000], chunk_size=64 * 1024, clock=lambda: now[0])
+    killed = killed_copy(tmp_path / "run", tmp_path / "k1")
+    report = reindex(killed)
+    assert report.messages == 5000 and report.lost_bytes == 0 and report.lost_messages == 0
+    assert 0 < report.files[0].journal < 5000
+    assert stored(killed) == [(topic, t, d) for topic, _, t, d in messages[:5000]]
+    assert leftovers(killed) == []
+
+    torn = killed_copy(tmp_path / "run", tmp_path / "k2")
+    (journal,) = torn.glob("*.journal")
+    os.truncate(journal, journal.stat().st_size - 5)
+    assert reindex(torn).messages == 4999
+    assert stored(torn) == [(topic, t, d) for topic, _, t, d in messages[:4999]]
+
+    stale = killed_copy(tmp_path / "run", tmp_path / "before_flush")
+    rec.flush()  # the chunk reaches the file; the copy's journal is the one from before
+    both = killed_copy(tmp_path / "run", tmp_path / "k3", journal_from=stale)
+    report = reindex(both)
+    assert report.messages == 5000 and report.files[0].journal == 0
+    assert stored(both) == [(topic, t, d) for topic, _, t, d in messages[:5000]]
+    rec.close()
+    assert leftovers(tmp_path / "run") == []
