@@ -563,6 +563,7 @@ def test_gz_maps_the_added_mass_switches_and_reads_them_back(
     assert back.added_mass_terms == load_terms(inertial=switches["inertial"],
                                                coriolis=switches["coriolis"],
                                                munk=switches["coriolis"])
+    assert back.added_mass is not None
     np.testing.assert_allclose(back.added_mass, heavy.body.added_mass, atol=1e-12)
 
 
@@ -605,6 +606,7 @@ def test_cli_export_import_round_trip_keeps_m_a_and_switches(tmp_path: Path,
                 "--out", str(out)]) == 0
     back, orig = load_model(out), load_model(src)
     assert back.added_mass_terms == orig.added_mass_terms
+    assert back.M_A is not None and orig.M_A is not None
     np.testing.assert_allclose(back.M_A, orig.M_A, atol=1e-12)
     np.testing.assert_allclose(back.M, orig.M, atol=1e-12)
     np.testing.assert_allclose(back.theta, orig.theta, rtol=1e-12)
@@ -626,7 +628,7 @@ def heavy_with(tmp_path: Path, heavy: Vehicle, values: dict[str, float],
         "min": (-flown * np.array([1, 0.5, 0.8, 1, 1, 1])).tolist(),
         "max": (flown * np.array([1, 0.5, 0.8, 1, 1, 1])).tolist()}}
     return save_model(tmp_path / "heavy_changed.yaml", names, theta, std, heavy.body.M,
-                      extra, damping=heavy.damping, **({"held": held} if held else {}))
+                      extra, damping=heavy.damping, held=held)
 
 
 @pytest.mark.parametrize("fmt", ["gz", "urdf", "uuv"])
