@@ -15,6 +15,11 @@ prior). An update whose numbers are not finite (θ, M, the σ of an identified c
 refused: the client keeps the last good model and says why (:attr:`ModelClient.errors`, the
 node's log).
 
+:attr:`ModelClient.age` is the time since the model in hand arrived. A server gone from the
+graph (its parameter services) for ``timeout`` seconds is lost: :attr:`ModelClient.lost` is
+true, :attr:`ModelClient.available` false (the last model is kept and still evaluated), a
+warning is logged; when the server is back the model is fetched again.
+
 Every static damping term is evaluated (linear, quadratic, cross, added mass, residual): the
 structure comes from ``model.terms.*`` when the server declares them (estimator_node and
 model_server_node do, as the model file has them), otherwise it is rebuilt from the
@@ -35,7 +40,9 @@ Example::
 
 from __future__ import annotations
 
+import math
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -77,13 +84,23 @@ class ModelClient:
         Refresh on ``/parameter_events`` of the server.
     on_update : callable, optional
         Called with the new :class:`IdentifiedModel` after each refresh.
+    timeout : float
+        Seconds the server may be missing from the graph before it counts as lost
+        (:attr:`lost`; checked every ``min(timeout / 4, 0.5)`` s of wall-clock time).
     """
 
     def __init__(self, node: Any = None, server: str = "estimator_node", follow: bool = True,
-                 on_update: Callable[[IdentifiedModel], None] | None = None) -> None:
+                 on_update: Callable[[IdentifiedModel], None] | None = None,
+                 timeout: float = 5.0) -> None:
+        if not timeout > 0:
+            raise ValueError(f"timeout must be > 0 s, got {timeout}")
         self.node = node
         self.server = server
         self.on_update = on_update
+        self.timeout = float(timeout)
+        self._received_at = math.nan     # time.monotonic() when the model in hand arrived
+        self._missing_since: float | None = None  # since when the server is not in the graph
+        self._lost_logged = False
         self._model: IdentifiedModel | None = None
         self._lock = threading.Lock()
         self._got = threading.Event()
@@ -103,6 +120,10 @@ class ModelClient:
             if follow:
                 node.create_subscription(ParameterEvent, "/parameter_events", self._on_event,
                                          100)
+            from rclpy.clock import Clock, ClockType
+            # the wall clock: a node on simulation time still notices a lost server
+            self._watch = node.create_timer(min(self.timeout / 4, 0.5), self._check_server,
+                                            clock=Clock(clock_type=ClockType.STEADY_TIME))
             self.request()
 
     # --- without ROS ---------------------------------------------------------------------
@@ -198,6 +219,28 @@ class ModelClient:
         self.errors.append(text)
         self.node.get_logger().error(f"model from {self.server} refused ({kept}): {text}")
 
+    def _check_server(self) -> None:
+        """Note when the server's services leave or come back to the graph."""
+        if self._list.service_is_ready() and self._cli.service_is_ready():
+            if self._missing_since is not None:
+                self._missing_since = None
+                if self._lost_logged:
+                    self._lost_logged = False
+                    self.node.get_logger().info(f"model server {self.server} is back")
+                    self.request()
+            return
+        if self._missing_since is None:
+            self._missing_since = time.monotonic()
+        if self.lost and not self._lost_logged:
+            self._lost_logged = True
+            if self._model is None:
+                what = "not found in the graph; waiting for it"
+            else:
+                what = (f"lost: not in the graph for {self.timeout:g} s (keeping version "
+                        f"{self.version}, {self.age:.1f} s old); available is false until "
+                        "it is back")
+            self.node.get_logger().warning(f"model server {self.server} {what}")
+
     def _on_event(self, event: Any) -> None:
         if event.node != self._full_name:
             return
@@ -208,6 +251,7 @@ class ModelClient:
     def _set(self, model: IdentifiedModel) -> None:
         with self._lock:
             self._model = model
+            self._received_at = time.monotonic()
             self.refreshes += 1
         self._got.set()
         if self.on_update is not None:
@@ -224,8 +268,19 @@ class ModelClient:
 
     @property
     def available(self) -> bool:
-        """True once a model was received."""
-        return self._model is not None
+        """True when a model was received and its server is not :attr:`lost`."""
+        return self._model is not None and not self.lost
+
+    @property
+    def lost(self) -> bool:
+        """True when the server has been missing from the graph for ``timeout`` seconds."""
+        return (self._missing_since is not None
+                and time.monotonic() - self._missing_since >= self.timeout)
+
+    @property
+    def age(self) -> float:
+        """Seconds (wall clock) since the model in hand arrived; NaN without a model."""
+        return time.monotonic() - self._received_at
 
     @property
     def model(self) -> IdentifiedModel:

@@ -5,6 +5,7 @@ the structure)."""
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -322,5 +323,61 @@ def test_bad_model_at_runtime_is_refused_and_the_client_keeps_the_last_good_one(
     finally:
         ex.shutdown()
         for n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_client_reports_the_age_of_its_model_and_a_lost_server(tmp_path: Path) -> None:
+    """Issue 12: a client whose server died kept 'available' true. With timeout=1 s: the age
+    grows from the model's arrival; 1 s after the server left the graph the client is lost
+    (available false, the last model kept and evaluated); a new server makes it available
+    again with a fresh model."""
+    rclpy = pytest.importorskip("rclpy")
+    from rclpy.executors import SingleThreadedExecutor
+
+    from dampest_ros.ros.model_server_node import ModelServerNode
+
+    path = tmp_path / "model.yaml"
+    model, theta, std, M = model_and_file(path)
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "77")
+    ns = f"/test_lost_{os.getpid()}"
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    ex = SingleThreadedExecutor(context=context)
+    args = ["--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={path}"]
+    server = ModelServerNode(context=context, cli_args=args)
+    probe = rclpy.create_node("probe", namespace=ns, context=context)
+    try:
+        ex.add_node(server)
+        ex.add_node(probe)
+        client = ModelClient(probe, "model_server_node", timeout=1.0)
+        assert math.isnan(client.age) and not client.available
+
+        def spin_for(seconds: float, done: Callable[[], bool] = lambda: False) -> float:
+            t0 = time.monotonic()
+            while not done() and time.monotonic() - t0 < seconds:
+                ex.spin_once(timeout_sec=0.05)
+            return time.monotonic() - t0
+
+        spin_for(10.0, lambda: client.available)
+        assert client.available and client.version == 4 and not client.lost
+        age0 = client.age
+        spin_for(0.5)
+        assert client.age - age0 == pytest.approx(0.5, abs=0.1)
+        ex.remove_node(server)
+        server.destroy_node()
+        gone = spin_for(10.0, lambda: client.lost)
+        assert client.lost and not client.available
+        assert 1.0 <= gone < 3.0  # the timeout plus the graph update and a check period
+        check_client(client, model, theta, std, M)  # the last model is kept
+        server = ModelServerNode(context=context, cli_args=args)
+        ex.add_node(server)
+        refreshes = client.refreshes
+        spin_for(10.0, lambda: client.available)
+        assert client.available and client.refreshes == refreshes + 1 and client.age < 1.0
+    finally:
+        ex.shutdown()
+        for n in (server, probe):
             n.destroy_node()
         rclpy.try_shutdown(context=context)

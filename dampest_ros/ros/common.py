@@ -6,9 +6,12 @@ import argparse
 import inspect
 import math
 import sys
+import threading
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from pathlib import Path
+from typing import Any, Protocol
 
 import rclpy
 from builtin_interfaces.msg import Time
@@ -20,6 +23,8 @@ from rcl_interfaces.msg import (
     SetParametersResult,
 )
 from rclpy.callback_groups import CallbackGroup
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -35,7 +40,7 @@ from rclpy.utilities import remove_ros_args
 
 from dampest_ros.core.estimator import wire_stamp
 from dampest_ros.core.rigid_body import ConfigError
-from dampest_ros.io.yaml_io import load_model
+from dampest_ros.io.yaml_io import load_model, load_vehicle
 
 #: Sensor topics: the sensor-data policies (best effort, volatile) with a deeper queue than
 #: its 5, for the bursts of a simulator running faster than real time.
@@ -46,6 +51,12 @@ SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000,
 RELIABLE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=200,
                           reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.VOLATILE)
+#: Where every node publishes its diagnostic_msgs/DiagnosticArray (absolute: the aggregator
+#: listens there whatever the node's namespace).
+DIAGNOSTICS_TOPIC = "/diagnostics"
+#: Seconds after its start during which a node started by :func:`main_for` looks in the
+#: graph for another node of its fully qualified name (and refuses to run if there is one).
+DUPLICATE_WINDOW = 3.0
 #: ``dampest/model``: reliable, transient local, keep last 1 (late joiners get the model).
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE,
@@ -191,11 +202,32 @@ def _descriptor(p: Param) -> ParameterDescriptor:
     return d
 
 
+def _type_reason(p: Param, value: Any) -> str | None:
+    """Why ``value`` has the wrong type for ``p`` (that of its default; an integer is a
+    number too), or None."""
+    d = p.default
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if isinstance(d, bool):
+        ok, what = isinstance(value, bool), "true or false"
+    elif isinstance(d, int):
+        ok, what = number and isinstance(value, int), "an integer"
+    elif isinstance(d, float):
+        ok, what = number, "a number"
+    elif isinstance(d, str):
+        ok, what = isinstance(value, str), "text (quote a number: -p name:=\"'5'\")"
+    elif isinstance(d, list):
+        ok, what = isinstance(value, list), "a list, e.g. [a, b]"
+    else:
+        return None
+    return None if ok else f"{p.name} must be {what}, got {value!r}"
+
+
 def validate(p: Param, value: Any) -> str | None:
-    """The reason why ``value`` is invalid for ``p``, or None."""
-    if isinstance(p.default, float) and (isinstance(value, bool)
-                                         or not isinstance(value, int | float)):
-        return f"{p.name} must be a number, got {value!r}"
+    """The reason why ``value`` is invalid for ``p`` (type, choices, finiteness, range, its
+    check), or None."""
+    reason = _type_reason(p, value)
+    if reason is not None:
+        return reason
     if p.choices and value not in p.choices:
         return f"{p.name} must be one of {list(p.choices)}, got {value!r}"
     if isinstance(value, float) and not math.isfinite(value):
@@ -225,6 +257,33 @@ def model_file_check(name: str) -> Callable[[Any], str | None]:
     return check
 
 
+def vehicle_check(value: Any) -> str | None:
+    """A :class:`Param` check for a vehicle preset name or YAML path: the reason
+    :func:`~dampest_ros.io.yaml_io.load_vehicle` refuses it, or None."""
+    try:
+        load_vehicle(str(value))
+    except (ConfigError, FileNotFoundError, ValueError) as exc:
+        return f"vehicle: {exc}"
+    return None
+
+
+def remove_orphaned_temp(path: Path) -> list[Path]:
+    """Remove the temporary files a killed atomic write of ``path`` left next to it
+    (``.<name>.*.tmp``, as :func:`dampest_ros.io.yaml_io.save_model` names them) that are
+    older than a minute (a write in progress by another process is younger); returns the
+    removed paths."""
+    now = time.time()
+    removed = []
+    for tmp in path.parent.glob(f".{path.name}.*.tmp"):
+        try:
+            if now - tmp.stat().st_mtime > 60.0:
+                tmp.unlink()
+                removed.append(tmp)
+        except FileNotFoundError:  # removed meanwhile by its writer
+            continue
+    return removed
+
+
 class ParamNode(Node):
     """A node whose parameters are declared from :class:`Param` specs and validated on set;
     accepted changes go to :meth:`on_parameters` (after they are set)."""
@@ -233,6 +292,15 @@ class ParamNode(Node):
         super().__init__(name, **kwargs)
         self._specs = {p.name: p for p in specs}
         for p in specs:
+            given = self._parameter_overrides.get(p.name)
+            if given is not None:  # refused with our reason before rclpy's type/range checks
+                reason = validate(p, given.value)
+                if reason is not None:
+                    raise ValueError(f"parameter {reason}")
+                if isinstance(p.default, list) and p.default and \
+                        isinstance(p.default[0], float):  # '[1, 0, 0]': integers are numbers
+                    self._parameter_overrides[p.name] = Parameter(
+                        p.name, value=[float(v) for v in given.value])
             self.declare_parameter(p.name, p.default, _descriptor(p))
             reason = validate(p, self.get_parameter(p.name).value)
             if reason is not None:
@@ -285,11 +353,66 @@ class ParamNode(Node):
         """Apply accepted parameter changes (override)."""
 
 
+class ModelParamNode(ParamNode):
+    """A node that holds the model in the read-only (from outside) model.* parameters."""
+
+    def __init__(self, name: str, specs: Any, **kwargs: Any) -> None:
+        self._internal = threading.local()
+        self._served: dict[str, Any] = {}
+        super().__init__(name, specs, **kwargs)
+
+    def serve_model(self, values: dict[str, Any]) -> None:
+        """Hold ``values`` in model.* (dotted name → value, as
+        :func:`dampest_ros.io.yaml_io.model_parameters` gives them): declare the new names,
+        undeclare those gone (the terms' names change with the structure), set the changed
+        values."""
+        for name in set(self._served) - set(values):
+            self.undeclare_parameter(name)
+        added = [Parameter(n, value=v) for n, v in values.items() if n not in self._served]
+        changed = [Parameter(n, value=v) for n, v in values.items()
+                   if n in self._served and self._served[n] != v]
+        if added:
+            self.declare_model(added)
+        if changed:
+            self.set_model(changed)
+        self._served = values
+
+    def declare_model(self, params: list[Parameter]) -> None:
+        """Declare model.* (read-only from outside: see :meth:`_check_parameters`)."""
+        self._internal.on = True
+        try:
+            for prm in params:
+                self.declare_parameter(prm.name, prm.value, ParameterDescriptor(
+                    description="identified damping model (docs/architecture.md §3); set by "
+                                "this node"))
+        finally:
+            self._internal.on = False
+
+    def set_model(self, params: list[Parameter]) -> None:
+        """Set model.* (allowed only from here)."""
+        self._internal.on = True
+        try:
+            result = self.set_parameters_atomically(params)
+        finally:
+            self._internal.on = False
+        if not result.successful:
+            self.get_logger().error(f"could not set the model parameters: {result.reason}")
+
+    def _check_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        if not getattr(self._internal, "on", False):
+            for prm in params:
+                if prm.name.startswith("model."):
+                    return SetParametersResult(
+                        successful=False, reason=f"{prm.name} is read-only: the model is set by "
+                        f"{self.get_name()} itself")
+        return super()._check_parameters(params)
+
+
 def diagnostic_array(node: Node, name: str, values: dict[str, Any], level: int = 0,
                      message: str = "ok", stamp: Time | None = None) -> DiagnosticArray:
     """A DiagnosticArray with one status of key/value pairs."""
     status = DiagnosticStatus(level=bytes([level]), name=name, message=message,
-                              hardware_id=node.get_name())
+                              hardware_id=node.get_fully_qualified_name())
     status.values = [KeyValue(key=str(k), value=_text(v)) for k, v in values.items()]
     arr = DiagnosticArray()
     arr.header.stamp = stamp if stamp is not None else node.get_clock().now().to_msg()
@@ -303,13 +426,46 @@ def _text(v: Any) -> str:
     return str(v)
 
 
-def main_for(node_class: Callable[[], Node], doc: str) -> Callable[[list[str] | None], None]:
-    """A console-script main(): ``--help`` lists the node's parameters; otherwise init, spin,
-    stop on Ctrl-C or external shutdown, destroy the node, shut down (as demo_nodes_py).
+class NodeMain(Protocol):
+    """A node's console-script ``main(args=None)``."""
 
-    A node that cannot start on its parameters (a ValueError while it is built: an invalid
-    parameter, a model file no reader takes) logs one error line and exits with status 2,
-    without a traceback."""
+    def __call__(self, args: list[str] | None = None) -> None: ...
+
+
+class DuplicateNodeError(RuntimeError):
+    """Another node of the same fully qualified name runs in the graph."""
+
+
+def watch_duplicates(node: Node, window: float = DUPLICATE_WINDOW) -> None:
+    """For ``window`` seconds (wall clock), look in the graph every 0.2 s for another node
+    of ``node``'s fully qualified name; raise :class:`DuplicateNodeError` from the executor
+    when there is one. The node that started last refuses (the other has stopped looking);
+    two started within ``window`` of each other both refuse."""
+    t0 = time.monotonic()
+    me = (node.get_name(), node.get_namespace())
+
+    def look() -> None:
+        if node.get_node_names_and_namespaces().count(me) > 1:
+            raise DuplicateNodeError(
+                f"another node named {node.get_fully_qualified_name()} is running (two would "
+                "both answer its services and parameters); stop it, or give this one another "
+                "name or namespace: --ros-args -r __node:=NAME or -r __ns:=/NAMESPACE")
+        if time.monotonic() - t0 > window:
+            timer.cancel()
+
+    timer = node.create_timer(0.2, look, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+
+def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
+    """A console-script main(): ``--help`` lists the node's parameters; otherwise init, spin,
+    stop on SIGINT, SIGTERM or external shutdown (status 0), destroy the node, shut down.
+
+    A node that cannot start logs one error line and exits with status 2, without a
+    traceback: a ValueError while it is built (an invalid parameter, a model file no reader
+    takes), a value rclpy refuses, or another node of the same fully qualified name in the
+    graph within :data:`DUPLICATE_WINDOW` s of the start (:func:`watch_duplicates`). An
+    error raised by a callback the shutdown interrupted (e.g. publishing on the context a
+    signal has just shut down) ends the node quietly too."""
 
     def main(args: list[str] | None = None) -> None:
         argv = sys.argv if args is None else args
@@ -324,14 +480,18 @@ def main_for(node_class: Callable[[], Node], doc: str) -> Callable[[list[str] | 
         refused = False
         try:
             node = node_class()
+            watch_duplicates(node)
             rclpy.spin(node)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
-        except ValueError as exc:  # ConfigError included
-            if node is not None:
+        except (ValueError, ParameterException, DuplicateNodeError) as exc:
+            if node is not None and not isinstance(exc, DuplicateNodeError):
                 raise
             rclpy.logging.get_logger(name).error(f"cannot start: {exc}")
             refused = True
+        except Exception:
+            if rclpy.ok():  # not a shutdown: a real failure, shown in full
+                raise
         finally:
             if node is not None:
                 node.destroy_node()

@@ -19,9 +19,15 @@ from dampest_ros.client import ModelClient
 from dampest_ros.core import frames
 from dampest_ros.core.control import DEFAULT_BANDWIDTH, VelocityPI
 from dampest_ros.io.yaml_io import load_vehicle
-from dampest_ros.ros.common import RELIABLE_QOS, Param, ParamNode, main_for, seconds
+from dampest_ros.ros.common import (
+    RELIABLE_QOS,
+    Param,
+    ParamNode,
+    main_for,
+    seconds,
+    vehicle_check,
+)
 from dampest_ros.ros.convert import twist6, wrench_msg, xyz
-from dampest_ros.ros.sim_node import _vehicle_ok
 
 
 def _six(value: Any) -> str | None:
@@ -37,7 +43,7 @@ class ControllerNode(ParamNode):
     NODE_NAME = "controller_node"
     PARAMS = (
         Param("vehicle", "bluerov2_heavy", "vehicle preset: M (gain scaling) and thrust "
-              "limits", check=_vehicle_ok),
+              "limits", check=vehicle_check),
         Param("model_node", "estimator_node", "node that holds model.* (estimator_node or "
               "model_server_node)"),
         Param("feedforward", True, "add the model feed-forward D(ν)ν + C(ν)ν"),

@@ -5,17 +5,20 @@ attitude for the restoring forces g(η)), matched by exact header stamp. Holds t
 parameters model.parameter_names, model.theta, model.theta_std, model.M (row-major, FRD),
 model.version (bumped at each publish) and the term structure model.terms.* (read-only from
 outside; the layout of the model file, as model_server_node has it), publishes it on dampest/model
-(std_msgs/String with the model file YAML, transient local) and diagnostics
+(std_msgs/String with the model file YAML, transient local) and on /diagnostics
 (diagnostic_msgs/DiagnosticArray: excitation per DOF, condition number, covariance trace,
-innovation RMS, CUSUM change alarm, samples rejected by the outlier gate) at publish_rate.
-Services: ~/reset (std_srvs/Trigger, back to the prior), ~/save (Trigger, atomic write of the
-model file to save_path), ~/freeze (std_srvs/SetBool: stop or resume updating). The work is
-done by dampest_ros.core.estimator.OnlineEstimator.
-"""
+innovation RMS, CUSUM change alarm, and every drop counter: count.* of the messages per
+topic, matched, unmatched, used, rejected_nonfinite, dropped_out_of_order, rejected_outliers,
+clock_jumps, resume_refused) at publish_rate.
+Services: ~/reset (std_srvs/Trigger, back to the model it started from), ~/save (Trigger,
+atomic write of the model file to save_path), ~/freeze (std_srvs/SetBool: stop or resume
+updating). With resume (default) it starts from the model file at save_path with its version
+when the file holds this vehicle's coefficients (else it says why, counts it and starts from
+the prior); temporary files of a killed save are removed at start. The work is done by
+dampest_ros.core.estimator.OnlineEstimator."""
 
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 from typing import Any
 
@@ -27,39 +30,32 @@ from geometry_msgs.msg import (
     TwistWithCovarianceStamped,
     WrenchStamped,
 )
-from rclpy.parameter import Parameter
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from dampest_ros.core import frames
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator
 from dampest_ros.core.rigid_body import ConfigError
-from dampest_ros.core.rls import FORGETTING_MODES, OUTLIER_GATE
-from dampest_ros.io.yaml_io import load_model, load_vehicle, model_parameters
+from dampest_ros.core.rls.least_squares import OUTLIER_GATE
+from dampest_ros.core.rls.update import FORGETTING_MODES
+from dampest_ros.io.yaml_io import ModelFile, load_model, load_vehicle, model_parameters
 from dampest_ros.ros.common import (
+    DIAGNOSTICS_TOPIC,
     LATCHED_QOS,
     RELIABLE_QOS,
     Drain,
+    ModelParamNode,
     Param,
-    ParamNode,
     diagnostic_array,
     main_for,
+    model_file_check,
+    remove_orphaned_temp,
+    vehicle_check,
 )
 from dampest_ros.ros.convert import stamped_floats
-from dampest_ros.ros.sim_node import _vehicle_ok
 
 TERM_HELP = "comma list of the vehicle's damping terms to identify, e.g. 'linear,quadratic' " \
             "('': all of the preset's terms)"
-
-
-def _prior_ok(value: Any) -> str | None:
-    if not str(value).strip():
-        return None
-    try:
-        load_model(str(value))
-    except (ConfigError, FileNotFoundError, ValueError, OSError) as exc:
-        return f"prior: {exc}"
-    return None
 
 
 def _save_ok(value: Any) -> str | None:
@@ -71,70 +67,13 @@ def _save_ok(value: Any) -> str | None:
     return None
 
 
-class ModelParamNode(ParamNode):
-    """A node that holds the model in the read-only (from outside) model.* parameters."""
-
-    def __init__(self, name: str, specs: Any, **kwargs: Any) -> None:
-        self._internal = threading.local()
-        self._served: dict[str, Any] = {}
-        super().__init__(name, specs, **kwargs)
-
-    def serve_model(self, values: dict[str, Any]) -> None:
-        """Hold ``values`` in model.* (dotted name → value, as
-        :func:`dampest_ros.io.yaml_io.model_parameters` gives them): declare the new names,
-        undeclare those gone (the terms' names change with the structure), set the changed
-        values."""
-        for name in set(self._served) - set(values):
-            self.undeclare_parameter(name)
-        added = [Parameter(n, value=v) for n, v in values.items() if n not in self._served]
-        changed = [Parameter(n, value=v) for n, v in values.items()
-                   if n in self._served and self._served[n] != v]
-        if added:
-            self.declare_model(added)
-        if changed:
-            self.set_model(changed)
-        self._served = values
-
-    def declare_model(self, params: list[Parameter]) -> None:
-        """Declare model.* (read-only from outside: see :meth:`_check_parameters`)."""
-        from rcl_interfaces.msg import ParameterDescriptor
-        self._internal.on = True
-        try:
-            for prm in params:
-                self.declare_parameter(prm.name, prm.value, ParameterDescriptor(
-                    description="identified damping model (docs/architecture.md §3); set by "
-                                "this node"))
-        finally:
-            self._internal.on = False
-
-    def set_model(self, params: list[Parameter]) -> None:
-        """Set model.* (allowed only from here)."""
-        self._internal.on = True
-        try:
-            result = self.set_parameters_atomically(params)
-        finally:
-            self._internal.on = False
-        if not result.successful:
-            self.get_logger().error(f"could not set the model parameters: {result.reason}")
-
-    def _check_parameters(self, params: list[Parameter]) -> Any:
-        from rcl_interfaces.msg import SetParametersResult
-        if not getattr(self._internal, "on", False):
-            for prm in params:
-                if prm.name.startswith("model."):
-                    return SetParametersResult(
-                        successful=False, reason=f"{prm.name} is read-only: the model is set by "
-                        f"{self.get_name()} itself")
-        return super()._check_parameters(params)
-
-
 class EstimatorNode(ModelParamNode):
     """Estimator node (see the module docstring)."""
 
     NODE_NAME = "estimator_node"
     PARAMS = (
         Param("vehicle", "bluerov2_heavy", "vehicle preset: M, restoring, nominal damping "
-              "(term structure and prior mean)", check=_vehicle_ok),
+              "(term structure and prior mean)", check=vehicle_check),
         Param("terms", "", TERM_HELP),
         Param("forgetting_factor", 0.999, "RLS forgetting factor λ (memory ≈ 1/(1−λ) samples)",
               low=0.9, high=1.0),
@@ -152,19 +91,32 @@ class EstimatorNode(ModelParamNode):
               "rejected and counted (count.rejected_outliers); χ²(6) quantiles: 22.5 at "
               "p = 1e-3, 53.3 at p = 1e-9; 0: no gate", low=0.0, high=1e12),
         Param("prior", "", "model YAML whose theta/theta_std are the prior ('' : nominal "
-              "damping of the preset with wide uncertainty)", check=_prior_ok),
+              "damping of the preset with wide uncertainty)", check=model_file_check("prior")),
         Param("save_path", "dampest_model.yaml", "where ~/save writes the model YAML",
               check=_save_ok),
+        Param("resume", True, "at start, continue from the model file at save_path (its θ, "
+              "σ and version) when there is one for this vehicle and terms; false: start "
+              "from the prior", read_only=True),
     )
 
     def __init__(self, keep_samples: bool = False, **kwargs: Any) -> None:
         super().__init__(self.NODE_NAME, self.PARAMS, **kwargs)
         self.keep_samples = keep_samples
         self.version = 0
+        #: what happened to the model file at save_path at start (diagnostics ``resume``)
+        self.resumed = "off"
+        #: saved model files refused at start (wrong vehicle or terms, unreadable)
+        self.resume_refused = 0
+        #: sample clock jumps back (matching restarted)
+        self.clock_jumps = 0
         self._build()
+        if self.p("resume"):
+            start = self._saved_model()
+            if start is not None:
+                self._build(start)
         self.serve_model(self._model_values())
         self.pub_model = self.create_publisher(String, "dampest/model", LATCHED_QOS)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RELIABLE_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, RELIABLE_QOS)
         # raw subscriptions: the stamp and the values are read from the CDR bytes
         streams = (("velocity", TwistWithCovarianceStamped, 6),
                    ("acceleration", AccelWithCovarianceStamped, 6),
@@ -187,10 +139,53 @@ class EstimatorNode(ModelParamNode):
         self._used_at_publish = -1
         self._last_stamp = -1
 
-    def _build(self) -> None:
+    def _saved_model(self) -> ModelFile | None:
+        """The model file at save_path when it can be resumed (its version taken), else None
+        (the reason logged and counted). Temporary files of a killed save are removed."""
+        path = Path(self.p("save_path")).expanduser()
+        log = self.get_logger()
+        for tmp in remove_orphaned_temp(path):
+            log.info(f"removed {tmp}, left by a save that was killed")
+        if not path.exists():
+            self.resumed = f"no model file at {path}"
+            return None
+        try:
+            m = load_model(path)
+            reason = self._mismatch(m)
+        except (ConfigError, ValueError, OSError) as exc:
+            reason = str(exc)
+        if reason is not None:
+            self.resume_refused += 1
+            self.resumed = f"refused {path}: {reason}"
+            log.error(f"not resuming from {path}: {reason}; starting from the prior (~/save "
+                      "replaces the file)")
+            return None
+        self.version = int(m.version)
+        self.resumed = f"version {m.version} from {path}"
+        log.info(f"resumed from {path}: model version {m.version}")
+        return m
+
+    def _mismatch(self, m: ModelFile) -> str | None:
+        """Why model file ``m`` is not an estimate of this node's vehicle and terms."""
+        e = self.estimator
+        vehicle = m.extra.get("vehicle")
+        if vehicle is not None and vehicle != e.vehicle.name:
+            return f"it was saved for vehicle {vehicle}, this node estimates {e.vehicle.name}"
+        if list(m.parameter_names) != list(e.names):
+            missing = [n for n in e.names if n not in m.parameter_names]
+            other = [n for n in m.parameter_names if n not in e.names]
+            return (f"its coefficients are not those of vehicle {e.vehicle.name} with terms "
+                    f"'{self.p('terms') or 'all'}' (missing {missing}, not estimated here "
+                    f"{other})")
+        return None
+
+    def _build(self, start: ModelFile | None = None) -> None:
+        """A new estimator from ``start`` (a resumed model file) or else the prior."""
         terms = [t.strip() for t in str(self.p("terms")).split(",") if t.strip()]
         prior = None
-        if str(self.p("prior")).strip():
+        if start is not None:
+            prior = (start.parameter_names, start.theta, start.theta_std)
+        elif str(self.p("prior")).strip():
             pm = load_model(self.p("prior"))
             prior = (pm.parameter_names, pm.theta, pm.theta_std)
         cfg = EstimatorConfig(forgetting_factor=self.p("forgetting_factor"),
@@ -204,7 +199,7 @@ class EstimatorNode(ModelParamNode):
         """model.* of the current estimate, its term structure included."""
         e = self.estimator
         return model_parameters(e.names, e.theta, e.theta_std, e.M, damping=e.model,
-                                version=self.version, **e.added_mass_kwargs())
+                                version=self.version, **e.file_kwargs())
 
     def check_parameter(self, name: str, value: Any) -> str | None:
         try:
@@ -242,6 +237,7 @@ class EstimatorNode(ModelParamNode):
                                       f"{(self._last_stamp - ns) * 1e-9:.3f} s; matching "
                                       "restarted, estimate kept")
             self.estimator.restart_clock()
+            self.clock_jumps += 1
             self._last_stamp = ns
         else:
             self._last_stamp = max(self._last_stamp, ns)
@@ -264,6 +260,9 @@ class EstimatorNode(ModelParamNode):
             self.pub_model.publish(String(data=est.text(self.version)))
         values = est.diagnostic_values()
         values["model.version"] = self.version
+        values["count.clock_jumps"] = self.clock_jumps
+        values["count.resume_refused"] = self.resume_refused
+        values["resume"] = self.resumed
         d = est.rls.diagnostics(condition=False)
         level, message = 0, "ok"
         if d.alarm:

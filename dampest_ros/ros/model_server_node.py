@@ -28,8 +28,13 @@ from dampest_ros.io.yaml_io import (
     model_parameters,
     model_text,
 )
-from dampest_ros.ros.common import LATCHED_QOS, Param, main_for, model_file_check
-from dampest_ros.ros.estimator_node import ModelParamNode
+from dampest_ros.ros.common import (
+    LATCHED_QOS,
+    ModelParamNode,
+    Param,
+    main_for,
+    model_file_check,
+)
 
 
 class ModelServerNode(ModelParamNode):

@@ -8,7 +8,8 @@ dampest/velocity (TwistWithCovarianceStamped), dampest/acceleration
 (QuaternionStamped, base_link FLU → odom ENU, for the restoring forces) with identical header
 stamps at a fixed rate, body frame FLU (base_link), only for usable samples (not during DVL
 dropouts); diagnostics with the message counts, rejections and resets once per second.
-The work is done by dampest_ros.core.online.OnlinePreprocessor (the same class replays bags).
+The work is done by dampest_ros.core.online.preprocessor.OnlinePreprocessor (the same class
+replays bags).
 The sensor messages reach it in stamp order whatever the order of their arrival
 (dampest_ros.core.reorder.StampOrder, up to reorder_latency of stamp time; what is held is
 released when no message has come for half a second), so that live data, a replayed bag and
@@ -31,10 +32,12 @@ from sensor_msgs.msg import FluidPressure, Imu, JointState
 
 from dampest_ros.core import frames
 from dampest_ros.core.estimator import attitude_quaternion
-from dampest_ros.core.online import OnlineConfig, OnlinePreprocessor, OnlineSample, topic_roles
+from dampest_ros.core.online.preprocessor import OnlinePreprocessor
+from dampest_ros.core.online.sample import OnlineConfig, OnlineSample, topic_roles
 from dampest_ros.core.reorder import StampOrder
 from dampest_ros.io.yaml_io import load_vehicle
 from dampest_ros.ros.common import (
+    DIAGNOSTICS_TOPIC,
     RELIABLE_QOS,
     SENSOR_QOS,
     Param,
@@ -44,9 +47,9 @@ from dampest_ros.ros.common import (
     seconds,
     stamp_ns,
     to_time,
+    vehicle_check,
 )
 from dampest_ros.ros.convert import stamped_floats
-from dampest_ros.ros.sim_node import _vehicle_ok
 
 
 class SampleMessages:
@@ -93,7 +96,7 @@ class PreprocessNode(ParamNode):
     NODE_NAME = "preprocess_node"
     PARAMS = (
         Param("vehicle", "bluerov2_heavy", "vehicle preset (thruster allocation, g, ρ)",
-              check=_vehicle_ok),
+              check=vehicle_check),
         Param("rate", 50.0, "output sample rate in Hz", low=1.0, high=500.0),
         Param("max_dvl_gap", 1.0, "samples more than this (s) after the last DVL fix are "
               "not published", low=0.05, high=60.0),
@@ -120,7 +123,8 @@ class PreprocessNode(ParamNode):
                                            RELIABLE_QOS)
         self.pub_w = self.create_publisher(WrenchStamped, "dampest/wrench", RELIABLE_QOS)
         self.pub_q = self.create_publisher(QuaternionStamped, "dampest/attitude", RELIABLE_QOS)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RELIABLE_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC,
+                                             RELIABLE_QOS)
         self.messages = SampleMessages()
         self._build()
         # raw: stamps and values read from the CDR bytes (the joint names need rclpy's)
@@ -214,7 +218,7 @@ class PreprocessNode(ParamNode):
             self.get_logger().warning(self.pre.events.popleft())
 
     def _publish_diagnostics(self) -> None:
-        c = dict(self.pre.counts)
+        c: dict[str, float] = dict(self.pre.counts)
         c["published"] = self.published
         c["late"] = self.order.counts["late"]
         c["max_lag_s"] = self.order.max_lag

@@ -39,7 +39,7 @@ from dampest_ros.ros.common import DRAIN_LIMIT, Param, ParamNode, main_for
 #: The topics of docs/architecture.md §3 (relative: resolved in the node's namespace).
 DEFAULT_TOPICS = ["truth/odom", "imu/data", "dvl/twist", "pressure", "thrusters/state",
                   "dampest/velocity", "dampest/acceleration", "dampest/wrench", "dampest/model",
-                  "diagnostics"]
+                  "/diagnostics"]
 
 
 def _output_ok(value: Any) -> str | None:

@@ -12,6 +12,7 @@ again at 0).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 from geometry_msgs.msg import TwistWithCovarianceStamped, WrenchStamped
@@ -21,10 +22,11 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import FluidPressure, Imu, JointState
 
 from dampest_ros.core import frames
+from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import PROTOCOLS
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.sensors import SensorConfig
-from dampest_ros.core.simulate import BACKENDS, Effects
+from dampest_ros.core.simulate import BACKENDS
 from dampest_ros.core.stream import LiveSimulation
 from dampest_ros.io.yaml_io import load_vehicle, read_mapping
 from dampest_ros.ros.common import (
@@ -34,19 +36,12 @@ from dampest_ros.ros.common import (
     ParamNode,
     main_for,
     to_time,
+    vehicle_check,
 )
 from dampest_ros.ros.convert import publications, wrench6
 
 
-def _vehicle_ok(value: Any) -> str | None:
-    try:
-        load_vehicle(str(value))
-    except (ConfigError, FileNotFoundError, ValueError) as exc:
-        return f"vehicle: {exc}"
-    return None
-
-
-def _mapping_ok(kind: type) -> Any:
+def _mapping_ok(kind: type[Effects] | type[SensorConfig]) -> Callable[[Any], str | None]:
     def check(value: Any) -> str | None:
         if not str(value).strip():
             return None
@@ -64,7 +59,7 @@ class SimNode(ParamNode):
     NODE_NAME = "sim_node"
     PARAMS = (
         Param("vehicle", "bluerov2_heavy", "vehicle preset name or YAML path",
-              check=_vehicle_ok),
+              check=vehicle_check),
         Param("protocol", "B", "excitation protocol flown without cmd_wrench",
               choices=(*PROTOCOLS, "hover")),
         Param("duration", 300.0, "length of the protocol in s; the simulation stops after it",
@@ -73,7 +68,7 @@ class SimNode(ParamNode):
               high=2**31 - 1),
         Param("rate_factor", 1.0, "simulated seconds per wall-clock second (1: real time)",
               low=0.01, high=1000.0),
-        Param("effects", "", "YAML mapping of hidden effects (dampest_ros.core.simulate."
+        Param("effects", "", "YAML mapping of hidden effects (dampest_ros.core.effects."
               "Effects), e.g. '{damping_change_time: 200, damping_change_factor: 1.3}'",
               check=_mapping_ok(Effects)),
         Param("sensors", "", "YAML mapping of sensor settings (dampest_ros.core.sensors."
