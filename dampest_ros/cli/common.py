@@ -119,11 +119,11 @@ def tau_topic(topics: dict[str, str]) -> str:
 
 def add_preprocess_options(p: argparse.ArgumentParser) -> None:
     """Options of the preprocessing (sample rate, filter, delay)."""
-    p.add_argument("--rate", type=float, default=50.0,
+    p.add_argument("--rate", type=float, default=50.0, metavar="HZ",
                    help="sample rate of the synchronised data in Hz (default: 50)")
-    p.add_argument("--max-gap", type=float, default=1.0,
+    p.add_argument("--max-gap", type=float, default=1.0, metavar="S",
                    help="DVL gaps longer than this (s) split the data (default: 1)")
-    p.add_argument("--delay", default="0",
+    p.add_argument("--delay", default="0", metavar="S|auto",
                    help="delay (s) of the vehicle's response after the logged thrust, or "
                         "'auto' to estimate it by cross-correlation and correct it (default: 0)")
 

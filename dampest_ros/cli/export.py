@@ -42,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="vehicle preset name or YAML path; its rigid body gives the added "
                         "mass M_A = M - M_RB when the model file has no model.M_A (without "
                         "either: damping only)")
-    p.add_argument("--link-name", default="base_link",
+    p.add_argument("--link-name", default="base_link", metavar="LINK",
                    help="gz, uuv: the link the plugin acts on (default: base_link)")
     p.add_argument("--frame", choices=FRAMES, default="flu",
                    help="gz: frame of that link, flu (Gazebo/REP-103, default) or frd")
@@ -64,7 +64,8 @@ def add_import_arguments(q: argparse.ArgumentParser) -> None:
                    help="vehicle preset name or YAML path for the rigid body M_RB (needed "
                         "when the file has no mass and inertia) and the added mass when the "
                         "file has none")
-    q.add_argument("--link-name", help="gz: which plugin to read when there are several")
+    q.add_argument("--link-name", metavar="LINK",
+                   help="gz: which plugin to read when there are several")
     q.add_argument("--frame", choices=FRAMES, default="flu",
                    help="gz: frame of the plugin's link, flu (default) or frd")
 
