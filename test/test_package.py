@@ -139,6 +139,7 @@ ROSDEP_KEYS = {
     "mcap_ros2": "mcap-ros2-support",
     "mujoco": "python3-mujoco-pip",
     "pinocchio": "pinocchio",
+    "dask": "python3-dask",
 }
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -11,11 +12,21 @@ import numpy as np
 
 from dampest_ros.cli.common import DEFAULT_TOPICS, table, term_list
 from dampest_ros.cli.inputs import bag_topics, check_options, cut, load_samples, split_holdout
+from dampest_ros.cli.pool import (
+    check_pooled_options,
+    drift_table,
+    expand_inputs,
+    log_table,
+    plot_drift,
+    reduce_all,
+)
 from dampest_ros.core.batch import Fit, FitOptions, fit
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.excitation import speed_limits
-from dampest_ros.core.online import OnlineConfig, OnlinePreprocessor
+from dampest_ros.core.online.preprocessor import OnlinePreprocessor
+from dampest_ros.core.online.sample import OnlineConfig
+from dampest_ros.core.pool import drift, pooled_fit, pooled_samples
 from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
@@ -24,13 +35,17 @@ from dampest_ros.core.validate import force_scores
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
-from dampest_ros.report import write_report
+from dampest_ros.report import parameter_units, write_report
 
 
 def run(args: argparse.Namespace) -> int:
     """Read, preprocess, fit, print the table, write the model."""
     t0 = time.perf_counter()
     vehicle = load_vehicle(args.vehicle)
+    paths = expand_inputs(args.input)
+    if len(paths) > 1:
+        return run_pooled(args, vehicle, paths)
+    args.input = paths[0]
     if args.method == "rls":
         return run_rls(args, vehicle)
     model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
@@ -44,14 +59,7 @@ def run(args: argparse.Namespace) -> int:
         values = dict(zip(model.parameter_names, nominal, strict=True))
         model = selection.model
         nominal = np.array([values.get(n, 0.0) for n in model.parameter_names])
-    prior, prior_std = nominal, None
-    if args.prior:
-        pm = load_model(args.prior)
-        values = dict(zip(pm.parameter_names, pm.theta, strict=True))
-        stds = dict(zip(pm.parameter_names, pm.theta_std, strict=True))
-        prior = np.array([values.get(n, v) for n, v in zip(model.parameter_names, nominal,
-                                                             strict=True)])
-        prior_std = np.array([stds.get(n, np.inf) for n in model.parameter_names])
+    prior, prior_std = prior_of(args, model, nominal)
     options = FitOptions(method=args.method, cutoff=args.cutoff,
                          speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
     result = fit(samples, model, vehicle.body, options, prior=prior, prior_std=prior_std)
@@ -90,6 +98,73 @@ def run(args: argparse.Namespace) -> int:
                             truth=truth, title=f"Damping of {vehicle.name}",
                             source=str(args.input), cutoff=args.cutoff, heldout=scores,
                             heldout_note=heldout_note(held) if held is not None else "")
+        print(f"wrote {page}")
+    return 0
+
+
+def prior_of(args: argparse.Namespace, model: DampingModel, nominal: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The prior mean and standard deviation: the nominal damping, or --prior's model (its
+    values where it names a parameter, the nominal elsewhere)."""
+    if not args.prior:
+        return nominal, None
+    pm = load_model(args.prior)
+    values = dict(zip(pm.parameter_names, pm.theta, strict=True))
+    stds = dict(zip(pm.parameter_names, pm.theta_std, strict=True))
+    prior = np.array([values.get(n, v) for n, v in zip(model.parameter_names, nominal,
+                                                         strict=True)])
+    return prior, np.array([stds.get(n, np.inf) for n in model.parameter_names])
+
+
+def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> int:
+    """Several logs: reduce each on Dask, fit them pooled, test the drift between them."""
+    check_pooled_options(args)
+    t0 = time.perf_counter()
+    model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
+    prior, prior_std = prior_of(args, model, nominal)
+    logs, failed = reduce_all(paths, args, prior, prior_std)
+    for path, why in failed.items():
+        print(f"left out: {path}: {why}", file=sys.stderr)
+    if not logs:
+        raise ConfigError("INPUT", "none of the logs could be read (reasons above)")
+    samples = pooled_samples(logs)
+    options = FitOptions(method=args.method, cutoff=args.cutoff,
+                         speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
+    result = pooled_fit(logs, model, vehicle.body, options, prior, prior_std)
+    print(f"{len(logs)} logs pooled ({len(failed)} left out): {len(samples)} samples "
+          f"({len(samples) / samples.rate:.0f} s), {result.method}, condition number "
+          f"{result.cond:.3g}, {time.perf_counter() - t0:.1f} s")
+    print(report_table(result, prior))
+    print()
+    print(table(("dof", "RMSE", "NSE", "CV RMSE (log fifths)"),
+                [(DOF_NAMES[i], float(result.rmse[i]), float(result.r2[i]),
+                  float(result.cv_rmse[i])) for i in range(6)]))
+    for name, why in result.flags.items():
+        print(f"not identified: {name}: {why}")
+    for name, why in result.constrained.items():
+        print(f"constrained: {name}: {why}")
+    more: dict[str, Any] = {"logs": [g.name for g in logs],
+                            "logs_left_out": list(failed) or ["none"]}
+    if len(logs) > 1:
+        d = drift(logs)
+        print(f"\ndrift between the {len(logs)} logs (χ² test per coefficient, "
+              f"family-wise α = {d.alpha:g}):")
+        print(drift_table(d, result))
+        if d.moved.any():
+            print(log_table(d))
+        more["drift_changed"] = [n for n, m in zip(d.names, d.moved, strict=True) if m] \
+            or ["none"]
+        if args.drift_plot:
+            plot_drift(Path(args.drift_plot), d, result, parameter_units(model))
+            print(f"wrote {args.drift_plot}")
+    if args.out:
+        write_model(Path(args.out), result, model, vehicle.body, source=", ".join(paths),
+                    flown=samples.nu, more=more)
+        print(f"wrote {args.out}")
+    if args.report:
+        page = write_report(args.report, samples, model, vehicle.body, result, prior=prior,
+                            title=f"Damping of {vehicle.name}, {len(logs)} logs pooled",
+                            source=", ".join(g.name for g in logs), cutoff=args.cutoff)
         print(f"wrote {page}")
     return 0
 
@@ -258,17 +333,19 @@ def heldout_text(held: Samples, scores: dict[str, np.ndarray]) -> str:
 
 def write_model(path: Path, result: Fit, model: DampingModel, body: RigidBody,
                 source: str, heldout: dict[str, np.ndarray] | None = None,
-                flown: np.ndarray | None = None) -> None:
+                flown: np.ndarray | None = None, more: dict[str, Any] | None = None
+                ) -> None:
     """Save a fit as the model YAML with the body's mass matrix, added mass and added-mass
     switches, its metrics, the coefficients the data did not determine (``model.identified``
     false, ``model.held`` with the reason), the flown speeds (``flown_speeds``: per-DOF
     smallest and largest of ``flown``, ν of the fitted samples, the envelope exports check
-    dissipativity on) and, with a held-out part, its per-DOF R² and RMSE (``heldout_r2``,
-    ``heldout_rmse``)."""
+    dissipativity on), with a held-out part, its per-DOF R² and RMSE (``heldout_r2``,
+    ``heldout_rmse``), and ``more`` entries (e.g. the logs pooled)."""
     ci = result.interval()
-    more: dict[str, Any] = {} if heldout is None else {
-        "heldout_r2": [float(x) for x in heldout["nse"]],
-        "heldout_rmse": [float(x) for x in heldout["rmse"]]}
+    more = dict(more or {})
+    if heldout is not None:
+        more["heldout_r2"] = [float(x) for x in heldout["nse"]]
+        more["heldout_rmse"] = [float(x) for x in heldout["rmse"]]
     if flown is not None:
         more["flown_speeds"] = {"min": [float(x) for x in flown.min(axis=0)],
                                 "max": [float(x) for x in flown.max(axis=0)]}

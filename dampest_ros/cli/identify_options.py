@@ -29,7 +29,9 @@ from dampest_ros.cli.common import (
 EXAMPLE = ("examples:\n"
            "  dampest identify bags/b600 --vehicle bluerov2_heavy --out model.yaml\n"
            "  dampest identify bags/b600 --vehicle bluerov2_heavy --select --holdout 0.3 "
-           "--report report")
+           "--report report\n"
+           "  dampest identify 'bags/dive_*' --vehicle bluerov2_heavy --workers 2 "
+           "--drift-plot drift.png --out pooled.yaml")
 
 #: Batch methods (dampest_ros.core.batch.METHODS; a test checks the two agree).
 METHODS = ("ols", "wls", "ridge", "bounded", "map")
@@ -38,7 +40,12 @@ METHODS = ("ols", "wls", "ridge", "bounded", "map")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of dampest identify (its work: dampest_ros.cli.identify.run)."""
     describe(p, __doc__, EXAMPLE, CSV_HELP)
-    p.add_argument("input", metavar="INPUT", help="rosbag2 directory, .csv or .csv.gz file")
+    p.add_argument("input", metavar="INPUT", nargs="+",
+                   help="rosbag2 directory, .csv or .csv.gz file; several (or a quoted glob "
+                        "pattern such as 'bags/dive_*', or a .txt file listing logs one per "
+                        "line) are pooled into one model, each log preprocessed on its own "
+                        "Dask worker, and the drift of every coefficient between the logs "
+                        "is tested")
     add_vehicle_option(p)
     p.add_argument("--terms", help="comma list of the preset's terms to identify, e.g. "
                                    "linear,quadratic (default: all terms of the preset)")
@@ -73,5 +80,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth", metavar="MODEL",
                    help="model YAML of the true coefficients (simulated data), shown in the "
                         "report")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="several logs: Dask worker processes of the local cluster (default: "
+                        "the CPU count, at most one per log)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="several logs: the address of a running Dask scheduler (e.g. "
+                        "tcp://10.0.0.5:8786) instead of a local cluster; the workers must "
+                        "see the log paths")
+    p.add_argument("--drift-plot", metavar="PNG",
+                   help="several logs: plot each coefficient's per-log estimate ± 2σ "
+                        "against the log's start time to this PNG")
     add_topic_options(p)
     add_preprocess_options(p)

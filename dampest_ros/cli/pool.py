@@ -1,0 +1,216 @@
+"""dampest identify over several logs: each log reduced on a Dask worker, one pooled fit, the
+drift of the damping between the logs (the maths: dampest_ros/core/pool.py).
+
+Workers read the logs themselves (paths as the workers see them), so nothing but the logs'
+preprocessed samples and statistics travels. By default a LocalCluster of --workers
+processes runs on this machine; --scheduler ADDRESS uses an existing Dask cluster. A log that
+fails is reported with its reason and left out; the rest go on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import glob
+import io
+import logging
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dampest_ros.cli.common import table, term_list
+from dampest_ros.cli.inputs import cut, load_samples
+from dampest_ros.cli.main import expected
+from dampest_ros.core.batch import Fit, FitOptions
+from dampest_ros.core.estimator import restrict
+from dampest_ros.core.excitation import speed_limits
+from dampest_ros.core.pool import Drift, LogStatistics, log_statistics
+from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.io.yaml_io import load_vehicle
+
+#: Characters that make an INPUT a glob pattern.
+GLOB = "*?["
+
+
+def expand_inputs(inputs: Sequence[str]) -> list[str]:
+    """The logs INPUT names: a log itself, a glob pattern (sorted matches), or a ``.txt``
+    file listing logs (one per line; blank lines and ``#`` comments skipped; relative paths
+    from the list's directory). ``file://`` URLs are paths.
+
+    Raises
+    ------
+    ConfigError
+        A pattern that matches nothing, a list that names nothing, or a URL of another
+        scheme (name, reason and fix).
+    """
+    out: list[str] = []
+    for item in inputs:
+        if item.startswith("file://"):
+            item = item[len("file://"):]
+        elif "://" in item:
+            raise ConfigError(item, "only local paths (or file:// URLs) are read; copy the "
+                                    "log to a path the workers see")
+        if any(c in item for c in GLOB):
+            found = sorted(glob.glob(item))
+            if not found:
+                raise ConfigError(item, "the pattern matches no log (quote it so the shell "
+                                        "does not expand it, check the path)")
+            out += found
+        elif item.endswith(".txt") and Path(item).is_file():
+            base = Path(item).parent
+            listed = [line.split("#", 1)[0].strip()
+                      for line in Path(item).read_text(encoding="utf-8").splitlines()]
+            listed = [str(base / x) if not Path(x).is_absolute() else x for x in listed if x]
+            if not listed:
+                raise ConfigError(item, "the list names no log (one path per line)")
+            out += expand_inputs(listed)
+        else:
+            out.append(item)
+    return out
+
+
+def check_pooled_options(args: argparse.Namespace) -> None:
+    """Options that take one log only, refused with the way to get the same result."""
+    if args.method == "rls":
+        raise ConfigError("--method rls", "replays one bag; give one log (or pool with a "
+                                          "batch method)")
+    if args.select:
+        raise ConfigError("--select", "searches the structure on one log; run it on one "
+                                      "log, then pool with --terms or --prior")
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError("--workers", f"{args.workers}: needs at least 1 worker")
+    if args.holdout is not None:
+        raise ConfigError("--holdout", "takes one log; to score on unseen data, leave a log "
+                                       "out and run dampest validate MODEL LOG")
+
+
+def reduce_log(path: str, args: argparse.Namespace, prior: np.ndarray | None,
+               prior_std: np.ndarray | None) -> tuple[LogStatistics | None, str, str]:
+    """Preprocess one log and reduce it (runs on a worker).
+
+    Returns its statistics (None when it failed), what the preprocessing printed on stderr
+    (progress bars dropped) and why it failed (one line, "" when it did not). Failures are
+    returned, not raised, so that no worker prints a traceback; ``--debug`` raises them.
+    """
+    captured = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(captured):
+            vehicle = load_vehicle(args.vehicle)
+            model, _ = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
+            samples = cut(load_samples(path, vehicle, args), args)
+            options = FitOptions(method=args.method, cutoff=args.cutoff, speed_range=tuple(
+                speed_limits(vehicle, tau_measured=samples.tau)))
+            stats = log_statistics(path, samples, model, vehicle.body, options, prior,
+                                   prior_std)
+        why = ""
+    except Exception as exc:
+        if args.debug:
+            raise
+        stats, why = None, (str(exc) if expected(exc) else
+                            f"unexpected {type(exc).__name__}: {exc} (--debug shows where)")
+    notes = "\n".join(line for line in captured.getvalue().replace("\r", "\n").splitlines()
+                      if line.strip() and "[" not in line)
+    return stats, notes, why
+
+
+def _client(args: argparse.Namespace, n_logs: int) -> Any:
+    """A Dask client: on --scheduler, or on a LocalCluster of --workers processes."""
+    from dask.distributed import Client, LocalCluster
+    if args.scheduler:
+        try:
+            return Client(args.scheduler, timeout="10s")
+        except OSError as exc:
+            raise ConfigError("--scheduler", f"{args.scheduler}: no Dask scheduler answers "
+                                             f"({exc}); start one or leave the option out "
+                                             "for a local cluster") from exc
+    workers = args.workers or min(os.cpu_count() or 1, n_logs)
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=logging.CRITICAL)
+    return Client(cluster)
+
+
+def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray | None,
+               prior_std: np.ndarray | None) -> tuple[list[LogStatistics], dict[str, str]]:
+    """Map :func:`reduce_log` over the logs on Dask; the statistics of those that worked (in
+    the given order) and the reason of each that failed, with a progress line on stderr."""
+    from dask.distributed import as_completed
+    client = _client(args, len(paths))
+    done: dict[str, LogStatistics] = {}
+    failed: dict[str, str] = {}
+    try:
+        futures = {client.submit(reduce_log, p, args, prior, prior_std, pure=False): p
+                   for p in paths}
+        for k, future in enumerate(as_completed(futures), 1):
+            path = futures[future]
+            stats, notes, why = future.result()
+            for line in notes.splitlines():
+                print(f"{path}: {line}", file=sys.stderr)
+            if stats is None:
+                failed[path] = why
+            else:
+                done[path] = stats
+            sys.stderr.write(f"\rlogs [{'#' * (25 * k // len(paths)):25s}] {k}/{len(paths)}"
+                             f" reduced, {len(failed)} failed")
+            sys.stderr.flush()
+        sys.stderr.write("\n")
+    finally:
+        cluster = getattr(client, "cluster", None)
+        client.close()
+        if cluster is not None and not args.scheduler:
+            cluster.close()
+    return [done[p] for p in paths if p in done], failed
+
+
+def drift_table(d: Drift, pooled: Fit) -> str:
+    """Per coefficient: the pooled estimate, the test of change and where it changed."""
+    rows: list[tuple[str | float, ...]] = []
+    for j, name in enumerate(d.names):
+        where = ""
+        if d.moved[j]:
+            k = int(d.change_after[j])
+            where = (f"after {Path(d.logs[k]).name}: {d.shift[j]:+.4g} ± "
+                     f"{d.shift_std[j]:.2g}")
+        rows.append((name, float(pooled.theta[j]), float(pooled.std[j]), float(d.chi2[j]),
+                     int(d.dof[j]), float(d.p_value[j]),
+                     "CHANGED" if d.moved[j] else "no change", where))
+    return table(("parameter", "pooled", "std", "chi2", "dof", "p", "drift", "where"), rows)
+
+
+def log_table(d: Drift) -> str:
+    """Per log, in start order: its estimates of the coefficients that moved."""
+    moved = np.flatnonzero(d.moved)
+    header = ("log", "start (s)", *(d.names[j] for j in moved))
+    rows = [(Path(name).name, float(d.start[b]),
+             *(f"{d.theta[b, j]:.4g} ± {d.std[b, j]:.2g}" for j in moved))
+            for b, name in enumerate(d.logs)]
+    return table(header, rows)
+
+
+def plot_drift(path: Path, d: Drift, pooled: Fit, units: dict[str, str]) -> None:
+    """Each coefficient's per-log estimate ± 2σ against the log's start time, with the
+    pooled estimate; changed coefficients titled as such (PNG)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    p = len(d.names)
+    cols = min(p, 4)
+    rows = -(-p // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.4 * rows), squeeze=False)
+    t = d.start - d.start[0]
+    for j, ax in enumerate(axes.flat):
+        if j >= p:
+            ax.set_visible(False)
+            continue
+        ax.errorbar(t, d.theta[:, j], yerr=2 * d.std[:, j], fmt="o", ms=3, capsize=2)
+        ax.axhline(pooled.theta[j], color="k", lw=0.8, ls="--")
+        ax.set_title(d.names[j] + (" (changed)" if d.moved[j] else ""), fontsize=9)
+        ax.set_xlabel("log start − first log start (s)", fontsize=7)
+        ax.set_ylabel(f"{d.names[j]} ({units.get(d.names[j], 'SI')})", fontsize=7)
+        ax.tick_params(labelsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
