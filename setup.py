@@ -40,6 +40,10 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE_NAME]),
         ("share/" + PACKAGE_NAME, ["package.xml"]),
+        # launch files (ros2 launch on a full Jazzy install); their parameter files are the
+        # config/<node>.params.yaml installed by config_data_files
+        ("share/" + PACKAGE_NAME + "/launch",
+         ["launch/pipeline.launch.py", "launch/replay.launch.py"]),
         *config_data_files(),
     ],
     python_requires=">=3.11",

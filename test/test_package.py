@@ -22,6 +22,7 @@ PACKAGE_FILES = [
     "resource",
     PACKAGE,
     "config",
+    "launch",
 ]
 
 

@@ -41,7 +41,7 @@ def colcon_install(ws: Path) -> Path:
     src = ws / "src" / "dampest_ros"
     src.mkdir(parents=True)
     for name in ("package.xml", "setup.py", "setup.cfg", "pyproject.toml", "resource",
-                 "dampest_ros", "config"):
+                 "dampest_ros", "config", "launch"):
         path = REPO / name
         if path.is_dir():
             shutil.copytree(path, src / name, ignore=shutil.ignore_patterns("__pycache__"))

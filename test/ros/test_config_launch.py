@@ -1,0 +1,139 @@
+"""Parameter files and launch files (issue 15): config/<node>.params.yaml holds every
+parameter a node declares, with its default and a comment, and loads with --params-file;
+launch/*.launch.py (``launch`` itself is not installable here) parse, name executables that
+setup.py installs and parameter files that exist, and are installed by setup.py."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+rclpy = pytest.importorskip("rclpy")
+
+REPO = Path(__file__).resolve().parents[2]
+LAUNCH_FILES = sorted((REPO / "launch").glob("*.launch.py"))
+
+
+def node_scripts() -> dict[str, str]:
+    """setup.py's NODE_SCRIPTS (a plain literal)."""
+    tree = ast.parse((REPO / "setup.py").read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.AnnAssign) and getattr(node.target, "id", "") == "NODE_SCRIPTS":
+            assert node.value is not None
+            scripts: dict[str, str] = ast.literal_eval(node.value)
+            return scripts
+    raise AssertionError("setup.py has no NODE_SCRIPTS")
+
+
+def node_class(name: str) -> Any:
+    module = importlib.import_module(node_scripts()[name].split(":")[0])
+    (cls,) = [c for c in vars(module).values()
+              if isinstance(c, type) and getattr(c, "NODE_NAME", None) == name]
+    return cls
+
+
+def params_file(name: str) -> dict[str, Any]:
+    doc = yaml.safe_load((REPO / "config" / f"{name}.params.yaml").read_text())
+    values: dict[str, Any] = doc["/**"]["ros__parameters"]
+    return values
+
+
+@pytest.mark.parametrize("name", sorted(node_scripts()))
+def test_parameter_file_holds_every_parameter_with_its_default_and_meaning(name: str) -> None:
+    specs = node_class(name).PARAMS
+    assert params_file(name) == {p.name: p.default for p in specs}
+    lines = (REPO / "config" / f"{name}.params.yaml").read_text().splitlines()
+    for p in specs:  # each entry follows its comment, which starts with the description
+        (k,) = [i for i, x in enumerate(lines) if x.startswith(f"    {p.name}: ")]
+        j = k
+        while lines[j - 1].startswith("    # "):
+            j -= 1
+        comment = " ".join(x[6:] for x in lines[j:k])
+        assert j < k and comment.startswith(p.description.rstrip(".")), (p.name, comment)
+
+
+def test_parameter_files_load_with_params_file_and_name_every_declared_parameter(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each node started with --params-file config/<node>.params.yaml (plus what it needs,
+    given after it) declares exactly the file's parameters (besides rclpy's own and the
+    model.* of the model servers)."""
+    from dampest_ros.io.yaml_io import load_vehicle, save_model
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", "81")
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    v = load_vehicle("bluerov2_heavy")
+    model = save_model(tmp_path / "m.yaml", v.damping.parameter_names, v.theta,
+                       0.1 * abs(v.theta) + 0.01, v.body.M, damping=v.damping)
+    bag = tmp_path / "bag"
+    from dampest_ros.io.recorder import BagRecorder
+    with BagRecorder(bag) as rec:
+        rec.write(rec.add_connection("/pressure", "sensor_msgs/msg/FluidPressure"), 1,
+                  bytes(4 + 8 + 4 + 8 + 8))
+    needs = {"model_server_node": ["-p", f"model_file:={model}"],
+             "recorder_node": ["-p", f"output:={tmp_path / 'out'}"],
+             "replay_node": ["-p", f"bag:={bag}"],
+             "estimator_node": ["-p", f"save_path:={tmp_path / 'est.yaml'}"]}
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        for name in sorted(node_scripts()):
+            node = node_class(name)(context=context, cli_args=[
+                "--ros-args", "--params-file", str(REPO / "config" / f"{name}.params.yaml"),
+                *needs.get(name, [])])
+            try:
+                declared = {n for n in node._parameters
+                            if n not in ("use_sim_time", "start_type_description_service")
+                            and not n.startswith("model.")}
+                assert declared == set(params_file(name)), name
+                # the file was read: each of its entries is an override of this node
+                assert set(params_file(name)) <= set(node._parameter_overrides), name
+            finally:
+                node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+def calls(tree: ast.AST, name: str) -> list[ast.Call]:
+    return [n for n in ast.walk(tree) if isinstance(n, ast.Call)
+            and getattr(n.func, "id", getattr(n.func, "attr", None)) == name]
+
+
+def keyword(call: ast.Call, key: str) -> ast.expr | None:
+    return next((k.value for k in call.keywords if k.arg == key), None)
+
+
+@pytest.mark.parametrize("path", LAUNCH_FILES, ids=[p.name for p in LAUNCH_FILES])
+def test_launch_file_names_installed_executables_and_existing_parameter_files(
+        path: Path) -> None:
+    tree = ast.parse(path.read_text(), str(path))
+    compile(tree, str(path), "exec")
+    assert any(isinstance(n, ast.FunctionDef) and n.name == "generate_launch_description"
+               for n in tree.body)
+    nodes = calls(tree, "Node")
+    assert len(nodes) >= 3
+    for call in nodes:
+        exe, package = keyword(call, "executable"), keyword(call, "package")
+        assert isinstance(exe, ast.Constant) and exe.value in node_scripts(), ast.dump(call)
+        assert isinstance(package, ast.Constant) and package.value == "dampest_ros"
+        files = [n.value for n in ast.walk(call) if isinstance(n, ast.Constant)
+                 and isinstance(n.value, str) and n.value.endswith(".params.yaml")]
+        assert files == [f"{exe.value}.params.yaml"], files  # its own file, first
+        assert (REPO / "config" / files[0]).is_file()
+    used = {c.args[0].value for c in calls(tree, "LaunchConfiguration")
+            if isinstance(c.args[0], ast.Constant)}
+    declared = {c.args[0].value for c in calls(tree, "DeclareLaunchArgument")
+                if isinstance(c.args[0], ast.Constant)}
+    assert used == declared, (used, declared)
+
+
+def test_setup_installs_every_launch_file() -> None:
+    tree = ast.parse((REPO / "setup.py").read_text())
+    installed = [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
+                 and isinstance(n.value, str) and n.value.endswith(".launch.py")]
+    assert sorted(installed) == [f"launch/{p.name}" for p in LAUNCH_FILES]
+    assert [p.name for p in LAUNCH_FILES] == ["pipeline.launch.py", "replay.launch.py"]
