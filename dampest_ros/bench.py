@@ -16,7 +16,10 @@ groups of rows. The online rows (ROS 2 nodes; the environment's ROS_DOMAIN_ID, l
 - ``recorder``: recorder_node in its own process records the sim topic set while sim_node
   runs at 20× real time: messages lost and the recorder's CPU per message; then
   ``--kills`` recordings killed with SIGKILL at a random moment and recovered with reindex:
-  the share of the messages published before the kill that the bag keeps (min / median).
+  the share of the messages the recorder had received before the kill that the bag keeps
+  (the recorder's own loss; its node counts them in a shared memory page), and the share of
+  those published before the kill (messages still in the middleware's queues included),
+  min / median of each.
 
 The start-up rows (``startup``): wall-clock time of ``dampest --help`` and of every
 ``dampest CMD --help`` (median of 5 runs of the console script), and how soon ``dampest
@@ -47,7 +50,8 @@ VEHICLE = "bluerov2_heavy"
 MUJOCO_VEHICLE = "torpedo_auv"  # the stiffer of the two MuJoCo presets (slender, finned)
 
 
-def _simulate(out: str, duration: str, backend: str = "native") -> dict[str, float]:
+def _simulate(out: str, duration: str, backend: str = "native", seed: str = "1"
+              ) -> dict[str, float]:
     from dampest_ros.core.excitation import make_excitation
     from dampest_ros.core.sensors import measure
     from dampest_ros.core.simulate import run
@@ -56,10 +60,10 @@ def _simulate(out: str, duration: str, backend: str = "native") -> dict[str, flo
 
     vehicle = load_vehicle(VEHICLE if backend == "native" else MUJOCO_VEHICLE)
     t0 = time.perf_counter()
-    traj = run(vehicle, make_excitation("B", vehicle, float(duration), seed=1),
+    traj = run(vehicle, make_excitation("B", vehicle, float(duration), seed=int(seed)),
                backend=backend)
     t1 = time.perf_counter()
-    rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, seed=1)
+    rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, seed=int(seed))
     t2 = time.perf_counter()
     write_bag(out, rec)
     t3 = time.perf_counter()
@@ -80,16 +84,41 @@ def _deserialise(bag: str) -> dict[str, float]:
 
 
 def _identify(bag: str, vehicle: str = VEHICLE, *options: str) -> dict[str, float]:
+    return _quiet_identify([bag, "--vehicle", vehicle, *options])
+
+
+def _quiet_identify(argv: list[str]) -> dict[str, float]:
+    """``dampest identify ARGV`` with its output discarded: seconds and exit status."""
     from dampest_ros.cli.main import main
 
     t0 = time.perf_counter()
     with open(os.devnull, "w") as null:
         stdout, stderr, sys.stdout, sys.stderr = sys.stdout, sys.stderr, null, null
         try:
-            status = main(["identify", bag, "--vehicle", vehicle, *options])
+            status = main(["identify", *argv])
         finally:
             sys.stdout, sys.stderr = stdout, stderr
     return {"seconds": time.perf_counter() - t0, "status": float(status)}
+
+
+def _pool(workers: str, *bags: str) -> dict[str, float]:
+    """``dampest identify BAG ...`` end to end on a LocalCluster of ``workers`` processes
+    (passed as --scheduler so that it outlives the command), then the workers' peak RSS."""
+    import logging
+    import resource
+
+    from dask.distributed import Client, LocalCluster
+
+    cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=logging.CRITICAL)
+    try:
+        t = _quiet_identify([*bags, "--vehicle", VEHICLE, "--scheduler",
+                             cluster.scheduler_address])
+        with Client(cluster) as client:
+            peak = client.run(lambda: resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+    finally:
+        cluster.close()
+    return {**t, "worker_peak_mb": max(peak.values()) / 1024}
 
 
 def _ros_env() -> None:
@@ -155,7 +184,7 @@ def _publish_samples(seconds: str, speed: str, subscribers: str) -> dict[str, fl
     )
 
     from dampest_ros.core.excitation import make_excitation
-    from dampest_ros.core.online import OnlinePreprocessor
+    from dampest_ros.core.online.preprocessor import OnlinePreprocessor
     from dampest_ros.core.sensors import measure
     from dampest_ros.core.simulate import run
     from dampest_ros.io.yaml_io import load_vehicle
@@ -284,10 +313,32 @@ def _proc_cpu(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def counting_recorder(count_file: str) -> None:
+    """recorder_node's main() (arguments from sys.argv) whose every message handed to the
+    bag recorder is counted in the first 8 bytes of ``count_file`` (shared memory: the count
+    survives a SIGKILL)."""
+    import mmap
+
+    from dampest_ros.ros import recorder_node
+
+    with open(count_file, "r+b") as f:
+        page = mmap.mmap(f.fileno(), 8)
+    count = memoryview(page).cast("Q")
+    write = recorder_node.RecorderNode._write
+
+    def counted(self: Any, conn: int, data: bytes, info: dict[str, Any]) -> None:
+        write(self, conn, data, info)
+        count[0] += 1
+
+    recorder_node.RecorderNode._write = counted  # type: ignore[method-assign]
+    recorder_node.main()
+
+
 def _recorder(rate_factor: str, seconds: str, kill_at: str = "") -> dict[str, float]:
     """recorder_node (own process) records the sim topics; sim_node here at ``rate_factor``.
     With ``kill_at`` (simulated seconds) the recorder is killed with SIGKILL then and the bag
-    recovered with reindex; ``published`` counts the messages published before the kill."""
+    recovered with reindex; ``published`` counts the messages published before the kill,
+    ``received`` those the recorder had handed to its bag recorder (:func:`counting_recorder`)."""
     _ros_env()
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -299,7 +350,10 @@ def _recorder(rate_factor: str, seconds: str, kill_at: str = "") -> dict[str, fl
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "bag"
-        rec = subprocess.Popen([sys.executable, "-m", "dampest_ros.ros.recorder_node",
+        counter = Path(tmp) / "received"
+        counter.write_bytes(bytes(8))
+        rec = subprocess.Popen([sys.executable, "-c", "from dampest_ros import "
+                                f"bench; bench.counting_recorder({str(counter)!r})",
                                 "--ros-args", "-p", f"output:={out}", "-p", "status_period:=0.0",
                                 "-r", "__node:=bench_recorder"],
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -334,12 +388,13 @@ def _recorder(rate_factor: str, seconds: str, kill_at: str = "") -> dict[str, fl
             rec.send_signal(signal.SIGINT)
             rec.wait(60)
             recorded = bag_summary(out).message_count
+        received = int.from_bytes(counter.read_bytes()[:8], "little")
         sim_s = sim.live.t
         ex.shutdown()
         sim.destroy_node()
         rclpy.shutdown()
-    return {"published": float(published), "recorded": float(recorded), "cpu": cpu,
-            "wall": wall, "sim_s": sim_s}
+    return {"published": float(published), "received": float(received),
+            "recorded": float(recorded), "cpu": cpu, "wall": wall, "sim_s": sim_s}
 
 
 def _dampest() -> str:
@@ -399,7 +454,7 @@ def _record_start(seconds: str = "4") -> dict[str, float]:
 TASKS: dict[str, Callable[..., dict[str, float]]] = {
     "simulate": _simulate, "deserialise": _deserialise, "identify": _identify, "live": _live,
     "publish_samples": _publish_samples, "receive": _receive, "recorder": _recorder,
-    "record_start": _record_start}
+    "record_start": _record_start, "pool": _pool}
 
 
 def _spawn(task: str, *args: str) -> subprocess.Popen[str]:
@@ -426,7 +481,7 @@ def _child(task: str, *args: str) -> dict[str, float]:
     return _result(_spawn(task, *args), task)
 
 
-GROUPS = ("startup", "simulate", "identify", "select", "live", "estimator", "recorder")
+GROUPS = ("startup", "simulate", "identify", "select", "pool", "live", "estimator", "recorder")
 
 
 def _startup_rows() -> list[tuple[str, ...]]:
@@ -480,20 +535,46 @@ def _online_rows(args: argparse.Namespace, only: set[str]) -> list[tuple[str, ..
                      f"lost {r['published'] - n:.0f}; {r['cpu'] / max(n, 1) * 1e6:.0f} µs CPU "
                      f"per message ({100 * r['cpu'] / r['wall']:.0f} % of a core)",
                      "none lost", ""))
-        kept = sorted(_killed_share(args.recorder_seconds, k) for k in range(args.kills))
-        rows.append((f"  SIGKILL at a random moment, reindex ({args.kills} kills at 20×)", "",
-                     f"kept of the messages published before the kill: min "
-                     f"{100 * kept[0]:.1f} %, median {100 * kept[len(kept) // 2]:.1f} %",
-                     "≥ 99 %", ""))
+        kills = [_killed(args.recorder_seconds, k) for k in range(args.kills)]
+        of_received = sorted(r["recorded"] / max(r["received"], 1.0) for r in kills)
+        of_published = sorted(r["recorded"] / max(r["published"], 1.0) for r in kills)
+        pace = sorted(r["sim_s"] / r["wall"] for r in kills)
+        rows.append((f"  SIGKILL at a random moment, reindex ({args.kills} kills at 20×, "
+                     f"{pace[len(pace) // 2]:.1f}× reached)", "",
+                     f"kept of the messages received before the kill: min "
+                     f"{100 * of_received[0]:.2f} %, median "
+                     f"{100 * of_received[len(kills) // 2]:.2f} %", "≥ 99 %", ""))
+        rows.append(("  the same kills, of the messages published before the kill", "",
+                     f"min {100 * of_published[0]:.1f} %, median "
+                     f"{100 * of_published[len(kills) // 2]:.1f} % (the rest: still in "
+                     "the middleware's queues)", "", ""))
     return rows
 
 
-def _killed_share(seconds: float, seed: int) -> float:
-    """Share of the published messages a recording killed at a random moment (between 20 %
-    and 90 % of ``seconds``, reproducible by ``seed``) keeps after reindex."""
+def _pool_rows(tmp: str, seconds: float) -> list[tuple[str, ...]]:
+    """Eight protocol-B bags (seeds 1–8) identified pooled on 1 and on 2 Dask workers, and
+    the workers' peak memory for 4 and for 8 bags (2 workers)."""
+    bags = [f"{tmp}/pool{k}" for k in range(1, 9)]
+    for k, bag in enumerate(bags, 1):
+        _child("simulate", bag, str(seconds), "native", str(k))
+    one, two = _child("pool", "1", *bags), _child("pool", "2", *bags)
+    four = _child("pool", "2", *bags[:4])
+    name = f"identify 8 × {seconds:.0f} s bags pooled (Dask)"
+    return [(f"{name}, 1 worker", f"{one['seconds']:.1f} s", "", "",
+             f"{one['worker_peak_mb']:.0f} (worker)"),
+            (f"{name}, 2 workers", f"{two['seconds']:.1f} s",
+             f"{one['seconds'] / two['seconds']:.2f}× 1 worker", "≥ 1.6×",
+             f"{two['worker_peak_mb']:.0f} (worker)"),
+            ("  the same, 4 bags on 2 workers", f"{four['seconds']:.1f} s",
+             f"worker peak {four['worker_peak_mb']:.0f} MB (4 bags) vs "
+             f"{two['worker_peak_mb']:.0f} MB (8)", "flat", "")]
+
+
+def _killed(seconds: float, seed: int) -> dict[str, float]:
+    """A recording killed at a random moment (between 20 % and 90 % of ``seconds``,
+    reproducible by ``seed``), recovered with reindex (:func:`_recorder`'s counts)."""
     kill_at = seconds * (0.2 + 0.7 * ((seed * 0.618034) % 1.0))
-    r = _child("recorder", "20", str(seconds), f"{kill_at:.3f}")
-    return r["recorded"] / max(r["published"], 1.0)
+    return _child("recorder", "20", str(seconds), f"{kill_at:.3f}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -512,6 +593,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="simulated seconds recorded by the recorder rows (default: 120)")
     ap.add_argument("--kills", type=int, default=10,
                     help="recordings killed with SIGKILL in the recorder rows (default: 10)")
+    ap.add_argument("--pool-seconds", type=float, default=600.0,
+                    help="length of each of the 8 bags of the pooled rows (default: 600)")
     ap.add_argument("--only", nargs="+", choices=GROUPS, default=list(GROUPS),
                     help="groups of rows to run (default: all)")
     args = ap.parse_args(argv)
@@ -552,6 +635,8 @@ def main(argv: list[str] | None = None) -> int:
                          f"{select['seconds']:.1f} s",
                          f"{select['seconds'] / plain['seconds']:.2f}× plain identify", "≤ 3×",
                          f"{select['peak_mb']:.0f}"))
+        if "pool" in only:
+            rows += _pool_rows(tmp, args.pool_seconds)
     rows += _online_rows(args, only)
     print(table(("benchmark", "time", "figure", "goal", "peak MB"), rows))
     load = os.getloadavg()
