@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     batch = None
     if args.batch:
         from dampest_ros.core.batch import FitOptions, fit
-        from dampest_ros.core.online import to_samples
+        from dampest_ros.core.online.sample import to_samples
         c = time.perf_counter()
         try:
             samples = to_samples(e.samples_log, e.cfg.rate)
@@ -311,9 +311,14 @@ def _report(args: argparse.Namespace, out: Path, flight: Flight,
             effects: Effects, prior: Path) -> Path:
     """Tracking runs without and with the saved model's feed-forward, then the report."""
     from dampest_ros.client import ModelClient
-    from dampest_ros.core.control import VelocityPI, tracking_rms
+    from dampest_ros.core.control import VelocityPI
     from dampest_ros.core.simulate import Simulator, track
-    from dampest_ros.report import Tracking, write_convergence_report
+    from dampest_ros.report import (
+        Tracking,
+        parameter_units,
+        rms_by_unit,
+        write_convergence_report,
+    )
 
     e = flight.estimator
     client = ModelClient.from_yaml(flight.path)
@@ -327,10 +332,12 @@ def _report(args: argparse.Namespace, out: Path, flight: Flight,
     for label, ff in (("PI", None), ("PI + D(ν)ν + C(ν)ν", client.feedforward)):
         sim = Simulator(vehicle, effects, dt=TRACK_DT, record=False)
         runs[label] = track(sim, VelocityPI.for_vehicle(vehicle, bandwidth, ff), ref, TRACK_DT)
-        rms[label] = tracking_rms(ref, runs[label], TRACK_DOFS, skip)
+        rms[label] = rms_by_unit(ref, runs[label], TRACK_DOFS, skip)
+    with_model = rms["PI + D(ν)ν + C(ν)ν"]
     print("velocity tracking on the simulator (sines in u, w, r; RMS after "
-          f"{skip * TRACK_DT:.0f} s): " + ", ".join(f"{k} {v:.4f}" for k, v in rms.items())
-          + f"  ({rms['PI'] / rms['PI + D(ν)ν + C(ν)ν']:.1f}x lower with the model)")
+          f"{skip * TRACK_DT:.0f} s, PI → with the model): " + ", ".join(
+              f"{rms['PI'][u]:.4f} → {with_model[u]:.4f} {u} ({rms['PI'][u] / with_model[u]:.1f}x"
+              " lower)" for u in with_model))
     tr = Tracking(t, ref, runs, rms, TRACK_DOFS, skip, bandwidth)
     ht, theta, std = flight.history.arrays()
     groups = {term.kind: term.parameter_names for term in e.model.terms}
@@ -342,7 +349,8 @@ def _report(args: argparse.Namespace, out: Path, flight: Flight,
                ("samples used by the RLS", str(e.counts["used"])),
                ("effects", args.effects or "none"), ("model", str(flight.path))]
     return write_convergence_report(out, e.names, ht, theta, std, groups, truth, batch, tr,
-                                    summary, title=f"Online identification: {vehicle.name}")
+                                    summary, title=f"Online identification: {vehicle.name}",
+                                    units=parameter_units(e.model))
 
 
 def _time_callbacks(node: Any) -> dict[str, float]:

@@ -75,11 +75,15 @@ def test_demo_40s_converges_from_a_wrong_prior(tmp_path: Path,
               "tracking.png"):
         assert (report / f).stat().st_size > 1000, f
     assert "±2σ coverage, last half" in (report / "index.html").read_text()
-    # tracking on the simulator: the identified model's feed-forward beats the PI alone
-    m = re.search(r"PI (\d\.\d+), PI \+ D\(ν\)ν \+ C\(ν\)ν (\d\.\d+)", printed)
-    assert m is not None, printed[-2000:]
-    pi, ff = float(m.group(1)), float(m.group(2))
+    # tracking on the simulator: the identified model's feed-forward beats the PI alone, in
+    # m/s (u, w) and in rad/s (r) apart (never mixed)
+    rms = {u: (float(a), float(b)) for a, b, u in
+           re.findall(r"(\d\.\d+) → (\d\.\d+) (m/s|rad/s) \(", printed)}
+    assert set(rms) == {"m/s", "rad/s"}, printed[-2000:]
     pace = next(line for line in printed.splitlines() if " simulated in " in line)
-    print(f"\n{pace}\ntracking RMS: PI {pi}, with the feed-forward {ff}\n±2σ coverage "
+    print(f"\n{pace}\ntracking RMS, PI → with the feed-forward: {rms}\n±2σ coverage "
           f"(second half): {np.round(100 * coverage)}")
-    assert ff < 0.3 * pi
+    assert rms["m/s"][1] < 0.3 * rms["m/s"][0]
+    assert rms["rad/s"][1] < 0.5 * rms["rad/s"][0]
+    page = (report / "index.html").read_text()
+    assert "RMS error (m/s; u, w)" in page and "RMS error (rad/s; r)" in page
