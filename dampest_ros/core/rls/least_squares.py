@@ -513,12 +513,8 @@ class RecursiveLeastSquares:
 
     @property
     def alarm_time(self) -> float | None:
-        """Stamp of the first change alarm since the last clear (None: none)."""
+        """Stamp of the first change alarm since the last reset (None: none)."""
         return self.monitor.alarm_time
-
-    def clear_alarm(self) -> None:
-        """Acknowledge a change: clear the CUSUM (the estimate is kept)."""
-        self.monitor.clear()
 
     # --- diagnostics ----------------------------------------------------------------------
 

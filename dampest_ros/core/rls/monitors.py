@@ -267,7 +267,7 @@ class InnovationMonitor:
 
     @property
     def alarm(self) -> bool:
-        """True once any channel alarmed (until :meth:`clear`)."""
+        """True once any channel alarmed (until :meth:`reset`)."""
         return bool(self.cusum.alarm.any())
 
     def channels(self) -> list[str]:
@@ -275,11 +275,6 @@ class InnovationMonitor:
         c = self.cusum
         return [f"{CUSUM_CHANNELS[i]}{'+' if c.alarm_sign[i] > 0 else '-'}"
                 for i in np.flatnonzero(c.alarm)]
-
-    def clear(self) -> None:
-        """Acknowledge the alarms (the statistics are kept)."""
-        self.cusum.reset()
-        self.alarm_time = None
 
 
 class OutlierGate:
