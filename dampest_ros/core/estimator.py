@@ -1,6 +1,7 @@
 """The online estimator behind the estimator node: joins the sample streams by exact stamp,
-builds the parallel-filtered regression (:class:`~dampest_ros.core.online.OnlineRegression`)
-and runs the RLS (:class:`~dampest_ros.core.rls.RecursiveLeastSquares`).
+builds the parallel-filtered regression
+(:class:`~dampest_ros.core.online.regression.OnlineRegression`) and runs the RLS
+(:class:`~dampest_ros.core.rls.least_squares.RecursiveLeastSquares`).
 
 Inputs per sample stamp (integer nanoseconds, identical on the four streams): velocity ν,
 acceleration ν̇ and wrench τ (FRD, SI) and the attitude for g(η) (the IMU orientation at the
@@ -29,7 +30,8 @@ from numpy.typing import NDArray
 from dampest_ros.core import frames
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.dissipative import project
-from dampest_ros.core.online import OnlineRegression, OnlineSample
+from dampest_ros.core.online.regression import OnlineRegression
+from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError
 from dampest_ros.core.rls.least_squares import (
     OUTLIER_GATE,

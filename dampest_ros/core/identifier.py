@@ -29,7 +29,7 @@ from dampest_ros.core.batch import Fit, FitOptions, fit, memory_states
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.excitation import speed_limits
-from dampest_ros.core.online import OnlineSample
+from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.validate import force_scores

@@ -6,8 +6,8 @@ subscription per round, so under load a slow topic runs ahead of a fast one). A 
 preprocessor whose state depends on that interleaving would give a different result live,
 in a replay and offline. :class:`StampOrder` removes the dependence: it holds the messages
 and releases them in (stamp, role) order, the order in which
-:meth:`dampest_ros.core.online.OnlinePreprocessor.messages` feeds a whole recording, so every
-path feeds the preprocessor the identical sequence.
+:meth:`dampest_ros.core.online.preprocessor.OnlinePreprocessor.messages` feeds a whole
+recording, so every path feeds the preprocessor the identical sequence.
 
 A held message (stamp t, role k) is released as soon as nothing that can still arrive may
 precede it, which is decided from stamps alone (no wall clock):

@@ -195,7 +195,7 @@ def test_preprocess_node_takes_the_wrench_topic_without_thrusters(run: Path) -> 
     from rclpy.parameter import Parameter
     from rclpy.serialization import serialize_message
 
-    from dampest_ros.core.online import OnlinePreprocessor
+    from dampest_ros.core.online.preprocessor import OnlinePreprocessor
     from dampest_ros.core.rigid_body import ConfigError
     from dampest_ros.ros.convert import publications
     from dampest_ros.ros.preprocess_node import PreprocessNode

@@ -8,7 +8,8 @@ import pytest
 
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.measurements import Recording
-from dampest_ros.core.online import DEFAULT_TOPICS, TOPIC_ROLES, OnlinePreprocessor
+from dampest_ros.core.online.preprocessor import OnlinePreprocessor
+from dampest_ros.core.online.sample import DEFAULT_TOPICS, TOPIC_ROLES
 from dampest_ros.core.reorder import StampOrder
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.sensors import SensorConfig, measure

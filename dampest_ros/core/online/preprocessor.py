@@ -1,6 +1,5 @@
-"""Causal preprocessing of live sensor messages into samples of ν, ν̇, τ, and the causal
-regression that feeds the RLS: the online counterpart of :mod:`dampest_ros.core.preprocess`
-and :func:`dampest_ros.core.batch.iter_regression`.
+"""Causal preprocessing of live sensor messages into samples of ν, ν̇, τ: the online
+counterpart of :mod:`dampest_ros.core.preprocess`.
 
 One class, :class:`OnlinePreprocessor`, takes the messages one at a time (the ROS node calls
 it from its subscriptions) or a whole recording (:meth:`OnlinePreprocessor.run` feeds the
@@ -40,11 +39,6 @@ topics get ahead) wait for it. A stamp more
 than ``clock_jump`` seconds behind its topic's last stamp is a clock jump backwards: the state
 is reset and the event reported. Samples before the first DVL fix, during DVL dropouts longer
 than ``max_dvl_gap`` and for ``settle`` seconds after a (re)start are flagged not usable.
-
-:class:`LowPass` is the causal "parallel filter": the same Butterworth low-pass (second-order
-sections) applied to y and to every column of Φ (O(p) per sample), so that LP(y) = LP(Φ) θ
-holds for the nonlinear regressor. :class:`OnlineRegression` turns samples into filtered
-(Φ, y) with the regressor and target of the batch path.
 """
 
 from __future__ import annotations
@@ -52,18 +46,14 @@ from __future__ import annotations
 import functools
 import math
 from collections import deque
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, fields
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
 from numpy.typing import NDArray
-from scipy import signal
 
 from dampest_ros.core import frames
-from dampest_ros.core.batch import target
-from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.measurements import (
     ImuSeries,
     JointSeries,
@@ -73,126 +63,11 @@ from dampest_ros.core.measurements import (
     WrenchSeries,
     stamp_order,
 )
+from dampest_ros.core.online.sample import DEFAULT_TOPICS, OnlineConfig, OnlineSample, topic_roles
 from dampest_ros.core.preprocess import DataError, body_wrench
-from dampest_ros.core.rigid_body import ConfigError, RigidBody
-from dampest_ros.core.samples import Samples
 from dampest_ros.core.thrusters import Thrusters
 
 FloatArray = NDArray[np.float64]
-
-#: ``gate(Φ, y)``: which raw regression rows, Φ (n, 6, p) and y (n, 6), to reject, (n,) bool.
-Gate = Callable[[FloatArray, FloatArray], NDArray[np.bool_]]
-
-TOPIC_ROLES = ("imu", "dvl", "pressure", "thrusters")
-DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
-                  "thrusters": "thrusters/state"}
-
-
-def topic_roles(wrench: bool) -> tuple[str, ...]:
-    """The message roles in tie order: τ from thruster telemetry (``thrusters``) or, with
-    ``wrench``, from a body-wrench topic (``wrench``) in its place."""
-    return (*TOPIC_ROLES[:3], "wrench" if wrench else "thrusters")
-
-
-@dataclass(frozen=True)
-class OnlineConfig:
-    """Settings of :class:`OnlinePreprocessor` (defaults suit a 200 Hz IMU, 5–8 Hz DVL).
-
-    Attributes
-    ----------
-    rate : float
-        Output sample rate (Hz).
-    accel_noise : float
-        Accelerometer (plus AHRS-induced gravity) noise per IMU message (m/s²).
-    accel_bias_walk : float
-        Accelerometer bias random walk (m/s²/√s).
-    gyro_noise : float
-        Gyro noise per message (rad/s).
-    angular_jerk : float
-        Power spectral density q of the white angular jerk of the [ω, ω̇] model
-        ((rad/s³)²/Hz); sets the filter bandwidth (q = 1: about 11 Hz at 200 Hz).
-    dvl_noise : float
-        DVL noise (m/s) when the message carries no usable covariance.
-    dvl_gate : float
-        Mahalanobis gate (χ², 3 DOF) for DVL messages; 0 disables it.
-    max_dvl_gap : float
-        Samples more than this (s) after the last DVL fix are not usable.
-    max_imu_gap : float
-        An IMU gap longer than this (s) restarts the inertial filters.
-    settle : float
-        Samples within this (s) after a start, restart or DVL recovery are not usable.
-    stale_after : float
-        DVL, pressure and thruster messages older than this (s) behind the IMU are rejected.
-    clock_jump : float
-        A stamp this much (s) behind its topic's last stamp is a clock jump: reset.
-    thrust_window : float
-        Averaging window of the thruster telemetry (s); 0: the message period.
-    atmospheric_pressure : float
-        Pa.
-    """
-
-    rate: float = 50.0
-    accel_noise: float = 0.03
-    accel_bias_walk: float = 1e-4
-    gyro_noise: float = 0.002
-    angular_jerk: float = 1.0
-    dvl_noise: float = 0.01
-    dvl_gate: float = 25.0
-    max_dvl_gap: float = 1.0
-    max_imu_gap: float = 0.1
-    settle: float = 1.0
-    stale_after: float = 1.0
-    clock_jump: float = 1.0
-    thrust_window: float = 0.0
-    atmospheric_pressure: float = 101325.0
-
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
-                raise ConfigError(f.name, f"must be a finite number, got {v!r}")
-            if v < 0:
-                raise ConfigError(f.name, f"must be ≥ 0, got {v}")
-        for name in ("rate", "gyro_noise", "accel_noise", "angular_jerk", "dvl_noise",
-                     "max_imu_gap", "stale_after", "clock_jump"):
-            if getattr(self, name) <= 0:
-                raise ConfigError(name, "must be > 0")
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> OnlineConfig:
-        """From a mapping; unknown keys raise ConfigError naming them."""
-        known = {f.name for f in fields(cls)}
-        unknown = set(d) - known
-        if unknown:
-            raise ConfigError("online", f"unknown key(s) {sorted(unknown)}")
-        return cls(**{k: float(v) for k, v in d.items()})
-
-
-@dataclass
-class OnlineSample:
-    """One synchronised sample (FRD/NED, SI units).
-
-    Attributes
-    ----------
-    t : float
-        Stamp (s), shared by all fields.
-    nu, nu_dot, tau : ndarray, shape (6,)
-        Velocity (m/s, rad/s), its derivative, generalised thruster force (N, N·m).
-    euler : ndarray, shape (3,)
-        Roll, pitch, yaw (rad).
-    depth : float
-        m (NaN without pressure).
-    usable : bool
-        False during DVL dropouts, before the first fix and while settling.
-    """
-
-    t: float
-    nu: FloatArray
-    nu_dot: FloatArray
-    tau: FloatArray
-    euler: FloatArray
-    depth: float
-    usable: bool
 
 
 class _History:
@@ -715,206 +590,3 @@ class OnlinePreprocessor:
             elif isinstance(pres, PressureSeries):
                 out += self.pressure(t, float(pres.fluid_pressure[i]))
         return out
-
-
-def to_samples(samples: list[OnlineSample], rate: float, usable_only: bool = True) -> Samples:
-    """Stack online samples into :class:`Samples`; a gap or an unusable stretch starts a new
-    segment (so that the batch path sees the same data as the RLS)."""
-    keep = [s for s in samples if s.usable or not usable_only]
-    if not keep:
-        raise DataError("no usable samples")
-    t = np.array([s.t for s in keep])
-    new_seg = np.r_[False, np.diff(t) > 1.5 / rate]
-    return Samples(t, np.array([s.nu for s in keep]), np.array([s.nu_dot for s in keep]),
-                   np.array([s.tau for s in keep]), np.array([s.euler for s in keep]),
-                   np.array([s.depth for s in keep]), np.cumsum(new_seg).astype(np.int64))
-
-
-class LowPass:
-    """Causal Butterworth low-pass applied in parallel to many channels.
-
-    Cascaded second-order sections (``order`` / 2 of them, as ``scipy.signal.sosfilt``),
-    vectorised over channels: O(channels) per sample. The state starts at the steady state
-    of the first input (no start-up step). Order 4 has the magnitude |H|² = 1/(1 + (f/f_c)⁸)
-    of the batch path's zero-phase filter, so the normal equations weight the frequencies as
-    the batch path does (the phase cancels in ΦᵀΦ and Φᵀy, since y and Φ share the filter).
-
-    Parameters
-    ----------
-    channels : int
-    cutoff : float
-        −3 dB frequency (Hz).
-    rate : float
-        Sample rate (Hz); cutoff < rate / 2.
-    order : int
-        Even filter order (2: one biquad).
-    """
-
-    def __init__(self, channels: int, cutoff: float, rate: float, order: int = 4) -> None:
-        if not 0 < cutoff < 0.5 * rate:
-            raise ConfigError("cutoff", f"must be in (0, rate/2 = {0.5 * rate}), got {cutoff}")
-        if order < 2 or order % 2:
-            raise ConfigError("order", f"must be even and ≥ 2, got {order}")
-        self.sos = np.asarray(signal.butter(order, cutoff, fs=rate, output="sos"), dtype=float)
-        self._zi = np.asarray(signal.sosfilt_zi(self.sos), dtype=float)  # (sections, 2)
-        self.state = np.zeros((len(self.sos), 2, channels))
-        self.started = False
-
-    def reset(self) -> None:
-        """Forget the state; the next input restarts the filter."""
-        self.started = False
-
-    def __call__(self, x: FloatArray) -> FloatArray:
-        """Filter one sample of every channel (shape (channels,)); returns the output."""
-        return self.filter(np.asarray(x, dtype=float).reshape(1, -1))[0]
-
-    def filter(self, X: FloatArray) -> FloatArray:
-        """Filter consecutive samples (n, channels), continuing from the current state."""
-        if len(X) == 0:
-            return X
-        if not self.started:
-            self.state = self._zi[:, :, None] * X[0]
-            self.started = True
-        y, self.state = signal.sosfilt(self.sos, X, axis=0, zi=self.state)
-        return np.asarray(y, dtype=float)
-
-
-class OnlineRegression:
-    """Samples → parallel-filtered (Φ, y) for the RLS, with the batch path's regressor and
-    target (:meth:`DampingModel.regressor`, :func:`dampest_ros.core.batch.target`).
-
-    Samples can be given one at a time or in chunks (vectorised, the same result); a stamp
-    gap longer than 1.5 sample periods or an unusable sample starts a new segment: the
-    low-pass and the memory states restart and the first ``settle`` seconds only settle them.
-
-    Parameters
-    ----------
-    model : DampingModel
-        Term structure being identified.
-    body : RigidBody
-        Known M and restoring data.
-    rate : float
-        Sample rate (Hz).
-    cutoff : float
-        Parallel low-pass (Hz); 0 disables it.
-    settle : float
-        Seconds after a (re)start whose samples are not returned.
-    order : int
-        Order of the parallel low-pass (even; 4: the batch path's magnitude).
-    """
-
-    def __init__(self, model: DampingModel, body: RigidBody, rate: float = 50.0,
-                 cutoff: float = 2.0, settle: float = 1.0, order: int = 4) -> None:
-        self.model = model
-        self.body = body
-        self.rate = float(rate)
-        self.cutoff = float(cutoff)
-        self.settle = float(settle)
-        p = model.n_params
-        self.lp = LowPass(6 * (p + 1), cutoff, rate, order) if cutoff > 0 else None
-        h = 1.0 / self.rate
-        lam = model.memory_rates
-        self._mem_a = np.exp(-lam * h)
-        # first-order hold, as in dampest_ros.core.damping.filter_memory
-        with np.errstate(divide="ignore", invalid="ignore"):
-            self._mem_b1 = (lam * h - 1.0 + self._mem_a) / (lam * lam * h)
-            self._mem_b0 = (1.0 - self._mem_a) / lam - self._mem_b1
-        self.reset()
-
-    def reset(self) -> None:
-        """Start a new segment."""
-        self._t_prev = -math.inf
-        self._t_start = math.nan
-        self._z = np.zeros(len(self.model.memory_rates))
-        self._x_prev = np.zeros(len(self.model.memory_rates))
-        if self.lp is not None:
-            self.lp.reset()
-
-    def __call__(self, s: OnlineSample, gate: Gate | None = None
-                 ) -> tuple[FloatArray, FloatArray] | None:
-        """Filtered (Φ (6, p), y (6,)) of one sample, or None (settling or unusable)."""
-        _, Phi, y = self.process([s], gate)
-        return (Phi[0], y[0]) if len(y) else None
-
-    def process(self, samples: list[OnlineSample], gate: Gate | None = None
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Filtered regression of consecutive samples.
-
-        Parameters
-        ----------
-        samples : list of OnlineSample
-        gate : callable, optional
-            ``gate(Φ, y)`` of raw (unfiltered) rows, Φ (n, 6, p) and y (n, 6), returns which
-            to reject, shape (n,) bool (e.g.
-            :meth:`~dampest_ros.core.rls.least_squares.RecursiveLeastSquares.outliers`). A
-            rejected row enters the low-pass as zeros: y = Φθ + e holds for it with any θ, so
-            the filtered regression stays exact, and the sample adds nothing else.
-
-        Returns
-        -------
-        t : ndarray, shape (n,)
-        Phi : ndarray, shape (n, 6, p)
-        y : ndarray, shape (n, 6)
-            For the samples past settling (n ≤ len(samples)).
-        """
-        p = self.model.n_params
-        ts: list[FloatArray] = []
-        Phis: list[FloatArray] = []
-        ys: list[FloatArray] = []
-        run: list[OnlineSample] = []
-        for s in samples:
-            if not s.usable:
-                self._flush(run, ts, Phis, ys, gate)
-                run = []
-                self.reset()
-                continue
-            last = run[-1].t if run else self._t_prev
-            if s.t - last > 1.5 / self.rate or s.t <= last:
-                self._flush(run, ts, Phis, ys, gate)
-                run = []
-                self.reset()
-                self._t_start = s.t
-            run.append(s)
-        self._flush(run, ts, Phis, ys, gate)
-        if not ts:
-            return np.zeros(0), np.zeros((0, 6, p)), np.zeros((0, 6))
-        return np.concatenate(ts), np.concatenate(Phis), np.concatenate(ys)
-
-    def _flush(self, run: list[OnlineSample], ts: list[FloatArray], Phis: list[FloatArray],
-               ys: list[FloatArray], gate: Gate | None) -> None:
-        """Regression of one gap-free run that continues the current segment."""
-        if not run:
-            return
-        n = len(run)
-        t = np.array([s.t for s in run])
-        smp = Samples(t, np.array([s.nu for s in run]), np.array([s.nu_dot for s in run]),
-                      np.array([s.tau for s in run]), np.array([s.euler for s in run]),
-                      np.array([s.depth for s in run]), np.zeros(n, dtype=np.int64))
-        states = None
-        if len(self._z):
-            x = smp.nu[:, self.model.memory_dofs]
-            prev = np.vstack([self._x_prev, x[:-1]])
-            # z_n = a z_{n−1} + b0 x_{n−1} + b1 x_n (z = 0 at the segment start)
-            u = self._mem_b0 * prev + self._mem_b1 * x
-            if not math.isfinite(self._t_prev):
-                u[0] = 0.0
-            z = np.empty_like(u)
-            zc = self._z
-            for k in range(n):
-                zc = self._mem_a * zc + u[k]
-                z[k] = zc
-            self._z, self._x_prev = zc, x[-1]
-            states = z
-        self._t_prev = float(t[-1])
-        y = target(smp, self.body)
-        Phi = self.model.regressor(smp.nu, states)
-        if gate is not None:
-            bad = gate(Phi, y)
-            y[bad], Phi[bad] = 0.0, 0.0
-        if self.lp is not None:
-            out = self.lp.filter(np.concatenate([y, Phi.reshape(n, -1)], axis=1))
-            y, Phi = out[:, :6], out[:, 6:].reshape(n, 6, -1)
-        keep = t - self._t_start >= self.settle
-        ts.append(t[keep])
-        Phis.append(Phi[keep])
-        ys.append(y[keep])
