@@ -12,8 +12,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.damping import CrossSpec, DampingModel, cross_term, memory_term
+from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
+from dampest_ros.core.terms import CrossSpec, cross_term, memory_term
 from dampest_ros.core.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]

@@ -1,6 +1,6 @@
 """Term selection: which damping terms do the data support?
 
-The candidates are a library of named single-entry coefficients (:func:`damping.library`:
+The candidates are a library of named single-entry coefficients (:func:`terms.library`:
 linear ν_j, cross-flow ν_j|ν_k|, bilinear ν_j ν_k, speed magnitude ν_j‖v‖ and ν_j‖ω‖ in every
 force row) and fluid-memory states, on top of a base model whose terms are always kept:
 
@@ -38,37 +38,33 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
+from dampest_ros.core.alpha import Alpha, AlphaBank
 from dampest_ros.core.batch import (
     NormalEquations,
     accumulate,
     fold_index,
     iter_regression,
 )
-from dampest_ros.core.damping import (
-    FAMILIES,
-    Alpha,
-    AlphaBank,
-    Basis,
-    CrossSpec,
-    DampingModel,
-    DampingTerm,
-    cross_term,
-    filter_memory,
-    library,
-    library_name,
-    memory_term,
-)
+from dampest_ros.core.damping import Basis, DampingModel, DampingTerm, filter_memory
 from dampest_ros.core.frequency import memory_impedance
 from dampest_ros.core.preprocess import zero_phase
 from dampest_ros.core.quadratic import solve_normal
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
+from dampest_ros.core.terms import (
+    FAMILIES,
+    CrossSpec,
+    cross_term,
+    library,
+    library_name,
+    memory_term,
+)
 
 FloatArray = NDArray[np.float64]
 
 #: Common couplings of a box- or torpedo-shaped vehicle: sway–yaw and heave–pitch damping
 #: cross terms and the surge–heave lift (Fossen 2011, §6.4; SNAME names, |x| as in X_uu).
-#: The gap search's cross candidates; selection searches the whole :func:`damping.library`.
+#: The gap search's cross candidates; selection searches the whole :func:`terms.library`.
 DEFAULT_CROSS = (
     {"row": "Y", "col": "v", "alpha": "|r|"}, {"row": "Y", "col": "r", "alpha": "|v|"},
     {"row": "N", "col": "v", "alpha": "|r|"}, {"row": "N", "col": "r", "alpha": "|v|"},
@@ -424,7 +420,7 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     cross : sequence of dict, optional
         Candidate coefficients as :class:`CrossSpec` mappings instead of the library.
     families : sequence of str
-        Library families searched when ``cross`` is not given (:data:`damping.FAMILIES`).
+        Library families searched when ``cross`` is not given (:data:`terms.FAMILIES`).
     memory_dofs : sequence of int
         DOFs that may carry a fluid-memory state (none if ``base`` has a memory term).
     cutoff : float

@@ -25,10 +25,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.damping import (
+from dampest_ros.core.damping import DampingModel, DampingTerm
+from dampest_ros.core.geometry import Geometry
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
+from dampest_ros.core.terms import (
     CrossSpec,
-    DampingModel,
-    DampingTerm,
     added_mass_term,
     cross_term,
     linear_term,
@@ -36,8 +37,6 @@ from dampest_ros.core.damping import (
     quadratic_term,
     residual_term,
 )
-from dampest_ros.core.geometry import Geometry
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
 from dampest_ros.core.thrusters import Thrusters
 
 FloatArray = NDArray[np.float64]
@@ -205,18 +204,6 @@ class Vehicle:
             raise ConfigError("thrusters", f"vehicle {self.name!r} has no thrusters and no "
                                            "measured τ was given for the force scale")
         return measured_wrench_scale(tau)
-
-    def reference_scales(self, v_ref: float) -> tuple[FloatArray, FloatArray]:
-        """Velocity and force scales for nondimensionalisation (prime system).
-
-        Linear velocities by v_ref, angular by v_ref/L; forces by ½ρL²v_ref², moments by
-        ½ρL³v_ref².
-
-        Returns
-        -------
-        nu_scale, force_scale : ndarray, shape (6,)
-        """
-        return nondim_scales(v_ref, self.length, self.body.rho)
 
 
 def measured_wrench_scale(tau: FloatArray, percentile: float = 99.0) -> FloatArray:

@@ -62,7 +62,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from dampest_ros.core.damping import TERM_KINDS, Alpha, DampingModel
+from dampest_ros.core.alpha import Alpha
+from dampest_ros.core.damping import TERM_KINDS, DampingModel
 from dampest_ros.core.identified import BoolArray, check_model_numbers, identified_mask
 from dampest_ros.core.measurements import FloatArray
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError

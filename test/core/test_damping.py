@@ -5,21 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dampest_ros.core.damping import (
-    Alpha,
-    AlphaBank,
+from dampest_ros.core.alpha import Alpha, AlphaBank
+from dampest_ros.core.damping import DampingModel, filter_memory, psd_project
+from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.terms import (
     CrossSpec,
-    DampingModel,
     added_mass_term,
     cross_term,
-    filter_memory,
     linear_term,
     memory_term,
-    psd_project,
     quadratic_term,
     residual_term,
 )
-from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.vehicle import nondim_scales
 
 CROSS = [

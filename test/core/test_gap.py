@@ -45,13 +45,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from dampest_ros.core.damping import (
-    CrossSpec,
-    DampingModel,
-    cross_term,
-    linear_term,
-    quadratic_term,
-)
+from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.gap.data import GapData
@@ -67,6 +61,7 @@ from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import DEFAULT_CROSS
 from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
 from dampest_ros.core.simulate import run
+from dampest_ros.core.terms import CrossSpec, cross_term, linear_term, quadratic_term
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 

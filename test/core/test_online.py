@@ -17,15 +17,9 @@ from dampest_ros.core.effects import Effects
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
 from dampest_ros.core.excitation import Excitation, make_excitation, speed_limits
 from dampest_ros.core.measurements import Recording, TwistSeries
-from dampest_ros.core.online import (
-    LowPass,
-    OnlineConfig,
-    OnlinePreprocessor,
-    OnlineRegression,
-    derivative_lag,
-    to_samples,
-    window_mean,
-)
+from dampest_ros.core.online.preprocessor import OnlinePreprocessor, derivative_lag, window_mean
+from dampest_ros.core.online.regression import LowPass, OnlineRegression
+from dampest_ros.core.online.sample import OnlineConfig, to_samples
 from dampest_ros.core.preprocess import PreprocessConfig, preprocess
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.rls.least_squares import RecursiveLeastSquares, RLSConfig
@@ -218,7 +212,7 @@ def test_low_pass_chunks_equal_samples_and_scipy() -> None:
 
 def test_parallel_filter_keeps_the_regression_exact(vehicle: Vehicle) -> None:
     """y = Φ(ν) θ sample by sample ⇒ LP(y) = LP(Φ) θ for the nonlinear regressor."""
-    from dampest_ros.core.online import OnlineSample
+    from dampest_ros.core.online.sample import OnlineSample
     rng = np.random.default_rng(1)
     model, theta = vehicle.damping, vehicle.theta
     n = 400
@@ -236,8 +230,9 @@ def test_parallel_filter_keeps_the_regression_exact(vehicle: Vehicle) -> None:
 
 def test_regression_matches_the_batch_path_and_memory(vehicle: Vehicle) -> None:
     """Without the low-pass, (Φ, y) equal batch.iter_regression, memory states included."""
-    from dampest_ros.core.damping import DampingModel, memory_term
-    from dampest_ros.core.online import OnlineSample
+    from dampest_ros.core.damping import DampingModel
+    from dampest_ros.core.online.sample import OnlineSample
+    from dampest_ros.core.terms import memory_term
     model = DampingModel([*vehicle.damping.terms, memory_term({"u": [2.0], "r": [0.5]})])
     rng = np.random.default_rng(2)
     n = 200
@@ -321,7 +316,7 @@ def test_hovering_for_an_hour_keeps_the_covariance_bounded(
     s = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
                    PreprocessConfig(rate=10.0, inertial_rate=50.0, cutoff=4.0))
     assert s.t[-1] - s.t[0] > 3500.0
-    from dampest_ros.core.online import OnlineSample
+    from dampest_ros.core.online.sample import OnlineSample
     samples = [OnlineSample(float(s.t[k]), s.nu[k], s.nu_dot[k], s.tau[k], s.euler[k],
                             float(s.depth[k]), True) for k in range(len(s))]
     T, Phi, y = OnlineRegression(vehicle.damping, vehicle.body, rate=10.0).process(samples)

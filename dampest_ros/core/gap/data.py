@@ -227,11 +227,6 @@ class GapData:
         out: FloatArray = self.memo(("power_points",), make)
         return out
 
-    def theta_of(self, name: str) -> float:
-        """The believed value of a damping parameter (0 when the model lacks it)."""
-        names = self.model.parameter_names
-        return float(self.theta[names.index(name)]) if name in names else 0.0
-
 
 def bind(fn: Callable[[GapData, Chunk, FloatArray], FloatArray], data: GapData,
          p: FloatArray) -> Callable[[Chunk], FloatArray]:

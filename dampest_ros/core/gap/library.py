@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from dampest_ros.core.damping import CrossSpec
 from dampest_ros.core.gap.effects import (
     Buoyancy,
     CGOffset,
@@ -26,6 +25,7 @@ from dampest_ros.core.gap.model_effects import (
 )
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.selection import DEFAULT_CROSS
+from dampest_ros.core.terms import CrossSpec
 
 
 def library(names: Sequence[str] | None = None) -> list[Effect]:

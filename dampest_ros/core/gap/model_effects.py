@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.damping import CrossSpec, DampingModel, cross_term, filter_memory
+from dampest_ros.core.damping import DampingModel, filter_memory
 from dampest_ros.core.gap.data import Chunk, GapData
 from dampest_ros.core.gap.effects import Effect, LinearEffect
 from dampest_ros.core.rigid_body import (
@@ -18,6 +18,7 @@ from dampest_ros.core.rigid_body import (
     ConfigError,
     added_coriolis_force,
 )
+from dampest_ros.core.terms import CrossSpec, cross_term
 
 FloatArray = NDArray[np.float64]
 

@@ -3,7 +3,6 @@ free-run velocity error of both (:func:`free_run_errors`)."""
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -12,15 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from dampest_ros.core.damping import (
-    CrossSpec,
-    DampingModel,
-    DampingTerm,
-    cross_term,
-    linear_term,
-    memory_term,
-    quadratic_term,
-)
+from dampest_ros.core.damping import DampingModel, DampingTerm
 from dampest_ros.core.gap.data import FORCE_UNITS, GapData, bind
 from dampest_ros.core.gap.effects import Effect
 from dampest_ros.core.rigid_body import (
@@ -31,6 +22,8 @@ from dampest_ros.core.rigid_body import (
     RigidBody,
 )
 from dampest_ros.core.samples import Samples
+from dampest_ros.core.terms import CrossSpec, cross_term, linear_term, memory_term, quadratic_term
+from dampest_ros.core.validate import free_run_error, longest_segment
 
 FloatArray = NDArray[np.float64]
 
@@ -190,7 +183,7 @@ def free_run_errors(data: GapData, effects: Sequence[tuple[Effect, FloatArray]],
                     seconds: float = 120.0) -> dict[str, Any] | str:
     """Free-run velocity RMSE of the believed model and of the model with the effects.
 
-    Uses :func:`dampest_ros.core.validate.free_run_error` when that module exists. The model
+    Uses :func:`dampest_ros.core.validate.free_run_error`. The model
     with the effects has the changed damping terms, M and added-mass switches; effects that
     change the applied force (thrust gain, buoyancy, delay, dead-zone) enter as a corrected
     τ. Current, CG offset and sensor biases depend on the state and are not represented in
@@ -202,14 +195,8 @@ def free_run_errors(data: GapData, effects: Sequence[tuple[Effect, FloatArray]],
     ``omitted`` (titles of effects left out) and ``notes`` (model → why its run diverged),
     or a string saying why it was skipped or failed.
     """
-    try:
-        validate = importlib.import_module("dampest_ros.core.validate")
-        free_run_error = validate.free_run_error
-        longest = validate.longest_segment
-    except (ImportError, AttributeError):
-        return "free run skipped: dampest_ros.core.validate.free_run is not available"
     s = data.samples
-    rows = longest(s, seconds)
+    rows = longest_segment(s, seconds)
     upd = updated_model(data, effects)
     try:
         body = upd.body(data)

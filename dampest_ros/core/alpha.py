@@ -1,0 +1,214 @@
+"""Scalar functions α(ν) of the body velocity (FRD, relative to the water) that multiply a
+damping parameter's basis matrix: :class:`Alpha` (one, parsed from its text, e.g. ``|r|``,
+``k^2/|U|``) and :class:`AlphaBank` (many, evaluated together, vectorised over samples)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
+
+FloatArray = NDArray[np.float64]
+
+
+def dof_index(name: str | int, what: str = "dof") -> int:
+    """Index 0..5 of a velocity letter (u..r), a force letter (X..N) or an int."""
+    if isinstance(name, int) and 0 <= name < 6:
+        return name
+    if isinstance(name, str):
+        if name in DOF_NAMES:
+            return DOF_NAMES.index(name)
+        if name in FORCE_NAMES:
+            return FORCE_NAMES.index(name)
+    raise ConfigError(what, f"unknown degree of freedom {name!r}; use one of {DOF_NAMES}")
+
+
+@dataclass(frozen=True)
+class Alpha:
+    """A scalar function α(ν) of the body velocity, from a small library.
+
+    kinds: ``one`` (1), ``abs`` (|ν_i|), ``lin`` (ν_i), ``norm`` (‖[u, v, w]‖, m/s),
+    ``anorm`` (‖[p, q, r]‖, rad/s), ``pnorm`` (‖[ν_i, ν_j]‖, the cross-flow speed of a body
+    slender along the third axis), ``area`` (ν_i² / ‖v‖ for a linear ν_i, ν_i² / ‖ω‖ for an
+    angular one; 0 at rest), ``prod`` (ν_i ν_j), ``absprod`` (|ν_i ν_j|),
+    ``absproj`` (|wᵀν| for a unit 6-vector w).
+    """
+
+    kind: str = "one"
+    i: int = -1
+    j: int = -1
+    w: tuple[float, ...] = ()
+
+    def __call__(self, nu: FloatArray) -> FloatArray:
+        """Evaluate on samples ``nu`` of shape (N, 6); returns shape (N,)."""
+        k = self.kind
+        if k == "one":
+            return np.ones(nu.shape[0])
+        if k == "abs":
+            return np.abs(nu[:, self.i])
+        if k == "lin":
+            return nu[:, self.i].copy()
+        if k == "norm":
+            return np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))
+        if k == "anorm":
+            return np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))
+        if k == "pnorm":
+            return np.hypot(nu[:, self.i], nu[:, self.j])
+        if k == "area":
+            return _area(nu, np.array([self.i]))[:, 0]
+        if k == "prod":
+            return nu[:, self.i] * nu[:, self.j]
+        if k == "absprod":
+            return np.abs(nu[:, self.i] * nu[:, self.j])
+        if k == "absproj":
+            return np.abs(nu @ np.asarray(self.w))
+        raise ConfigError("alpha", f"unknown kind {k!r}")
+
+    def scale(self, nu_scale: FloatArray) -> float:
+        """Factor c with α(ν_s ⊙ ν') = c α(ν') for velocity scales ν_s, shape (6,).
+
+        Exact for ``one, abs, lin, prod, absprod``; for ``norm`` and ``absproj`` exact when
+        the velocities inside α share one scale (the largest is used).
+        """
+        s = np.asarray(nu_scale, dtype=float)
+        k = self.kind
+        if k == "one":
+            return 1.0
+        if k in ("abs", "lin"):
+            return float(s[self.i])
+        if k in ("prod", "absprod"):
+            return float(s[self.i] * s[self.j])
+        if k == "pnorm":
+            return float(max(s[self.i], s[self.j]))
+        if k == "area":
+            return float(s[self.i] ** 2 / (s[:3].max() if self.i < 3 else s[3:].max()))
+        if k == "norm":
+            return float(s[:3].max())
+        if k == "anorm":
+            return float(s[3:].max())
+        if k == "absproj":
+            return float(s[np.abs(np.asarray(self.w)) > 0].max())
+        raise ConfigError("alpha", f"unknown kind {k!r}")
+
+    def label(self) -> str:
+        """Short text form, e.g. ``|r|``, ``u``, ``|U|`` (‖v‖), ``|W|`` (‖ω‖)."""
+        n = DOF_NAMES
+        return {
+            "one": "1",
+            "abs": f"|{n[self.i]}|" if self.i >= 0 else "",
+            "lin": n[self.i] if self.i >= 0 else "",
+            "norm": "|U|",
+            "anorm": "|W|",
+            "pnorm": f"|{n[self.i]},{n[self.j]}|" if self.i >= 0 else "",
+            "area": f"{n[self.i]}^2/{'|U|' if self.i < 3 else '|W|'}" if self.i >= 0 else "",
+            "prod": f"{n[self.i]}{n[self.j]}" if self.i >= 0 else "",
+            "absprod": f"|{n[self.i]}{n[self.j]}|" if self.i >= 0 else "",
+            "absproj": "|w'nu|",
+        }[self.kind]
+
+    @classmethod
+    def parse(cls, text: str) -> Alpha:
+        """Parse ``1``, ``|r|``, ``u``, ``|U|`` (‖v‖), ``|W|`` (‖ω‖), ``|v,w|`` (‖(v, w)‖),
+        ``uv``, ``|uv|``."""
+        t = text.replace(" ", "")
+        if t in ("1", "", "one"):
+            return cls("one")
+        if t in ("|U|", "norm"):
+            return cls("norm")
+        if t in ("|W|", "anorm"):
+            return cls("anorm")
+        if t.endswith(("^2/|U|", "^2/|W|")):
+            i = dof_index(t[:-6], "alpha")
+            if (i < 3) != t.endswith("|U|"):
+                raise ConfigError("alpha", f"{text!r}: a linear velocity goes over |U|, an "
+                                  "angular one over |W|")
+            return cls("area", i)
+        if "," in t and t.startswith("|") and t.endswith("|"):
+            pair = [dof_index(c, "alpha") for c in t.strip("|").split(",")]
+            if len(pair) == 2:
+                return cls("pnorm", pair[0], pair[1])
+        bars = t.startswith("|") and t.endswith("|")
+        core = t.strip("|")
+        idx = [dof_index(c, "alpha") for c in core]
+        if len(idx) == 1:
+            return cls("abs" if bars else "lin", idx[0])
+        if len(idx) == 2:
+            return cls("absprod" if bars else "prod", idx[0], idx[1])
+        raise ConfigError("alpha", f"cannot parse {text!r}")
+
+
+class AlphaBank:
+    """All α_j of a list of bases evaluated at once: a fixed number of array operations
+    whatever p is, so the per-sample cost in the simulator and the RLS stays small.
+
+    Parameters
+    ----------
+    alphas : sequence of Alpha
+    """
+
+    _ONE = 6  # index of the constant column appended to ν
+
+    def __init__(self, alphas: Sequence[Alpha]) -> None:
+        p = len(alphas)
+        self.i = np.full(p, self._ONE)
+        self.j = np.full(p, self._ONE)
+        self.absolute = np.zeros(p, dtype=bool)
+        self.norm = np.zeros(p, dtype=bool)
+        self.anorm = np.zeros(p, dtype=bool)
+        self.pnorm = np.zeros(p, dtype=bool)
+        self.area = np.zeros(p, dtype=bool)
+        self.W = np.zeros((6, p))
+        self.proj = np.zeros(p, dtype=bool)
+        for k, a in enumerate(alphas):
+            if a.kind in ("abs", "lin", "prod", "absprod", "pnorm", "area"):
+                self.i[k] = a.i
+            if a.kind in ("prod", "absprod", "pnorm"):
+                self.j[k] = a.j
+            self.absolute[k] = a.kind in ("abs", "absprod", "absproj")
+            self.norm[k] = a.kind == "norm"
+            self.anorm[k] = a.kind == "anorm"
+            self.pnorm[k] = a.kind == "pnorm"
+            self.area[k] = a.kind == "area"
+            if a.kind == "absproj":
+                self.proj[k] = True
+                self.W[:, k] = a.w
+        self.any_norm = bool(self.norm.any())
+        self.any_anorm = bool(self.anorm.any())
+        self.any_pnorm = bool(self.pnorm.any())
+        self.any_area = bool(self.area.any())
+        self.any_proj = bool(self.proj.any())
+        self.any_abs = bool(self.absolute.any())
+
+    def __call__(self, nu: FloatArray) -> FloatArray:
+        """α for samples ``nu`` (N, 6); returns (N, p)."""
+        aug = np.concatenate([nu, np.ones((nu.shape[0], 1))], axis=1)
+        # products ν_i ν_j with ν_6 ≡ 1 cover the kinds one, lin and prod
+        a = aug[:, self.i] * aug[:, self.j]
+        if self.any_pnorm:
+            a = np.where(self.pnorm, np.hypot(aug[:, self.i], aug[:, self.j]), a)
+        if self.any_area:
+            a[:, self.area] = _area(nu, self.i[self.area])
+        if self.any_proj:
+            a = np.where(self.proj, nu @ self.W, a)
+        if self.any_norm:
+            speed = np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))
+            a = np.where(self.norm, speed[:, None], a)
+        if self.any_anorm:
+            turn = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))
+            a = np.where(self.anorm, turn[:, None], a)
+        if self.any_abs:
+            a = np.where(self.absolute, np.abs(a), a)
+        return a
+
+
+def _area(nu: FloatArray, k: NDArray[np.int64]) -> FloatArray:
+    """ν_k² / ‖v‖ for linear k, ν_k² / ‖ω‖ for angular k, 0 at rest; shape (N, len(k))."""
+    lin = np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))
+    ang = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))
+    norm = np.where(k < 3, lin[:, None], ang[:, None])
+    # ν_k² / ‖·‖ (≤ ‖·‖, so it goes to 0 with the speed)
+    return np.divide(nu[:, k] ** 2, norm, out=np.zeros_like(norm), where=norm > 0)
