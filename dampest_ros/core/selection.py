@@ -36,18 +36,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize
 
 from dampest_ros.core.alpha import Alpha, AlphaBank
-from dampest_ros.core.batch import (
-    NormalEquations,
-    accumulate,
-    fold_index,
-    iter_regression,
-)
-from dampest_ros.core.damping import Basis, DampingModel, DampingTerm, filter_memory
-from dampest_ros.core.frequency import memory_impedance
-from dampest_ros.core.preprocess import zero_phase
+from dampest_ros.core.batch import NormalEquations, fold_index, iter_regression
+from dampest_ros.core.damping import Basis, DampingModel, DampingTerm
+from dampest_ros.core.memory_rates import MemoryEvidence, memory_evidence
 from dampest_ros.core.quadratic import solve_normal
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
@@ -89,62 +82,6 @@ class SelectionStep:
     cv: FloatArray = field(default_factory=lambda: np.zeros(6))
 
 
-@dataclass(frozen=True)
-class MemoryEvidence:
-    """The two estimates of one DOF's fluid memory K(t) = c e^{−λt}: the time-domain profile
-    (staged least squares) and the frequency-domain rational fit of the residual impedance
-    (:func:`frequency.memory_impedance`).
-
-    Fluid memory is passive: Re Z(iω) = c λ / (λ² + ω²) ≥ 0 needs c ≥ 0. A rate outside the
-    search range is not memory either (a trend or an offset below it, plain damping above).
-    """
-
-    dof: int
-    rate: float
-    gain: float
-    rate_freq: float
-    gain_freq: float
-    bounds: tuple[float, float]
-
-    @property
-    def contradiction(self) -> str:
-        """Why these estimates are not fluid memory ('' if they are)."""
-        lo, hi = self.bounds
-        if not lo * 1.05 < self.rate < hi / 1.05:
-            return (f"its rate λ = {self.rate:.3g} 1/s is at the edge of the search range "
-                    f"[{lo:g}, {hi:g}]: a trend or an offset, not fluid memory")
-        if self.gain <= 0.0:
-            return (f"not passive: the best gain c = {self.gain:.3g} ≤ 0 would feed energy "
-                    "into the vehicle")
-        if self.gain_freq <= 0.0 or not lo <= self.rate_freq <= hi:
-            return (f"the frequency-domain estimate (λ = {self.rate_freq:.3g} 1/s, c = "
-                    f"{self.gain_freq:.3g}) is not passive memory in the searched range: the "
-                    "residual has another cause (a current, an offset, a sensor bias; "
-                    "see dampest gap)")
-        return ""
-
-    @property
-    def agrees(self) -> bool:
-        """Both estimates passive, their rates and their steady gains c/λ (the force per unit
-        of a slow velocity) within a factor of 2."""
-        steady = (self.gain_freq / self.rate_freq) / (self.gain / self.rate)
-        return (not self.contradiction and 0.5 <= self.rate_freq / self.rate <= 2.0
-                and 0.5 <= steady <= 2.0)
-
-    def describe(self) -> str:
-        """One line: both estimates and whether they agree."""
-        text = (f"memory on {DOF_NAMES[self.dof]}: λ = {self.rate:.4g} 1/s, c = "
-                f"{self.gain:.4g} (time domain); λ = {self.rate_freq:.4g} 1/s, c = "
-                f"{self.gain_freq:.4g} (frequency domain)")
-        if self.contradiction:
-            return f"{text}: DISAGREE: {self.contradiction}"
-        if not self.agrees:
-            return (f"{text}: DISAGREE: their rates or steady gains c/λ differ by more than a "
-                    "factor of 2; the memory is uncertain (broadband data, e.g. protocol C, "
-                    "separate it from other causes: a delay, an added-mass error)")
-        return f"{text}: agree"
-
-
 @dataclass
 class Selection:
     """Result of :func:`select_terms`: the chosen model and the path that led to it.
@@ -174,20 +111,6 @@ class Selection:
         return 1.0 - self.steps[0].cv / self.tss, 1.0 - self.steps[-1].cv / self.tss
 
 
-def _criteria(ne: NormalEquations, idx: NDArray[np.int64], weights: FloatArray, n_eff: float
-              ) -> tuple[FloatArray, float, float]:
-    """RSS per DOF, BIC and AIC of the least-squares fit on the columns ``idx``."""
-    A = np.einsum("i,fipq->pq", weights, ne.A)[np.ix_(idx, idx)]
-    b = np.einsum("i,fip->p", weights, ne.b)[idx]
-    theta = solve_normal(A, b, np.ones(len(idx), dtype=bool), np.zeros(len(idx)))
-    full = np.zeros(ne.A.shape[-1])
-    full[idx] = theta
-    rss = np.maximum(ne.rss(full), 1e-300)
-    n = float(ne.n.sum())
-    ll = n_eff * float(np.sum(np.log(rss / n)))
-    return rss, ll + len(idx) * float(np.log(n_eff)), ll + 2.0 * len(idx)
-
-
 def _with_terms(base: DampingModel, cross: Sequence[CrossSpec],
                 memory: dict[int, float]) -> DampingModel:
     terms: dict[str, DampingTerm] = {t.kind: t for t in base.terms}
@@ -200,102 +123,6 @@ def _with_terms(base: DampingModel, cross: Sequence[CrossSpec],
         terms["freq"] = memory_term({DOF_NAMES[d]: [lam] for d, lam in memory.items()})
     order = ("linear", "quadratic", "cross", "freq", "added", "residual")
     return DampingModel([terms[k] for k in order if k in terms])
-
-
-def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int,
-                 weights: FloatArray, cutoff: float, ne: NormalEquations,
-                 bounds: tuple[float, float] = (0.05, 20.0)) -> tuple[float, float, float]:
-    """Memory rate λ of one DOF by minimising the profiled weighted RSS over log λ, among
-    passive memories (gain c ≥ 0).
-
-    The memory column only acts on row ``dof``, so the base model's low-passed regressor
-    row and target of that DOF are kept once; each trial λ then costs one recursive filter
-    of ν_dof and one low-pass, not a pass over the full regression. Where the best gain is
-    negative the passive optimum is c = 0 (no memory), whose RSS is the base model's.
-
-    Parameters
-    ----------
-    ne : NormalEquations
-        The base model's low-passed, decimated normal equations on ``samples``
-        (:func:`batch.accumulate`), shared by the DOFs profiled.
-
-    Returns
-    -------
-    rate : float
-        λ (1/s).
-    rss : float
-        Weighted RSS at that rate.
-    gain : float
-        The unconstrained least-squares gain c at that rate (≤ 0: no passive memory).
-    """
-    A, b, c = ne.total(weights)
-    # the same (decimated) samples as the normal equations
-    parts = [(np.arange(len(samples))[sl], Phi[:, dof, :], y[:, dof])
-             for sl, Phi, y in iter_regression(samples, base, body, cutoff=cutoff,
-                                               decimate=True)]
-    used = np.concatenate([p[0] for p in parts])
-    rows = np.concatenate([p[1] for p in parts])
-    y_d = np.concatenate([p[2] for p in parts])
-    w = float(weights[dof])
-    rss_base = c - float(b @ solve_normal(A, b, np.ones(len(b), dtype=bool), np.zeros(len(b))))
-
-    def solve(log_rate: float) -> tuple[float, float]:
-        lam = np.array([np.exp(log_rate)])
-        z = np.empty(len(samples))
-        for sl in samples.segments():
-            zs = filter_memory(samples.t[sl], samples.nu[sl, dof:dof + 1], lam)[:, 0]
-            z[sl] = zero_phase(zs, samples.rate, cutoff) if cutoff > 0 else zs
-        z = z[used]
-        # bordered normal equations: [A, a; aᵀ, s] [θ; c_m] = [b; β]
-        a = w * rows.T @ z
-        Ab = np.block([[A, a[:, None]], [a[None, :], np.array([[w * z @ z]])]])
-        bb = np.r_[b, w * z @ y_d]
-        theta = solve_normal(Ab, bb, np.ones(len(bb), dtype=bool), np.zeros(len(bb)))
-        # a negative gain is not passive: the best passive memory is none at all
-        return (c - float(bb @ theta) if theta[-1] > 0 else rss_base), float(theta[-1])
-
-    def cost(log_rate: float) -> float:
-        return solve(log_rate)[0]
-
-    lo, hi = np.log(bounds[0]), np.log(bounds[1])
-    grid = np.linspace(lo, hi, 13)
-    values = [cost(g) for g in grid]
-    k = int(np.argmin(values))
-    res = optimize.minimize_scalar(cost, bounds=(grid[max(k - 1, 0)],
-                                                 grid[min(k + 1, len(grid) - 1)]),
-                                   method="bounded", options={"xatol": 1e-4})
-    return float(np.exp(res.x)), float(res.fun), solve(float(res.x))[1]
-
-
-def memory_evidence(samples: Samples, base: DampingModel, body: RigidBody,
-                    dofs: Sequence[int], cutoff: float,
-                    bounds: tuple[float, float] = (0.05, 20.0)) -> list[MemoryEvidence]:
-    """Both estimates of a memory state in each DOF of ``dofs`` on top of ``base``.
-
-    The time domain profiles the rate among passive memories (:func:`profile_rate`, per-DOF
-    weights 1/σ² from the residual of ``base``); the frequency domain fits the impedance of
-    the same residual (:func:`frequency.memory_impedance`, one pass for all DOFs).
-
-    Parameters
-    ----------
-    base : DampingModel
-        The static model (it may hold memory states of other DOFs).
-    dofs : sequence of int
-    cutoff : float
-        Parallel low-pass of the regression (Hz).
-    bounds : tuple of float
-        Search range of the rate (1/s).
-    """
-    ne = accumulate(samples, base, body, folds=1, cutoff=cutoff)
-    A, b, _ = ne.total(np.ones(6))
-    theta = solve_normal(A, b, np.ones(len(b), dtype=bool), np.zeros(len(b)))
-    # per-DOF noise variance of the base's residual → weights 1/σ²
-    weights = np.asarray(1.0 / np.maximum(ne.rss(theta) / float(ne.n.sum()), 1e-12))
-    profiles = [profile_rate(samples, base, body, int(d), weights, cutoff, ne, bounds)
-                for d in dofs]
-    freq = memory_impedance(samples, base, body, theta, dofs)
-    return [MemoryEvidence(int(d), lam, gain, z.rate, z.gain, bounds)
-            for d, (lam, _, gain), z in zip(dofs, profiles, freq, strict=True)]
 
 
 def _key(col: int, alpha: Alpha) -> tuple[Any, ...]:
@@ -764,37 +591,3 @@ def _fit_row(ne: NormalEquations, i: int, cols: Sequence[int]) -> float:
     G, bv = ne.A[:, i].sum(0)[np.ix_(idx, idx)], ne.b[:, i].sum(0)[idx]
     theta = solve_normal(G, bv, np.ones(len(idx), dtype=bool), np.zeros(len(idx)))
     return float(bv @ theta)
-
-
-def shift_tau(samples: Samples, delay: float) -> Samples:
-    """Samples whose τ is delayed by ``delay`` seconds within each segment (τ(t − d))."""
-    tau = np.empty_like(samples.tau)
-    for sl in samples.segments():
-        t = samples.t[sl]
-        for i in range(6):
-            tau[sl, i] = np.interp(t - delay, t, samples.tau[sl, i])
-    return Samples(samples.t, samples.nu, samples.nu_dot, tau, samples.euler, samples.depth,
-                   samples.segment)
-
-
-def profile_delay(samples: Samples, model: DampingModel, body: RigidBody, cutoff: float = 2.0,
-                  bounds: tuple[float, float] = (-0.05, 0.5)) -> float:
-    """Delay (s) of the response after τ that minimises the residual of the fit.
-
-    Each trial shifts the (band-limited) τ and refits by least squares on the decimated,
-    low-passed regression; a coarse grid then a bounded scalar search.
-    """
-    def cost(delay: float) -> float:
-        ne = accumulate(shift_tau(samples, delay), model, body, folds=1, cutoff=cutoff)
-        idx = np.arange(model.n_params)
-        rss, _, _ = _criteria(ne, idx, np.ones(6), 1.0)
-        # scale-free: sum of the per-DOF log residuals (DOFs with large forces do not rule)
-        return float(np.sum(np.log(np.maximum(rss, 1e-300))))
-
-    grid = np.linspace(bounds[0], bounds[1], 12)
-    values = [cost(g) for g in grid]
-    k = int(np.argmin(values))
-    res = optimize.minimize_scalar(cost, bounds=(grid[max(k - 1, 0)],
-                                                 grid[min(k + 1, len(grid) - 1)]),
-                                   method="bounded", options={"xatol": 1e-3})
-    return float(res.x)
