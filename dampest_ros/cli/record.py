@@ -38,8 +38,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--chunk-size", type=int, default=None, metavar="BYTES",
                    help="MCAP chunk size; each chunk is flushed to disk (default: 262144)")
     p.add_argument("--flush-period", type=float, default=None, metavar="S",
-                   help="flush a chunk at least this often; a killed recording loses at most "
-                        "1.25 times this (default: 0.2)")
+                   help="flush a chunk at least this often (until then its messages are in "
+                        "the file's journal: a killed recording loses none) (default: 0.2)")
     p.add_argument("--compression", choices=("none", "zstd", "lz4"), default="none",
                    help="chunk compression (default: none)")
     p.add_argument("--namespace", default="", metavar="NS",

@@ -6,8 +6,9 @@ are), receives the serialized bytes (no deserialisation) and writes them with th
 time (the node clock: simulation time under use_sim_time) through
 dampest_ros.io.recorder.BagRecorder. The QoS each publisher offers is stored in the bag
 metadata. Chunks reach the disk every chunk_size bytes or flush_period seconds (checked
-every flush_period / 4), so a killed recorder loses at most the last 0.25 s by default;
-SIGINT/SIGTERM close the bag (summary, metadata.yaml). A killed recording is recovered with
+every flush_period / 4); each message of the chunk in progress is also appended at once to
+the file's journal, so a killed recorder loses no message it had received. SIGINT/SIGTERM
+close the bag (summary, metadata.yaml). A killed recording is recovered with
 'dampest reindex BAG'. While recording, the bag holds a lock that reindex and another recorder
 respect. A full disk stops the recording: the bag is closed with every message received (from
 the space the recorder keeps in reserve), an error line gives the count and the node exits
@@ -77,8 +78,8 @@ class RecorderNode(ParamNode):
         Param("chunk_size", DEFAULT_CHUNK_SIZE, "bytes of messages per MCAP chunk; each "
               "chunk is flushed to disk when complete", low=1024, high=2**30, read_only=True),
         Param("flush_period", DEFAULT_CHUNK_INTERVAL, "a chunk is also flushed once it is this "
-              "many seconds old (checked every quarter of it: a crash loses at most 1.25 "
-              "times this much); 0: by size only", low=0.0, high=3600.0, read_only=True),
+              "many seconds old (checked every quarter of it; until then its messages are in "
+              "the file's journal); 0: by size only", low=0.0, high=3600.0, read_only=True),
         Param("compression", "none", "chunk compression", choices=("none", "zstd", "lz4"),
               read_only=True),
         Param("queue_depth", 2000, "subscription queue (messages) absorbing bursts",
