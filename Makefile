@@ -33,7 +33,7 @@ demo: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check dampest_ros test
-	$(BIN)/mypy dampest_ros/core dampest_ros/io
+	$(BIN)/mypy dampest_ros
 
 test: export OPENBLAS_NUM_THREADS = 1
 test: lint
