@@ -45,8 +45,8 @@ FloatArray = NDArray[np.float64]
 
 STREAMS = ("velocity", "acceleration", "wrench", "attitude")
 #: Block length (s) over which the residual correlation that widens θ's standard deviation is
-#: measured (:class:`~dampest_ros.core.rls.CorrelationFactor`): residuals stay correlated over
-#: seconds (sensor-bias drift, model error).
+#: measured (:class:`~dampest_ros.core.rls.monitors.CorrelationFactor`): residuals stay
+#: correlated over seconds (sensor-bias drift, model error).
 CORRELATION_SECONDS = 5.0
 _WIDTH = {"velocity": 6, "acceleration": 6, "wrench": 6, "attitude": 4}
 
@@ -73,7 +73,7 @@ class EstimatorConfig:
         Partial samples (not all streams seen) older than this (s) are dropped.
     outlier_gate : float
         Squared Mahalanobis distance above which a raw sample is rejected
-        (:class:`~dampest_ros.core.rls.OutlierGate`; ≤ 0: none). The gate opens after
+        (:class:`~dampest_ros.core.rls.monitors.OutlierGate`; ≤ 0: none). The gate opens after
         :data:`CORRELATION_SECONDS` of samples and its innovation variances average over
         twice that.
     dissipative : bool
