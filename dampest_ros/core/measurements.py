@@ -93,12 +93,18 @@ class PressureSeries(Series):
 
 @dataclass
 class JointSeries(Series):
-    """sensor_msgs/JointState for thrusters: names, velocity (N, n) rotor speed rad/s,
-    effort (N, n) thrust N (position empty)."""
+    """sensor_msgs/JointState: names, velocity (N, n), effort (N, n) and position (N, n)
+    or (N, 0). Thrusters: velocity rotor speed rad/s, effort thrust N, no position. Arm
+    joints: position rad, velocity rad/s, effort N m."""
 
     names: tuple[str, ...] = ()
     velocity: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     effort: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    position: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    def __post_init__(self) -> None:
+        if self.position.size == 0:  # no positions: (N, 0), one empty row per message
+            self.position = np.zeros((len(self.stamp), 0))
 
 
 @dataclass

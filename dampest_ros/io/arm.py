@@ -1,6 +1,7 @@
 """Arm descriptions and arm joint data on disk: the shipped arm presets (URDF for Pinocchio
-and the MJCF written from it, ``dampest_ros/data/arm/``), and ``sensor_msgs/JointState``
-bags of an arm's joints (position, velocity, effort) with the simulation's truth beside them.
+and the MJCF written from it, ``dampest_ros/data/arm/``), ``sensor_msgs/JointState`` bags of
+an arm's joints (position, velocity, effort) with the simulation's truth beside them, and
+FFS trajectory files.
 """
 
 from __future__ import annotations
@@ -8,11 +9,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import yaml
 from numpy.typing import NDArray
 
+from dampest_ros.core.arm.design import DesignLimits
+from dampest_ros.core.arm.ffs import FourierTrajectory
 from dampest_ros.core.arm.model import ArmModel, JointDynamics, arm_from_urdf, joint_dynamics
+from dampest_ros.core.measurements import JointSeries, Series
+from dampest_ros.io.bag import bag_summary, read_bag, write_bag
 
 FloatArray = NDArray[np.float64]
 
@@ -81,3 +88,182 @@ def load_arm(name_or_path: str | Path) -> ArmDescription:
     except ValueError as exc:
         raise ArmDataError(f"arm {text}: {exc}") from None
     return ArmDescription(model, xml, dyn, text)
+
+
+# --- joint-state bags ----------------------------------------------------------------------
+
+#: Topic of the measured joint states, and of the simulation's truth (true q, q̇ and the
+#: applied torque).
+JOINT_TOPIC = "joint_states"
+TRUTH_TOPIC = "truth/joint_states"
+_JOINT_STATE = "sensor_msgs/msg/JointState"
+
+
+@dataclass(frozen=True)
+class JointData:
+    """Joint samples of a bag in a model's joint order.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Header stamps (s).
+    position, velocity, effort : ndarray, shape (N, n)
+        rad, rad/s, N m.
+    topic : str
+        The topic read.
+    """
+
+    t: FloatArray
+    position: FloatArray
+    velocity: FloatArray
+    effort: FloatArray
+    topic: str
+
+
+def joint_series(t: FloatArray, names: tuple[str, ...], position: FloatArray,
+                 velocity: FloatArray, effort: FloatArray, frame_id: str = "") -> JointSeries:
+    """A ``sensor_msgs/JointState`` series of arm joints (shapes (N,) and (N, n))."""
+    return JointSeries(stamp=np.asarray(t, dtype=float), frame_id=frame_id, names=names,
+                       velocity=np.asarray(velocity, dtype=float),
+                       effort=np.asarray(effort, dtype=float),
+                       position=np.asarray(position, dtype=float))
+
+
+def write_joint_bag(path: str | Path, measured: JointSeries,
+                    truth: JointSeries | None = None) -> Path:
+    """Write measured joint states (and the truth) as an MCAP rosbag2 bag.
+
+    Parameters
+    ----------
+    path : str or Path
+        Bag directory to create (must not exist).
+    measured : JointSeries
+        Published on :data:`JOINT_TOPIC`.
+    truth : JointSeries, optional
+        Published on :data:`TRUTH_TOPIC`.
+
+    Returns
+    -------
+    Path
+    """
+    recording: dict[str, Series] = {JOINT_TOPIC: measured}
+    if truth is not None:
+        recording[TRUTH_TOPIC] = truth
+    return write_bag(path, recording)
+
+
+def read_joint_bag(path: str | Path, names: tuple[str, ...], topic: str | None = None,
+                   ) -> tuple[JointData, JointData | None]:
+    """Read an arm's joint states (and the truth, if the bag has it) in the model's order.
+
+    Parameters
+    ----------
+    path : str or Path
+        rosbag2 bag.
+    names : tuple of str
+        The model's joint names.
+    topic : str, optional
+        JointState topic; default :data:`JOINT_TOPIC`, or the bag's only JointState topic
+        other than the truth.
+
+    Returns
+    -------
+    measured, truth : JointData, JointData or None
+
+    Raises
+    ------
+    ArmDataError
+        If the bag has no JointState topic (or not the one named), its joints do not
+        include the model's, or it carries no positions or efforts.
+    """
+    summary = bag_summary(path)
+    found = {t.lstrip("/"): s.msgtype for t, s in summary.topics.items()}
+    joint_topics = sorted(t for t, m in found.items() if m == _JOINT_STATE)
+    if topic is None:
+        mine = [t for t in joint_topics if t != TRUTH_TOPIC]
+        topic = JOINT_TOPIC if JOINT_TOPIC in mine else (mine[0] if len(mine) == 1 else None)
+    have = ", ".join(f"{t} ({m})" for t, m in sorted(found.items())) or "no topics"
+    if topic is None or found.get(topic.lstrip("/")) != _JOINT_STATE:
+        raise ArmDataError(f"bag {path}: no sensor_msgs/JointState topic "
+                           f"{'to use' if topic is None else topic!r}; it has: {have}"
+                           + ("; name one with --topic" if len(joint_topics) > 1 else ""))
+    wanted = [topic.lstrip("/")] + ([TRUTH_TOPIC] if TRUTH_TOPIC in found else [])
+    series = read_bag(path, wanted)
+    out = [_in_order(path, t, series[t], names) for t in wanted]
+    return out[0], (out[1] if len(out) > 1 else None)
+
+
+def _in_order(path: str | Path, topic: str, s: Series, names: tuple[str, ...]) -> JointData:
+    assert isinstance(s, JointSeries)
+    missing = [n for n in names if n not in s.names]
+    if missing:
+        raise ArmDataError(f"bag {path}, topic {topic}: joints {missing} of the model are "
+                           f"not in the messages (they name {list(s.names)}); record the "
+                           "arm the model describes, or give its URDF with --arm")
+    cols = [s.names.index(n) for n in names]
+    for field_name in ("position", "effort"):
+        arr = getattr(s, field_name)
+        if arr.ndim != 2 or arr.shape[1] != len(s.names):
+            raise ArmDataError(f"bag {path}, topic {topic}: the messages carry no "
+                               f"{field_name} for each joint ({arr.shape[1]} values for "
+                               f"{len(s.names)} joints); identification needs position "
+                               "and effort")
+    vel = s.velocity[:, cols] if s.velocity.shape[1] == len(s.names) else np.full(
+        (len(s), len(cols)), np.nan)
+    return JointData(np.asarray(s.stamp, dtype=float), s.position[:, cols], vel,
+                     s.effort[:, cols], topic)
+
+
+# --- trajectory files ----------------------------------------------------------------------
+
+
+def save_trajectory(path: str | Path, trajectory: FourierTrajectory, limits: DesignLimits,
+                    info: dict[str, Any]) -> Path:
+    """Write an FFS trajectory and the limits it was designed within as YAML.
+
+    Parameters
+    ----------
+    path : str or Path
+    trajectory : FourierTrajectory
+    limits : DesignLimits
+    info : dict
+        Extra entries (arm, condition numbers, ...), plain YAML types.
+
+    Returns
+    -------
+    Path
+    """
+    doc = {**info, "base_frequency": float(trajectory.base_frequency),
+           "q0": trajectory.q0.tolist(), "a": trajectory.a.tolist(), "b": trajectory.b.tolist(),
+           "limits": {k: np.asarray(getattr(limits, k), dtype=float).tolist()
+                      for k in ("lower", "upper", "velocity", "acceleration", "effort")}}
+    path = Path(path)
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def load_trajectory(path: str | Path, n: int) -> tuple[FourierTrajectory, DesignLimits | None]:
+    """Read a trajectory file of :func:`save_trajectory` for an arm of n joints.
+
+    Raises
+    ------
+    ArmDataError
+        If the file is missing entries or its shapes do not fit n joints.
+    """
+    try:
+        doc = yaml.safe_load(Path(path).read_text())
+        a, b = np.asarray(doc["a"], dtype=float), np.asarray(doc["b"], dtype=float)
+        traj = FourierTrajectory(np.asarray(doc["q0"], dtype=float), a, b,
+                                 float(doc["base_frequency"]))
+        lim = doc.get("limits")
+        limits = None if lim is None else DesignLimits(
+            *(np.asarray(lim[k], dtype=float)
+              for k in ("lower", "upper", "velocity", "acceleration", "effort")))
+    except (KeyError, TypeError, ValueError, yaml.YAMLError) as exc:
+        raise ArmDataError(f"trajectory file {path}: not a dampest arm trajectory "
+                           f"({type(exc).__name__}: {exc}); write one with 'dampest arm "
+                           "design'") from None
+    if a.shape != b.shape or a.ndim != 2 or a.shape[0] != n or traj.q0.shape != (n,):
+        raise ArmDataError(f"trajectory file {path}: coefficients of shape {a.shape} and q0 "
+                           f"of {traj.q0.shape} do not fit an arm of {n} joints")
+    return traj, limits

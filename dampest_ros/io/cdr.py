@@ -323,7 +323,7 @@ def _odometry(b: _Builder) -> None:
 def _joint_state(b: _Builder) -> None:
     _header(b)
     b.strings("names", "name")
-    b.float_seq("", "position")
+    b.float_seq("position", "position")
     b.float_seq("velocity", "velocity")
     b.float_seq("effort", "effort")
 

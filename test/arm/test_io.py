@@ -1,0 +1,56 @@
+"""Arm joint-state bags: positions survive the JointState round trip, and bags that cannot
+serve an arm are refused with a line naming what is wrong."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dampest_ros.core.measurements import JointSeries, WrenchSeries
+from dampest_ros.io.arm import ArmDataError, joint_series, read_joint_bag, write_joint_bag
+from dampest_ros.io.bag import read_bag, write_bag
+
+NAMES = ("j1", "j2", "j3")
+
+
+def _series(n: int = 50, names: tuple[str, ...] = NAMES) -> JointSeries:
+    rng = np.random.default_rng(0)
+    t = np.arange(n) * 1e-3
+    return joint_series(t, names, *(rng.normal(size=(n, len(names))) for _ in range(3)))
+
+
+def test_round_trip_in_model_order(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    measured = _series()
+    truth = _series()
+    write_joint_bag(tmp_path / "b", measured, truth)
+    # the model lists the joints in another order: columns follow the model
+    got, got_truth = read_joint_bag(tmp_path / "b", ("j3", "j1", "j2"))
+    assert got.topic == "joint_states" and got_truth is not None
+    assert np.array_equal(got.position, measured.position[:, [2, 0, 1]])
+    assert np.array_equal(got.effort, measured.effort[:, [2, 0, 1]])
+    assert np.array_equal(got_truth.velocity, truth.velocity[:, [2, 0, 1]])
+    assert np.allclose(got.t, measured.stamp, atol=1e-9)
+
+
+def test_thruster_joint_states_still_have_no_position(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    s = JointSeries(np.arange(5) * 0.1, "", ("t1",), np.ones((5, 1)), np.ones((5, 1)))
+    assert s.position.shape == (5, 0)
+    write_bag(tmp_path / "t", {"thrusters/state": s})
+    back = read_bag(tmp_path / "t")["thrusters/state"]
+    assert isinstance(back, JointSeries) and back.position.shape == (5, 0)
+
+
+def test_refusals(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    t = np.arange(5) * 0.1
+    write_bag(tmp_path / "w", {"wrench": WrenchSeries(t, "", np.ones((5, 3)), np.ones((5, 3)))})
+    with pytest.raises(ArmDataError, match=r"no sensor_msgs/JointState topic .* it has: "
+                                           r"wrench \(geometry_msgs/msg/WrenchStamped\)"):
+        read_joint_bag(tmp_path / "w", NAMES)
+    write_joint_bag(tmp_path / "b", _series())
+    with pytest.raises(ArmDataError, match=r"joints \['shoulder_pan_joint'\] of the model are "
+                                           r"not in the messages"):
+        read_joint_bag(tmp_path / "b", ("j1", "shoulder_pan_joint"))
+    s = JointSeries(t, "", NAMES, np.ones((5, 3)), np.ones((5, 3)))  # no positions
+    write_bag(tmp_path / "np", {"joint_states": s})
+    with pytest.raises(ArmDataError, match="carry no position"):
+        read_joint_bag(tmp_path / "np", NAMES)
