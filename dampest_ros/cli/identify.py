@@ -24,6 +24,7 @@ from dampest_ros.core.batch import Fit, FitOptions, fit
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.excitation import speed_limits
+from dampest_ros.core.identifier import prior_arrays
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import OnlineConfig
 from dampest_ros.core.pool import drift, pooled_fit, pooled_samples
@@ -109,11 +110,7 @@ def prior_of(args: argparse.Namespace, model: DampingModel, nominal: np.ndarray
     if not args.prior:
         return nominal, None
     pm = load_model(args.prior)
-    values = dict(zip(pm.parameter_names, pm.theta, strict=True))
-    stds = dict(zip(pm.parameter_names, pm.theta_std, strict=True))
-    prior = np.array([values.get(n, v) for n, v in zip(model.parameter_names, nominal,
-                                                         strict=True)])
-    return prior, np.array([stds.get(n, np.inf) for n in model.parameter_names])
+    return prior_arrays(model, nominal, (pm.parameter_names, pm.theta, pm.theta_std))
 
 
 def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> int:

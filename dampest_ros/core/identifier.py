@@ -25,17 +25,33 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.batch import Fit, FitOptions, fit, memory_states
+from dampest_ros.core.batch import Fit, FitOptions, fit
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.online.sample import OnlineSample
+from dampest_ros.core.regression import memory_states
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.validate import force_scores
 from dampest_ros.core.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
+#: A prior by name: (parameter names, mean θ, standard deviation), each of length p.
+Prior = tuple[Sequence[str], FloatArray, FloatArray]
+
+
+def prior_arrays(model: DampingModel, nominal: FloatArray, prior: Prior
+                 ) -> tuple[FloatArray, FloatArray]:
+    """The prior mean and standard deviation in the order of ``model``'s parameters, shape
+    (p,) each: ``prior``'s values where it names a parameter, else the ``nominal`` θ with an
+    infinite standard deviation (no prior weight)."""
+    names, theta, std = prior
+    values = dict(zip(names, np.asarray(theta, dtype=float), strict=True))
+    stds = dict(zip(names, np.asarray(std, dtype=float), strict=True))
+    mean = np.array([values.get(n, v) for n, v in zip(model.parameter_names, nominal,
+                                                       strict=True)])
+    return mean, np.array([stds.get(n, np.inf) for n in model.parameter_names])
 
 
 class DampingIdentifier:
@@ -55,6 +71,11 @@ class DampingIdentifier:
         Parallel low-pass of the regression (Hz), for both paths and :meth:`score`.
     forgetting_factor : float
         λ in [0.9, 1] of :meth:`partial_fit` (1: every sample weighs the same).
+    prior : tuple (names, theta, theta_std), optional
+        Prior mean and standard deviation by name (e.g. a model file's): the MAP prior of
+        :meth:`fit` (``method="map"`` needs it) and the RLS prior of :meth:`partial_fit`.
+        Parameters it does not name keep the vehicle's nominal θ (and no prior weight in MAP,
+        the default prior width in the RLS).
     **fit_options
         Further :class:`~dampest_ros.core.batch.FitOptions` fields (``ridge``, ``block``,
         ``max_vif``, ``dissipative``, …).
@@ -79,12 +100,13 @@ class DampingIdentifier:
 
     def __init__(self, vehicle: Vehicle, terms: Sequence[str] | None = None,
                  method: str = "wls", *, cutoff: float = 2.0, forgetting_factor: float = 1.0,
-                 **fit_options: Any) -> None:
+                 prior: Prior | None = None, **fit_options: Any) -> None:
         self.vehicle = vehicle
         self.terms = list(terms) if terms else None
         self.method = method
         self.cutoff = float(cutoff)
         self.forgetting_factor = float(forgetting_factor)
+        self.prior = prior
         self.fit_options = fit_options
         FitOptions(method=method, cutoff=cutoff, **fit_options)  # validates them now
         self.fit_: Fit | None = None
@@ -99,7 +121,9 @@ class DampingIdentifier:
                              speed_range=tuple(speed_limits(self.vehicle,
                                                             tau_measured=samples.tau)),
                              **self.fit_options)
-        self.fit_ = fit(samples, model, self.vehicle.body, options, prior=nominal)
+        mean, std = (nominal, None) if self.prior is None else prior_arrays(model, nominal,
+                                                                             self.prior)
+        self.fit_ = fit(samples, model, self.vehicle.body, options, prior=mean, prior_std=std)
         self.estimator_ = None
         self.model_ = model
         self.coef_ = self.fit_.theta
@@ -115,7 +139,7 @@ class DampingIdentifier:
         if est is None:
             est = OnlineEstimator(self.vehicle, self.terms, EstimatorConfig(
                 forgetting_factor=self.forgetting_factor, rate=samples.rate,
-                cutoff=self.cutoff))
+                cutoff=self.cutoff), self.prior)
             self.fit_ = None
         elif not math.isclose(samples.rate, est.cfg.rate, rel_tol=1e-6):
             raise ConfigError("samples", f"rate {samples.rate:g} Hz differs from the "

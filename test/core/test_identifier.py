@@ -109,3 +109,23 @@ def test_unfitted_and_bad_options_are_refused(vehicle: Vehicle,
     resampled = flight[1].take(slice(200, 400, 2))  # every other sample: 25 Hz
     with pytest.raises(ConfigError, match="rate"):
         est.partial_fit(resampled)
+
+
+def test_a_prior_by_name_in_map_and_rls(vehicle: Vehicle,
+                                         flight: tuple[Samples, Samples]) -> None:
+    held = flight[1]
+    names = vehicle.damping.parameter_names
+    # a prior far tighter than the data: MAP and the RLS return it
+    tight = (names, 1.5 * vehicle.theta, np.full(len(names), 1e-9))
+    batch = DampingIdentifier(vehicle, method="map", prior=tight).fit(held)
+    recursive = DampingIdentifier(vehicle, prior=tight).partial_fit(held.take(slice(0, 500)))
+    for est in (batch, recursive):
+        np.testing.assert_allclose(est.coef_, 1.5 * vehicle.theta, rtol=1e-9, atol=1e-12)
+    # a prior on one parameter only: X_u = 20 ± 0.2 pulls the data's 13.7 ± 0.5 towards it
+    free = DampingIdentifier(vehicle).fit(held).coef_[names.index("X_u")]
+    pulled = DampingIdentifier(vehicle, method="map", prior=(["X_u"], np.array([20.0]),
+                                                             np.array([0.2]))).fit(held)
+    x_u = pulled.coef_[names.index("X_u")]
+    assert abs(free - 13.7) < 1.0 and 17.0 < x_u < 20.0, (free, x_u)
+    with pytest.raises(ConfigError, match="MAP needs a prior"):
+        DampingIdentifier(vehicle, method="map").fit(held)
