@@ -1,4 +1,5 @@
-"""Layering rule (docs/architecture.md §2): dampest_ros.core and dampest_ros.io never load rclpy."""
+"""Layering rules (docs/architecture.md §2): dampest_ros.core and dampest_ros.io never load rclpy;
+no private name is imported from another module. (import-linter checks the layer order.)"""
 
 import os
 import subprocess
@@ -39,3 +40,16 @@ def test_core_and_io_do_not_import_rclpy() -> None:
         timeout=120,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_no_private_name_is_imported_across_modules() -> None:
+    """A name that starts with _ stays in its module: a shared helper is public."""
+    import ast
+
+    crossings = []
+    for path in sorted((REPO / "dampest_ros").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("dampest_ros"):
+                crossings += [f"{path.relative_to(REPO)}: {node.module}.{a.name}"
+                              for a in node.names if a.name.startswith("_")]
+    assert not crossings, crossings
