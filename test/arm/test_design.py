@@ -51,6 +51,6 @@ def test_design_keeps_limits_and_lowers_cond(ur5) -> None:  # type: ignore[no-un
 def test_designed_excitation_is_5x_better_conditioned(ur5) -> None:  # type: ignore[no-untyped-def]
     arm, base, nominal = ur5
     limits = default_limits(arm.model)
-    d = design_excitation(arm.model, base, nominal, limits, iterations=20)
+    d = design_excitation(arm.model, base, nominal, limits, iterations=40, baseline=16)
     _check(arm, d, limits, nominal)
     assert d.cond_random / d.cond >= 5.0

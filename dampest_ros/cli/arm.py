@@ -1,0 +1,317 @@
+"""dampest arm: dynamic parameters and joint friction of a 6-axis arm (issue 14).
+
+design: finite-Fourier-series excitation optimised for the condition number of the base
+regressor (friction columns included) within position, velocity, acceleration and torque
+limits. simulate: MuJoCo tracks a trajectory with computed-torque control; writes a rosbag2
+(MCAP) bag of sensor_msgs/JointState with quantised encoders and a noisy torque sensor, and
+the truth. identify: base parameters (OLS, WLS, physically consistent) with joint damping
+and friction from a bag, validated on another bag.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING, Any
+
+from dampest_ros.cli.common import describe, table
+
+if TYPE_CHECKING:
+    import numpy as np
+
+EXAMPLES = {
+    "design": "  dampest arm design --arm ur5 --harmonics 5 --base-frequency 0.1 "
+              "--out excite.yaml",
+    "simulate": "  dampest arm simulate --trajectory excite.yaml --duration 60 --seed 1 "
+                "--out bags/arm_train\n  dampest arm simulate --random 7 --duration 20 "
+                "--seed 2 --out bags/arm_val",
+    "identify": "  dampest arm identify bags/arm_train --validate bags/arm_val "
+                "--out arm_params.yaml",
+}
+
+HELP = {
+    "design": "optimise an FFS excitation trajectory for the base regressor's conditioning",
+    "simulate": "run a trajectory on the MuJoCo arm and write a JointState bag",
+    "identify": "identify base parameters and joint friction from a JointState bag",
+}
+
+
+def _arm_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--arm", default="ur5", metavar="NAME|URDF",
+                   help="arm preset (ur5, shipped) or a URDF path with its MJCF beside it "
+                        "(same stem, .xml) (default: ur5)")
+
+
+def _limit_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--span", type=float, default=1.0, metavar="RAD",
+                   help="position range: +-SPAN around q0 (default: 1.0)")
+    p.add_argument("--velocity", type=float, default=1.0, metavar="RAD/S",
+                   help="|joint velocity| limit (default: 1.0; never above the URDF's)")
+    p.add_argument("--acceleration", type=float, default=4.0, metavar="RAD/S2",
+                   help="|joint acceleration| limit (default: 4.0)")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of dampest arm and its sub-commands."""
+    describe(p, __doc__, "example:\n" + "\n".join(EXAMPLES.values()))
+    sub = p.add_subparsers(dest="arm_command", metavar="ARM_COMMAND", required=True,
+                           help="design, simulate or identify (each has its --help)")
+    d = sub.add_parser("design", help=HELP["design"], description=HELP["design"],
+                       epilog="example:\n" + EXAMPLES["design"],
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    _arm_option(d)
+    d.add_argument("--harmonics", type=int, default=5, help="N harmonics (default: 5)")
+    d.add_argument("--base-frequency", type=float, default=0.1, metavar="HZ",
+                   help="base frequency; the period is its inverse (default: 0.1)")
+    _limit_options(d)
+    d.add_argument("--iterations", type=int, default=40,
+                   help="optimiser iterations (default: 40; about 2 s each)")
+    d.add_argument("--seed", type=int, default=0, help="seed of the random start (default: 0)")
+    d.add_argument("--out", required=True, metavar="YAML", help="trajectory file to write")
+
+    s = sub.add_parser("simulate", help=HELP["simulate"], description=HELP["simulate"],
+                       epilog="example:\n" + EXAMPLES["simulate"],
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    _arm_option(s)
+    which = s.add_mutually_exclusive_group(required=True)
+    which.add_argument("--trajectory", metavar="YAML",
+                       help="trajectory file of 'dampest arm design' (checked against the "
+                            "limits it holds)")
+    which.add_argument("--random", type=int, metavar="SEED",
+                       help="random FFS coefficients (4 harmonics, 0.125 Hz) within the "
+                            "design limits instead (a validation trajectory)")
+    _limit_options(s)
+    s.add_argument("--duration", type=float, default=60.0, metavar="S",
+                   help="simulated seconds (default: 60)")
+    s.add_argument("--rate", type=float, default=1000.0, metavar="HZ",
+                   help="JointState rate, 1000 divided by an integer (default: 1000)")
+    s.add_argument("--noise", choices=("realistic", "none"), default="realistic",
+                   help="sensors: 20-bit encoders and torque noise 0.4/0.4/0.3/0.1/0.1/0.1 "
+                        "N m with offsets (realistic, default) or exact (none)")
+    s.add_argument("--payload", type=float, nargs=2, metavar=("KG", "AT_S"),
+                   help="attach a point mass of KG at the last link's origin at AT_S seconds")
+    s.add_argument("--seed", type=int, default=1, help="seed of the sensor noise (default: 1)")
+    s.add_argument("--out", required=True, metavar="BAG",
+                   help="bag directory to create (must not exist)")
+
+    i = sub.add_parser("identify", help=HELP["identify"], description=HELP["identify"],
+                       epilog="example:\n" + EXAMPLES["identify"],
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    i.add_argument("bag", metavar="BAG", help="rosbag2 bag with sensor_msgs/JointState")
+    _arm_option(i)
+    i.add_argument("--topic", metavar="TOPIC",
+                   help="JointState topic (default: joint_states, or the only one)")
+    i.add_argument("--validate", metavar="BAG",
+                   help="a bag of another trajectory: torque RMSE per joint of the identified "
+                        "and the nominal parameters against the noise floor")
+    i.add_argument("--cutoff", type=float, default=10.0, metavar="HZ",
+                   help="zero-phase low-pass of q and torque (default: 10)")
+    i.add_argument("--rate-out", type=float, default=50.0, metavar="HZ",
+                   help="rate the filtered data are decimated to (default: 50)")
+    i.add_argument("--min-speed", type=float, default=0.1, metavar="RAD/S",
+                   help="rows of a joint slower than this are not used: dry friction is "
+                        "undefined at rest (default: 0.1)")
+    i.add_argument("--mapping", action="store_true",
+                   help="print how each base parameter combines the full parameters")
+    i.add_argument("--out", metavar="YAML", help="write the parameters as YAML")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Dispatch to the chosen arm command."""
+    return {"design": _design, "simulate": _simulate, "identify": _identify}[
+        args.arm_command](args)
+
+
+def _limits(args: argparse.Namespace, arm: Any) -> Any:
+    from dampest_ros.core.arm.design import default_limits
+
+    for name in ("span", "velocity", "acceleration"):
+        if not getattr(args, name) > 0:
+            raise ValueError(f"--{name} must be > 0, got {getattr(args, name)}")
+    return default_limits(arm, span=args.span, velocity=args.velocity,
+                          acceleration=args.acceleration)
+
+
+def _design(args: argparse.Namespace) -> int:
+    import time
+    from pathlib import Path
+
+    from dampest_ros.core.arm.base import base_parameters
+    from dampest_ros.core.arm.design import design_excitation
+    from dampest_ros.core.arm.regressor import full_parameters
+    from dampest_ros.io.arm import load_arm, save_trajectory
+
+    if args.harmonics < 1 or not args.base_frequency > 0 or args.iterations < 0:
+        raise ValueError("--harmonics must be >= 1, --base-frequency > 0, --iterations >= 0")
+    if Path(args.out).exists():
+        raise FileExistsError(f"{args.out} exists; choose a new --out")
+    arm = load_arm(args.arm)
+    limits = _limits(args, arm.model)
+    base = base_parameters(arm.model)
+    t0 = time.perf_counter()
+    d = design_excitation(arm.model, base, full_parameters(arm.model, arm.dynamics), limits,
+                          harmonics=args.harmonics, base_frequency=args.base_frequency,
+                          seed=args.seed, iterations=args.iterations)
+    save_trajectory(args.out, d.trajectory, limits, {
+        "arm": str(args.arm), "cond": d.cond, "cond_start": d.cond_start,
+        "cond_random_median": d.cond_random})
+    print(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s ({d.iterations} iterations)"
+          f": {base.size} base parameters, period {d.trajectory.period:g} s")
+    print(table(("base regressor condition number", "value"),
+                [("random FFS within the limits (median)", d.cond_random),
+                 ("start (random)", d.cond_start), ("designed", d.cond),
+                 ("improvement over random", d.cond_random / d.cond)]))
+    return 0
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    import time
+    from pathlib import Path
+
+    import numpy as np
+
+    from dampest_ros.core.arm.design import within_limits
+    from dampest_ros.core.arm.ffs import random_trajectory
+    from dampest_ros.core.arm.regressor import full_parameters, regressor
+    from dampest_ros.core.arm.simulate import REALISTIC, ArmSensors, simulate_arm
+    from dampest_ros.io.arm import joint_series, load_arm, load_trajectory, write_joint_bag
+
+    out = Path(args.out)
+    if out.exists():
+        raise FileExistsError(f"{out} exists; choose a new --out")
+    if not args.duration > 0:
+        raise ValueError(f"--duration must be > 0, got {args.duration}")
+    arm = load_arm(args.arm)
+    limits = _limits(args, arm.model)
+    if args.trajectory:
+        traj, held = load_trajectory(args.trajectory, arm.model.n)
+        limits = held or limits
+    else:
+        rng = np.random.default_rng(args.random)
+        traj = within_limits(arm.model, random_trajectory(
+            0.5 * (limits.lower + limits.upper), 4, 0.125, limits.velocity, rng), limits,
+            full_parameters(arm.model, arm.dynamics))
+    t = np.linspace(0.0, traj.period, 20 * 40 * traj.harmonics, endpoint=False)
+    q, qd, qdd = traj.evaluate(t)
+    nominal = full_parameters(arm.model, arm.dynamics)
+    bad = limits.violations(q, qd, qdd, regressor(arm.model, q, qd, qdd) @ nominal,
+                            arm.model.names)
+    if bad:
+        raise ValueError(f"trajectory {args.trajectory or 'random'} violates its limits: "
+                         + "; ".join(bad))
+    sensors = REALISTIC if args.noise == "realistic" else ArmSensors()
+    payload = None if args.payload is None else (float(args.payload[0]),
+                                                 float(args.payload[1]))
+    t0 = time.perf_counter()
+    run = simulate_arm(arm.mjcf, arm.model, arm.dynamics, traj, args.duration, args.rate,
+                       sensors, seed=args.seed, payload=payload)
+    names = arm.model.names
+    write_joint_bag(out, joint_series(run.t, names, run.position, run.velocity, run.effort),
+                    joint_series(run.t, names, run.q, run.qd, run.tau))
+    print(f"wrote {out} in {time.perf_counter() - t0:.1f} s: {args.duration:g} s of "
+          f"{args.arm} at {args.rate:g} Hz ({len(run.t)} JointState messages on joint_states, "
+          "truth on truth/joint_states)")
+    print(table(("joint", "|q - q0| max rad", "|qd| max rad/s", "|tau| max N m",
+                 "noise N m", "offset N m"),
+                [(n, float(np.abs(run.q[:, j] - traj.q0[j]).max()),
+                  float(np.abs(run.qd[:, j]).max()), float(np.abs(run.tau[:, j]).max()),
+                  float(np.broadcast_to(sensors.torque_sigma, (len(names),))[j]),
+                  float(np.broadcast_to(sensors.torque_offset, (len(names),))[j]))
+                 for j, n in enumerate(names)]))
+    return 0
+
+
+def _identify(args: argparse.Namespace) -> int:
+    import time
+
+    import numpy as np
+
+    from dampest_ros.core.arm.base import base_parameters
+    from dampest_ros.core.arm.fit import pseudo_inertia_eigenvalues
+    from dampest_ros.core.arm.identify import (
+        IdentifyConfig,
+        filter_joints,
+        identify_arm,
+        predict,
+        torque_rmse,
+    )
+    from dampest_ros.core.arm.regressor import full_parameters
+    from dampest_ros.io.arm import load_arm, read_joint_bag
+
+    cfg = IdentifyConfig(cutoff=args.cutoff, rate_out=args.rate_out, min_speed=args.min_speed)
+    arm = load_arm(args.arm)
+    names = arm.model.names
+    t0 = time.perf_counter()
+    data, _ = read_joint_bag(args.bag, names, args.topic)
+    val = read_joint_bag(args.validate, names, args.topic) if args.validate else None
+    t1 = time.perf_counter()
+    base = base_parameters(arm.model)
+    nominal = full_parameters(arm.model, arm.dynamics)
+    res = identify_arm(arm.model, base, filter_joints(data.t, data.position, data.effort, cfg),
+                       nominal, cfg)
+    t2 = time.perf_counter()
+    print(f"{args.bag}: {len(data.t)} samples of {len(names)} joints on {data.topic} "
+          f"(read {t1 - t0:.1f} s, identified {t2 - t1:.1f} s); {base.size} base parameters, "
+          f"rows used per joint {res.rows.tolist()}")
+    ind = [base.names[k] for k in base.independent]
+    print(table(("base parameter", "OLS", "WLS", "sigma", "consistent", "nominal"),
+                [(f"b{k + 1} {ind[k]}", res.ols.theta[k], res.wls.theta[k], res.wls.std[k],
+                  res.consistent.theta[k], base.of(nominal)[k])
+                 for k in range(base.size)]))
+    eig = pseudo_inertia_eigenvalues(res.consistent.full[:10 * len(names)])
+    masses = np.round(res.consistent.full[0:10 * len(names):10], 3).tolist()
+    print(f"\nphysically consistent: every link's pseudo-inertia positive definite (smallest "
+          f"eigenvalue {eig.min():.3g}), masses {masses} kg; weighted cost above WLS "
+          f"{res.consistent.cost_increase:.3g} residual variances")
+    if args.mapping:
+        print("\nbase parameters in the full ones (b = kept + beta x folded):")
+        print("\n".join(base.mapping()))
+        print("not identifiable (in no base parameter): " + ", ".join(base.unidentifiable()))
+    if val is not None:
+        vdata, truth = val
+        vcfg = IdentifyConfig(cutoff=cfg.cutoff, rate_out=1.0 / float(np.median(
+            np.diff(vdata.t))), min_speed=cfg.min_speed, coulomb_width=cfg.coulomb_width)
+        fv = filter_joints(vdata.t, vdata.position, vdata.effort, vcfg)
+        measured = vdata.effort[fv.index]
+        if truth is not None:
+            floor = np.std(vdata.effort - truth.effort, axis=0)
+            floor_from = "truth: std of effort - true torque"
+        else:
+            floor = fv.noise
+            floor_from = "estimated from the torque above the cutoff (an upper bound)"
+        rows: list[tuple[object, ...]] = []
+        for label, theta in (("WLS", res.wls.theta), ("consistent", res.consistent.theta),
+                             ("OLS", res.ols.theta), ("nominal", base.of(nominal))):
+            tau = predict(arm.model, base, theta, fv.q, fv.qd, fv.qdd, vcfg)
+            rmse, moving = torque_rmse(measured, tau, fv.qd, cfg.min_speed)
+            rows.extend((label, n, rmse[j], moving[j], rmse[j] / floor[j])
+                        for j, n in enumerate(names))
+        print(f"\nvalidation on {args.validate} ({len(fv.t)} samples); noise floor from "
+              f"{floor_from}: " + ", ".join(f"{f:.3g}" for f in floor) + " N m")
+        print(table(("parameters", "joint", "RMSE N m", f"RMSE |qd|>={cfg.min_speed:g}",
+                     "RMSE / noise floor"), rows))
+    if args.out:
+        _write_params(args.out, args, base, res, names, nominal)
+        print(f"\nwrote {args.out}")
+    return 0
+
+
+def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
+                  names: tuple[str, ...], nominal: np.ndarray) -> None:
+    from pathlib import Path
+
+    import yaml
+
+    ind = [base.names[k] for k in base.independent]
+    doc = {
+        "source": f"dampest arm identify {args.bag}", "arm": str(args.arm),
+        "base": {f"b{k + 1}": {"kept": ind[k], "wls": float(res.wls.theta[k]),
+                               "sigma": float(res.wls.std[k]),
+                               "ols": float(res.ols.theta[k]),
+                               "consistent": float(res.consistent.theta[k])}
+                 for k in range(base.size)},
+        "mapping": base.mapping(),
+        "consistent_full": dict(zip(base.names, map(float, res.consistent.full), strict=True)),
+        "noise_estimate": dict(zip(names, map(float, res.noise), strict=True)),
+    }
+    Path(path).write_text(yaml.safe_dump(doc, sort_keys=False))
+

@@ -1,0 +1,63 @@
+"""dampest arm: simulate -> identify on bags, and one line + exit 2 for unusable input."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from dampest_ros.cli.main import main
+from dampest_ros.core.measurements import WrenchSeries
+from dampest_ros.io.bag import write_bag
+
+
+@pytest.mark.slow
+def test_simulate_identify_validate(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                    ) -> None:
+    train, val = tmp_path / "train", tmp_path / "val"
+    assert main(["arm", "simulate", "--random", "3", "--duration", "30", "--seed", "1",
+                 "--out", str(train)]) == 0
+    assert main(["arm", "simulate", "--random", "8", "--duration", "12", "--seed", "2",
+                 "--rate", "500", "--out", str(val)]) == 0
+    capsys.readouterr()
+    assert main(["arm", "identify", str(train), "--validate", str(val), "--mapping",
+                 "--out", str(tmp_path / "p.yaml")]) == 0
+    out = capsys.readouterr().out
+    assert "58 base parameters" in out and "b1 = " in out and "noise floor from truth" in out
+    rows = [line.split() for line in out.splitlines() if line.strip().startswith("WLS")]
+    ratios = np.array([float(r[-1]) for r in rows])
+    assert len(ratios) == 6 and np.all(ratios <= 1.05)
+    doc = yaml.safe_load((tmp_path / "p.yaml").read_text())
+    fc = [b["wls"] for b in doc["base"].values() if b["kept"] == "elbow_joint.Fc"]
+    assert fc == [pytest.approx(2.0, rel=0.02)]
+
+
+def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                          ) -> None:
+    t = np.arange(5) * 0.1
+    write_bag(tmp_path / "w", {"wrench": WrenchSeries(t, "", np.ones((5, 3)), np.ones((5, 3)))})
+    assert main(["arm", "identify", str(tmp_path / "w")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "no sensor_msgs/JointState topic" in err
+    # a trajectory beyond the limits it was designed within
+    traj = {"base_frequency": 0.1, "q0": [0.0] * 6, "a": [[3.0, 0.0]] * 6,
+            "b": [[0.0, 0.0]] * 6,
+            "limits": {"lower": [-1.0] * 6, "upper": [1.0] * 6, "velocity": [1.0] * 6,
+                       "acceleration": [4.0] * 6, "effort": [150, 150, 150, 28, 28, 28]}}
+    (tmp_path / "t.yaml").write_text(yaml.safe_dump(traj))
+    assert main(["arm", "simulate", "--trajectory", str(tmp_path / "t.yaml"), "--out",
+                 str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "shoulder_pan_joint |velocity| 3 exceeds 1 rad/s" in err
+    assert "position" in err and not (tmp_path / "x").exists()
+    # joints that do not match the model: a three-joint bag
+    from dampest_ros.io.arm import joint_series, write_joint_bag
+
+    write_joint_bag(tmp_path / "j3", joint_series(t, ("a", "b", "c"), *(np.ones((5, 3)),) * 3))
+    assert main(["arm", "identify", str(tmp_path / "j3")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "'shoulder_pan_joint'" in err and "not in the " \
+        "messages" in err
