@@ -30,17 +30,17 @@ from rclpy.qos import (  # noqa: E402
     ReliabilityPolicy,
     qos_profile_sensor_data,
 )
+from rosbags.interfaces import ConnectionExtRosbag2  # noqa: E402
 from rosbags.rosbag2 import Reader  # noqa: E402
 from sensor_msgs.msg import Imu, JointState  # noqa: E402
 
+from dampest_ros.core.measurements import ImuSeries  # noqa: E402
 from dampest_ros.io import bag  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 DOMAIN = "88"
 IMU_HZ, JOINT_HZ = 200, 50
-CLI = ("import argparse, sys; from importlib import import_module; "
-       "m = import_module('dampest_ros.cli.' + sys.argv[1]); p = argparse.ArgumentParser(); "
-       "m.add_parser(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); sys.exit(a.run(a))")
+CLI = "import sys; from dampest_ros.cli.main import main; sys.exit(main(sys.argv[1:]))"
 
 
 def env() -> dict[str, str]:
@@ -96,14 +96,13 @@ class Ros:
 @pytest.fixture
 def make_imu() -> Any:
     """2 s of random IMU samples at 200 Hz from t = 100 s."""
-    from dampest_ros.core.measurements import ImuSeries
-
     rng = np.random.default_rng(3)
     n = 400
     q = rng.normal(size=(n, 4))
-    return ImuSeries(100.0 + np.arange(n) * 0.005, "imu_link",
-                     q / np.linalg.norm(q, axis=1, keepdims=True), rng.normal(size=(n, 3)),
-                     rng.normal(size=(n, 3)), np.zeros(9), np.zeros(9), np.zeros(9))
+    q = (q / np.linalg.norm(q, axis=1, keepdims=True)).astype(np.float64)
+    t = (100.0 + np.arange(n) * 0.005).astype(np.float64)
+    return ImuSeries(t, "imu_link", q, rng.normal(size=(n, 3)), rng.normal(size=(n, 3)),
+                     np.zeros(9), np.zeros(9), np.zeros(9))
 
 
 @pytest.fixture(scope="module")
@@ -211,12 +210,13 @@ def test_sigint_bag_holds_every_published_message(recorded: tuple[Path, dict[str
     assert {t: s.count for t, s in summary.topics.items()} == sent
     # every message, in publishing order, and readable by mcap + mcap_ros2
     assert sequence_numbers(path) == {t: list(range(n)) for t, n in sent.items()}
-    data = bag.read_bag(path)
-    np.testing.assert_array_equal(data["imu/data"].angular_velocity[:, 0],
-                                  np.arange(sent["/imu/data"]))
+    imu = bag.read_bag(path)["imu/data"]
+    assert isinstance(imu, ImuSeries)
+    np.testing.assert_array_equal(imu.angular_velocity[:, 0], np.arange(sent["/imu/data"]))
     assert summary.duration == pytest.approx(12.0, abs=0.5)
     with Reader(path) as reader:  # the publishers' offered QoS, as discovered
         for conn in reader.connections:
+            assert isinstance(conn.ext, ConnectionExtRosbag2)
             (qos,) = conn.ext.offered_qos_profiles
             assert qos.reliability.name == "BEST_EFFORT"
             assert qos.durability.name == "VOLATILE"
