@@ -1,17 +1,15 @@
 """Offline batch identification of the damping parameters θ from samples.
 
-Regression form (FRD, per sample n): y_n = τ_n − M ν̇_n − C(ν_n)ν_n − g(η_n) = Φ(ν_n) θ + e_n.
-
-Normal equations are accumulated in chunks of samples (memory does not grow with the length
-of the data) separately per degree of freedom i and per cross-validation fold f:
-A_{f,i} = Σ Φ_iᵀ Φ_i, b_{f,i} = Σ Φ_iᵀ y_i, c_{f,i} = Σ y_i². Everything below (OLS, per-DOF
-weighted LS, ridge, bounded LS, MAP, held-out residuals, AIC/BIC) is closed-form in them.
-A second pass computes block scores for a covariance that is robust to correlated residuals.
+Regression form (FRD, per sample n): y_n = τ_n − M ν̇_n − C(ν_n)ν_n − g(η_n) = Φ(ν_n) θ + e_n,
+reduced to per-DOF, per-fold normal equations (:mod:`dampest_ros.core.regression`).
+Everything here (OLS, per-DOF weighted LS, ridge, bounded LS, MAP, held-out residuals,
+AIC/BIC) is closed-form in them; the covariance is block-robust plus the sensor-bias budget
+(:mod:`dampest_ros.core.covariance`), and the estimate is held dissipative
+(:mod:`dampest_ros.core.dissipative`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,18 +17,22 @@ from numpy.typing import NDArray
 from scipy import linalg, stats
 from scipy.sparse import csgraph
 
+from dampest_ros.core.covariance import (
+    bias_covariance,
+    block_count,
+    block_length,
+    robust_covariance,
+)
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.dissipative import dissipation_points, impose, misfit_report
-from dampest_ros.core.frames import matrix_from_euler
-from dampest_ros.core.preprocess import zero_phase
 from dampest_ros.core.quadratic import solve_normal
+from dampest_ros.core.regression import NormalEquations, accumulate, total_sum_of_squares
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import CHUNK, Samples
 
 FloatArray = NDArray[np.float64]
 
 METHODS = ("ols", "wls", "ridge", "bounded", "map")
-STRETCH = 20000  # samples per stretch of the sensor-bias sensitivity on long logs
 #: Noise floor of each DOF relative to its RMS target force: the WLS weight 1/σ_i² uses
 #: σ_i ≥ FLOOR · RMS(y_i). No thrust model or force measurement is better than 0.1 %, so a
 #: smaller residual is the structure fitting exactly, not noise; unfloored, such a DOF
@@ -39,159 +41,6 @@ FLOOR = 1e-3
 #: A parameter with more than this share of its unit vector (scaled coordinates) in the
 #: directions collinearity leaves undetermined is reported only through a combination.
 SHARE = 0.01
-
-
-def target(samples: Samples, body: RigidBody, index: slice | None = None) -> FloatArray:
-    """y = τ − M ν̇ − C(ν)ν − g(η), the force the damping must explain, shape (N, 6).
-
-    M and C_A act as the vehicle's ``added_mass_terms`` say (:attr:`RigidBody.M_inertial`,
-    :meth:`RigidBody.coriolis_force`)."""
-    sl = index if index is not None else slice(None)
-    nu, nu_dot = samples.nu[sl], samples.nu_dot[sl]
-    R = matrix_from_euler(samples.euler[sl])
-    # y = τ − M ν̇ − C(ν)ν − g(η)
-    return np.asarray(samples.tau[sl] - nu_dot @ body.M_inertial.T - body.coriolis_force(nu)
-                      - body.restoring(R), dtype=float)
-
-
-def memory_states(samples: Samples, model: DampingModel) -> FloatArray:
-    """Memory filter states of the model along every segment, shape (N, n_states)."""
-    out = np.zeros((len(samples), len(model.memory_rates)))
-    if out.shape[1]:
-        for sl in samples.segments():
-            out[sl] = model.memory_states(samples.t[sl], samples.nu[sl])
-    return out
-
-
-def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
-                    chunk: int = CHUNK, cutoff: float = 0.0, margin: float = 5.0,
-                    offset: FloatArray | None = None, decimate: bool = False,
-                    regressor: Callable[[FloatArray, FloatArray | None], FloatArray] | None
-                    = None
-                    ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
-    """Yield (rows, Φ (n, 6, p), y (n, 6)) over chunks of at most ``chunk`` samples.
-
-    With ``cutoff`` > 0 both y and every column of Φ are low-passed (zero phase) along time
-    within each segment: "parallel filtering". Since θ is constant, LP(y) = LP(Φ) θ holds
-    exactly however nonlinear Φ is, whereas filtering ν before forming |ν|ν does not. Chunks
-    are filtered with ``margin`` seconds of neighbouring data on both sides, so memory stays
-    flat while the result equals filtering whole segments (to the filter's decay).
-
-    ``offset`` (6,) is added to ν first: the data as a sensor bias would have made them.
-
-    ``regressor(ν, z)`` replaces ``model.regressor`` (the model still gives the memory states
-    z): any array with time on axis 0, e.g. (n, 1, m) features shared by every row.
-
-    With ``decimate`` (and ``cutoff`` > 0) only every k-th sample is yielded, k the largest
-    step that keeps four samples per period of the cutoff: the low-passed signals carry no
-    more information than that, and the normal equations cost k times less. Rows are then
-    global sample indices, every k-th from each segment's first (the same whatever the
-    chunking and whatever segments precede).
-    """
-    if offset is not None:
-        samples = Samples(samples.t, samples.nu + offset, samples.nu_dot, samples.tau,
-                          samples.euler, samples.depth, samples.segment)
-    z = memory_states(samples, model)
-    has_z = z.shape[1] > 0
-    pad = round(margin * samples.rate) if cutoff > 0 else 0
-    step = max(1, int(samples.rate / (4.0 * cutoff))) if decimate and cutoff > 0 else 1
-    for seg in samples.segments():
-        s0, s1 = seg.start or 0, seg.stop or 0
-        for start in range(s0, s1, chunk):
-            stop = min(start + chunk, s1)
-            a, b = max(s0, start - pad), min(s1, stop + pad)
-            ext = slice(a, b)
-            Phi = (regressor or model.regressor)(samples.nu[ext], z[ext] if has_z else None)
-            y = target(samples, body, ext)
-            if cutoff > 0:
-                Phi = zero_phase(Phi, samples.rate, cutoff)
-                y = zero_phase(y, samples.rate, cutoff)
-            if step > 1:
-                # every k-th sample counted from the segment's first: a segment gives the
-                # same rows whatever comes before it (a log pooled with others included)
-                rows = np.arange(start + (s0 - start) % step, stop, step)
-                yield rows, Phi[rows - a], y[rows - a]
-            else:
-                core = slice(start - a, stop - a)
-                yield slice(start, stop), Phi[core], y[core]
-
-
-@dataclass
-class NormalEquations:
-    """Per-fold, per-DOF sufficient statistics of the regression.
-
-    Attributes
-    ----------
-    A : ndarray, shape (F, 6, p, p)
-    b : ndarray, shape (F, 6, p)
-    c : ndarray, shape (F, 6)
-        Σ y².
-    n : ndarray, shape (F,)
-        Samples per fold.
-    """
-
-    A: FloatArray
-    b: FloatArray
-    c: FloatArray
-    n: FloatArray
-
-    def total(self, weights: FloatArray, exclude: int | None = None
-              ) -> tuple[FloatArray, FloatArray, float]:
-        """Σ over folds (but ``exclude``) and DOFs of w_i A, w_i b, w_i c."""
-        keep = np.ones(len(self.n), dtype=bool)
-        if exclude is not None:
-            keep[exclude] = False
-        A = np.einsum("i,fipq->pq", weights, self.A[keep])
-        b = np.einsum("i,fip->p", weights, self.b[keep])
-        return A, b, float(np.einsum("i,fi->", weights, self.c[keep]))
-
-    def rss(self, theta: FloatArray, fold: int | None = None) -> FloatArray:
-        """Residual sum of squares per DOF, Σ (y − Φθ)², shape (6,)."""
-        sel = slice(None) if fold is None else slice(fold, fold + 1)
-        A, b, c = self.A[sel].sum(0), self.b[sel].sum(0), self.c[sel].sum(0)
-        # ‖y − Φθ‖² = yᵀy − 2 θᵀΦᵀy + θᵀΦᵀΦθ (≥ 0; rounding can dip below for exact fits)
-        return np.maximum(c - 2 * b @ theta + np.einsum("ipq,p,q->i", A, theta, theta), 0.0)
-
-
-def fold_index(n: int, folds: int) -> NDArray[np.int64]:
-    """The contiguous time fold (0..folds−1) of each of n samples, shape (n,)."""
-    return np.minimum((np.arange(n) * folds) // max(n, 1), folds - 1)
-
-
-def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: int = 5,
-               chunk: int = CHUNK, cutoff: float = 0.0) -> NormalEquations:
-    """Accumulate :class:`NormalEquations` over contiguous time folds in chunks.
-
-    Parameters
-    ----------
-    samples : Samples
-    model : DampingModel
-    body : RigidBody
-    folds : int
-        Number of contiguous blocks for cross-validation.
-    chunk : int
-        Samples per chunk (memory ∝ chunk · 6 · p).
-    cutoff : float
-        Parallel low-pass of y and Φ (Hz); 0: none.
-    """
-    p, N = model.n_params, len(samples)
-    fold_of = fold_index(N, folds)
-    A = np.zeros((folds, 6, p, p))
-    b = np.zeros((folds, 6, p))
-    c = np.zeros((folds, 6))
-    n = np.zeros(folds)
-    for sl, Phi, y in iter_regression(samples, model, body, chunk, cutoff, decimate=True):
-        fo = fold_of[sl]
-        for f in np.unique(fo):
-            m = fo == f
-            P, Y = Phi[m], y[m]
-            # per DOF i: ΦᵢᵀΦᵢ, Φᵢᵀyᵢ, yᵢᵀyᵢ
-            A[f] += np.einsum("nip,niq->ipq", P, P)
-            b[f] += np.einsum("nip,ni->ip", P, Y)
-            c[f] += np.einsum("ni,ni->i", Y, Y)
-            n[f] += len(Y)
-    return NormalEquations(A, b, c, n)
-
 
 @dataclass(frozen=True)
 class Combination:
@@ -387,9 +236,6 @@ class FitOptions:
             raise ConfigError("method", f"unknown method {self.method!r}; use one of {METHODS}")
 
 
-
-
-
 def determined_directions(A: FloatArray, free: NDArray[np.bool_], max_vif: float
                           ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Split θ_free into the directions the data determine and those collinearity hides.
@@ -531,9 +377,6 @@ def parameter_scale(ne: NormalEquations, theta: FloatArray) -> FloatArray:
     return np.asarray(np.maximum(np.abs(theta), 0.1 * explained[i] / col))
 
 
-
-
-
 def fit(samples: Samples, model: DampingModel, body: RigidBody,
         options: FitOptions | None = None, prior: FloatArray | None = None,
         prior_std: FloatArray | None = None, normal: NormalEquations | None = None,
@@ -661,119 +504,3 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
                blocks=block_count(samples, block_length(samples, opts, T.shape[1])),
                held=held, combinations=combos,
                constrained=constrained, rank=T.shape[1])
-
-
-
-def total_sum_of_squares(ne: NormalEquations) -> FloatArray:
-    """Σ (y − ȳ)² per DOF from the normal equations' Σ y² and the mean of y, shape (6,).
-
-    The mean is the coefficient of a constant column, which the statistics do not hold, so
-    Σ y² is returned: the NSE is then 1 − RSS/Σy², conservative for signals with an offset.
-    """
-    return np.asarray(ne.c.sum(0))
-
-
-def block_index(samples: Samples, block: float) -> NDArray[np.int64]:
-    """Index 0..B−1 of the ``block``-second block (within its segment) of every sample."""
-    block_of = np.floor((samples.t - samples.t[0]) / block).astype(np.int64)
-    block_of += samples.segment * (int(block_of.max()) + 1)
-    return np.unique(block_of, return_inverse=True)[1].astype(np.int64)
-
-
-def block_length(samples: Samples, opts: FitOptions, rank: int) -> float:
-    """Length (s) of the robust covariance's blocks: ``opts.block``, shorter when the samples
-    span fewer than 2 r + 1 of them, but never below two periods of the low-pass (``4 /
-    cutoff``; 10 samples without one), over which filtered residuals stay correlated.
-
-    The block sandwich's middle factor Σ_b s_b s_bᵀ has rank ≤ B: with fewer blocks than
-    estimated directions r some directions get no variance at all (a 60 s log in 10 s blocks
-    has 7 blocks for 12 parameters, and a σ six times too small on one of them).
-    """
-    span = sum(float(samples.t[sl][-1] - samples.t[sl][0]) + 1.0 / samples.rate
-               for sl in samples.segments()) if len(samples) > 1 else 0.0
-    floor = 4.0 / opts.cutoff if opts.cutoff > 0 else 10.0 / max(samples.rate, 1e-300)
-    return float(max(min(opts.block, span / (2 * rank + 1)), floor))
-
-
-def block_count(samples: Samples, block: float) -> int:
-    """Number of blocks B of the robust covariance."""
-    return int(block_index(samples, block).max()) + 1 if len(samples) else 0
-
-
-def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
-                      theta: FloatArray, weights: FloatArray, ne: NormalEquations,
-                      free: NDArray[np.bool_], basis: FloatArray, opts: FitOptions,
-                      chunk: int = CHUNK) -> FloatArray:
-    """Block sandwich covariance A⁺ (Σ_b s_b s_bᵀ) A⁺ of the free parameters.
-
-    A⁺ = T (Tᵀ A T)⁻¹ Tᵀ is the inverse of A over the directions ``basis`` (T, shape
-    (p_free, r)) spans, 0 in those the data do not determine (:func:`determined_directions`).
-
-    s_b = Σ_{n ∈ block b} Σ_i w_i Φ_{n,i}ᵀ r_{n,i} is the weighted score of a block of
-    :func:`block_length` seconds; summing within blocks makes the estimate robust to
-    residuals that are correlated over less than a block (filtered noise, unmodelled slow
-    effects).
-    """
-    p = model.n_params
-    cov = np.full((p, p), np.nan)
-    if not free.any():
-        return cov
-    A, _, _ = ne.total(weights)
-    Af = A[np.ix_(free, free)]
-    block_idx = block_index(samples, block_length(samples, opts, basis.shape[1]))
-    S = np.zeros((int(block_idx.max()) + 1, int(free.sum())))
-    for sl, Phi, y in iter_regression(samples, model, body, chunk, opts.cutoff,
-                                      decimate=True):
-        r = y - Phi @ theta
-        # weighted score of each sample: Σ_i w_i Φ_iᵀ r_i
-        g = np.einsum("nip,ni,i->np", Phi[:, :, free], r, weights)
-        np.add.at(S, block_idx[sl], g)
-    B = len(S)
-    meat = S.T @ S * (B / max(B - 1, 1))
-    Ainv = basis @ linalg.inv(basis.T @ Af @ basis) @ basis.T
-    cov[np.ix_(free, free)] = Ainv @ meat @ Ainv
-    return cov
-
-
-def bias_covariance(samples: Samples, model: DampingModel, body: RigidBody,
-                    theta: FloatArray, weights: FloatArray, free: NDArray[np.bool_],
-                    basis: FloatArray, opts: FitOptions, chunk: int = CHUNK) -> FloatArray:
-    """Covariance of θ caused by unknown constant sensor biases (the error budget).
-
-    For each axis k of the gyro (σ = ``opts.gyro_bias``) and of the DVL (``opts.dvl_bias``)
-    the data are refitted with ν offset by σ e_k; the change Δθ_k is one standard deviation
-    of the error that bias causes, and Σ_k Δθ_k Δθ_kᵀ is the covariance (biases independent).
-    Such errors are constant over the record, so the residuals cannot reveal them. The
-    refits estimate the directions ``basis`` spans (:func:`determined_directions`).
-    """
-    p = model.n_params
-    cov = np.zeros((p, p))
-    sigma = np.array([opts.dvl_bias] * 3 + [opts.gyro_bias] * 3)
-    if not free.any() or not np.any(sigma > 0):
-        return cov
-    # a sensitivity is an average property of the data: on long logs, three evenly spread
-    # stretches of STRETCH samples give it at a fraction of the cost
-    data = samples
-    if len(samples) > 3 * STRETCH:
-        starts = np.linspace(0, len(samples) - STRETCH, 3).astype(int)
-        index = np.concatenate([np.arange(a, a + STRETCH) for a in starts])
-        data = samples.take(index)
-        data.segment = np.repeat(np.arange(3), STRETCH) + 3 * data.segment
-
-    def refit(offset: FloatArray | None) -> FloatArray:
-        A = np.zeros((p, p))
-        b = np.zeros(p)
-        for _, Phi, y in iter_regression(data, model, body, chunk, opts.cutoff,
-                                         offset=offset, decimate=True):
-            A += np.einsum("nip,niq,i->pq", Phi, Phi, weights)
-            b += np.einsum("nip,ni,i->p", Phi, y, weights)
-        return solve_normal(A, b, free, theta, basis=basis)
-
-    base = theta if data is samples else refit(None)
-    for k in np.flatnonzero(sigma > 0):
-        offset = np.zeros(6)
-        offset[k] = sigma[k]
-        d = refit(offset) - base
-        cov += np.outer(d, d)
-    return cov
-

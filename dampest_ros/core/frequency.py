@@ -16,8 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize, signal
 
-from dampest_ros.core.batch import iter_regression
 from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.regression import iter_regression
 from dampest_ros.core.rigid_body import RigidBody
 from dampest_ros.core.samples import Samples
 

@@ -23,8 +23,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from dampest_ros.core.batch import Fit, FitOptions, NormalEquations, accumulate, fit
+from dampest_ros.core.batch import Fit, FitOptions, fit
 from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.regression import NormalEquations, accumulate
 from dampest_ros.core.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 

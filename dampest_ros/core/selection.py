@@ -38,10 +38,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.alpha import Alpha, AlphaBank
-from dampest_ros.core.batch import NormalEquations, fold_index, iter_regression
 from dampest_ros.core.damping import Basis, DampingModel, DampingTerm
 from dampest_ros.core.memory_rates import MemoryEvidence, memory_evidence
 from dampest_ros.core.quadratic import solve_normal
+from dampest_ros.core.regression import NormalEquations, fold_index, iter_regression
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.terms import (

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dampest_ros.cli.main import main
-from dampest_ros.core.batch import target
+from dampest_ros.core.regression import target
 from dampest_ros.core.rigid_body import coriolis_force, munk_moment
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.validate import metrics, predicted_force

@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.alpha import Alpha
-from dampest_ros.core.batch import FitOptions, accumulate, fit, iter_regression
+from dampest_ros.core.batch import FitOptions, fit
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.dissipative import envelope
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.regression import accumulate, iter_regression
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.simulate import run
 from dampest_ros.core.terms import CrossSpec, cross_term

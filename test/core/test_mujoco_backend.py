@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 import yaml
 
-from dampest_ros.core.batch import target
 from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
@@ -22,6 +21,7 @@ from dampest_ros.core.mujoco_backend import (
     plant_added_mass,
     plant_vehicle,
 )
+from dampest_ros.core.regression import target
 from dampest_ros.core.rigid_body import AddedMassTerms, ConfigError, coriolis_force
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.simulate import run

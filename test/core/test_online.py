@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from dampest_ros.core.batch import FitOptions, fit, iter_regression
+from dampest_ros.core.batch import FitOptions, fit
 from dampest_ros.core.damping import filter_memory
 from dampest_ros.core.dissipative import envelope
 from dampest_ros.core.effects import Effects
@@ -21,6 +21,7 @@ from dampest_ros.core.online.preprocessor import OnlinePreprocessor, derivative_
 from dampest_ros.core.online.regression import LowPass, OnlineRegression
 from dampest_ros.core.online.sample import OnlineConfig, to_samples
 from dampest_ros.core.preprocess import PreprocessConfig, preprocess
+from dampest_ros.core.regression import iter_regression
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.rls.least_squares import RecursiveLeastSquares, RLSConfig
 from dampest_ros.core.sensors import SensorConfig, measure

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.alpha import Alpha, AlphaBank
-from dampest_ros.core.batch import FitOptions, accumulate, fit
+from dampest_ros.core.batch import FitOptions, fit
 from dampest_ros.core.damping import DampingModel, filter_memory
 from dampest_ros.core.frames import matrix_from_euler
 from dampest_ros.core.quadratic import rank_solve
+from dampest_ros.core.regression import accumulate
 from dampest_ros.core.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import select_terms

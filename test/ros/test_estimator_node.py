@@ -27,8 +27,9 @@ from std_msgs.msg import String  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 
 from dampest_ros.client import ModelClient  # noqa: E402
-from dampest_ros.core.batch import accumulate, fit, parameter_scale  # noqa: E402
+from dampest_ros.core.batch import fit, parameter_scale  # noqa: E402
 from dampest_ros.core.online.sample import to_samples  # noqa: E402
+from dampest_ros.core.regression import accumulate  # noqa: E402
 from dampest_ros.io.yaml_io import load_model, load_vehicle, loads_model  # noqa: E402
 from dampest_ros.ros.common import LATCHED_QOS  # noqa: E402
 from dampest_ros.ros.estimator_node import EstimatorNode  # noqa: E402

@@ -16,9 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from dampest_ros.core.batch import target
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.online.sample import OnlineSample
+from dampest_ros.core.regression import target
 from dampest_ros.core.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 

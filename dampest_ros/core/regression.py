@@ -1,0 +1,186 @@
+"""The regression form of identification and its sufficient statistics.
+
+Per sample n (FRD): y_n = τ_n − M ν̇_n − C(ν_n)ν_n − g(η_n) = Φ(ν_n) θ + e_n (:func:`target`,
+:meth:`DampingModel.regressor`), formed in chunks of samples with the parallel low-pass of y
+and Φ (:func:`iter_regression`), and reduced to normal equations per degree of freedom i and
+cross-validation fold f (:func:`accumulate`): A_{f,i} = Σ Φ_iᵀ Φ_i, b_{f,i} = Σ Φ_iᵀ y_i,
+c_{f,i} = Σ y_i². Memory does not grow with the length of the data; the statistics of several
+logs add up (:mod:`dampest_ros.core.pool`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.frames import matrix_from_euler
+from dampest_ros.core.preprocess import zero_phase
+from dampest_ros.core.rigid_body import RigidBody
+from dampest_ros.core.samples import CHUNK, Samples
+
+FloatArray = NDArray[np.float64]
+
+
+def target(samples: Samples, body: RigidBody, index: slice | None = None) -> FloatArray:
+    """y = τ − M ν̇ − C(ν)ν − g(η), the force the damping must explain, shape (N, 6).
+
+    M and C_A act as the vehicle's ``added_mass_terms`` say (:attr:`RigidBody.M_inertial`,
+    :meth:`RigidBody.coriolis_force`)."""
+    sl = index if index is not None else slice(None)
+    nu, nu_dot = samples.nu[sl], samples.nu_dot[sl]
+    R = matrix_from_euler(samples.euler[sl])
+    # y = τ − M ν̇ − C(ν)ν − g(η)
+    return np.asarray(samples.tau[sl] - nu_dot @ body.M_inertial.T - body.coriolis_force(nu)
+                      - body.restoring(R), dtype=float)
+
+
+def memory_states(samples: Samples, model: DampingModel) -> FloatArray:
+    """Memory filter states of the model along every segment, shape (N, n_states)."""
+    out = np.zeros((len(samples), len(model.memory_rates)))
+    if out.shape[1]:
+        for sl in samples.segments():
+            out[sl] = model.memory_states(samples.t[sl], samples.nu[sl])
+    return out
+
+
+def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
+                    chunk: int = CHUNK, cutoff: float = 0.0, margin: float = 5.0,
+                    offset: FloatArray | None = None, decimate: bool = False,
+                    regressor: Callable[[FloatArray, FloatArray | None], FloatArray] | None
+                    = None
+                    ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
+    """Yield (rows, Φ (n, 6, p), y (n, 6)) over chunks of at most ``chunk`` samples.
+
+    With ``cutoff`` > 0 both y and every column of Φ are low-passed (zero phase) along time
+    within each segment: "parallel filtering". Since θ is constant, LP(y) = LP(Φ) θ holds
+    exactly however nonlinear Φ is, whereas filtering ν before forming |ν|ν does not. Chunks
+    are filtered with ``margin`` seconds of neighbouring data on both sides, so memory stays
+    flat while the result equals filtering whole segments (to the filter's decay).
+
+    ``offset`` (6,) is added to ν first: the data as a sensor bias would have made them.
+
+    ``regressor(ν, z)`` replaces ``model.regressor`` (the model still gives the memory states
+    z): any array with time on axis 0, e.g. (n, 1, m) features shared by every row.
+
+    With ``decimate`` (and ``cutoff`` > 0) only every k-th sample is yielded, k the largest
+    step that keeps four samples per period of the cutoff: the low-passed signals carry no
+    more information than that, and the normal equations cost k times less. Rows are then
+    global sample indices, every k-th from each segment's first (the same whatever the
+    chunking and whatever segments precede).
+    """
+    if offset is not None:
+        samples = Samples(samples.t, samples.nu + offset, samples.nu_dot, samples.tau,
+                          samples.euler, samples.depth, samples.segment)
+    z = memory_states(samples, model)
+    has_z = z.shape[1] > 0
+    pad = round(margin * samples.rate) if cutoff > 0 else 0
+    step = max(1, int(samples.rate / (4.0 * cutoff))) if decimate and cutoff > 0 else 1
+    for seg in samples.segments():
+        s0, s1 = seg.start or 0, seg.stop or 0
+        for start in range(s0, s1, chunk):
+            stop = min(start + chunk, s1)
+            a, b = max(s0, start - pad), min(s1, stop + pad)
+            ext = slice(a, b)
+            Phi = (regressor or model.regressor)(samples.nu[ext], z[ext] if has_z else None)
+            y = target(samples, body, ext)
+            if cutoff > 0:
+                Phi = zero_phase(Phi, samples.rate, cutoff)
+                y = zero_phase(y, samples.rate, cutoff)
+            if step > 1:
+                # every k-th sample counted from the segment's first: a segment gives the
+                # same rows whatever comes before it (a log pooled with others included)
+                rows = np.arange(start + (s0 - start) % step, stop, step)
+                yield rows, Phi[rows - a], y[rows - a]
+            else:
+                core = slice(start - a, stop - a)
+                yield slice(start, stop), Phi[core], y[core]
+
+
+@dataclass
+class NormalEquations:
+    """Per-fold, per-DOF sufficient statistics of the regression.
+
+    Attributes
+    ----------
+    A : ndarray, shape (F, 6, p, p)
+    b : ndarray, shape (F, 6, p)
+    c : ndarray, shape (F, 6)
+        Σ y².
+    n : ndarray, shape (F,)
+        Samples per fold.
+    """
+
+    A: FloatArray
+    b: FloatArray
+    c: FloatArray
+    n: FloatArray
+
+    def total(self, weights: FloatArray, exclude: int | None = None
+              ) -> tuple[FloatArray, FloatArray, float]:
+        """Σ over folds (but ``exclude``) and DOFs of w_i A, w_i b, w_i c."""
+        keep = np.ones(len(self.n), dtype=bool)
+        if exclude is not None:
+            keep[exclude] = False
+        A = np.einsum("i,fipq->pq", weights, self.A[keep])
+        b = np.einsum("i,fip->p", weights, self.b[keep])
+        return A, b, float(np.einsum("i,fi->", weights, self.c[keep]))
+
+    def rss(self, theta: FloatArray, fold: int | None = None) -> FloatArray:
+        """Residual sum of squares per DOF, Σ (y − Φθ)², shape (6,)."""
+        sel = slice(None) if fold is None else slice(fold, fold + 1)
+        A, b, c = self.A[sel].sum(0), self.b[sel].sum(0), self.c[sel].sum(0)
+        # ‖y − Φθ‖² = yᵀy − 2 θᵀΦᵀy + θᵀΦᵀΦθ (≥ 0; rounding can dip below for exact fits)
+        return np.maximum(c - 2 * b @ theta + np.einsum("ipq,p,q->i", A, theta, theta), 0.0)
+
+
+def fold_index(n: int, folds: int) -> NDArray[np.int64]:
+    """The contiguous time fold (0..folds−1) of each of n samples, shape (n,)."""
+    return np.minimum((np.arange(n) * folds) // max(n, 1), folds - 1)
+
+
+def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: int = 5,
+               chunk: int = CHUNK, cutoff: float = 0.0) -> NormalEquations:
+    """Accumulate :class:`NormalEquations` over contiguous time folds in chunks.
+
+    Parameters
+    ----------
+    samples : Samples
+    model : DampingModel
+    body : RigidBody
+    folds : int
+        Number of contiguous blocks for cross-validation.
+    chunk : int
+        Samples per chunk (memory ∝ chunk · 6 · p).
+    cutoff : float
+        Parallel low-pass of y and Φ (Hz); 0: none.
+    """
+    p, N = model.n_params, len(samples)
+    fold_of = fold_index(N, folds)
+    A = np.zeros((folds, 6, p, p))
+    b = np.zeros((folds, 6, p))
+    c = np.zeros((folds, 6))
+    n = np.zeros(folds)
+    for sl, Phi, y in iter_regression(samples, model, body, chunk, cutoff, decimate=True):
+        fo = fold_of[sl]
+        for f in np.unique(fo):
+            m = fo == f
+            P, Y = Phi[m], y[m]
+            # per DOF i: ΦᵢᵀΦᵢ, Φᵢᵀyᵢ, yᵢᵀyᵢ
+            A[f] += np.einsum("nip,niq->ipq", P, P)
+            b[f] += np.einsum("nip,ni->ip", P, Y)
+            c[f] += np.einsum("ni,ni->i", Y, Y)
+            n[f] += len(Y)
+    return NormalEquations(A, b, c, n)
+
+
+def total_sum_of_squares(ne: NormalEquations) -> FloatArray:
+    """Σ (y − ȳ)² per DOF from the normal equations' Σ y² and the mean of y, shape (6,).
+
+    The mean is the coefficient of a constant column, which the statistics do not hold, so
+    Σ y² is returned: the NSE is then 1 − RSS/Σy², conservative for signals with an offset.
+    """
+    return np.asarray(ne.c.sum(0))
