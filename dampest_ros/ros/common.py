@@ -473,7 +473,11 @@ def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
         parser = argparse.ArgumentParser(
             prog=name, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter,
             epilog="ROS arguments follow --ros-args, e.g. --ros-args -p forgetting_factor:=0.99 "
-                   "-r __ns:=/vehicle" + _param_help(node_class))
+                   "-r __ns:=/vehicle\nEvery parameter with its default: --params-file "
+                   f"config/{name}.params.yaml (installed\nin share/dampest_ros/config). A "
+                   "bad parameter, or another node of the same name and namespace\nalready "
+                   "running, ends the node with one error line and exit status 2."
+                   + _param_help(node_class))
         parser.parse_args(remove_ros_args(argv)[1:])
         rclpy.init(args=argv)
         node = None
