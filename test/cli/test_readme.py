@@ -53,7 +53,14 @@ def pip_commands() -> list[list[str]]:
 
 
 def _paths(args: object, names: tuple[str, ...]) -> list[Path]:
-    return [Path(str(v)) for n in names if (v := getattr(args, n, None)) not in (None, "")]
+    """The paths given to the named options (a list option gives each of its values)."""
+    out = []
+    for name in names:
+        value = getattr(args, name, None)
+        for v in value if isinstance(value, list) else [value]:
+            if v not in (None, ""):
+                out.append(Path(str(v)))
+    return out
 
 
 def _made_by(path: Path, made: list[Path]) -> bool:
