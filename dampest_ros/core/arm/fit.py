@@ -11,11 +11,12 @@ OLS weights all joints alike; WLS weights joint j by 1/σ_j², σ_j its OLS resi
 
 Physically consistent fit: each link's ten parameters come from its pseudo-inertia
 J = [[½ tr(I) 1 − I, m c], [(m c)ᵀ, m]] = L Lᵀ, L lower triangular with a positive (log-
-parameterised) diagonal (Rucker & Wensing 2022), so every link has m > 0 and J ≻ 0;
-armature, viscous and Coulomb terms are > 0 (as exponentials). It minimises the same
-weighted squared residual, and among the full parameter sets with the same base parameters
-picks the one nearest the nominal (weight ``prior_weight``, tiny): the nominal never sets a
-base parameter.
+parameterised) diagonal (Rucker & Wensing 2022), bounded below at 1e-5 of the nominal's, so
+every link has m > 0 and J ≻ 0 with a margin; armature, viscous and Coulomb terms are ≥ 0.
+It minimises the same weighted squared residual (scipy's bounded trust-region least squares,
+analytic Jacobian), and among the full parameter sets with the same base parameters picks the
+one nearest the nominal (weight ``prior_weight``, tiny): the nominal never sets a base
+parameter.
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 import scipy.optimize
 from numpy.typing import NDArray
 
@@ -266,7 +266,7 @@ class ConsistentFit:
 
 
 def fit_consistent(normals: JointNormals, base: BaseParameters, fit: BaseFit,
-                   nominal: FloatArray, prior_weight: float = 1e-4) -> ConsistentFit:
+                   nominal: FloatArray, prior_weight: float = 1e-5) -> ConsistentFit:
     """Physically consistent least squares (log-Cholesky links, bounded joint terms).
 
     Parameters
@@ -293,7 +293,6 @@ def fit_consistent(normals: JointNormals, base: BaseParameters, fit: BaseFit,
     vals, vecs = np.linalg.eigh(A)
     Rm = (vecs * np.sqrt(np.maximum(vals, 0.0))).T
     scale = np.maximum(np.abs(nominal), 1e-3)
-    joint_nom = nominal[nl:].reshape(n, 4)
 
     # θ = B π: the base parameters as a matrix over the full ones
     B = np.zeros((base.size, nl + 4 * n))
@@ -302,15 +301,13 @@ def fit_consistent(normals: JointNormals, base: BaseParameters, fit: BaseFit,
     data_w = Rm @ B / np.sqrt(max(float(np.sum(fit.weights * fit.sigma ** 2)) / n, 1e-300))
     prior_w = np.sqrt(prior_weight) / scale
 
-    positive = np.zeros(len(nominal), dtype=bool)
-    positive[nl:] = np.tile([True, True, True, False], n)  # Ia, Fv, Fc > 0; offset free
-
     def unpack(x: FloatArray) -> tuple[FloatArray, FloatArray]:
-        full = np.where(positive, np.exp(np.where(positive, x, 0.0)), x)
-        jac = np.diag(np.where(positive, full, 1.0))
+        full = x.copy()
+        jac = np.eye(len(x))
         links, ljac = links_from_cholesky(x[:nl].reshape(n, 10))
         full[:nl] = links.ravel()
-        jac[:nl, :nl] = scipy.linalg.block_diag(*ljac)
+        for j in range(n):
+            jac[10 * j:10 * j + 10, 10 * j:10 * j + 10] = ljac[j]
         return full, jac
 
     def residual(x: FloatArray) -> FloatArray:
@@ -325,10 +322,18 @@ def fit_consistent(normals: JointNormals, base: BaseParameters, fit: BaseFit,
     start = np.zeros(nl + 4 * n)
     start[base.independent] = fit.theta
     x0 = np.concatenate([*(cholesky_of_link(nominal[10 * j:10 * j + 10]) for j in range(n)),
-                         joint_nom.ravel()])
-    x0[positive] = np.log(np.maximum(x0[positive], 1e-6))
-    sol = scipy.optimize.least_squares(residual, x0, jac=jacobian, method="lm",
-                                       xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=3000)
+                         nominal[nl:]])
+    # bounds: Ia, Fv, Fc ≥ 0 (offsets free); each link's Cholesky diagonal at least 1e-5 of
+    # its nominal one (physical with a margin, and an optimum on the boundary is reached in
+    # finitely many steps instead of as log L_kk → −∞)
+    lo = np.full(len(x0), -np.inf)
+    lo[nl:] = np.tile([0.0, 0.0, 0.0, -np.inf], n)
+    diag = np.flatnonzero(_TRIL[0] == _TRIL[1])
+    for j in range(n):
+        lo[10 * j + diag] = x0[10 * j + diag] + np.log(1e-5)
+    x0 = np.maximum(x0, np.where(np.isfinite(lo), lo + 1e-9, -np.inf))
+    sol = scipy.optimize.least_squares(residual, x0, jac=jacobian, bounds=(lo, np.inf),
+                                       xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)
     full, _ = unpack(sol.x)
     theta = base.of(full)
     d = theta - fit.theta
