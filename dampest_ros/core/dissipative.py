@@ -13,13 +13,12 @@ of 1 is the same problem. Both check every point of a grid over the flown envelo
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from statistics import NormalDist
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, stats
 
 from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.quadratic import solve_normal
 from dampest_ros.core.rigid_body import DOF_NAMES
 from dampest_ros.core.samples import CHUNK
 
@@ -111,7 +110,7 @@ def misfit_report(model: DampingModel, theta: FloatArray, pts: FloatArray,
     it gives the reason.
     """
     names = model.parameter_names
-    z = float(stats.norm.ppf(0.975))
+    z = NormalDist().inv_cdf(0.975)
     std = np.sqrt(np.abs(np.diag(cov)))
     share = power_rows(model, pts) * theta  # (n, p): θ_j g_j(ν)
     share[:, ~free] = 0.0
@@ -194,6 +193,10 @@ def project(theta: FloatArray, cov: FloatArray, model: DampingModel, flown: Floa
     constrained : dict of str to str
         The coefficients the constraint holds, with the reason (:func:`misfit_report`).
     """
+    # the solvers load scipy (0.3 s): only a projection that has work to do needs them
+    from scipy import linalg
+
+    from dampest_ros.core.quadratic import solve_normal
     none = np.zeros((0, 6))
     pts, on_data = dissipation_points(model, theta, none, flown, chunk)
     if not len(pts):

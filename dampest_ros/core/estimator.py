@@ -10,9 +10,10 @@ sample instant, ROS order [x, y, z, w], FLU → ENU; converted through
 is vectorised over a chunk; the RLS updates sample by sample).
 
 The dampest/* topics carry the preprocessor's samples in that form
-(:func:`wire_stamp`, :func:`attitude_quaternion`); :meth:`OnlineEstimator.add_sample` feeds
-a sample exactly as it arrives through them, so that an offline run
-(``dampest identify --method rls``) takes the nodes' code path number for number.
+(:func:`~dampest_ros.core.samples.wire_stamp`, :func:`attitude_quaternion`);
+:meth:`OnlineEstimator.add_sample` feeds a sample exactly as it arrives through them, so that
+an offline run (``dampest identify --method rls``) takes the nodes' code path number for
+number.
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from dampest_ros.core.rls.least_squares import (
     RecursiveLeastSquares,
     RLSConfig,
 )
+from dampest_ros.core.samples import wire_stamp
 from dampest_ros.core.vehicle import Vehicle, measured_wrench_scale
 
 FloatArray = NDArray[np.float64]
@@ -101,11 +103,6 @@ class EstimatorConfig:
             raise ConfigError("chunk", f"must be ≥ 1, got {self.chunk}")
         if self.prior_scale <= 0:
             raise ConfigError("prior_scale", "must be > 0")
-
-
-def wire_stamp(t: float) -> int:
-    """The integer nanoseconds that a header stamp of t seconds carries (nearest)."""
-    return round(t * 1e9)
 
 
 def attitude_quaternion(euler: FloatArray) -> FloatArray:

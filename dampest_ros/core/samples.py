@@ -19,6 +19,11 @@ FloatArray = NDArray[np.float64]
 CHUNK = 8000
 
 
+def wire_stamp(t: float) -> int:
+    """The integer nanoseconds that a header stamp of t seconds carries (nearest)."""
+    return round(t * 1e9)
+
+
 @dataclass
 class Samples:
     """Uniformly sampled segments of vehicle data.

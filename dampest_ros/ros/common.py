@@ -38,8 +38,8 @@ from rclpy.qos import (
 from rclpy.subscription import Subscription
 from rclpy.utilities import remove_ros_args
 
-from dampest_ros.core.estimator import wire_stamp
 from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.samples import wire_stamp
 from dampest_ros.io.yaml_io import load_model, load_vehicle
 
 #: Sensor topics: the sensor-data policies (best effort, volatile) with a deeper queue than
