@@ -98,12 +98,15 @@ def parameter_units(model: DampingModel) -> dict[str, str]:
                 units[name] = _unit_text(dims)
             continue
         for b in term.bases:
-            rows, cols = np.nonzero(np.asarray(b.B))
-            a = _alpha_dims(b.alpha)
-            found = {_sub(_FORCE_DIMS[r], _VEL_DIMS[c]) for r, c in zip(rows, cols,
-                                                                          strict=True)}
-            units[b.name] = (_unit_text(_sub(found.pop(), a)) if len(found) == 1
-                             and a is not None else "SI")
+            # [F_row] / ([α] [ν_col]) over every entry of every atom; one unit or "SI"
+            found: set[_Dims | None] = set()
+            for B, alpha in b.atoms:
+                rows, cols = np.nonzero(np.asarray(B))
+                a = _alpha_dims(alpha)
+                found |= {None if a is None else _sub(_sub(_FORCE_DIMS[r], _VEL_DIMS[c]), a)
+                          for r, c in zip(rows, cols, strict=True)}
+            unit = found.pop() if len(found) == 1 else None
+            units[b.name] = _unit_text(unit) if unit is not None else "SI"
     return units
 
 Values = FloatArray | Sequence[float] | Mapping[str, float]

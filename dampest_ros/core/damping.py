@@ -1,9 +1,12 @@
 """Damping D(ν) as a sum of named terms, each linear in its parameters.
 
-Every scalar parameter θ_j owns one basis matrix B_j (6×6) and one scalar function α_j(ν),
+Every scalar parameter θ_j owns a basis matrix B_j (6×6) and a scalar function α_j(ν),
 so a static term contributes D_t(ν) = Σ_j θ_j α_j(ν) B_j and the damping force
 D_t(ν)ν = Σ_j θ_j α_j(ν) B_j ν. The regressor column of θ_j is therefore α_j(ν) B_j ν
-and the whole model is y = Φ(ν) θ with Φ of shape (N, 6, p).
+and the whole model is y = Φ(ν) θ with Φ of shape (N, 6, p). A parameter that acts through
+several velocity products at once (the Coriolis and Munk forces of an added-mass correction:
+one mass, four entries) carries further (B, α) pairs, its "atoms": its column is
+Σ_k α_k(ν) B_k ν.
 
 The memory term D_freq replaces ν by filter states z (ż = −λ z + ν, so z is the convolution
 of ν with e^{−λt}); its columns are e_i z_{i,m} and its force is Σ_m c_m z_m, the
@@ -23,23 +26,30 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
 
 from dampest_ros.core.alpha import Alpha, AlphaBank
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError
 
 FloatArray = NDArray[np.float64]
 
-TERM_KINDS = ("linear", "quadratic", "cross", "freq", "added", "residual")
+TERM_KINDS = ("linear", "quadratic", "cross", "freq", "added", "coriolis", "residual")
 
 
 @dataclass(frozen=True)
 class Basis:
-    """One scalar parameter: its name, basis matrix B (6×6) and function α(ν)."""
+    """One scalar parameter: its name, basis matrix B (6×6) and function α(ν), and the
+    further (B_k, α_k) pairs of a parameter that acts through several products (``more``):
+    its contribution to D(ν) is θ (α(ν) B + Σ_k α_k(ν) B_k)."""
 
     name: str
     B: FloatArray
     alpha: Alpha = field(default_factory=Alpha)
+    more: tuple[tuple[FloatArray, Alpha], ...] = ()
+
+    @property
+    def atoms(self) -> list[tuple[FloatArray, Alpha]]:
+        """Every (B, α) pair of the parameter, the first one first."""
+        return [(self.B, self.alpha), *self.more]
 
 
 def unit(i: int, j: int) -> FloatArray:
@@ -56,7 +66,7 @@ class DampingTerm:
     Parameters
     ----------
     kind : str
-        One of ``linear, quadratic, cross, freq, added, residual``.
+        One of :data:`TERM_KINDS`.
     meaning : str
         One line of physics, shown in reports.
     bases : list of Basis
@@ -113,7 +123,8 @@ class DampingTerm:
         if self.kind == "freq":
             return D
         for th, b in zip(theta, self.bases, strict=True):
-            D += th * b.alpha(nu)[:, None, None] * b.B
+            for B, alpha in b.atoms:
+                D += th * alpha(nu)[:, None, None] * B
         return D
 
     def param_scales(self, nu_scale: FloatArray, force_scale: FloatArray) -> FloatArray:
@@ -125,10 +136,11 @@ class DampingTerm:
         for j, b in enumerate(self.bases):
             # θ_j α_j(ν) (B_j ν)_a = F_a θ'_j α_j(ν') (B_j ν')_a with ν = ν_s ⊙ ν': the scale
             # of α (its homogeneity, not its value at ν_s: ‖ν_s[:3]‖ = √3 v) times
-            # ν_s,b / F_a over the entries of B_j (their pattern; a mode's entries are < 1)
-            a = b.alpha.scale(nu_scale)
-            ratio = (b.B != 0) * nu_scale[None, :] / force_scale[:, None]
-            out[j] = a * ratio.max()
+            # ν_s,b / F_a over the entries of B_j (their pattern; a mode's entries are < 1);
+            # the largest over the parameter's atoms
+            out[j] = max(alpha.scale(nu_scale)
+                         * float(((B != 0) * nu_scale[None, :] / force_scale[:, None]).max())
+                         for B, alpha in b.atoms)
         return out
 
     def project(self, theta: FloatArray) -> FloatArray:
@@ -137,7 +149,8 @@ class DampingTerm:
         Linear term: the symmetric part of D_linear onto the PSD cone. Quadratic and residual
         terms: negative weights of PSD bases to zero. Memory: c_m ≥ 0 (a positive kernel
         is passive). Cross and added-mass terms have indefinite bases: left unchanged; their
-        effect is checked on data with :meth:`DampingModel.dissipation`.
+        effect is checked on data with :meth:`DampingModel.dissipation` (the ``coriolis``
+        term does no work at all: its D(ν) is skew).
         """
         theta = np.array(theta, dtype=float)
         if self.kind == "freq":
@@ -215,12 +228,19 @@ class DampingModel:
         for t in self.terms:
             self._slices[t.kind] = slice(start, start + t.n_params)
             start += t.n_params
-        # static columns (every term but freq), in θ order
-        static = [(self._slices[t.kind].start + k, b) for t in self.terms if t.kind != "freq"
-                  for k, b in enumerate(t.bases)]
-        self._static_idx = np.array([k for k, _ in static], dtype=np.int64)
-        self._Bs = np.stack([b.B for _, b in static]) if static else np.zeros((0, 6, 6))
-        self._bank = AlphaBank([b.alpha for _, b in static])
+        # static atoms (every term but freq: one per (B, α) pair), in θ order; the column of
+        # θ_j is the sum of its atoms' columns
+        static = [(self._slices[t.kind].start + k, B, alpha) for t in self.terms
+                  if t.kind != "freq" for k, b in enumerate(t.bases) for B, alpha in b.atoms]
+        self._static_idx = np.array([k for k, _, _ in static], dtype=np.int64)
+        self._Bs = np.stack([B for _, B, _ in static]) if static else np.zeros((0, 6, 6))
+        self._bank = AlphaBank([alpha for _, _, alpha in static])
+        self._static_params = np.unique(self._static_idx)
+        # atom → parameter sum (None: one atom per parameter, the common case)
+        self._atom_sum: FloatArray | None = None
+        if len(self._static_params) < len(self._static_idx):
+            self._atom_sum = (self._static_idx[:, None]
+                              == self._static_params[None, :]).astype(float)
         freq = self.term("freq")
         self._freq_idx = (np.arange(self._slices["freq"].start, self._slices["freq"].stop)
                           if freq is not None else np.zeros(0, dtype=np.int64))
@@ -303,9 +323,12 @@ class DampingModel:
         N = nu.shape[0]
         Phi = np.empty((N, 6, self.n_params))
         if len(self._static_idx):
-            # column j: α_j(ν) B_j ν
-            Bnu = np.einsum("jab,nb->naj", self._Bs, nu)
-            Phi[:, :, self._static_idx] = Bnu * self._bank(nu)[:, None, :]
+            # column j: α_j(ν) B_j ν (summed over the parameter's atoms)
+            Bnu = np.einsum("jab,nb->naj", self._Bs, nu) * self._bank(nu)[:, None, :]
+            if self._atom_sum is None:
+                Phi[:, :, self._static_idx] = Bnu
+            else:
+                Phi[:, :, self._static_params] = Bnu @ self._atom_sum
         if len(self._freq_idx):
             if states is None:
                 raise ValueError("the freq term needs its memory states")
@@ -331,11 +354,12 @@ class DampingModel:
         return f
 
     def alphas(self, nu: FloatArray) -> FloatArray:
-        """α_j(ν) of the static parameters, shape (N, p_static)."""
+        """α(ν) of the static atoms (one per parameter but for multi-product ones), shape
+        (N, n_atoms)."""
         return self._bank(nu)
 
     def static_gain(self, theta: FloatArray) -> FloatArray:
-        """θ_j B_j of the static parameters, flattened: D(ν) = α(ν) K, shape (p_static, 36)."""
+        """θ B of the static atoms, flattened: D(ν) = α(ν) K, shape (n_atoms, 36)."""
         return (theta[self._static_idx, None, None] * self._Bs).reshape(-1, 36)
 
     def memory_gain(self, theta: FloatArray) -> FloatArray:
@@ -388,7 +412,8 @@ class DampingModel:
             if t.kind == "freq":
                 lo[s] = 0.0
             else:
-                psd = [np.linalg.eigvalsh(0.5 * (b.B + b.B.T)).min() >= -1e-12 and
+                psd = [not b.more and
+                       np.linalg.eigvalsh(0.5 * (b.B + b.B.T)).min() >= -1e-12 and
                        b.alpha.kind in ("one", "abs", "absprod", "absproj", "norm", "anorm",
                                         "pnorm")
                        for b in t.bases]
@@ -448,6 +473,7 @@ def filter_memory(t: FloatArray, x: FloatArray, rates: FloatArray) -> FloatArray
 
 def _fo_hold(x: FloatArray, a: float, b0: float, b1: float) -> FloatArray:
     # z_{n+1} = a z_n + b0 x_n + b1 x_{n+1}, z_0 = 0, as one IIR filter on the input
+    from scipy import signal  # here: loading scipy.signal costs 0.8 s, most users never need it
     u = np.empty_like(x)
     u[0] = 0.0
     u[1:] = b0 * x[:-1] + b1 * x[1:]

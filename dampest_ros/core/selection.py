@@ -31,17 +31,17 @@ weights, nor on the prior's magnitudes, which it never sees.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.alpha import Alpha, AlphaBank
-from dampest_ros.core.damping import Basis, DampingModel, DampingTerm
+from dampest_ros.core.damping import TERM_KINDS, Basis, DampingModel, DampingTerm
 from dampest_ros.core.memory_rates import MemoryEvidence, memory_evidence
 from dampest_ros.core.quadratic import solve_normal
-from dampest_ros.core.regression import NormalEquations, fold_index, iter_regression
+from dampest_ros.core.regression import NormalEquations, accumulate, fold_index, iter_regression
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.terms import (
@@ -112,8 +112,8 @@ class Selection:
 
 
 def _with_terms(base: DampingModel, cross: Sequence[CrossSpec],
-                memory: dict[int, float]) -> DampingModel:
-    terms: dict[str, DampingTerm] = {t.kind: t for t in base.terms}
+                memory: dict[int, float], shared: Sequence[DampingTerm] = ()) -> DampingModel:
+    terms: dict[str, DampingTerm] = {t.kind: t for t in [*base.terms, *shared]}
     if cross:
         extra = cross_term(list(cross))
         old = terms.get("cross")
@@ -121,8 +121,7 @@ def _with_terms(base: DampingModel, cross: Sequence[CrossSpec],
                                      (old.bases if old else []) + extra.bases)
     if memory:
         terms["freq"] = memory_term({DOF_NAMES[d]: [lam] for d, lam in memory.items()})
-    order = ("linear", "quadratic", "cross", "freq", "added", "residual")
-    return DampingModel([terms[k] for k in order if k in terms])
+    return DampingModel([terms[k] for k in TERM_KINDS if k in terms])
 
 
 def _key(col: int, alpha: Alpha) -> tuple[Any, ...]:
@@ -277,7 +276,22 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     Returns
     -------
     Selection
+
+    Base parameters that act in several rows at once (the ``coriolis`` term) cannot be chosen
+    row by row: they stay, estimated with the whole base by least squares, and the search
+    runs on the target less their force; the fit of the selected model estimates them again
+    with the chosen terms.
     """
+    shared = [t for t in base.terms if any(b.more for b in t.bases)]
+    n_shared = sum(t.n_params for t in shared)
+    if shared:
+        theta = _least_squares(samples, base, body, cutoff)
+        part = DampingModel(shared)
+        values = dict(zip(base.parameter_names, theta, strict=True))
+        known = part.force(samples.nu, np.array([values[n] for n in part.parameter_names]))
+        # y − Φ_shared θ_shared: the same as τ less that force
+        samples = replace(samples, tau=samples.tau - known)
+        base = DampingModel([t for t in base.terms if t not in shared])
     base_names = base.parameter_names
     specs = library(families) if cross is None else [CrossSpec.from_dict(c) for c in cross]
     specs = [sp for sp in specs if sp.label not in base_names]
@@ -372,7 +386,7 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
 
     state = {i: refresh(i) for i in range(6)}
     cv = np.array([float(state[i][0]) for i in range(6)])
-    k_now = base.n_params
+    k_now = base.n_params + n_shared
     log_n = float(np.log(n_eff))
 
     def crit(r: FloatArray, k: int) -> tuple[float, float]:
@@ -385,8 +399,8 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
                                    1.0 - rss[i] / max(steps[-1].rss[i], 1e-300), cv.copy()))
 
     bic, aic = crit(rss, k_now)
-    steps = [SelectionStep("base: " + "+".join(base.kinds), k_now, rss.copy(), bic, aic, 0.0,
-                           cv.copy())]
+    steps = [SelectionStep("base: " + "+".join([*base.kinds, *(t.kind for t in shared)]), k_now,
+                           rss.copy(), bic, aic, 0.0, cv.copy())]
     def best_addition(rows: Sequence[int] = range(6)) -> tuple[float, int, int] | None:
         """(score, row, pool index) of the candidate with the largest held-out gain (score
         = change of the row's held-out unexplained share, < 0) among those that qualify."""
@@ -506,10 +520,18 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
             del keep_mem[d]
         else:
             keep_mem[d] = ev.rate
-    model = _with_terms(base, keep_cross, keep_mem)
+    model = _with_terms(base, keep_cross, keep_mem, shared)
     return Selection(model, steps, {f"freq.{DOF_NAMES[d]}.lambda1": lam
                                     for d, lam in keep_mem.items()}, dropped,
                      np.asarray(ne.c.sum(0), dtype=float), memory)
+
+
+def _least_squares(samples: Samples, model: DampingModel, body: RigidBody, cutoff: float
+                   ) -> FloatArray:
+    """Unweighted least-squares θ of ``model`` (every parameter free), shape (p,)."""
+    ne = accumulate(samples, model, body, cutoff=cutoff)
+    A, b, _ = ne.total(np.ones(6))
+    return solve_normal(A, b, np.ones(model.n_params, dtype=bool), np.zeros(model.n_params))
 
 
 def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],

@@ -1,5 +1,6 @@
-"""The damping terms by kind (linear, quadratic, cross, memory, added-mass, residual) and the
-library of candidate terms that :mod:`dampest_ros.core.selection` searches.
+"""The damping terms by kind (linear, quadratic, cross, memory, added-mass, Coriolis,
+residual) and the library of candidate terms that :mod:`dampest_ros.core.selection`
+searches.
 
 Parameter names (SNAME style, ASCII; F is the force letter X..N, j, k velocity letters u..r).
 A single-entry coefficient in row F acts on the column ν_j through α(ν); the names are
@@ -211,6 +212,46 @@ def added_mass_term() -> DampingTerm:
         Basis("added.N_uv", unit(5, 1), Alpha("lin", 0)),  # N ∝ u v
     ]
     return DampingTerm("added", "velocity-dependent added-mass (Munk) moments not in M", bases)
+
+
+#: Letters of the added-mass corrections of the ``coriolis`` term and, per correction, its
+#: four (row, column, velocity of α, sign) entries: with δA = diag(m_u, m_v, m_w) the
+#: Coriolis force ω × (δA v) and the Munk moment v × (δA v) (Fossen's C_A(ν)ν of δA).
+CORIOLIS_ENTRIES = {
+    "u": ((1, 0, 5, 1.0), (2, 0, 4, -1.0), (4, 0, 2, 1.0), (5, 0, 1, -1.0)),
+    "v": ((0, 1, 5, -1.0), (2, 1, 3, 1.0), (3, 1, 2, -1.0), (5, 1, 0, 1.0)),
+    "w": ((0, 2, 4, 1.0), (1, 2, 3, -1.0), (3, 2, 1, 1.0), (4, 2, 0, -1.0)),
+}
+
+
+def coriolis_term(dofs: Iterable[str] = ("u", "v", "w")) -> DampingTerm:
+    """D_coriolis: the velocity forces of translational added-mass corrections.
+
+    A correction δA = diag(m_u, m_v, m_w) (kg) of the translational added mass acts through
+    Fossen's C_A(ν)ν: the Coriolis force ω × (δA v) and the Munk moment v × (δA v), e.g.
+    m_u gives Y ∝ u r, Z ∝ −u q, M ∝ u w, N ∝ −u v. Its inertial force δA v̇ is not part
+    of it (the regression target keeps the vehicle's M). The term does no work (νᵀDν = 0).
+    MuJoCo's Magnus lift ρ V C_M ω × v on an ellipsoid geom is of this form with
+    m_u = m_v = m_w = −ρ V C_M, so a MuJoCo plant needs one parameter per axis for it,
+    not six bilinear coefficients.
+
+    Parameters
+    ----------
+    dofs : iterable of str
+        Which of u, v, w carry a correction (parameters ``coriolis.m_u`` …).
+    """
+    bases = []
+    for d in dofs:
+        if d not in CORIOLIS_ENTRIES:
+            raise ConfigError("coriolis", f"{d!r}: the corrections are along u, v or w")
+        atoms = []
+        for row, col, k, sign in CORIOLIS_ENTRIES[d]:
+            # entry (row, col) of D(ν) with α = ν_k: force row += sign · m · ν_k ν_col
+            atoms.append((sign * unit(row, col), Alpha("lin", k)))
+        (B, alpha), *more = atoms
+        bases.append(Basis(f"coriolis.m_{d}", B, alpha, tuple(more)))
+    return DampingTerm("coriolis", "Coriolis force and Munk moment of translational added-mass "
+                                   "corrections (and MuJoCo's Magnus lift)", bases)
 
 
 def residual_term(modes: FloatArray | None = None) -> DampingTerm:

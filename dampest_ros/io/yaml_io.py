@@ -26,6 +26,7 @@ well as :func:`load_model` does (docs/architecture.md §1, §3)::
             cross: {rows: [1], cols: [1], alphas: ['|r|'], names: [Y_vr]}  # rows X..N = 0..5
             freq: {dofs: [0], rates: [2.0]}            # dofs u..r = 0..5, rates λ (1/s)
             added: true                               # Munk moments added.K_vw, M_uw, N_uv
+            coriolis: [coriolis.m_u, coriolis.m_v]     # added-mass corrections (C_A only)
             residual: {modes: [...]}                   # r unit 6-vectors, row-major
           ...                   # extra entries (scalars, homogeneous arrays, namespaces)
 
@@ -184,7 +185,8 @@ def damping_spec(model: DampingModel, theta: FloatArray) -> dict[str, Any]:
     -------
     dict
         Sections ``linear``, ``quadratic`` (name → value), ``cross``, ``freq`` (lists of
-        mappings), ``added`` (name → value), ``residual`` (``modes``, ``values``).
+        mappings), ``added``, ``coriolis`` (name → value), ``residual`` (``modes``,
+        ``values``).
     """
     if model.kinds != sorted(model.kinds, key=TERM_KINDS.index):
         raise ValueError(f"terms must be in the order {TERM_KINDS}, got {model.kinds}")
@@ -195,7 +197,7 @@ def damping_spec(model: DampingModel, theta: FloatArray) -> dict[str, Any]:
     for term in model.terms:
         values = [float(v) for v in theta[model.slice(term.kind)]]
         named = dict(zip(term.parameter_names, values, strict=True))
-        if term.kind in ("linear", "quadratic", "added"):
+        if term.kind in ("linear", "quadratic", "added", "coriolis"):
             spec[term.kind] = named
         elif term.kind == "cross":
             spec["cross"] = []
@@ -218,7 +220,7 @@ def damping_spec(model: DampingModel, theta: FloatArray) -> dict[str, Any]:
 def _terms_params(spec: Mapping[str, Any]) -> dict[str, Any]:
     """The structure of a damping spec as ROS parameters (no values, no empty arrays)."""
     out: dict[str, Any] = {}
-    for kind in ("linear", "quadratic"):
+    for kind in ("linear", "quadratic", "coriolis"):
         if spec.get(kind):
             out[kind] = list(spec[kind])
     if spec.get("cross"):
@@ -239,7 +241,7 @@ def _terms_params(spec: Mapping[str, Any]) -> dict[str, Any]:
 def _spec_from_params(terms: Mapping[str, Any]) -> dict[str, Any]:
     """A damping spec (all values zero) from :func:`_terms_params` output."""
     spec: dict[str, Any] = {}
-    for kind in ("linear", "quadratic"):
+    for kind in ("linear", "quadratic", "coriolis"):
         if kind in terms:
             spec[kind] = {str(n): 0.0 for n in terms[kind]}
     if "cross" in terms:

@@ -202,7 +202,11 @@ def coefficients(model: DampingModel, theta: FloatArray) -> tuple[list[Coefficie
         for b, v in zip(term.bases, th, strict=True):
             nz = np.argwhere(b.B != 0)
             a = b.alpha
-            if len(nz) == 1 and a.kind in ("one", "abs", "lin"):
+            if b.more:
+                other.append(f"{b.name} = {num(v)} (an added-mass correction acting through "
+                             "the Coriolis force and Munk moment only, not inertially: the "
+                             "format's added mass acts both ways)")
+            elif len(nz) == 1 and a.kind in ("one", "abs", "lin"):
                 i, j = (int(x) for x in nz[0])
                 kind = {"one": "const", "abs": "abs", "lin": "lin"}[a.kind]
                 out.append(Coefficient(i, j, kind, a.i if kind != "const" else -1,
