@@ -102,3 +102,16 @@ def test_realistic_noise_reaches_the_noise_floor(ur5) -> None:  # type: ignore[n
     n = len(fv.t)
     assert np.all(pc <= ols * (1.0 + 1.0 / np.sqrt(2 * n)) + 1e-12)
     assert ratio(base.of(nominal)).max() > 2.0  # the 20 %-off nominal is visibly worse
+
+
+def test_filtering_in_windows_equals_one_pass() -> None:
+    rng = np.random.default_rng(0)
+    t = np.arange(60_000) / 1000.0
+    pos = np.cumsum(rng.normal(size=(60_000, 2)), axis=0) * 1e-3 + np.sin(t)[:, None]
+    eff = rng.normal(size=(60_000, 2)) + np.cos(t)[:, None]
+    one = filter_joints(t, pos, eff, IdentifyConfig(chunk_seconds=1e9))
+    win = filter_joints(t, pos, eff, IdentifyConfig(chunk_seconds=7.0))
+    for name, tol in (("q", 1e-12), ("qd", 1e-10), ("qdd", 1e-8), ("tau", 1e-10)):
+        assert np.abs(getattr(one, name) - getattr(win, name)).max() < tol, name
+    assert np.allclose(one.noise, win.noise, rtol=1e-12)
+    assert one.noise == pytest.approx([1.0, 1.0], rel=0.02)  # the white noise's own sigma

@@ -51,6 +51,8 @@ class IdentifyConfig:
         0: sign(q̇); > 0: tanh(q̇ / width) (rad/s).
     chunk : int
         Samples per regressor chunk.
+    chunk_seconds : float
+        Length of the windows the input is filtered in (s).
     """
 
     cutoff: float = 10.0
@@ -58,6 +60,7 @@ class IdentifyConfig:
     min_speed: float = 0.1
     coulomb_width: float = 0.0
     chunk: int = 20_000
+    chunk_seconds: float = 60.0
 
 
 @dataclass(frozen=True)
@@ -138,21 +141,36 @@ def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
     if not 2.0 * config.cutoff <= config.rate_out <= rate:
         raise ValueError(f"output rate {config.rate_out} Hz must be in [2 × cutoff, "
                          f"{rate:g}] Hz")
-    q = zero_phase(position, rate, config.cutoff)
-    qd = zero_phase(position, rate, config.cutoff, derivative=True)
-    qdd = np.gradient(qd, 1.0 / rate, axis=0)  # q̈ of the already filtered q̇
-    tau = zero_phase(effort, rate, config.cutoff)
-    # σ² ≈ mean((τ − τ_f)²) / share of white noise above the cutoff (the trajectory's own
-    # content is far below it)
-    noise = np.sqrt(np.mean((effort - tau) ** 2, axis=0) / _stop_share(rate, config.cutoff))
     # the ends see the filter's mirror images: drop 3 / cutoff seconds at each
     edge = int(np.ceil(3.0 * rate / config.cutoff))
     if len(t) <= 4 * edge:
         raise ValueError(f"{len(t) / rate:.3g} s of joint data; at least "
                          f"{4 * edge / rate:.3g} s are needed at a {config.cutoff:g} Hz cutoff")
     keep = np.arange(edge, len(t) - edge, max(1, round(rate / config.rate_out)))
-    return Filtered(t[keep], q[keep], qd[keep], qdd[keep], tau[keep], noise,
-                    keep.astype(np.int64))
+    n = position.shape[1]
+    q, qd, qdd, tau = (np.empty((len(keep), n)) for _ in range(4))
+    # in windows of chunk_seconds with a margin of 10 / cutoff s on each side (what
+    # zero_phase mirrors at an end): the same result as one pass, a fraction of the memory
+    margin = int(np.ceil(10.0 * rate / config.cutoff))
+    width = max(int(config.chunk_seconds * rate), margin)
+    stopped = np.zeros(n)
+    for start in range(0, len(t), width):
+        stop = min(start + width, len(t))
+        lo, hi = max(start - margin, 0), min(stop + margin, len(t))
+        inner = slice(start - lo, stop - lo)
+        w_qd = zero_phase(position[lo:hi], rate, config.cutoff, derivative=True)
+        w_tau = zero_phase(effort[lo:hi], rate, config.cutoff)
+        stopped += np.sum((effort[start:stop] - w_tau[inner]) ** 2, axis=0)
+        rows = np.flatnonzero((keep >= start) & (keep < stop))
+        at = keep[rows] - lo
+        q[rows] = zero_phase(position[lo:hi], rate, config.cutoff)[at]
+        qd[rows] = w_qd[at]
+        qdd[rows] = np.gradient(w_qd, 1.0 / rate, axis=0)[at]  # q̈ of the filtered q̇
+        tau[rows] = w_tau[at]
+    # σ² ≈ mean((τ − τ_f)²) / share of white noise above the cutoff (the trajectory's own
+    # content is far below it)
+    noise = np.sqrt(stopped / len(t) / _stop_share(rate, config.cutoff))
+    return Filtered(t[keep], q, qd, qdd, tau, noise, keep.astype(np.int64))
 
 
 def accumulate(arm: ArmModel, data: Filtered, config: IdentifyConfig,
@@ -173,11 +191,41 @@ def accumulate(arm: ArmModel, data: Filtered, config: IdentifyConfig,
     """
     p = 14 * arm.n
     normals = normals or JointNormals.empty(arm.n, p)
+    use = usable_rows(data.t, data.qd, config)
     for s in range(0, len(data.t), config.chunk):
         k = slice(s, s + config.chunk)
         Y = regressor(arm, data.q[k], data.qd[k], data.qdd[k], config.coulomb_width)
-        normals.add(Y, data.tau[k], np.abs(data.qd[k]) >= config.min_speed)
+        normals.add(Y, data.tau[k], use[k])
     return normals
+
+
+def usable_rows(t: FloatArray, qd: FloatArray, config: IdentifyConfig) -> NDArray[np.bool_]:
+    """Rows where joint j's friction follows the Coulomb model through the filter: |q̇_j| ≥
+    min_speed and no reversal of q̇_j within 2 / cutoff seconds (the filter smears the
+    torque's step at a reversal over about that long).
+
+    Parameters
+    ----------
+    t : ndarray, shape (M,)
+        s.
+    qd : ndarray, shape (M, n)
+        rad/s.
+    config : IdentifyConfig
+
+    Returns
+    -------
+    ndarray of bool, shape (M, n)
+    """
+    use = np.abs(qd) >= config.min_speed
+    window = 2.0 / config.cutoff
+    for j in range(qd.shape[1]):  # per joint (n columns), vectorised over samples
+        flips = t[1:][np.signbit(qd[1:, j]) != np.signbit(qd[:-1, j])]
+        if len(flips):
+            i = np.clip(np.searchsorted(flips, t), 1, len(flips)) - 1
+            near = np.minimum(np.abs(t - flips[i]),
+                              np.abs(t - flips[np.minimum(i + 1, len(flips) - 1)]))
+            use[:, j] &= near >= window
+    return use
 
 
 @dataclass(frozen=True)
