@@ -196,7 +196,8 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
         del topics["thrusters"]  # τ from the body wrench: the thruster topic is not read
     rec = read_bag(path, list(topics.values()))
     pre = OnlinePreprocessor(vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
-                             OnlineConfig(rate=args.rate, max_dvl_gap=args.max_gap))
+                             OnlineConfig(rate=args.rate, max_dvl_gap=args.max_gap),
+                             mounting=vehicle.mounting)
     prior = None
     if args.prior:
         pm = load_model(args.prior)

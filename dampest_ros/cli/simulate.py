@@ -84,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
                                  amplitude=args.amplitude)
     traj = run_sim(vehicle, excitation, effects, dt=args.dt, backend=args.backend)
     bias = SensorBias(effects.gyro_bias, effects.accel_bias, effects.dvl_bias)
-    rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, sensors, bias, seed=args.seed)
+    rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, sensors, bias, seed=args.seed,
+                  mounting=vehicle.mounting)
     write_bag(out, rec, storage=args.storage)
     if args.backend == "native":
         truth = true_vehicle(vehicle, effects)
@@ -97,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
                    added_mass_terms=truth.body.added_mass_terms)
     if args.csv:
         samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
-                             PreprocessConfig())
+                             PreprocessConfig(), mounting=vehicle.mounting)
         write_csv(args.csv, samples_to_columns(samples))
     elapsed = time.perf_counter() - t0
     print(f"wrote {out} ({args.storage}) in {elapsed:.1f} s: {args.duration:.0f} s of "

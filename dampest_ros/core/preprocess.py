@@ -3,7 +3,11 @@
 Pipeline, all vectorised over whole segments:
 
 1. Frames: IMU, DVL and thruster data (or a body-wrench topic) from ROS (FLU/ENU) to
-   Fossen (FRD/NED).
+   Fossen (FRD/NED); then each sensor from its mounting (:mod:`dampest_ros.core.mounting`)
+   to the body origin and axes: the IMU's attitude, rates and specific force (its lever-arm
+   terms with ω̇ differentiated from the gyro as in step 4), the DVL velocity (lever arm with
+   the gyro at the DVL stamps), the pressure depth through the attitude. Messages whose
+   frame_id is not the configured one are counted (one note per topic).
 2. DVL gaps longer than ``max_gap`` split the data into segments (nothing is invented inside
    a long gap); DVL samples that disagree with the inertially fused velocity are dropped.
 3. On a common grid at ``rate`` Hz per segment: attitude, gyro and specific force from the
@@ -38,6 +42,15 @@ from dampest_ros.core.measurements import (
     Series,
     TwistSeries,
     WrenchSeries,
+)
+from dampest_ros.core.mounting import (
+    Mounting,
+    depth_offset,
+    dvl_to_body,
+    frame_id_note,
+    imu_to_body,
+    rotate,
+    specific_force_at_origin,
 )
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.samples import Samples
@@ -342,7 +355,8 @@ class MemorySource:
 def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravity: float,
                rho: float, config: PreprocessConfig | None = None,
                topics: dict[str, str] | None = None,
-               report: dict[str, float] | None = None) -> Samples:
+               report: dict[str, float] | None = None, mounting: Mounting | None = None,
+               notes: list[str] | None = None) -> Samples:
     """Synchronise and filter sensor topics into samples of ν, ν̇, τ.
 
     Parameters
@@ -361,7 +375,15 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
         thruster telemetry (then ``thrusters`` is not read).
     report : dict, optional
         Filled with counts: ``rejected_nonfinite_or_unordered``, ``dvl_outliers``,
-        ``segments``, ``dropped_seconds`` (data in gaps and too-short segments).
+        ``segments``, ``dropped_seconds`` (data in gaps and too-short segments) and, per
+        sensor topic with messages of another frame_id than the mounting's,
+        ``frame_id_mismatch <topic>``.
+    mounting : Mounting, optional
+        Where the IMU, DVL and pressure sensor sit (the vehicle's; default: at the origin,
+        aligned).
+    notes : list of str, optional
+        Appended: one line per sensor topic whose messages carry another frame_id than the
+        mounting gives (with their count), for the user.
 
     Returns
     -------
@@ -369,6 +391,7 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
         FRD/NED, uniformly sampled segments.
     """
     cfg = config or PreprocessConfig()
+    mount = mounting or Mounting()
     src: SeriesSource = MemorySource(rec) if isinstance(rec, dict) else rec
     names = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
              "thrusters": "thrusters/state", **(topics or {})}
@@ -388,7 +411,19 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
     dvl_ok = _clean(dvl, dvl.linear)
     rejected = int((~dvl_ok).sum())
     dvl = dvl if dvl_ok.all() else dvl.select(dvl_ok)  # type: ignore[assignment]
+    # DVL velocity in its own axes (FRD); to the body origin per window, with the gyro
     t_dvl, v_dvl = dvl.stamp, frames.body_vec(dvl.linear)
+    # messages per (topic, frame_id) that is not the configured one
+    foreign: dict[tuple[str, str], int] = {}
+
+    def check_frame(topic: str, series: Series, expected: str, count: int) -> None:
+        if count and series.frame_id != expected:
+            key = (topic, series.frame_id)
+            foreign[key] = foreign.get(key, 0) + count
+
+    check_frame(names["dvl"], dvl, mount.dvl.frame_id, len(dvl))
+    if pres is not None:
+        check_frame(names["pressure"], pres, mount.pressure.frame_id, len(pres))
     # τ telemetry period and phase from the first messages
     head = _need(src.series(tau_topic, None, t_dvl[0] + 10.0), tau_topic, tau_kind, minimum=2)
     window = float(np.median(np.diff(head.stamp)))
@@ -417,6 +452,8 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
                            (thr, _clean(thr, *_tau_columns(thr)))):
             in_core = (series.stamp >= t_core[0]) & (series.stamp <= t_core[1])
             rejected += int((~ok & in_core).sum())
+            if series is imu:
+                check_frame(names["imu"], imu, mount.imu.frame_id, int(in_core.sum()))
         imu_ok = _clean(imu, imu.orientation, imu.angular_velocity, imu.linear_acceleration)
         thr_ok = _clean(thr, *_tau_columns(thr))
         imu = imu if imu_ok.all() else imu.select(imu_ok)  # type: ignore[assignment]
@@ -430,11 +467,18 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
         q = imu.orientation[:, [3, 0, 1, 2]]
         flip = np.cumsum(np.r_[0, np.einsum("ij,ij->i", q[1:], q[:-1]) < 0]) % 2 == 1
         q[flip] *= -1.0
-        R = frames.rotation(frames.quat_to_matrix(_interp(tf, ts, q)))
-        om = _interp(tf, ts, frames.body_vec(imu.angular_velocity))
-        f = _interp(tf, ts, frames.body_vec(imu.linear_acceleration))
+        gyro = frames.body_vec(imu.angular_velocity)
+        R, om, f = imu_to_body(mount.imu, frames.rotation(frames.quat_to_matrix(
+            _interp(tf, ts, q))), _interp(tf, ts, gyro),
+            _interp(tf, ts, frames.body_vec(imu.linear_acceleration)))
+        # the IMU's lever arm, with ω̇ differentiated from the gyro like ν̇ below
+        f = specific_force_at_origin(mount.imu, f, om, zero_phase(
+            om, rate_f, cfg.cutoff, derivative=True)) if not mount.imu.centred else f
         inside = (t_dvl >= t[0] - 1.0) & (t_dvl <= t[-1] + 1.0)
-        td, vd = t_dvl[inside], v_dvl[inside]
+        td = t_dvl[inside]
+        # v = R_bs v_s − ω × r, with the gyro (body axes) at the DVL stamps
+        vd = dvl_to_body(mount.dvl, v_dvl[inside], np.zeros((len(td), 3)) if mount.dvl.centred
+                         else _interp(td, ts, rotate(mount.imu.rotation, gyro)))
         v, v_ned_dot = fuse_velocity(tf, R, f, td, vd, gravity, cfg.crossover)
         keep = dvl_inliers(td, vd, tf, v, cfg.outlier_sigma)
         in_core = (td >= t_core[0]) & (td < t_core[1] + 0.5 / cfg.rate)
@@ -456,6 +500,9 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
         depth = ((_interp(t, pressure.stamp, pressure.fluid_pressure[:, None])[:, 0]
                   - cfg.atmospheric_pressure) / (rho * gravity)) if pressure is not None \
             else np.full(len(t), np.nan)
+        if pressure is not None and not mount.pressure.centred:
+            # z_o = z_s − (R r_p)_z: the origin's depth from the sensor's
+            depth = depth - depth_offset(mount.pressure, R[::ratio])
         return nu[::ratio], nu_dot[::ratio], R[::ratio], tau, depth
 
     # stretches of `stretch` seconds computed with `margin` seconds on each side (more than
@@ -496,6 +543,14 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
                 kept_segments.append(k)
             out.segment[m] = len(kept_segments) - 1
             n += i1 - i0
+    for (topic, found), count in sorted(foreign.items()):
+        expected = {names["imu"]: mount.imu.frame_id, names["dvl"]: mount.dvl.frame_id,
+                    names["pressure"]: mount.pressure.frame_id}[topic]
+        if notes is not None:
+            notes.append(frame_id_note(topic, count, found, expected))
+        if report is not None:
+            report[f"frame_id_mismatch {topic}"] = report.get(
+                f"frame_id_mismatch {topic}", 0.0) + count
     if report is not None:
         report.update(rejected_nonfinite_or_unordered=float(rejected),
                       dvl_outliers=float(n_outliers), segments=float(len(kept_segments)),

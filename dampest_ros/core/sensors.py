@@ -11,8 +11,12 @@ in ROS frames (FLU body ``base_link``, ENU world ``odom``), at each sensor's own
 - ``pressure``: PressureSeries, ``pressure_link``; absolute pressure (Pa).
 - ``thrusters/state``: JointSeries, ``base_link``; rotor speed (rad/s), logged thrust (N).
 
-All sensors sit at the body origin with axes aligned to the body, so their frames differ from
-``base_link`` only by name. Every FRD/NED → FLU/ENU conversion goes through
+By default the sensors sit at the body origin with axes aligned to the body, so their frames
+differ from ``base_link`` only by name; a :class:`~dampest_ros.core.mounting.Mounting` (the
+vehicle file's ``sensors:`` section) puts them elsewhere: the DVL then measures the velocity
+of its own point in its own axes, the IMU the rates and specific force of its point in its
+axes and the attitude of its axes, the pressure sensor the depth of its point, and each
+message carries the mounting's frame_id. Every FRD/NED → FLU/ENU conversion goes through
 :mod:`dampest_ros.core.frames`.
 
 Between integration steps the models interpolate the truth: ν by the cubic Hermite polynomial
@@ -39,6 +43,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.frames import (
     body_vec,
+    matrix_to_quat,
     quat_frd_ned_to_flu_enu,
     quat_mul,
     quat_to_matrix,
@@ -56,6 +61,15 @@ from dampest_ros.core.measurements import (
     TwistSeries,
     WrenchSeries,
 )
+from dampest_ros.core.mounting import (
+    DEFAULT_FRAME_IDS,
+    Mounting,
+    SensorMount,
+    depth_offset,
+    lever_acceleration,
+    lever_velocity,
+    rotate,
+)
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.trajectory import Trajectory
 
@@ -67,12 +81,13 @@ BoolArray = NDArray[np.bool_]
 #: gives those entries no weight.
 UNUSED_VARIANCE = 1.0e6
 
-#: Frame ids of the sensor messages.
+#: Frame ids of the sensor messages (those of the IMU, DVL and pressure sensor: defaults of a
+#: :class:`~dampest_ros.core.mounting.Mounting`).
 FRAME_IDS: dict[str, str] = {
     "truth/odom": "odom",
-    "imu/data": "imu_link",
-    "dvl/twist": "dvl_link",
-    "pressure": "pressure_link",
+    "imu/data": DEFAULT_FRAME_IDS["imu"],
+    "dvl/twist": DEFAULT_FRAME_IDS["dvl"],
+    "pressure": DEFAULT_FRAME_IDS["pressure"],
     "thrusters/state": "base_link",
     "truth/hydro_wrench": "base_link",
 }
@@ -185,7 +200,8 @@ class SensorConfig:
 
 @dataclass(frozen=True)
 class SensorBias:
-    """Constant hidden sensor biases (the 'effects'), in the FRD body frame.
+    """Constant hidden sensor biases (the 'effects'), in each sensor's FRD axes (the body's
+    for an aligned sensor).
 
     Attributes
     ----------
@@ -248,6 +264,7 @@ def measure(
     config: SensorConfig = SensorConfig(),
     bias: SensorBias = SensorBias(),
     seed: int = 0,
+    mounting: Mounting | None = None,
 ) -> Recording:
     """Simulate all sensors along a ground-truth trajectory.
 
@@ -265,6 +282,8 @@ def measure(
         Constant hidden biases (FRD).
     seed : int
         Seed of the noise; the same seed gives identical output.
+    mounting : Mounting, optional
+        Where the IMU, DVL and pressure sensor sit (default: at the origin, aligned).
 
     Returns
     -------
@@ -275,17 +294,21 @@ def measure(
 
     Notes
     -----
-    With R the body→NED rotation, ν = [v, ω] and g_n = [0, 0, g] (NED):
+    With R the body→NED rotation, ν = [v, ω] and g_n = [0, 0, g] (NED), and for each
+    sensor its position r and axes R_bs (the mounting; r = 0, R_bs = I by default):
 
-    - gyro: ω + b_g + b_g,walk(t) + white noise;
-    - accelerometer (specific force): v̇ + ω × v − Rᵀ g_n + b_a + b_a,walk(t) + white noise,
+    - gyro: R_bsᵀ ω + b_g + b_g,walk(t) + white noise;
+    - accelerometer (specific force of its point):
+      R_bsᵀ (v̇ + ω × v − Rᵀ g_n + ω̇ × r + ω × (ω × r)) + b_a + b_a,walk(t) + white noise,
       i.e. [0, 0, −g] FRD = [0, 0, +g] FLU at rest and level;
-    - AHRS attitude: q ⊗ exp(δθ / 2), δθ ~ N(0, σ² I) a small rotation in the sensor frame;
-    - DVL (bottom lock): v + b_dvl + white noise, with messages missing inside dropouts
+    - AHRS attitude of the IMU's axes: (q ⊗ q_bs) ⊗ exp(δθ / 2), δθ ~ N(0, σ² I) a small
+      rotation in the sensor frame;
+    - DVL (bottom lock): R_bsᵀ (v + ω × r) + b_dvl + white noise, with messages missing
+      inside dropouts
       (an alternating renewal process: locked for Exp(1 / dvl_dropout_rate) s, then lost for
       Exp(dvl_dropout_mean) s, starting locked at t[0]; the expected lost fraction is
       λ m / (1 + λ m)); the angular variances are ``UNUSED_VARIANCE``;
-    - pressure: p_atm + ρ g z + white noise, z the NED depth of the body origin;
+    - pressure: p_atm + ρ g z + white noise, z the NED depth of its point, z_o + (R r)_z;
     - thrusters: velocity 2π n + white noise (rad/s, n in rev/s), effort = logged thrust (N),
       both the mean over the window of one message period before the stamp.
 
@@ -295,6 +318,7 @@ def measure(
     for name, value in (("rho", rho), ("gravity", gravity)):
         if not math.isfinite(value) or value <= 0:
             raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    mounting = mounting or Mounting()
     children = np.random.default_rng(seed).spawn(len(NOISE_STREAMS))
     rngs = dict(zip(NOISE_STREAMS, children, strict=True))
 
@@ -307,9 +331,9 @@ def measure(
                    np.asarray(traj.nu_dot, dtype=float))
     return {
         "truth/odom": _odometry(truth, config),
-        "imu/data": _imu(truth, gravity, config, bias, rngs),
-        "dvl/twist": _dvl(truth, config, bias, rngs),
-        "pressure": _pressure(truth, rho, gravity, config, rngs),
+        "imu/data": _imu(truth, gravity, config, bias, rngs, mounting.imu),
+        "dvl/twist": _dvl(truth, config, bias, rngs, mounting.dvl),
+        "pressure": _pressure(truth, rho, gravity, config, rngs, mounting.pressure),
         "thrusters/state": _thrusters(traj, config, rngs),
         **({"truth/hydro_wrench": hydro_series(
             sample_times(float(t[0]), float(t[-1]), config.truth_rate), t, traj.hydro)}
@@ -349,7 +373,7 @@ def _white(rng: np.random.Generator, shape: tuple[int, ...], sigma: float) -> Fl
 
 
 def _imu(truth: _Truth, gravity: float, config: SensorConfig, bias: SensorBias,
-         rngs: dict[str, np.random.Generator]) -> ImuSeries:
+         rngs: dict[str, np.random.Generator], mount: SensorMount) -> ImuSeries:
     stamp = truth.times(config.imu_rate)
     n = len(stamp)
     k = locate(truth.t, stamp)
@@ -360,6 +384,14 @@ def _imu(truth: _Truth, gravity: float, config: SensorConfig, bias: SensorBias,
     g_body = gravity * quat_to_matrix(q)[:, 2, :]
     # f = v̇ + ω × v − Rᵀ [0, 0, g]: specific force at the body origin (FRD)
     specific_force = v_dot + np.cross(w, v) - g_body
+    if not mount.centred:
+        # f_p = f + ω̇ × r + ω × (ω × r): the specific force of the IMU's point
+        specific_force = specific_force + lever_acceleration(w, nu_dot[:, 3:], mount.lever)
+    if not mount.aligned:
+        # in the IMU's axes: ω_s = R_bsᵀ ω, f_s = R_bsᵀ f_p; its attitude q_ns = q_nb ⊗ q_bs
+        R_sb = mount.rotation.T
+        w, specific_force = rotate(R_sb, w), rotate(R_sb, specific_force)
+        q = quat_mul(q, np.broadcast_to(matrix_to_quat(mount.rotation), q.shape))
     gyro = (w + np.asarray(bias.gyro)
             + _random_walk(rngs["gyro_walk"], n, config.gyro_bias_walk, config.imu_rate)
             + _white(rngs["gyro_noise"], (n, 3), config.gyro_noise))
@@ -372,7 +404,7 @@ def _imu(truth: _Truth, gravity: float, config: SensorConfig, bias: SensorBias,
     q_meas *= np.where(q_meas[:, :1] < 0.0, -1.0, 1.0)
     return ImuSeries(
         stamp=stamp,
-        frame_id=FRAME_IDS["imu/data"],
+        frame_id=mount.frame_id,
         orientation=wxyz_to_xyzw(q_meas),
         angular_velocity=body_vec(gyro),
         linear_acceleration=body_vec(accel),
@@ -408,18 +440,20 @@ def _dropout_keep(t0: float, stamp: FloatArray, rate: float, mean: float,
 
 
 def _dvl(truth: _Truth, config: SensorConfig, bias: SensorBias,
-         rngs: dict[str, np.random.Generator]) -> TwistSeries:
+         rngs: dict[str, np.random.Generator], mount: SensorMount) -> TwistSeries:
     stamp = truth.times(config.dvl_rate)
     n = len(stamp)
     nu, _ = hermite(locate(truth.t, stamp), truth.nu, truth.nu_dot)
-    # v_dvl = v + b_dvl + noise (bottom lock: velocity over ground, FRD)
-    v = nu[:, :3] + np.asarray(bias.dvl) + _white(rngs["dvl_noise"], (n, 3), config.dvl_noise)
+    # v_s = R_bsᵀ (v + ω × r): the velocity over ground of the DVL's point, in its axes (FRD)
+    v_s = rotate(mount.rotation.T, nu[:, :3] + lever_velocity(nu[:, 3:], mount.lever))
+    # v_dvl = v_s + b_dvl + noise
+    v = v_s + np.asarray(bias.dvl) + _white(rngs["dvl_noise"], (n, 3), config.dvl_noise)
     keep = _dropout_keep(float(truth.t[0]), stamp, config.dvl_dropout_rate,
                          config.dvl_dropout_mean, rngs["dvl_dropout"])
     cov = np.diag([config.dvl_noise**2] * 3 + [UNUSED_VARIANCE] * 3).ravel()
     return TwistSeries(
         stamp=stamp[keep],
-        frame_id=FRAME_IDS["dvl/twist"],
+        frame_id=mount.frame_id,
         linear=body_vec(v[keep]),
         angular=np.zeros((int(keep.sum()), 3)),
         covariance=cov,
@@ -427,13 +461,17 @@ def _dvl(truth: _Truth, config: SensorConfig, bias: SensorBias,
 
 
 def _pressure(truth: _Truth, rho: float, gravity: float, config: SensorConfig,
-              rngs: dict[str, np.random.Generator]) -> PressureSeries:
+              rngs: dict[str, np.random.Generator], mount: SensorMount) -> PressureSeries:
     stamp = truth.times(config.pressure_rate)
-    position, _ = hermite(locate(truth.t, stamp), truth.position, truth.p_dot)
+    k = locate(truth.t, stamp)
+    position, _ = hermite(k, truth.position, truth.p_dot)
     noise = _white(rngs["pressure"], (len(stamp),), config.pressure_noise)
-    # p = p_atm + ρ g z + noise, z the NED depth
-    pressure = config.atmospheric_pressure + rho * gravity * position[:, 2] + noise
-    return PressureSeries(stamp=stamp, frame_id=FRAME_IDS["pressure"],
+    # z = z_o + (R r)_z: the NED depth of the sensor's point
+    z = position[:, 2] + (depth_offset(mount, quat_to_matrix(nlerp(k, truth.q)))
+                          if not mount.centred else 0.0)
+    # p = p_atm + ρ g z + noise
+    pressure = config.atmospheric_pressure + rho * gravity * z + noise
+    return PressureSeries(stamp=stamp, frame_id=mount.frame_id,
                           fluid_pressure=pressure, variance=config.pressure_noise**2)
 
 

@@ -428,4 +428,4 @@ def simulate(vehicle: Vehicle, protocol: str = "B", duration: float = 600.0, see
     traj = run(vehicle, excitation, fx, dt=dt, backend=backend)
     bias = SensorBias(fx.gyro_bias, fx.accel_bias, fx.dvl_bias)
     return measure(traj, vehicle.body.rho, vehicle.body.gravity, sensors or SensorConfig(),
-                   bias, seed=seed)
+                   bias, seed=seed, mounting=vehicle.mounting)

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.damping import DampingModel, DampingTerm
 from dampest_ros.core.geometry import Geometry
+from dampest_ros.core.mounting import Mounting
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
 from dampest_ros.core.terms import (
     CrossSpec,
@@ -147,6 +148,9 @@ class Vehicle:
         The shape for a fluid model (the MuJoCo backend), from a ``geometry:`` section.
     source : str
         The file the vehicle was read from ("" when built in code), for messages.
+    mounting : Mounting
+        Where the IMU, DVL and pressure sensor sit, from a ``sensors:`` section
+        (:mod:`dampest_ros.core.mounting`; default: at the origin, aligned).
     """
 
     name: str
@@ -158,11 +162,12 @@ class Vehicle:
     extra: dict[str, Any] = field(default_factory=dict)
     geometry: Geometry | None = None
     source: str = ""
+    mounting: Mounting = field(default_factory=Mounting)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Vehicle:
         """Build from a preset mapping with sections ``vehicle``, ``damping`` and, optionally,
-        ``thrusters``."""
+        ``thrusters``, ``geometry`` and ``sensors``."""
         for key in ("vehicle", "damping"):
             if key not in d:
                 raise ConfigError(key, "missing section")
@@ -176,8 +181,9 @@ class Vehicle:
         geometry = None if d.get("geometry") is None else Geometry.from_dict(d["geometry"])
         return cls(str(d["vehicle"].get("name", "vehicle")), body, damping, theta, thrusters,
                    length, {k: v for k, v in d.items()
-                            if k not in ("vehicle", "damping", "thrusters", "geometry")},
-                   geometry)
+                            if k not in ("vehicle", "damping", "thrusters", "geometry",
+                                         "sensors")},
+                   geometry, mounting=Mounting.from_dict(d.get("sensors")))
 
     def need_thrusters(self, what: str, instead: str = "") -> Thrusters:
         """The thrusters, or ConfigError naming ``what`` needs them and how to give them

@@ -66,6 +66,8 @@ class TopicTypeError(BagError):
 ROLE_TYPES = {role: TOPIC_TYPES[topic][0] for role, topic in (
     ("imu", "imu/data"), ("dvl", "dvl/twist"), ("pressure", "pressure"),
     ("thrusters", "thrusters/state"), ("wrench", "wrench"))}
+#: Other message types a role accepts: a DVL's velocity without covariance.
+ROLE_ALTERNATIVES = {"dvl": ("geometry_msgs/msg/TwistStamped",)}
 
 
 def _relative(topic: str) -> str:
@@ -411,7 +413,7 @@ def role_type_errors(summary: BagSummary, roles: Mapping[str, str]) -> list[str]
         if role == "thrusters" and "wrench" in roles:
             continue
         have, need = found.get(_relative(topic)), ROLE_TYPES[role]
-        if have is not None and have != need:
+        if have is not None and have != need and have not in ROLE_ALTERNATIVES.get(role, ()):
             carriers = [name for name, msgtype in found.items() if msgtype == need]
             which = carriers[0] if len(carriers) == 1 else "TOPIC"
             errors.append(f"topic {topic} ({role}) carries {have}, not the {need} "

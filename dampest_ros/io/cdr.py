@@ -53,8 +53,10 @@ MESSAGE_TYPES: dict[type[Series], str] = {
     OdometrySeries: "nav_msgs/msg/Odometry",
     JointSeries: "sensor_msgs/msg/JointState",
 }
-#: ROS 2 message type → series class it decodes to.
+#: ROS 2 message type → series class it decodes to; a DVL may also send a TwistStamped
+#: (decoded to a TwistSeries with a zero covariance: none given).
 SERIES_CLASSES: dict[str, type[Series]] = {t: c for c, t in MESSAGE_TYPES.items()}
+SERIES_CLASSES["geometry_msgs/msg/TwistStamped"] = TwistSeries
 
 _CDR_LE = b"\x00\x01\x00\x00"
 _SEC, _NSEC = "header.stamp.sec", "header.stamp.nanosec"
@@ -297,6 +299,12 @@ def _with_covariance(outer: str) -> Callable[[_Builder], None]:
     return layout
 
 
+def _twist_stamped(b: _Builder) -> None:
+    _header(b)
+    b.vector("linear", "twist.linear")
+    b.vector("angular", "twist.angular")
+
+
 def _pressure(b: _Builder) -> None:
     _header(b)
     b.floats("fluid_pressure", "fluid_pressure", ())
@@ -332,6 +340,7 @@ _LAYOUTS: dict[str, Callable[[_Builder], None]] = {
     "sensor_msgs/msg/Imu": _imu,
     "geometry_msgs/msg/TwistWithCovarianceStamped": _with_covariance("twist"),
     "geometry_msgs/msg/AccelWithCovarianceStamped": _with_covariance("accel"),
+    "geometry_msgs/msg/TwistStamped": _twist_stamped,
     "sensor_msgs/msg/FluidPressure": _pressure,
     "geometry_msgs/msg/WrenchStamped": _wrench,
     "nav_msgs/msg/Odometry": _odometry,

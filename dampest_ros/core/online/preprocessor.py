@@ -22,6 +22,13 @@ State estimation (FRD body, NED world; frames converted only through
   lags by L = T (α/β − ½) (its error for a constant ω̈ is −L ω̈); ω̇ is read L later so that
   ω, ω̇ and τ refer to the same instant.
 - **Attitude** from the IMU orientation; **depth** from the pressure.
+- **Mounting** (:mod:`dampest_ros.core.mounting`, the vehicle's ``sensors:``): the IMU's
+  attitude, rates and specific force are turned to the body axes, its specific force moved to
+  the origin with ω̇ from the angular filter; the DVL velocity is turned to the body axes and
+  its lever arm removed with ω of the angular filter at the DVL stamp; the depth of the
+  pressure sensor is moved to the origin with the sample's attitude. Messages whose frame_id
+  is not the configured one are counted (``frame_id_mismatch``), the first of each topic
+  reported in ``events``.
 - **τ** from the thruster JointState efforts through the allocation
   (:func:`dampest_ros.core.preprocess.thruster_wrench`). Thruster telemetry is the mean over
   the message period w before its stamp s, so it describes the window centre s − w/2.
@@ -62,6 +69,14 @@ from dampest_ros.core.measurements import (
     TwistSeries,
     WrenchSeries,
     stamp_order,
+)
+from dampest_ros.core.mounting import (
+    Mounting,
+    depth_offset,
+    dvl_to_body,
+    frame_id_note,
+    imu_to_body,
+    specific_force_at_origin,
 )
 from dampest_ros.core.online.sample import DEFAULT_TOPICS, OnlineConfig, OnlineSample, topic_roles
 from dampest_ros.core.preprocess import DataError, body_wrench
@@ -187,6 +202,9 @@ class OnlinePreprocessor:
     rho : float
         Water density (kg/m³), for depth from pressure.
     config : OnlineConfig, optional
+    mounting : Mounting, optional
+        Where the IMU, DVL and pressure sensor sit (the vehicle's; default: at the origin,
+        aligned).
 
     Notes
     -----
@@ -196,11 +214,14 @@ class OnlinePreprocessor:
 
     _COUNTS = ("imu", "dvl", "pressure", "thrusters", "wrench", "rejected_nonfinite",
                "rejected_out_of_order", "rejected_stale", "dvl_outliers", "clock_resets",
-               "imu_gaps", "samples", "samples_unusable", "samples_skipped")
+               "imu_gaps", "samples", "samples_unusable", "samples_skipped",
+               "frame_id_mismatch")
 
     def __init__(self, thrusters: Thrusters | None, gravity: float, rho: float,
-                 config: OnlineConfig | None = None) -> None:
+                 config: OnlineConfig | None = None, mounting: Mounting | None = None) -> None:
         self.thr = thrusters
+        self.mount = mounting or Mounting()
+        self._foreign: set[str] = set()  # roles whose foreign frame_id was reported
         self.gravity = float(gravity)
         self.rho = float(rho)
         self.cfg = config or OnlineConfig()
@@ -307,12 +328,27 @@ class OnlinePreprocessor:
         self._newest = max(self._newest, t)
         return True
 
+    def _frame(self, role: str, frame_id: str | None) -> None:
+        """Count a message whose frame_id is not the mounting's (None: not checked); the
+        first of each role goes to ``events``."""
+        expected = getattr(self.mount, role).frame_id
+        if frame_id is None or frame_id == expected:
+            return
+        self.counts["frame_id_mismatch"] += 1
+        if role not in self._foreign:
+            self._foreign.add(role)
+            self.events.append(frame_id_note(role, 1, frame_id, expected) + " (counted as "
+                               "frame_id_mismatch, reported once)")
+
     # --- messages ---------------------------------------------------------------------------
 
     def imu(self, t: float, orientation: FloatArray, angular_velocity: FloatArray,
-            linear_acceleration: FloatArray) -> list[OnlineSample]:
-        """sensor_msgs/Imu: orientation [x, y, z, w] FLU→ENU, rates and specific force FLU."""
+            linear_acceleration: FloatArray, frame_id: str | None = None
+            ) -> list[OnlineSample]:
+        """sensor_msgs/Imu: orientation [x, y, z, w] FLU→ENU, rates and specific force FLU,
+        in the IMU's frame (``frame_id``: its header's, checked against the mounting)."""
         self.counts["imu"] += 1
+        self._frame("imu", frame_id)
         if not _finite(t, orientation, angular_velocity, linear_acceleration) or \
                 float(np.linalg.norm(orientation)) < 1e-9:
             self.counts["rejected_nonfinite"] += 1
@@ -320,10 +356,11 @@ class OnlinePreprocessor:
         if not self._admit("imu", t):
             return []
         q = np.asarray(orientation, dtype=float)
-        # ROS FLU→ENU [x, y, z, w] → rotation FRD→NED
-        R = frames.rotation(frames.quat_to_matrix(q[[3, 0, 1, 2]]))
-        w = frames.body_vec(np.asarray(angular_velocity, dtype=float))
-        f = frames.body_vec(np.asarray(linear_acceleration, dtype=float))
+        # ROS FLU→ENU [x, y, z, w] → rotation FRD→NED; then from the IMU's axes to the body's
+        R, w, f = imu_to_body(self.mount.imu,
+                              frames.rotation(frames.quat_to_matrix(q[[3, 0, 1, 2]])),
+                              frames.body_vec(np.asarray(angular_velocity, dtype=float)),
+                              frames.body_vec(np.asarray(linear_acceleration, dtype=float)))
         if self._imu_started and t - self._imu_t > self.cfg.max_imu_gap:
             self.counts["imu_gaps"] += 1
             self.events.append(f"IMU gap of {t - self._imu_t:.3f} s at {t:.3f}; inertial "
@@ -333,27 +370,34 @@ class OnlinePreprocessor:
         return self._emit()
 
     def _inertial_step(self, t: float, R: FloatArray, w: FloatArray, f: FloatArray) -> None:
+        """One IMU message in the body axes: R body→NED, gyro w, specific force f of the
+        IMU's point."""
         kv, ka = self.kf_v, self.kf_w
-        b = kv.x[3:, 0]
-        a_ned = R @ (f - b)
-        a_ned[2] += self.gravity
-        if not self._imu_started:
+        started = self._imu_started
+        if not started:
             ka.x[[0, 2, 4], 0] = w
-            self._imu_started = True
-            self._unusable_until = max(self._unusable_until, t + self.cfg.settle)
         else:
             dt = t - self._imu_t
             if abs(dt - self._imu_dt) > 1e-9:
                 self._set_imu_dt(dt)
             self._nominal_period(dt)
+            ka.predict()
+            ka.update(w.reshape(3, 1))
+        # the specific force of the origin: f − ω̇ × r − ω × (ω × r), ω̇ of the angular filter
+        f = specific_force_at_origin(self.mount.imu, f, w, ka.x[[1, 3, 5], 0])
+        b = kv.x[3:, 0]
+        a_ned = R @ (f - b)
+        a_ned[2] += self.gravity
+        if not started:
+            self._imu_started = True
+            self._unusable_until = max(self._unusable_until, t + self.cfg.settle)
+        else:
             # velocity: trapezoid of the previous and current NED acceleration
             a_mean = 0.5 * (a_ned + (self._a_prev if self._a_prev is not None else a_ned))
             kv.F[:3, 3:] = -R * dt
             # x⁺ = F x + B u with u = a_mean + R b (so that F x + B u = v + (R(f − b) + g) dt)
             kv.predict(u=(a_mean + R @ b).reshape(3, 1) * dt, B=self._B_v)
             self._v_int = self._v_int + a_mean * dt
-            ka.predict()
-            ka.update(w.reshape(3, 1))
         self._a_prev = a_ned
         self._imu_t = t
         # DVL messages that the IMU has now passed
@@ -370,21 +414,27 @@ class OnlinePreprocessor:
         self._hist.append(t, np.concatenate([v, v_dot, omega, omega_dot, R.ravel(),
                                              self._v_int]))
 
-    def dvl(self, t: float, linear: FloatArray,
-            covariance: FloatArray | None = None) -> list[OnlineSample]:
-        """geometry_msgs/TwistWithCovarianceStamped: body velocity (FLU), covariance (36,)."""
+    def dvl(self, t: float, linear: FloatArray, covariance: FloatArray | None = None,
+            frame_id: str | None = None) -> list[OnlineSample]:
+        """geometry_msgs/TwistWithCovarianceStamped (covariance (36,)) or TwistStamped (no
+        covariance): the velocity of the DVL's point in its frame (FLU)."""
         self.counts["dvl"] += 1
+        self._frame("dvl", frame_id)
         if not _finite(t, linear):
             self.counts["rejected_nonfinite"] += 1
             return []
         if not self._admit("dvl", t):
             return []
+        # in the DVL's axes (FRD); to the body origin in _dvl_update, with ω at t
         v = frames.body_vec(np.asarray(linear, dtype=float))
         var = np.full(3, self.cfg.dvl_noise**2)
         if covariance is not None:
             c = np.asarray(covariance, dtype=float).reshape(-1)
             if c.size == 36 and np.all(np.isfinite(c[[0, 7, 14]])) and np.all(c[[0, 7, 14]] > 0):
                 var = c[[0, 7, 14]]
+        # the covariance in the body axes: R_bs diag(σ²) R_bsᵀ
+        R_bs = self.mount.dvl.rotation
+        var = np.diag(var) if self.mount.dvl.aligned else R_bs @ np.diag(var) @ R_bs.T
         if t > self._imu_t:
             self._dvl_pending.append((t, v, var))
             return []
@@ -394,16 +444,19 @@ class OnlinePreprocessor:
         self._dvl_update(t, v, var)
         return self._emit()
 
-    def _dvl_update(self, td: float, v_body: FloatArray, var: FloatArray) -> None:
+    def _dvl_update(self, td: float, v_sensor: FloatArray, cov: FloatArray) -> None:
+        """One DVL velocity (its axes, FRD) with its covariance (3, 3) in the body axes."""
         kv = self.kf_v
         ts, X = self._hist.arrays()
         if len(ts) == 0:
             return
         row = _interp_rows(ts, X, np.array([td]))[0] if len(ts) > 1 else X[0]
         Rd = row[12:21].reshape(3, 3)
+        # v = R_bs v_s − ω × r, ω of the angular filter at td
+        v_body = dvl_to_body(self.mount.dvl, v_sensor, row[6:9])
         # NED velocity at td, moved forward by the inertial increment up to the IMU time
         z = Rd @ v_body + (self._v_int - row[21:24])
-        Rm = Rd @ np.diag(var) @ Rd.T
+        Rm = Rd @ cov @ Rd.T
         S = kv.P[:3, :3] + Rm
         innov = z - kv.x[:3, 0]
         if not self._dvl_seen:
@@ -425,9 +478,11 @@ class OnlinePreprocessor:
             self._unusable_until = max(self._unusable_until, self._imu_t + self.cfg.settle)
         self._last_dvl = max(self._last_dvl, td)
 
-    def pressure(self, t: float, fluid_pressure: float) -> list[OnlineSample]:
-        """sensor_msgs/FluidPressure: absolute pressure (Pa)."""
+    def pressure(self, t: float, fluid_pressure: float, frame_id: str | None = None
+                 ) -> list[OnlineSample]:
+        """sensor_msgs/FluidPressure: absolute pressure (Pa) at the sensor's point."""
         self.counts["pressure"] += 1
+        self._frame("pressure", frame_id)
         if not _finite(t, fluid_pressure):
             self.counts["rejected_nonfinite"] += 1
             return []
@@ -519,6 +574,10 @@ class OnlinePreprocessor:
             Rk = _interp_rows(ts, X[:, 12:21], np.array([tk]))[0].reshape(3, 3)
             U, _, Vt = np.linalg.svd(Rk)  # nearest rotation to the interpolated matrix
             euler = frames.euler_from_matrix(U @ Vt)
+            depth = self._depth(tk)
+            if not self.mount.pressure.centred:
+                # z_o = z_s − (R r_p)_z: the origin's depth from the sensor's
+                depth -= float(depth_offset(self.mount.pressure, U @ Vt))
             usable = (self._dvl_seen and tk >= self._unusable_until
                       and tk - self._last_dvl <= self.cfg.max_dvl_gap)
             self.counts["samples"] += 1
@@ -526,7 +585,7 @@ class OnlinePreprocessor:
                 self.counts["samples_unusable"] += 1
             out.append(OnlineSample(tk, np.concatenate([m[:3], m[6:9]]),
                                     np.concatenate([m[3:6], wd]), np.asarray(tau, dtype=float),
-                                    euler, self._depth(tk), bool(usable)))
+                                    euler, depth, bool(usable)))
         return out
 
     def _depth(self, t: float) -> float:
@@ -580,13 +639,13 @@ class OnlinePreprocessor:
         for role, t, i in self.messages(rec, topics):
             if role == "imu":
                 out += self.imu(t, imu.orientation[i], imu.angular_velocity[i],
-                                imu.linear_acceleration[i])
+                                imu.linear_acceleration[i], imu.frame_id)
             elif role == "dvl":
-                out += self.dvl(t, dvl.linear[i], dvl.covariance)
+                out += self.dvl(t, dvl.linear[i], dvl.covariance, dvl.frame_id)
             elif role == "thrusters" and isinstance(thr, JointSeries):
                 out += self.thrusters(t, thr.names, thr.effort[i])
             elif role == "wrench" and isinstance(thr, WrenchSeries):
                 out += self.wrench(t, thr.force[i], thr.torque[i])
             elif isinstance(pres, PressureSeries):
-                out += self.pressure(t, float(pres.fluid_pressure[i]))
+                out += self.pressure(t, float(pres.fluid_pressure[i]), pres.frame_id)
         return out
