@@ -113,6 +113,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     i.add_argument("--mapping", action="store_true",
                    help="print how each base parameter combines the full parameters")
     i.add_argument("--out", metavar="YAML", help="write the parameters as YAML")
+    i.add_argument("--report", metavar="DIR",
+                   help="write an HTML report (index.html and a torque figure) to DIR")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -279,9 +281,11 @@ def _identify(args: argparse.Namespace) -> int:
             floor = fv.noise
             floor_from = "estimated from the torque above the cutoff (an upper bound)"
         rows: list[tuple[object, ...]] = []
+        shown: dict[str, np.ndarray] = {}
         for label, theta in (("WLS", res.wls.theta), ("consistent", res.consistent.theta),
                              ("OLS", res.ols.theta), ("nominal", base.of(nominal))):
             tau = predict(arm.model, base, theta, fv.q, fv.qd, fv.qdd, vcfg)
+            shown[label] = tau
             rmse, moving = torque_rmse(measured, tau, fv.qd, cfg.min_speed)
             rows.extend((label, n, rmse[j], moving[j], rmse[j] / floor[j])
                         for j, n in enumerate(names))
@@ -289,6 +293,11 @@ def _identify(args: argparse.Namespace) -> int:
               f"{floor_from}: " + ", ".join(f"{f:.3g}" for f in floor) + " N m")
         print(table(("parameters", "joint", "RMSE N m", f"RMSE |qd|>={cfg.min_speed:g}",
                      "RMSE / noise floor"), rows))
+        validation = (fv.t, measured, shown, rows, floor_from)
+    if args.report:
+        path = _write_report(args.report, args, base, res, names, nominal,
+                             validation if val is not None else None)
+        print(f"\nwrote {path}")
     if args.out:
         _write_params(args.out, args, base, res, names, nominal)
         print(f"\nwrote {args.out}")
@@ -315,3 +324,67 @@ def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
     }
     Path(path).write_text(yaml.safe_dump(doc, sort_keys=False))
 
+
+
+def _write_report(out_dir: str, args: argparse.Namespace, base: Any, res: Any,
+                  names: tuple[str, ...], nominal: np.ndarray, validation: Any) -> Any:
+    """index.html in the style of the vehicle reports: base parameters, joint friction,
+    the mapping, validation RMSE and a figure of measured and predicted torque."""
+    import html
+    from pathlib import Path
+
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    from dampest_ros.report import CSS
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+
+    def tab(header: tuple[str, ...], rows: list[tuple[object, ...]]) -> str:
+        def cell(x: object) -> str:
+            return f"{x:.4g}" if isinstance(x, float) else html.escape(str(x))
+        head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+        body = "".join("<tr>" + "".join(f"<td>{cell(c)}</td>" for c in r) + "</tr>"
+                       for r in rows)
+        return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+    ind = [base.names[k] for k in base.independent]
+    nom = base.of(nominal)
+    parts = [f"<html><head><meta charset='utf-8'><title>arm identification</title>"
+             f"<style>{CSS}</style></head><body>",
+             f"<h1>Arm identification: {html.escape(str(args.arm))}</h1>",
+             f"<p class='meta'>{html.escape(str(args.bag))}; {base.size} base parameters; rows "
+             f"per joint {res.rows.tolist()}; cutoff {args.cutoff:g} Hz, {args.rate_out:g} Hz"
+             "</p>"]
+    if validation is not None:
+        t, measured, shown, rows, floor_from = validation
+        k = slice(0, min(len(t), int(20.0 / max(float(np.median(np.diff(t))), 1e-9))))
+        fig = Figure(figsize=(11, 7.5))
+        axes = fig.subplots(3, 2, sharex=True).T.ravel()
+        for j, ax in enumerate(axes[:len(names)]):
+            ax.plot(t[k] - t[0], measured[k, j], lw=0.6, color="0.6", label="measured")
+            ax.plot(t[k] - t[0], shown["WLS"][k, j], lw=1.0, color="tab:red", label="WLS")
+            ax.plot(t[k] - t[0], shown["nominal"][k, j], lw=1.0, ls="--", color="tab:blue",
+                    label="nominal")
+            ax.set_ylabel(f"{names[j]} (N m)", fontsize=8)
+            ax.grid(alpha=0.3)
+        axes[0].legend(loc="upper right", fontsize=8)
+        fig.suptitle(f"Validation torque, first 20 s of {args.validate}")
+        fig.savefig(out / "torque.png", dpi=90)
+        parts += [f"<h2>Validation on {html.escape(str(args.validate))}</h2>",
+                  f"<p class='note'>Noise floor: {html.escape(floor_from)}.</p>",
+                  tab(("parameters", "joint", "RMSE N m", "RMSE moving", "RMSE / noise floor"),
+                      rows), "<img src='torque.png' alt='validation torque'>"]
+    parts += ["<h2>Base parameters</h2>",
+              tab(("base parameter", "OLS", "WLS", "σ", "consistent", "nominal"),
+                  [(f"b{k + 1} {ind[k]}", float(res.ols.theta[k]), float(res.wls.theta[k]),
+                    float(res.wls.std[k]), float(res.consistent.theta[k]), float(nom[k]))
+                   for k in range(base.size)]),
+              "<h2>Base parameters in the full ones</h2><pre>"
+              + html.escape("\n".join(base.mapping())) + "</pre>",
+              "<p class='note'>Not identifiable (in no base parameter): "
+              + html.escape(", ".join(base.unidentifiable())) + "</p></body></html>"]
+    path = out / "index.html"
+    path.write_text("\n".join(parts))
+    return path

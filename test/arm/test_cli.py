@@ -23,12 +23,14 @@ def test_simulate_identify_validate(tmp_path: Path, capsys: pytest.CaptureFixtur
                  "--rate", "500", "--out", str(val)]) == 0
     capsys.readouterr()
     assert main(["arm", "identify", str(train), "--validate", str(val), "--mapping",
-                 "--out", str(tmp_path / "p.yaml")]) == 0
+                 "--out", str(tmp_path / "p.yaml"), "--report", str(tmp_path / "rep")]) == 0
     out = capsys.readouterr().out
     assert "58 base parameters" in out and "b1 = " in out and "noise floor from truth" in out
     rows = [line.split() for line in out.splitlines() if line.strip().startswith("WLS")]
     ratios = np.array([float(r[-1]) for r in rows])
     assert len(ratios) == 6 and np.all(ratios <= 1.05)
+    page = (tmp_path / "rep" / "index.html").read_text()
+    assert "RMSE / noise floor" in page and (tmp_path / "rep" / "torque.png").stat().st_size
     doc = yaml.safe_load((tmp_path / "p.yaml").read_text())
     fc = [b["wls"] for b in doc["base"].values() if b["kept"] == "elbow_joint.Fc"]
     assert fc == [pytest.approx(2.0, rel=0.02)]
