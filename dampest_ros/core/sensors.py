@@ -384,14 +384,7 @@ def _imu(truth: _Truth, gravity: float, config: SensorConfig, bias: SensorBias,
     g_body = gravity * quat_to_matrix(q)[:, 2, :]
     # f = v̇ + ω × v − Rᵀ [0, 0, g]: specific force at the body origin (FRD)
     specific_force = v_dot + np.cross(w, v) - g_body
-    if not mount.centred:
-        # f_p = f + ω̇ × r + ω × (ω × r): the specific force of the IMU's point
-        specific_force = specific_force + lever_acceleration(w, nu_dot[:, 3:], mount.lever)
-    if not mount.aligned:
-        # in the IMU's axes: ω_s = R_bsᵀ ω, f_s = R_bsᵀ f_p; its attitude q_ns = q_nb ⊗ q_bs
-        R_sb = mount.rotation.T
-        w, specific_force = rotate(R_sb, w), rotate(R_sb, specific_force)
-        q = quat_mul(q, np.broadcast_to(matrix_to_quat(mount.rotation), q.shape))
+    w, specific_force, q = imu_reading(mount, w, nu_dot[:, 3:], specific_force, q)
     gyro = (w + np.asarray(bias.gyro)
             + _random_walk(rngs["gyro_walk"], n, config.gyro_bias_walk, config.imu_rate)
             + _white(rngs["gyro_noise"], (n, 3), config.gyro_noise))
@@ -412,6 +405,50 @@ def _imu(truth: _Truth, gravity: float, config: SensorConfig, bias: SensorBias,
         angular_velocity_covariance=diag3(config.gyro_noise**2),
         linear_acceleration_covariance=diag3(config.accel_noise**2),
     )
+
+
+def imu_reading(mount: SensorMount, omega: FloatArray, omega_dot: FloatArray, f: FloatArray,
+                q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """What a mounted IMU senses, noise-free, from the body's motion.
+
+    Parameters
+    ----------
+    mount : SensorMount
+    omega, omega_dot : ndarray, shape (n, 3)
+        Body rates (rad/s) and their derivative (rad/s²), FRD.
+    f : ndarray, shape (n, 3)
+        Specific force of the body origin (m/s², FRD).
+    q : ndarray, shape (n, 4)
+        Attitude quaternions [w, x, y, z], body (FRD) → NED.
+
+    Returns
+    -------
+    omega_s, f_s : ndarray, shape (n, 3)
+        R_bsᵀ ω and R_bsᵀ (f + ω̇ × r + ω × (ω × r)), the IMU's axes (FRD).
+    q_s : ndarray, shape (n, 4)
+        q ⊗ q_bs: the IMU's axes → NED.
+    """
+    if not mount.centred:
+        # f_p = f + ω̇ × r + ω × (ω × r): the specific force of the IMU's point
+        f = f + lever_acceleration(omega, omega_dot, mount.lever)
+    if mount.aligned:
+        return omega, f, q
+    R_sb = mount.rotation.T
+    # ω_s = R_bsᵀ ω, f_s = R_bsᵀ f_p; q_ns = q_nb ⊗ q_bs
+    return (rotate(R_sb, omega), rotate(R_sb, f),
+            quat_mul(q, np.broadcast_to(matrix_to_quat(mount.rotation), q.shape)))
+
+
+def dvl_reading(mount: SensorMount, nu: FloatArray) -> FloatArray:
+    """v_s = R_bsᵀ (v + ω × r), shape (n, 3): the velocity over ground of a mounted DVL's
+    point in its axes (m/s, FRD), noise-free, from ν (n, 6) (FRD)."""
+    return rotate(mount.rotation.T, nu[:, :3] + lever_velocity(nu[:, 3:], mount.lever))
+
+
+def sensor_depth(mount: SensorMount, z: FloatArray, q: FloatArray) -> FloatArray:
+    """z_s = z + (R r)_z, shape (n,): the NED depth (m) of a mounted pressure sensor from
+    the origin's depth z (n,) and the attitude q (n, 4) [w, x, y, z], body → NED."""
+    return z + depth_offset(mount, quat_to_matrix(q)) if not mount.centred else z
 
 
 def diag3(variance: float) -> FloatArray:
@@ -444,10 +481,9 @@ def _dvl(truth: _Truth, config: SensorConfig, bias: SensorBias,
     stamp = truth.times(config.dvl_rate)
     n = len(stamp)
     nu, _ = hermite(locate(truth.t, stamp), truth.nu, truth.nu_dot)
-    # v_s = R_bsᵀ (v + ω × r): the velocity over ground of the DVL's point, in its axes (FRD)
-    v_s = rotate(mount.rotation.T, nu[:, :3] + lever_velocity(nu[:, 3:], mount.lever))
     # v_dvl = v_s + b_dvl + noise
-    v = v_s + np.asarray(bias.dvl) + _white(rngs["dvl_noise"], (n, 3), config.dvl_noise)
+    v = dvl_reading(mount, nu) + np.asarray(bias.dvl) + _white(rngs["dvl_noise"], (n, 3),
+                                                                config.dvl_noise)
     keep = _dropout_keep(float(truth.t[0]), stamp, config.dvl_dropout_rate,
                          config.dvl_dropout_mean, rngs["dvl_dropout"])
     cov = np.diag([config.dvl_noise**2] * 3 + [UNUSED_VARIANCE] * 3).ravel()
@@ -466,11 +502,9 @@ def _pressure(truth: _Truth, rho: float, gravity: float, config: SensorConfig,
     k = locate(truth.t, stamp)
     position, _ = hermite(k, truth.position, truth.p_dot)
     noise = _white(rngs["pressure"], (len(stamp),), config.pressure_noise)
-    # z = z_o + (R r)_z: the NED depth of the sensor's point
-    z = position[:, 2] + (depth_offset(mount, quat_to_matrix(nlerp(k, truth.q)))
-                          if not mount.centred else 0.0)
     # p = p_atm + ρ g z + noise
-    pressure = config.atmospheric_pressure + rho * gravity * z + noise
+    pressure = config.atmospheric_pressure + rho * gravity * sensor_depth(
+        mount, position[:, 2], nlerp(k, truth.q)) + noise
     return PressureSeries(stamp=stamp, frame_id=mount.frame_id,
                           fluid_pressure=pressure, variance=config.pressure_noise**2)
 

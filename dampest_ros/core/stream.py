@@ -39,6 +39,7 @@ from dampest_ros.core.measurements import (
     Recording,
     TwistSeries,
 )
+from dampest_ros.core.mounting import Mounting
 from dampest_ros.core.sensors import (
     FRAME_IDS,
     NOISE_STREAMS,
@@ -46,7 +47,10 @@ from dampest_ros.core.sensors import (
     SensorBias,
     SensorConfig,
     diag3,
+    dvl_reading,
     hydro_series,
+    imu_reading,
+    sensor_depth,
 )
 from dampest_ros.core.simulate import make_plant
 from dampest_ros.core.trajectory import Trajectory
@@ -65,6 +69,9 @@ class SensorStream:
     config : SensorConfig
     bias : SensorBias
     seed : int
+    mounting : Mounting, optional
+        Where the IMU, DVL and pressure sensor sit (as :func:`~dampest_ros.core.sensors.measure`
+        models them; default: at the origin, aligned).
 
     Notes
     -----
@@ -77,8 +84,10 @@ class SensorStream:
     HISTORY = 256  # integration steps of thruster history kept beyond the current chunk
 
     def __init__(self, rho: float, gravity: float, config: SensorConfig | None = None,
-                 bias: SensorBias | None = None, seed: int = 0) -> None:
+                 bias: SensorBias | None = None, seed: int = 0,
+                 mounting: Mounting | None = None) -> None:
         self.rho, self.gravity = float(rho), float(gravity)
+        self.mount = mounting or Mounting()
         self.cfg = config or SensorConfig()
         self.bias = bias or SensorBias()
         children = np.random.default_rng(seed).spawn(len(NOISE_STREAMS))
@@ -137,10 +146,11 @@ class SensorStream:
         n = len(st)
         g_body = self.gravity * quat_to_matrix(qs)[:, 2, :]
         sf = v_nud[:, :3] + np.cross(v_nu[:, 3:], v_nu[:, :3]) - g_body
+        w_s, sf, qs = imu_reading(self.mount.imu, v_nu[:, 3:], v_nud[:, 3:], sf, qs)
         gyro_walk = self._walk("gyro_walk", n, cfg.gyro_bias_walk, cfg.imu_rate, "_gyro_walk")
         accel_walk = self._walk("accel_walk", n, cfg.accel_bias_walk, cfg.imu_rate,
                                 "_accel_walk")
-        gyro = (v_nu[:, 3:] + np.asarray(self.bias.gyro) + gyro_walk
+        gyro = (w_s + np.asarray(self.bias.gyro) + gyro_walk
                 + self.rng["gyro_noise"].standard_normal((n, 3)) * cfg.gyro_noise)
         accel = (sf + np.asarray(self.bias.accel) + accel_walk
                  + self.rng["accel_noise"].standard_normal((n, 3)) * cfg.accel_noise)
@@ -148,7 +158,7 @@ class SensorStream:
         q_meas = quat_mul(quat_frd_ned_to_flu_enu(qs), small_rotation(dtheta))
         q_meas *= np.where(q_meas[:, :1] < 0.0, -1.0, 1.0)
         out["imu/data"] = ImuSeries(
-            stamp=st, frame_id=FRAME_IDS["imu/data"], orientation=wxyz_to_xyzw(q_meas),
+            stamp=st, frame_id=self.mount.imu.frame_id, orientation=wxyz_to_xyzw(q_meas),
             angular_velocity=body_vec(gyro), linear_acceleration=body_vec(accel),
             orientation_covariance=diag3(cfg.orientation_noise**2),
             angular_velocity_covariance=diag3(cfg.gyro_noise**2),
@@ -156,19 +166,21 @@ class SensorStream:
         # --- DVL
         st = self._stamps("dvl", cfg.dvl_rate, a, b)
         v_nu, _ = hermite(locate(t, st), nu, nu_dot)
-        v = (v_nu[:, :3] + np.asarray(self.bias.dvl)
+        v = (dvl_reading(self.mount.dvl, v_nu) + np.asarray(self.bias.dvl)
              + self.rng["dvl_noise"].standard_normal((len(st), 3)) * cfg.dvl_noise)
         keep = np.array([self._locked(s) for s in st], dtype=bool)
         cov = np.diag([cfg.dvl_noise**2] * 3 + [UNUSED_VARIANCE] * 3).ravel()
-        out["dvl/twist"] = TwistSeries(stamp=st[keep], frame_id=FRAME_IDS["dvl/twist"],
+        out["dvl/twist"] = TwistSeries(stamp=st[keep], frame_id=self.mount.dvl.frame_id,
                                        linear=body_vec(v[keep]),
                                        angular=np.zeros((int(keep.sum()), 3)), covariance=cov)
         # --- pressure
         st = self._stamps("pressure", cfg.pressure_rate, a, b)
-        p_i, _ = hermite(locate(t, st), pos, p_dot)
-        pressure = (cfg.atmospheric_pressure + self.rho * self.gravity * p_i[:, 2]
+        k = locate(t, st)
+        p_i, _ = hermite(k, pos, p_dot)
+        z = sensor_depth(self.mount.pressure, p_i[:, 2], nlerp(k, q))
+        pressure = (cfg.atmospheric_pressure + self.rho * self.gravity * z
                     + self.rng["pressure"].standard_normal(len(st)) * cfg.pressure_noise)
-        out["pressure"] = PressureSeries(stamp=st, frame_id=FRAME_IDS["pressure"],
+        out["pressure"] = PressureSeries(stamp=st, frame_id=self.mount.pressure.frame_id,
                                          fluid_pressure=pressure,
                                          variance=cfg.pressure_noise**2)
         # --- thrusters: window means over [s − w, s] of the step means
@@ -294,7 +306,8 @@ class LiveSimulation:
         self.sub = max(1, round(self.dt_control / dt))
         self.controller = VelocityPI.for_vehicle(vehicle, ex.bandwidth)
         bias = SensorBias(self.effects.gyro_bias, self.effects.accel_bias, self.effects.dvl_bias)
-        self.stream = SensorStream(vehicle.body.rho, vehicle.body.gravity, sensors, bias, seed)
+        self.stream = SensorStream(vehicle.body.rho, vehicle.body.gravity, sensors, bias, seed,
+                                   vehicle.mounting)
         self.k = 0
         self._cmd: FloatArray | None = None
         self._cmd_until = -math.inf

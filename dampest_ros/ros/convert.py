@@ -187,3 +187,21 @@ def stamped_floats(data: bytes, count: int) -> tuple[int, FloatArray]:
     if len(data) < start + 8 * count:
         raise ValueError(f"{len(data)} bytes: too short for {count} float64 after the header")
     return sec * 1_000_000_000 + nanosec, np.frombuffer(data, f"{order}f8", count, start)
+
+
+def header_frame_id(data: bytes) -> str:
+    """The header.frame_id of a serialized message that starts with a std_msgs/Header
+    (plain CDR, as :func:`stamped_floats` reads it).
+
+    Raises
+    ------
+    ValueError
+        Another encapsulation, or a message too short for its frame_id.
+    """
+    order = _CDR_ORDER.get(bytes(data[:2]))
+    if order is None:
+        raise ValueError(f"not plain CDR (encapsulation {bytes(data[:2]).hex()})")
+    size = _STAMP[order].unpack_from(data, 4)[2]  # the string's length, its NUL included
+    if size < 1 or len(data) < 16 + size:
+        raise ValueError(f"{len(data)} bytes: too short for a frame_id of {size} bytes")
+    return bytes(data[16:15 + size]).decode(errors="replace")

@@ -8,6 +8,10 @@ dampest/velocity (TwistWithCovarianceStamped), dampest/acceleration
 (QuaternionStamped, base_link FLU → odom ENU, for the restoring forces) with identical header
 stamps at a fixed rate, body frame FLU (base_link), only for usable samples (not during DVL
 dropouts); diagnostics with the message counts, rejections and resets once per second.
+The DVL may send geometry_msgs/TwistStamped instead (parameter dvl_type, read at start).
+Sensor mounting (lever arms, rotations) and the expected frame_ids come from the vehicle
+file's sensors: section; messages with another header.frame_id are counted
+(frame_id_mismatch in the diagnostics) and warned about once per topic.
 The work is done by dampest_ros.core.online.preprocessor.OnlinePreprocessor (the same class
 replays bags).
 The sensor messages reach it in stamp order whatever the order of their arrival
@@ -25,6 +29,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import (
     AccelWithCovarianceStamped,
     QuaternionStamped,
+    TwistStamped,
     TwistWithCovarianceStamped,
     WrenchStamped,
 )
@@ -49,7 +54,7 @@ from dampest_ros.ros.common import (
     to_time,
     vehicle_check,
 )
-from dampest_ros.ros.convert import stamped_floats
+from dampest_ros.ros.convert import header_frame_id, stamped_floats
 
 
 class SampleMessages:
@@ -110,6 +115,9 @@ class PreprocessNode(ParamNode):
               "newer one of another topic and still be put in stamp order (later: counted as "
               "late); a topic gone quiet holds the others up this long", low=0.0, high=60.0),
         Param("frame_id", "base_link", "frame_id of the published samples"),
+        Param("dvl_type", "TwistWithCovarianceStamped", "message type on dvl/twist "
+              "(geometry_msgs); read at start", choices=("TwistWithCovarianceStamped",
+                                                         "TwistStamped"), read_only=True),
         Param("wrench_topic", "", "topic of a body wrench τ (geometry_msgs/WrenchStamped, "
               "FLU) read instead of thrusters/state ('': τ from thrusters/state through the "
               "vehicle's allocation); read at start", read_only=True),
@@ -129,8 +137,12 @@ class PreprocessNode(ParamNode):
         self._build()
         # raw: stamps and values read from the CDR bytes (the joint names need rclpy's)
         self.create_subscription(Imu, "imu/data", self._on_imu, SENSOR_QOS, raw=True)
-        self.create_subscription(TwistWithCovarianceStamped, "dvl/twist", self._on_dvl,
-                                 SENSOR_QOS, raw=True)
+        if self.p("dvl_type") == "TwistStamped":
+            self.create_subscription(TwistStamped, "dvl/twist", self._on_dvl_twist,
+                                     SENSOR_QOS, raw=True)
+        else:
+            self.create_subscription(TwistWithCovarianceStamped, "dvl/twist", self._on_dvl,
+                                     SENSOR_QOS, raw=True)
         self.create_subscription(FluidPressure, "pressure", self._on_pressure, SENSOR_QOS,
                                  raw=True)
         wrench = str(self.p("wrench_topic")).strip()
@@ -154,7 +166,8 @@ class PreprocessNode(ParamNode):
         if not wrench:
             v.need_thrusters("preprocess_node (τ from thrusters/state)",
                              "set the parameter wrench_topic (a body wrench)")
-        self.pre = OnlinePreprocessor(v.thrusters, v.body.gravity, v.body.rho, cfg)
+        self.pre = OnlinePreprocessor(v.thrusters, v.body.gravity, v.body.rho, cfg,
+                                      mounting=v.mounting)
         self.order = StampOrder(topic_roles(wrench), self.p("reorder_latency"),
                                 self.p("clock_jump"))
 
@@ -168,15 +181,19 @@ class PreprocessNode(ParamNode):
     def _on_imu(self, data: bytes) -> None:
         # orientation, its covariance, angular velocity, its covariance, linear acceleration
         ns, v = stamped_floats(data, 28)
-        self._feed("imu", ns, (v[0:4], v[13:16], v[25:28]))
+        self._feed("imu", ns, (v[0:4], v[13:16], v[25:28], header_frame_id(data)))
 
     def _on_dvl(self, data: bytes) -> None:
         ns, v = stamped_floats(data, 42)  # twist (linear, angular), covariance (36)
-        self._feed("dvl", ns, (v[0:3], v[6:42]))
+        self._feed("dvl", ns, (v[0:3], v[6:42], header_frame_id(data)))
+
+    def _on_dvl_twist(self, data: bytes) -> None:
+        ns, v = stamped_floats(data, 6)  # TwistStamped: linear, angular; no covariance
+        self._feed("dvl", ns, (v[0:3], None, header_frame_id(data)))
 
     def _on_pressure(self, data: bytes) -> None:
         ns, v = stamped_floats(data, 1)
-        self._feed("pressure", ns, (float(v[0]),))
+        self._feed("pressure", ns, (float(v[0]), header_frame_id(data)))
 
     def _on_thrusters(self, m: JointState) -> None:
         self._feed("thrusters", stamp_ns(m.header.stamp), (tuple(m.name),

@@ -146,6 +146,21 @@ def test_off_centre_sensors_measure_their_own_point_and_axes() -> None:
                                rtol=1e-12)
 
 
+def test_streaming_simulator_mounts_sensors_like_measure(vehicle: Vehicle) -> None:
+    """The sim node's SensorStream (via LiveSimulation, from the vehicle's sensors:) gives the
+    messages measure() gives for the same mounting."""
+    from dampest_ros.core.stream import SensorStream
+
+    traj = run(vehicle, make_excitation("B", vehicle, 10.0, seed=1))
+    want = measure(traj, RHO, G, EXACT, mounting=MOUNTED)
+    got = SensorStream(RHO, G, EXACT, mounting=MOUNTED).add(traj)
+    for topic in ("imu/data", "dvl/twist", "pressure"):
+        assert got[topic].frame_id == want[topic].frame_id
+        for name, a in want[topic].per_message().items():
+            np.testing.assert_allclose(getattr(got[topic], name), a, rtol=1e-12, atol=1e-12,
+                                       err_msg=f"{topic} {name}")
+
+
 # --- preprocessing and identification ------------------------------------------------------------
 
 
