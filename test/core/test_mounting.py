@@ -82,7 +82,14 @@ def write_vehicle(tmp_path: Path, sensors: object) -> Path:
 
 def test_sensors_section_is_read_with_defaults(tmp_path: Path) -> None:
     preset = load_vehicle("bluerov2_heavy")
-    assert preset.mounting == Mounting()  # the commented example changes nothing
+    assert preset.mounting == Mounting()
+    # the preset's commented sensors: block, uncommented, is the defaults
+    text = vehicle_path("bluerov2_heavy").read_text()
+    block = text[text.index("# sensors:"):]
+    uncommented = text.replace(block, "\n".join(line[2:] for line in block.splitlines()))
+    (tmp_path / "uncommented.yaml").write_text(uncommented)
+    assert yaml.safe_load(uncommented)["sensors"]["dvl"]["frame_id"] == "dvl_link"
+    assert load_vehicle(tmp_path / "uncommented.yaml").mounting == Mounting()
     assert (preset.mounting.imu.frame_id, preset.mounting.dvl.frame_id,
             preset.mounting.pressure.frame_id) == ("imu_link", "dvl_link", "pressure_link")
     v = load_vehicle(write_vehicle(tmp_path, {
