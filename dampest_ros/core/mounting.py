@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -81,12 +82,13 @@ class SensorMount:
     position: tuple[float, float, float] = _ORIGIN
     rpy: tuple[float, float, float] = _ORIGIN
 
-    @property
+    @cached_property
     def rotation(self) -> FloatArray:
-        """R_bs, shape (3, 3): sensor axes (FRD) → body axes (FRD)."""
+        """R_bs, shape (3, 3): sensor axes (FRD) → body axes (FRD); computed once (the
+        online preprocessing asks for it per message)."""
         return matrix_from_euler(np.asarray(self.rpy))
 
-    @property
+    @cached_property
     def lever(self) -> FloatArray:
         """The position r, shape (3,) (m, FRD)."""
         return np.asarray(self.position, dtype=float)
