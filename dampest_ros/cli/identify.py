@@ -25,6 +25,7 @@ from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.identifier import prior_arrays
+from dampest_ros.core.mounting import frame_id_note
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import OnlineConfig
 from dampest_ros.core.pool import drift, pooled_fit, pooled_samples
@@ -220,6 +221,9 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
         rejected["samples beyond the innovation gate (outliers)"] = d.outliers
     if rejected:
         print("rejected: " + ", ".join(f"{n} {k}" for k, n in rejected.items()))
+    for role, (found, n) in pre.foreign_frames.items():  # not the sensors: section's frame_id
+        print(f"{path.name}: warning: " + frame_id_note(
+            topics[role], n, found, getattr(vehicle.mounting, role).frame_id), file=sys.stderr)
     ci = 1.959964 * est.theta_std
     print(table(("parameter", "estimate", "std", "95% low", "95% high", "prior"),
                 [(n, float(th), float(sd), float(th - w), float(th + w), float(p0))

@@ -209,7 +209,9 @@ class OnlinePreprocessor:
     Notes
     -----
     Every message method returns the samples that became complete (possibly none).
-    ``counts`` holds the statistics; ``events`` the reports of resets (newest last).
+    ``counts`` holds the statistics; ``events`` the reports of resets (newest last);
+    ``foreign_frames`` role → (frame_id, count) of the messages whose frame_id is not the
+    mounting's.
     """
 
     _COUNTS = ("imu", "dvl", "pressure", "thrusters", "wrench", "rejected_nonfinite",
@@ -221,7 +223,8 @@ class OnlinePreprocessor:
                  config: OnlineConfig | None = None, mounting: Mounting | None = None) -> None:
         self.thr = thrusters
         self.mount = mounting or Mounting()
-        self._foreign: set[str] = set()  # roles whose foreign frame_id was reported
+        #: role → (the latest foreign frame_id, messages with a foreign frame_id)
+        self.foreign_frames: dict[str, tuple[str, int]] = {}
         self.gravity = float(gravity)
         self.rho = float(rho)
         self.cfg = config or OnlineConfig()
@@ -335,8 +338,9 @@ class OnlinePreprocessor:
         if frame_id is None or frame_id == expected:
             return
         self.counts["frame_id_mismatch"] += 1
-        if role not in self._foreign:
-            self._foreign.add(role)
+        seen = self.foreign_frames.get(role, ("", 0))[1]
+        self.foreign_frames[role] = (frame_id, seen + 1)
+        if not seen:
             self.events.append(frame_id_note(role, 1, frame_id, expected) + " (counted as "
                                "frame_id_mismatch, reported once)")
 
