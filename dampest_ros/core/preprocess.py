@@ -383,7 +383,8 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
         aligned).
     notes : list of str, optional
         Appended: one line per sensor topic whose messages carry another frame_id than the
-        mounting gives (with their count), for the user.
+        mounting gives, for the user, with their count: all of the DVL and pressure topics,
+        the IMU's within the processed stretches (it is read a window at a time).
 
     Returns
     -------

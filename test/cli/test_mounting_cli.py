@@ -26,12 +26,24 @@ def vehicle_file(path: Path, sensors: dict) -> Path:
     return path
 
 
-def test_mounted_vehicle_identifies_and_foreign_frame_ids_are_warned(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    mounted = vehicle_file(tmp_path / "mounted.yaml", SENSORS)
-    bag = tmp_path / "bag"
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
+    """90 s of protocol B of the mounted vehicle: the bag, its vehicle file, and a file of the
+    same mounting that expects the frame ids 'dvl' and 'imu' (the bag has the defaults)."""
+    root = tmp_path_factory.mktemp("mounted")
+    mounted = vehicle_file(root / "mounted.yaml", SENSORS)
+    foreign = vehicle_file(root / "foreign.yaml", {
+        **SENSORS, "dvl": {**SENSORS["dvl"], "frame_id": "dvl"},
+        "imu": {**SENSORS["imu"], "frame_id": "imu"}})
     assert main(["simulate", "--vehicle", str(mounted), "--protocol", "B", "--duration", "90",
-                 "--seed", "2", "--out", str(bag)]) == 0
+                 "--seed", "2", "--out", str(root / "bag")]) == 0
+    return root / "bag", mounted, foreign
+
+
+def test_mounted_vehicle_identifies_and_foreign_frame_ids_are_warned(
+        flown: tuple[Path, Path, Path], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    bag, mounted, foreign = flown
     out = tmp_path / "model.yaml"
     capsys.readouterr()
     assert main(["identify", str(bag), "--vehicle", str(mounted), "--out", str(out)]) == 0
@@ -45,15 +57,23 @@ def test_mounted_vehicle_identifies_and_foreign_frame_ids_are_warned(
     wrong = load_model(tmp_path / "centred_model.yaml").theta
     assert np.max(np.abs(wrong[big] / truth.theta[big] - 1.0)) > 0.2
     # the same mounting, but the file expects other frame ids than the bag carries
-    foreign = vehicle_file(tmp_path / "foreign.yaml", {
-        **SENSORS, "dvl": {**SENSORS["dvl"], "frame_id": "dvl"},
-        "imu": {**SENSORS["imu"], "frame_id": "imu"}})
     assert main(["identify", str(bag), "--vehicle", str(foreign), "--out",
                  str(tmp_path / "foreign_model.yaml")]) == 0
     err = [line for line in capsys.readouterr().err.splitlines() if "frame_id" in line]
-    assert len(err) == 2, err
-    assert err[0].startswith("bag: warning: dvl/twist: ") and "'dvl_link', expected 'dvl'" \
-        in err[0]
-    assert err[1].startswith("bag: warning: imu/data: ") and "'imu_link', expected 'imu'" \
-        in err[1]
+    # every DVL message (707 of 721 pings: dropouts), the IMU messages of the used stretches
+    assert [line.split(" message(s)")[0] for line in err] == [
+        "bag: warning: dvl/twist: 707", "bag: warning: imu/data: 16014"], err
+    assert "'dvl_link', expected 'dvl'" in err[0] and "'imu_link', expected 'imu'" in err[1]
     np.testing.assert_array_equal(load_model(tmp_path / "foreign_model.yaml").theta, est.theta)
+
+
+@pytest.mark.slow
+def test_rls_path_warns_about_foreign_frame_ids(flown: tuple[Path, Path, Path],
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """The same lines from the online preprocessing (--method rls), counting every message."""
+    bag, _, foreign = flown
+    capsys.readouterr()
+    assert main(["identify", str(bag), "--vehicle", str(foreign), "--method", "rls"]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "frame_id" in line]
+    assert [line.split(" message(s)")[0] for line in err] == [
+        "bag: warning: imu/data: 18001", "bag: warning: dvl/twist: 707"], err  # all of them
