@@ -171,7 +171,8 @@ def _simulate(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from dampest_ros.core.arm.design import within_limits
+    from dampest_ros.core.arm.base import base_parameters
+    from dampest_ros.core.arm.design import regressor_cond, within_limits
     from dampest_ros.core.arm.ffs import random_trajectory
     from dampest_ros.core.arm.regressor import full_parameters, regressor
     from dampest_ros.core.arm.simulate import REALISTIC, ArmSensors, simulate_arm
@@ -211,7 +212,8 @@ def _simulate(args: argparse.Namespace) -> int:
                     joint_series(run.t, names, run.q, run.qd, run.tau))
     print(f"wrote {out} in {time.perf_counter() - t0:.1f} s: {args.duration:g} s of "
           f"{args.arm} at {args.rate:g} Hz ({len(run.t)} JointState messages on joint_states, "
-          "truth on truth/joint_states)")
+          "truth on truth/joint_states); base regressor condition number of the trajectory "
+          f"{regressor_cond(arm.model, base_parameters(arm.model), traj):.4g}")
     print(table(("joint", "|q - q0| max rad", "|qd| max rad/s", "|tau| max N m",
                  "noise N m", "offset N m"),
                 [(n, float(np.abs(run.q[:, j] - traj.q0[j]).max()),

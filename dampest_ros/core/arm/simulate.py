@@ -4,7 +4,7 @@ sensor with an offset)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -56,9 +56,6 @@ class ArmRun:
     position, velocity, effort : ndarray, shape (N, n)
         Measured: quantised position, its backward difference, and the torque sensor's
         reading τ + offset + noise.
-    names : tuple of str
-        Joint names.
-    sensors : ArmSensors
     """
 
     t: FloatArray
@@ -69,8 +66,6 @@ class ArmRun:
     position: FloatArray
     velocity: FloatArray
     effort: FloatArray
-    names: tuple[str, ...] = ()
-    sensors: ArmSensors = field(default_factory=ArmSensors)
 
 
 def simulate_arm(mjcf_xml: str, arm: ArmModel, nominal: JointDynamics,
@@ -165,5 +160,4 @@ def simulate_arm(mjcf_xml: str, arm: ArmModel, nominal: JointDynamics,
     effort = (out["tau"] + np.asarray(sensors.torque_offset, dtype=float)
               + rng.normal(size=out["tau"].shape) * np.asarray(sensors.torque_sigma, float))
     return ArmRun(t=t_all[keep], q=out["q"], qd=out["qd"], qdd=out["qdd"], tau=out["tau"],
-                  position=position, velocity=velocity, effort=effort, names=arm.names,
-                  sensors=sensors)
+                  position=position, velocity=velocity, effort=effort)
