@@ -118,7 +118,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Dispatch to the chosen arm command."""
+    """Dispatch to the chosen arm command (after checking that Pinocchio and MuJoCo load)."""
+    import importlib
+
+    for module, pip in (("pinocchio", "pin==4.1.0"), ("mujoco", "mujoco==4.0.0")):
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise ValueError(f"dampest arm needs {module} ({exc}); install it with "
+                             f"'pip install {pip}' (pinned in requirements/lock.txt)") from None
     return {"design": _design, "simulate": _simulate, "identify": _identify}[
         args.arm_command](args)
 
