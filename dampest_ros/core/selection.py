@@ -111,6 +111,11 @@ class Selection:
         return 1.0 - self.steps[0].cv / self.tss, 1.0 - self.steps[-1].cv / self.tss
 
 
+#: Searches of :func:`select_terms` when the base has terms acting in several rows: their
+#: force is estimated with the base, then with the terms the previous search chose.
+SHARED_ROUNDS = 2
+
+
 def _with_terms(base: DampingModel, cross: Sequence[CrossSpec],
                 memory: dict[int, float], shared: Sequence[DampingTerm] = ()) -> DampingModel:
     terms: dict[str, DampingTerm] = {t.kind: t for t in [*base.terms, *shared]}
@@ -278,20 +283,41 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     Selection
 
     Base parameters that act in several rows at once (the ``coriolis`` term) cannot be chosen
-    row by row: they stay, estimated with the whole base by least squares, and the search
-    runs on the target less their force; the fit of the selected model estimates them again
-    with the chosen terms.
+    row by row: they stay, and the search runs on the target less their force, estimated by
+    least squares with the base, then again with the terms the first search chose
+    (:data:`SHARED_ROUNDS` searches); the fit of the selected model estimates them with the
+    chosen terms.
     """
+    options: dict[str, Any] = {
+        "cross": cross, "families": families, "memory_dofs": memory_dofs, "cutoff": cutoff,
+        "folds": folds, "max_terms": max_terms, "min_improvement": min_improvement,
+        "min_err": min_err, "tol": tol, "strict_base": strict_base, "rounds": rounds,
+        "exchange": exchange}
     shared = [t for t in base.terms if any(b.more for b in t.bases)]
-    n_shared = sum(t.n_params for t in shared)
-    if shared:
-        theta = _least_squares(samples, base, body, cutoff)
+    if not shared:
+        return _search(samples, base, body, (), **options)
+    single = DampingModel([t for t in base.terms if t not in shared])
+    model = base
+    for _ in range(SHARED_ROUNDS):
+        theta = _least_squares(samples, model, body, cutoff)
+        values = dict(zip(model.parameter_names, theta, strict=True))
         part = DampingModel(shared)
-        values = dict(zip(base.parameter_names, theta, strict=True))
         known = part.force(samples.nu, np.array([values[n] for n in part.parameter_names]))
         # y − Φ_shared θ_shared: the same as τ less that force
-        samples = replace(samples, tau=samples.tau - known)
-        base = DampingModel([t for t in base.terms if t not in shared])
+        selection = _search(replace(samples, tau=samples.tau - known), single, body, shared,
+                            **options)
+        model = selection.model
+    return selection
+
+
+def _search(samples: Samples, base: DampingModel, body: RigidBody,
+            shared: Sequence[DampingTerm], cross: Sequence[dict[str, str]] | None,
+            families: Sequence[str], memory_dofs: Sequence[int], cutoff: float, folds: int,
+            max_terms: int, min_improvement: float, min_err: float, tol: float,
+            strict_base: bool, rounds: int, exchange: float) -> Selection:
+    """The stepwise search of :func:`select_terms` on top of the single-row terms ``base``;
+    the ``shared`` terms count in the budget and join the selected model."""
+    n_shared = sum(t.n_params for t in shared)
     base_names = base.parameter_names
     specs = library(families) if cross is None else [CrossSpec.from_dict(c) for c in cross]
     specs = [sp for sp in specs if sp.label not in base_names]

@@ -32,6 +32,7 @@ from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, Rig
 from dampest_ros.core.terms import (
     CrossSpec,
     added_mass_term,
+    coriolis_term,
     cross_term,
     linear_term,
     memory_term,
@@ -115,6 +116,14 @@ def damping_from_spec(spec: dict[str, Any]) -> tuple[DampingModel, FloatArray]:
     if "added" in spec:
         terms.append(added_mass_term())
         values.update(_values("added", spec["added"] or {}))
+    if "coriolis" in spec:
+        cor = _values("coriolis", spec["coriolis"] or {})
+        axes = [n.removeprefix("coriolis.m_") for n in cor] or ["u", "v", "w"]
+        if any(a not in ("u", "v", "w") for a in axes):
+            raise ConfigError("damping.coriolis", f"names are coriolis.m_u, coriolis.m_v, "
+                                                  f"coriolis.m_w; got {list(cor)}")
+        terms.append(coriolis_term(axes))
+        values.update(cor)
     if "residual" in spec:
         res = spec["residual"] or {}
         term = residual_term(np.asarray(res["modes"], dtype=float).T if "modes" in res else None)

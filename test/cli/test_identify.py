@@ -196,7 +196,8 @@ def test_table_says_what_the_data_determine_on_foreign_physics(
     assert main(["simulate", "--backend", "mujoco", "--vehicle", "torpedo_auv", "--protocol",
                  "B", "--duration", "120", "--seed", "1", "--out", str(bag)]) == 0
     capsys.readouterr()
-    assert main(["identify", str(bag), "--vehicle", "torpedo_auv"]) == 0
+    assert main(["identify", str(bag), "--vehicle", "torpedo_auv", "--terms",
+                 "linear,quadratic"]) == 0
     printed = capsys.readouterr().out
     rows = {x.split()[0]: x for x in printed.split("status\n")[1].split("\n\n")[0]
             .splitlines()[1:]}

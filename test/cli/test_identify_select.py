@@ -71,23 +71,27 @@ def test_no_misfit_on_data_the_preset_describes(tmp_path: Path,
     assert not [x for x in capsys.readouterr().out.splitlines() if x.startswith("misfit:")]
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize(("vehicle", "floor"), [("torpedo_auv", 0.99),
-                                                ("bluerov2_heavy_mujoco", 0.985)])
-def test_mujoco_plant_held_out_r2_and_prior_independence(
-        vehicle: str, floor: float, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """Physics we did not write (MuJoCo's ellipsoid fluid model), 600 s of protocol B: fit on
-    the first 70 %, held-out force R² on the last 30 % ≥ 0.99 in every DOF for the torpedo
-    (measured .994–.999), ≥ 0.985 for the ROV (K .986 with 25 terms: short of 0.99), at most
-    25 terms; with the preset's damping halved and doubled the same terms and R² to 0.002."""
+#: Noiseless sensors for dampest simulate --sensors (no white noise, bias walk or dropout).
+CLEAN = ("{gyro_noise: 0.0, gyro_bias_walk: 0.0, accel_noise: 0.0, accel_bias_walk: 0.0, "
+         "orientation_noise: 0.0, dvl_noise: 0.0, dvl_dropout_rate: 0.0, pressure_noise: 0.0, "
+         "rpm_noise: 0.0}")
+
+
+def select_heldout(tmp_path: Path, vehicle: str, seed: int, clean: bool = False,
+                   factors: tuple[float, ...] = (1.0,)) -> dict[float, tuple[set[str],
+                                                                  np.ndarray]]:
+    """600 s of protocol B in MuJoCo (the README's recommended command: --select, fit on the
+    first 70 %, held-out force R² on the last 30 %) with the preset's damping prior scaled by
+    each factor: the selected names and the held-out R² per DOF."""
     import yaml
 
     bag = tmp_path / "bag"
     assert main(["simulate", "--backend", "mujoco", "--vehicle", vehicle, "--protocol", "B",
-                 "--duration", "600", "--seed", "1", "--out", str(bag)]) == 0
+                 "--duration", "600", "--seed", str(seed), "--out", str(bag),
+                 *(["--sensors", CLEAN] if clean else [])]) == 0
     preset = yaml.safe_load((Path("config/vehicles") / f"{vehicle}.yaml").read_text())
     runs = {}
-    for factor in (1.0, 0.5, 2.0):
+    for factor in factors:
         scaled = dict(preset, damping={k: {n: v * factor for n, v in terms.items()}
                                        for k, terms in preset["damping"].items()})
         path = tmp_path / f"{vehicle}_{factor}.yaml"
@@ -97,9 +101,32 @@ def test_mujoco_plant_held_out_r2_and_prior_independence(
                      "0.3", "--out", str(out)]) == 0
         m = load_model(out)
         runs[factor] = (set(m.parameter_names), np.array(m.extra["heldout_r2"]))
-    names, r2 = runs[1.0]
+    return runs
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("clean", [False, True], ids=["noisy", "clean"])
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("vehicle", ["torpedo_auv", "bluerov2_heavy_mujoco"])
+def test_mujoco_plant_held_out_r2(vehicle: str, seed: int, clean: bool,
+                                  tmp_path: Path) -> None:
+    """Physics we did not write (MuJoCo's ellipsoid fluid model, the faithful vehicle
+    description with its Magnus lift as the coriolis term): held-out force R² ≥ 0.99 in every
+    DOF with at most 25 terms, both presets, seeds 1–3, realistic and noiseless sensors
+    (the ROV's roll was .986 while the lift took six bilinear terms of the 25)."""
+    names, r2 = select_heldout(tmp_path, vehicle, seed, clean)[1.0]
     assert len(names) <= 25
-    assert np.all(r2 >= floor), r2
+    assert np.all(r2 >= 0.99), r2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("vehicle", ["torpedo_auv", "bluerov2_heavy_mujoco"])
+def test_mujoco_plant_selection_does_not_depend_on_the_prior(vehicle: str,
+                                                             tmp_path: Path) -> None:
+    """Seed 1 with the preset's damping halved and doubled: the same terms and held-out R²
+    to 0.002."""
+    runs = select_heldout(tmp_path, vehicle, 1, factors=(1.0, 0.5, 2.0))
+    names, r2 = runs[1.0]
     for factor in (0.5, 2.0):
         assert runs[factor][0] == names
         np.testing.assert_allclose(runs[factor][1], r2, atol=0.002)

@@ -11,6 +11,7 @@ from dampest_ros.core.alpha import Alpha
 from dampest_ros.core.batch import FitOptions, fit
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.dissipative import envelope
+from dampest_ros.core.estimator import restrict
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.regression import accumulate, iter_regression
@@ -105,9 +106,12 @@ def with_extra_force(s: Samples, extra: np.ndarray) -> Samples:
 @pytest.fixture(scope="module")
 def torpedo() -> tuple[Vehicle, Samples]:
     """MuJoCo's torpedo_auv (physics we did not write), protocol B, 120 s, seed 2, exact ν,
-    ν̇ and τ: its ellipsoid drag and fin lift are not of the preset's linear + quadratic form."""
+    ν̇ and τ: its ellipsoid drag and fin lift are not of the preset's linear + quadratic form
+    (the vehicle here has those two terms only)."""
     pytest.importorskip("mujoco")
-    v = load_vehicle("torpedo_auv")
+    full = load_vehicle("torpedo_auv")
+    damping, theta = restrict(full.damping, full.theta, ["linear", "quadratic"])
+    v = replace(full, damping=damping, theta=theta)
     traj = run(v, make_excitation("B", v, 120.0, seed=2), dt=0.02, backend="mujoco")
     R = quat_to_matrix(traj.quaternion)
     return v, Samples(traj.t, traj.nu, traj.nu_dot, traj.tau, euler_from_matrix(R),
