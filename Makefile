@@ -34,6 +34,7 @@ demo: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check dampest_ros test
 	$(BIN)/mypy dampest_ros
+	$(BIN)/lint-imports
 
 test: export OPENBLAS_NUM_THREADS = 1
 test: lint

@@ -9,6 +9,7 @@ The library in a few lines::
                             vehicle.body.rho)
     identified = dr.DampingIdentifier(vehicle).fit(samples)
     print(dict(zip(identified.names_, identified.coef_)))
+    dr.save_model("model.yaml", identified.model_)  # the model file every node and tool reads
 
 The names below are imported on first use, so that ``import dampest_ros`` (and the
 ``dampest`` command's start) loads neither numpy nor scipy.
@@ -28,21 +29,25 @@ _HOME = {
     "read_csv": "dampest_ros.io.csv",
     "preprocess": "dampest_ros.core.preprocess",
     "DampingIdentifier": "dampest_ros.core.identifier",
+    "Model": "dampest_ros.core.model",
+    "load_model": "dampest_ros.io.yaml_io",
+    "save_model": "dampest_ros.io.yaml_io",
     "find_gap": "dampest_ros.core.gap.search",
     "simulate": "dampest_ros.core.simulate",
 }
 
-__all__ = ["DampingIdentifier", "find_gap", "load_vehicle", "preprocess", "read_bag",
-           "read_csv", "simulate"]
+__all__ = ["DampingIdentifier", "Model", "find_gap", "load_model", "load_vehicle", "preprocess",
+           "read_bag", "read_csv", "save_model", "simulate"]
 
 if TYPE_CHECKING:
     from dampest_ros.core.gap.search import find_gap
     from dampest_ros.core.identifier import DampingIdentifier
+    from dampest_ros.core.model import Model
     from dampest_ros.core.preprocess import preprocess
     from dampest_ros.core.simulate import simulate
     from dampest_ros.io.bag import read_bag
     from dampest_ros.io.csv import read_csv
-    from dampest_ros.io.yaml_io import load_vehicle
+    from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 
 
 def __getattr__(name: str) -> Any:

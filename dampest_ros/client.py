@@ -24,7 +24,7 @@ Every static damping term is evaluated (linear, quadratic, cross, added mass, re
 structure comes from ``model.terms.*`` when the server declares them (estimator_node and
 model_server_node do, as the model file has them), otherwise it is rebuilt from the
 parameter names, which is enough for linear and quadratic terms. A fluid-memory term needs
-its filter states and is refused (:class:`dampest_ros.core.identified.IdentifiedModel`).
+its filter states and is refused.
 
 The service is called with ``call_async``; the caller's node must be spun by an executor
 (its own, or the background thread :meth:`ModelClient.standalone` starts). Blocking on
@@ -44,14 +44,16 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.identified import IdentifiedModel
-from dampest_ros.io.yaml_io import ModelFile, load_model, model_from_parameters
+from dampest_ros.core.model import Model
+from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.io.yaml_io import load_model, model_from_parameters
 
 FloatArray = NDArray[np.float64]
 
@@ -61,10 +63,14 @@ MODEL_PARAMETERS = ("model.parameter_names", "model.theta", "model.theta_std", "
                     "model.version")
 
 
-def _identified(m: ModelFile) -> IdentifiedModel:
-    """The evaluable model of a model file (structure from its terms, else from the names)."""
-    return IdentifiedModel(m.parameter_names, m.theta, m.theta_std, m.M, m.damping, m.version,
-                           m.M_A, m.added_mass_terms, m.held)
+def _evaluable(m: Model) -> Model:
+    """The model with its structure (from its terms, else rebuilt from the names); a memory
+    term, which needs its filter states, is refused (ConfigError)."""
+    structure = m.structure
+    if structure.term("freq") is not None:
+        raise ConfigError("model.terms", "a memory (freq) term needs its filter states; "
+                                         "evaluate it with DampingModel.force")
+    return replace(m, damping=structure)
 
 
 class ModelUnavailableError(RuntimeError):
@@ -83,14 +89,14 @@ class ModelClient:
     follow : bool
         Refresh on ``/parameter_events`` of the server.
     on_update : callable, optional
-        Called with the new :class:`IdentifiedModel` after each refresh.
+        Called with the new :class:`Model` after each refresh.
     timeout : float
         Seconds the server may be missing from the graph before it counts as lost
         (:attr:`lost`; checked every ``min(timeout / 4, 0.5)`` s of wall-clock time).
     """
 
     def __init__(self, node: Any = None, server: str = "estimator_node", follow: bool = True,
-                 on_update: Callable[[IdentifiedModel], None] | None = None,
+                 on_update: Callable[[Model], None] | None = None,
                  timeout: float = 5.0) -> None:
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout}")
@@ -101,7 +107,7 @@ class ModelClient:
         self._received_at = math.nan     # time.monotonic() when the model in hand arrived
         self._missing_since: float | None = None  # since when the server is not in the graph
         self._lost_logged = False
-        self._model: IdentifiedModel | None = None
+        self._model: Model | None = None
         self._lock = threading.Lock()
         self._got = threading.Event()
         self.refreshes = 0
@@ -132,7 +138,7 @@ class ModelClient:
     def from_yaml(cls, path: str | Path) -> ModelClient:
         """A client holding the model of a model file (no ROS needed)."""
         client = cls(None)
-        client._set(_identified(load_model(path)))
+        client._set(_evaluable(load_model(path)))
         return client
 
     # --- with ROS ------------------------------------------------------------------------
@@ -207,7 +213,7 @@ class ModelClient:
                                             f"{len(names)} model parameters")
             m = model_from_parameters({n: parameter_value_to_python(v)
                                        for n, v in zip(names, values, strict=True)})
-            self._set(_identified(m))
+            self._set(_evaluable(m))
         except Exception as exc:  # a bad answer must not kill the caller's executor
             self._refuse(exc)
 
@@ -248,7 +254,7 @@ class ModelClient:
         if "model.version" in changed:
             self.request()
 
-    def _set(self, model: IdentifiedModel) -> None:
+    def _set(self, model: Model) -> None:
         with self._lock:
             self._model = model
             self._received_at = time.monotonic()
@@ -257,7 +263,7 @@ class ModelClient:
         if self.on_update is not None:
             self.on_update(model)
 
-    def wait(self, timeout: float = 10.0) -> IdentifiedModel:
+    def wait(self, timeout: float = 10.0) -> Model:
         """Block until a model is available (the node must be spun elsewhere)."""
         if not self._got.wait(timeout):
             raise ModelUnavailableError(f"no model from {self.server} within {timeout} s"
@@ -283,7 +289,7 @@ class ModelClient:
         return time.monotonic() - self._received_at
 
     @property
-    def model(self) -> IdentifiedModel:
+    def model(self) -> Model:
         """The latest model."""
         with self._lock:
             if self._model is None:

@@ -26,7 +26,13 @@ def test_the_readme_example_identifies_a_simulated_bag(tmp_path: Path) -> None:
     samples = dr.preprocess(dr.read_bag(tmp_path / "my_bag"), vehicle.thrusters,
                             vehicle.body.gravity, vehicle.body.rho)
     identified = dr.DampingIdentifier(vehicle).fit(samples)
+    path = dr.save_model(tmp_path / "model.yaml", identified.model_)
 
+    # the model file holds what the fit found
+    back = dr.load_model(path)
+    assert back.parameter_names == identified.names_
+    np.testing.assert_array_equal(back.theta, identified.coef_)
+    assert back.identified.all() and back.extra["method"] == "wls"
     # the quadratic coefficients the bag was simulated with, to 2 % (X_uu = 141 ... N_rr = 1.5)
     quad = truth.damping.slice("quadratic")
     assert identified.names_[quad] == truth.damping.parameter_names[quad]

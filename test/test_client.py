@@ -17,6 +17,7 @@ import pytest
 
 from dampest_ros.client import ModelClient
 from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import ConfigError, coriolis_force
 from dampest_ros.core.vehicle import damping_from_spec
 from dampest_ros.io.yaml_io import damping_spec, load_vehicle, save_model, vehicle_path
@@ -40,7 +41,7 @@ def model_and_file(path: Path, seed: int = 3) -> tuple[DampingModel, np.ndarray,
     theta = rng.uniform(0.1, 50.0, model.n_params)
     std = rng.uniform(0.01, 1.0, model.n_params)
     M = load_vehicle("bluerov2_heavy").body.M
-    save_model(path, model.parameter_names, theta, std, M, damping=model, version=4)
+    save_model(path, Model(model.parameter_names, theta, std, M, damping=model, version=4))
     return model, theta, std, M
 
 
@@ -67,7 +68,7 @@ def test_yaml_client_evaluates_cross_added_and_residual_terms(tmp_path: Path) ->
     assert {t.kind for t in model.terms} == {"linear", "quadratic", "cross", "added",
                                              "residual"}
     client = ModelClient.from_yaml(path)
-    assert client.version == 4 and client.model.names == model.parameter_names
+    assert client.version == 4 and client.model.parameter_names == model.parameter_names
     check_client(client, model, theta, std, M)
     # the cross and residual terms matter at these speeds (the test would see them missing)
     nu = np.array([[0.5, 0.3, 0.2, 0.1, 0.2, 0.6]])
@@ -163,8 +164,8 @@ def test_model_server_and_estimator_parameters_give_the_same_model(tmp_path: Pat
         # client follows the version bump to the new structure
         small = tmp_path / "small.yaml"
         v = load_vehicle("bluerov2_heavy")
-        save_model(small, v.damping.parameter_names, 2.0 * v.theta, np.ones(12), v.body.M,
-                   damping=v.damping)
+        save_model(small, Model(v.damping.parameter_names, 2.0 * v.theta, np.ones(12), v.body.M,
+                                damping=v.damping))
         by_file.set_parameters([rclpy.parameter.Parameter("model_file", value=str(small))])
         spin_until(lambda: clients[0].version == 5)
         assert clients[0].version == 5, clients[0].errors
@@ -188,9 +189,10 @@ def test_added_mass_switches_reach_the_client_from_file_and_parameters(tmp_path:
     vehicle_file.write_text(yaml.safe_dump(doc, sort_keys=False))
     v = load_vehicle(vehicle_file)
     assert v.body.added_mass_terms == AddedMassTerms(**switches)
-    path = save_model(tmp_path / "model.yaml", v.damping.parameter_names, v.theta,
-                      np.ones(v.theta.size), v.body.M, damping=v.damping,
-                      M_A=v.body.added_mass, added_mass_terms=v.body.added_mass_terms)
+    path = save_model(tmp_path / "model.yaml", Model(v.damping.parameter_names, v.theta,
+                                                     np.ones(v.theta.size), v.body.M,
+                                                     damping=v.damping, M_A=v.body.added_mass,
+                                                     added_mass_terms=v.body.added_mass_terms))
     nu = np.random.default_rng(11).normal(0.0, [0.8, 0.6, 0.4, 0.5, 0.5, 0.6], (40, 6))
     want = v.body.coriolis_force(nu)
     # the Munk moments are what the switch removes: N = (Y_v̇ − X_u̇) u v is large here
@@ -262,8 +264,8 @@ def test_bad_model_at_runtime_is_refused_and_the_client_keeps_the_last_good_one(
     names = v.damping.parameter_names
     held = {"Y_vv": "poorly determined", "K_pp": "no excitation"}
     std = np.array([np.nan if n in held else 0.5 for n in names])
-    good = save_model(tmp_path / "good.yaml", names, v.theta, std, v.body.M,
-                      damping=v.damping, version=4, held=held)
+    good = save_model(tmp_path / "good.yaml", Model(names, v.theta, std, v.body.M,
+                                                    damping=v.damping, version=4, held=held))
     bad = nan_file(tmp_path / "bad.yaml", good)
     with pytest.raises(ConfigError, match=r"model\.theta: not finite: X_u = nan"):
         ModelClient.from_yaml(bad)
@@ -282,8 +284,8 @@ def test_bad_model_at_runtime_is_refused_and_the_client_keeps_the_last_good_one(
         # a server that publishes whatever it is given (as a faulty estimator would)
         m = load_model(good)
         fake = rclpy.create_node("fake_server", namespace=ns, context=context)
-        for name, value in model_parameters(names, m.theta, m.theta_std, m.M,
-                                            damping=m.damping, version=4, held=held).items():
+        for name, value in model_parameters(Model(names, m.theta, m.theta_std, m.M,
+                                                  damping=m.damping, version=4, held=held)).items():
             fake.declare_parameter(name, value)
         probe = rclpy.create_node("probe", namespace=ns, context=context)
         nodes += [server, fake, probe]

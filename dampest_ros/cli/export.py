@@ -107,6 +107,7 @@ def run_import(args: argparse.Namespace) -> int:
     """Read the file's hydrodynamics into a model file."""
     import numpy as np
 
+    from dampest_ros.core.model import Model
     from dampest_ros.io.export.common import imported_mass_parts
     from dampest_ros.io.export.convert import import_model
     from dampest_ros.io.yaml_io import load_vehicle, save_model
@@ -119,10 +120,11 @@ def run_import(args: argparse.Namespace) -> int:
     if vehicle is not None and imp.added_mass is None and (terms is None or terms.all):
         terms = vehicle.body.added_mass_terms  # the vehicle's added mass, with its switches
     damping = imp.damping()
-    save_model(args.out, imp.names, imp.theta, np.zeros(len(imp.names)), M_RB + M_A,
-               extra={"source": f"dampest import {args.file} ({args.format})",
-                      "import_notes": "; ".join([*imp.notes, *mass_notes])},
-               damping=damping, M_A=M_A, added_mass_terms=terms)
+    save_model(args.out, Model(
+        imp.names, imp.theta, np.zeros(len(imp.names)), M_RB + M_A, damping=damping,
+        extra={"source": f"dampest import {args.file} ({args.format})",
+               "import_notes": "; ".join([*imp.notes, *mass_notes])},
+        M_A=M_A, added_mass_terms=terms))
     print(f"wrote {args.out}: {len(imp.names)} parameters from {args.file} ({args.format}); "
           + "; ".join(mass_notes))
     for note in imp.notes:

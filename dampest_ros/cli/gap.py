@@ -23,10 +23,11 @@ from dampest_ros.core.gap.model_effects import Memory
 from dampest_ros.core.gap.search import GapOptions, GapResult, correction, find_gap
 from dampest_ros.core.gap.update import free_run_errors, updated_model
 from dampest_ros.core.measurements import JointSeries
+from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
-from dampest_ros.io.yaml_io import ModelFile, load_vehicle, save_model
+from dampest_ros.io.yaml_io import load_vehicle, save_model
 from dampest_ros.report import psd_limits, psd_unit
 
 DPI = 90
@@ -97,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     # the model file first: it does not depend on the free run
     final = final_model(data, result, mf, args)
     if args.out:
-        save_final(Path(args.out), final)
+        save_model(Path(args.out), final)
     free = free_run_errors(data, result.effects)
     print()
     print(free_run_text(free))
@@ -194,9 +195,9 @@ def _param_key(key: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]", "_", key)
 
 
-def final_model(data: GapData, result: GapResult, mf: ModelFile,
-                args: argparse.Namespace) -> dict[str, Any]:
-    """Names, θ, std, M, damping model and extra entries of the model with the effects."""
+def final_model(data: GapData, result: GapResult, mf: Model,
+                args: argparse.Namespace) -> Model:
+    """The believed model with the named effects applied, its σ and what they updated."""
     upd = updated_model(data, result.effects)
     std = dict(zip(mf.parameter_names, mf.theta_std.tolist(), strict=True))
     effects: dict[str, Any] = {}
@@ -226,17 +227,9 @@ def final_model(data: GapData, result: GapResult, mf: ModelFile,
                 "conclusion": result.conclusion, **effects, **upd.extra}}
     # a coefficient the believed model held at its prior stays held unless an effect set it
     held = {n: why for n, why in mf.held.items() if n in names and n not in updated}
-    return {"names": names, "theta": upd.theta,
-            "std": np.array([std.get(n, 0.0) for n in names]), "M": upd.M,
-            "damping": upd.model, "M_A": upd.M_A, "added_mass_terms": upd.added_mass_terms,
-            "extra": extra, "held": held}
-
-
-def save_final(path: Path, final: dict[str, Any]) -> None:
-    """Write the model with the named effects as a model YAML."""
-    save_model(path, final["names"], final["theta"], final["std"], final["M"],
-               extra=final["extra"], damping=final["damping"], M_A=final["M_A"],
-               added_mass_terms=final["added_mass_terms"], held=final["held"])
+    return Model(names, upd.theta, np.array([std.get(n, 0.0) for n in names]), upd.M,
+                 damping=upd.model, extra=extra, M_A=upd.M_A,
+                 added_mass_terms=upd.added_mass_terms, held=held)
 
 
 # --- report ------------------------------------------------------------------------------
@@ -311,10 +304,10 @@ def _residual_figure(data: GapData, before: np.ndarray, after: np.ndarray, title
 
 def write_report(out: Path, data: GapData, result: GapResult,
                  rows: list[LocalRow], free: dict[str, Any] | str,
-                 final: dict[str, Any], args: argparse.Namespace) -> Path:
+                 final: Model, args: argparse.Namespace) -> Path:
     """index.html, residual figures per step and final_model.yaml in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    save_final(out / "final_model.yaml", final)
+    save_model(out / "final_model.yaml", final)
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>dampest gap</title>"
              f"<style>{CSS}</style></head><body><h1>Sim-to-real gap</h1>"
              f"<p class='note'>measured: {html.escape(str(args.input))} · model: "

@@ -234,7 +234,7 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
               "residual standard deviations; a large residual is a model misfit: try dampest "
               "identify --select)")
     if args.out:
-        est.save(Path(args.out), 1, source=str(args.input), method="rls")
+        save_model(Path(args.out), est.to_model(1, source=str(args.input), method="rls"))
         print(f"wrote {args.out}")
     return 0
 
@@ -343,20 +343,11 @@ def write_model(path: Path, result: Fit, model: DampingModel, body: RigidBody,
     smallest and largest of ``flown``, ν of the fitted samples, the envelope exports check
     dissipativity on), with a held-out part, its per-DOF R² and RMSE (``heldout_r2``,
     ``heldout_rmse``), and ``more`` entries (e.g. the logs pooled)."""
-    ci = result.interval()
-    more = dict(more or {})
+    more = {**(more or {}), "source": source}
     if heldout is not None:
         more["heldout_r2"] = [float(x) for x in heldout["nse"]]
         more["heldout_rmse"] = [float(x) for x in heldout["rmse"]]
     if flown is not None:
         more["flown_speeds"] = {"min": [float(x) for x in flown.min(axis=0)],
                                 "max": [float(x) for x in flown.max(axis=0)]}
-    save_model(path, result.names, result.theta, result.std, body.M, damping=model,
-               M_A=body.added_mass, added_mass_terms=body.added_mass_terms,
-               held={n: result.flags.get(n) or result.constrained[n]
-                     for n, ok in zip(result.names, result.identified, strict=True) if not ok},
-               extra={**more,
-        "source": source, "method": result.method, "samples": int(result.n),
-        "ci95_low": [float(x) for x in ci[:, 0]], "ci95_high": [float(x) for x in ci[:, 1]],
-        "nse": [float(x) for x in result.r2], "rmse": [float(x) for x in result.rmse],
-        "condition_number": float(result.cond)})
+    save_model(path, result.to_model(model, body, more))

@@ -19,13 +19,14 @@ import numpy as np
 from dampest_ros.cli.common import Progress, tau_topic, topic_roles
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.delay import profile_delay
+from dampest_ros.core.model import Model
 from dampest_ros.core.preprocess import DataError, PreprocessConfig, preprocess
 from dampest_ros.core.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import BagSource, bag_summary, check_role_types
 from dampest_ros.io.csv import is_csv, load_column_map, read_log
-from dampest_ros.io.yaml_io import ModelFile, load_model
+from dampest_ros.io.yaml_io import load_model
 
 
 def bag_topics(path: Path, vehicle: Vehicle, args: argparse.Namespace) -> dict[str, str]:
@@ -245,7 +246,7 @@ def split_holdout(samples: Samples, text: str) -> tuple[Samples, Samples]:
     return rest, samples.take(held)
 
 
-def believed_body(vehicle: Vehicle, mf: ModelFile) -> RigidBody:
+def believed_body(vehicle: Vehicle, mf: Model) -> RigidBody:
     """The vehicle's rigid body with the model file's M (added mass = M − M_RB), its
     added-mass switches kept."""
     b = vehicle.body
@@ -261,7 +262,7 @@ def believed_body(vehicle: Vehicle, mf: ModelFile) -> RigidBody:
                           ) from None
 
 
-def load_model_for(path: str, vehicle: Vehicle) -> tuple[ModelFile, DampingModel, RigidBody]:
+def load_model_for(path: str, vehicle: Vehicle) -> tuple[Model, DampingModel, RigidBody]:
     """A model file with its term structure (the vehicle preset's when the file has none and
     the same parameters) and the body it implies (:func:`believed_body`)."""
     mf = load_model(path)

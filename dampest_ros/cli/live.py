@@ -17,9 +17,11 @@ from dampest_ros.cli.common import table
 from dampest_ros.core.control import DEFAULT_BANDWIDTH
 from dampest_ros.core.effects import Effects, true_vehicle
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
+from dampest_ros.core.model import Model
 from dampest_ros.core.preprocess import DataError
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.io.yaml_io import save_model
 
 FloatArray = NDArray[np.float64]
 
@@ -168,13 +170,12 @@ def write_prior(vehicle: Vehicle, factor: float, path: Path) -> Path:
     """
     if not factor > 0:
         raise ConfigError("prior_factor", f"must be > 0, got {factor}")
-    from dampest_ros.io.yaml_io import save_model
     theta = factor * vehicle.theta
     std = EstimatorConfig().prior_scale * parameter_scale(vehicle.damping, theta)
-    return save_model(path, vehicle.damping.parameter_names, theta, std, vehicle.body.M,
-                      {"source": f"{factor:g} x the nominal damping of {vehicle.name}"},
-                      damping=vehicle.damping, M_A=vehicle.body.added_mass,
-                      added_mass_terms=vehicle.body.added_mass_terms)
+    return save_model(path, Model(
+        vehicle.damping.parameter_names, theta, std, vehicle.body.M, damping=vehicle.damping,
+        extra={"source": f"{factor:g} x the nominal damping of {vehicle.name}"},
+        M_A=vehicle.body.added_mass, added_mass_terms=vehicle.body.added_mass_terms))
 
 
 @dataclass
@@ -283,7 +284,7 @@ def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float], p
     e.process(force=True)
     history.add(e.last_sample_t, e.theta, e.theta_std)
     est.version += 1
-    saved = e.save(path, est.version)
+    saved = save_model(path, e.to_model(est.version))
     used = max(e.counts["used"], 1)
     lost = pre.pre.counts
     lines = [

@@ -65,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
     from dampest_ros.cli.common import speed_table, table
     from dampest_ros.core.effects import Effects, true_vehicle
     from dampest_ros.core.excitation import make_excitation
+    from dampest_ros.core.model import Model
     from dampest_ros.core.preprocess import PreprocessConfig, preprocess
     from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
     from dampest_ros.core.simulate import run as run_sim
@@ -89,13 +90,13 @@ def run(args: argparse.Namespace) -> int:
     write_bag(out, rec, storage=args.storage)
     if args.backend == "native":
         truth = true_vehicle(vehicle, effects)
-        save_model(out / "truth_model.yaml", truth.damping.parameter_names, truth.theta,
-                   np.zeros(truth.damping.n_params), truth.body.M,
-                   extra={"source": "dampest simulate", "vehicle": vehicle.name,
-                          "protocol": args.protocol, "duration": float(args.duration),
-                          "seed": int(args.seed), "effects": str(effects.as_dict() or "none")},
-                   damping=truth.damping, M_A=truth.body.added_mass,
-                   added_mass_terms=truth.body.added_mass_terms)
+        save_model(out / "truth_model.yaml", Model(
+            truth.damping.parameter_names, truth.theta, np.zeros(truth.damping.n_params),
+            truth.body.M, damping=truth.damping,
+            extra={"source": "dampest simulate", "vehicle": vehicle.name,
+                   "protocol": args.protocol, "duration": float(args.duration),
+                   "seed": int(args.seed), "effects": str(effects.as_dict() or "none")},
+            M_A=truth.body.added_mass, added_mass_terms=truth.body.added_mass_terms))
     if args.csv:
         samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
                              PreprocessConfig(), mounting=vehicle.mounting)

@@ -11,6 +11,7 @@ AIC/BIC) is closed-form in them; the covariance is block-robust plus the sensor-
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,6 +26,7 @@ from dampest_ros.core.covariance import (
 )
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.dissipative import dissipation_points, impose, misfit_report
+from dampest_ros.core.model import Model
 from dampest_ros.core.quadratic import solve_normal
 from dampest_ros.core.regression import NormalEquations, accumulate, total_sum_of_squares
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
@@ -185,6 +187,33 @@ class Fit:
     def bic(self) -> float:
         """Bayesian information criterion."""
         return -2 * self.log_likelihood + self.n_free * float(np.log(self.n_eff))
+
+    def to_model(self, damping: DampingModel, body: RigidBody,
+                 extra: dict[str, Any] | None = None) -> Model:
+        """The fit as a :class:`~dampest_ros.core.model.Model`: θ and σ, the coefficients not
+        identified held with their reason (``flags``, else the constraint), the body's mass
+        matrix, added mass and switches, and as ``extra`` the method, sample count, 95 %
+        intervals, per-DOF NSE and RMSE and condition number, plus ``extra``.
+
+        Parameters
+        ----------
+        damping : DampingModel
+            The structure fitted (its names are :attr:`names`).
+        body : RigidBody
+        extra : dict, optional
+            More provenance (e.g. ``source``, ``flown_speeds``).
+        """
+        ci = self.interval()
+        held = {n: self.flags.get(n) or self.constrained[n]
+                for n, ok in zip(self.names, self.identified, strict=True) if not ok}
+        figures = {"method": self.method, "samples": int(self.n),
+                   "ci95_low": [float(x) for x in ci[:, 0]],
+                   "ci95_high": [float(x) for x in ci[:, 1]],
+                   "nse": [float(x) for x in self.r2], "rmse": [float(x) for x in self.rmse],
+                   "condition_number": float(self.cond)}
+        return Model(self.names, self.theta, self.std, body.M, damping=damping,
+                     extra={**(extra or {}), **figures}, M_A=body.added_mass,
+                     added_mass_terms=body.added_mass_terms, held=held)
 
 
 @dataclass(frozen=True)

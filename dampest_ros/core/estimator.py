@@ -22,7 +22,6 @@ import math
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -31,6 +30,7 @@ from numpy.typing import NDArray
 from dampest_ros.core import frames
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.dissipative import project
+from dampest_ros.core.model import Model
 from dampest_ros.core.online.regression import OnlineRegression
 from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError
@@ -389,23 +389,11 @@ class OnlineEstimator:
                 "samples": int(d.samples), "forgetting_factor": float(self.rls.lam),
                 "unexcited": d.unexcited or ["none"], "change_alarm": bool(d.alarm), **extra}
 
-    def save(self, path: str | Path, version: int, **extra: Any) -> Path:
-        """Atomic write of the model file (:func:`dampest_ros.io.yaml_io.save_model`);
-        ``extra``: more entries (:meth:`model_extra`)."""
-        from dampest_ros.io.yaml_io import save_model
-        return save_model(path, self.names, self.theta, self.theta_std, self.M,
-                          self.model_extra(**extra), damping=self.model, version=version,
-                          **self.file_kwargs())
-
-    def text(self, version: int) -> str:
-        """The model file text for ``dampest/model``."""
-        from dampest_ros.io.yaml_io import model_text
-        return model_text(self.names, self.theta, self.theta_std, self.M, self.model_extra(),
-                          damping=self.model, version=version, **self.file_kwargs())
-
-    def file_kwargs(self) -> dict[str, Any]:
-        """The body's added mass, its switches and the coefficients not identified
-        (:attr:`held`) as the model file takes them (``M_A``, ``added_mass_terms``, ``held``
-        of :func:`dampest_ros.io.yaml_io.save_model`)."""
-        return {"M_A": self.body.added_mass, "added_mass_terms": self.body.added_mass_terms,
-                "held": self.held}
+    def to_model(self, version: int, **extra: Any) -> Model:
+        """The current estimate as a :class:`~dampest_ros.core.model.Model`: θ (projected
+        when the config says so), its σ, the coefficients not identified (:attr:`held`), the
+        body's mass matrix, added mass and switches, and :meth:`model_extra` (``extra``
+        overrides or adds entries, e.g. ``source``)."""
+        return Model(self.names, self.theta, self.theta_std, self.M, version, self.model,
+                     self.model_extra(**extra), M_A=self.body.added_mass,
+                     added_mass_terms=self.body.added_mass_terms, held=self.held)

@@ -1,11 +1,11 @@
-"""An identified damping model as controllers use it: D(ν), the damping force and its
-uncertainty, and C(ν)ν from the mass matrix with the added-mass switches of the plant (FRD body
-frame, SI units).
+"""What every reader of an identified model checks, and what the data determined.
 
-Two checks every reader of a model shares: :func:`check_model_numbers` (θ, M and the σ of the
-identified coefficients finite) and :func:`non_dissipative` (νᵀD(ν)ν ≥ 0 over a grid of the
-speed envelope, memory gains ≥ 0). A model says per coefficient whether the data determined it
-(``held``: name → why it stayed at its prior; :attr:`IdentifiedModel.identified`).
+Two checks every reader of a model (:class:`~dampest_ros.core.model.Model`) shares:
+:func:`check_model_numbers` (θ, M and the σ of the identified coefficients finite) and
+:func:`non_dissipative` (νᵀD(ν)ν ≥ 0 over a grid of the speed envelope, memory gains ≥ 0).
+A model says per coefficient whether the data determined it (``held``: name → why it stayed
+at its prior; :func:`identified_mask`); a model file without its term structure has it
+rebuilt from the names (:func:`damping_from_names`).
 """
 
 from __future__ import annotations
@@ -20,9 +20,7 @@ from dampest_ros.core.dissipative import envelope, power_rows
 from dampest_ros.core.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,
-    AddedMassTerms,
     ConfigError,
-    split_coriolis_force,
 )
 from dampest_ros.core.vehicle import damping_from_spec
 
@@ -153,97 +151,3 @@ def non_dissipative(model: DampingModel, theta: FloatArray,
         out += [f"{n} = {c:.4g} < 0: a negative memory gain feeds energy back"
                 for n, c in zip(names[mem], theta[mem], strict=True) if c < 0]
     return out
-
-
-class IdentifiedModel:
-    """θ of a damping model with its standard deviations and the mass matrix.
-
-    Parameters
-    ----------
-    names : sequence of str
-        Parameter names, θ order.
-    theta, theta_std : ndarray, shape (p,)
-    M : ndarray, shape (6, 6) or (36,)
-        M_RB + M_A, row-major.
-    damping : DampingModel, optional
-        Term structure; rebuilt from the names when omitted.
-    version : int
-    M_A : ndarray, shape (6, 6) or (36,), optional
-        The added mass inside ``M``; needed when ``added_mass_terms`` turn an effect off.
-    added_mass_terms : AddedMassTerms, optional
-        Which effects of M_A act (None: all, C(ν)ν of M as a whole).
-    held : mapping of str to str, optional
-        Coefficients the data did not determine (their θ is the prior), with the reason.
-
-    Raises
-    ------
-    ConfigError
-        Shapes that disagree, or numbers :func:`check_model_numbers` refuses.
-    """
-
-    def __init__(self, names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
-                 M: FloatArray, damping: DampingModel | None = None, version: int = 0,
-                 M_A: FloatArray | None = None,
-                 added_mass_terms: AddedMassTerms | None = None,
-                 held: Mapping[str, str] | None = None) -> None:
-        self.names = [str(n) for n in names]
-        self.theta = np.asarray(theta, dtype=float)
-        self.theta_std = np.asarray(theta_std, dtype=float)
-        self.M = np.asarray(M, dtype=float).reshape(6, 6)
-        self.held = dict(held or {})
-        self.damping = damping if damping is not None else damping_from_names(self.names)
-        self.version = int(version)
-        self.M_A = None if M_A is None else np.asarray(M_A, dtype=float).reshape(6, 6)
-        self.added_mass_terms = added_mass_terms
-        if added_mass_terms is not None and not added_mass_terms.all and self.M_A is None:
-            raise ConfigError("model.M_A", f"added_mass_terms {added_mass_terms.as_dict()} "
-                                           "turn effects off and need M_A to split M")
-        p = len(self.names)
-        if self.theta.shape != (p,) or self.theta_std.shape != (p,):
-            raise ConfigError("model.theta", f"theta and theta_std need {p} values")
-        check_model_numbers(self.names, self.theta, self.theta_std, self.M, self.held)
-        if self.damping.parameter_names != self.names:
-            raise ConfigError("model.terms", "the terms do not give model.parameter_names")
-        if self.damping.term("freq") is not None:
-            raise ConfigError("model.terms", "a memory (freq) term needs its filter states; "
-                                             "evaluate it with DampingModel.force")
-
-    @property
-    def identified(self) -> BoolArray:
-        """Per coefficient (θ order), True when the data determined it; False: θ is the
-        prior (the reason is in :attr:`held`)."""
-        return identified_mask(self.names, self.held)
-
-    def value(self, name: str) -> float:
-        """θ of one named parameter."""
-        return float(self.theta[self.names.index(name)])
-
-    def D(self, nu: FloatArray) -> FloatArray:
-        """D(ν), shape (6, 6) for ν (6,) or (N, 6, 6) for (N, 6)."""
-        nu = np.asarray(nu, dtype=float)
-        D = self.damping.matrix(np.atleast_2d(nu), self.theta)
-        return D[0] if nu.ndim == 1 else D
-
-    def damping_force(self, nu: FloatArray) -> FloatArray:
-        """D(ν)ν (N, N·m), shape like ν."""
-        nu = np.asarray(nu, dtype=float)
-        f = self.damping.force(np.atleast_2d(nu), self.theta)
-        return f[0] if nu.ndim == 1 else f
-
-    def damping_force_std(self, nu: FloatArray) -> FloatArray:
-        """Standard deviation of D(ν)ν from θ_std (independent parameters), shape like ν:
-        √(Σ_j Φ_ij(ν)² σ_j²)."""
-        nu = np.asarray(nu, dtype=float)
-        Phi = self.damping.regressor(np.atleast_2d(nu))
-        s = np.sqrt(np.einsum("nip,p->ni", Phi * Phi, self.theta_std**2))
-        return s[0] if nu.ndim == 1 else s
-
-    def coriolis_force(self, nu: FloatArray) -> FloatArray:
-        """C_RB(ν)ν + the acting part of C_A(ν)ν (switches ``coriolis``, ``munk``; no
-        current), N and N·m, shape like ν."""
-        return split_coriolis_force(self.M, self.M_A, self.added_mass_terms,
-                                    np.asarray(nu, dtype=float))
-
-    def feedforward(self, nu: FloatArray) -> FloatArray:
-        """D(ν)ν + C(ν)ν, the model-based feed-forward of a velocity controller."""
-        return self.damping_force(nu) + self.coriolis_force(nu)

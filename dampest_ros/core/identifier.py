@@ -82,8 +82,10 @@ class DampingIdentifier:
 
     Attributes
     ----------
-    model_ : DampingModel
-        The identified term structure (θ order of ``coef_``).
+    model_ : Model
+        The identified model (:class:`~dampest_ros.core.model.Model`: θ, σ, what the data
+        did not determine, the term structure, the mass matrix), ready for
+        :func:`dampest_ros.io.yaml_io.save_model`.
     coef_ : ndarray, shape (p,)
         θ.
     cov_ : ndarray, shape (p, p)
@@ -125,7 +127,7 @@ class DampingIdentifier:
                                                                              self.prior)
         self.fit_ = fit(samples, model, self.vehicle.body, options, prior=mean, prior_std=std)
         self.estimator_ = None
-        self.model_ = model
+        self.model_ = self.fit_.to_model(model, self.vehicle.body)
         self.coef_ = self.fit_.theta
         self.cov_ = self.fit_.cov
         self.names_ = list(self.fit_.names)
@@ -150,7 +152,7 @@ class DampingIdentifier:
                                         float(samples.depth[k]), True))
         est.process(force=True)
         self.estimator_ = est
-        self.model_ = est.model
+        self.model_ = est.to_model(version=1)
         self.coef_ = est.theta.copy()
         std = est.theta_std
         d = np.sqrt(np.maximum(np.diagonal(est.rls.P), 1e-300))
@@ -167,10 +169,11 @@ class DampingIdentifier:
         return self._fitted().parameter_names
 
     def _fitted(self) -> DampingModel:
+        """The fitted term structure."""
         if not hasattr(self, "model_"):
             raise ConfigError("DampingIdentifier", "not fitted yet: call fit or partial_fit "
                               "first")
-        return self.model_
+        return self.model_.structure
 
     def predict(self, X: Samples | FloatArray) -> FloatArray:
         """Damping force D(ν)ν (+ the memory force of a ``freq`` term) of the fitted θ.

@@ -55,8 +55,8 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -65,8 +65,9 @@ import yaml
 
 from dampest_ros.core.alpha import Alpha
 from dampest_ros.core.damping import TERM_KINDS, DampingModel
-from dampest_ros.core.identified import BoolArray, check_model_numbers, identified_mask
+from dampest_ros.core.identified import check_model_numbers
 from dampest_ros.core.measurements import FloatArray
+from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.vehicle import Vehicle, damping_from_spec
 
@@ -263,85 +264,6 @@ def _spec_from_params(terms: Mapping[str, Any]) -> dict[str, Any]:
 # --- the model file ------------------------------------------------------------------------
 
 
-@dataclass
-class ModelFile:
-    """The content of a model file.
-
-    Parameters
-    ----------
-    parameter_names : list of str
-        SNAME names, in θ order.
-    theta, theta_std : ndarray, shape (p,)
-        Coefficients (positive when dissipative) and their standard deviations, SI units.
-    M : ndarray, shape (6, 6)
-        Mass matrix M_RB + M_A (kg, kg·m, kg·m²), FRD body frame.
-    version : int
-        Bumped at each publish.
-    damping : DampingModel or None
-        Rebuilt from ``model.terms`` when the file has them.
-    extra : dict
-        Every other entry under ``model``.
-    M_A : ndarray, shape (6, 6), or None
-        The added mass inside ``M`` (``model.M_A``), when the file has it.
-    added_mass_terms : AddedMassTerms or None
-        Which effects of M_A act (``model.added_mass_terms``); None: the file does not say,
-        all act.
-    held : dict of str to str
-        The coefficients the data did not determine (θ is their prior), with the reason
-        (``model.held``); empty: all identified.
-    """
-
-    parameter_names: list[str]
-    theta: FloatArray
-    theta_std: FloatArray
-    M: FloatArray
-    version: int = 1
-    damping: DampingModel | None = None
-    extra: dict[str, Any] = field(default_factory=dict)
-    sign_convention: str = SIGN_CONVENTION
-    M_A: FloatArray | None = None
-    added_mass_terms: AddedMassTerms | None = None
-    held: dict[str, str] = field(default_factory=dict)
-
-    @property
-    def identified(self) -> BoolArray:
-        """Per coefficient (θ order), True when the data determined it."""
-        return identified_mask(self.parameter_names, self.held)
-
-    @property
-    def flown(self) -> FloatArray | None:
-        """The smallest and largest velocity per DOF of the data the model was fitted on,
-        shape (2, 6) (``model.flown_speeds.min``, ``max``; m/s, rad/s), or None.
-
-        Raises
-        ------
-        ConfigError
-            When the entry is not two lists of 6 finite numbers.
-        """
-        given = self.extra.get("flown_speeds")
-        if given is None:
-            return None
-        try:
-            flown = np.array([given["min"], given["max"]], dtype=float)
-        except (KeyError, TypeError, ValueError):
-            flown = np.zeros(0)
-        if flown.shape != (2, 6) or not np.all(np.isfinite(flown)):
-            raise ConfigError("model.flown_speeds", "needs min: and max: of 6 finite "
-                                                    "numbers each")
-        return flown
-
-    @property
-    def acting_terms(self) -> AddedMassTerms:
-        """The added-mass switches, all true when the file has none."""
-        return self.added_mass_terms or AddedMassTerms()
-
-    def file_kwargs(self) -> dict[str, Any]:
-        """``M_A``, ``added_mass_terms`` and ``held`` as :func:`save_model` takes them (to
-        write the model again as it was read)."""
-        return {"M_A": self.M_A, "added_mass_terms": self.added_mass_terms,
-                "held": self.held}
-
-
 def _param_value(key: str, value: Any) -> Any:
     """``value`` as a ROS parameter (scalar, homogeneous non-empty array or namespace)."""
     if isinstance(value, np.ndarray | np.generic):
@@ -383,37 +305,17 @@ def _atomic_write(path: Path, text: str) -> None:
         raise
 
 
-def save_model(path: str | Path, names: Sequence[str], theta: FloatArray,
-               theta_std: FloatArray, M: FloatArray, extra: Mapping[str, Any] | None = None,
-               *, damping: DampingModel | None = None, version: int = 1,
-               M_A: FloatArray | None = None,
-               added_mass_terms: AddedMassTerms | None = None,
-               held: Mapping[str, str] | None = None) -> Path:
+def save_model(path: str | Path, model: Model) -> Path:
     """Write the model file atomically (temporary file in the same directory + rename).
 
     Parameters
     ----------
     path : str or Path
-    names : sequence of str, length p
-        Parameter names in θ order.
-    theta, theta_std : ndarray, shape (p,)
-        Coefficients (positive when dissipative) and standard deviations, SI units.
-    M : ndarray, shape (6, 6) or (36,)
-        Mass matrix, row-major.
-    extra : mapping, optional
-        More entries under ``model`` (scalars, homogeneous arrays, nested namespaces).
-    damping : DampingModel, optional
-        Written as ``model.terms`` so that :func:`load_model` rebuilds it; its parameter
-        names must be ``names``.
-    version : int
-    M_A : ndarray, shape (6, 6) or (36,), optional
-        The added mass inside ``M`` (kg, kg·m, kg·m²), written as ``model.M_A``.
-    added_mass_terms : AddedMassTerms, optional
-        Which effects of M_A act, written as ``model.added_mass_terms``; switches that turn
-        an effect off need ``M_A``.
-    held : mapping of str to str, optional
-        Coefficients the data did not determine (``theta`` holds their prior), with the
-        reason: written as ``model.identified`` (false for them) and ``model.held``.
+    model : Model
+        Written as ``model.*``: names, θ, σ, M, version, ``identified`` and ``held``,
+        ``M_A`` and ``added_mass_terms`` when it has them, its term structure as
+        ``model.terms`` (so that :func:`load_model` rebuilds it) and its ``extra`` entries
+        (scalars, homogeneous arrays, nested namespaces).
 
     Returns
     -------
@@ -422,41 +324,24 @@ def save_model(path: str | Path, names: Sequence[str], theta: FloatArray,
     Raises
     ------
     ValueError
-        Shapes that disagree; ConfigError (a ValueError) for numbers no reader would take
-        (:func:`~dampest_ros.core.identified.check_model_numbers`).
+        An ``extra`` entry that is not a ROS parameter value or uses a reserved key.
     """
     path = Path(path)
-    text = model_text(names, theta, theta_std, M, extra, damping=damping, version=version,
-                      M_A=M_A, added_mass_terms=added_mass_terms, held=held)
-    _atomic_write(path, text)
+    _atomic_write(path, model_text(model))
     return path
 
 
-def model_text(names: Sequence[str], theta: FloatArray, theta_std: FloatArray, M: FloatArray,
-               extra: Mapping[str, Any] | None = None, *, damping: DampingModel | None = None,
-               version: int = 1, M_A: FloatArray | None = None,
-               added_mass_terms: AddedMassTerms | None = None,
-               held: Mapping[str, str] | None = None) -> str:
-    """The model file's text (what :func:`save_model` writes and ``dampest/model`` carries).
-
-    Parameters are those of :func:`save_model`.
-    """
-    model = _model_mapping(names, theta, theta_std, M, extra, damping, version, M_A,
-                           added_mass_terms, held)
+def model_text(model: Model) -> str:
+    """The model file's text (what :func:`save_model` writes and ``dampest/model`` carries)."""
     return ("# dampest_ros model: a ROS 2 parameters file (--ros-args --params-file).\n"
             "# Damping coefficients are positive when dissipative; M is row-major, FRD.\n"
-            + yaml.dump({"/**": {"ros__parameters": {"model": model}}}, Dumper=_Dumper,
-                        sort_keys=False, default_flow_style=None, width=100))
+            + yaml.dump({"/**": {"ros__parameters": {"model": _model_mapping(model)}}},
+                        Dumper=_Dumper, sort_keys=False, default_flow_style=None, width=100))
 
 
-def model_parameters(names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
-                     M: FloatArray, *, damping: DampingModel | None = None,
-                     version: int = 1, M_A: FloatArray | None = None,
-                     added_mass_terms: AddedMassTerms | None = None,
-                     held: Mapping[str, str] | None = None) -> dict[str, Any]:
-    """The model as the ROS parameters a node declares from the model file.
-
-    Parameters are those of :func:`save_model` (without ``extra``).
+def model_parameters(model: Model) -> dict[str, Any]:
+    """The model as the ROS parameters a node declares from the model file (its ``extra``
+    entries left out).
 
     Returns
     -------
@@ -475,12 +360,11 @@ def model_parameters(names: Sequence[str], theta: FloatArray, theta_std: FloatAr
         else:
             flat[prefix] = value
 
-    walk("model", _model_mapping(names, theta, theta_std, M, None, damping, version, M_A,
-                                 added_mass_terms, held))
+    walk("model", _model_mapping(replace(model, extra={})))
     return flat
 
 
-def model_from_parameters(values: Mapping[str, Any]) -> ModelFile:
+def model_from_parameters(values: Mapping[str, Any]) -> Model:
     """:func:`load_model` for the ``model.*`` parameters of a node.
 
     Parameters
@@ -493,7 +377,7 @@ def model_from_parameters(values: Mapping[str, Any]) -> ModelFile:
 
     Returns
     -------
-    ModelFile
+    Model
     """
     model: dict[str, Any] = {"sign_convention": SIGN_CONVENTION}
     for name, value in values.items():
@@ -508,46 +392,22 @@ def model_from_parameters(values: Mapping[str, Any]) -> ModelFile:
     return _model_from_mapping(model, Path("<parameters>"))
 
 
-def _model_mapping(names: Sequence[str], theta: FloatArray, theta_std: FloatArray,
-                   M: FloatArray, extra: Mapping[str, Any] | None,
-                   damping: DampingModel | None, version: int,
-                   M_A: FloatArray | None = None,
-                   added_mass_terms: AddedMassTerms | None = None,
-                   held: Mapping[str, str] | None = None) -> dict[str, Any]:
-    """The ``model`` mapping of the file (checked)."""
-    names = [str(n) for n in names]
-    theta = np.asarray(theta, dtype=float)
-    theta_std = np.asarray(theta_std, dtype=float)
-    M = np.asarray(M, dtype=float)
-    if not names or theta.shape != (len(names),) or theta_std.shape != (len(names),):
-        raise ValueError(f"need p >= 1 names, theta and theta_std of one length, got "
-                         f"{len(names)}, {theta.shape}, {theta_std.shape}")
-    if M.size != 36:
-        raise ValueError(f"M must have 36 entries, got shape {M.shape}")
-    held = {str(k): str(v) for k, v in (held or {}).items()}
-    check_model_numbers(names, theta, theta_std, M, held)
+def _model_mapping(m: Model) -> dict[str, Any]:
+    """The ``model`` mapping of the file."""
     model: dict[str, Any] = {
-        "sign_convention": SIGN_CONVENTION, "parameter_names": names,
-        "theta": theta.tolist(), "theta_std": theta_std.tolist(),
-        "identified": identified_mask(names, held).tolist(),
-        "M": M.reshape(36).tolist(), "version": int(version)}
-    if held:
-        model["held"] = {"names": list(held), "reasons": list(held.values())}
-    if M_A is not None:
-        M_A = np.asarray(M_A, dtype=float)
-        if M_A.size != 36:
-            raise ValueError(f"M_A must have 36 entries, got shape {M_A.shape}")
-        model["M_A"] = M_A.reshape(36).tolist()
-    if added_mass_terms is not None:
-        if not added_mass_terms.all and M_A is None:
-            raise ValueError(f"added_mass_terms {added_mass_terms.as_dict()} turn effects off: "
-                             "M_A is needed to split M")
-        model["added_mass_terms"] = added_mass_terms.as_dict()
-    if damping is not None:
-        if damping.parameter_names != names:
-            raise ValueError("damping.parameter_names differ from names")
-        model["terms"] = _terms_params(damping_spec(damping, theta))
-    for key, value in (extra or {}).items():
+        "sign_convention": SIGN_CONVENTION, "parameter_names": m.parameter_names,
+        "theta": m.theta.tolist(), "theta_std": m.theta_std.tolist(),
+        "identified": m.identified.tolist(), "M": m.M.reshape(36).tolist(),
+        "version": m.version}
+    if m.held:
+        model["held"] = {"names": list(m.held), "reasons": list(m.held.values())}
+    if m.M_A is not None:
+        model["M_A"] = m.M_A.reshape(36).tolist()
+    if m.added_mass_terms is not None:
+        model["added_mass_terms"] = m.added_mass_terms.as_dict()
+    if m.damping is not None:
+        model["terms"] = _terms_params(damping_spec(m.damping, m.theta))
+    for key, value in m.extra.items():
         if key in _RESERVED:
             raise ValueError(f"extra key {key!r} is reserved")
         model[str(key)] = _param_value(str(key), value)
@@ -563,7 +423,7 @@ def _model_section(doc: Any, path: Path) -> dict[str, Any]:
     raise ConfigError("model", f"no <node>: ros__parameters: model: mapping in {path}")
 
 
-def load_model(path: str | Path) -> ModelFile:
+def load_model(path: str | Path) -> Model:
     """Read a model file written by :func:`save_model` (or by the estimator's ``~/save``).
 
     Parameters
@@ -572,7 +432,7 @@ def load_model(path: str | Path) -> ModelFile:
 
     Returns
     -------
-    ModelFile
+    Model
 
     Raises
     ------
@@ -583,7 +443,7 @@ def load_model(path: str | Path) -> ModelFile:
     return _model_from_doc(_read_yaml(path), path)
 
 
-def loads_model(text: str) -> ModelFile:
+def loads_model(text: str) -> Model:
     """:func:`load_model` for the text of a model file (e.g. a ``dampest/model`` message)."""
     try:
         doc = yaml.safe_load(text)
@@ -592,13 +452,13 @@ def loads_model(text: str) -> ModelFile:
     return _model_from_doc(doc, Path("<text>"))
 
 
-def _model_from_doc(doc: Any, path: Path) -> ModelFile:
-    """The ModelFile of a parsed parameters file."""
+def _model_from_doc(doc: Any, path: Path) -> Model:
+    """The Model of a parsed parameters file."""
     return _model_from_mapping(_model_section(doc, path), path)
 
 
-def _model_from_mapping(model: Mapping[str, Any], path: Path) -> ModelFile:
-    """The ModelFile of a ``model`` mapping (checked; ``path`` names it in errors)."""
+def _model_from_mapping(model: Mapping[str, Any], path: Path) -> Model:
+    """The Model of a ``model`` mapping (checked; ``path`` names it in errors)."""
     for key in _REQUIRED:
         if key not in model:
             raise ConfigError(f"model.{key}", f"missing in {path}")
@@ -621,10 +481,10 @@ def _model_from_mapping(model: Mapping[str, Any], path: Path) -> ModelFile:
     held = _held_entries(model, names, path)
     check_model_numbers(names, arrays["theta"], arrays["theta_std"], arrays["M"], held,
                         f" ({path})")
-    return ModelFile(names, arrays["theta"], arrays["theta_std"], arrays["M"].reshape(6, 6),
-                     int(model["version"]), damping,
-                     {k: v for k, v in model.items() if k not in _RESERVED}, M_A=M_A,
-                     added_mass_terms=terms, held=held)
+    return Model(names, arrays["theta"], arrays["theta_std"], arrays["M"].reshape(6, 6),
+                 int(model["version"]), damping,
+                 {k: v for k, v in model.items() if k not in _RESERVED}, M_A=M_A,
+                 added_mass_terms=terms, held=held)
 
 
 def _held_entries(model: Mapping[str, Any], names: list[str], path: Path) -> dict[str, str]:

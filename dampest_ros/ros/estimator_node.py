@@ -35,10 +35,17 @@ from std_srvs.srv import SetBool, Trigger
 
 from dampest_ros.core import frames
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator
+from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.rls.least_squares import OUTLIER_GATE
 from dampest_ros.core.rls.update import FORGETTING_MODES
-from dampest_ros.io.yaml_io import ModelFile, load_model, load_vehicle, model_parameters
+from dampest_ros.io.yaml_io import (
+    load_model,
+    load_vehicle,
+    model_parameters,
+    model_text,
+    save_model,
+)
 from dampest_ros.ros.common import (
     DIAGNOSTICS_TOPIC,
     LATCHED_QOS,
@@ -139,7 +146,7 @@ class EstimatorNode(ModelParamNode):
         self._used_at_publish = -1
         self._last_stamp = -1
 
-    def _saved_model(self) -> ModelFile | None:
+    def _saved_model(self) -> Model | None:
         """The model file at save_path when it can be resumed (its version taken), else None
         (the reason logged and counted). Temporary files of a killed save are removed."""
         path = Path(self.p("save_path")).expanduser()
@@ -165,7 +172,7 @@ class EstimatorNode(ModelParamNode):
         log.info(f"resumed from {path}: model version {m.version}")
         return m
 
-    def _mismatch(self, m: ModelFile) -> str | None:
+    def _mismatch(self, m: Model) -> str | None:
         """Why model file ``m`` is not an estimate of this node's vehicle and terms."""
         e = self.estimator
         vehicle = m.extra.get("vehicle")
@@ -179,7 +186,7 @@ class EstimatorNode(ModelParamNode):
                     f"{other})")
         return None
 
-    def _build(self, start: ModelFile | None = None) -> None:
+    def _build(self, start: Model | None = None) -> None:
         """A new estimator from ``start`` (a resumed model file) or else the prior."""
         terms = [t.strip() for t in str(self.p("terms")).split(",") if t.strip()]
         prior = None
@@ -198,8 +205,7 @@ class EstimatorNode(ModelParamNode):
     def _model_values(self) -> dict[str, Any]:
         """model.* of the current estimate, its term structure included."""
         e = self.estimator
-        return model_parameters(e.names, e.theta, e.theta_std, e.M, damping=e.model,
-                                version=self.version, **e.file_kwargs())
+        return model_parameters(e.to_model(self.version))
 
     def check_parameter(self, name: str, value: Any) -> str | None:
         try:
@@ -257,7 +263,7 @@ class EstimatorNode(ModelParamNode):
             self._used_at_publish = used
             self.version += 1
             self.serve_model(self._model_values())
-            self.pub_model.publish(String(data=est.text(self.version)))
+            self.pub_model.publish(String(data=model_text(est.to_model(self.version))))
         values = est.diagnostic_values()
         values["model.version"] = self.version
         values["count.clock_jumps"] = self.clock_jumps
@@ -280,7 +286,8 @@ class EstimatorNode(ModelParamNode):
 
     def _srv_save(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
         try:
-            path = self.estimator.save(Path(self.p("save_path")).expanduser(), self.version)
+            path = save_model(Path(self.p("save_path")).expanduser(),
+                              self.estimator.to_model(self.version))
         except (OSError, ValueError) as exc:
             res.success, res.message = False, f"could not save: {exc}"
             return res

@@ -15,14 +15,15 @@ model refused at start ends the node with one logged error and exit status 2.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from std_msgs.msg import String
 
+from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.io.yaml_io import (
-    ModelFile,
     load_model,
     model_from_parameters,
     model_parameters,
@@ -56,7 +57,7 @@ class ModelServerNode(ModelParamNode):
         self.get_logger().info(f"serving {len(self.model.parameter_names)} parameters, "
                                f"version {self.version}")
 
-    def _load(self) -> ModelFile:
+    def _load(self) -> Model:
         path = str(self.p("model_file")).strip()
         if path:
             return load_model(Path(path))
@@ -69,13 +70,10 @@ class ModelServerNode(ModelParamNode):
 
     def _serve(self) -> None:
         """Hold the model in model.* (the terms' names may change with the file), publish."""
-        m = self.model
-        self.serve_model(model_parameters(m.parameter_names, m.theta, m.theta_std, m.M,
-                                          damping=m.damping, version=self.version,
-                                          **m.file_kwargs()))
-        self.pub.publish(String(data=model_text(
-            m.parameter_names, m.theta, m.theta_std, m.M, {"source": "model_server_node"},
-            damping=m.damping, version=self.version, **m.file_kwargs())))
+        m = replace(self.model, version=self.version)
+        self.serve_model(model_parameters(m))
+        self.pub.publish(String(data=model_text(replace(m,
+                                                        extra={"source": "model_server_node"}))))
 
     def on_parameters(self, names: list[str]) -> None:
         if "model_file" in names and str(self.p("model_file")).strip():

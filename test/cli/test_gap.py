@@ -16,6 +16,7 @@ import pytest
 from dampest_ros.cli.inputs import load_model_for
 from dampest_ros.cli.main import main
 from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.model import Model
 from dampest_ros.core.terms import CrossSpec, cross_term
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 
@@ -31,8 +32,8 @@ def measured(tmp_path_factory: pytest.TempPathFactory) -> Path:
     v = load_vehicle("bluerov2_heavy")
     theta = v.theta.copy()
     theta[v.damping.parameter_names.index("X_uu")] = 100.0
-    save_model(root / "sim_model.yaml", v.damping.parameter_names, theta,
-               np.zeros(len(theta)), v.body.M, damping=v.damping)
+    save_model(root / "sim_model.yaml", Model(v.damping.parameter_names, theta,
+                                              np.zeros(len(theta)), v.body.M, damping=v.damping))
     return root
 
 
@@ -120,8 +121,8 @@ def test_naming_a_cross_term_the_model_has_updates_it_and_writes_the_files(
     theta = model.theta_from_dict({**dict(zip(v.damping.parameter_names, v.theta,
                                               strict=True)), "Y_vr": 60.0})
     believed = measured / "cross_model.yaml"
-    save_model(believed, model.parameter_names, theta, np.zeros(len(theta)), v.body.M,
-               damping=model)
+    save_model(believed, Model(model.parameter_names, theta, np.zeros(len(theta)), v.body.M,
+                               damping=model))
     out, report = measured / "cross_final.yaml", measured / "cross_report"
     capsys.readouterr()
     assert main(["gap", str(measured / "samples.csv"), "--model", str(believed),
@@ -142,8 +143,8 @@ def test_a_diverging_believed_model_is_explained_and_the_files_are_written(
     theta = v.damping.theta_from_dict({**dict(zip(v.damping.parameter_names, v.theta,
                                                   strict=True)), "Z_ww": -61.0})
     believed = measured / "zww_model.yaml"
-    save_model(believed, v.damping.parameter_names, theta, np.zeros(len(theta)), v.body.M,
-               damping=v.damping)
+    save_model(believed, Model(v.damping.parameter_names, theta, np.zeros(len(theta)), v.body.M,
+                               damping=v.damping))
     out, report = measured / "zww_final.yaml", measured / "zww_report"
     capsys.readouterr()
     assert main(["gap", str(measured / "samples.csv"), "--model", str(believed),

@@ -18,7 +18,7 @@ from dampest_ros.core.measurements import JointSeries, WrenchSeries
 from dampest_ros.core.preprocess import thruster_wrench
 from dampest_ros.core.vehicle import measured_wrench_scale
 from dampest_ros.io.bag import read_bag, write_bag
-from dampest_ros.io.yaml_io import load_model, load_vehicle, vehicle_path
+from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model, vehicle_path
 
 HEAVY = load_vehicle("bluerov2_heavy")
 
@@ -175,7 +175,7 @@ def test_estimator_without_thrusters_weights_by_the_measured_tau(run: Path) -> N
     np.testing.assert_allclose(want[0], (0.01 * np.percentile(np.abs(first[:, 0]), 99)) ** 2,
                                rtol=1e-12)
     # the estimator's model file (~/save) carries the added mass and its switches
-    saved = load_model(est.save(run / "estimator.yaml", 3))
+    saved = load_model(save_model(run / "estimator.yaml", est.to_model(3)))
     np.testing.assert_array_equal(saved.M_A, bare.body.added_mass)
     assert saved.added_mass_terms == bare.body.added_mass_terms
     np.testing.assert_array_equal(saved.theta, est.theta)

@@ -1,4 +1,4 @@
-"""IdentifiedModel (what controllers evaluate) and the controller's gain from it."""
+"""The identified Model as controllers evaluate it, and the controller's gain from it."""
 
 from __future__ import annotations
 
@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.control import VelocityPI, tracking_rms
-from dampest_ros.core.identified import IdentifiedModel, damping_from_names
+from dampest_ros.core.identified import damping_from_names
+from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import ConfigError, coriolis_force
 from dampest_ros.core.simulate import Simulator, track
 from dampest_ros.io.yaml_io import load_vehicle
@@ -16,7 +17,7 @@ def test_force_matrix_and_std_from_names() -> None:
     v = load_vehicle("bluerov2_heavy")
     names = v.damping.parameter_names
     std = np.full(len(names), 0.1)
-    m = IdentifiedModel(names, v.theta, std, v.body.M)  # structure rebuilt from the names
+    m = Model(names, v.theta, std, v.body.M)  # structure rebuilt from the names
     nu = np.array([0.5, -0.2, 0.1, 0.3, 0.0, -0.4])
     # D(ν)ν for linear + quadratic diagonal terms: (X_u + X_uu|u|) u, …
     lin, quad = v.theta[:6], v.theta[6:]
@@ -33,7 +34,7 @@ def test_force_matrix_and_std_from_names() -> None:
 def tracking_rms_60s(feedforward: bool) -> float:
     """Velocity PI (bandwidth 1 rad/s) tracking sines in surge, heave and yaw for 60 s."""
     v = load_vehicle("bluerov2_heavy")
-    model = IdentifiedModel(v.damping.parameter_names, v.theta, np.zeros(12), v.body.M)
+    model = Model(v.damping.parameter_names, v.theta, np.zeros(12), v.body.M)
     ctrl = VelocityPI.for_vehicle(v, 1.0, model.feedforward if feedforward else None)
     t = 0.02 * np.arange(3000)
     ref = np.zeros((3000, 6))
@@ -54,7 +55,7 @@ def test_feedforward_from_the_model_improves_tracking() -> None:
     {"inertial": True, "coriolis": False, "munk": False},   # no C_A at all
 ])
 def test_coriolis_force_honours_the_added_mass_switches(switches: dict[str, bool]) -> None:
-    """C(ν)ν and the feed-forward of an IdentifiedModel with M_A and the switches equal the
+    """C(ν)ν and the feed-forward of a Model with M_A and the switches equal the
     core RigidBody's to 1e-12 (the Munk moment is N = (Y_v̇ − X_u̇) u v, big at these speeds).
     """
     from dataclasses import replace
@@ -65,8 +66,8 @@ def test_coriolis_force_honours_the_added_mass_switches(switches: dict[str, bool
     terms = AddedMassTerms(**switches)
     body = replace(v.body, added_mass_terms=terms)
     nu = np.random.default_rng(4).normal(0.0, [1.0, 0.5, 0.4, 0.6, 0.5, 0.7], (50, 6))
-    m = IdentifiedModel(v.damping.parameter_names, v.theta, np.zeros(v.theta.size), body.M,
-                        v.damping, M_A=body.added_mass, added_mass_terms=terms)
+    m = Model(v.damping.parameter_names, v.theta, np.zeros(v.theta.size), body.M,
+              damping=v.damping, M_A=body.added_mass, added_mass_terms=terms)
     scale = float(np.abs(body.coriolis_force(nu)).max())
     np.testing.assert_allclose(m.coriolis_force(nu), body.coriolis_force(nu), rtol=0,
                                atol=1e-12 * scale)
@@ -78,5 +79,5 @@ def test_coriolis_force_honours_the_added_mass_switches(switches: dict[str, bool
     assert gap > 1e6 * 1e-12 * scale if not terms.munk else gap < 1e-12 * scale
     # switches that turn an effect off need M_A
     with pytest.raises(ConfigError, match="M_A"):
-        IdentifiedModel(v.damping.parameter_names, v.theta, np.zeros(v.theta.size), body.M,
-                        v.damping, added_mass_terms=terms)
+        Model(v.damping.parameter_names, v.theta, np.zeros(v.theta.size), body.M,
+              damping=v.damping, added_mass_terms=terms)

@@ -28,7 +28,7 @@ from dampest_ros.core.sensors import SensorConfig, measure
 from dampest_ros.core.simulate import run
 from dampest_ros.core.trajectory import Trajectory
 from dampest_ros.core.vehicle import Vehicle
-from dampest_ros.io.yaml_io import load_model, load_vehicle
+from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 from dampest_ros.report import band_coverage
 
 
@@ -480,7 +480,7 @@ def test_the_published_estimate_is_dissipative_and_says_what_the_constraint_hold
     assert est.theta[j] > -4.0  # −X_uu |u| at the slowest grid speed, no more
     assert est.model.dissipation(envelope(est.flown), est.theta).min() >= -1e-9
     assert "held by dissipativity" in est.constrained["X_u"]
-    saved = load_model(est.save(tmp_path / "model.yaml", version=2))
+    saved = load_model(save_model(tmp_path / "model.yaml", est.to_model(version=2)))
     assert not saved.identified[j] and "held by dissipativity" in saved.held["X_u"]
     raw = OnlineEstimator(vehicle, config=EstimatorConfig(forgetting_factor=1.0,
                                                           dissipative=False),

@@ -12,6 +12,7 @@ from dampest_ros.core.alpha import Alpha, AlphaBank
 from dampest_ros.core.batch import FitOptions, fit
 from dampest_ros.core.damping import DampingModel, filter_memory
 from dampest_ros.core.frames import matrix_from_euler
+from dampest_ros.core.model import Model
 from dampest_ros.core.quadratic import rank_solve
 from dampest_ros.core.regression import accumulate
 from dampest_ros.core.rigid_body import ConfigError, RigidBody
@@ -109,8 +110,9 @@ def test_library_names_are_unique_documented_and_round_trip(tmp_path: Path) -> N
                               "Z_uxw", "Y_vr", "X_uU", "K_pW", "N_rv", "M_wxq",
                               "X_uUvw", "X_uAv", "K_pAq")])])
     theta = np.arange(1.0, model.n_params + 1.0)
-    path = save_model(tmp_path / "m.yaml", model.parameter_names, theta,
-                      np.zeros(model.n_params), np.eye(6), damping=model)
+    path = save_model(tmp_path / "m.yaml", Model(model.parameter_names, theta,
+                                                 np.zeros(model.n_params), np.eye(6),
+                                                 damping=model))
     back = load_model(path)
     assert back.damping is not None
     assert back.parameter_names == model.parameter_names

@@ -26,6 +26,7 @@ rclpy = pytest.importorskip("rclpy")
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
+from dampest_ros.core.model import Model  # noqa: E402
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model  # noqa: E402
 from dampest_ros.ros.common import DIAGNOSTICS_TOPIC, ParamNode  # noqa: E402
 from dampest_ros.ros.controller_node import ControllerNode  # noqa: E402
@@ -58,8 +59,9 @@ def context(monkeypatch: pytest.MonkeyPatch) -> Iterator[Any]:
 def model_file(tmp_path: Path) -> Path:
     """The BlueROV2 Heavy's nominal damping as a model file (version 4)."""
     v = load_vehicle("bluerov2_heavy")
-    return save_model(tmp_path / "nominal.yaml", v.damping.parameter_names, v.theta,
-                      0.1 * np.abs(v.theta) + 0.01, v.body.M, damping=v.damping, version=4)
+    return save_model(tmp_path / "nominal.yaml", Model(v.damping.parameter_names, v.theta,
+                                                       0.1 * np.abs(v.theta) + 0.01, v.body.M,
+                                                       damping=v.damping, version=4))
 
 
 def needed(name: str, tmp_path: Path, sim_bag: Path, model_file: Path) -> dict[str, Any]:

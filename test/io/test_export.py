@@ -19,6 +19,7 @@ import pytest
 import yaml
 
 from dampest_ros.cli.main import main
+from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.vehicle import Vehicle, damping_from_spec
 from dampest_ros.io.export.common import ExportWarning, NotDissipativeError, imported_mass
@@ -26,19 +27,18 @@ from dampest_ros.io.export.convert import export_model, import_model
 from dampest_ros.io.export.gz import export_gz, import_gz
 from dampest_ros.io.export.urdf import export_urdf, import_urdf
 from dampest_ros.io.export.uuv import export_uuv
-from dampest_ros.io.yaml_io import ModelFile, load_model, load_vehicle, save_model
+from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 
 T6 = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])  # FRD <-> FLU for a 6-vector
 GZ_F, GZ_V = "xyzkmn", "UVWPQR"
 
 
 def model_file(tmp_path: Path, spec: dict[str, Any], M: np.ndarray | None = None,
-               name: str = "model.yaml") -> ModelFile:
+               name: str = "model.yaml") -> Model:
     """A model file on disk (with model.terms) from a damping spec, read back."""
     model, theta = damping_from_spec(spec)
-    path = save_model(tmp_path / name, model.parameter_names, theta,
-                      np.zeros(model.n_params), np.eye(6) * 20.0 if M is None else M,
-                      damping=model)
+    path = save_model(tmp_path / name, Model(model.parameter_names, theta, np.zeros(model.n_params),
+                                             np.eye(6) * 20.0 if M is None else M, damping=model))
     return load_model(path)
 
 
@@ -48,9 +48,10 @@ def heavy() -> Vehicle:
 
 
 @pytest.fixture
-def heavy_file(tmp_path: Path, heavy: Vehicle) -> ModelFile:
-    path = save_model(tmp_path / "heavy.yaml", heavy.damping.parameter_names, heavy.theta,
-                      np.zeros(heavy.damping.n_params), heavy.body.M, damping=heavy.damping)
+def heavy_file(tmp_path: Path, heavy: Vehicle) -> Model:
+    path = save_model(tmp_path / "heavy.yaml", Model(heavy.damping.parameter_names, heavy.theta,
+                                                     np.zeros(heavy.damping.n_params), heavy.body.M,
+                                                     damping=heavy.damping))
     return load_model(path)
 
 
@@ -102,7 +103,7 @@ def random_nu(n: int = 50) -> np.ndarray:
 # --- gz ---------------------------------------------------------------------------------------
 
 
-def test_gz_bluerov2_heavy_tags_are_sname_negative(heavy_file: ModelFile,
+def test_gz_bluerov2_heavy_tags_are_sname_negative(heavy_file: Model,
                                                    heavy: Vehicle) -> None:
     out = export_gz(heavy_file, heavy)
     assert out.text.count("<plugin") == 1
@@ -195,7 +196,7 @@ def test_gz_added_mass_round_trip_with_couplings(tmp_path: Path, heavy: Vehicle)
     np.testing.assert_allclose(M, vehicle.body.M, atol=1e-12)
 
 
-def test_gz_without_vehicle_exports_damping_only_and_says_so(heavy_file: ModelFile) -> None:
+def test_gz_without_vehicle_exports_damping_only_and_says_so(heavy_file: Model) -> None:
     out = export_gz(heavy_file)
     assert "Dot" not in "".join(tags(out.text))
     assert any("Added mass not exported" in n for n in out.notes)
@@ -265,7 +266,7 @@ def urdf_block(text: str) -> ET.Element:
     return ET.fromstring(text)
 
 
-def test_urdf_bluerov2_heavy_block(heavy_file: ModelFile, heavy: Vehicle) -> None:
+def test_urdf_bluerov2_heavy_block(heavy_file: Model, heavy: Vehicle) -> None:
     out = export_urdf(heavy_file, heavy)
     block = urdf_block(out.text)
     lin, quad = block.find("linear_damping"), block.find("quadratic_damping")
@@ -282,7 +283,7 @@ def test_urdf_bluerov2_heavy_block(heavy_file: ModelFile, heavy: Vehicle) -> Non
     assert out.left_out == ()
 
 
-def test_urdf_round_trip_and_force_law(heavy_file: ModelFile, heavy: Vehicle) -> None:
+def test_urdf_round_trip_and_force_law(heavy_file: Model, heavy: Vehicle) -> None:
     out = export_urdf(heavy_file, heavy)
     back = import_urdf(out.text)
     assert back.names == heavy_file.parameter_names
@@ -445,7 +446,7 @@ def test_memory_and_residual_are_listed_never_dropped(tmp_path: Path) -> None:
             assert name in out.text, (fmt, name)
 
 
-def test_unknown_format_and_frame(heavy_file: ModelFile) -> None:
+def test_unknown_format_and_frame(heavy_file: Model) -> None:
     with pytest.raises(ValueError, match=r"unknown export format 'sdf'.*gz.*urdf.*uuv"):
         export_model(heavy_file, "sdf")
     with pytest.raises(ValueError, match="unknown frame"):
@@ -454,15 +455,16 @@ def test_unknown_format_and_frame(heavy_file: ModelFile) -> None:
         import_model("<a/>", "uuv")
 
 
-def test_wrong_vehicle_warns_about_negative_added_mass(heavy_file: ModelFile) -> None:
+def test_wrong_vehicle_warns_about_negative_added_mass(heavy_file: Model) -> None:
     with pytest.warns(ExportWarning, match="negative diagonal"):
         out = export_gz(heavy_file, load_vehicle("platform_b"))
     assert any("negative diagonal" in n for n in out.notes)
 
 
 def test_model_file_without_terms_is_read_from_the_names(tmp_path: Path) -> None:
-    path = save_model(tmp_path / "old.yaml", ["X_u", "Y_r", "X_uu", "Y_vr"],
-                      np.array([13.7, 1.5, 141.0, 3.0]), np.zeros(4), np.eye(6))
+    path = save_model(tmp_path / "old.yaml", Model(["X_u", "Y_r", "X_uu", "Y_vr"],
+                                                   np.array([13.7, 1.5, 141.0, 3.0]), np.zeros(4),
+                                                   np.eye(6)))
     mf = load_model(path)
     assert mf.damping is None
     with pytest.warns(ExportWarning, match="Y_vr"):
@@ -480,7 +482,7 @@ def cli(argv: list[str]) -> int:
     return main(["--debug", *argv])
 
 
-def test_cli_export_then_import(tmp_path: Path, heavy_file: ModelFile,
+def test_cli_export_then_import(tmp_path: Path, heavy_file: Model,
                                 capsys: pytest.CaptureFixture[str]) -> None:
     src = tmp_path / "heavy.yaml"
     sdf = tmp_path / "hydro.sdf"
@@ -526,9 +528,11 @@ def test_cli_import_urdf_without_rigid_body_needs_a_vehicle(tmp_path: Path) -> N
 def switched_file(tmp_path: Path, heavy: Vehicle, **switches: bool) -> Path:
     """The heavy's model with model.M_A and the given added-mass switches."""
     from dampest_ros.core.rigid_body import AddedMassTerms
-    return save_model(tmp_path / "switched.yaml", heavy.damping.parameter_names, heavy.theta,
-                      np.zeros(heavy.damping.n_params), heavy.body.M, damping=heavy.damping,
-                      M_A=heavy.body.added_mass, added_mass_terms=AddedMassTerms(**switches))
+    return save_model(tmp_path / "switched.yaml", Model(heavy.damping.parameter_names, heavy.theta,
+                                                        np.zeros(heavy.damping.n_params),
+                                                        heavy.body.M, damping=heavy.damping,
+                                                        M_A=heavy.body.added_mass,
+                                                        added_mass_terms=AddedMassTerms(**switches)))
 
 
 def plugin_flags(text: str) -> dict[str, str]:
@@ -627,8 +631,9 @@ def heavy_with(tmp_path: Path, heavy: Vehicle, values: dict[str, float],
     extra = {} if flown is None else {"flown_speeds": {
         "min": (-flown * np.array([1, 0.5, 0.8, 1, 1, 1])).tolist(),
         "max": (flown * np.array([1, 0.5, 0.8, 1, 1, 1])).tolist()}}
-    return save_model(tmp_path / "heavy_changed.yaml", names, theta, std, heavy.body.M,
-                      extra, damping=heavy.damping, held=held)
+    return save_model(tmp_path / "heavy_changed.yaml", Model(names, theta, std, heavy.body.M,
+                                                             extra=extra, damping=heavy.damping,
+                                                             held=held))
 
 
 @pytest.mark.parametrize("fmt", ["gz", "urdf", "uuv"])

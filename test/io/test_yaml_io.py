@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
+from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.vehicle import damping_from_spec
 from dampest_ros.io import yaml_io
@@ -97,14 +98,15 @@ def test_model_file_round_trip(tmp_path: Path) -> None:
     M = rng.normal(size=(6, 6))
     extra = {"vehicle": "bluerov2_heavy", "fit": {"rmse": [0.1, 0.2, 3], "samples": 36000},
              "frozen": False, "frame": "N"}
-    path = yaml_io.save_model(tmp_path / "model.yaml", model.parameter_names, theta, theta_std,
-                              M, extra, damping=model, version=7)
+    path = yaml_io.save_model(tmp_path / "model.yaml", Model(model.parameter_names, theta,
+                                                             theta_std, M, extra=extra,
+                                                             damping=model, version=7))
     out = yaml_io.load_model(path)
     assert out.parameter_names == model.parameter_names
     np.testing.assert_array_equal(out.theta, theta)
     np.testing.assert_array_equal(out.theta_std, theta_std)
     np.testing.assert_array_equal(out.M, M)
-    assert out.version == 7 and out.sign_convention == "dissipative_positive"
+    assert out.version == 7 and "sign_convention: dissipative_positive" in path.read_text()
     assert out.extra == {"vehicle": "bluerov2_heavy", "fit": {"rmse": [0.1, 0.2, 3.0],
                                                                 "samples": 36000},
                          "frozen": False, "frame": "N"}
@@ -124,10 +126,10 @@ def test_model_file_is_a_ros_parameters_file(tmp_path: Path) -> None:
     # σ of the two coefficients held at their prior: not estimated (inf, nan)
     std = np.r_[np.inf, np.nan, np.full(theta.size - 2, 0.5)]
     held = dict(zip(model.parameter_names[:2], ["no data", "n"], strict=True))
-    path = yaml_io.save_model(tmp_path / "model.yaml", model.parameter_names, theta, std,
-                              np.eye(6) * 2.0, {"note": "n", "flags": [True, False]},
-                              damping=model, M_A=np.eye(6),
-                              added_mass_terms=AddedMassTerms(inertial=False), held=held)
+    path = yaml_io.save_model(tmp_path / "model.yaml", Model(
+        model.parameter_names, theta, std, np.eye(6) * 2.0, damping=model,
+        extra={"note": "n", "flags": [True, False]}, M_A=np.eye(6),
+        added_mass_terms=AddedMassTerms(inertial=False), held=held))
     probe = (
         "import json, sys, rclpy\n"
         "from rclpy.node import Node\n"
@@ -168,26 +170,26 @@ def test_model_file_is_a_ros_parameters_file(tmp_path: Path) -> None:
 
 
 def test_invalid_extra_and_failed_save_keep_the_old_file(tmp_path: Path) -> None:
-    path = yaml_io.save_model(tmp_path / "m.yaml", ["X_u"], np.array([1.0]), np.array([0.1]),
-                              np.eye(6))
+    path = yaml_io.save_model(tmp_path / "m.yaml", Model(["X_u"], np.array([1.0]), np.array([0.1]),
+                                                         np.eye(6)))
     before = path.read_text()
     with pytest.raises(ValueError, match=r"model\.fit\.bad: a ROS parameter array"):
-        yaml_io.save_model(path, ["X_u"], np.array([2.0]), np.array([0.1]), np.eye(6),
-                           {"fit": {"bad": [1.0, "a"]}})
+        yaml_io.save_model(path, Model(["X_u"], np.array([2.0]), np.array([0.1]), np.eye(6),
+                                       extra={"fit": {"bad": [1.0, "a"]}}))
     with pytest.raises(ValueError, match="reserved"):
-        yaml_io.save_model(path, ["X_u"], np.array([2.0]), np.array([0.1]), np.eye(6),
-                           {"theta": 1.0})
+        yaml_io.save_model(path, Model(["X_u"], np.array([2.0]), np.array([0.1]), np.eye(6),
+                                       extra={"theta": 1.0}))
     with pytest.raises(ValueError, match="non-empty"):
-        yaml_io.save_model(path, ["X_u"], np.array([2.0]), np.array([0.1]), np.eye(6),
-                           {"empty": []})
+        yaml_io.save_model(path, Model(["X_u"], np.array([2.0]), np.array([0.1]), np.eye(6),
+                                       extra={"empty": []}))
     assert path.read_text() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.yaml"]
 
 
 def test_load_model_errors_name_the_entry(tmp_path: Path) -> None:
     model, theta = damping_from_spec(FULL_SPEC)
-    path = yaml_io.save_model(tmp_path / "m.yaml", model.parameter_names, theta, theta,
-                              np.eye(6), damping=model)
+    path = yaml_io.save_model(tmp_path / "m.yaml", Model(model.parameter_names, theta, theta,
+                                                         np.eye(6), damping=model))
     doc = yaml.safe_load(path.read_text())
     params = doc["/**"]["ros__parameters"]["model"]
     params["terms"]["quadratic"] = ["X_uu"]
@@ -212,9 +214,10 @@ def test_added_mass_switches_round_trip_through_the_file_and_the_parameters(
     model, theta = damping_from_spec({"linear": {"X_u": 13.7, "N_r": 0.5}})
     v = yaml_io.load_vehicle("bluerov2_heavy")
     terms = AddedMassTerms(inertial=False, coriolis=True, munk=False)
-    path = yaml_io.save_model(tmp_path / "m.yaml", model.parameter_names, theta, theta,
-                              v.body.M, damping=model, M_A=v.body.added_mass,
-                              added_mass_terms=terms)
+    path = yaml_io.save_model(tmp_path / "m.yaml", Model(model.parameter_names, theta, theta,
+                                                         v.body.M, damping=model,
+                                                         M_A=v.body.added_mass,
+                                                         added_mass_terms=terms))
     doc = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]["model"]
     assert doc["added_mass_terms"] == {"inertial": False, "coriolis": True, "munk": False}
     assert doc["M_A"][0] == 6.36 and len(doc["M_A"]) == 36
@@ -223,23 +226,22 @@ def test_added_mass_switches_round_trip_through_the_file_and_the_parameters(
     np.testing.assert_array_equal(out.M_A, v.body.added_mass)
     assert "M_A" not in out.extra and "added_mass_terms" not in out.extra
     # the node parameters (bool leaves of a namespace) give the same model
-    params = yaml_io.model_parameters(out.parameter_names, out.theta, out.theta_std, out.M,
-                                      damping=out.damping, **out.file_kwargs())
+    params = yaml_io.model_parameters(out)
     assert params["model.added_mass_terms.inertial"] is False
     assert params["model.added_mass_terms.munk"] is False
     back = yaml_io.model_from_parameters(params)
     assert back.added_mass_terms == terms
     np.testing.assert_array_equal(back.M_A, v.body.added_mass)
     # an older file: no switches, no M_A → all on
-    old = yaml_io.save_model(tmp_path / "old.yaml", model.parameter_names, theta, theta,
-                             v.body.M, damping=model)
+    old = yaml_io.save_model(tmp_path / "old.yaml", Model(model.parameter_names, theta, theta,
+                                                          v.body.M, damping=model))
     o = yaml_io.load_model(old)
     assert o.added_mass_terms is None and o.M_A is None and o.acting_terms.all
     assert "added_mass_terms" not in old.read_text()
     # switches that turn effects off cannot be written or read without M_A
-    with pytest.raises(ValueError, match="M_A is needed"):
-        yaml_io.save_model(tmp_path / "x.yaml", model.parameter_names, theta, theta, v.body.M,
-                           added_mass_terms=terms)
+    with pytest.raises(ValueError, match="need M_A to split M"):
+        yaml_io.save_model(tmp_path / "x.yaml", Model(model.parameter_names, theta, theta, v.body.M,
+                                                      added_mass_terms=terms))
     del doc["M_A"]
     (tmp_path / "bad.yaml").write_text(yaml.safe_dump({"/**": {"ros__parameters": {
         "model": doc}}}))
@@ -261,16 +263,15 @@ def test_model_file_says_which_coefficients_the_data_determined(tmp_path: Path) 
                                       "quadratic": {"X_uu": 141.0, "Y_vv": 217.0}})
     std = np.array([0.2, 0.1, 1.5, np.nan])  # Y_vv held at its prior: no σ
     held = {"Y_vv": "no excitation: its regressor column is zero"}
-    path = yaml_io.save_model(tmp_path / "m.yaml", model.parameter_names, theta, std,
-                              np.eye(6), damping=model, held=held)
+    path = yaml_io.save_model(tmp_path / "m.yaml", Model(model.parameter_names, theta, std,
+                                                         np.eye(6), damping=model, held=held))
     doc = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]["model"]
     assert doc["identified"] == [True, True, True, False]
     assert doc["held"] == {"names": ["Y_vv"], "reasons": [held["Y_vv"]]}
     m = yaml_io.load_model(path)
     assert m.held == held and m.identified.tolist() == [True, True, True, False]
     assert "identified" not in m.extra and "held" not in m.extra
-    params = yaml_io.model_parameters(m.parameter_names, m.theta, m.theta_std, m.M,
-                                      damping=m.damping, **m.file_kwargs())
+    params = yaml_io.model_parameters(m)
     assert params["model.identified"] == [True, True, True, False]
     assert params["model.held.names"] == ["Y_vv"]
     assert yaml_io.model_from_parameters(params).held == held
@@ -286,8 +287,8 @@ def test_model_file_says_which_coefficients_the_data_determined(tmp_path: Path) 
     assert yaml_io.load_model(path).held == {"Y_vv": "poorly determined"}
     # a held name the model does not have, or a mask of the wrong length, is refused
     with pytest.raises(ConfigError, match=r"^model\.held: .*Z_ww"):
-        yaml_io.save_model(tmp_path / "x.yaml", model.parameter_names, theta, std, np.eye(6),
-                           held={"Z_ww": "?", **held})
+        yaml_io.save_model(tmp_path / "x.yaml", Model(model.parameter_names, theta, std, np.eye(6),
+                                                      held={"Z_ww": "?", **held}))
     doc["identified"] = [True, False]
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"model": doc}}}))
     with pytest.raises(ConfigError, match=r"^model\.identified: needs 4 booleans"):
@@ -305,15 +306,13 @@ def test_every_reader_refuses_non_finite_numbers(tmp_path: Path, entry: str, ind
                                                   value: float, match: str) -> None:
     """Issue 11: a NaN in a model file's theta was served by model_server_node and the client
     returned a NaN feed-forward. The file, its text, its node parameters and the evaluable
-    model all refuse it, naming the entry; a held coefficient's σ may be NaN."""
-    from dampest_ros.core.identified import IdentifiedModel
-
+    Model all refuse it, naming the entry; a held coefficient's σ may be NaN."""
     model, theta = damping_from_spec({"linear": {"X_u": 13.7, "Y_v": 2.0},
                                       "quadratic": {"X_uu": 141.0, "Y_vv": 217.0}})
     std, M = np.array([0.2, 0.1, 1.5, np.nan]), 20.0 * np.eye(6)
     held = {"Y_vv": "poorly determined"}
-    path = yaml_io.save_model(tmp_path / "m.yaml", model.parameter_names, theta, std, M,
-                              damping=model, held=held)
+    path = yaml_io.save_model(tmp_path / "m.yaml", Model(model.parameter_names, theta, std, M,
+                                                         damping=model, held=held))
     good = yaml_io.load_model(path)
     assert np.isnan(good.theta_std[3]) and good.theta[3] == 217.0
     doc = yaml.safe_load(path.read_text())
@@ -323,8 +322,8 @@ def test_every_reader_refuses_non_finite_numbers(tmp_path: Path, entry: str, ind
         yaml_io.load_model(path)
     with pytest.raises(ConfigError, match=match):
         yaml_io.loads_model(path.read_text())
-    params = yaml_io.model_parameters(good.parameter_names, good.theta, good.theta_std,
-                                      good.M, damping=good.damping, held=held)
+    params = yaml_io.model_parameters(Model(good.parameter_names, good.theta, good.theta_std,
+                                            good.M, damping=good.damping, held=held))
     params[f"model.{entry}"] = list(params[f"model.{entry}"])
     params[f"model.{entry}"][index] = value
     with pytest.raises(ConfigError, match=match):
@@ -332,9 +331,6 @@ def test_every_reader_refuses_non_finite_numbers(tmp_path: Path, entry: str, ind
     bad = {"theta": good.theta.copy(), "theta_std": good.theta_std.copy(),
            "M": good.M.reshape(36).copy()}
     bad[entry][index] = value
-    with pytest.raises(ConfigError, match=match):
-        IdentifiedModel(good.parameter_names, bad["theta"], bad["theta_std"], bad["M"],
-                        good.damping, held=held)
-    with pytest.raises(ConfigError, match=match):  # and no writer
-        yaml_io.save_model(tmp_path / "w.yaml", good.parameter_names, bad["theta"],
-                           bad["theta_std"], bad["M"], held=held)
+    with pytest.raises(ConfigError, match=match):  # nor the Model every writer takes
+        Model(good.parameter_names, bad["theta"], bad["theta_std"], bad["M"],
+              damping=good.damping, held=held)

@@ -62,13 +62,15 @@ def test_parameter_files_load_with_params_file_and_name_every_declared_parameter
     """Each node started with --params-file config/<node>.params.yaml (plus what it needs,
     given after it) declares exactly the file's parameters (besides rclpy's own and the
     model.* of the model servers)."""
+    from dampest_ros.core.model import Model
     from dampest_ros.io.yaml_io import load_vehicle, save_model
 
     monkeypatch.setenv("ROS_DOMAIN_ID", "81")
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     v = load_vehicle("bluerov2_heavy")
-    model = save_model(tmp_path / "m.yaml", v.damping.parameter_names, v.theta,
-                       0.1 * abs(v.theta) + 0.01, v.body.M, damping=v.damping)
+    model = save_model(tmp_path / "m.yaml", Model(v.damping.parameter_names, v.theta,
+                                                  0.1 * abs(v.theta) + 0.01, v.body.M,
+                                                  damping=v.damping))
     bag = tmp_path / "bag"
     from dampest_ros.io.recorder import BagRecorder
     with BagRecorder(bag) as rec:

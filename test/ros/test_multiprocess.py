@@ -116,7 +116,7 @@ def test_client_reads_a_converged_model(processes: dict) -> None:
     v = load_vehicle("bluerov2_heavy")
     truth = dict(zip(v.damping.parameter_names, v.theta, strict=True))
     print(f"\nmodel version {m.version} (first seen {first})")
-    for name, th, sd in zip(m.names, m.theta, m.theta_std, strict=True):
+    for name, th, sd in zip(m.parameter_names, m.theta, m.theta_std, strict=True):
         print(f"{name:5s} {th:10.4f} ± {sd:.4f}  truth {truth[name]:.4f}")
     assert m.version >= SIM_SECONDS - 12, logs  # one publication per simulated second
     for name in ("X_uu", "Y_vv", "Z_ww", "K_pp", "N_rr"):

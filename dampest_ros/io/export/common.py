@@ -18,9 +18,10 @@ import numpy as np
 
 from dampest_ros.core.damping import DampingModel, FloatArray
 from dampest_ros.core.identified import non_dissipative
+from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.vehicle import Vehicle, damping_from_spec
-from dampest_ros.io.yaml_io import ModelFile
+from dampest_ros.io.yaml_io import SIGN_CONVENTION
 
 
 class ExportWarning(UserWarning):
@@ -141,7 +142,7 @@ def num(x: float) -> str:
     return "0" if x == 0.0 else repr(x)
 
 
-def model_damping(mf: ModelFile) -> tuple[DampingModel | None, FloatArray, list[str]]:
+def model_damping(mf: Model) -> tuple[DampingModel | None, FloatArray, list[str]]:
     """The damping model of a model file, its θ, and the parameters it cannot place.
 
     Files written with ``damping=`` carry ``model.terms``; for older files the structure is
@@ -221,7 +222,7 @@ def coefficients(model: DampingModel, theta: FloatArray) -> tuple[list[Coefficie
     return out, other
 
 
-def export_added_mass(mf: ModelFile, vehicle: Vehicle | None
+def export_added_mass(mf: Model, vehicle: Vehicle | None
                       ) -> tuple[FloatArray | None, list[str]]:
     """M_A (FRD): the file's ``model.M_A``, else M − M_RB of the vehicle, cleaned of
     round-off, and notes; None with neither."""
@@ -249,7 +250,7 @@ def export_added_mass(mf: ModelFile, vehicle: Vehicle | None
     return M_A, notes
 
 
-def added_mass_switches(mf: ModelFile, vehicle: Vehicle | None) -> AddedMassTerms:
+def added_mass_switches(mf: Model, vehicle: Vehicle | None) -> AddedMassTerms:
     """The added-mass switches of the model file, else of the vehicle, else all on."""
     if mf.added_mass_terms is not None:
         return mf.added_mass_terms
@@ -279,10 +280,10 @@ def merge(items: Iterable[tuple[str, Coefficient, float]],
     return values
 
 
-def checked(mf: ModelFile, force: bool, source: str | None) -> tuple[list[str], list[str]]:
+def checked(mf: Model, force: bool, source: str | None) -> tuple[list[str], list[str]]:
     """The held-at-prior coefficients (``"name = value (reason)"``) and where the model
     generates energy (:func:`~dampest_ros.core.identified.non_dissipative` over
-    :attr:`ModelFile.flown <dampest_ros.io.yaml_io.ModelFile.flown>`).
+    :attr:`Model.flown <dampest_ros.core.model.Model.flown>`).
 
     Raises
     ------
@@ -320,12 +321,12 @@ def xml_comment(lines: Sequence[str]) -> str:
     return "\n" + text.replace("--", "- -") + "\n"
 
 
-def header_lines(mf: ModelFile, source: str | None, held: Sequence[str],
+def header_lines(mf: Model, source: str | None, held: Sequence[str],
             unsafe: Sequence[str]) -> list[str]:
     """The first lines of every export: origin, what is not an estimate, and dissipativity."""
     where = f" from {source}" if source else ""
     lines = [f"Exported by dampest_ros{where} (model version {mf.version}, "
-             f"dampest convention {mf.sign_convention}: +D(nu)nu on the left-hand side, FRD)."]
+             f"dampest convention {SIGN_CONVENTION}: +D(nu)nu on the left-hand side, FRD)."]
     if unsafe:
         lines += ["NON-DISSIPATIVE, exported on request (force): the model generates energy,",
                   "a simulator built from it can diverge:", *(f"  {x}" for x in unsafe)]

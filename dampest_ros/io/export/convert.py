@@ -4,23 +4,23 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from dampest_ros.core.model import Model
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.export import FORMATS, IMPORT_FORMATS
 from dampest_ros.io.export.common import Exported, Imported
 from dampest_ros.io.export.gz import export_gz, import_gz
 from dampest_ros.io.export.urdf import export_urdf, import_urdf
 from dampest_ros.io.export.uuv import export_uuv
-from dampest_ros.io.yaml_io import ModelFile
 
 
-def export_model(mf: ModelFile, fmt: str, vehicle: Vehicle | None = None, *,
+def export_model(mf: Model, fmt: str, vehicle: Vehicle | None = None, *,
                  link_name: str = "base_link", frame: str = "flu",
                  source: str | None = None, force: bool = False) -> Exported:
     """Export a model in one of :data:`~dampest_ros.io.export.FORMATS`.
 
     Parameters
     ----------
-    mf : ModelFile
+    mf : Model
     fmt : {'gz', 'urdf', 'uuv'}
     vehicle : Vehicle, optional
         For the added mass M_A = M − M_RB (and, for ``urdf``, the rigid-body entries; for

@@ -32,6 +32,7 @@ import numpy as np
 
 from dampest_ros.core.damping import FloatArray
 from dampest_ros.core.frames import body_twist
+from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.export import FRAMES
@@ -56,7 +57,6 @@ from dampest_ros.io.export.common import (
     xml_comment,
     xml_float,
 )
-from dampest_ros.io.yaml_io import ModelFile
 
 _GZ_FORCE = "xyzkmn"
 _GZ_VEL = "UVWPQR"
@@ -96,13 +96,13 @@ def _check_frame(frame: str) -> str:
     return frame
 
 
-def export_gz(mf: ModelFile, vehicle: Vehicle | None = None, *, link_name: str = "base_link",
+def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "base_link",
               frame: str = "flu", source: str | None = None, force: bool = False) -> Exported:
     """The gz-sim Hydrodynamics plugin element for a model.
 
     Parameters
     ----------
-    mf : ModelFile
+    mf : Model
     vehicle : Vehicle, optional
         Its rigid body gives the added mass M_A = M − M_RB; without it no ``<iDotJ>`` tags.
     link_name : str

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from dampest_ros.core.damping import FloatArray
+from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, rigid_body_mass
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.export.common import (
@@ -46,20 +47,19 @@ from dampest_ros.io.export.common import (
     xml_comment,
     xml_float,
 )
-from dampest_ros.io.yaml_io import ModelFile
 
 _URDF_ADDED = ("Xdu", "Ydv", "Zdw", "Kdp", "Mdq", "Ndr")
 _URDF_LINEAR = ("Xu", "Yv", "Zw", "Kp", "Mq", "Nr")
 _URDF_QUADRATIC = ("Xuu", "Yvv", "Zww", "Kpp", "Mqq", "Nrr")
 
 
-def export_urdf(mf: ModelFile, vehicle: Vehicle | None = None, *,
+def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
                 source: str | None = None, force: bool = False) -> Exported:
     """The ``<hydrodynamics>`` block (RDML ``hydrodynamics`` / ``auv_controllers`` / ``blue``).
 
     Parameters
     ----------
-    mf : ModelFile
+    mf : Model
     vehicle : Vehicle, optional
         Adds ``<mass>``, ``<inertia>``, ``<added_mass>`` (M_A = M − M_RB, diagonal),
         ``<weight>``, ``<buoyancy>`` and the centres of gravity and buoyancy.

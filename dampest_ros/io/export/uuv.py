@@ -21,6 +21,7 @@ import numpy as np
 
 from dampest_ros.core.damping import FloatArray
 from dampest_ros.core.frames import body_twist
+from dampest_ros.core.model import Model
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.export.common import (
     Coefficient,
@@ -37,7 +38,6 @@ from dampest_ros.io.export.common import (
     switches_left_out,
     xml_comment,
 )
-from dampest_ros.io.yaml_io import ModelFile
 
 #: The plugin of uuv_gazebo_ros_plugins that holds the hydrodynamic models (ROS variant).
 PLUGIN = {"name": "uuv_plugin", "filename": "libuuv_underwater_object_ros_plugin.so"}
@@ -50,13 +50,13 @@ def _numbers(values: FloatArray) -> str:
     return "\n" + rows + "\n      "
 
 
-def export_uuv(mf: ModelFile, vehicle: Vehicle | None = None, *, link_name: str = "base_link",
+def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "base_link",
                source: str | None = None, force: bool = False) -> Exported:
     """The UUV Simulator ``<plugin>`` block with the model as its HMFossen matrices (FRD).
 
     Parameters
     ----------
-    mf : ModelFile
+    mf : Model
     vehicle : Vehicle, optional
         Gives ``<added_mass>`` (M_A = M − M_RB, positive, when the model file has no
         ``model.M_A``), ``<volume>``, ``<center_of_buoyancy>`` and ``<fluid_density>``.
