@@ -345,7 +345,7 @@ def _recorder(rate_factor: str, seconds: str, kill_at: str = "") -> dict[str, fl
     from rclpy.parameter import Parameter
 
     from dampest_ros.io.bag import bag_summary
-    from dampest_ros.io.recorder import reindex
+    from dampest_ros.io.reindex import reindex
     from dampest_ros.ros.sim_node import SimNode
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -24,7 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Reindex and print what each file held and what could not be read."""
-    from dampest_ros.io.recorder import reindex
+    from dampest_ros.io.reindex import reindex
 
     report = reindex(args.bag)
     if report.removed:

@@ -22,14 +22,9 @@ appended at once to the file's journal (``<file>.journal``, :class:`_Journal`, e
 the chunk reaches the file): a killed process loses no message it had handed to the
 recorder, since what it wrote is in the operating system's cache.
 
-:func:`reindex` rebuilds ``metadata.yaml`` from the storage files, checking every chunk. A
-file without a valid footer (the recording was killed) or with damaged chunks is scanned
-record by record with the mcap stream reader; the messages of every intact chunk, up to the
-first unreadable record outside a chunk, are written to a new, well-formed file that replaces
-it, and the damaged original is kept beside it as ``<file>.damaged``. What could not be read
-is reported in bytes and, where the indexes count them, in messages. The messages of a
-journal whose chunk never reached the file are added (the bytes of that cut-off chunk are
-then not counted as lost).
+:func:`dampest_ros.io.reindex.reindex` recovers a bag whose recording was killed, with the
+journal; the rosbag2 metadata (definitions, QoS, ``metadata.yaml``) is written by
+:mod:`dampest_ros.io.bag_metadata`.
 
 No rclpy here: the recorder node (:mod:`dampest_ros.ros.recorder_node`) feeds it the
 serialized messages it receives.
@@ -38,36 +33,30 @@ serialized messages it receives.
 from __future__ import annotations
 
 import fcntl
-import itertools
 import os
-import re
 import struct
 import time
-from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
-from functools import cache
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-import yaml
 from mcap.data_stream import RecordBuilder
-from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Footer, Message, MessageIndex, Metadata, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.records import Channel, Metadata, Schema
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from rosbags.interfaces import (
     Qos,
-    QosDurability,
-    QosHistory,
-    QosLiveliness,
-    QosReliability,
-    QosTime,
 )
-from rosbags.rosbag2.metadata import dump_qos_v9, parse_qos
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from dampest_ros.io.bag_metadata import (
+    FileRecord,
+    TopicRecord,
+    make_qos,
+    message_definition,
+    qos_yaml,
+    write_metadata,
+)
 
 #: Bytes of messages per chunk: small enough that a crash loses little, large enough that
 #: the per-chunk indexes stay a small fraction of the file (~1 % at 256 KiB).
@@ -84,21 +73,19 @@ RESERVE_NAME = ".dampest.reserve"
 #: Suffix of a storage file's journal (the messages of its chunk in progress).
 JOURNAL_SUFFIX = ".journal"
 #: Name of the journal's first record (an MCAP metadata record): which chunk it holds.
-_JOURNAL_HEADER = "dampest journal"
+JOURNAL_HEADER = "dampest journal"
 #: Partial files a killed recorder or reindex may leave; reindex removes them.
 TEMP_PATTERNS = ("*.recovering", "metadata.yaml.tmp", RESERVE_NAME)
 #: Bytes of the reserve besides one chunk, the largest message and the summary estimate.
 _RESERVE_MARGIN = 256 * 1024
 #: Summary bytes per chunk (chunk index with a few channels) and per topic (estimate).
 _SUMMARY_PER_CHUNK, _SUMMARY_PER_TOPIC = 200, 1024
-#: rosbag2's "infinite" duration in QoS profiles (RMW_DURATION_INFINITE).
-INFINITE = QosTime(9223372036, 854775807)
 #: Bytes a message adds to a chunk besides its data (MCAP message record header).
 _RECORD_OVERHEAD = 31
 _COMPRESSIONS = {"none": CompressionType.NONE, "zstd": CompressionType.ZSTD,
                  "lz4": CompressionType.LZ4}
-_PROFILE = "ros2"
-_LIBRARY = "dampest_ros recorder (mcap python writer)"
+PROFILE = "ros2"
+LIBRARY = "dampest_ros recorder (mcap python writer)"
 
 
 class RecorderError(RuntimeError):
@@ -161,115 +148,7 @@ class BagLock:
         self.fd = -1
 
 
-# --- message definitions and QoS -----------------------------------------------------------
-
-
-@cache
-def _store() -> Any:
-    """A typestore of the ROS 2 Jazzy types, extended by :func:`message_definition`."""
-    return get_typestore(Stores.ROS2_JAZZY)
-
-
-def _find_msg_file(msgtype: str, prefixes: Sequence[str]) -> Path | None:
-    pkg, _, name = msgtype.partition("/msg/")
-    for prefix in prefixes:
-        path = Path(prefix) / "share" / pkg / "msg" / f"{name}.msg"
-        if path.is_file():
-            return path
-    return None
-
-
-def message_definition(msgtype: str, prefixes: Sequence[str] | None = None
-                       ) -> tuple[str, str]:
-    """The rosbag2 message definition text and RIHS01 type hash of a message type.
-
-    Types of ROS 2 Jazzy come from the rosbags typestore; other types (a vehicle's own
-    messages) are loaded from ``share/<package>/msg/<Type>.msg`` under the ament prefixes,
-    their dependencies too.
-
-    Parameters
-    ----------
-    msgtype : str
-        e.g. ``sensor_msgs/msg/Imu``.
-    prefixes : sequence of str, optional
-        Install prefixes to search; default: ``$AMENT_PREFIX_PATH``.
-
-    Returns
-    -------
-    (msgdef, rihs01)
-
-    Raises
-    ------
-    KeyError
-        If the type (or one it uses) is neither known nor found as a ``.msg`` file.
-    """
-    store = _store()
-    if prefixes is None:
-        prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
-    for _ in range(64):  # each round loads one missing type
-        try:
-            msgdef, _ = store.generate_msgdef(msgtype, ros_version=2)
-            return str(msgdef), str(store.hash_rihs01(msgtype))
-        except KeyError as exc:
-            missing = str(exc.args[0]) if exc.args else msgtype
-            if "/msg/" not in missing:
-                missing = msgtype
-            path = _find_msg_file(missing, prefixes)
-            if path is None or missing in store.fielddefs:
-                raise KeyError(f"no message definition for {missing!r} (not a ROS 2 Jazzy "
-                               f"type and no .msg file under {list(prefixes)})") from None
-            store.register(get_types_from_msg(path.read_text(), missing))
-    raise KeyError(f"cannot resolve the definition of {msgtype!r}")
-
-
-def make_qos(*, reliable: bool = True, transient_local: bool = False, depth: int = 10,
-             history: QosHistory = QosHistory.KEEP_LAST) -> Qos:
-    """A QoS profile as stored in bag metadata (infinite deadline, lifespan and lease)."""
-    return Qos(history, depth,
-               QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
-               QosDurability.TRANSIENT_LOCAL if transient_local else QosDurability.VOLATILE,
-               INFINITE, INFINITE, QosLiveliness.AUTOMATIC, INFINITE, False)
-
-
-def qos_time(ns: int) -> QosTime:
-    """A QoS duration from nanoseconds; 0 (the rmw default) and ≥ 2**63 − 1 stay as rosbag2
-    writes them (0 as 0, the maximum as :data:`INFINITE`)."""
-    if ns >= 2**63 - 1:
-        return INFINITE
-    sec, nsec = divmod(int(ns), 1_000_000_000)
-    return QosTime(sec, nsec)
-
-
-def _qos_yaml(profiles: Sequence[Qos]) -> str:
-    return str(yaml.safe_dump(dump_qos_v9(list(profiles)), default_flow_style=False,
-                              sort_keys=False)).strip()
-
-
 # --- writing -------------------------------------------------------------------------------
-
-
-@dataclass
-class TopicRecord:
-    """A topic of the bag: name, type, offered QoS, definition and message count."""
-
-    id: int
-    topic: str
-    msgtype: str
-    qos: list[Qos]
-    msgdef: str
-    type_hash: str
-    count: int = 0
-
-
-@dataclass
-class FileRecord:
-    """A storage file of the bag: name, message count and log-time range (ns)."""
-
-    name: str
-    count: int = 0
-    start: int = 2**63 - 1
-    end: int = 0
-    counts: dict[int, int] = field(default_factory=dict)
 
 
 class _Spool:
@@ -353,7 +232,7 @@ class _Journal:
         """Empty the journal for the chunk of index ``chunk`` of the file."""
         if self.fd < 0:
             return
-        header = _record_bytes(Metadata(name=_JOURNAL_HEADER, metadata={"chunk": str(chunk)}))
+        header = _record_bytes(Metadata(name=JOURNAL_HEADER, metadata={"chunk": str(chunk)}))
         try:
             os.ftruncate(self.fd, 0)
         except OSError:
@@ -391,7 +270,7 @@ class _OpenFile:
         # finish() and flush() of mcap 1.6 carry no annotations.)
         self.writer: Any = McapWriter(self.stream,  # type: ignore[arg-type]  # (duck-typed)
                                       chunk_size=2**62, compression=compression)
-        self.writer.start(_PROFILE, _LIBRARY)
+        self.writer.start(PROFILE, LIBRARY)
         self.schemas: dict[str, int] = {}
         self.channels: dict[int, int] = {}
         self.record = FileRecord(path.name)
@@ -405,7 +284,7 @@ class _OpenFile:
             self.schemas[t.msgtype] = self.writer.register_schema(t.msgtype, encoding, data)
             self.journal.define(Schema(id=self.schemas[t.msgtype], name=t.msgtype,
                                        encoding=encoding, data=data))
-        metadata = {"offered_qos_profiles": _qos_yaml(t.qos), "topic_type_hash": t.type_hash}
+        metadata = {"offered_qos_profiles": qos_yaml(t.qos), "topic_type_hash": t.type_hash}
         self.channels[t.id] = self.writer.register_channel(
             t.topic, "cdr", self.schemas[t.msgtype], metadata)
         self.journal.define(Channel(id=self.channels[t.id], topic=t.topic,
@@ -721,400 +600,3 @@ class BagRecorder:
         """Bytes in the storage files so far (the chunk in progress not included)."""
         done = sum((self.path / r.name).stat().st_size for r in self.files[:-1])
         return done + (self._file.size() if self._file is not None else 0)
-
-
-def write_metadata(path: Path, topics: Sequence[TopicRecord], files: Sequence[FileRecord]
-                   ) -> None:
-    """Write ``metadata.yaml`` (rosbag2 version 9) atomically.
-
-    Chunk compression inside MCAP files is not bag-level compression: rosbag2 leaves
-    ``compression_format``/``compression_mode`` empty for it, and so does this.
-    """
-    counted = [f for f in files if f.count]
-    start = min((f.start for f in counted), default=0)
-    end = max((f.end for f in counted), default=0)
-
-    def nanoseconds(n: int) -> dict[str, int]:
-        return {"nanoseconds": int(n)}
-
-    info = {
-        "version": 9,
-        "storage_identifier": "mcap",
-        "duration": nanoseconds(end - start),
-        "starting_time": {"nanoseconds_since_epoch": int(start)},
-        "message_count": sum(f.count for f in files),
-        "topics_with_message_count": [
-            {"topic_metadata": {"name": t.topic, "type": t.msgtype,
-                                "serialization_format": "cdr",
-                                "offered_qos_profiles": dump_qos_v9(list(t.qos)),
-                                "type_description_hash": t.type_hash},
-             "message_count": t.count}
-            for t in topics],
-        "compression_format": "",
-        "compression_mode": "",
-        "relative_file_paths": [f.name for f in files],
-        "files": [{"path": f.name,
-                   "starting_time": {"nanoseconds_since_epoch": int(f.start if f.count else 0)},
-                   "duration": nanoseconds(f.end - f.start if f.count else 0),
-                   "message_count": f.count} for f in files],
-        "custom_data": None,
-        "ros_distro": "jazzy",
-    }
-    tmp = path / "metadata.yaml.tmp"
-    try:
-        tmp.write_text(yaml.safe_dump({"rosbag2_bagfile_information": info},
-                                      default_flow_style=False, sort_keys=False))
-        tmp.replace(path / "metadata.yaml")
-    finally:
-        tmp.unlink(missing_ok=True)  # never a partial metadata file left behind
-
-
-# --- recovery ------------------------------------------------------------------------------
-
-
-@dataclass
-class FileReport:
-    """What :func:`reindex` found in one storage file."""
-
-    name: str
-    messages: int
-    complete: bool
-    recovered: bool = False
-    lost_bytes: int = 0
-    lost_messages: int = 0
-    error: str = ""
-    journal: int = 0  # messages of the chunk in progress, recovered from the journal
-
-
-@dataclass
-class ReindexReport:
-    """What :func:`reindex` did: one entry per storage file, and the total."""
-
-    path: Path
-    files: list[FileReport]
-    removed: list[str] = field(default_factory=list)  # partial files found and removed
-
-    @property
-    def messages(self) -> int:
-        """Messages indexed in the new metadata."""
-        return sum(f.messages for f in self.files)
-
-    @property
-    def lost_bytes(self) -> int:
-        """Bytes of the storage files that could not be read."""
-        return sum(f.lost_bytes for f in self.files)
-
-    @property
-    def lost_messages(self) -> int:
-        """Messages known to be unreadable (counted by the indexes of damaged chunks or the
-        file's summary; a chunk cut off by a killed recording has no index to count)."""
-        return sum(f.lost_messages for f in self.files)
-
-
-def _natural(p: Path) -> tuple[Any, ...]:
-    return tuple(int(s) if s.isdigit() else s for s in re.split(r"(\d+)", p.name))
-
-
-def _has_summary(path: Path) -> bool:
-    """True when the file ends in a valid footer and summary rosbags can index."""
-    try:
-        with path.open("rb") as f:
-            summary = make_reader(f).get_summary()
-    except Exception:  # any failure to parse the file end: not indexable as it is
-        return False
-    return summary is not None and summary.statistics is not None
-
-
-@dataclass
-class _Scan:
-    schemas: dict[int, Schema] = field(default_factory=dict)
-    channels: dict[int, Channel] = field(default_factory=dict)
-    complete: bool = False
-    end: int = 0           # byte offset after the last complete record
-    error: str = ""
-    compression: str = ""
-    damaged_bytes: int = 0      # bytes of chunks skipped as damaged
-    damaged_messages: int = 0   # messages in them, by their message indexes
-    untyped: int = 0            # messages of a channel whose record was lost
-    chunks: int = 0             # chunk records met (intact or not)
-    journal: int = 0            # messages taken from the journal
-
-    @property
-    def damaged(self) -> bool:
-        """Some bytes of the file could not be read."""
-        return bool(self.error or self.damaged_bytes or self.untyped or not self.complete)
-
-
-def _chunk_records(chunk: Chunk, scan: _Scan) -> list[Any] | None:
-    """The records of a chunk, or None when it is damaged (CRC, compression, framing)."""
-    try:
-        return list(breakup_chunk(chunk, validate_crc=True))  # all or nothing
-    except Exception as exc:  # any failure to unpack damaged bytes: the chunk is skipped
-        scan.error = scan.error or f"damaged chunk ({type(exc).__name__}: {exc})"
-        return None
-
-
-def _records(path: Path, scan: _Scan) -> Iterator[Message]:
-    """Messages of a file in file order, skipping damaged chunks (counted in ``scan`` with
-    the messages their indexes list), up to its first incomplete or corrupt record outside
-    a chunk; fills ``scan`` with schemas, channels, the readable extent and why it stopped."""
-    size = path.stat().st_size
-    with path.open("rb") as f:
-        reader = StreamReader(f, emit_chunks=True, validate_crcs=False,
-                              record_size_limit=max(size, 1))
-        skipped = False  # the message indexes after a damaged chunk count its messages
-        try:
-            for record in reader.records:
-                inner: list[Any] | None = [record]
-                if isinstance(record, Chunk):
-                    scan.chunks += 1
-                    scan.compression = record.compression
-                    inner = _chunk_records(record, scan)
-                    skipped = inner is None
-                    if skipped:
-                        scan.damaged_bytes += f.tell() - scan.end
-                elif isinstance(record, MessageIndex) and skipped:
-                    scan.damaged_messages += len(record.records)
-                for r in inner or ():
-                    if isinstance(r, Schema):
-                        scan.schemas[r.id] = r
-                    elif isinstance(r, Channel):
-                        scan.channels[r.id] = r
-                    elif isinstance(r, Message):
-                        yield r
-                    elif isinstance(r, Footer):
-                        scan.complete = True
-                scan.end = f.tell()
-        except (McapError, ValueError, EOFError, OSError) as exc:
-            scan.error = f"{type(exc).__name__}: {exc}".rstrip(": ")
-        except struct.error:
-            scan.error = "truncated record"
-        except Exception as exc:  # any other parse failure of damaged bytes stops the scan
-            scan.error = f"{type(exc).__name__}: {exc}"
-
-
-def _journal_records(path: Path, scan: _Scan) -> Iterator[Message]:
-    """The messages of the journal of storage file ``path`` when its chunk is not in the
-    file (its index is not below the chunks ``scan`` met), up to its first incomplete
-    record; its schemas and channels join ``scan``'s."""
-    journal = journal_path(path)
-    if not journal.exists():
-        return
-    with journal.open("rb") as f:
-        reader = StreamReader(f, skip_magic=True, validate_crcs=False,
-                              record_size_limit=max(journal.stat().st_size, 1))
-        try:
-            for r in reader.records:
-                if isinstance(r, Metadata) and r.name == _JOURNAL_HEADER:
-                    if int(r.metadata["chunk"]) < scan.chunks:
-                        return  # its chunk reached the file
-                elif isinstance(r, Schema):
-                    scan.schemas.setdefault(r.id, r)
-                elif isinstance(r, Channel):
-                    scan.channels.setdefault(r.id, r)
-                elif isinstance(r, Message):
-                    scan.journal += 1
-                    yield r
-        except (McapError, ValueError, EOFError, struct.error):
-            return  # the record being appended when the recorder was killed
-
-
-@dataclass
-class _Tally:
-    counts: dict[int, int] = field(default_factory=dict)
-    start: int = 2**63 - 1
-    end: int = 0
-
-    def add(self, m: Message) -> None:
-        self.counts[m.channel_id] = self.counts.get(m.channel_id, 0) + 1
-        self.start = min(self.start, m.log_time)
-        self.end = max(self.end, m.log_time)
-
-
-def _recover(path: Path, chunk_size: int, known: _Scan) -> tuple[_Scan, _Tally]:
-    """Copy the readable messages of a damaged file into a well-formed one in its place
-    (``known``: schemas and channels of its summary, for those lost in damaged chunks)."""
-    scan, tally = _Scan(schemas=dict(known.schemas), channels=dict(known.channels)), _Tally()
-    tmp = path.with_name(path.name + ".recovering")
-    tmp.unlink(missing_ok=True)
-    try:
-        writer = _copy_readable(path, tmp, chunk_size, scan, tally)
-    except BaseException:
-        tmp.unlink(missing_ok=True)  # never a partial file left behind
-        raise
-    if writer is None:  # not even a channel is readable: leave the file as it is
-        tmp.unlink()
-        return scan, tally
-    path.replace(path.with_name(path.name + ".damaged"))
-    tmp.replace(path)
-    return scan, tally
-
-
-def _copy_readable(path: Path, tmp: Path, chunk_size: int, scan: _Scan, tally: _Tally
-                   ) -> Any:
-    """Write the readable messages of ``path`` to ``tmp``; the writer, or None when no
-    channel is readable."""
-    with tmp.open("xb") as out:
-        writer: Any = None  # McapWriter once the first channel is known
-        schema_ids: dict[int, int] = {}
-        channel_ids: dict[int, int] = {}
-
-        def channel(cid: int) -> int:
-            nonlocal writer
-            if writer is None:
-                comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}.get(
-                    scan.compression, CompressionType.NONE)
-                writer = McapWriter(out, chunk_size=chunk_size, compression=comp)
-                writer.start(_PROFILE, _LIBRARY + ", recovered by reindex")
-            if cid not in channel_ids:
-                ch = scan.channels[cid]
-                if ch.schema_id and ch.schema_id not in schema_ids:
-                    s = scan.schemas[ch.schema_id]
-                    schema_ids[ch.schema_id] = writer.register_schema(s.name, s.encoding, s.data)
-                channel_ids[cid] = writer.register_channel(
-                    ch.topic, ch.message_encoding, schema_ids.get(ch.schema_id, 0), ch.metadata)
-            return channel_ids[cid]
-
-        for m in itertools.chain(_records(path, scan), _journal_records(path, scan)):
-            if m.channel_id not in scan.channels:
-                scan.untyped += 1  # a message whose channel record was lost cannot be typed
-                continue
-            cid = channel(m.channel_id)
-            assert writer is not None
-            writer.add_message(cid, m.log_time, m.data, m.publish_time, m.sequence)
-            tally.add(m)
-        for cid in scan.channels:  # topics without a readable message keep their channel
-            channel(cid)
-        if writer is not None:
-            writer.finish()
-            out.flush()
-            os.fsync(out.fileno())
-    return writer
-
-
-def _summarised(path: Path) -> tuple[_Scan, _Tally]:
-    """Schemas, channels and counts of a complete file, from its summary."""
-    scan, tally = _Scan(complete=True), _Tally()
-    with path.open("rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None and summary.statistics is not None
-    scan.schemas = dict(summary.schemas)
-    scan.channels = dict(summary.channels)
-    st = summary.statistics
-    tally.counts = {int(k): int(v) for k, v in st.channel_message_counts.items() if v}
-    if st.message_count:
-        tally.start, tally.end = st.message_start_time, st.message_end_time
-    scan.end = path.stat().st_size
-    return scan, tally
-
-
-def _metadata_value(channel: Channel, key: str) -> str:
-    return str(channel.metadata.get(key, ""))
-
-
-def _index(mcap_path: Path, chunk_size: int) -> tuple[_Scan, _Tally, FileReport]:
-    """Schemas, channels, counts and the report of one storage file; a file that is not
-    complete and intact (no summary, or a damaged chunk) is rewritten with its readable
-    messages (:func:`_recover`)."""
-    size = mcap_path.stat().st_size
-    known, counted = (_summarised(mcap_path) if _has_summary(mcap_path)
-                      else (_Scan(), _Tally()))
-    if known.complete:  # the summary is there: are the chunks it indexes intact too?
-        check = _Scan(schemas=dict(known.schemas), channels=dict(known.channels))
-        for _ in _records(mcap_path, check):
-            pass
-        if not check.damaged:
-            return known, counted, FileReport(mcap_path.name, sum(counted.counts.values()),
-                                              complete=True)
-    scan, tally = _recover(mcap_path, chunk_size, known)
-    readable = sum(tally.counts.values())
-    lost = max(scan.damaged_messages + scan.untyped, sum(counted.counts.values()) - readable)
-    # a cut-off last chunk whose messages the journal held loses no message
-    tail = 0 if scan.complete or scan.journal else size - scan.end
-    return scan, tally, FileReport(mcap_path.name, readable, complete=False, recovered=True,
-                                   lost_bytes=scan.damaged_bytes + tail, lost_messages=lost,
-                                   error=scan.error, journal=scan.journal)
-
-
-def reindex(path: str | Path, *, chunk_size: int = DEFAULT_CHUNK_SIZE) -> ReindexReport:
-    """Rebuild ``metadata.yaml`` of an MCAP bag from its storage files.
-
-    Every file is read through, its chunks checked against their CRCs. A complete, intact
-    file is indexed from its summary. Any other (the recording was killed, or bytes of a
-    chunk are damaged) is read record by record, damaged chunks skipped and counted, up to
-    its first unreadable record outside a chunk; the readable messages are written to a new
-    file under the same name and the original is kept as ``<file>.damaged``. Partial files
-    a killed recorder or reindex left (:data:`TEMP_PATTERNS`) are removed first; an existing
-    ``metadata.yaml`` is replaced. The bag is locked meanwhile (:class:`BagLock`).
-
-    Parameters
-    ----------
-    path : str or Path
-        The bag directory.
-    chunk_size : int
-        Chunk size of rewritten files (bytes).
-
-    Returns
-    -------
-    ReindexReport
-
-    Raises
-    ------
-    FileNotFoundError
-        If ``path`` is not a directory holding ``.mcap`` files.
-    BagBusyError
-        If a recorder is still writing the bag.
-    """
-    path = Path(path)
-    if not path.is_dir():
-        raise FileNotFoundError(f"{path} is not a bag directory")
-    try:
-        lock = BagLock(path, "dampest reindex")
-    except BagBusyError as exc:
-        raise BagBusyError(f"{exc}: reindex would rewrite the file being written; stop the "
-                           "recorder first (Ctrl-C or SIGTERM close the bag and write its "
-                           "metadata.yaml, no reindex needed)") from None
-    try:
-        removed = sorted(p.name for pattern in TEMP_PATTERNS for p in path.glob(pattern))
-        for name in removed:
-            (path / name).unlink()
-        report = _reindex(path, chunk_size)
-    finally:
-        lock.release()
-    report.removed = removed
-    return report
-
-
-def _reindex(path: Path, chunk_size: int) -> ReindexReport:
-    """:func:`reindex` of a locked bag directory."""
-    mcaps = sorted(path.glob("*.mcap"), key=_natural)
-    if not mcaps:
-        kinds = sorted({p.suffix for p in path.iterdir()})
-        raise FileNotFoundError(f"no .mcap storage file in {path} (found {kinds}); "
-                                "reindex supports MCAP bags only")
-    topics: dict[tuple[str, str], TopicRecord] = {}
-    files: list[FileRecord] = []
-    reports: list[FileReport] = []
-    for mcap_path in mcaps:
-        scan, tally, report = _index(mcap_path, chunk_size)
-        journal_path(mcap_path).unlink(missing_ok=True)  # used, or its chunk is in the file
-        reports.append(report)
-        if not scan.channels:
-            continue  # nothing readable: left out of the metadata, kept on disk
-        record = FileRecord(mcap_path.name, report.messages, tally.start, tally.end)
-        files.append(record)
-        for cid, ch in scan.channels.items():
-            schema = scan.schemas.get(ch.schema_id)
-            msgtype = schema.name if schema is not None else ""
-            key = (ch.topic, msgtype)
-            t = topics.get(key)
-            if t is None:
-                qos_text = _metadata_value(ch, "offered_qos_profiles")
-                qos = parse_qos(qos_text) if qos_text else []
-                t = TopicRecord(len(topics) + 1, ch.topic, msgtype, qos,
-                                schema.data.decode() if schema is not None else "",
-                                _metadata_value(ch, "topic_type_hash"))
-                topics[key] = t
-            t.count += tally.counts.get(cid, 0)
-    write_metadata(path, list(topics.values()), files)
-    return ReindexReport(path, reports)

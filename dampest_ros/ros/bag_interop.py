@@ -25,7 +25,7 @@ from rosbags.interfaces import (
     QosTime,
 )
 
-from dampest_ros.io.recorder import qos_time
+from dampest_ros.io.bag_metadata import qos_time
 
 
 def to_bag_qos(profile: QoSProfile) -> Qos:

@@ -15,14 +15,10 @@ from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader
 
 from dampest_ros.cli.main import main
-from dampest_ros.io import bag, recorder
-from dampest_ros.io.recorder import (
-    LOCK_NAME,
-    RESERVE_NAME,
-    BagRecorder,
-    StorageError,
-    reindex,
-)
+from dampest_ros.io import bag
+from dampest_ros.io import reindex as reindexing
+from dampest_ros.io.recorder import LOCK_NAME, RESERVE_NAME, BagRecorder, StorageError
+from dampest_ros.io.reindex import reindex
 
 Msg = tuple[str, str, int, bytes]  # topic, type, log time (ns), CDR bytes
 
@@ -241,7 +237,7 @@ def test_reindex_that_fails_leaves_no_partial_file(tmp_path: Path, messages: lis
     def no_space(*args: Any, **kw: Any) -> None:
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(recorder, "McapWriter", no_space)
+    monkeypatch.setattr(reindexing, "McapWriter", no_space)
     with pytest.raises(OSError, match="No space left"):
         reindex(path)
     assert sorted(p.name for p in path.iterdir()) == [mcap.name]

@@ -19,7 +19,9 @@ from rosbags.rosbag2 import Reader
 
 from dampest_ros.core.measurements import ImuSeries, JointSeries, Series
 from dampest_ros.io import bag, cdr
-from dampest_ros.io.recorder import BagRecorder, RecorderError, make_qos, reindex
+from dampest_ros.io.bag_metadata import make_qos
+from dampest_ros.io.recorder import BagRecorder, RecorderError
+from dampest_ros.io.reindex import reindex
 
 Msg = tuple[str, int, bytes]  # topic, log time (ns), CDR bytes
 
