@@ -17,14 +17,9 @@ from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle
-from dampest_ros.report import (
-    PSD_DECADES,
-    Tracking,
-    parameter_units,
-    rms_by_unit,
-    write_convergence_report,
-    write_report,
-)
+from dampest_ros.report.convergence import Tracking, rms_by_unit, write_convergence_report
+from dampest_ros.report.figures import PSD_DECADES, parameter_units
+from dampest_ros.report.identify import write_report
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -346,7 +346,7 @@ def _write_report(out_dir: str, args: argparse.Namespace, base: Any, res: Any,
     import numpy as np
     from matplotlib.figure import Figure
 
-    from dampest_ros.report import CSS
+    from dampest_ros.report.figures import CSS
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -28,7 +28,7 @@ from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.yaml_io import load_vehicle, save_model
-from dampest_ros.report import psd_limits, psd_unit
+from dampest_ros.report.figures import psd_limits, psd_unit
 
 DPI = 90
 

@@ -37,7 +37,8 @@ from dampest_ros.core.validate import force_scores
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
-from dampest_ros.report import parameter_units, write_report
+from dampest_ros.report.figures import parameter_units
+from dampest_ros.report.identify import write_report
 
 
 def run(args: argparse.Namespace) -> int:

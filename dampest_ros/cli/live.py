@@ -99,7 +99,7 @@ def _error(value: float, truth: float) -> float:
 def run(args: argparse.Namespace) -> int:
     """Fly the pipeline, print and save; then the batch column and the report."""
     from dampest_ros.io.yaml_io import load_vehicle, read_mapping
-    from dampest_ros.report import band_coverage
+    from dampest_ros.report.convergence import band_coverage
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -314,12 +314,8 @@ def _report(args: argparse.Namespace, out: Path, flight: Flight,
     from dampest_ros.client import ModelClient
     from dampest_ros.core.control import VelocityPI
     from dampest_ros.core.simulate import Simulator, track
-    from dampest_ros.report import (
-        Tracking,
-        parameter_units,
-        rms_by_unit,
-        write_convergence_report,
-    )
+    from dampest_ros.report.convergence import Tracking, rms_by_unit, write_convergence_report
+    from dampest_ros.report.figures import parameter_units
 
     e = flight.estimator
     client = ModelClient.from_yaml(flight.path)

@@ -14,7 +14,7 @@ pytest.importorskip("rclpy")
 
 from dampest_ros.cli.main import main
 from dampest_ros.io.yaml_io import load_model, load_vehicle
-from dampest_ros.report import band_coverage
+from dampest_ros.report.convergence import band_coverage
 
 NUMBER = r"(-?[\d.]+(?:e[-+]\d+)?|—)"
 

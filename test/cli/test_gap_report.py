@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from dampest_ros.cli.main import main
-from dampest_ros.report import PSD_DECADES
+from dampest_ros.report.figures import PSD_DECADES
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -29,7 +29,7 @@ from dampest_ros.core.simulate import run
 from dampest_ros.core.trajectory import Trajectory
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
-from dampest_ros.report import band_coverage
+from dampest_ros.report.convergence import band_coverage
 
 
 @pytest.fixture(scope="module")
