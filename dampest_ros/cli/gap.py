@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import html
 import re
+import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -16,6 +17,7 @@ from matplotlib.figure import Figure
 
 from dampest_ros.cli.common import table
 from dampest_ros.cli.inputs import load_model_for, load_samples
+from dampest_ros.cli.pool import expand_inputs
 from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData
 from dampest_ros.core.gap.library import library
 from dampest_ros.core.gap.localise import LocalRow, concentration, localise, residual_psd
@@ -25,6 +27,7 @@ from dampest_ros.core.gap.update import free_run_errors, updated_model
 from dampest_ros.core.measurements import JointSeries
 from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
+from dampest_ros.core.samples import Samples
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.yaml_io import load_vehicle, save_model
@@ -51,6 +54,36 @@ def _joints(path: str, args: argparse.Namespace, vehicle: Vehicle) -> JointSerie
     return replace(series, stamp=series.stamp + float(args.delay))
 
 
+def pooled_logs(paths: list[str], args: argparse.Namespace, vehicle: Vehicle
+                ) -> tuple[Samples, JointSeries | None]:
+    """The samples (and logged thruster state) of one log, or of several one after the other:
+    each log's clock is shifted to start 1 s after the previous one ends, its samples a
+    segment of their own, so that the effects are screened on the pooled data and the held-out
+    part is the last logs' end. The thruster state is kept only when every log has it."""
+    parts = [(load_samples(p, vehicle, args), _joints(p, args, vehicle)) for p in paths]
+    if len(parts) == 1:
+        return parts[0]
+    shifted: list[Samples] = []
+    joints: list[JointSeries | None] = []
+    end = 0.0
+    for s, j in parts:
+        offset = end + 1.0 - float(s.t[0]) if shifted else 0.0
+        shifted.append(replace(s, t=s.t + offset))
+        joints.append(None if j is None else replace(j, stamp=j.stamp + offset))
+        end = float(shifted[-1].t[-1])
+    print(f"{len(paths)} logs pooled, one after the other in time", file=sys.stderr)
+    pooled = Samples.concatenate(shifted)
+    if any(j is None for j in joints):
+        return pooled, None
+    js = [j for j in joints if j is not None]
+    if any(j.names != js[0].names for j in js):
+        return pooled, None
+    return pooled, replace(js[0], stamp=np.concatenate([j.stamp for j in js]),
+                           velocity=np.concatenate([j.velocity for j in js]),
+                           effort=np.concatenate([j.effort for j in js]),
+                           position=np.concatenate([j.position for j in js]))
+
+
 def run(args: argparse.Namespace) -> int:
     """Load, compare, localise, name the missing effects, print and write the report.
 
@@ -68,8 +101,9 @@ def run(args: argparse.Namespace) -> int:
     vehicle = load_vehicle(args.vehicle)
     mf, model, body = load_model_for(args.model, vehicle)
     cands = library([c.strip() for c in str(args.candidates).split(",") if c.strip()])
-    samples = load_samples(args.input, vehicle, args)
-    joints = _joints(args.input, args, vehicle)
+    paths = expand_inputs(args.input)
+    args.input = ", ".join(paths)
+    samples, joints = pooled_logs(paths, args, vehicle)
     data = GapData(samples, model, mf.theta, body, vehicle.thrusters, joints,
                        cutoff=args.cutoff, split=args.split)
     seconds = len(samples) / samples.rate

@@ -36,9 +36,10 @@ MIN_HELDOUT = 0.03
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of dampest gap (its work: dampest_ros.cli.gap.run)."""
     describe(p, __doc__, EXAMPLE, CSV_HELP)
-    p.add_argument("input", metavar="MEASURED",
+    p.add_argument("input", metavar="MEASURED", nargs="+",
                    help="rosbag2 directory (MCAP or SQLite3) or .csv / .csv.gz file from the "
-                        "vehicle")
+                        "vehicle; several (or a quoted glob, or a .txt list) are pooled one "
+                        "after the other in time, the last part held out")
     p.add_argument("--model", required=True, metavar="MODEL",
                    help="model YAML (ROS 2 parameters file) of the damping you believe, e.g. "
                         "the simulator's; its M is used as M_RB + M_A")
