@@ -20,11 +20,11 @@ from dampest_ros.cli.pool import (
     plot_drift,
     reduce_all,
 )
-from dampest_ros.core.batch import Fit, FitOptions, fit
+from dampest_ros.core.batch import Fit, FitOptions
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.excitation import speed_limits
-from dampest_ros.core.identifier import prior_arrays
+from dampest_ros.core.identifier import DampingIdentifier, prior_arrays
 from dampest_ros.core.mounting import frame_id_note
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import OnlineConfig
@@ -62,10 +62,14 @@ def run(args: argparse.Namespace) -> int:
         values = dict(zip(model.parameter_names, nominal, strict=True))
         model = selection.model
         nominal = np.array([values.get(n, 0.0) for n in model.parameter_names])
-    prior, prior_std = prior_of(args, model, nominal)
-    options = FitOptions(method=args.method, cutoff=args.cutoff,
-                         speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
-    result = fit(samples, model, vehicle.body, options, prior=prior, prior_std=prior_std)
+    prior_model = load_model(args.prior) if args.prior else None
+    spec = None if prior_model is None else (prior_model.parameter_names, prior_model.theta,
+                                             prior_model.theta_std)
+    prior = nominal if spec is None else prior_arrays(model, nominal, spec)[0]
+    identifier = DampingIdentifier(vehicle, method=args.method, cutoff=args.cutoff,
+                                   prior=spec, structure=model).fit(samples)
+    result = identifier.fit_
+    assert result is not None  # fit() sets it
     elapsed = time.perf_counter() - t0
     print(f"{args.input}: {len(samples)} samples ({len(samples) / samples.rate:.0f} s in "
           f"{int(samples.segment.max()) + 1} segment(s)), {result.method}, "

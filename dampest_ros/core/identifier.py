@@ -76,6 +76,10 @@ class DampingIdentifier:
         :meth:`fit` (``method="map"`` needs it) and the RLS prior of :meth:`partial_fit`.
         Parameters it does not name keep the vehicle's nominal θ (and no prior weight in MAP,
         the default prior width in the RLS).
+    structure : DampingModel, optional
+        The term structure :meth:`fit` identifies instead of the vehicle's (e.g. what
+        :func:`~dampest_ros.core.selection.select_terms` chose); parameters the vehicle does
+        not have start from 0. :meth:`partial_fit` identifies the vehicle's terms only.
     **fit_options
         Further :class:`~dampest_ros.core.batch.FitOptions` fields (``ridge``, ``block``,
         ``max_vif``, ``dissipative``, …).
@@ -102,13 +106,15 @@ class DampingIdentifier:
 
     def __init__(self, vehicle: Vehicle, terms: Sequence[str] | None = None,
                  method: str = "wls", *, cutoff: float = 2.0, forgetting_factor: float = 1.0,
-                 prior: Prior | None = None, **fit_options: Any) -> None:
+                 prior: Prior | None = None, structure: DampingModel | None = None,
+                 **fit_options: Any) -> None:
         self.vehicle = vehicle
         self.terms = list(terms) if terms else None
         self.method = method
         self.cutoff = float(cutoff)
         self.forgetting_factor = float(forgetting_factor)
         self.prior = prior
+        self.structure = structure
         self.fit_options = fit_options
         FitOptions(method=method, cutoff=cutoff, **fit_options)  # validates them now
         self.fit_: Fit | None = None
@@ -118,7 +124,13 @@ class DampingIdentifier:
 
     def fit(self, samples: Samples) -> DampingIdentifier:
         """Batch identification over all ``samples`` (forgets any earlier fit); returns self."""
-        model, nominal = restrict(self.vehicle.damping, self.vehicle.theta, self.terms)
+        if self.structure is None:
+            model, nominal = restrict(self.vehicle.damping, self.vehicle.theta, self.terms)
+        else:
+            values = dict(zip(self.vehicle.damping.parameter_names, self.vehicle.theta,
+                              strict=True))
+            model = self.structure
+            nominal = np.array([values.get(n, 0.0) for n in model.parameter_names])
         options = FitOptions(method=self.method, cutoff=self.cutoff,
                              speed_range=tuple(speed_limits(self.vehicle,
                                                             tau_measured=samples.tau)),
@@ -137,6 +149,9 @@ class DampingIdentifier:
         """Recursive identification: feed ``samples`` in time order to the estimator node's
         RLS, continuing from the previous call (the first one starts from the prior);
         returns self. Every call must bring samples of the same rate."""
+        if self.structure is not None:
+            raise ConfigError("structure", "partial_fit identifies the vehicle's terms (the "
+                                           "estimator node's); leave structure out")
         est = self.estimator_
         if est is None:
             est = OnlineEstimator(self.vehicle, self.terms, EstimatorConfig(
