@@ -517,3 +517,24 @@ def test_a_plant_without_an_added_mass_term_is_named_in_that_form(switch: str) -
     assert getattr(upd.added_mass_terms, switch) is False
     np.testing.assert_array_equal(upd.M, data.body.M)
     upd.body(data)  # a valid rigid body
+
+
+def test_the_attitude_measures_a_gyro_bias_and_not_a_modelling_error() -> None:
+    """A gyro bias must show in the logged attitude (its rate differs from the logged body
+    rates by the bias); a modelling error does not, so gap does not call it a gyro bias."""
+    from dampest_ros.core.gap.effects import GyroBias, attitude_gyro_bias
+
+    v = vehicle()
+    truth = np.array([0.005, -0.005, 0.005])
+    case = CASES["gyro_bias"]
+    samples, joints = hidden(json.dumps(case.effects), 1)
+    theta, body = believed(case)
+    biased = GapData(samples, v.damping, theta, body, v.thrusters, joints)
+    b, sd = attitude_gyro_bias(biased)
+    np.testing.assert_allclose(b, truth, atol=5 * sd.max() + 2e-4)
+    assert GyroBias().implausible(biased, truth) == ""
+    samples, _ = clean(1)
+    data = GapData(samples, v.damping, v.theta, v.body)
+    b0, sd0 = attitude_gyro_bias(data)
+    assert np.all(np.abs(b0) < 5 * sd0 + 2e-4)
+    assert "not a gyro bias" in GyroBias().implausible(data, np.radians([0.0, 4.2, 0.0]))

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dampest_ros.core.frames import matrix_from_euler
 from dampest_ros.core.gap.data import Chunk, GapData
 from dampest_ros.core.preprocess import zero_phase
 from dampest_ros.core.rigid_body import coriolis_force, rigid_body_mass
@@ -407,6 +408,48 @@ class GyroBias(Effect):
 
     def model_update(self, data: GapData, p: FloatArray) -> dict[str, Any]:
         return {"extra": {"gyro_bias": [float(x) for x in p]}}
+
+    def implausible(self, data: GapData, p: FloatArray) -> str:
+        b, sd = attitude_gyro_bias(data)
+        # a bias the attitude does not show: 5 σ of its block means, and 0.1 °/s
+        off = np.abs(p - b) > 5.0 * sd + np.radians(0.1)
+        if not off.any():
+            return ""
+        return ("the attitude measures the gyro bias as [" + ", ".join(
+            f"{np.degrees(v):+.2f} ± {np.degrees(e):.2g}" for v, e in zip(b, sd, strict=True))
+                + "] °/s (p, q, r): a modelling error, not a gyro bias")
+
+
+def attitude_gyro_bias(data: GapData, block: float = 10.0) -> tuple[FloatArray, FloatArray]:
+    """The gyro bias the attitude shows: the mean of the logged body rates less the rates of
+    the logged attitude (rad/s, FRD), with its standard deviation over ``block``-second
+    blocks, each shape (3,).
+
+    Between consecutive samples of a segment R_kᵀ R_{k+1} = exp(S(ω Δt)): the attitude's rate
+    is ω = vee(R_kᵀ R_{k+1} − R_{k+1}ᵀ R_k) / (2 Δt) (small angles), against the mean of the
+    two logged rates. The attitude comes from the orientation, not from the gyro, so a real
+    bias shows here and a modelling error does not.
+    """
+    def make() -> tuple[FloatArray, FloatArray]:
+        s = data.samples
+        R = matrix_from_euler(s.euler)
+        same = s.segment[1:] == s.segment[:-1]
+        D = np.einsum("nji,njk->nik", R[:-1], R[1:])[same]  # R_kᵀ R_{k+1}
+        dt = np.diff(s.t)[same]
+        # vee of the skew part / Δt
+        w_att = np.stack([D[:, 2, 1] - D[:, 1, 2], D[:, 0, 2] - D[:, 2, 0],
+                          D[:, 1, 0] - D[:, 0, 1]], axis=1) / (2.0 * dt[:, None])
+        w_log = 0.5 * (s.nu[:-1, 3:] + s.nu[1:, 3:])[same]
+        diff = w_log - w_att
+        blocks = np.floor((s.t[:-1][same] - s.t[0]) / block).astype(np.int64)
+        _, idx = np.unique(blocks, return_inverse=True)
+        count = np.bincount(idx)
+        means = np.stack([np.bincount(idx, diff[:, i]) / count for i in range(3)], axis=1)
+        sd = means.std(axis=0, ddof=1) / np.sqrt(len(means)) if len(means) > 1 else \
+            np.full(3, np.inf)
+        return diff.mean(axis=0), sd
+    result: tuple[FloatArray, FloatArray] = data.memo(("attitude_gyro_bias", block), make)
+    return result
 
 
 class DvlBias(Effect):
