@@ -22,7 +22,7 @@ from dampest_ros.cli.pool import (
 )
 from dampest_ros.core.batch import Fit, FitOptions
 from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
+from dampest_ros.core.estimator import EstimatorConfig, restrict
 from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.identifier import DampingIdentifier, prior_arrays
 from dampest_ros.core.mounting import frame_id_note
@@ -208,8 +208,9 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     if args.prior:
         pm = load_model(args.prior)
         prior = (pm.parameter_names, pm.theta, pm.theta_std)
-    est = OnlineEstimator(vehicle, term_list(args.terms) or None, EstimatorConfig(
-        forgetting_factor=args.forgetting_factor, rate=args.rate, cutoff=args.cutoff), prior)
+    est = DampingIdentifier(vehicle, term_list(args.terms) or None, prior=prior).online(
+        EstimatorConfig(forgetting_factor=args.forgetting_factor, rate=args.rate,
+                        cutoff=args.cutoff))
     for sample in pre.run(rec, topics):
         est.add_sample(sample)
     est.process(force=True)

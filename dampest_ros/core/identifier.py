@@ -145,19 +145,38 @@ class DampingIdentifier:
         self.names_ = list(self.fit_.names)
         return self
 
+    def online(self, config: EstimatorConfig | None = None, keep_samples: bool = False
+               ) -> OnlineEstimator:
+        """Start the recursive estimator of :meth:`partial_fit` from the prior and return it,
+        for input stream by stream (the estimator node feeds it the four dampest/* topics,
+        ``dampest identify --method rls`` a bag's messages); later :meth:`partial_fit` calls
+        continue it.
+
+        Parameters
+        ----------
+        config : EstimatorConfig, optional
+            Default: λ = ``forgetting_factor``, this ``cutoff``, 50 Hz samples.
+        keep_samples : bool
+            Keep every sample used (:attr:`OnlineEstimator.samples_log`).
+        """
+        if self.structure is not None:
+            raise ConfigError("structure", "the recursive estimator identifies the vehicle's "
+                                           "terms (the estimator node's); leave structure out")
+        cfg = config or EstimatorConfig(forgetting_factor=self.forgetting_factor,
+                                        cutoff=self.cutoff)
+        self.estimator_ = OnlineEstimator(self.vehicle, self.terms, cfg, self.prior,
+                                          keep_samples=keep_samples)
+        self.fit_ = None
+        return self.estimator_
+
     def partial_fit(self, samples: Samples) -> DampingIdentifier:
         """Recursive identification: feed ``samples`` in time order to the estimator node's
         RLS, continuing from the previous call (the first one starts from the prior);
         returns self. Every call must bring samples of the same rate."""
-        if self.structure is not None:
-            raise ConfigError("structure", "partial_fit identifies the vehicle's terms (the "
-                                           "estimator node's); leave structure out")
         est = self.estimator_
         if est is None:
-            est = OnlineEstimator(self.vehicle, self.terms, EstimatorConfig(
-                forgetting_factor=self.forgetting_factor, rate=samples.rate,
-                cutoff=self.cutoff), self.prior)
-            self.fit_ = None
+            est = self.online(EstimatorConfig(forgetting_factor=self.forgetting_factor,
+                                              rate=samples.rate, cutoff=self.cutoff))
         elif not math.isclose(samples.rate, est.cfg.rate, rel_tol=1e-6):
             raise ConfigError("samples", f"rate {samples.rate:g} Hz differs from the "
                               f"{est.cfg.rate:g} Hz the estimate was started with")

@@ -34,7 +34,8 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from dampest_ros.core import frames
-from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator
+from dampest_ros.core.estimator import EstimatorConfig
+from dampest_ros.core.identifier import DampingIdentifier
 from dampest_ros.core.model import Model
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.rls.least_squares import OUTLIER_GATE
@@ -199,8 +200,8 @@ class EstimatorNode(ModelParamNode):
                               forgetting_mode=self.p("forgetting_mode"), rate=self.p("rate"),
                               cutoff=self.p("cutoff"), chunk=self.p("chunk"),
                               outlier_gate=self.p("outlier_gate"))
-        self.estimator = OnlineEstimator(load_vehicle(self.p("vehicle")), terms, cfg, prior,
-                                         keep_samples=self.keep_samples)
+        identifier = DampingIdentifier(load_vehicle(self.p("vehicle")), terms, prior=prior)
+        self.estimator = identifier.online(cfg, keep_samples=self.keep_samples)
 
     def _model_values(self) -> dict[str, Any]:
         """model.* of the current estimate, its term structure included."""
