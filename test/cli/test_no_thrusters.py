@@ -76,6 +76,7 @@ def test_wrench_bag_identifies_without_thrusters_as_the_thruster_bag(run: Path) 
                                           strict=True))
 
 
+@pytest.mark.slow
 def test_rls_on_a_wrench_bag_without_thrusters_is_the_rls_on_the_thruster_bag(
         run: Path) -> None:
     """The online preprocessing (preprocess_node's core) takes τ from the wrench topic in

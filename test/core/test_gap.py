@@ -287,6 +287,7 @@ def test_current_speed_and_direction() -> None:
     assert "towards" in result.steps[0].description
 
 
+@pytest.mark.slow
 def test_two_effects_named_within_three_steps() -> None:
     case = Case({"current": [0.1, 0.05, 0.0], "buoyancy_offset": 1.0})
     _, result = analyse(case, 1)
@@ -505,7 +506,8 @@ def test_a_diverging_free_run_is_explained() -> None:
     assert divergence_reason(v.damping, v.theta, samples.nu) == ""
 
 
-@pytest.mark.parametrize("switch", ["inertial", pytest.param("coriolis", marks=pytest.mark.slow)])
+@pytest.mark.slow
+@pytest.mark.parametrize("switch", ["inertial", "coriolis"])
 def test_a_plant_without_an_added_mass_term_is_named_in_that_form(switch: str) -> None:
     """The plant applies no M_A ν̇ (MuJoCo, gz-sim's disable_added_mass) or no C_A(ν)ν
     (disable_coriolis); the model has both. Before: a delay of 0.0 ms and a per-DOF added

@@ -293,6 +293,7 @@ def test_step_change_is_tracked_and_detected(vehicle: Vehicle) -> None:
     np.testing.assert_allclose(at220[[0, 1, 2, 5]], new[[0, 1, 2, 5]], rtol=0.05)
 
 
+@pytest.mark.slow
 def test_hovering_for_an_hour_keeps_the_covariance_bounded(
         vehicle: Vehicle, flight: tuple[Trajectory, Recording]) -> None:
     """Converge on 60 s of protocol B, then 1 h of station keeping (no excitation) at

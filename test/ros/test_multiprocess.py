@@ -94,6 +94,7 @@ def processes(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, ob
     rclpy.try_shutdown(context=context)
 
 
+@pytest.mark.slow
 def test_client_reads_a_converged_model(processes: dict) -> None:
     context = processes["context"]
     node = rclpy.create_node("test_client", context=context)
