@@ -10,13 +10,13 @@ PACKAGE_NAME = "dampest_ros"
 # Each becomes a console script (installed to lib/dampest_ros for `ros2 run`).
 # test/test_package.py reads this dict with `ast`, so keep it a plain literal.
 NODE_SCRIPTS: dict[str, str] = {
-    "sim_node": "dampest_ros.ros.sim_node:main",
-    "preprocess_node": "dampest_ros.ros.preprocess_node:main",
-    "estimator_node": "dampest_ros.ros.estimator_node:main",
-    "model_server_node": "dampest_ros.ros.model_server_node:main",
-    "controller_node": "dampest_ros.ros.controller_node:main",
-    "recorder_node": "dampest_ros.ros.recorder_node:main",
-    "replay_node": "dampest_ros.ros.replay_node:main",
+    "sim_node": "dampest_ros.ros.entry:sim_node",
+    "preprocess_node": "dampest_ros.ros.entry:preprocess_node",
+    "estimator_node": "dampest_ros.ros.entry:estimator_node",
+    "model_server_node": "dampest_ros.ros.entry:model_server_node",
+    "controller_node": "dampest_ros.ros.entry:controller_node",
+    "recorder_node": "dampest_ros.ros.entry:recorder_node",
+    "replay_node": "dampest_ros.ros.entry:replay_node",
 }
 
 

@@ -432,3 +432,17 @@ def test_sim_node_holds_no_growing_container(context: Any) -> None:
     finally:
         sim.destroy_node()
     assert len(before) > 50 and after == before
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_while_a_node_is_still_starting_ends_it_quietly(sig: int) -> None:
+    """Was: a Ctrl-C 0.3 s after the start, while the node still imported scipy, ended it with
+    a KeyboardInterrupt traceback and status −2 (the console-script entry now catches it)."""
+    code = "from dampest_ros.ros.entry import sim_node; sim_node()"
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    time.sleep(0.3)
+    proc.send_signal(sig)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err[-2000:]
+    assert "Traceback" not in out + err

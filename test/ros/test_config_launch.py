@@ -31,7 +31,9 @@ def node_scripts() -> dict[str, str]:
 
 
 def node_class(name: str) -> Any:
-    module = importlib.import_module(node_scripts()[name].split(":")[0])
+    """The node class of an executable: its entry runs dampest_ros.ros.<name>.main()."""
+    assert node_scripts()[name] == f"dampest_ros.ros.entry:{name}"
+    module = importlib.import_module(f"dampest_ros.ros.{name}")
     (cls,) = [c for c in vars(module).values()
               if isinstance(c, type) and getattr(c, "NODE_NAME", None) == name]
     return cls

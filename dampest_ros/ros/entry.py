@@ -1,0 +1,41 @@
+"""Console-script entries of the nodes (``ros2 run dampest_ros <node>``).
+
+A node's module imports numpy, scipy and rclpy, which takes up to seconds on a loaded machine.
+The entry imports it here, with SIGTERM turned into KeyboardInterrupt meanwhile, so that a
+Ctrl-C or SIGTERM that arrives while the node is still starting ends it quietly with status 0,
+as one during spin does (:func:`dampest_ros.ros.common.main_for`). This module imports nothing
+heavy itself.
+"""
+
+from __future__ import annotations
+
+import importlib
+import signal
+import sys
+from functools import partial
+from types import FrameType
+
+
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    raise KeyboardInterrupt
+
+
+def run(module: str) -> None:
+    """Import ``dampest_ros.ros.<module>`` and call its ``main()``; interrupted while
+    importing: exit 0."""
+    previous = signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        main = importlib.import_module(f"dampest_ros.ros.{module}").main
+    except KeyboardInterrupt:
+        sys.exit(0)
+    signal.signal(signal.SIGTERM, previous)
+    main()
+
+
+sim_node = partial(run, "sim_node")
+preprocess_node = partial(run, "preprocess_node")
+estimator_node = partial(run, "estimator_node")
+model_server_node = partial(run, "model_server_node")
+controller_node = partial(run, "controller_node")
+recorder_node = partial(run, "recorder_node")
+replay_node = partial(run, "replay_node")
