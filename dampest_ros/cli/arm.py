@@ -1,4 +1,4 @@
-"""dampest arm: dynamic parameters and joint friction of a 6-axis arm (issue 14).
+"""dampest arm: dynamic parameters and joint friction of a 6-axis arm.
 
 design: finite-Fourier-series excitation optimised for the condition number of the base
 regressor (friction columns included) within position, velocity, acceleration and torque

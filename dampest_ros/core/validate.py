@@ -1,4 +1,4 @@
-"""Validation of an identified damping model on data (issue 3, section 6).
+"""Validation of an identified damping model on data.
 
 Everything here compares the model M ν̇ + C(ν)ν + D(ν)ν + g(η) = τ (FRD body, NED world)
 with measured :class:`~dampest_ros.core.samples.Samples`:

@@ -1,6 +1,6 @@
 """dampest demo: the online pipeline (sim → preprocess → RLS → controller) in one process,
 started from a wrong prior (half the true coefficients), a convergence table against the
-truth, the ±2σ coverage, the model and the report (issue 4)."""
+truth, the ±2σ coverage, the model and the report."""
 
 from __future__ import annotations
 
