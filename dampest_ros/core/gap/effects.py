@@ -420,10 +420,10 @@ class GyroBias(Effect):
                 + "] °/s (p, q, r): a modelling error, not a gyro bias")
 
 
-def attitude_gyro_bias(data: GapData, block: float = 10.0) -> tuple[FloatArray, FloatArray]:
+def attitude_gyro_bias(data: GapData) -> tuple[FloatArray, FloatArray]:
     """The gyro bias the attitude shows: the mean of the logged body rates less the rates of
-    the logged attitude (rad/s, FRD), with its standard deviation over ``block``-second
-    blocks, each shape (3,).
+    the logged attitude (rad/s, FRD), with its standard deviation over the data's blocks
+    (:attr:`GapData.block_index`), each shape (3,).
 
     Between consecutive samples of a segment R_kᵀ R_{k+1} = exp(S(ω Δt)): the attitude's rate
     is ω = vee(R_kᵀ R_{k+1} − R_{k+1}ᵀ R_k) / (2 Δt) (small angles), against the mean of the
@@ -441,14 +441,13 @@ def attitude_gyro_bias(data: GapData, block: float = 10.0) -> tuple[FloatArray, 
                           D[:, 1, 0] - D[:, 0, 1]], axis=1) / (2.0 * dt[:, None])
         w_log = 0.5 * (s.nu[:-1, 3:] + s.nu[1:, 3:])[same]
         diff = w_log - w_att
-        blocks = np.floor((s.t[:-1][same] - s.t[0]) / block).astype(np.int64)
-        _, idx = np.unique(blocks, return_inverse=True)
+        _, idx = np.unique(data.block_index[:-1][same], return_inverse=True)
         count = np.bincount(idx)
         means = np.stack([np.bincount(idx, diff[:, i]) / count for i in range(3)], axis=1)
         sd = means.std(axis=0, ddof=1) / np.sqrt(len(means)) if len(means) > 1 else \
             np.full(3, np.inf)
         return diff.mean(axis=0), sd
-    result: tuple[FloatArray, FloatArray] = data.memo(("attitude_gyro_bias", block), make)
+    result: tuple[FloatArray, FloatArray] = data.memo(("attitude_gyro_bias",), make)
     return result
 
 
