@@ -24,7 +24,7 @@ from dampest_ros.core.batch import Fit, FitOptions
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, restrict
 from dampest_ros.core.excitation import speed_limits
-from dampest_ros.core.identifier import DampingIdentifier, prior_arrays
+from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
 from dampest_ros.core.mounting import frame_id_note
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import OnlineConfig
@@ -62,10 +62,8 @@ def run(args: argparse.Namespace) -> int:
         values = dict(zip(model.parameter_names, nominal, strict=True))
         model = selection.model
         nominal = np.array([values.get(n, 0.0) for n in model.parameter_names])
-    prior_model = load_model(args.prior) if args.prior else None
-    spec = None if prior_model is None else (prior_model.parameter_names, prior_model.theta,
-                                             prior_model.theta_std)
-    prior = nominal if spec is None else prior_arrays(model, nominal, spec)[0]
+    spec = prior_spec(args)
+    prior = prior_of(model, nominal, spec)[0]
     identifier = DampingIdentifier(vehicle, method=args.method, cutoff=args.cutoff,
                                    prior=spec, structure=model).fit(samples)
     result = identifier.fit_
@@ -109,14 +107,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def prior_of(args: argparse.Namespace, model: DampingModel, nominal: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray | None]:
-    """The prior mean and standard deviation: the nominal damping, or --prior's model (its
-    values where it names a parameter, the nominal elsewhere)."""
+def prior_spec(args: argparse.Namespace) -> Prior | None:
+    """--prior's model as a prior by name (names, θ, σ), or None without the option."""
     if not args.prior:
-        return nominal, None
+        return None
     pm = load_model(args.prior)
-    return prior_arrays(model, nominal, (pm.parameter_names, pm.theta, pm.theta_std))
+    return pm.parameter_names, pm.theta, pm.theta_std
+
+
+def prior_of(model: DampingModel, nominal: np.ndarray, spec: Prior | None
+             ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The prior mean and standard deviation: the nominal damping, or ``spec``'s values where
+    it names a parameter (the nominal elsewhere)."""
+    return (nominal, None) if spec is None else prior_arrays(model, nominal, spec)
 
 
 def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> int:
@@ -124,7 +127,7 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
     check_pooled_options(args)
     t0 = time.perf_counter()
     model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
-    prior, prior_std = prior_of(args, model, nominal)
+    prior, prior_std = prior_of(model, nominal, prior_spec(args))
     logs, failed = reduce_all(paths, args, prior, prior_std)
     for path, why in failed.items():
         print(f"left out: {path}: {why}", file=sys.stderr)
@@ -204,11 +207,8 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     pre = OnlinePreprocessor(vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
                              OnlineConfig(rate=args.rate, max_dvl_gap=args.max_gap),
                              mounting=vehicle.mounting)
-    prior = None
-    if args.prior:
-        pm = load_model(args.prior)
-        prior = (pm.parameter_names, pm.theta, pm.theta_std)
-    est = DampingIdentifier(vehicle, term_list(args.terms) or None, prior=prior).online(
+    est = DampingIdentifier(vehicle, term_list(args.terms) or None,
+                            prior=prior_spec(args)).online(
         EstimatorConfig(forgetting_factor=args.forgetting_factor, rate=args.rate,
                         cutoff=args.cutoff))
     for sample in pre.run(rec, topics):
