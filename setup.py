@@ -13,6 +13,7 @@ NODE_SCRIPTS: dict[str, str] = {
     "sim_node": "dampest_ros.ros.entry:sim_node",
     "preprocess_node": "dampest_ros.ros.entry:preprocess_node",
     "estimator_node": "dampest_ros.ros.entry:estimator_node",
+    "arm_estimator_node": "dampest_ros.ros.entry:arm_estimator_node",
     "model_server_node": "dampest_ros.ros.entry:model_server_node",
     "controller_node": "dampest_ros.ros.entry:controller_node",
     "recorder_node": "dampest_ros.ros.entry:recorder_node",

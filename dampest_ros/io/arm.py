@@ -1,7 +1,7 @@
 """Arm descriptions and arm joint data on disk: the shipped arm presets (URDF for Pinocchio
 and the MJCF written from it, ``dampest_ros/data/arm/``), ``sensor_msgs/JointState`` bags of
-an arm's joints (position, velocity, effort) with the simulation's truth beside them, and
-FFS trajectory files.
+an arm's joints (position, velocity, effort) with the simulation's truth beside them, FFS
+trajectory files, and the online estimate's model file.
 """
 
 from __future__ import annotations
@@ -18,8 +18,10 @@ from numpy.typing import NDArray
 from dampest_ros.core.arm.design import DesignLimits
 from dampest_ros.core.arm.ffs import FourierTrajectory
 from dampest_ros.core.arm.model import ArmModel, JointDynamics, arm_from_urdf, joint_dynamics
+from dampest_ros.core.arm.online import ArmEstimate
 from dampest_ros.core.measurements import JointSeries, Series
 from dampest_ros.io.bag import bag_summary, read_bag, write_bag
+from dampest_ros.io.yaml_io import atomic_write
 
 FloatArray = NDArray[np.float64]
 
@@ -267,3 +269,85 @@ def load_trajectory(path: str | Path, n: int) -> tuple[FourierTrajectory, Design
         raise ArmDataError(f"trajectory file {path}: coefficients of shape {a.shape} and q0 "
                            f"of {traj.q0.shape} do not fit an arm of {n} joints")
     return traj, limits
+
+
+# --- the online estimate as a model file and as parameters ---------------------------------
+
+#: ``model.kind`` of an arm's base-parameter model file (a vehicle's has none).
+ARM_MODEL_KIND = "arm_base_parameters"
+
+
+def arm_model_parameters(est: ArmEstimate, arm: str) -> dict[str, Any]:
+    """The estimate as the ``model.*`` parameters a node holds (dotted name → value).
+
+    Parameters
+    ----------
+    est : ArmEstimate
+    arm : str
+        The arm preset or URDF the estimate belongs to.
+
+    Returns
+    -------
+    dict
+        ``model.kind``, ``model.arm``, ``model.joint_names``, ``model.parameter_names``,
+        ``model.theta``, ``model.theta_std``, ``model.identified``, ``model.mapping``,
+        ``model.version``: what ``--params-file`` gives for the file of
+        :func:`save_arm_model`.
+    """
+    return {"model.kind": ARM_MODEL_KIND, "model.arm": str(arm),
+            "model.joint_names": list(est.joint_names),
+            "model.parameter_names": list(est.parameter_names),
+            "model.theta": [float(x) for x in est.theta],
+            "model.theta_std": [float(x) for x in est.theta_std],
+            "model.identified": [bool(x) for x in est.identified],
+            "model.mapping": list(est.mapping), "model.version": int(est.version)}
+
+
+def arm_model_text(est: ArmEstimate, arm: str) -> str:
+    """The model file's text: a ROS 2 parameters file (``/**: ros__parameters: model:``)."""
+    model = {k.removeprefix("model."): v for k, v in arm_model_parameters(est, arm).items()}
+    return ("# dampest_ros arm model: base parameters (each named by the full parameter it "
+            "keeps;\n# mapping says what it combines), SI units; a ROS 2 parameters file.\n"
+            + yaml.safe_dump({"/**": {"ros__parameters": {"model": model}}}, sort_keys=False,
+                             default_flow_style=None, width=100))
+
+
+def save_arm_model(path: str | Path, est: ArmEstimate, arm: str) -> Path:
+    """Write the estimate's model file atomically; returns the path."""
+    path = Path(path)
+    atomic_write(path, arm_model_text(est, arm))
+    return path
+
+
+def load_arm_model(path: str | Path) -> ArmEstimate:
+    """Read a model file of :func:`save_arm_model`.
+
+    Raises
+    ------
+    ArmDataError
+        If the file is missing, not an arm model file, or has non-finite or mismatched
+        entries (named).
+    """
+    try:
+        doc = yaml.safe_load(Path(path).read_text())
+        m = doc["/**"]["ros__parameters"]["model"]
+        if m.get("kind") != ARM_MODEL_KIND:
+            raise KeyError(f"model.kind is {m.get('kind')!r}, not {ARM_MODEL_KIND!r}")
+        names = [str(x) for x in m["parameter_names"]]
+        theta = np.asarray(m["theta"], dtype=float)
+        std = np.asarray(m["theta_std"], dtype=float)
+        identified = np.asarray(m["identified"], dtype=bool)
+        est = ArmEstimate(tuple(str(x) for x in m["joint_names"]), names, theta, std,
+                          identified, [str(x) for x in m["mapping"]], int(m["version"]))
+    except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as exc:
+        raise ArmDataError(f"arm model file {path}: not readable as one ({type(exc).__name__}"
+                           f": {exc}); write one with arm_estimator_node's ~/save") from None
+    for field_name in ("theta", "theta_std", "identified", "mapping"):
+        if len(getattr(est, field_name)) != len(names):
+            raise ArmDataError(f"arm model file {path}: model.{field_name} has "
+                               f"{len(getattr(est, field_name))} entries for {len(names)} "
+                               "parameter_names")
+    if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(std)) and np.all(std >= 0)):
+        raise ArmDataError(f"arm model file {path}: model.theta and model.theta_std must be "
+                           "finite (and the std >= 0)")
+    return est

@@ -291,7 +291,9 @@ _Dumper.add_representer(str, lambda d, s: d.represent_scalar(
     "tag:yaml.org,2002:str", s, style="'" if s in ("y", "Y", "n", "N") else None))
 
 
-def _atomic_write(path: Path, text: str) -> None:
+def atomic_write(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically: a temporary file in the same directory
+    (``.<name>.*.tmp``), synced, then renamed over ``path``."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "w") as f:
@@ -327,7 +329,7 @@ def save_model(path: str | Path, model: Model) -> Path:
         An ``extra`` entry that is not a ROS parameter value or uses a reserved key.
     """
     path = Path(path)
-    _atomic_write(path, model_text(model))
+    atomic_write(path, model_text(model))
     return path
 
 

@@ -267,6 +267,17 @@ def vehicle_check(value: Any) -> str | None:
     return None
 
 
+def save_path_check(value: Any) -> str | None:
+    """A :class:`Param` check for the file a node's ~/save writes: not empty, in an existing
+    directory."""
+    parent = Path(str(value)).expanduser().resolve().parent
+    if not str(value).strip():
+        return "save_path must not be empty"
+    if not parent.is_dir():
+        return f"save_path: directory {parent} does not exist"
+    return None
+
+
 def remove_orphaned_temp(path: Path) -> list[Path]:
     """Remove the temporary files a killed atomic write of ``path`` left next to it
     (``.<name>.*.tmp``, as :func:`dampest_ros.io.yaml_io.save_model` names them) that are

@@ -35,6 +35,7 @@ def run(module: str) -> None:
 sim_node = partial(run, "sim_node")
 preprocess_node = partial(run, "preprocess_node")
 estimator_node = partial(run, "estimator_node")
+arm_estimator_node = partial(run, "arm_estimator_node")
 model_server_node = partial(run, "model_server_node")
 controller_node = partial(run, "controller_node")
 recorder_node = partial(run, "recorder_node")

@@ -58,21 +58,13 @@ from dampest_ros.ros.common import (
     main_for,
     model_file_check,
     remove_orphaned_temp,
+    save_path_check,
     vehicle_check,
 )
 from dampest_ros.ros.convert import stamped_floats
 
 TERM_HELP = "comma list of the vehicle's damping terms to identify, e.g. 'linear,quadratic' " \
             "('': all of the preset's terms)"
-
-
-def _save_ok(value: Any) -> str | None:
-    parent = Path(str(value)).expanduser().resolve().parent
-    if not str(value).strip():
-        return "save_path must not be empty"
-    if not parent.is_dir():
-        return f"save_path: directory {parent} does not exist"
-    return None
 
 
 class EstimatorNode(ModelParamNode):
@@ -101,7 +93,7 @@ class EstimatorNode(ModelParamNode):
         Param("prior", "", "model YAML whose theta/theta_std are the prior ('' : nominal "
               "damping of the preset with wide uncertainty)", check=model_file_check("prior")),
         Param("save_path", "dampest_model.yaml", "where ~/save writes the model YAML",
-              check=_save_ok),
+              check=save_path_check),
         Param("resume", True, "at start, continue from the model file at save_path (its θ, "
               "σ and version) when there is one for this vehicle and terms; false: start "
               "from the prior", read_only=True),

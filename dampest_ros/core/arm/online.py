@@ -8,9 +8,13 @@ Joint samples arrive in any pieces. They are filtered exactly as offline
 ones and the estimate lags the data by that margin plus one hop. Each decimated sample is
 one RLS update with the six joints as its six rows; a joint's row is zeroed where its
 friction does not follow the Coulomb model (:func:`dampest_ros.core.arm.identify.usable_rows`).
+The filter needs uniformly spaced samples: at a gap (a lost message, a pause) the samples
+before it whose window is not complete are dropped and the stream starts afresh after it.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,9 +23,40 @@ from dampest_ros.core.arm.base import BaseParameters
 from dampest_ros.core.arm.identify import IdentifyConfig, filter_joints, usable_rows
 from dampest_ros.core.arm.model import ArmModel
 from dampest_ros.core.arm.regressor import regressor
+from dampest_ros.core.rigid_body import FORCE_NAMES
 from dampest_ros.core.rls.least_squares import RecursiveLeastSquares, RLSConfig
 
 FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ArmEstimate:
+    """The online estimate of an arm's base parameters, as nodes serve and save it.
+
+    Attributes
+    ----------
+    joint_names : tuple of str, length n
+        The arm's joints, in the order of the rows.
+    parameter_names : list of str, length b
+        Base parameter k is named by the full parameter it keeps (``elbow_joint.m``);
+        :attr:`mapping` line k says what it combines.
+    theta, theta_std : ndarray, shape (b,)
+        Estimate and standard deviation (SI units of the kept parameter).
+    identified : ndarray of bool, shape (b,)
+        The data have at least halved the prior's standard deviation.
+    mapping : list of str, length b
+        ``bk = kept + c · folded + ...`` (:meth:`BaseParameters.mapping`).
+    version : int
+        Bumped by the holder at every publication.
+    """
+
+    joint_names: tuple[str, ...]
+    parameter_names: list[str]
+    theta: FloatArray
+    theta_std: FloatArray
+    identified: NDArray[np.bool_]
+    mapping: list[str]
+    version: int = 1
 
 
 class ArmEstimator:
@@ -58,11 +93,34 @@ class ArmEstimator:
                                noise_var=(0.01,) * 6, trace_max=10.0 * base.size)
         self.rls = RecursiveLeastSquares(np.asarray(theta0, dtype=float),
                                          np.asarray(std0, dtype=float) ** 2, rls)
-        self._t = np.zeros(0)
-        self._q = np.zeros((0, arm.n))
-        self._tau = np.zeros((0, arm.n))
-        self.emitted = -np.inf  # samples before this time (s) have been used
+        self.std0 = np.asarray(std0, dtype=float)
+        self.gaps = 0  # gaps in the samples: the stream restarted after each
+        self.clear()
         self.alarms: list[float] = []  # times of the change alarms (s)
+        self.alarm_joints: list[list[str]] = []  # per alarm: e.g. ['elbow_joint gain+']
+
+    def clear(self) -> None:
+        """Drop the buffered samples (their windows are never completed); the estimate
+        stays."""
+        self._t = np.zeros(0)
+        self._q = np.zeros((0, self.arm.n))
+        self._tau = np.zeros((0, self.arm.n))
+        self.emitted = -np.inf  # samples before this time (s) have been used
+
+    def reset(self) -> None:
+        """Back to the prior: estimate, covariance, detector, buffer and alarms."""
+        self.rls.reset()
+        self.clear()
+        self.alarms.clear()
+        self.alarm_joints.clear()
+
+    def estimate(self, version: int = 1) -> ArmEstimate:
+        """The current estimate with its names and mapping."""
+        return ArmEstimate(tuple(self.arm.names),
+                           [self.base.names[i] for i in self.base.independent],
+                           self.theta.copy(), self.std.copy(),
+                           np.asarray(self.std <= 0.5 * self.std0), self.base.mapping(),
+                           int(version))
 
     @property
     def theta(self) -> FloatArray:
@@ -95,7 +153,17 @@ class ArmEstimator:
         self._tau = np.concatenate([self._tau, np.asarray(effort, dtype=float)])
         if len(self._t) < 2:
             return 0
-        rate = 1.0 / float(np.median(np.diff(self._t[-100:])))
+        dt = np.diff(self._t)
+        rate = 1.0 / float(np.median(dt[-100:]))
+        # a step off the rate by more than filter_joints accepts: restart after the last one
+        off = np.flatnonzero(np.abs(dt * rate - 1.0) > 0.01)
+        if len(off):
+            self.gaps += len(off)
+            start_at = int(off[-1]) + 1
+            self._t, self._q, self._tau = (x[start_at:] for x in (self._t, self._q, self._tau))
+            self.emitted = -np.inf
+            if len(self._t) < 2:
+                return 0
         margin = 10.0 / self.config.cutoff
         done = 0
         start = max(self.emitted, self._t[0] + margin)
@@ -126,5 +194,9 @@ class ArmEstimator:
             # the RLS has reset its covariance (boost_on_alarm); the detector learns the new
             # innovation statistics afresh, so that re-convergence does not alarm again
             self.alarms.append(float(self.rls.monitor.alarm_time or t[-1]))
+            # channel "X bias+" of the vehicle's RLS is row 0 here: the first joint
+            self.alarm_joints.append([
+                f"{self.arm.names[FORCE_NAMES.index(c[0])]}{c[1:]}"
+                for c in self.rls.monitor.channels()])
             self.rls.monitor.reset()
         return len(t)

@@ -1,0 +1,327 @@
+"""arm_estimator_node: recursive least squares of an arm's base parameters and joint friction
+on live sensor_msgs/JointState.
+
+Subscribes joint_states (sensor-data QoS; position and effort of the arm's joints, in any
+order: they are matched by name). The samples are filtered as offline (zero-phase low-pass at
+cutoff, q̇ and q̈ of the filtered q, decimation to rate_out) in windows that reach 10 / cutoff s
+past the samples they emit, so the estimate lags the data by that margin plus hop. The work is
+done by dampest_ros.core.arm.online.ArmEstimator: the vehicle estimator's RLS (forgetting,
+per-joint noise weights, CUSUM change alarm with a covariance reset on an alarm) on the base
+regressor with friction columns.
+
+Holds the estimate as the parameters model.kind (arm_base_parameters), model.arm,
+model.joint_names, model.parameter_names (each base parameter named by the full parameter it
+keeps), model.theta, model.theta_std, model.identified, model.mapping (what each base
+parameter combines) and model.version (bumped at each publish), read-only from outside,
+and publishes it on dampest/arm_model (std_msgs/String with the model file YAML, transient
+local) and on /diagnostics (diagnostic_msgs/DiagnosticArray: per joint innovation RMS, noise
+and excitation, covariance trace, lag, the change alarms with their time and joints, and every
+counter: count.received, used, rejected_joints (messages without the arm's joints),
+rejected_fields (position or effort missing), rejected_nonfinite, dropped_out_of_order,
+clock_jumps, gaps, filter_errors). A change alarm is published on /diagnostics at once.
+Services: ~/reset (std_srvs/Trigger, back to the prior), ~/save (Trigger, atomic write of the
+model file to save_path), ~/freeze (std_srvs/SetBool: stop or resume updating).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from std_srvs.srv import SetBool, Trigger
+
+from dampest_ros.core.arm.base import base_parameters
+from dampest_ros.core.arm.identify import IdentifyConfig
+from dampest_ros.core.arm.online import ArmEstimator
+from dampest_ros.core.arm.regressor import full_parameters
+from dampest_ros.core.rls.least_squares import RLSConfig
+from dampest_ros.io.arm import (
+    ArmDataError,
+    arm_model_parameters,
+    arm_model_text,
+    load_arm,
+    load_arm_model,
+    save_arm_model,
+)
+from dampest_ros.ros.common import (
+    DIAGNOSTICS_TOPIC,
+    LATCHED_QOS,
+    RELIABLE_QOS,
+    SENSOR_QOS,
+    ModelParamNode,
+    Param,
+    diagnostic_array,
+    main_for,
+    save_path_check,
+    stamp_ns,
+)
+
+#: Messages buffered before they are handed to the estimator (a quarter second at 1 kHz).
+HANDOVER = 250
+
+
+def _arm_check(value: Any) -> str | None:
+    try:
+        load_arm(str(value))
+    except ArmDataError as exc:
+        return f"arm: {exc}"
+    return None
+
+
+def _prior_check(value: Any) -> str | None:
+    if not str(value).strip():
+        return None
+    try:
+        load_arm_model(str(value))
+    except ArmDataError as exc:
+        return f"prior: {exc}"
+    return None
+
+
+class ArmEstimatorNode(ModelParamNode):
+    """Arm estimator node (see the module docstring)."""
+
+    NODE_NAME = "arm_estimator_node"
+    PARAMS = (
+        Param("arm", "ur5", "arm preset or URDF path (its MJCF beside it): joint names, "
+              "kinematics and the nominal parameters (the prior mean)", check=_arm_check),
+        Param("cutoff", 10.0, "zero-phase low-pass of q and torque in Hz (at most "
+              "rate_out/2)", low=0.5, high=200.0),
+        Param("rate_out", 50.0, "rate the filtered samples are decimated to, one RLS update "
+              "each, in Hz (at most the JointState rate)", low=1.0, high=1000.0),
+        Param("min_speed", 0.1, "a joint's rows slower than this (rad/s) are not used: dry "
+              "friction is undefined at rest", low=0.0, high=10.0),
+        Param("forgetting_factor", 0.9995, "RLS forgetting factor λ (memory ≈ 1/(1−λ) "
+              "samples at rate_out)", low=0.9, high=1.0),
+        Param("hop", 1.0, "s of samples filtered per pass (the estimate lags by 10/cutoff + "
+              "hop s)", low=0.05, high=10.0),
+        Param("prior", "", "arm model YAML (this node's ~/save) whose theta/theta_std are the "
+              "prior ('': the arm's nominal parameters, σ = prior_std_factor·|θ| + 0.01)",
+              check=_prior_check),
+        Param("prior_std_factor", 1.0, "prior σ of the nominal parameters relative to their "
+              "magnitude", low=1e-6, high=1e6),
+        Param("publish_rate", 1.0, "model and diagnostics publications per second (node "
+              "clock)", low=0.01, high=100.0),
+        Param("save_path", "dampest_arm_model.yaml", "where ~/save writes the model YAML",
+              check=save_path_check),
+    )
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMS, **kwargs)
+        self.version = 0
+        self.counts = dict.fromkeys(
+            ("received", "used", "rejected_joints", "rejected_fields", "rejected_nonfinite",
+             "dropped_out_of_order", "clock_jumps", "filter_errors"), 0)
+        self._build()
+        self.serve_model(self._model_values())
+        self.pub_model = self.create_publisher(String, "dampest/arm_model", LATCHED_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, RELIABLE_QOS)
+        self.create_subscription(JointState, "joint_states", self._on_joint_state, SENSOR_QOS)
+        self.create_service(Trigger, "~/reset", self._srv_reset)
+        self.create_service(Trigger, "~/save", self._srv_save)
+        self.create_service(SetBool, "~/freeze", self._srv_freeze)
+        self._timer = self.create_timer(1.0 / self.p("publish_rate"), self._publish)
+        self._used_at_publish = -1
+        self._alarms_reported = 0
+        self.last_error = ""
+
+    def _build(self) -> None:
+        """A new estimator from the prior (and an empty buffer)."""
+        if not 2.0 * self.p("cutoff") <= self.p("rate_out"):
+            raise ValueError(f"parameter cutoff {self.p('cutoff')} Hz must be at most "
+                             f"rate_out/2 = {0.5 * self.p('rate_out')} Hz")
+        self.arm = load_arm(self.p("arm"))
+        base = base_parameters(self.arm.model)
+        theta0 = base.of(full_parameters(self.arm.model, self.arm.dynamics))
+        std0 = self.p("prior_std_factor") * np.abs(theta0) + 0.01
+        if str(self.p("prior")).strip():
+            prior = load_arm_model(self.p("prior"))
+            kept = [base.names[i] for i in base.independent]
+            if prior.parameter_names != kept:
+                raise ValueError(f"parameter prior: {self.p('prior')} holds the base parameters "
+                                 f"of another arm ({len(prior.parameter_names)} named, "
+                                 f"{self.p('arm')} has {len(kept)}: {kept[:3]} ...)")
+            theta0, std0 = prior.theta, np.maximum(prior.theta_std, 1e-12)
+        cfg = IdentifyConfig(cutoff=self.p("cutoff"), rate_out=self.p("rate_out"),
+                             min_speed=self.p("min_speed"))
+        rls = RLSConfig(forgetting_factor=self.p("forgetting_factor"), adapt_weights=True,
+                        noise_var=(0.01,) * 6, trace_max=10.0 * base.size)
+        self.estimator = ArmEstimator(self.arm.model, base, theta0, std0, cfg, rls,
+                                      hop=self.p("hop"))
+        self.names = tuple(self.arm.model.names)
+        self._order: dict[tuple[str, ...], np.ndarray | None] = {}
+        self._t: list[float] = []
+        self._q: list[np.ndarray] = []
+        self._tau: list[np.ndarray] = []
+        self._last = -np.inf
+
+    def _model_values(self) -> dict[str, Any]:
+        return arm_model_parameters(self.estimator.estimate(self.version), self.p("arm"))
+
+    def check_parameter(self, name: str, value: Any) -> str | None:
+        if name == "cutoff" and not 2.0 * value <= self.p("rate_out"):
+            return f"cutoff must be at most rate_out/2 = {0.5 * self.p('rate_out')} Hz, got " \
+                   f"{value}"
+        if name == "rate_out" and not value >= 2.0 * self.p("cutoff"):
+            return f"rate_out must be at least 2 × cutoff = {2.0 * self.p('cutoff')} Hz, got " \
+                   f"{value}"
+        return None
+
+    def on_parameters(self, names: list[str]) -> None:
+        if names == ["forgetting_factor"]:
+            self.estimator.rls.set_forgetting_factor(self.p("forgetting_factor"))
+            self.get_logger().info(f"forgetting factor {self.p('forgetting_factor')}")
+            return
+        if "publish_rate" in names:
+            self._timer.cancel()
+            self._timer = self.create_timer(1.0 / self.p("publish_rate"), self._publish)
+        if set(names) - {"publish_rate", "save_path"}:
+            self._build()
+            self.get_logger().info(f"estimator restarted from the prior ({', '.join(names)} "
+                                   "changed)")
+            self._publish(force=True)
+
+    # --- input ---------------------------------------------------------------------------------
+
+    def _columns(self, names: tuple[str, ...]) -> np.ndarray | None:
+        """Where the arm's joints are in a message naming ``names`` (None: not all there;
+        the first such message is logged)."""
+        if names not in self._order:
+            missing = [n for n in self.names if n not in names]
+            self._order[names] = None if missing else np.array(
+                [names.index(n) for n in self.names])
+            if missing:
+                self.get_logger().error(
+                    f"joint_states names {list(names)} lack the joints {missing} of arm "
+                    f"{self.p('arm')}; such messages are rejected (count.rejected_joints): "
+                    "remap the arm's topic or set the parameter arm")
+        return self._order[names]
+
+    def _on_joint_state(self, m: JointState) -> None:
+        c = self.counts
+        c["received"] += 1
+        cols = self._columns(tuple(m.name))
+        if cols is None:
+            c["rejected_joints"] += 1
+            return
+        if len(m.position) != len(m.name) or len(m.effort) != len(m.name):
+            c["rejected_fields"] += 1
+            return
+        q = np.asarray(m.position, dtype=float)[cols]
+        tau = np.asarray(m.effort, dtype=float)[cols]
+        t = stamp_ns(m.header.stamp) * 1e-9
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(tau))):
+            c["rejected_nonfinite"] += 1
+            return
+        if t <= self._last:
+            if t < self._last - 1.0:  # the source restarted its clock: start the stream anew
+                c["clock_jumps"] += 1
+                self._hand_over()
+                self.estimator.clear()
+                self.get_logger().warning(f"joint_states clock jumped back by "
+                                          f"{self._last - t:.3f} s; filtering restarted, "
+                                          "estimate kept")
+            else:
+                c["dropped_out_of_order"] += 1
+                return
+        self._last = t
+        self._t.append(t)
+        self._q.append(q)
+        self._tau.append(tau)
+        if len(self._t) >= HANDOVER:
+            self._hand_over()
+
+    def _hand_over(self) -> None:
+        """Give the buffered samples to the estimator; a change alarm is published at once."""
+        if not self._t:
+            return
+        t, q, tau = np.array(self._t), np.array(self._q), np.array(self._tau)
+        self._t, self._q, self._tau = [], [], []
+        try:
+            self.counts["used"] += self.estimator.add(t, q, tau)
+        except ValueError as exc:  # rates that do not fit cutoff and rate_out
+            self.counts["filter_errors"] += 1
+            self.estimator.clear()
+            if str(exc) != self.last_error:
+                self.get_logger().error(f"joint_states cannot be filtered: {exc}")
+            self.last_error = str(exc)
+        if len(self.estimator.alarms) > self._alarms_reported:
+            self._publish_diagnostics()
+
+    # --- output --------------------------------------------------------------------------------
+
+    def _publish(self, force: bool = False) -> None:
+        self._hand_over()
+        if force or self.counts["used"] != self._used_at_publish:
+            self._used_at_publish = self.counts["used"]
+            self.version += 1
+            est = self.estimator.estimate(self.version)
+            self.serve_model(arm_model_parameters(est, self.p("arm")))
+            self.pub_model.publish(String(data=arm_model_text(est, self.p("arm"))))
+        self._publish_diagnostics()
+
+    def _publish_diagnostics(self) -> None:
+        e = self.estimator
+        d = e.rls.diagnostics(condition=False)
+        values: dict[str, Any] = {f"count.{k}": v for k, v in self.counts.items()}
+        values["count.gaps"] = e.gaps
+        values["model.version"] = self.version
+        values["estimated_until_s"] = e.emitted if np.isfinite(e.emitted) else "none yet"
+        values["lag_s"] = self._last - e.emitted if np.isfinite(e.emitted) else "none yet"
+        for j, name in enumerate(self.names):
+            values[f"{name}.innovation_rms"] = float(d.innovation_rms[j])
+            values[f"{name}.noise_std"] = float(d.noise_std[j])
+            values[f"{name}.excitation"] = float(d.excitation[j])
+        values["covariance_trace"] = d.covariance_trace
+        values["alarms"] = len(e.alarms)
+        level, message = 0, "ok"
+        if e.alarms:
+            values["last_alarm_s"] = e.alarms[-1]
+            values["last_alarm_joints"] = ", ".join(e.alarm_joints[-1])
+        if len(e.alarms) > self._alarms_reported:
+            self._alarms_reported = len(e.alarms)
+            level = 1
+            message = (f"dynamics change detected at t = {e.alarms[-1]:.3f} s "
+                       f"({', '.join(e.alarm_joints[-1])}); covariance reset, re-identifying")
+        elif self.last_error:
+            level, message = 1, f"joint_states cannot be filtered: {self.last_error}"
+        elif d.unexcited:
+            level = 1
+            message = "not excited: " + ", ".join(
+                self.names[j] for j in np.flatnonzero(~d.excited))
+        self.pub_diag.publish(diagnostic_array(self, "dampest arm estimator", values, level,
+                                               message))
+
+    def _srv_reset(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        self._t, self._q, self._tau = [], [], []
+        self.estimator.reset()
+        self._alarms_reported = 0
+        self._publish(force=True)
+        res.success, res.message = True, f"reset to the prior (model version {self.version})"
+        return res
+
+    def _srv_save(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        try:
+            path = save_arm_model(Path(self.p("save_path")).expanduser(),
+                                  self.estimator.estimate(self.version), self.p("arm"))
+        except (OSError, ValueError) as exc:
+            res.success, res.message = False, f"could not save: {exc}"
+            return res
+        res.success, res.message = True, f"saved model version {self.version} to {path}"
+        return res
+
+    def _srv_freeze(self, req: SetBool.Request, res: SetBool.Response) -> SetBool.Response:
+        self.estimator.rls.frozen = bool(req.data)
+        res.success = True
+        res.message = "frozen: estimate held" if req.data else "updating"
+        return res
+
+
+main = main_for(ArmEstimatorNode, __doc__ or "")
+
+if __name__ == "__main__":
+    main()
