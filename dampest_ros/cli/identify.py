@@ -37,8 +37,6 @@ from dampest_ros.core.validate import force_scores
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
-from dampest_ros.report.figures import parameter_units
-from dampest_ros.report.identify import write_report
 
 
 def run(args: argparse.Namespace) -> int:
@@ -99,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
         if args.truth:
             tm = load_model(args.truth)
             truth = dict(zip(tm.parameter_names, tm.theta, strict=True))
+        from dampest_ros.report.identify import write_report  # matplotlib: only for a report
         page = write_report(args.report, samples, model, vehicle.body, result, prior=prior,
                             truth=truth, title=f"Damping of {vehicle.name}",
                             source=str(args.input), cutoff=args.cutoff, heldout=scores,
@@ -128,15 +127,15 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
     t0 = time.perf_counter()
     model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
     prior, prior_std = prior_of(model, nominal, prior_spec(args))
-    logs, failed = reduce_all(paths, args, prior, prior_std)
-    for path, why in failed.items():
-        print(f"left out: {path}: {why}", file=sys.stderr)
-    if not logs:
-        raise ConfigError("INPUT", "none of the logs could be read (reasons above)")
-    samples = pooled_samples(logs)
-    options = FitOptions(method=args.method, cutoff=args.cutoff,
-                         speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
-    result = pooled_fit(logs, model, vehicle.body, options, prior, prior_std)
+    with reduce_all(paths, args, prior, prior_std) as (logs, failed, map_logs):
+        for path, why in failed.items():
+            print(f"left out: {path}: {why}", file=sys.stderr)
+        if not logs:
+            raise ConfigError("INPUT", "none of the logs could be read (reasons above)")
+        samples = pooled_samples(logs)
+        options = FitOptions(method=args.method, cutoff=args.cutoff,
+                             speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
+        result = pooled_fit(logs, model, vehicle.body, options, prior, prior_std, map_logs)
     print(f"{len(logs)} logs pooled ({len(failed)} left out): {len(samples)} samples "
           f"({len(samples) / samples.rate:.0f} s), {result.method}, condition number "
           f"{result.cond:.3g}, {time.perf_counter() - t0:.1f} s")
@@ -161,6 +160,7 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
         more["drift_changed"] = [n for n, m in zip(d.names, d.moved, strict=True) if m] \
             or ["none"]
         if args.drift_plot:
+            from dampest_ros.report.figures import parameter_units
             plot_drift(Path(args.drift_plot), d, result, parameter_units(model))
             print(f"wrote {args.drift_plot}")
     if args.out:
@@ -168,6 +168,7 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
                     flown=samples.nu, more=more)
         print(f"wrote {args.out}")
     if args.report:
+        from dampest_ros.report.identify import write_report  # matplotlib: only for a report
         page = write_report(args.report, samples, model, vehicle.body, result, prior=prior,
                             title=f"Damping of {vehicle.name}, {len(logs)} logs pooled",
                             source=", ".join(g.name for g in logs), cutoff=args.cutoff)

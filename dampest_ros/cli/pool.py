@@ -16,7 +16,7 @@ import io
 import logging
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +28,7 @@ from dampest_ros.cli.main import expected
 from dampest_ros.core.batch import Fit, FitOptions
 from dampest_ros.core.estimator import restrict
 from dampest_ros.core.excitation import speed_limits
-from dampest_ros.core.pool import Drift, LogStatistics, log_statistics
+from dampest_ros.core.pool import Drift, LogStatistics, MapLogs, log_statistics
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.io.yaml_io import load_vehicle
 
@@ -133,13 +133,20 @@ def _client(args: argparse.Namespace, n_logs: int) -> Any:
     return Client(cluster)
 
 
+@contextlib.contextmanager
 def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray | None,
-               prior_std: np.ndarray | None) -> tuple[list[LogStatistics], dict[str, str]]:
-    """Map :func:`reduce_log` over the logs on Dask; the statistics of those that worked (in
-    the given order) and the reason of each that failed, with a progress line on stderr."""
+               prior_std: np.ndarray | None
+               ) -> Iterator[tuple[list[LogStatistics], dict[str, str], MapLogs]]:
+    """Map :func:`reduce_log` over the logs on Dask, with a progress line on stderr.
+
+    Yields the statistics of the logs that worked (in the given order), the reason of each
+    that failed, and a :data:`~dampest_ros.core.pool.MapLogs` that runs a function on each
+    log where its worker holds it (the pooled fit's passes over the samples); the cluster
+    lives until the block ends.
+    """
     from dask.distributed import as_completed
     client = _client(args, len(paths))
-    done: dict[str, LogStatistics] = {}
+    done: dict[str, tuple[LogStatistics, Any]] = {}
     failed: dict[str, str] = {}
     try:
         futures = {client.submit(reduce_log, p, args, prior, prior_std, pure=False): p
@@ -152,17 +159,32 @@ def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray
             if stats is None:
                 failed[path] = why
             else:
-                done[path] = stats
+                done[path] = stats, future
             sys.stderr.write(f"\rlogs [{'#' * (25 * k // len(paths)):25s}] {k}/{len(paths)}"
                              f" reduced, {len(failed)} failed")
             sys.stderr.flush()
         sys.stderr.write("\n")
+        held = [done[p][1] for p in paths if p in done]
+
+        def map_logs(fn: Callable[[LogStatistics, int], Any]) -> list[Any]:
+            # the log's future as the argument: the call runs on the worker holding it
+            return list(client.gather([client.submit(_stats_of, f, fn, k, pure=False)
+                                       for k, f in enumerate(held)]))
+
+        yield [done[p][0] for p in paths if p in done], failed, map_logs
     finally:
         cluster = getattr(client, "cluster", None)
         client.close()
         if cluster is not None and not args.scheduler:
             cluster.close()
-    return [done[p] for p in paths if p in done], failed
+
+
+def _stats_of(reduced: tuple[LogStatistics | None, str, str],
+              fn: Callable[[LogStatistics, int], Any], k: int) -> Any:
+    """``fn`` on the statistics of a reduced log (:func:`reduce_log`'s result), log k."""
+    stats = reduced[0]
+    assert stats is not None  # only the logs that worked are mapped
+    return fn(stats, k)
 
 
 def drift_table(d: Drift, pooled: Fit) -> str:

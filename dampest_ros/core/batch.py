@@ -19,6 +19,7 @@ from scipy import linalg, stats
 from scipy.sparse import csgraph
 
 from dampest_ros.core.covariance import (
+    MapParts,
     bias_covariance,
     block_count,
     block_length,
@@ -241,6 +242,9 @@ class FitOptions:
         Standard deviation of an unknown constant gyro (rad/s) and DVL (m/s) bias per axis:
         the sensor error budget that :func:`bias_covariance` propagates into θ. 0 ignores
         it.
+    bias_stretch : int
+        On logs longer than three times this many samples, the sensor-bias refits use three
+        evenly spread stretches of it (:func:`bias_covariance`).
     speed_range : tuple of 6 float, optional
         Speeds the vehicle can reach per DOF; quadratic terms of DOFs flown below 15 % of
         it are flagged (:func:`speed_coverage_flags`).
@@ -257,6 +261,7 @@ class FitOptions:
     cutoff: float = 2.0
     gyro_bias: float = 2e-4
     dvl_bias: float = 1e-3
+    bias_stretch: int = 20000
     speed_range: tuple[float, ...] | None = None
     dissipative: bool = True
 
@@ -409,7 +414,7 @@ def parameter_scale(ne: NormalEquations, theta: FloatArray) -> FloatArray:
 def fit(samples: Samples, model: DampingModel, body: RigidBody,
         options: FitOptions | None = None, prior: FloatArray | None = None,
         prior_std: FloatArray | None = None, normal: NormalEquations | None = None,
-        chunk: int = CHUNK) -> Fit:
+        chunk: int = CHUNK, map_parts: MapParts | None = None) -> Fit:
     """Identify θ from samples.
 
     1. Per-DOF weights 1/σ_i² from the residuals (``wls``), σ_i floored at
@@ -442,6 +447,9 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
         Precomputed statistics (saves the first pass).
     chunk : int
         Samples per chunk.
+    map_parts : MapParts, optional
+        Runs the covariances' passes over the samples part by part where the parts are
+        held (:data:`~dampest_ros.core.covariance.MapParts`; default: ``samples`` at once).
 
     Returns
     -------
@@ -497,8 +505,8 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
         flags[names[j]] = f"held at prior {prior_v[j]:.4g} ({flags[names[j]]})"
     T, W, s = determined_directions(ne.total(w)[0], free, opts.max_vif)
     theta = solve(w, free, T)
-    cov = robust_covariance(samples, model, body, theta, w, ne, free, T, opts, chunk) \
-        + bias_covariance(samples, model, body, theta, w, free, T, opts, chunk)
+    cov = robust_covariance(samples, model, body, theta, w, ne, free, T, opts, chunk, map_parts) \
+        + bias_covariance(samples, model, body, theta, w, free, T, opts, chunk, map_parts)
     fi = np.flatnonzero(free)
     combos = combinations_of(W, s, [names[j] for j in fi], theta[fi], cov[np.ix_(fi, fi)])
     for c in combos:

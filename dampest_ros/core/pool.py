@@ -5,7 +5,8 @@ add up to those of all their samples at once, A = Σ_b A_b, b = Σ_b b_b, c = Σ
 is therefore preprocessed and reduced on its own (in parallel, anywhere: :class:`LogStatistics`
 is all a worker returns), and the pooled fit solves the summed statistics; its second passes
 (block-robust covariance, sensor-bias sensitivity, the dissipativity check) run over the logs'
-samples as segments of one set. Cross-validation folds of the pooled fit are the k-th fifths of
+samples as segments of one set, log by log where each log is held (``map_logs``).
+Cross-validation folds of the pooled fit are the k-th fifths of
 every log (:func:`pooled_normal`), so each fold holds some of every trial.
 
 Drift: each log's own estimate θ_b ± σ_b, ordered by its start time, is tested for a change
@@ -16,8 +17,10 @@ consecutive logs that separates the two weighted means the most.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -96,17 +99,36 @@ def pooled_samples(logs: Sequence[LogStatistics]) -> Samples:
     return Samples.concatenate([g.samples for g in logs])
 
 
+#: ``map_logs(fn)`` returns ``[fn(log, k), ...]`` for log k = 0, 1, … of a pooled fit, each
+#: call where that log's :class:`LogStatistics` is held (a Dask worker, or here).
+MapLogs = Callable[[Callable[[LogStatistics, int], Any]], list[Any]]
+
+
+def on_samples(log: LogStatistics, k: int, fn: Callable[[Samples, int], Any],
+               firsts: Sequence[int]) -> Any:
+    """``fn`` on log k's samples, told where they begin in the pooled set (a
+    :data:`~dampest_ros.core.covariance.MapParts` call, run where the log is)."""
+    return fn(log.samples, firsts[k])
+
+
 def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBody,
                options: FitOptions, prior: FloatArray | None = None,
-               prior_std: FloatArray | None = None) -> Fit:
+               prior_std: FloatArray | None = None, map_logs: MapLogs | None = None) -> Fit:
     """The fit of all the logs' samples at once, from their summed statistics (the reduce).
 
     θ, its covariance and every per-DOF figure equal those of
     :func:`~dampest_ros.core.batch.fit` on :func:`pooled_samples` to rounding; only the
-    cross-validation folds differ (see :func:`pooled_normal`).
+    cross-validation folds differ (see :func:`pooled_normal`). The covariances' passes over
+    the samples run log by log through ``map_logs`` (default: here, one after the other).
     """
+    firsts = np.cumsum([0] + [len(g.samples) for g in logs[:-1]]).tolist()
+    run = map_logs or (lambda fn: [fn(g, k) for k, g in enumerate(logs)])
+
+    def map_parts(fn: Callable[[Samples, int], Any]) -> list[Any]:
+        return run(partial(on_samples, fn=fn, firsts=firsts))
+
     return fit(pooled_samples(logs), model, body, options, prior=prior, prior_std=prior_std,
-               normal=pooled_normal([g.normal for g in logs]))
+               normal=pooled_normal([g.normal for g in logs]), map_parts=map_parts)
 
 
 @dataclass

@@ -2,13 +2,22 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 import pytest
 
 from dampest_ros.core.batch import FitOptions, fit
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
-from dampest_ros.core.pool import drift, log_statistics, pooled_fit, pooled_samples
+from dampest_ros.core.pool import (
+    LogStatistics,
+    drift,
+    log_statistics,
+    pooled_fit,
+    pooled_samples,
+)
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.simulate import run
 from dampest_ros.core.vehicle import Vehicle
@@ -45,6 +54,31 @@ def test_the_pooled_fit_is_the_fit_of_all_samples_at_once(vehicle: Vehicle) -> N
     np.testing.assert_allclose(pooled.std, once.std, rtol=1e-10, atol=0)
     np.testing.assert_allclose(pooled.r2, once.r2, rtol=1e-12)
     assert pooled.n == once.n == sum(g.fit.n for g in logs)  # decimated samples
+
+
+def test_the_pooled_covariance_is_formed_log_by_log(vehicle: Vehicle) -> None:
+    """With the sensor-bias budget on and refit stretches shorter than the logs (so they start
+    inside logs and one spans two), the covariance's passes run log by log through map_logs
+    and still give the σ of all samples at once; each log is visited once per pass."""
+    options = FitOptions(method="wls", cutoff=2.0, bias_stretch=2000)
+    logs = [log_statistics(f"log{k}", noisy_log(vehicle, k, start=100.0 * k),
+                           vehicle.damping, vehicle.body, options) for k in range(4)]
+    visits: list[int] = []
+
+    def map_logs(fn: Callable[[LogStatistics, int], Any]) -> list[Any]:
+        visits.extend(range(len(logs)))
+        return [fn(g, k) for k, g in enumerate(logs)]
+
+    pooled = pooled_fit(logs, vehicle.damping, vehicle.body, options, map_logs=map_logs)
+    once = fit(pooled_samples(logs), vehicle.damping, vehicle.body, options)
+    n = [len(g.samples) for g in logs]  # 4 × 3001: the stretches start at 0, 5002, 10004
+    assert sum(n) > 3 * options.bias_stretch and 5002 < n[0] + n[1] < 7002
+    np.testing.assert_allclose(pooled.theta, once.theta, rtol=1e-10, atol=0)
+    np.testing.assert_allclose(pooled.std, once.std, rtol=1e-10, atol=0)
+    assert visits == [0, 1, 2, 3] * 2  # the robust pass, then the bias refits
+    without = fit(pooled_samples(logs), vehicle.damping, vehicle.body,
+                  FitOptions(method="wls", cutoff=2.0, gyro_bias=0.0, dvl_bias=0.0))
+    assert np.all(once.std >= without.std) and np.any(once.std > 1.01 * without.std)
 
 
 def test_a_20_percent_change_is_found_between_the_right_logs(vehicle: Vehicle) -> None:
