@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
 
     from dampest_ros.cli.common import speed_table, table
     from dampest_ros.core.effects import Effects, true_vehicle
-    from dampest_ros.core.excitation import make_excitation
+    from dampest_ros.core.excitation import protocol
     from dampest_ros.core.model import Model
     from dampest_ros.core.preprocess import PreprocessConfig, preprocess
     from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
@@ -81,8 +81,8 @@ def run(args: argparse.Namespace) -> int:
     sensors = SensorConfig.from_dict(read_mapping(args.sensors)) if args.sensors \
         else SensorConfig()
     t0 = time.perf_counter()
-    excitation = make_excitation(args.protocol, vehicle, args.duration, seed=args.seed,
-                                 amplitude=args.amplitude)
+    excitation = protocol(args.protocol, vehicle, args.duration, seed=args.seed,
+                          amplitude=args.amplitude)
     traj = run_sim(vehicle, excitation, effects, dt=args.dt, backend=args.backend)
     bias = SensorBias(effects.gyro_bias, effects.accel_bias, effects.dvl_bias)
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, sensors, bias, seed=args.seed,

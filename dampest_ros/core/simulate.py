@@ -18,7 +18,8 @@ from numpy.typing import NDArray
 from dampest_ros.core.control import VelocityPI
 from dampest_ros.core.damping import DampingModel
 from dampest_ros.core.effects import Effects, true_vehicle
-from dampest_ros.core.excitation import Excitation, make_excitation
+from dampest_ros.core.excitation import Excitation, ProtocolStream
+from dampest_ros.core.excitation import protocol as make_protocol
 from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.measurements import Recording
 from dampest_ros.core.rigid_body import ConfigError
@@ -328,7 +329,7 @@ def make_plant(vehicle: Vehicle, effects: Effects | None = None, dt: float = 0.0
     raise ConfigError("backend", f"unknown backend {backend!r}; use one of {BACKENDS}")
 
 
-def run(vehicle: Vehicle, excitation: Excitation, effects: Effects | None = None,
+def run(vehicle: Vehicle, excitation: Excitation | ProtocolStream, effects: Effects | None = None,
         dt: float = 0.02, backend: str = "native") -> Trajectory:
     """Fly ``excitation`` with the velocity PI controller and return the ground truth.
 
@@ -336,8 +337,9 @@ def run(vehicle: Vehicle, excitation: Excitation, effects: Effects | None = None
     ----------
     vehicle : Vehicle
         Nominal vehicle (the controller and the logs use it).
-    excitation : Excitation
-        Sampled protocol; its grid sets the control rate (a multiple of ``dt``).
+    excitation : Excitation or ProtocolStream
+        Sampled or block-wise protocol; its grid sets the control rate (a multiple of
+        ``dt``).
     effects : Effects, optional
         Hidden effects in the physics.
     dt : float
@@ -350,14 +352,14 @@ def run(vehicle: Vehicle, excitation: Excitation, effects: Effects | None = None
     Trajectory
     """
     sim = make_plant(vehicle, effects, dt=dt, backend=backend,
-                     position=np.array([0.0, 0.0, excitation.depth_ref[0]]))
-    dt_c = float(excitation.t[1] - excitation.t[0])
+                     position=np.array([0.0, 0.0, excitation.initial_depth]))
+    dt_c = excitation.dt
     sub = max(1, round(dt_c / dt))
     ctrl = VelocityPI.for_vehicle(vehicle, excitation.bandwidth)
-    for k in range(len(excitation.t)):
+    for k in range(excitation.ticks):
         roll, pitch, _ = euler_from_matrix(quat_to_matrix(sim.quaternion))
         cmd = excitation.command(k, sim.nu, float(roll), float(pitch), float(sim.position[2]))
-        tau = ctrl(cmd, sim.nu, dt_c) + excitation.tau_ff[k]
+        tau = ctrl(cmd, sim.nu, dt_c) + excitation.feedforward(k)
         rotor = sim.wrench_to_command(tau)
         for _ in range(sub):
             sim.step(rotor)
@@ -403,7 +405,7 @@ def simulate(vehicle: Vehicle, protocol: str = "B", duration: float = 600.0, see
     ----------
     vehicle : Vehicle
     protocol : {'A', 'B', 'C', 'fourier'}
-        Excitation (:func:`~dampest_ros.core.excitation.make_excitation`).
+        Excitation (:func:`~dampest_ros.core.excitation.protocol`).
     duration : float
         Seconds flown.
     seed : int
@@ -424,7 +426,7 @@ def simulate(vehicle: Vehicle, protocol: str = "B", duration: float = 600.0, see
         Topic → series in ROS frames, as :func:`dampest_ros.io.bag.read_bag` returns a bag.
     """
     fx = effects or Effects()
-    excitation = make_excitation(protocol, vehicle, duration, seed=seed, amplitude=amplitude)
+    excitation = make_protocol(protocol, vehicle, duration, seed=seed, amplitude=amplitude)
     traj = run(vehicle, excitation, fx, dt=dt, backend=backend)
     bias = SensorBias(fx.gyro_bias, fx.accel_bias, fx.dvl_bias)
     return measure(traj, vehicle.body.rho, vehicle.body.gravity, sensors or SensorConfig(),

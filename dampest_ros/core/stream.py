@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.control import VelocityPI
 from dampest_ros.core.effects import Effects
-from dampest_ros.core.excitation import Excitation, make_excitation
+from dampest_ros.core.excitation import protocol as make_protocol
 from dampest_ros.core.frames import (
     body_vec,
     euler_from_matrix,
@@ -256,16 +256,6 @@ class SensorStream:
         return np.asarray((hi - lo) / w, dtype=float)
 
 
-def hover_excitation(vehicle: Vehicle, duration: float, depth: float = 5.0,
-                     control_rate: float = 50.0) -> Excitation:
-    """Station keeping: zero velocity, level attitude and constant depth for ``duration`` s."""
-    del vehicle
-    t = np.arange(0.0, duration + 0.5 / control_rate, 1.0 / control_rate)
-    z = np.zeros((len(t), 6))
-    return Excitation("hover", t, z, np.zeros((len(t), 2)), np.full(len(t), depth), z.copy(),
-                      np.full(6, 1.0))
-
-
 class LiveSimulation:
     """The simulator flown step by step with its sensors streamed: the core of the sim node.
 
@@ -277,7 +267,8 @@ class LiveSimulation:
     ----------
     vehicle : Vehicle
     protocol : str
-        One of :data:`dampest_ros.core.excitation.PROTOCOLS` or ``hover``.
+        One of :data:`dampest_ros.core.excitation.LIVE_PROTOCOLS` (generated block by
+        block: memory does not grow with the duration).
     duration : float
         Length of the protocol (s); :attr:`done` after it.
     seed : int
@@ -295,14 +286,11 @@ class LiveSimulation:
                  backend: str = "native") -> None:
         self.vehicle = vehicle
         self.effects = effects or Effects()
-        if protocol == "hover":
-            self.excitation = hover_excitation(vehicle, duration)
-        else:
-            self.excitation = make_excitation(protocol, vehicle, duration, seed=seed)
+        self.excitation = make_protocol(protocol, vehicle, duration, seed=seed)
         ex = self.excitation
         self.sim = make_plant(vehicle, self.effects, dt=dt, backend=backend,
-                              position=np.array([0.0, 0.0, ex.depth_ref[0]]))
-        self.dt_control = float(ex.t[1] - ex.t[0])
+                              position=np.array([0.0, 0.0, ex.initial_depth]))
+        self.dt_control = ex.dt
         self.sub = max(1, round(self.dt_control / dt))
         self.controller = VelocityPI.for_vehicle(vehicle, ex.bandwidth)
         bias = SensorBias(self.effects.gyro_bias, self.effects.accel_bias, self.effects.dvl_bias)
@@ -322,7 +310,7 @@ class LiveSimulation:
     @property
     def done(self) -> bool:
         """True when the protocol has been flown to its end."""
-        return self.k >= len(self.excitation.t)
+        return self.k >= self.excitation.ticks
 
     def command(self, tau: FloatArray, hold: float) -> None:
         """External wrench τ (FRD, N and N·m) in force for ``hold`` seconds of sim time."""
@@ -340,7 +328,7 @@ class LiveSimulation:
                 roll, pitch, _ = euler_from_matrix(quat_to_matrix(sim.quaternion))
                 ref = ex.command(self.k, sim.nu, float(roll), float(pitch),
                                  float(sim.position[2]))
-                tau = self.controller(ref, sim.nu, self.dt_control) + ex.tau_ff[self.k]
+                tau = self.controller(ref, sim.nu, self.dt_control) + ex.feedforward(self.k)
             rotor = sim.wrench_to_command(tau)
             for _ in range(self.sub):
                 sim.step(rotor)

@@ -23,7 +23,7 @@ from sensor_msgs.msg import FluidPressure, Imu, JointState
 
 from dampest_ros.core import frames
 from dampest_ros.core.effects import Effects
-from dampest_ros.core.excitation import PROTOCOLS
+from dampest_ros.core.excitation import LIVE_PROTOCOLS
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.sensors import SensorConfig
 from dampest_ros.core.simulate import BACKENDS
@@ -61,7 +61,7 @@ class SimNode(ParamNode):
         Param("vehicle", "bluerov2_heavy", "vehicle preset name or YAML path",
               check=vehicle_check),
         Param("protocol", "B", "excitation protocol flown without cmd_wrench",
-              choices=(*PROTOCOLS, "hover")),
+              choices=LIVE_PROTOCOLS),
         Param("duration", 300.0, "length of the protocol in s; the simulation stops after it",
               low=1.0, high=1e6),
         Param("seed", 1, "random seed of the protocol and the sensor noise", low=0,
