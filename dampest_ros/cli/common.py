@@ -112,6 +112,17 @@ def add_cutoff_option(p: argparse.ArgumentParser, zero: str = "") -> None:
                         + (f"; 0: {zero}" if zero else "") + ")")
 
 
+def add_dask_options(p: argparse.ArgumentParser) -> None:
+    """--workers, --scheduler: where several logs are read (Dask)."""
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="several logs: Dask worker processes of the local cluster (default: "
+                        "the CPU count, at most one per log)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="several logs: the address of a running Dask scheduler (e.g. "
+                        "tcp://10.0.0.5:8786) instead of a local cluster; the workers must "
+                        "see the log paths")
+
+
 def tau_topic(topics: dict[str, str]) -> str:
     """The topic τ comes from: the body wrench, else the thruster telemetry."""
     return topics.get("wrench") or topics["thrusters"]

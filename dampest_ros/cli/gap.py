@@ -9,6 +9,7 @@ import re
 import sys
 import time
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,7 @@ from matplotlib.figure import Figure
 
 from dampest_ros.cli.common import table
 from dampest_ros.cli.inputs import load_model_for, load_samples
-from dampest_ros.cli.pool import expand_inputs
+from dampest_ros.cli.pool import expand_inputs, map_logs_on_dask
 from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData
 from dampest_ros.core.gap.library import library
 from dampest_ros.core.gap.localise import LocalRow, concentration, localise, residual_psd
@@ -54,15 +55,25 @@ def _joints(path: str, args: argparse.Namespace, vehicle: Vehicle) -> JointSerie
     return replace(series, stamp=series.stamp + float(args.delay))
 
 
-def pooled_logs(paths: list[str], args: argparse.Namespace, vehicle: Vehicle
-                ) -> tuple[Samples, JointSeries | None]:
+def _load_log(path: str, args: argparse.Namespace) -> tuple[Samples, JointSeries | None]:
+    """One log's samples and logged thruster state (runs on a Dask worker)."""
+    vehicle = load_vehicle(args.vehicle)
+    return load_samples(path, vehicle, args), _joints(path, args, vehicle)
+
+
+def pooled_logs(paths: list[str], args: argparse.Namespace
+                ) -> tuple[Samples, JointSeries | None, dict[str, list[str]]]:
     """The samples (and logged thruster state) of one log, or of several one after the other:
     each log's clock is shifted to start 1 s after the previous one ends, its samples a
     segment of their own, so that the effects are screened on the pooled data and the held-out
-    part is the last logs' end. The thruster state is kept only when every log has it."""
-    parts = [(load_samples(p, vehicle, args), _joints(p, args, vehicle)) for p in paths]
-    if len(parts) == 1:
-        return parts[0]
+    part is the last logs' end. The thruster state is kept only when every log has it.
+    Several logs are read on Dask (--workers, --scheduler); one that fails is left out with
+    its reason. The third value names the logs pooled and left out (for the model file)."""
+    if len(paths) == 1:
+        return (*_load_log(paths[0], args), {})
+    with map_logs_on_dask(paths, partial(_load_log, args=args), args) as (_, done, failed):
+        parts: list[tuple[Samples, JointSeries | None]] = [r for r, _ in done.values()]
+    logs = {"logs": list(done), "logs_left_out": list(failed) or ["none"]}
     shifted: list[Samples] = []
     joints: list[JointSeries | None] = []
     end = 0.0
@@ -71,17 +82,17 @@ def pooled_logs(paths: list[str], args: argparse.Namespace, vehicle: Vehicle
         shifted.append(replace(s, t=s.t + offset))
         joints.append(None if j is None else replace(j, stamp=j.stamp + offset))
         end = float(shifted[-1].t[-1])
-    print(f"{len(paths)} logs pooled, one after the other in time", file=sys.stderr)
+    print(f"{len(parts)} logs pooled, one after the other in time", file=sys.stderr)
     pooled = Samples.concatenate(shifted)
     if any(j is None for j in joints):
-        return pooled, None
+        return pooled, None, logs
     js = [j for j in joints if j is not None]
     if any(j.names != js[0].names for j in js):
-        return pooled, None
+        return pooled, None, logs
     return pooled, replace(js[0], stamp=np.concatenate([j.stamp for j in js]),
                            velocity=np.concatenate([j.velocity for j in js]),
                            effort=np.concatenate([j.effort for j in js]),
-                           position=np.concatenate([j.position for j in js]))
+                           position=np.concatenate([j.position for j in js])), logs
 
 
 def run(args: argparse.Namespace) -> int:
@@ -103,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     cands = library([c.strip() for c in str(args.candidates).split(",") if c.strip()])
     paths = expand_inputs(args.input)
     args.input = ", ".join(paths)
-    samples, joints = pooled_logs(paths, args, vehicle)
+    samples, joints, logs = pooled_logs(paths, args)
     data = GapData(samples, model, mf.theta, body, vehicle.thrusters, joints,
                        cutoff=args.cutoff, split=args.split)
     seconds = len(samples) / samples.rate
@@ -130,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     print(steps_table(data, result) if result.steps else "no effect named.")
     print(f"\n{result.conclusion}.")
     # the model file first: it does not depend on the free run
-    final = final_model(data, result, mf, args)
+    final = final_model(data, result, mf, args, logs)
     if args.out:
         save_model(Path(args.out), final)
     free = free_run_errors(data, result.effects)
@@ -229,9 +240,10 @@ def _param_key(key: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]", "_", key)
 
 
-def final_model(data: GapData, result: GapResult, mf: Model,
-                args: argparse.Namespace) -> Model:
-    """The believed model with the named effects applied, its σ and what they updated."""
+def final_model(data: GapData, result: GapResult, mf: Model, args: argparse.Namespace,
+                logs: dict[str, list[str]] | None = None) -> Model:
+    """The believed model with the named effects applied, its σ and what they updated;
+    ``logs``: the logs pooled and left out (:func:`pooled_logs`), recorded in ``extra``."""
     upd = updated_model(data, result.effects)
     std = dict(zip(mf.parameter_names, mf.theta_std.tolist(), strict=True))
     effects: dict[str, Any] = {}
@@ -256,7 +268,7 @@ def final_model(data: GapData, result: GapResult, mf: Model,
         effects[_param_key(e.key)] = entry
     names = upd.model.parameter_names
     extra: dict[str, Any] = {
-        "source": f"dampest gap {args.input} --model {args.model}",
+        "source": f"dampest gap {args.input} --model {args.model}", **(logs or {}),
         "gap": {"named": [e.key for e, _ in result.effects] or ["none"],
                 "conclusion": result.conclusion, **effects, **upd.extra}}
     # a coefficient the believed model held at its prior stays held unless an effect set it

@@ -16,6 +16,7 @@ from dampest_ros.cli.common import (
     CSV_HELP,
     add_columns_option,
     add_cutoff_option,
+    add_dask_options,
     add_preprocess_options,
     add_topic_options,
     add_vehicle_option,
@@ -39,7 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", metavar="MEASURED", nargs="+",
                    help="rosbag2 directory (MCAP or SQLite3) or .csv / .csv.gz file from the "
                         "vehicle; several (or a quoted glob, or a .txt list) are pooled one "
-                        "after the other in time, the last part held out")
+                        "after the other in time (read on Dask), the last part held out")
     p.add_argument("--model", required=True, metavar="MODEL",
                    help="model YAML (ROS 2 parameters file) of the damping you believe, e.g. "
                         "the simulator's; its M is used as M_RB + M_A")
@@ -53,6 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "cg_offset, thrusters, added_mass, damping, memory, sensor_bias, "
                         "or keys such as thrust_gain, delay, linear.X_u, cross.Y_vr); "
                         "default: all")
+    add_dask_options(p)
     p.add_argument("--max-steps", type=int, default=6, metavar="N",
                    help="name at most this many effects (default: 6)")
     add_cutoff_option(p)

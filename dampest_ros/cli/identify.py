@@ -128,10 +128,6 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
     model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
     prior, prior_std = prior_of(model, nominal, prior_spec(args))
     with reduce_all(paths, args, prior, prior_std) as (logs, failed, map_logs):
-        for path, why in failed.items():
-            print(f"left out: {path}: {why}", file=sys.stderr)
-        if not logs:
-            raise ConfigError("INPUT", "none of the logs could be read (reasons above)")
         samples = pooled_samples(logs)
         options = FitOptions(method=args.method, cutoff=args.cutoff,
                              speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))

@@ -19,6 +19,7 @@ from dampest_ros.cli.common import (
     CSV_HELP,
     add_columns_option,
     add_cutoff_option,
+    add_dask_options,
     add_preprocess_options,
     add_topic_options,
     add_vehicle_option,
@@ -80,13 +81,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth", metavar="MODEL",
                    help="model YAML of the true coefficients (simulated data), shown in the "
                         "report")
-    p.add_argument("--workers", type=int, metavar="N",
-                   help="several logs: Dask worker processes of the local cluster (default: "
-                        "the CPU count, at most one per log)")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="several logs: the address of a running Dask scheduler (e.g. "
-                        "tcp://10.0.0.5:8786) instead of a local cluster; the workers must "
-                        "see the log paths")
+    add_dask_options(p)
     p.add_argument("--drift-plot", metavar="PNG",
                    help="several logs: plot each coefficient's per-log estimate ± 2σ "
                         "against the log's start time to this PNG")

@@ -17,6 +17,7 @@ import logging
 import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -81,45 +82,47 @@ def check_pooled_options(args: argparse.Namespace) -> None:
     if args.select:
         raise ConfigError("--select", "searches the structure on one log; run it on one "
                                       "log, then pool with --terms or --prior")
-    if args.workers is not None and args.workers < 1:
-        raise ConfigError("--workers", f"{args.workers}: needs at least 1 worker")
     if args.holdout is not None:
         raise ConfigError("--holdout", "takes one log; to score on unseen data, leave a log "
                                        "out and run dampest validate MODEL LOG")
 
 
-def reduce_log(path: str, args: argparse.Namespace, prior: np.ndarray | None,
-               prior_std: np.ndarray | None) -> tuple[LogStatistics | None, str, str]:
-    """Preprocess one log and reduce it (runs on a worker).
-
-    Returns its statistics (None when it failed), what the preprocessing printed on stderr
-    (progress bars dropped) and why it failed (one line, "" when it did not). Failures are
-    returned, not raised, so that no worker prints a traceback; ``--debug`` raises them.
-    """
+def guarded(work: Callable[[str], Any], path: str, debug: bool) -> tuple[Any, str, str]:
+    """``work(path)`` on a worker: its result (None when it failed), what it printed on
+    stderr (progress bars dropped) and why it failed (one line, "" when it did not).
+    Failures are returned, not raised, so that no worker prints a traceback; ``debug``
+    (``--debug``) raises them."""
     captured = io.StringIO()
     try:
         with contextlib.redirect_stderr(captured):
-            vehicle = load_vehicle(args.vehicle)
-            model, _ = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
-            samples = cut(load_samples(path, vehicle, args), args)
-            options = FitOptions(method=args.method, cutoff=args.cutoff, speed_range=tuple(
-                speed_limits(vehicle, tau_measured=samples.tau)))
-            stats = log_statistics(path, samples, model, vehicle.body, options, prior,
-                                   prior_std)
+            result = work(path)
         why = ""
     except Exception as exc:
-        if args.debug:
+        if debug:
             raise
-        stats, why = None, (str(exc) if expected(exc) else
-                            f"unexpected {type(exc).__name__}: {exc} (--debug shows where)")
+        result, why = None, (str(exc) if expected(exc) else
+                             f"unexpected {type(exc).__name__}: {exc} (--debug shows where)")
     notes = "\n".join(line for line in captured.getvalue().replace("\r", "\n").splitlines()
                       if line.strip() and "[" not in line)
-    return stats, notes, why
+    return result, notes, why
+
+
+def reduce_log(path: str, args: argparse.Namespace, prior: np.ndarray | None,
+               prior_std: np.ndarray | None) -> LogStatistics:
+    """Preprocess one log and reduce it (runs on a worker)."""
+    vehicle = load_vehicle(args.vehicle)
+    model, _ = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
+    samples = cut(load_samples(path, vehicle, args), args)
+    options = FitOptions(method=args.method, cutoff=args.cutoff, speed_range=tuple(
+        speed_limits(vehicle, tau_measured=samples.tau)))
+    return log_statistics(path, samples, model, vehicle.body, options, prior, prior_std)
 
 
 def _client(args: argparse.Namespace, n_logs: int) -> Any:
     """A Dask client: on --scheduler, or on a LocalCluster of --workers processes."""
     from dask.distributed import Client, LocalCluster
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError("--workers", f"{args.workers}: needs at least 1 worker")
     if args.scheduler:
         try:
             return Client(args.scheduler, timeout="10s")
@@ -134,44 +137,39 @@ def _client(args: argparse.Namespace, n_logs: int) -> Any:
 
 
 @contextlib.contextmanager
-def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray | None,
-               prior_std: np.ndarray | None
-               ) -> Iterator[tuple[list[LogStatistics], dict[str, str], MapLogs]]:
-    """Map :func:`reduce_log` over the logs on Dask, with a progress line on stderr.
+def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: argparse.Namespace,
+                     verb: str = "read") -> Iterator[tuple[Any, dict[str, Any], dict[str, str]]]:
+    """Run ``work(path)`` for every log on Dask (--workers, --scheduler), with a progress line
+    on stderr and each log's notes prefixed by its path.
 
-    Yields the statistics of the logs that worked (in the given order), the reason of each
-    that failed, and a :data:`~dampest_ros.core.pool.MapLogs` that runs a function on each
-    log where its worker holds it (the pooled fit's passes over the samples); the cluster
-    lives until the block ends.
+    Yields the client, each log that worked with its result and its future (the result
+    stays on the worker that made it too, for further calls there) in the given order, and
+    the reason of each that failed; the cluster lives until the block ends.
     """
     from dask.distributed import as_completed
     client = _client(args, len(paths))
-    done: dict[str, tuple[LogStatistics, Any]] = {}
+    done: dict[str, Any] = {}
     failed: dict[str, str] = {}
     try:
-        futures = {client.submit(reduce_log, p, args, prior, prior_std, pure=False): p
-                   for p in paths}
+        futures = {client.submit(guarded, work, p, args.debug, pure=False): p for p in paths}
         for k, future in enumerate(as_completed(futures), 1):
             path = futures[future]
-            stats, notes, why = future.result()
+            result, notes, why = future.result()
             for line in notes.splitlines():
                 print(f"{path}: {line}", file=sys.stderr)
-            if stats is None:
+            if result is None:
                 failed[path] = why
             else:
-                done[path] = stats, future
+                done[path] = result, future
             sys.stderr.write(f"\rlogs [{'#' * (25 * k // len(paths)):25s}] {k}/{len(paths)}"
-                             f" reduced, {len(failed)} failed")
+                             f" {verb}, {len(failed)} failed")
             sys.stderr.flush()
         sys.stderr.write("\n")
-        held = [done[p][1] for p in paths if p in done]
-
-        def map_logs(fn: Callable[[LogStatistics, int], Any]) -> list[Any]:
-            # the log's future as the argument: the call runs on the worker holding it
-            return list(client.gather([client.submit(_stats_of, f, fn, k, pure=False)
-                                       for k, f in enumerate(held)]))
-
-        yield [done[p][0] for p in paths if p in done], failed, map_logs
+        for path, why in failed.items():
+            print(f"left out: {path}: {why}", file=sys.stderr)
+        if not done:
+            raise ConfigError("INPUT", "none of the logs could be read (reasons above)")
+        yield client, {p: done[p] for p in paths if p in done}, failed
     finally:
         cluster = getattr(client, "cluster", None)
         client.close()
@@ -179,12 +177,32 @@ def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray
             cluster.close()
 
 
-def _stats_of(reduced: tuple[LogStatistics | None, str, str],
+@contextlib.contextmanager
+def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray | None,
+               prior_std: np.ndarray | None
+               ) -> Iterator[tuple[list[LogStatistics], dict[str, str], MapLogs]]:
+    """Map :func:`reduce_log` over the logs on Dask (:func:`map_logs_on_dask`).
+
+    Yields the statistics of the logs that worked (in the given order), the reason of each
+    that failed, and a :data:`~dampest_ros.core.pool.MapLogs` that runs a function on each
+    log where its worker holds it (the pooled fit's passes over the samples).
+    """
+    work = partial(reduce_log, args=args, prior=prior, prior_std=prior_std)
+    with map_logs_on_dask(paths, work, args, "reduced") as (client, done, failed):
+        held = [future for _, future in done.values()]
+
+        def map_logs(fn: Callable[[LogStatistics, int], Any]) -> list[Any]:
+            # the log's future as the argument: the call runs on the worker holding it
+            return list(client.gather([client.submit(_stats_of, f, fn, k, pure=False)
+                                       for k, f in enumerate(held)]))
+
+        yield [stats for stats, _ in done.values()], failed, map_logs
+
+
+def _stats_of(reduced: tuple[LogStatistics, str, str],
               fn: Callable[[LogStatistics, int], Any], k: int) -> Any:
-    """``fn`` on the statistics of a reduced log (:func:`reduce_log`'s result), log k."""
-    stats = reduced[0]
-    assert stats is not None  # only the logs that worked are mapped
-    return fn(stats, k)
+    """``fn`` on the statistics of a reduced log (:func:`guarded`'s result), log k."""
+    return fn(reduced[0], k)
 
 
 def drift_table(d: Drift, pooled: Fit) -> str:

@@ -174,8 +174,9 @@ def test_bad_options_are_one_line_and_exit_2(measured: Path, option: str, value:
 
 def test_several_logs_are_screened_pooled(tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
-    """Issue 16: two 150 s bags (seeds 5, 6) with the same hidden buoyancy offset (+10 N),
-    pooled one after the other in time: the offset is named first, on samples of both."""
+    """Two 150 s bags (seeds 5, 6) with the same hidden buoyancy offset (+10 N), read on two
+    Dask workers and pooled one after the other in time: the offset is named first, on
+    samples of both; a third log that is not a bag is left out with its reason."""
     bags = []
     for seed in (5, 6):
         bag = tmp_path / f"dive_{seed}"
@@ -183,15 +184,21 @@ def test_several_logs_are_screened_pooled(tmp_path: Path,
                      "--duration", "150", "--seed", str(seed), "--out", str(bag),
                      "--effects", "{buoyancy_offset: 10.0}"]) == 0
         bags.append(str(bag))
+    broken = tmp_path / "dive_broken"
+    broken.mkdir()
+    (broken / "metadata.yaml").write_text("not: a bag\n")
     out = tmp_path / "final.yaml"
     capsys.readouterr()
-    assert main(["gap", *bags, "--model", str(tmp_path / "dive_5" / "truth_model.yaml"),
-                 "--vehicle", "bluerov2_heavy", "--max-steps", "2", "--out", str(out)]) == 0
+    assert main(["gap", *bags, str(broken), "--model",
+                 str(tmp_path / "dive_5" / "truth_model.yaml"), "--vehicle", "bluerov2_heavy",
+                 "--max-steps", "2", "--out", str(out), "--workers", "2"]) == 0
     printed = capsys.readouterr()
     assert "2 logs pooled" in printed.err
+    assert f"left out: {broken}:" in printed.err and "Traceback" not in printed.err
     first = printed.out.splitlines()[0]
     n = int(first.split(": ", 1)[1].split()[0])
     assert n > 2 * 0.9 * 150 * 50  # samples of both logs (50 Hz, a few dropped at the ends)
     model = load_model(out)
     assert model.extra["gap"]["named"][0] == "buoyancy"
-    assert model.extra["source"].startswith(f"dampest gap {bags[0]}, {bags[1]}")
+    assert model.extra["source"].startswith(f"dampest gap {bags[0]}, {bags[1]}, {broken}")
+    assert model.extra["logs"] == bags and model.extra["logs_left_out"] == [str(broken)]
