@@ -141,6 +141,7 @@ ROSDEP_KEYS = {
     "mujoco": "python3-mujoco-pip",
     "pinocchio": "pinocchio",
     "dask": "python3-dask",
+    "fsspec": "python3-fsspec",
 }
 
 

@@ -31,6 +31,7 @@ from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
+from dampest_ros.io.remote import is_url, local_log
 from dampest_ros.io.yaml_io import load_vehicle, save_model
 from dampest_ros.report.figures import psd_limits, psd_unit
 
@@ -56,9 +57,11 @@ def _joints(path: str, args: argparse.Namespace, vehicle: Vehicle) -> JointSerie
 
 
 def _load_log(path: str, args: argparse.Namespace) -> tuple[Samples, JointSeries | None]:
-    """One log's samples and logged thruster state (runs on a Dask worker)."""
+    """One log's samples and logged thruster state (a path, or a URL copied here first;
+    runs on a Dask worker)."""
     vehicle = load_vehicle(args.vehicle)
-    return load_samples(path, vehicle, args), _joints(path, args, vehicle)
+    with local_log(path) as local:
+        return load_samples(local, vehicle, args), _joints(local, args, vehicle)
 
 
 def pooled_logs(paths: list[str], args: argparse.Namespace
@@ -69,7 +72,7 @@ def pooled_logs(paths: list[str], args: argparse.Namespace
     part is the last logs' end. The thruster state is kept only when every log has it.
     Several logs are read on Dask (--workers, --scheduler); one that fails is left out with
     its reason. The third value names the logs pooled and left out (for the model file)."""
-    if len(paths) == 1:
+    if len(paths) == 1 and not is_url(paths[0]):
         return (*_load_log(paths[0], args), {})
     with map_logs_on_dask(paths, partial(_load_log, args=args), args) as (_, done, failed):
         parts: list[tuple[Samples, JointSeries | None]] = [r for r, _ in done.values()]

@@ -36,6 +36,7 @@ from dampest_ros.core.selection import Selection, select_terms
 from dampest_ros.core.validate import force_scores
 from dampest_ros.core.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
+from dampest_ros.io.remote import is_url
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 
 
@@ -44,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     vehicle = load_vehicle(args.vehicle)
     paths = expand_inputs(args.input)
-    if len(paths) > 1:
+    if len(paths) > 1 or is_url(paths[0]):  # a URL is fetched where a Dask worker reads it
         return run_pooled(args, vehicle, paths)
     args.input = paths[0]
     if args.method == "rls":

@@ -42,7 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of dampest identify (its work: dampest_ros.cli.identify.run)."""
     describe(p, __doc__, EXAMPLE, CSV_HELP)
     p.add_argument("input", metavar="INPUT", nargs="+",
-                   help="rosbag2 directory, .csv or .csv.gz file; several (or a quoted glob "
+                   help="rosbag2 directory, .csv or .csv.gz file, or an fsspec URL of one "
+                        "(e.g. s3://…, copied where it is read); several (or a quoted glob "
                         "pattern such as 'bags/dive_*', or a .txt file listing logs one per "
                         "line) are pooled into one model, each log preprocessed on its own "
                         "Dask worker, and the drift of every coefficient between the logs "

@@ -2,7 +2,8 @@
 drift of the damping between the logs (the maths: dampest_ros/core/pool.py).
 
 Workers read the logs themselves (paths as the workers see them), so nothing but the logs'
-preprocessed samples and statistics travels. By default a LocalCluster of --workers
+preprocessed samples and statistics travels; a log named by URL is copied to the worker
+that reads it (dampest_ros/io/remote.py). By default a LocalCluster of --workers
 processes runs on this machine; --scheduler ADDRESS uses an existing Dask cluster. A log that
 fails is reported with its reason and left out; the rest go on.
 """
@@ -31,6 +32,7 @@ from dampest_ros.core.estimator import restrict
 from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.pool import Drift, LogStatistics, MapLogs, log_statistics
 from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.io.remote import glob_url, is_url, local_log, local_name
 from dampest_ros.io.yaml_io import load_vehicle
 
 #: Characters that make an INPUT a glob pattern.
@@ -40,34 +42,31 @@ GLOB = "*?["
 def expand_inputs(inputs: Sequence[str]) -> list[str]:
     """The logs INPUT names: a log itself, a glob pattern (sorted matches), or a ``.txt``
     file listing logs (one per line; blank lines and ``#`` comments skipped; relative paths
-    from the list's directory). ``file://`` URLs are paths.
+    from the list's directory). ``file://`` URLs are paths; other URLs (any fsspec
+    filesystem, :mod:`dampest_ros.io.remote`) are logs too, globbed on their filesystem.
 
     Raises
     ------
     ConfigError
-        A pattern that matches nothing, a list that names nothing, or a URL of another
-        scheme (name, reason and fix).
+        A pattern that matches nothing, or a list that names nothing (name, reason and fix).
     """
     out: list[str] = []
-    for item in inputs:
-        if item.startswith("file://"):
-            item = item[len("file://"):]
-        elif "://" in item:
-            raise ConfigError(item, "only local paths (or file:// URLs) are read; copy the "
-                                    "log to a path the workers see")
+    for given in inputs:
+        item = local_name(given)
         if any(c in item for c in GLOB):
-            found = sorted(glob.glob(item))
+            found = glob_url(item) if is_url(item) else sorted(glob.glob(item))
             if not found:
-                raise ConfigError(item, "the pattern matches no log (quote it so the shell "
-                                        "does not expand it, check the path)")
+                raise ConfigError(given, "the pattern matches no log (quote it so the shell "
+                                         "does not expand it, check the path)")
             out += found
         elif item.endswith(".txt") and Path(item).is_file():
             base = Path(item).parent
             listed = [line.split("#", 1)[0].strip()
                       for line in Path(item).read_text(encoding="utf-8").splitlines()]
-            listed = [str(base / x) if not Path(x).is_absolute() else x for x in listed if x]
+            listed = [str(base / x) if not (Path(x).is_absolute() or is_url(x)) else x
+                      for x in listed if x]
             if not listed:
-                raise ConfigError(item, "the list names no log (one path per line)")
+                raise ConfigError(given, "the list names no log (one path per line)")
             out += expand_inputs(listed)
         else:
             out.append(item)
@@ -109,10 +108,12 @@ def guarded(work: Callable[[str], Any], path: str, debug: bool) -> tuple[Any, st
 
 def reduce_log(path: str, args: argparse.Namespace, prior: np.ndarray | None,
                prior_std: np.ndarray | None) -> LogStatistics:
-    """Preprocess one log and reduce it (runs on a worker)."""
+    """Preprocess one log (a path, or a URL copied here first) and reduce it (runs on a
+    worker)."""
     vehicle = load_vehicle(args.vehicle)
     model, _ = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
-    samples = cut(load_samples(path, vehicle, args), args)
+    with local_log(path) as local:
+        samples = cut(load_samples(local, vehicle, args), args)
     options = FitOptions(method=args.method, cutoff=args.cutoff, speed_range=tuple(
         speed_limits(vehicle, tau_measured=samples.tau)))
     return log_statistics(path, samples, model, vehicle.body, options, prior, prior_std)

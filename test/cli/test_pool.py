@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -32,8 +33,37 @@ def test_inputs_expand_globs_and_lists_and_refuse_what_they_cannot_read(tmp_path
         str(tmp_path / "other"), "/x/bag"]
     with pytest.raises(ValueError, match="matches no log"):
         expand_inputs([str(tmp_path / "nothing_*")])
-    with pytest.raises(ValueError, match="only local paths"):
-        expand_inputs(["s3://bucket/bag"])
+    with pytest.raises(ValueError, match="cannot open this URL"):
+        expand_inputs(["nosuchscheme://bucket/dive_*"])
+
+
+def test_logs_named_by_url_are_copied_where_they_are_read(tmp_path: Path) -> None:
+    """Two bags on an fsspec filesystem (memory://, shared with an in-process Dask worker)
+    named by a URL glob: each is copied where it is read and gives the estimate of its
+    local copy; no temporary copy is left behind."""
+    import fsspec
+    from dask.distributed import LocalCluster
+
+    fs = fsspec.filesystem("memory")
+    local = []
+    for seed in (1, 2):
+        bag = tmp_path / f"dive_{seed}"
+        assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B",
+                     "--duration", "40", "--seed", str(seed), "--out", str(bag)]) == 0
+        fs.put(str(bag), f"/dampest_test/dive_{seed}", recursive=True)
+        local.append(str(bag))
+    before = set(Path(tempfile.gettempdir()).glob("dampest_log_*"))
+    with LocalCluster(n_workers=1, processes=False, threads_per_worker=1,
+                      dashboard_address=None) as cluster:
+        options = ["--vehicle", "bluerov2_heavy", "--scheduler", cluster.scheduler_address]
+        assert main(["identify", "memory://dampest_test/dive_*", *options, "--out",
+                     str(tmp_path / "url.yaml")]) == 0
+        assert main(["identify", *local, *options, "--out", str(tmp_path / "path.yaml")]) == 0
+    fs.rm("/dampest_test", recursive=True)
+    by_url, by_path = load_model(tmp_path / "url.yaml"), load_model(tmp_path / "path.yaml")
+    assert by_url.extra["logs"] == [f"memory:///dampest_test/dive_{k}" for k in (1, 2)]
+    np.testing.assert_allclose(by_url.theta, by_path.theta, rtol=1e-12, atol=0)
+    assert set(Path(tempfile.gettempdir()).glob("dampest_log_*")) == before
 
 
 @pytest.mark.parametrize("option,message", [
