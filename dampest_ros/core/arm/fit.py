@@ -72,9 +72,15 @@ class JointNormals:
             Which rows enter.
         """
         w = use.astype(float)
-        Yw = Y * w[:, :, None]
-        self.G += np.einsum("kjp,kjq->jpq", Yw, Y, optimize=True)
-        self.g += np.einsum("kjp,kj->jp", Yw, tau)
+        for j in range(Y.shape[1]):  # per joint (n), over the columns its row has
+            rows = Y[:, j, :]
+            cols = np.flatnonzero(np.any(rows != 0.0, axis=0))
+            Yj = rows[:, cols]
+            Yw = Yj * w[:, j, None]
+            # G_j += Y_jᵀ W Y_j, g_j += Y_jᵀ W τ_j on those columns (a row of a serial arm
+            # holds only the links beyond its joint: the others' blocks stay zero)
+            self.G[j][np.ix_(cols, cols)] += Yw.T @ Yj
+            self.g[j, cols] += Yw.T @ tau[:, j]
         self.c += np.einsum("kj,kj->j", w, tau * tau)
         self.count += use.sum(axis=0)
 

@@ -159,17 +159,30 @@ def rigid_regressor(arm: ArmModel, q: FloatArray, qd: FloatArray, qdd: FloatArra
         screw[:, :3, j] = _cross(pw[j], z)
         screw[:, 3:, j] = z
         f, m = _link_wrench_columns(v, w, a, al)
-        # to the world frame: f_w = R f, n_w (about the world origin) = R n + p × f_w
+        # to the world frame: f_w = R f, n_w (about the world origin) = R n + p × f_w, on the
+        # rows that are not zero (the inertias exert no force, the mass no moment)
         RwT = np.swapaxes(Rw[j], 1, 2)
-        fw = f @ RwT
-        wrench.append(np.concatenate([fw, m @ RwT + _cross(pw[j][:, None], fw)], axis=2))
-    Y = np.zeros((N, n, 10 * n))
-    for j in range(n):
-        loaded = np.zeros(n)
-        loaded[_ancestors(arm, j)] = 1.0
-        # τ_i = z_i · n + (p_i × z_i) · f for the joints i between link j and the base
-        Y[:, :, 10 * j:10 * j + 10] = np.swapaxes(wrench[j] @ screw, 1, 2) * loaded[:, None]
+        fw = f[:, :4] @ RwT
+        wj = np.zeros((N, 10, 6))
+        wj[:, :4, :3] = fw
+        wj[:, :4, 3:] = _cross(pw[j][:, None], fw)
+        wj[:, 1:, 3:] += m[:, 1:] @ RwT
+        wrench.append(wj)
+    # τ_i = z_i · n + (p_i × z_i) · f, every link's columns at once (the screws (n, 6) times
+    # the wrench columns (6, 10 n) per sample), kept for the joints i between link j and the
+    # base
+    Y = np.matmul(np.swapaxes(screw, 1, 2), np.swapaxes(np.concatenate(wrench, axis=1), 1, 2))
+    Y *= _loaded(arm)
     return Y
+
+
+def _loaded(arm: ArmModel) -> FloatArray:
+    """Mask of the rigid regressor's columns, shape (n, 10 n): 1 where link j (columns
+    10 j … 10 j + 9) loads joint i (row i), i.e. joint i is j or one of its ancestors."""
+    mask = np.zeros((arm.n, arm.n))
+    for j in range(arm.n):
+        mask[_ancestors(arm, j), j] = 1.0
+    return np.repeat(mask, 10, axis=1)
 
 
 def _ancestors(arm: ArmModel, j: int) -> list[int]:
