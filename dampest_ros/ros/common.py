@@ -68,9 +68,10 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 DRAIN_LIMIT = 500
 
 
-class _Taken(CallbackGroup):
+class TakenElsewhere(CallbackGroup):
     """A callback group that executors never wait on or run: its subscriptions are read
-    only by the :class:`Drain` group they belong to."""
+    by their owner (the :class:`Drain` group they belong to, or a take thread of their
+    own)."""
 
     def can_execute(self, entity: Any) -> bool:
         return False
@@ -101,7 +102,7 @@ class Drain:
 
     def __init__(self, limit: int = DRAIN_LIMIT) -> None:
         self.limit = int(limit)
-        self.passive: CallbackGroup = _Taken()
+        self.passive: CallbackGroup = TakenElsewhere()
         self._members: list[tuple[Subscription, Callable[[tuple[Any, Any]], None]]] = []
 
     def add(self, sub: Subscription) -> None:

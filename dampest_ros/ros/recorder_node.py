@@ -1,30 +1,37 @@
 """recorder_node: records topics to a rosbag2 MCAP bag (as ``ros2 bag record``).
 
-Subscribes to each topic as soon as a publisher of it appears in the graph (checked every
-discovery_period), with a QoS compatible with every publisher (reliable only if all of them
-are), receives the serialized bytes (no deserialisation) and writes them with their receive
-time (the node clock: simulation time under use_sim_time) through
+Subscribes to each topic as soon as a publisher of it appears in the graph (looked for every
+0.02 s during the first seconds, then every discovery_period), with a QoS compatible with
+every publisher (reliable only if all of them are). A thread of its own waits on the
+subscriptions alone and takes every queued message as serialized bytes (no
+deserialisation, no executor round per message), so the bag keeps pace with publishers in
+bursts; it writes each message with its receive time (the time the middleware received it;
+the node clock, i.e. simulation time, under use_sim_time) through
 dampest_ros.io.recorder.BagRecorder. The QoS each publisher offers is stored in the bag
 metadata. Chunks reach the disk every chunk_size bytes or flush_period seconds (checked
 every flush_period / 4); each message of the chunk in progress is also appended at once to
 the file's journal, so a killed recorder loses no message it had received. SIGINT/SIGTERM
-close the bag (summary, metadata.yaml). A killed recording is recovered with
-'dampest reindex BAG'. While recording, the bag holds a lock that reindex and another recorder
-respect. A full disk stops the recording: the bag is closed with every message received (from
-the space the recorder keeps in reserve), an error line gives the count and the node exits
-with status 1.
+take what is still queued and close the bag (summary, metadata.yaml). A killed recording is
+recovered with 'dampest reindex BAG'. While recording, the bag holds a lock that reindex and
+another recorder respect. A full disk stops the recording: the bag is closed with every
+message received (from the space the recorder keeps in reserve), an error line gives the
+count and the node exits with status 1.
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from datetime import datetime
 from functools import partial
 from pathlib import Path
 from typing import Any
 
+from rclpy.clock import Clock, ClockType, ROSClock
 from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.guard_condition import GuardCondition
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.subscription import Subscription
 
 from dampest_ros.io.recorder import (
@@ -35,12 +42,15 @@ from dampest_ros.io.recorder import (
     StorageError,
 )
 from dampest_ros.ros.bag_interop import compatible_qos, import_message_type, to_bag_qos
-from dampest_ros.ros.common import DRAIN_LIMIT, Param, ParamNode, main_for
+from dampest_ros.ros.common import DRAIN_LIMIT, Param, ParamNode, TakenElsewhere, main_for
 
 #: The topics of docs/architecture.md §3 (relative: resolved in the node's namespace).
 DEFAULT_TOPICS = ["truth/odom", "imu/data", "dvl/twist", "pressure", "thrusters/state",
                   "dampest/velocity", "dampest/acceleration", "dampest/wrench", "dampest/model",
                   "/diagnostics"]
+#: Seconds after the start during which the graph is looked at every :data:`EARLY_LOOK` s
+#: (Fast DDS discovers a running publisher between 0.05 and 3 s after the start).
+EARLY_WINDOW, EARLY_LOOK = 5.0, 0.02
 
 
 def _output_ok(value: Any) -> str | None:
@@ -84,10 +94,9 @@ class RecorderNode(ParamNode):
               read_only=True),
         Param("queue_depth", 2000, "subscription queue (messages) absorbing bursts",
               low=1, high=1_000_000, read_only=True),
-        Param("drain", True, "in each callback, also take the messages already queued on "
-              "the subscription (far less CPU per message under load)", read_only=True),
         Param("discovery_period", 0.5, "seconds between looks at the graph for publishers "
-              "of topics not yet subscribed", low=0.05, high=60.0),
+              "of topics not yet subscribed (every 0.02 s during the first 5 s)",
+              low=0.05, high=60.0),
         Param("status_period", 10.0, "seconds between status lines in the log; 0: none",
               low=0.0, high=3600.0),
     )
@@ -105,7 +114,6 @@ class RecorderNode(ParamNode):
             self.recorder.open()
         except (OSError, RecorderError) as exc:  # a refusal at start: one line, status 2
             raise ValueError(f"output {output}: {exc}") from None
-        self.p_drain = bool(self.p("drain"))
         wanted = [t for t in self.p("topics") if t]
         self.all_topics = wanted == ["all"]
         self.wanted = [] if self.all_topics else [self.resolve_topic_name(t) for t in wanted]
@@ -117,11 +125,23 @@ class RecorderNode(ParamNode):
         self.gaps: dict[int, int] = {}         # → messages missing from closed spans
         self.skipped: set[str] = set()
         self._cpu0, self._wall0 = time.process_time(), time.monotonic()
+        # the take thread (see _take_loop) and what it shares with the executor's thread
+        self._lock = threading.Lock()            # the bag recorder and the span counters
+        self._elsewhere = TakenElsewhere()       # the subscriptions' group: no executor
+        self._taken: tuple[Subscription, ...] = ()
+        self._wake = GuardCondition(None, None, context=self.context)
+        self._failure: BaseException | None = None
+        self._failed = self.create_guard_condition(self._raise_failure)
+        self._running = True
+        self._taker = threading.Thread(target=self._take_loop, name="recorder take",
+                                       daemon=True)
+        self._taker.start()
         self._discover()
         self.discovery_timer = self.create_timer(float(self.p("discovery_period")),
                                                  self._discover)
-        period = float(self.p("flush_period"))
-        self.flush_timer = self.create_timer(max(period / 4, 0.05), self._flush_if_due)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._early_end = time.monotonic() + EARLY_WINDOW
+        self.early_timer = self.create_timer(EARLY_LOOK, self._discover_early, clock=steady)
         self.status_timer = None
         if self.p("status_period") > 0:
             self.status_timer = self.create_timer(float(self.p("status_period")), self._status)
@@ -141,14 +161,22 @@ class RecorderNode(ParamNode):
         return [name for name, _ in self.get_topic_names_and_types()
                 if name not in self.subs and name not in self.exclude]
 
+    def _discover_early(self) -> None:
+        """Look at the graph often while the node is young and topics are missing."""
+        self._discover()
+        if time.monotonic() > self._early_end or (not self.all_topics
+                                                  and not self._candidates()):
+            self.early_timer.cancel()
+
     def _discover(self) -> None:
         for topic in self.subs:  # drops are counted while one publisher sends
             conn = self.recorder.connection(topic)
             if conn is not None:
                 single = self.count_publishers(topic) == 1
                 if single != self.single[conn]:
-                    self._close_span(conn)
-                    self.single[conn] = single
+                    with self._lock:
+                        self._close_span(conn)
+                        self.single[conn] = single
         for topic in self._candidates():
             pubs = self.get_publishers_info_by_topic(topic)
             if not pubs or topic in self.skipped:
@@ -161,19 +189,78 @@ class RecorderNode(ParamNode):
                 self.skipped.add(topic)
                 continue
             offered = [p.qos_profile for p in pubs if p.topic_type == msgtype]
-            conn = self.recorder.add_connection(
-                topic, msgtype, [to_bag_qos(q) for q in offered],
-                type_hash=str(getattr(pubs[0], "topic_type_hash", "")) or None)
+            with self._lock:
+                conn = self.recorder.add_connection(
+                    topic, msgtype, [to_bag_qos(q) for q in offered],
+                    type_hash=str(getattr(pubs[0], "topic_type_hash", "")) or None)
+                self.single[conn], self.span[conn], self.gaps[conn] = (len(pubs) == 1,
+                                                                       [0, 0, 0], 0)
             self.lost[topic] = 0
-            self.single[conn], self.span[conn], self.gaps[conn] = len(pubs) == 1, [0, 0, 0], 0
             events = SubscriptionEventCallbacks(message_lost=partial(self._on_lost, topic))
-            # raw: the callback gets the serialized bytes and the message info
+            # raw: the take thread hands the callback the serialized bytes and the info
             callback: Any = partial(self._write, conn)
-            self.subs[topic] = self.create_subscription(
+            self.subs[topic] = sub = self.create_subscription(
                 cls, topic, callback, compatible_qos(offered, int(self.p("queue_depth"))),
-                raw=True, event_callbacks=events, drain=DRAIN_LIMIT if self.p_drain else 0)
+                raw=True, event_callbacks=events, drain=0, callback_group=self._elsewhere)
+            self._taken = (*self._taken, sub)
+            self._wake.trigger()  # the take thread waits on it from now on
             self.get_logger().info(f"recording {topic} ({msgtype}, "
                                    f"{len(offered)} publisher(s))")
+
+    def _take_loop(self) -> None:
+        """The take thread: wait on the subscriptions (and :attr:`_wake`) alone, take every
+        queued message in turns, one per subscription, and hand it to the subscription's
+        callback (:meth:`_write`); flush a chunk that is due. An error (a full disk) ends
+        the thread and is raised in the executor's thread (:meth:`_raise_failure`).
+
+        The subscriptions belong to a callback group executors never wait on; they are
+        destroyed only after this thread has ended (:meth:`destroy_node`)."""
+        timeout = int(max(float(self.p("flush_period")) / 4, 0.05) * 1e9)
+        subs: tuple[Subscription, ...] | None = None
+        wait_set: Any = None
+        try:
+            while self._running:
+                if subs is not self._taken:
+                    subs = self._taken
+                    wait_set = _rclpy.WaitSet(len(subs), 1, 0, 0, 0, 0, self.context.handle)
+                wait_set.clear_entities()
+                for sub in subs:
+                    wait_set.add_subscription(sub.handle)
+                wait_set.add_guard_condition(self._wake.handle)
+                wait_set.wait(timeout)
+                with self._lock:
+                    if self._running:
+                        self._take(subs, DRAIN_LIMIT)
+                        self.recorder.flush_if_due()
+        except BaseException as exc:  # (StorageError: the recorder closed the bag)
+            self._failure = exc
+            self._failed.trigger()
+
+    def _take(self, subs: tuple[Subscription, ...], turns: int) -> None:
+        """Take the queued messages of ``subs``, one per subscription and turn, for at most
+        ``turns`` turns (all of them when ``turns`` is 0)."""
+        turn = 0
+        while not turns or turn < turns:
+            took = False
+            for sub in subs:
+                taken = sub.handle.take_message(sub.msg_type, True)
+                if taken is not None:
+                    sub.callback(*taken)
+                    took = True
+            if not took:
+                return
+            turn += 1
+
+    def _raise_failure(self) -> None:
+        """In the executor's thread: the take thread ended on an error; a refused write
+        (the recorder closed the bag) is said in one line and ends the node with status 1,
+        anything else is raised."""
+        exc = self._failure
+        if isinstance(exc, StorageError):
+            self.get_logger().error(f"{exc}")
+            raise SystemExit(1)
+        if exc is not None:
+            raise exc
 
     def _write(self, conn: int, data: bytes, info: dict[str, Any]) -> None:
         seq = int(info.get("publication_sequence_number") or 0)
@@ -183,23 +270,14 @@ class RecorderNode(ParamNode):
                 span[0] = seq
             span[1] = max(span[1], seq)
             span[2] += 1
-        try:
-            self.recorder.write(conn, self.get_clock().now().nanoseconds, data,
-                                publish_time=int(info.get("source_timestamp") or 0) or None,
-                                sequence=seq)
-        except StorageError as exc:
-            self._stopped(exc)
-
-    def _flush_if_due(self) -> None:
-        try:
-            self.recorder.flush_if_due()
-        except StorageError as exc:
-            self._stopped(exc)
-
-    def _stopped(self, exc: StorageError) -> None:
-        """The storage refused a write: the recorder closed the bag; say so and exit 1."""
-        self.get_logger().error(f"{exc}")
-        raise SystemExit(1)
+        clock = self.get_clock()
+        if isinstance(clock, ROSClock) and clock.ros_time_is_active:  # use_sim_time
+            received = clock.now().nanoseconds
+        else:  # the system clock when the middleware received it
+            received = int(info.get("received_timestamp") or 0) or time.time_ns()
+        self.recorder.write(conn, received, data,
+                            publish_time=int(info.get("source_timestamp") or 0) or None,
+                            sequence=seq)
 
     def _on_lost(self, topic: str, info: Any) -> None:
         self.lost[topic] = int(info.total_count)
@@ -235,7 +313,16 @@ class RecorderNode(ParamNode):
             f"{self.recorder.bytes_written / 1e6:.1f} MB, {self._describe(s)}")
 
     def destroy_node(self) -> None:
-        """Close the bag (last chunk, summary, metadata.yaml), then destroy the node."""
+        """End the take thread, take what is still queued, close the bag (last chunk,
+        summary, metadata.yaml), then destroy the node."""
+        self._running = False
+        self._wake.trigger()
+        self._taker.join()
+        if not self.recorder.closed and self._failure is None:
+            try:
+                self._take(self._taken, 0)
+            except StorageError as exc:  # the recorder closed the bag
+                self.get_logger().error(f"{exc}")
         if not self.recorder.closed:
             s = self.stats()
             path = self.recorder.close()
@@ -246,6 +333,7 @@ class RecorderNode(ParamNode):
                 self.get_logger().info(text)
             else:  # after SIGINT/SIGTERM: /rosout is gone, the console is not
                 print(f"[INFO] [{self.get_name()}]: {text}", file=sys.stderr, flush=True)
+        self._wake.destroy()
         super().destroy_node()
 
 
