@@ -131,6 +131,7 @@ class RecorderNode(ParamNode):
         self._taken: tuple[Subscription, ...] = ()
         self._wake = GuardCondition(None, None, context=self.context)
         self._failure: BaseException | None = None
+        self._sim_time = False                   # the node clock runs on /clock (use_sim_time)
         self._failed = self.create_guard_condition(self._raise_failure)
         self._running = True
         self._taker = threading.Thread(target=self._take_loop, name="recorder take",
@@ -239,6 +240,8 @@ class RecorderNode(ParamNode):
     def _take(self, subs: tuple[Subscription, ...], turns: int) -> None:
         """Take the queued messages of ``subs``, one per subscription and turn, for at most
         ``turns`` turns (all of them when ``turns`` is 0)."""
+        clock = self.get_clock()  # (whether it runs on /clock: once per batch, it takes a lock)
+        self._sim_time = isinstance(clock, ROSClock) and clock.ros_time_is_active
         turn = 0
         while not turns or turn < turns:
             took = False
@@ -270,9 +273,8 @@ class RecorderNode(ParamNode):
                 span[0] = seq
             span[1] = max(span[1], seq)
             span[2] += 1
-        clock = self.get_clock()
-        if isinstance(clock, ROSClock) and clock.ros_time_is_active:  # use_sim_time
-            received = clock.now().nanoseconds
+        if self._sim_time:
+            received = self.get_clock().now().nanoseconds
         else:  # the system clock when the middleware received it
             received = int(info.get("received_timestamp") or 0) or time.time_ns()
         self.recorder.write(conn, received, data,
