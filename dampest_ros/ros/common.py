@@ -38,10 +38,6 @@ from rclpy.qos import (
 from rclpy.subscription import Subscription
 from rclpy.utilities import remove_ros_args
 
-from dampest_ros.core.rigid_body import ConfigError
-from dampest_ros.core.samples import wire_stamp
-from dampest_ros.io.yaml_io import load_model, load_vehicle
-
 #: Sensor topics: the sensor-data policies (best effort, volatile) with a deeper queue than
 #: its 5, for the bursts of a simulator running faster than real time.
 SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000,
@@ -148,6 +144,8 @@ class Drain:
 
 def to_time(t: float) -> Time:
     """builtin_interfaces/Time from seconds (rounded to the nanosecond)."""
+    from dampest_ros.core.samples import wire_stamp  # (numpy: not at a node's start)
+
     ns = wire_stamp(t)
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
@@ -247,6 +245,9 @@ def model_file_check(name: str) -> Callable[[Any], str | None]:
     non-finite numbers, …), prefixed with the parameter's name."""
 
     def check(value: Any) -> str | None:
+        from dampest_ros.core.rigid_body import ConfigError
+        from dampest_ros.io.yaml_io import load_model
+
         if not str(value).strip():
             return None
         try:
@@ -261,6 +262,9 @@ def model_file_check(name: str) -> Callable[[Any], str | None]:
 def vehicle_check(value: Any) -> str | None:
     """A :class:`Param` check for a vehicle preset name or YAML path: the reason
     :func:`~dampest_ros.io.yaml_io.load_vehicle` refuses it, or None."""
+    from dampest_ros.core.rigid_body import ConfigError
+    from dampest_ros.io.yaml_io import load_vehicle
+
     try:
         load_vehicle(str(value))
     except (ConfigError, FileNotFoundError, ValueError) as exc:
