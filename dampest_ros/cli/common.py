@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 
 #: Excitation protocols of the simulator (dampest_ros.core.excitation.PROTOCOLS, which a
 #: test checks this against; not imported here, it pulls in scipy).
-PROTOCOLS = ("A", "B", "C", "fourier")
+PROTOCOLS = ("A", "B", "C", "fourier", "optimal")
 
 #: Width the plain-text descriptions are wrapped to.
 WIDTH = 88
@@ -93,7 +93,9 @@ def add_protocol_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--protocol", choices=PROTOCOLS, default="B",
                    help="excitation: A low-speed steps and sines; B ramped surge and PRBS on "
                         "all DOFs; C multisine 0.1-10 Hz; fourier Fourier-series "
-                        "trajectories (default: B)")
+                        "trajectories; optimal Fourier-series references optimised for the "
+                        "damping regressor's condition number within the speed and thrust "
+                        "limits (designed at start, ~20 s) (default: B)")
 
 
 def add_columns_option(p: argparse.ArgumentParser) -> None:

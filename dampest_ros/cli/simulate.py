@@ -110,6 +110,12 @@ def run(args: argparse.Namespace) -> int:
                  for k, s in rec.items()]))
     print("\nbody velocity (FRD, m/s and rad/s):")
     print(speed_table(traj.nu))
+    if excitation.design is not None:
+        d = excitation.design
+        print("\n" + table(("damping regressor condition number (scaled)", "value"),
+                           [("random FFS within the limits (median)", d.cond_random),
+                            ("start (random)", d.cond_start), ("designed", d.cond),
+                            ("improvement over random", d.cond_random / d.cond)]))
     if effects.as_dict():
         print(f"\nhidden effects: {effects.as_dict()}")
     if args.backend == "mujoco":

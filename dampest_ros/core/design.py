@@ -3,8 +3,15 @@ coefficients that minimise the condition number of a regressor over one period, 
 position, velocity, acceleration and effort limits (Swevers et al. 1997; Gautier & Khalil
 1992).
 
-The FFS is that of :class:`dampest_ros.core.arm.ffs.FourierTrajectory`: coordinate j moves
-as q_j(t) around q0_j, its velocity q̇_j a sum of L harmonics. What is excited is the
+The FFS (:class:`FourierTrajectory`): for coordinate j, with ω_f = 2π f_f the base angular
+frequency and L harmonics,
+
+    q_j(t)  = q0_j + Σ_l [ a_jl / (l ω_f) sin(l ω_f t) − b_jl / (l ω_f) cos(l ω_f t) ]
+    q̇_j(t)  = Σ_l [ a_jl cos(l ω_f t) + b_jl sin(l ω_f t) ]
+    q̈_j(t)  = Σ_l l ω_f [ −a_jl sin(l ω_f t) + b_jl cos(l ω_f t) ]
+
+so the trajectory repeats every 1/f_f seconds and the data of whole periods average
+periodic noise out (Swevers et al. 1997). What is excited is the
 caller's: ``regressor(q, q̇, q̈)`` gives the stacked regressor whose conditioning counts (the
 arm's base regressor with friction columns, the vehicle's damping regressor), and
 ``effort(q, q̇, q̈)`` what the nominal model needs to fly it (joint torques, thruster thrusts).
@@ -26,12 +33,93 @@ import numpy as np
 import scipy.optimize
 from numpy.typing import NDArray
 
-from dampest_ros.core.arm.ffs import FourierTrajectory
-
 FloatArray = NDArray[np.float64]
 #: (q, q̇, q̈), each (N, n) → an array of N rows per sample: the stacked regressor (R, p)
 #: or the effort (N, m).
 Kinematic = Callable[[FloatArray, FloatArray, FloatArray], FloatArray]
+
+
+@dataclass(frozen=True)
+class FourierTrajectory:
+    """An FFS trajectory for n joints.
+
+    Attributes
+    ----------
+    q0 : ndarray, shape (n,)
+        Offset (rad).
+    a, b : ndarray, shape (n, L)
+        Velocity amplitudes of the cosine and sine terms of harmonic l (rad/s).
+    base_frequency : float
+        f_f (Hz); the period is 1 / f_f.
+    """
+
+    q0: FloatArray
+    a: FloatArray
+    b: FloatArray
+    base_frequency: float
+
+    @property
+    def period(self) -> float:
+        """1 / f_f (s)."""
+        return 1.0 / self.base_frequency
+
+    @property
+    def harmonics(self) -> int:
+        """L."""
+        return int(self.a.shape[1])
+
+    def basis(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """sin and cos of every harmonic at t, and l ω_f.
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Time (s).
+
+        Returns
+        -------
+        s, c : ndarray, shape (N, L)
+            sin(l ω_f t), cos(l ω_f t).
+        lw : ndarray, shape (L,)
+            l ω_f (rad/s).
+        """
+        lw = 2.0 * np.pi * self.base_frequency * np.arange(1, self.harmonics + 1, dtype=float)
+        phase = np.outer(np.asarray(t, dtype=float), lw)
+        return np.sin(phase), np.cos(phase), lw
+
+    def evaluate(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """q, q̇, q̈ at the given times.
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Time (s).
+
+        Returns
+        -------
+        q, qd, qdd : ndarray, shape (N, n)
+            rad, rad/s, rad/s².
+        """
+        s, c, lw = self.basis(t)
+        # q = q0 + Σ (a sin − b cos) / (l ω_f)
+        q = self.q0 + s @ (self.a / lw).T - c @ (self.b / lw).T
+        # q̇ = Σ a cos + b sin
+        qd = c @ self.a.T + s @ self.b.T
+        # q̈ = Σ l ω_f (−a sin + b cos)
+        qdd = -s @ (self.a * lw).T + c @ (self.b * lw).T
+        return q, qd, qdd
+
+    def with_coefficients(self, x: FloatArray) -> FourierTrajectory:
+        """The same offset and frequency with coefficients x = [a.ravel(), b.ravel()]."""
+        n, L = self.a.shape
+        x = np.asarray(x, dtype=float)
+        return FourierTrajectory(self.q0, x[:n * L].reshape(n, L), x[n * L:].reshape(n, L),
+                                 self.base_frequency)
+
+    @property
+    def coefficients(self) -> FloatArray:
+        """[a.ravel(), b.ravel()], shape (2 n L,)."""
+        return np.concatenate([self.a.ravel(), self.b.ravel()])
 
 
 @dataclass(frozen=True)
@@ -156,10 +244,10 @@ class DesignProblem:
         q, qd, qdd = traj.evaluate(grid)
         lim = self.limits
         bounded = np.isfinite(lim.lower) & np.isfinite(lim.upper)
-        center = np.where(bounded, 0.5 * (lim.lower + lim.upper), 0.0)
+        lower, upper = np.where(bounded, lim.lower, 0.0), np.where(bounded, lim.upper, 0.0)
+        center = 0.5 * (lower + upper)
         # q − q0 scales with the coefficients: |q0 − centre| + s max|q − q0| ≤ half-range
-        room = np.where(bounded, 0.5 * (lim.upper - lim.lower) - np.abs(traj.q0 - center),
-                        np.inf)
+        room = np.where(bounded, 0.5 * (upper - lower) - np.abs(traj.q0 - center), np.inf)
         s = np.min([room / np.maximum(np.abs(q - traj.q0).max(axis=0), 1e-12),
                     lim.velocity / np.maximum(np.abs(qd).max(axis=0), 1e-12),
                     lim.acceleration / np.maximum(np.abs(qdd).max(axis=0), 1e-12)], axis=0)

@@ -15,6 +15,11 @@ block. The offline simulation and the simulator node fly the same :class:`Protoc
 - ``C``: multisine wrench 0.1–10 Hz on all six DOFs (frequency response, fluid memory), with
   a slow controller holding the mean.
 - ``fourier``: finite-Fourier-series velocity trajectories (period 50 s, 5 harmonics).
+- ``optimal``: finite-Fourier-series velocity, roll, pitch and depth references (period
+  10 s, 5 harmonics up to 0.5 Hz) whose coefficients are optimised for the condition number
+  of the damping regressor within the speed limits, ±25° of roll and pitch, ±2 m of depth
+  and 70 % of every thruster's thrust (:mod:`dampest_ros.core.vehicle_design`, the arm's
+  design engine); the design and its condition numbers are :attr:`ProtocolStream.design`.
 - ``hover`` (the simulator node only): station keeping at constant depth.
 """
 
@@ -30,12 +35,14 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
+from dampest_ros.core.design import Design, FourierTrajectory, Kinematic
 from dampest_ros.core.rigid_body import ConfigError
 from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.vehicle_design import design_vehicle, nominal_wrench, vehicle_limits
 
 FloatArray = NDArray[np.float64]
 
-PROTOCOLS = ("A", "B", "C", "fourier")
+PROTOCOLS = ("A", "B", "C", "fourier", "optimal")
 #: What the simulator node flies: the protocols and station keeping.
 LIVE_PROTOCOLS = (*PROTOCOLS, "hover")
 #: Control ticks per generated block (4096 ticks × 16 numbers × 8 B = 512 kB).
@@ -133,13 +140,17 @@ class ProtocolStream:
         ``raw()`` → a fresh iterator of consecutive raw blocks covering the K ticks.
     cols : tuple of int
         Velocity references that are the time derivatives of the raw blocks' ``grad``.
+    design : Design, optional
+        The optimised design of protocol ``optimal`` (its condition numbers).
     """
 
     def __init__(self, name: str, ticks: int, dt: float, bandwidth: FloatArray,
-                 raw: Callable[[], Iterator[_Raw]], cols: tuple[int, ...] = ()) -> None:
+                 raw: Callable[[], Iterator[_Raw]], cols: tuple[int, ...] = (),
+                 design: Design | None = None) -> None:
         self.name, self.ticks, self.dt = name, int(ticks), float(dt)
         self.bandwidth = np.asarray(bandwidth, dtype=float)
         self._raw, self._cols = raw, list(cols)
+        self.design = design
         self._iter: Iterator[Excitation] | None = None
         self._block: Excitation | None = None
         self._k0 = 0
@@ -404,7 +415,7 @@ def protocol(name: str, vehicle: Vehicle, duration: float, seed: int = 0,
 
     Parameters
     ----------
-    name : {'A', 'B', 'C', 'fourier', 'hover'}
+    name : {'A', 'B', 'C', 'fourier', 'optimal', 'hover'}
     vehicle : Vehicle
         Nominal vehicle: its thrust limits and damping set the speed range.
     duration : float
@@ -450,7 +461,26 @@ def protocol(name: str, vehicle: Vehicle, duration: float, seed: int = 0,
                                                   max_angle, depth), cols=(2, 3, 4))
     if name == "C":
         return _protocol_c(vehicle, rng, ticks, dt, depth, amplitude)
-    return _protocol_fourier(rng, ticks, dt, lim, max_angle, depth)
+    if name == "fourier":
+        return _protocol_fourier(rng, ticks, dt, lim, max_angle, depth)
+    design = design_vehicle(vehicle, vehicle_limits(vehicle, lim, max_angle), seed=seed)
+    wrench = nominal_wrench(vehicle)
+    return ProtocolStream(name, ticks, dt, np.full(6, 3.0),
+                          lambda: (_protocol_optimal(design.trajectory, wrench, t, depth)
+                                   for t in _grid(ticks, dt)), design=design)
+
+
+def _protocol_optimal(traj: FourierTrajectory, wrench: Kinematic, t: FloatArray,
+                      depth: float) -> _Raw:
+    """The designed FFS at the instants t: ν_ref = q̇, roll and pitch q₃, q₄, depth + q₂,
+    and the nominal model's τ along it as feed-forward (the controller corrects the rest)."""
+    raw = _zeros(t, depth)
+    q, qd, qdd = traj.evaluate(t)
+    raw.nu_ref[:] = qd
+    raw.attitude_ref[:] = q[:, 3:5]
+    raw.depth_ref += q[:, 2]
+    raw.tau_ff[:] = wrench(q, qd, qdd)
+    return raw
 
 
 def _protocol_a(t: FloatArray, duration: float, lim: FloatArray, depth: float) -> _Raw:

@@ -404,7 +404,7 @@ def simulate(vehicle: Vehicle, protocol: str = "B", duration: float = 600.0, see
     Parameters
     ----------
     vehicle : Vehicle
-    protocol : {'A', 'B', 'C', 'fourier'}
+    protocol : {'A', 'B', 'C', 'fourier', 'optimal'}
         Excitation (:func:`~dampest_ros.core.excitation.protocol`).
     duration : float
         Seconds flown.

@@ -60,7 +60,9 @@ class SimNode(ParamNode):
     PARAMS = (
         Param("vehicle", "bluerov2_heavy", "vehicle preset name or YAML path",
               check=vehicle_check),
-        Param("protocol", "B", "excitation protocol flown without cmd_wrench",
+        Param("protocol", "B", "excitation protocol flown without cmd_wrench (optimal: "
+              "Fourier-series references optimised for the damping regressor's condition "
+              "number within the speed and thrust limits, designed at start in ~30 s)",
               choices=LIVE_PROTOCOLS),
         Param("duration", 300.0, "length of the protocol in s; the simulation stops after it",
               low=1.0, high=1e6),
@@ -123,6 +125,12 @@ class SimNode(ParamNode):
         self._sim0 = self.live.t
         self._rate = float(self.p("rate_factor"))
         self._finished_logged = False
+        design = self.live.excitation.design
+        if design is not None:
+            self.get_logger().info(
+                f"designed protocol {self.p('protocol')}: damping regressor condition number "
+                f"{design.cond:.3g} (random Fourier series within the same limits: median "
+                f"{design.cond_random:.3g}, {design.cond_random / design.cond:.1f}x higher)")
         self.get_logger().info(
             f"simulating {self.live.vehicle.name}, protocol {self.p('protocol')} for "
             f"{self.p('duration'):.0f} s at {self._rate:g}x real time"
