@@ -11,7 +11,7 @@ STAMP = $(VENV)/.installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE = LOCALHOST
 export ROS_DOMAIN_ID ?= 77
 
-.PHONY: all demo test lint bench clean distclean
+.PHONY: all demo test lint bench bench-peers clean distclean
 .DEFAULT_GOAL := all
 
 all: $(STAMP)
@@ -42,6 +42,11 @@ test: lint
 
 bench: $(STAMP)
 	$(BIN)/python -m dampest_ros.bench
+
+# The arm identification beside FIGAROH and MuJoCo's sysid (their pins: requirements/peers.txt).
+bench-peers: $(STAMP)
+	$(BIN)/pip install -r requirements/peers.txt
+	$(BIN)/python -m dampest_ros.bench --only arm_peers
 
 clean:
 	rm -rf build install log .mypy_cache .ruff_cache .pytest_cache *.egg-info

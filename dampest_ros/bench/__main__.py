@@ -19,7 +19,10 @@ GROUPS: dict[str, Rows] = {
     "startup": startup.startup_rows, "simulate": offline.simulate_rows,
     "identify": offline.identify_rows, "select": offline.select_rows, "pool": pool.pool_rows,
     "arm": arm.arm_rows, "live": online.live_rows, "estimator": online.estimator_rows,
-    "recorder": recorder.recorder_rows}
+    "recorder": recorder.recorder_rows, "arm_peers": arm.arm_peers_rows}
+#: Groups that run only when named with ``--only`` (make bench-peers): they need the peers of
+#: requirements/peers.txt and take minutes.
+ON_REQUEST = ("arm_peers",)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,8 +43,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="recordings killed with SIGKILL in the recorder rows (default: 10)")
     ap.add_argument("--pool-seconds", type=float, default=600.0,
                     help="length of each of the 8 bags of the pooled rows (default: 600)")
-    ap.add_argument("--only", nargs="+", choices=list(GROUPS), default=list(GROUPS),
-                    help="groups of rows to run (default: all)")
+    ap.add_argument("--only", nargs="+", choices=list(GROUPS),
+                    default=[g for g in GROUPS if g not in ON_REQUEST],
+                    help="groups of rows to run (default: all but "
+                         f"{', '.join(ON_REQUEST)})")
     args = ap.parse_args(argv)
     rows: list[tuple[str, ...]] = []
     with tempfile.TemporaryDirectory() as tmp:
