@@ -8,7 +8,7 @@ import sys
 import tempfile
 from collections.abc import Callable
 
-from dampest_ros.bench import __doc__ as about
+import dampest_ros.bench
 from dampest_ros.bench import arm, offline, online, pool, recorder, startup
 from dampest_ros.cli.common import table
 
@@ -27,7 +27,8 @@ ON_REQUEST = ("arm_peers",)
 
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmarks and print the table."""
-    ap = argparse.ArgumentParser(prog="python -m dampest_ros.bench", description=about,
+    ap = argparse.ArgumentParser(prog="python -m dampest_ros.bench",
+                                 description=dampest_ros.bench.__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--hours", type=float, nargs="*", default=[1.0],
                     help="lengths of the identification bags in hours (default: 1)")
