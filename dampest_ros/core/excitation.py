@@ -217,30 +217,6 @@ class ProtocolStream:
         block, i = self._at(k)
         return block.feedforward(i)
 
-    def held_bytes(self) -> int:
-        """Bytes of the arrays the protocol holds now (the current block and the generators'
-        state): bounded by the block size, not the duration."""
-        return _nbytes(self.__dict__, set())
-
-
-def _nbytes(obj: object, seen: set[int]) -> int:
-    """Total nbytes of the numpy arrays reachable from obj (generators' frames included)."""
-    if id(obj) in seen:
-        return 0
-    seen.add(id(obj))
-    if isinstance(obj, np.ndarray):
-        return int(obj.nbytes)
-    if isinstance(obj, dict):
-        return sum(_nbytes(v, seen) for v in obj.values())
-    if isinstance(obj, list | tuple):
-        return sum(_nbytes(v, seen) for v in obj)
-    frame = getattr(obj, "gi_frame", None)
-    if frame is not None:
-        return _nbytes(dict(frame.f_locals), seen)
-    if hasattr(obj, "__dict__") and type(obj).__module__ == __name__:
-        return _nbytes(vars(obj), seen)
-    return 0
-
 
 def speed_limits(vehicle: Vehicle, fraction: float = 0.5,
                  tau_measured: FloatArray | None = None) -> FloatArray:
