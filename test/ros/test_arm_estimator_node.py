@@ -89,13 +89,19 @@ def test_payload_step_on_joint_states_is_alarmed_and_tracked(tmp_path: Path) -> 
                               effort=[0.0] * 6)
         t0 = time.monotonic()
         sent = 0
+        lost = int(10.0 * RATE)  # a message lost at 10 s: the filter restarts after the gap
         for k in range(0, len(run.t), 100):
             for i in range(k, min(k + 100, len(run.t))):
+                if i == lost:
+                    continue
                 msg.header.stamp = to_time(float(run.t[i]))
                 msg.position = run.position[i, order].tolist()
                 msg.effort = run.effort[i, order].tolist()
                 pub.publish(msg)
-            sent = min(k + 100, len(run.t))
+                if i == lost + 1:  # and one that comes late (an older stamp): dropped
+                    msg.header.stamp = to_time(float(run.t[i - 2]))
+                    pub.publish(msg)
+            sent = min(k + 100, len(run.t))  # the lost one is made up by the late one
             if k % 4000 == 0 and k // 4000 < BAD:
                 pub.publish(stranger)
             spin_until(ex, lambda s=sent: node.counts["received"] - node.counts[
@@ -106,7 +112,8 @@ def test_payload_step_on_joint_states_is_alarmed_and_tracked(tmp_path: Path) -> 
         est = node.estimator
         c = node.counts
         assert c["received"] == len(run.t) + BAD and c["rejected_joints"] == BAD, c
-        assert c["rejected_fields"] == c["rejected_nonfinite"] == 0 and est.gaps == 0
+        assert c["rejected_fields"] == c["rejected_nonfinite"] == c["clock_jumps"] == 0
+        assert c["dropped_out_of_order"] == 1 and est.gaps == 1, (c, est.gaps)
         # one alarm, within 5 s of the step (its time is the data's stamp), on /diagnostics
         assert len(est.alarms) == 1, est.alarms
         delay = est.alarms[0] - STEP_AT
