@@ -112,7 +112,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "undefined at rest (default: 0.1)")
     i.add_argument("--mapping", action="store_true",
                    help="print how each base parameter combines the full parameters")
-    i.add_argument("--out", metavar="YAML", help="write the parameters as YAML")
+    i.add_argument("--out", metavar="YAML",
+                   help="write the arm model file (WLS base parameters with sigma, the OLS "
+                        "and consistent fits beside them; arm_estimator_node's prior)")
     i.add_argument("--report", metavar="DIR",
                    help="write an HTML report (index.html and a torque figure) to DIR")
 
@@ -309,31 +311,30 @@ def _identify(args: argparse.Namespace) -> int:
                              validation if val is not None else None)
         print(f"\nwrote {path}")
     if args.out:
-        _write_params(args.out, args, base, res, names, nominal)
+        _write_params(args.out, args, base, res, names)
         print(f"\nwrote {args.out}")
     return 0
 
 
 def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
-                  names: tuple[str, ...], nominal: np.ndarray) -> None:
-    from pathlib import Path
+                  names: tuple[str, ...]) -> None:
+    """The arm model file (the one arm_estimator_node saves and takes as its prior) with the
+    WLS estimate as theta, and the OLS and physically consistent fits beside it."""
+    import numpy as np
 
-    import yaml
+    from dampest_ros.core.arm.online import ArmEstimate
+    from dampest_ros.io.arm import save_arm_model
 
-    ind = [base.names[k] for k in base.independent]
-    doc = {
-        "source": f"dampest arm identify {args.bag}", "arm": str(args.arm),
-        "base": {f"b{k + 1}": {"kept": ind[k], "wls": float(res.wls.theta[k]),
-                               "sigma": float(res.wls.std[k]),
-                               "ols": float(res.ols.theta[k]),
-                               "consistent": float(res.consistent.theta[k])}
-                 for k in range(base.size)},
-        "mapping": base.mapping(),
-        "consistent_full": dict(zip(base.names, map(float, res.consistent.full), strict=True)),
-        "noise_estimate": dict(zip(names, map(float, res.noise), strict=True)),
-    }
-    Path(path).write_text(yaml.safe_dump(doc, sort_keys=False))
-
+    est = ArmEstimate(tuple(names), [base.names[k] for k in base.independent],
+                      res.wls.theta, res.wls.std, np.ones(base.size, dtype=bool),
+                      base.mapping())
+    save_arm_model(path, est, str(args.arm), {
+        "source": f"dampest arm identify {args.bag}",
+        "ols": [float(x) for x in res.ols.theta],
+        "consistent": [float(x) for x in res.consistent.theta],
+        "consistent_full": {"names": list(base.names),
+                            "values": [float(x) for x in res.consistent.full]},
+        "noise_estimate": [float(x) for x in res.noise]})
 
 
 def _write_report(out_dir: str, args: argparse.Namespace, base: Any, res: Any,

@@ -303,19 +303,27 @@ def arm_model_parameters(est: ArmEstimate, arm: str) -> dict[str, Any]:
             "model.mapping": list(est.mapping), "model.version": int(est.version)}
 
 
-def arm_model_text(est: ArmEstimate, arm: str) -> str:
-    """The model file's text: a ROS 2 parameters file (``/**: ros__parameters: model:``)."""
+def arm_model_text(est: ArmEstimate, arm: str, extra: dict[str, Any] | None = None) -> str:
+    """The model file's text: a ROS 2 parameters file (``/**: ros__parameters: model:``);
+    ``extra`` entries (plain YAML types, names other than the model's) are added to
+    ``model``."""
     model = {k.removeprefix("model."): v for k, v in arm_model_parameters(est, arm).items()}
+    clash = sorted(set(extra or {}) & set(model))
+    if clash:
+        raise ValueError(f"extra entries {clash} would replace the model's own")
+    model.update(extra or {})
     return ("# dampest_ros arm model: base parameters (each named by the full parameter it "
             "keeps;\n# mapping says what it combines), SI units; a ROS 2 parameters file.\n"
             + yaml.safe_dump({"/**": {"ros__parameters": {"model": model}}}, sort_keys=False,
                              default_flow_style=None, width=100))
 
 
-def save_arm_model(path: str | Path, est: ArmEstimate, arm: str) -> Path:
-    """Write the estimate's model file atomically; returns the path."""
+def save_arm_model(path: str | Path, est: ArmEstimate, arm: str,
+                   extra: dict[str, Any] | None = None) -> Path:
+    """Write the estimate's model file atomically (``extra``: see :func:`arm_model_text`);
+    returns the path."""
     path = Path(path)
-    atomic_write(path, arm_model_text(est, arm))
+    atomic_write(path, arm_model_text(est, arm, extra))
     return path
 
 
@@ -341,7 +349,8 @@ def load_arm_model(path: str | Path) -> ArmEstimate:
                           identified, [str(x) for x in m["mapping"]], int(m["version"]))
     except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as exc:
         raise ArmDataError(f"arm model file {path}: not readable as one ({type(exc).__name__}"
-                           f": {exc}); write one with arm_estimator_node's ~/save") from None
+                           f": {exc}); write one with 'dampest arm identify --out' or "
+                           "arm_estimator_node's ~/save") from None
     for field_name in ("theta", "theta_std", "identified", "mapping"):
         if len(getattr(est, field_name)) != len(names):
             raise ArmDataError(f"arm model file {path}: model.{field_name} has "

@@ -10,6 +10,7 @@ import yaml
 
 from dampest_ros.cli.main import main
 from dampest_ros.core.measurements import WrenchSeries
+from dampest_ros.io.arm import load_arm_model
 from dampest_ros.io.bag import write_bag
 
 
@@ -31,9 +32,9 @@ def test_simulate_identify_validate(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert len(ratios) == 6 and np.all(ratios <= 1.05)
     page = (tmp_path / "rep" / "index.html").read_text()
     assert "RMSE / noise floor" in page and (tmp_path / "rep" / "torque.png").stat().st_size
-    doc = yaml.safe_load((tmp_path / "p.yaml").read_text())
-    fc = [b["wls"] for b in doc["base"].values() if b["kept"] == "elbow_joint.Fc"]
-    assert fc == [pytest.approx(2.0, rel=0.02)]
+    model = load_arm_model(tmp_path / "p.yaml")  # the file arm_estimator_node takes as prior
+    assert model.theta[model.parameter_names.index("elbow_joint.Fc")] == pytest.approx(
+        2.0, rel=0.02)
 
 
 def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]

@@ -150,6 +150,11 @@ def test_payload_step_on_joint_states_is_alarmed_and_tracked(tmp_path: Path) -> 
         assert future.result().success, future.result().message
         saved = load_arm_model(save)
         assert np.allclose(saved.theta, est.theta) and saved.version == node.version
+        # which a node takes as its prior (as it takes dampest arm identify --out)
+        again = ArmEstimatorNode(context=context, parameter_overrides=[
+            Parameter("prior", value=str(save))])
+        assert np.array_equal(again.estimator.theta, saved.theta)
+        again.destroy_node()
     finally:
         ex.shutdown()
         node.destroy_node()

@@ -43,7 +43,8 @@ class ArmEstimate:
     theta, theta_std : ndarray, shape (b,)
         Estimate and standard deviation (SI units of the kept parameter).
     identified : ndarray of bool, shape (b,)
-        The data have at least halved the prior's standard deviation.
+        Determined by the data: online, the data have at least halved the prior's standard
+        deviation; offline, every base parameter of a regular least-squares fit.
     mapping : list of str, length b
         ``bk = kept + c · folded + ...`` (:meth:`BaseParameters.mapping`).
     version : int
