@@ -30,7 +30,7 @@ from dampest_ros.core.arm.fit import (
 )
 from dampest_ros.core.arm.model import ArmModel
 from dampest_ros.core.arm.regressor import regressor
-from dampest_ros.core.preprocess import zero_phase
+from dampest_ros.core.preprocess import zero_phase, zero_phase_many
 
 FloatArray = NDArray[np.float64]
 
@@ -159,14 +159,15 @@ def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
         stop = min(start + width, len(t))
         lo, hi = max(start - margin, 0), min(stop + margin, len(t))
         inner = slice(start - lo, stop - lo)
-        w_qd = zero_phase(position[lo:hi], rate, config.cutoff, derivative=True)
+        w_q, w_qd = zero_phase_many(position[lo:hi], rate, config.cutoff, (False, True))
         w_tau = zero_phase(effort[lo:hi], rate, config.cutoff)
         stopped += np.sum((effort[start:stop] - w_tau[inner]) ** 2, axis=0)
         rows = np.flatnonzero((keep >= start) & (keep < stop))
-        at = keep[rows] - lo
-        q[rows] = zero_phase(position[lo:hi], rate, config.cutoff)[at]
+        at = keep[rows] - lo  # inside the window, never at its ends
+        q[rows] = w_q[at]
         qd[rows] = w_qd[at]
-        qdd[rows] = np.gradient(w_qd, 1.0 / rate, axis=0)[at]  # q̈ of the filtered q̇
+        # q̈ of the filtered q̇: its central difference (np.gradient's), at the kept rows only
+        qdd[rows] = (w_qd[at + 1] - w_qd[at - 1]) / (2.0 * (1.0 / rate))
         tau[rows] = w_tau[at]
     # σ² ≈ mean((τ − τ_f)²) / share of white noise above the cutoff (the trajectory's own
     # content is far below it)
