@@ -275,7 +275,7 @@ def _identify(args: argparse.Namespace) -> int:
     masses = np.round(res.consistent.full[0:10 * len(names):10], 3).tolist()
     print(f"\nphysically consistent: every link's pseudo-inertia positive definite (smallest "
           f"eigenvalue {eig.min():.3g}), masses {masses} kg; weighted cost above WLS "
-          f"{res.consistent.cost_increase:.3g} residual variances")
+          f"{res.consistent.cost_increase:.3g} residual variances; {res.consistent.status}")
     if args.mapping:
         print("\nbase parameters in the full ones (b = kept + beta x folded):")
         print("\n".join(base.mapping()))
@@ -332,6 +332,7 @@ def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
         "source": f"dampest arm identify {args.bag}",
         "ols": [float(x) for x in res.ols.theta],
         "consistent": [float(x) for x in res.consistent.theta],
+        "consistent_status": res.consistent.status,
         "consistent_full": {"names": list(base.names),
                             "values": [float(x) for x in res.consistent.full]},
         "noise_estimate": [float(x) for x in res.noise]})
@@ -388,6 +389,8 @@ def _write_report(out_dir: str, args: argparse.Namespace, base: Any, res: Any,
                   tab(("parameters", "joint", "RMSE N m", "RMSE moving", "RMSE / noise floor"),
                       rows), "<img src='torque.png' alt='validation torque'>"]
     parts += ["<h2>Base parameters</h2>",
+              f"<p class='note'>Physically consistent fit: {html.escape(res.consistent.status)}"
+              ".</p>",
               tab(("base parameter", "OLS", "WLS", "σ", "consistent", "nominal"),
                   [(f"b{k + 1} {ind[k]}", float(res.ols.theta[k]), float(res.wls.theta[k]),
                     float(res.wls.std[k]), float(res.consistent.theta[k]), float(nom[k]))

@@ -70,6 +70,7 @@ def test_noise_free_data_give_the_truth(ur5) -> None:  # type: ignore[no-untyped
     pc = fit_consistent(normals, base, fit_base(normals, base), nominal)
     assert np.linalg.norm(pc.theta - truth) <= 1e-6 * np.linalg.norm(truth)
     assert pseudo_inertia_eigenvalues(pc.full[:60]).min() > 0
+    assert pc.converged and pc.status == "converged"
 
 
 def test_realistic_noise_reaches_the_noise_floor(ur5) -> None:  # type: ignore[no-untyped-def]

@@ -264,11 +264,25 @@ class ConsistentFit:
     cost_increase : float
         Weighted residual sum of squares above the unconstrained fit's, in units of the
         unconstrained fit's per-row variance (0 when the constraint does not bind).
+    converged : bool
+        The solver met its tolerances; False: it stopped at its evaluation limit, the
+        parameters are physical but their cost may still fall.
+    evaluations : int
+        Residual evaluations the solver used.
     """
 
     full: FloatArray
     theta: FloatArray
     cost_increase: float
+    converged: bool
+    evaluations: int
+
+    @property
+    def status(self) -> str:
+        """One line: converged, or where the solver stopped."""
+        return ("converged" if self.converged else
+                f"NOT converged: stopped after {self.evaluations} evaluations, physical but "
+                "its cost may still fall")
 
 
 def fit_consistent(normals: JointNormals, base: BaseParameters, fit: BaseFit,
@@ -339,9 +353,10 @@ def fit_consistent(normals: JointNormals, base: BaseParameters, fit: BaseFit,
         lo[10 * j + diag] = x0[10 * j + diag] + np.log(1e-5)
     x0 = np.maximum(x0, np.where(np.isfinite(lo), lo + 1e-9, -np.inf))
     sol = scipy.optimize.least_squares(residual, x0, jac=jacobian, bounds=(lo, np.inf),
-                                       xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)
+                                       xtol=1e-8, ftol=1e-8, gtol=1e-8, max_nfev=400)
     full, _ = unpack(sol.x)
     theta = base.of(full)
     d = theta - fit.theta
     per_row = float(np.sum(fit.weights * fit.sigma ** 2) / n)
-    return ConsistentFit(full, theta, float(d @ A @ d) / max(per_row, 1e-300))
+    return ConsistentFit(full, theta, float(d @ A @ d) / max(per_row, 1e-300),
+                         converged=bool(sol.status > 0), evaluations=int(sol.nfev))
