@@ -9,15 +9,16 @@ from dampest_ros.bench.runner import VEHICLE, child
 
 
 def pool(workers: str, *bags: str) -> dict[str, float]:
-    """``dampest identify BAG ...`` end to end on a LocalCluster of ``workers`` processes
-    (passed as --scheduler so that it outlives the command), then the workers' peak RSS."""
-    import logging
+    """``dampest identify BAG ...`` end to end on the LocalCluster of ``workers`` processes
+    ``dampest identify --workers`` starts (passed as --scheduler so that it outlives the
+    command), then the workers' peak RSS."""
     import resource
 
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client
 
-    cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=logging.CRITICAL)
+    from dampest_ros.cli.pool import local_cluster
+
+    cluster = local_cluster(int(workers))
     try:
         t = quiet_identify([*bags, "--vehicle", VEHICLE, "--scheduler",
                              cluster.scheduler_address])
