@@ -75,7 +75,7 @@ def pooled_logs(paths: list[str], args: argparse.Namespace
     if len(paths) == 1 and not is_url(paths[0]):
         return (*_load_log(paths[0], args), {})
     with map_logs_on_dask(paths, partial(_load_log, args=args), args) as (_, done, failed):
-        parts: list[tuple[Samples, JointSeries | None]] = [r for r, _ in done.values()]
+        parts: list[tuple[Samples, JointSeries | None]] = list(done.values())
     logs = {"logs": list(done), "logs_left_out": list(failed) or ["none"]}
     shifted: list[Samples] = []
     joints: list[JointSeries | None] = []

@@ -155,9 +155,9 @@ def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: arg
     """Run ``work(path)`` for every log on Dask (--workers, --scheduler), with a progress line
     on stderr and each log's notes prefixed by its path.
 
-    Yields the client, each log that worked with its result and its future (the result
-    stays on the worker that made it too, for further calls there) in the given order, and
-    the reason of each that failed; the cluster lives until the block ends.
+    Yields the client, the result of each log that worked, in the given order, and the
+    reason of each that failed; the cluster lives until the block ends. The workers keep
+    nothing: their memory does not grow with the number of logs.
     """
     from dask.distributed import as_completed
     client = _client(args, len(paths))
@@ -166,14 +166,14 @@ def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: arg
     try:
         futures = {client.submit(guarded, work, p, args.debug, pure=False): p for p in paths}
         for k, future in enumerate(as_completed(futures), 1):
-            path = futures[future]
+            path = futures.pop(future)  # the worker may forget the result once it is here
             result, notes, why = future.result()
             for line in notes.splitlines():
                 print(f"{path}: {line}", file=sys.stderr)
             if result is None:
                 failed[path] = why
             else:
-                done[path] = result, future
+                done[path] = result
             sys.stderr.write(f"\rlogs [{'#' * (25 * k // len(paths)):25s}] {k}/{len(paths)}"
                              f" {verb}, {len(failed)} failed")
             sys.stderr.flush()
@@ -198,24 +198,35 @@ def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray
 
     Yields the statistics of the logs that worked (in the given order), the reason of each
     that failed, and a :data:`~dampest_ros.core.pool.MapLogs` that runs a function on each
-    log where its worker holds it (the pooled fit's passes over the samples).
+    log on a worker (the pooled fit's passes over the samples).
     """
     work = partial(reduce_log, args=args, prior=prior, prior_std=prior_std)
     with map_logs_on_dask(paths, work, args, "reduced") as (client, done, failed):
-        held = [future for _, future in done.values()]
+        logs: list[LogStatistics] = list(done.values())
 
         def map_logs(fn: Callable[[LogStatistics, int], Any]) -> list[Any]:
-            # the log's future as the argument: the call runs on the worker holding it
-            return list(client.gather([client.submit(_stats_of, f, fn, k, pure=False)
-                                       for k, f in enumerate(held)]))
+            # each log sent to a worker with its call, at most two per worker at a time, and
+            # forgotten when done: the workers' memory stays that of two logs
+            from dask.distributed import as_completed
+            window = 2 * max(len(client.scheduler_info()["workers"]), 1)
+            out: list[Any] = [None] * len(logs)
+            todo = list(enumerate(logs))[::-1]
+            log_of: dict[Any, int] = {}
 
-        yield [stats for stats, _ in done.values()], failed, map_logs
+            def send() -> Any:
+                k, stats = todo.pop()
+                future = client.submit(fn, client.scatter(stats), k, pure=False)
+                log_of[future] = k
+                return future
 
+            running = as_completed([send() for _ in range(min(window, len(todo)))])
+            for future in running:
+                out[log_of.pop(future)] = future.result()
+                if todo:
+                    running.add(send())
+            return out
 
-def _stats_of(reduced: tuple[LogStatistics, str, str],
-              fn: Callable[[LogStatistics, int], Any], k: int) -> Any:
-    """``fn`` on the statistics of a reduced log (:func:`guarded`'s result), log k."""
-    return fn(reduced[0], k)
+        yield logs, failed, map_logs
 
 
 def drift_table(d: Drift, pooled: Fit) -> str:
