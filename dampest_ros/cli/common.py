@@ -95,7 +95,9 @@ def add_protocol_option(p: argparse.ArgumentParser) -> None:
                         "all DOFs; C multisine 0.1-10 Hz; fourier Fourier-series "
                         "trajectories; optimal Fourier-series references optimised for the "
                         "damping regressor's condition number within the speed and thrust "
-                        "limits (designed at start, ~20 s) (default: B)")
+                        "limits (designed at start, ~20 s; better conditioned than B, but B "
+                        "identified as well or better in our tests, see the README) "
+                        "(default: B)")
 
 
 def add_columns_option(p: argparse.ArgumentParser) -> None:
