@@ -88,12 +88,12 @@ def _figaroh(arm: Any, data: Any) -> Any:
     (Pinocchio per sample, with viscous and Coulomb friction, armature and offset columns),
     its elimination of zero columns and its double QR decomposition (base parameters and
     their least-squares estimate); returns the prediction function of the estimate."""
-    from figaroh.identification.parameter import (  # type: ignore[import-untyped]
+    from figaroh.identification.parameter import (
         add_standard_additional_parameters,
         get_standard_parameters,
     )
-    from figaroh.tools.qrdecomposition import QRDecomposer  # type: ignore[import-untyped]
-    from figaroh.tools.regressor import (  # type: ignore[import-untyped]
+    from figaroh.tools.qrdecomposition import QRDecomposer
+    from figaroh.tools.regressor import (
         build_regressor_basic,
         build_regressor_reduced,
         get_index_eliminate,
