@@ -305,20 +305,12 @@ class ArmEstimatorNode(ModelParamNode):
         return res
 
     def _srv_save(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
-        try:
-            path = save_arm_model(Path(self.p("save_path")).expanduser(),
-                                  self.estimator.estimate(self.version), self.p("arm"))
-        except (OSError, ValueError) as exc:
-            res.success, res.message = False, f"could not save: {exc}"
-            return res
-        res.success, res.message = True, f"saved model version {self.version} to {path}"
-        return res
+        return self._answer_save(res, lambda: save_arm_model(
+            Path(self.p("save_path")).expanduser(), self.estimator.estimate(self.version),
+            self.p("arm")), self.version)
 
     def _srv_freeze(self, req: SetBool.Request, res: SetBool.Response) -> SetBool.Response:
-        self.estimator.rls.frozen = bool(req.data)
-        res.success = True
-        res.message = "frozen: estimate held" if req.data else "updating"
-        return res
+        return self._answer_freeze(self.estimator.rls, req, res)
 
 
 main = main_for(ArmEstimatorNode, __doc__ or "")

@@ -423,6 +423,26 @@ class ModelParamNode(ParamNode):
                         f"{self.get_name()} itself")
         return super()._check_parameters(params)
 
+    def _answer_save(self, res: Any, save: Callable[[], Path], version: int) -> Any:
+        """Answer a ``~/save`` call (std_srvs/Trigger): ``save()`` writes the model and
+        returns its path; a failure is the answer's message, never an exception."""
+        try:
+            path = save()
+        except (OSError, ValueError) as exc:
+            res.success, res.message = False, f"could not save: {exc}"
+            return res
+        res.success, res.message = True, f"saved model version {version} to {path}"
+        return res
+
+    @staticmethod
+    def _answer_freeze(rls: Any, req: Any, res: Any) -> Any:
+        """Answer a ``~/freeze`` call (std_srvs/SetBool): hold or release the estimate of
+        the recursive estimator ``rls``."""
+        rls.frozen = bool(req.data)
+        res.success = True
+        res.message = "frozen: estimate held" if req.data else "updating"
+        return res
+
 
 def diagnostic_array(node: Node, name: str, values: dict[str, Any], level: int = 0,
                      message: str = "ok", stamp: Time | None = None) -> DiagnosticArray:
