@@ -32,7 +32,6 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
-from std_srvs.srv import SetBool, Trigger
 
 from dampest_ros.core.arm.base import base_parameters
 from dampest_ros.core.arm.identify import IdentifyConfig
@@ -52,7 +51,7 @@ from dampest_ros.ros.common import (
     LATCHED_QOS,
     RELIABLE_QOS,
     SENSOR_QOS,
-    ModelParamNode,
+    EstimatorParamNode,
     Param,
     diagnostic_array,
     main_for,
@@ -82,7 +81,7 @@ def _prior_check(value: Any) -> str | None:
     return None
 
 
-class ArmEstimatorNode(ModelParamNode):
+class ArmEstimatorNode(EstimatorParamNode):
     """Arm estimator node (see the module docstring)."""
 
     NODE_NAME = "arm_estimator_node"
@@ -121,10 +120,7 @@ class ArmEstimatorNode(ModelParamNode):
         self.pub_model = self.create_publisher(String, "dampest/arm_model", LATCHED_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, RELIABLE_QOS)
         self.create_subscription(JointState, "joint_states", self._on_joint_state, SENSOR_QOS)
-        self.create_service(Trigger, "~/reset", self._srv_reset)
-        self.create_service(Trigger, "~/save", self._srv_save)
-        self.create_service(SetBool, "~/freeze", self._srv_freeze)
-        self._timer = self.create_timer(1.0 / self.p("publish_rate"), self._publish)
+        self.start_services()
         self._used_at_publish = -1
         self._alarms_reported = 0
         self.last_error = ""
@@ -170,20 +166,6 @@ class ArmEstimatorNode(ModelParamNode):
             return f"rate_out must be at least 2 × cutoff = {2.0 * self.p('cutoff')} Hz, got " \
                    f"{value}"
         return None
-
-    def on_parameters(self, names: list[str]) -> None:
-        if names == ["forgetting_factor"]:
-            self.estimator.rls.set_forgetting_factor(self.p("forgetting_factor"))
-            self.get_logger().info(f"forgetting factor {self.p('forgetting_factor')}")
-            return
-        if "publish_rate" in names:
-            self._timer.cancel()
-            self._timer = self.create_timer(1.0 / self.p("publish_rate"), self._publish)
-        if set(names) - {"publish_rate", "save_path"}:
-            self._build()
-            self.get_logger().info(f"estimator restarted from the prior ({', '.join(names)} "
-                                   "changed)")
-            self._publish(force=True)
 
     # --- input ---------------------------------------------------------------------------------
 
@@ -296,21 +278,14 @@ class ArmEstimatorNode(ModelParamNode):
         self.pub_diag.publish(diagnostic_array(self, "dampest arm estimator", values, level,
                                                message))
 
-    def _srv_reset(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+    def _reset(self) -> None:
         self._t, self._q, self._tau = [], [], []
         self.estimator.reset()
         self._alarms_reported = 0
-        self._publish(force=True)
-        res.success, res.message = True, f"reset to the prior (model version {self.version})"
-        return res
 
-    def _srv_save(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
-        return self._answer_save(res, lambda: save_arm_model(
-            Path(self.p("save_path")).expanduser(), self.estimator.estimate(self.version),
-            self.p("arm")), self.version)
-
-    def _srv_freeze(self, req: SetBool.Request, res: SetBool.Response) -> SetBool.Response:
-        return self._answer_freeze(self.estimator.rls, req, res)
+    def _save(self) -> Path:
+        return save_arm_model(Path(self.p("save_path")).expanduser(),
+                              self.estimator.estimate(self.version), self.p("arm"))
 
 
 main = main_for(ArmEstimatorNode, __doc__ or "")

@@ -37,6 +37,7 @@ from rclpy.qos import (
 )
 from rclpy.subscription import Subscription
 from rclpy.utilities import remove_ros_args
+from std_srvs.srv import SetBool, Trigger
 
 #: Sensor topics: the sensor-data policies (best effort, volatile) with a deeper queue than
 #: its 5, for the bursts of a simulator running faster than real time.
@@ -423,22 +424,75 @@ class ModelParamNode(ParamNode):
                         f"{self.get_name()} itself")
         return super()._check_parameters(params)
 
-    def _answer_save(self, res: Any, save: Callable[[], Path], version: int) -> Any:
-        """Answer a ``~/save`` call (std_srvs/Trigger): ``save()`` writes the model and
-        returns its path; a failure is the answer's message, never an exception."""
+
+class EstimatorParamNode(ModelParamNode):
+    """A :class:`ModelParamNode` around a recursive estimator (``self.estimator``, whose
+    ``rls`` forgets and can be frozen): what the vehicle and the arm estimator nodes share.
+
+    :meth:`start_services` creates ``~/reset``, ``~/save`` and ``~/freeze`` and the publish
+    timer; :meth:`on_parameters` applies a new forgetting factor in place, a new
+    publish_rate to the timer, and restarts the estimator from the prior on any other change
+    but save_path. A subclass gives :meth:`_build`, :meth:`_publish`, :meth:`_reset` and
+    :meth:`_save`, and holds ``version``.
+    """
+
+    estimator: Any
+    version: int
+
+    def _build(self) -> None:
+        """A new estimator from the prior."""
+        raise NotImplementedError
+
+    def _publish(self, force: bool = False) -> None:
+        """Publish the model and the diagnostics (``force``: even if nothing changed)."""
+        raise NotImplementedError
+
+    def _reset(self) -> None:
+        """Back to the prior, keeping the settings."""
+        raise NotImplementedError
+
+    def _save(self) -> Path:
+        """Write the model file at save_path; its path."""
+        raise NotImplementedError
+
+    def start_services(self) -> None:
+        """~/reset, ~/save, ~/freeze and the publish timer (once the estimator exists)."""
+        self.create_service(Trigger, "~/reset", self._srv_reset)
+        self.create_service(Trigger, "~/save", self._srv_save)
+        self.create_service(SetBool, "~/freeze", self._srv_freeze)
+        self._timer = self.create_timer(1.0 / self.p("publish_rate"), self._publish)
+
+    def on_parameters(self, names: list[str]) -> None:
+        if names == ["forgetting_factor"]:
+            self.estimator.rls.set_forgetting_factor(self.p("forgetting_factor"))
+            self.get_logger().info(f"forgetting factor {self.p('forgetting_factor')}")
+            return
+        if "publish_rate" in names:
+            self._timer.cancel()
+            self._timer = self.create_timer(1.0 / self.p("publish_rate"), self._publish)
+        if set(names) - {"publish_rate", "save_path"}:
+            self._build()
+            self.get_logger().info(f"estimator restarted from the prior ({', '.join(names)} "
+                                   "changed)")
+            self._publish(force=True)
+
+    def _srv_reset(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        self._reset()
+        self._publish(force=True)
+        res.success, res.message = True, f"reset to the prior (model version {self.version})"
+        return res
+
+    def _srv_save(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
         try:
-            path = save()
+            path = self._save()
         except (OSError, ValueError) as exc:
             res.success, res.message = False, f"could not save: {exc}"
             return res
-        res.success, res.message = True, f"saved model version {version} to {path}"
+        res.success, res.message = True, f"saved model version {self.version} to {path}"
         return res
 
-    @staticmethod
-    def _answer_freeze(rls: Any, req: Any, res: Any) -> Any:
-        """Answer a ``~/freeze`` call (std_srvs/SetBool): hold or release the estimate of
-        the recursive estimator ``rls``."""
-        rls.frozen = bool(req.data)
+    def _srv_freeze(self, req: SetBool.Request, res: SetBool.Response) -> SetBool.Response:
+        self.estimator.rls.frozen = bool(req.data)
         res.success = True
         res.message = "frozen: estimate held" if req.data else "updating"
         return res

@@ -31,7 +31,6 @@ from geometry_msgs.msg import (
     WrenchStamped,
 )
 from std_msgs.msg import String
-from std_srvs.srv import SetBool, Trigger
 
 from dampest_ros.core import frames
 from dampest_ros.core.estimator import EstimatorConfig
@@ -52,7 +51,7 @@ from dampest_ros.ros.common import (
     LATCHED_QOS,
     RELIABLE_QOS,
     Drain,
-    ModelParamNode,
+    EstimatorParamNode,
     Param,
     diagnostic_array,
     main_for,
@@ -67,7 +66,7 @@ TERM_HELP = "comma list of the vehicle's damping terms to identify, e.g. 'linear
             "('': all of the preset's terms)"
 
 
-class EstimatorNode(ModelParamNode):
+class EstimatorNode(EstimatorParamNode):
     """Estimator node (see the module docstring)."""
 
     NODE_NAME = "estimator_node"
@@ -132,10 +131,7 @@ class EstimatorNode(ModelParamNode):
                 lambda data, n=name, w=width: self._on_sample(n, *stamped_floats(data, w)),
                 RELIABLE_QOS, raw=True, drain=self._samples,
                 callback_group=None if name == "attitude" else self._samples.passive)
-        self.create_service(Trigger, "~/reset", self._srv_reset)
-        self.create_service(Trigger, "~/save", self._srv_save)
-        self.create_service(SetBool, "~/freeze", self._srv_freeze)
-        self._timer = self.create_timer(1.0 / self.p("publish_rate"), self._publish)
+        self.start_services()
         self._used_at_publish = -1
         self._last_stamp = -1
 
@@ -213,21 +209,6 @@ class EstimatorNode(ModelParamNode):
             return str(exc)
         return None
 
-    def on_parameters(self, names: list[str]) -> None:
-        if names == ["forgetting_factor"]:
-            self.estimator.rls.set_forgetting_factor(self.p("forgetting_factor"))
-            self.get_logger().info(f"forgetting factor {self.p('forgetting_factor')}")
-            return
-        if "publish_rate" in names:
-            self._timer.cancel()
-            self._timer = self.create_timer(1.0 / self.p("publish_rate"), self._publish)
-        if set(names) & {"vehicle", "terms", "forgetting_factor", "forgetting_mode", "rate",
-                         "cutoff", "chunk", "prior", "outlier_gate"}:
-            self._build()
-            self.get_logger().info(f"estimator restarted from the prior ({', '.join(names)} "
-                                   "changed)")
-            self._publish(force=True)
-
     # --- inputs --------------------------------------------------------------------------------
 
     def _on_sample(self, stream: str, ns: int, value: np.ndarray) -> None:
@@ -271,19 +252,12 @@ class EstimatorNode(ModelParamNode):
         self.pub_diag.publish(diagnostic_array(self, "dampest estimator", values, level,
                                                message))
 
-    def _srv_reset(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+    def _reset(self) -> None:
         self.estimator.reset()
-        self._publish(force=True)
-        res.success, res.message = True, f"reset to the prior (model version {self.version})"
-        return res
 
-    def _srv_save(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
-        return self._answer_save(res, lambda: save_model(
-            Path(self.p("save_path")).expanduser(), self.estimator.to_model(self.version)),
-            self.version)
-
-    def _srv_freeze(self, req: SetBool.Request, res: SetBool.Response) -> SetBool.Response:
-        return self._answer_freeze(self.estimator.rls, req, res)
+    def _save(self) -> Path:
+        return save_model(Path(self.p("save_path")).expanduser(),
+                          self.estimator.to_model(self.version))
 
 
 main = main_for(EstimatorNode, __doc__ or "")
