@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -44,13 +44,8 @@ RATE = 500.0  # Hz
 BAD = 7  # messages naming other joints, interleaved
 
 
-def spin_until(ex: SingleThreadedExecutor, done: Any, timeout: float = 10.0) -> None:
-    end = time.monotonic() + timeout
-    while not done() and time.monotonic() < end:
-        ex.spin_once(timeout_sec=0.01)
-
-
-def test_payload_step_on_joint_states_is_alarmed_and_tracked(tmp_path: Path) -> None:
+def test_payload_step_on_joint_states_is_alarmed_and_tracked(
+        tmp_path: Path, spin_until: Callable[..., bool]) -> None:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", "92")
     arm = load_arm("ur5")
@@ -105,7 +100,7 @@ def test_payload_step_on_joint_states_is_alarmed_and_tracked(tmp_path: Path) -> 
             if k % 4000 == 0 and k // 4000 < BAD:
                 pub.publish(stranger)
             spin_until(ex, lambda s=sent: node.counts["received"] - node.counts[
-                "rejected_joints"] >= s)
+                "rejected_joints"] >= s, 10.0)
         node._publish()
         spin_until(ex, lambda: len(models) > 0 and warnings != [], 5.0)
         wall = time.monotonic() - t0
@@ -146,7 +141,7 @@ def test_payload_step_on_joint_states_is_alarmed_and_tracked(tmp_path: Path) -> 
         client = probe.create_client(Trigger, "arm_estimator_node/save")
         assert client.wait_for_service(timeout_sec=5.0)
         future = client.call_async(Trigger.Request())
-        spin_until(ex, future.done)
+        spin_until(ex, future.done, 10.0)
         assert future.result().success, future.result().message
         saved = load_arm_model(save)
         assert np.allclose(saved.theta, est.theta) and saved.version == node.version

@@ -60,15 +60,6 @@ def context(domain: int) -> Any:
     return ctx
 
 
-def spin_until(ex: SingleThreadedExecutor, done: Callable[[], bool], timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while not done():
-        if time.monotonic() > end:
-            return False
-        ex.spin_once(timeout_sec=0.02)
-    return True
-
-
 def pipeline(ctx: Any) -> tuple[PreprocessNode, EstimatorNode]:
     """preprocess_node and estimator_node with their defaults, λ = 1."""
     return (PreprocessNode(context=ctx),
@@ -92,7 +83,7 @@ def result(pre: PreprocessNode, est: EstimatorNode) -> dict[str, Any]:
             "matched": e.counts["matched"], "samples": e.rls.diagnostics(False).samples}
 
 
-def live_run(bag: Path) -> dict[str, Any]:
+def live_run(bag: Path, spin_until: Callable[..., bool]) -> dict[str, Any]:
     ctx = context(LIVE_DOMAIN)
     recorder = RecorderNode(context=ctx, parameter_overrides=[
         P("output", value=str(bag)), P("status_period", value=0.0)])
@@ -131,7 +122,7 @@ def live_run(bag: Path) -> dict[str, Any]:
     return out
 
 
-def replay_run(bag: Path) -> dict[str, Any]:
+def replay_run(bag: Path, spin_until: Callable[..., bool]) -> dict[str, Any]:
     ctx = context(REPLAY_DOMAIN)
     pre, est = pipeline(ctx)
     ex = SingleThreadedExecutor(context=ctx)
@@ -175,11 +166,12 @@ def _spin_quietly(ex: SingleThreadedExecutor) -> None:
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
+def runs(tmp_path_factory: pytest.TempPathFactory, spin_until: Callable[..., bool]
+         ) -> Iterator[dict[str, Any]]:
     root = tmp_path_factory.mktemp("one_code_path")
     bag = root / "live"
-    live = live_run(bag)
-    replay = replay_run(bag)
+    live = live_run(bag, spin_until)
+    replay = replay_run(bag, spin_until)
     model = root / "offline.yaml"
     assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy", "--method", "rls",
                  "--forgetting-factor", "1", "--out", str(model)]) == 0

@@ -42,15 +42,6 @@ def ctx() -> Iterator[Any]:
     rclpy.try_shutdown(context=context)
 
 
-def spin_until(ex: SingleThreadedExecutor, done: Callable[[], bool], timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while not done():
-        if time.monotonic() > end:
-            return False
-        ex.spin_once(timeout_sec=0.02)
-    return True
-
-
 def wait_until(done: Callable[[], bool], timeout: float) -> bool:
     """Wait without spinning any executor."""
     end = time.monotonic() + timeout
@@ -78,8 +69,8 @@ def log_times(path: Path) -> dict[str, list[tuple[int, int, int]]]:
     return out
 
 
-def test_burst_written_by_the_take_thread_with_the_executor_idle(ctx: Any, tmp_path: Path
-                                                                 ) -> None:
+def test_burst_written_by_the_take_thread_with_the_executor_idle(
+        ctx: Any, tmp_path: Path, spin_until: Callable[..., bool]) -> None:
     """Publishers created after the start are found by the early looks (discovery_period
     60 s); then 600 messages published at once all reach the bag while no executor spins,
     each stamped between its publication and the moment the bag had it."""
@@ -117,7 +108,8 @@ def test_burst_written_by_the_take_thread_with_the_executor_idle(ctx: Any, tmp_p
         assert all(t0 <= sent <= logged <= t1 for _, logged, sent in msgs), topic
 
 
-def test_log_time_is_the_simulation_time_under_use_sim_time(ctx: Any, tmp_path: Path) -> None:
+def test_log_time_is_the_simulation_time_under_use_sim_time(
+        ctx: Any, tmp_path: Path, spin_until: Callable[..., bool]) -> None:
     rec = recorder(ctx, tmp_path / "bag", topics=["imu/data"], use_sim_time=True)
     src = rclpy.create_node("recorder_test_clock", context=ctx)
     clock = src.create_publisher(ClockMsg, "/clock", 10)
@@ -141,7 +133,7 @@ def test_log_time_is_the_simulation_time_under_use_sim_time(ctx: Any, tmp_path: 
 
 
 def test_write_refused_in_the_take_thread_ends_the_node_with_status_1(
-        ctx: Any, tmp_path: Path) -> None:
+        ctx: Any, tmp_path: Path, spin_until: Callable[..., bool]) -> None:
     rec = recorder(ctx, tmp_path / "bag", topics=["imu/data"])
     src = rclpy.create_node("recorder_test_full", context=ctx)
     imu = src.create_publisher(Imu, "imu/data", SENSOR_QOS)
