@@ -125,19 +125,30 @@ def save_figure(fig: Figure, path: Path, bottom: float = 0.08, wspace: float = 0
     return path.name
 
 
-def force_figure(t: FloatArray, y: FloatArray, y_hat: FloatArray, path: Path) -> str:
+def _measured_vs_model(t: FloatArray, measured: FloatArray, model: FloatArray,
+                       labels: tuple[str, str], ylabels: list[str], title: str,
+                       path: Path) -> str:
+    """Six panels (one per DOF, surge…heave left, roll…yaw right): a measured signal and
+    its model's, shapes (N, 6), against time t (s)."""
     fig = Figure(figsize=(11, 7.5))
     axes = fig.subplots(3, 2, sharex=True).T.ravel()
     for i, ax in enumerate(axes):
-        ax.plot(t, y[:, i], lw=1.0, color="0.2", label="measured y")
-        ax.plot(t, y_hat[:, i], lw=1.0, color="tab:red", alpha=0.85, label="predicted Φθ")
-        ax.set_ylabel(f"{FORCE_NAMES[i]} ({FORCE_UNITS[i]})")
+        ax.plot(t, measured[:, i], lw=1.0, color="0.2", label=labels[0])
+        ax.plot(t, model[:, i], lw=1.0, color="tab:red", alpha=0.85, label=labels[1])
+        ax.set_ylabel(ylabels[i])
         ax.grid(alpha=0.3)
     axes[2].set_xlabel("time (s)")
     axes[5].set_xlabel("time (s)")
     axes[0].legend(loc="upper right", fontsize=8)
-    fig.suptitle("Damping force: measured y = τ − Mν̇ − C(ν)ν − g(η) vs model Φ(ν)θ")
+    fig.suptitle(title)
     return save_figure(fig, path)
+
+
+def force_figure(t: FloatArray, y: FloatArray, y_hat: FloatArray, path: Path) -> str:
+    return _measured_vs_model(
+        t, y, y_hat, ("measured y", "predicted Φθ"),
+        [f"{FORCE_NAMES[i]} ({FORCE_UNITS[i]})" for i in range(6)],
+        "Damping force: measured y = τ − Mν̇ − C(ν)ν − g(η) vs model Φ(ν)θ", path)
 
 
 def spectrum_figure(f: FloatArray, p_y: FloatArray, p_r: FloatArray, cutoff: float,
@@ -253,18 +264,10 @@ def coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray,
 
 
 def free_run_figure(t: FloatArray, nu: FloatArray, sim: FloatArray, path: Path) -> str:
-    fig = Figure(figsize=(11, 7.5))
-    axes = fig.subplots(3, 2, sharex=True).T.ravel()
-    for i, ax in enumerate(axes):
-        ax.plot(t, nu[:, i], lw=1.0, color="0.2", label="measured ν")
-        ax.plot(t, sim[:, i], lw=1.0, color="tab:red", alpha=0.85, label="free run")
-        ax.set_ylabel(f"{DOF_NAMES[i]} ({VEL_UNITS[i]})")
-        ax.grid(alpha=0.3)
-    axes[2].set_xlabel("time (s)")
-    axes[5].set_xlabel("time (s)")
-    axes[0].legend(loc="upper right", fontsize=8)
-    fig.suptitle("Free-run simulation driven by the measured τ and attitude vs measured ν")
-    return save_figure(fig, path)
+    return _measured_vs_model(
+        t, nu, sim, ("measured ν", "free run"),
+        [f"{DOF_NAMES[i]} ({VEL_UNITS[i]})" for i in range(6)],
+        "Free-run simulation driven by the measured τ and attitude vs measured ν", path)
 
 
 def coverage_figure(nu: FloatArray, path: Path) -> str:
