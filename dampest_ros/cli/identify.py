@@ -132,7 +132,8 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
         samples = pooled_samples(logs)
         options = FitOptions(method=args.method, cutoff=args.cutoff,
                              speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
-        result = pooled_fit(logs, model, vehicle.body, options, prior, prior_std, map_logs)
+        result = pooled_fit(logs, model, vehicle.body, options, prior, prior_std, map_logs,
+                            samples)
     print(f"{len(logs)} logs pooled ({len(failed)} left out): {len(samples)} samples "
           f"({len(samples) / samples.rate:.0f} s), {result.method}, condition number "
           f"{result.cond:.3g}, {time.perf_counter() - t0:.1f} s")

@@ -113,13 +113,15 @@ def on_samples(log: LogStatistics, k: int, fn: Callable[[Samples, int], Any],
 
 def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBody,
                options: FitOptions, prior: FloatArray | None = None,
-               prior_std: FloatArray | None = None, map_logs: MapLogs | None = None) -> Fit:
+               prior_std: FloatArray | None = None, map_logs: MapLogs | None = None,
+               samples: Samples | None = None) -> Fit:
     """The fit of all the logs' samples at once, from their summed statistics (the reduce).
 
     θ, its covariance and every per-DOF figure equal those of
     :func:`~dampest_ros.core.batch.fit` on :func:`pooled_samples` to rounding; only the
     cross-validation folds differ (see :func:`pooled_normal`). The covariances' passes over
     the samples run log by log through ``map_logs`` (default: here, one after the other).
+    ``samples`` is :func:`pooled_samples` of ``logs`` when the caller has made it already.
     """
     firsts = np.cumsum([0] + [len(g.samples) for g in logs[:-1]]).tolist()
     run = map_logs or (lambda fn: [fn(g, k) for k, g in enumerate(logs)])
@@ -127,7 +129,8 @@ def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBo
     def map_parts(fn: Callable[[Samples, int], Any]) -> list[Any]:
         return run(partial(on_samples, fn=fn, firsts=firsts))
 
-    return fit(pooled_samples(logs), model, body, options, prior=prior, prior_std=prior_std,
+    whole = pooled_samples(logs) if samples is None else samples
+    return fit(whole, model, body, options, prior=prior, prior_std=prior_std,
                normal=pooled_normal([g.normal for g in logs]), map_parts=map_parts)
 
 
