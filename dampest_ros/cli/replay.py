@@ -38,6 +38,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="start once every topic has N subscribers")
     p.add_argument("--delay", type=float, default=0.0, metavar="S",
                    help="wait this long before playing (default: 0)")
+    p.add_argument("--wait-for-acked", type=float, default=5.0, metavar="S",
+                   help="at the end, wait up to S seconds until reliable subscribers have "
+                        "every message (default: 5; 0: exit at once)")
 
 
 def node_parameters(args: argparse.Namespace) -> dict[str, object]:
@@ -48,7 +51,8 @@ def node_parameters(args: argparse.Namespace) -> dict[str, object]:
         "start_offset": float(args.start_offset), "loop": bool(args.loop),
         "clock": args.clock is not None, "reliability": args.reliability,
         "queue_depth": int(args.queue_depth),
-        "wait_for_subscribers": int(args.wait_for_subscribers), "delay": float(args.delay)}
+        "wait_for_subscribers": int(args.wait_for_subscribers), "delay": float(args.delay),
+        "wait_for_acked": float(args.wait_for_acked)}
     if args.clock is not None:
         params["clock_rate"] = float(args.clock)
     return params

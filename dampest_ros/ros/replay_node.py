@@ -6,7 +6,8 @@ loops, publishes /clock with the bag time (for use_sim_time listeners), plays on
 topics and renames them. Publishers use the QoS recorded in the bag (reliable only when every
 recorded publisher was; override with reliability) and keep queue_depth messages. A topic
 whose message type is not installed is skipped with a warning. Progress is logged every
-progress_period seconds; when the bag has been played (and loop is false) the node exits.
+progress_period seconds; when the bag has been played (and loop is false) the node waits up to
+wait_for_acked seconds until reliable subscribers have acknowledged every message, then exits.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from builtin_interfaces.msg import Time
+from rclpy.duration import Duration
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.rosbag2 import Reader
@@ -70,6 +72,9 @@ class ReplayNode(ParamNode):
         Param("wait_for_subscribers", 0, "before playing, wait until every played topic has "
               "this many subscribers", low=0, high=1000, read_only=True),
         Param("delay", 0.0, "seconds to wait before playing (after wait_for_subscribers)",
+              low=0.0, high=3600.0, read_only=True),
+        Param("wait_for_acked", 5.0, "after the last message, seconds to wait until reliable "
+              "subscribers have acknowledged every message before exiting; 0: exit at once",
               low=0.0, high=3600.0, read_only=True),
         Param("progress_period", 5.0, "seconds between progress lines in the log; 0: none",
               low=0.0, high=3600.0),
@@ -144,6 +149,7 @@ class ReplayNode(ParamNode):
         try:
             if self._wait_to_start():
                 self._play()
+                self._wait_for_acked()
         except Exception as exc:  # a shut-down context while publishing: stop quietly
             if not self._stop.is_set() and self.context.ok():
                 self.get_logger().error(f"playback failed: {exc}")
@@ -176,6 +182,21 @@ class ReplayNode(ParamNode):
                 self.bag_time = t
             if not self.p("loop"):
                 return
+
+    def _wait_for_acked(self) -> None:
+        """Hold the publishers until reliable subscribers have every message (a reliable
+        message still in flight when the node exits is lost), at most wait_for_acked s."""
+        timeout = float(self.p("wait_for_acked"))
+        if self._stop.is_set() or timeout <= 0:
+            return
+        deadline = time.monotonic() + timeout
+        late = [p.topic_name for p in set(self.pubs.values())
+                if not p.wait_for_all_acked(
+                    Duration(seconds=max(deadline - time.monotonic(), 0.0)))]
+        if late:
+            self.get_logger().warning(
+                f"not every message was acknowledged within {timeout:g} s on {sorted(late)} "
+                "(a subscriber too slow or gone); raise wait_for_acked to wait longer")
 
     def _sleep_until(self, t: int) -> bool:
         """Wait for the wall time of bag time ``t`` (publishing /clock meanwhile); False

@@ -299,7 +299,9 @@ def test_replay_rate_10_keeps_timing_and_bytes(ros: Ros, recorded: tuple[Path, d
                                         "wait_for_subscribers": "1", "delay": "0.5"}, log)
     try:
         assert proc.wait(timeout=60) == 0, log.read_text()
-        time.sleep(0.3)
+        end = time.monotonic() + 10.0  # this process's executor may still be taking them
+        while len(got) < len(expected) and time.monotonic() < end:
+            time.sleep(0.05)
     finally:
         if proc.poll() is None:
             proc.kill()
