@@ -208,6 +208,12 @@ class ModelClient:
         from rclpy.parameter import parameter_value_to_python
         try:
             values = future.result().values
+            if not values and names:  # a server going away answers with nothing
+                self.node.get_logger().warning(
+                    f"model server {self.server} answered none of the {len(names)} model "
+                    f"parameters (stopping?); keeping "
+                    + (f"version {self._model.version}" if self._model else "no model yet"))
+                return
             if len(values) != len(names):
                 raise ModelUnavailableError(f"{self.server} answered {len(values)} of "
                                             f"{len(names)} model parameters")

@@ -10,6 +10,7 @@ import os
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -322,6 +323,10 @@ def test_bad_model_at_runtime_is_refused_and_the_client_keeps_the_last_good_one(
             clients[1].errors[-1]
         assert clients[1].version == 4
         np.testing.assert_allclose(clients[1].damping_force(nu), want, rtol=1e-12)
+        # a server stopping while asked answers with no values: kept, logged, not a refusal
+        stopping = SimpleNamespace(result=lambda: SimpleNamespace(values=[]))
+        clients[1]._on_response(["model.theta", "model.version"], stopping)
+        assert len(clients[1].errors) == 1 and clients[1].version == 4
     finally:
         ex.shutdown()
         for n in nodes:
