@@ -18,9 +18,11 @@ local) and on /diagnostics (diagnostic_msgs/DiagnosticArray: per joint innovatio
 and excitation, covariance trace, lag, the change alarms with their time and joints, and every
 counter: count.received, used, rejected_joints (messages without the arm's joints),
 rejected_fields (position or effort missing), rejected_nonfinite, dropped_out_of_order,
-clock_jumps, gaps, filter_errors). A change alarm is published on /diagnostics at once.
-Services: ~/reset (std_srvs/Trigger, back to the prior), ~/save (Trigger, atomic write of the
-model file to save_path), ~/freeze (std_srvs/SetBool: stop or resume updating).
+clock_jumps, gaps, filter_errors, resume_refused) and what resume did. A change alarm is
+published on /diagnostics at once. Services: ~/reset (std_srvs/Trigger, back to the prior),
+~/save (Trigger, atomic write of the model file to save_path), ~/freeze (std_srvs/SetBool:
+stop or resume updating). With resume (default) it starts from the model file at save_path
+with its version when that file holds this arm's base parameters.
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from std_msgs.msg import String
 
 from dampest_ros.core.arm.base import base_parameters
 from dampest_ros.core.arm.identify import IdentifyConfig
-from dampest_ros.core.arm.online import ArmEstimator
+from dampest_ros.core.arm.online import ArmEstimate, ArmEstimator
 from dampest_ros.core.arm.regressor import full_parameters
 from dampest_ros.core.rls.least_squares import RLSConfig
 from dampest_ros.io.arm import (
@@ -107,6 +109,9 @@ class ArmEstimatorNode(EstimatorParamNode):
               "clock)", low=0.01, high=100.0),
         Param("save_path", "dampest_arm_model.yaml", "where ~/save writes the model YAML",
               check=save_path_check),
+        Param("resume", True, "at start, continue from the model file at save_path (its θ, "
+              "σ and version) when it holds this arm's base parameters; false: start from "
+              "the prior", read_only=True),
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -116,6 +121,10 @@ class ArmEstimatorNode(EstimatorParamNode):
             ("received", "used", "rejected_joints", "rejected_fields", "rejected_nonfinite",
              "dropped_out_of_order", "clock_jumps", "filter_errors"), 0)
         self._build()
+        if self.p("resume"):
+            start = self.saved_model(load_arm_model, self._mismatch)
+            if start is not None:
+                self._build(start)
         self.serve_model(self._model_values())
         self.pub_model = self.create_publisher(String, "dampest/arm_model", LATCHED_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, RELIABLE_QOS)
@@ -125,8 +134,9 @@ class ArmEstimatorNode(EstimatorParamNode):
         self._alarms_reported = 0
         self.last_error = ""
 
-    def _build(self) -> None:
-        """A new estimator from the prior (and an empty buffer)."""
+    def _build(self, start: ArmEstimate | None = None) -> None:
+        """A new estimator (and an empty buffer) from ``start`` (a resumed model file) or
+        else the prior."""
         if not 2.0 * self.p("cutoff") <= self.p("rate_out"):
             raise ValueError(f"parameter cutoff {self.p('cutoff')} Hz must be at most "
                              f"rate_out/2 = {0.5 * self.p('rate_out')} Hz")
@@ -134,14 +144,14 @@ class ArmEstimatorNode(EstimatorParamNode):
         base = base_parameters(self.arm.model)
         theta0 = base.of(full_parameters(self.arm.model, self.arm.dynamics))
         std0 = self.p("prior_std_factor") * np.abs(theta0) + 0.01
-        if str(self.p("prior")).strip():
-            prior = load_arm_model(self.p("prior"))
-            kept = [base.names[i] for i in base.independent]
-            if prior.parameter_names != kept:
-                raise ValueError(f"parameter prior: {self.p('prior')} holds the base parameters "
-                                 f"of another arm ({len(prior.parameter_names)} named, "
-                                 f"{self.p('arm')} has {len(kept)}: {kept[:3]} ...)")
-            theta0, std0 = prior.theta, np.maximum(prior.theta_std, 1e-12)
+        self._kept = [base.names[i] for i in base.independent]
+        if start is None and str(self.p("prior")).strip():
+            start = load_arm_model(self.p("prior"))
+            reason = self._mismatch(start)
+            if reason is not None:
+                raise ValueError(f"parameter prior: {self.p('prior')} {reason}")
+        if start is not None:
+            theta0, std0 = start.theta, np.maximum(start.theta_std, 1e-12)
         cfg = IdentifyConfig(cutoff=self.p("cutoff"), rate_out=self.p("rate_out"),
                              min_speed=self.p("min_speed"))
         rls = RLSConfig(forgetting_factor=self.p("forgetting_factor"), adapt_weights=True,
@@ -154,6 +164,13 @@ class ArmEstimatorNode(EstimatorParamNode):
         self._q: list[np.ndarray] = []
         self._tau: list[np.ndarray] = []
         self._last = -np.inf
+
+    def _mismatch(self, m: ArmEstimate) -> str | None:
+        """Why arm model ``m`` does not hold this arm's base parameters (None: it does)."""
+        if m.parameter_names != self._kept:
+            return (f"holds the base parameters of another arm ({len(m.parameter_names)} "
+                    f"named, {self.p('arm')} has {len(self._kept)}: {self._kept[:3]} ...)")
+        return None
 
     def _model_values(self) -> dict[str, Any]:
         return arm_model_parameters(self.estimator.estimate(self.version), self.p("arm"))
@@ -251,6 +268,8 @@ class ArmEstimatorNode(EstimatorParamNode):
         d = e.rls.diagnostics(condition=False)
         values: dict[str, Any] = {f"count.{k}": v for k, v in self.counts.items()}
         values["count.gaps"] = e.gaps
+        values["count.resume_refused"] = self.resume_refused
+        values["resume"] = self.resumed
         values["model.version"] = self.version
         values["estimated_until_s"] = e.emitted if np.isfinite(e.emitted) else "none yet"
         values["lag_s"] = self._last - e.emitted if np.isfinite(e.emitted) else "none yet"

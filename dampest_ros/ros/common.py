@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 import rclpy
 from builtin_interfaces.msg import Time
@@ -425,6 +425,15 @@ class ModelParamNode(ParamNode):
         return super()._check_parameters(params)
 
 
+class _HasVersion(Protocol):
+    @property
+    def version(self) -> int: ...
+
+
+#: A saved model of any estimator: it has a version.
+Versioned = TypeVar("Versioned", bound=_HasVersion)
+
+
 class EstimatorParamNode(ModelParamNode):
     """A :class:`ModelParamNode` around a recursive estimator (``self.estimator``, whose
     ``rls`` forgets and can be frozen): what the vehicle and the arm estimator nodes share.
@@ -438,6 +447,40 @@ class EstimatorParamNode(ModelParamNode):
 
     estimator: Any
     version: int
+    #: what happened to the model file at save_path at start (diagnostics ``resume``)
+    resumed: str = "off"
+    #: saved model files refused at start (another estimator's, unreadable)
+    resume_refused: int = 0
+
+    def saved_model(self, load: Callable[[Path], Versioned],
+                    mismatch: Callable[[Versioned], str | None]) -> Versioned | None:
+        """The model file at save_path when it can be resumed, else None (the reason
+        logged and counted in :attr:`resume_refused`); its version becomes this node's.
+        ``load`` reads the file (raising ValueError or OSError), ``mismatch`` says why a
+        model is not one of this estimator's (None: it is). Temporary files of a killed save
+        are removed."""
+        path = Path(self.p("save_path")).expanduser()
+        log = self.get_logger()
+        for tmp in remove_orphaned_temp(path):
+            log.info(f"removed {tmp}, left by a save that was killed")
+        if not path.exists():
+            self.resumed = f"no model file at {path}"
+            return None
+        try:
+            m = load(path)
+            reason = mismatch(m)
+        except (ValueError, OSError) as exc:
+            reason = str(exc)
+        if reason is not None:
+            self.resume_refused += 1
+            self.resumed = f"refused {path}: {reason}"
+            log.error(f"not resuming from {path}: {reason}; starting from the prior (~/save "
+                      "replaces the file)")
+            return None
+        self.version = int(m.version)
+        self.resumed = f"version {m.version} from {path}"
+        log.info(f"resumed from {path}: model version {m.version}")
+        return m
 
     def _build(self) -> None:
         """A new estimator from the prior."""

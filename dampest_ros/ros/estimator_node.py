@@ -56,7 +56,6 @@ from dampest_ros.ros.common import (
     diagnostic_array,
     main_for,
     model_file_check,
-    remove_orphaned_temp,
     save_path_check,
     vehicle_check,
 )
@@ -102,15 +101,11 @@ class EstimatorNode(EstimatorParamNode):
         super().__init__(self.NODE_NAME, self.PARAMS, **kwargs)
         self.keep_samples = keep_samples
         self.version = 0
-        #: what happened to the model file at save_path at start (diagnostics ``resume``)
-        self.resumed = "off"
-        #: saved model files refused at start (wrong vehicle or terms, unreadable)
-        self.resume_refused = 0
         #: sample clock jumps back (matching restarted)
         self.clock_jumps = 0
         self._build()
         if self.p("resume"):
-            start = self._saved_model()
+            start = self.saved_model(load_model, self._mismatch)
             if start is not None:
                 self._build(start)
         self.serve_model(self._model_values())
@@ -134,32 +129,6 @@ class EstimatorNode(EstimatorParamNode):
         self.start_services()
         self._used_at_publish = -1
         self._last_stamp = -1
-
-    def _saved_model(self) -> Model | None:
-        """The model file at save_path when it can be resumed (its version taken), else None
-        (the reason logged and counted). Temporary files of a killed save are removed."""
-        path = Path(self.p("save_path")).expanduser()
-        log = self.get_logger()
-        for tmp in remove_orphaned_temp(path):
-            log.info(f"removed {tmp}, left by a save that was killed")
-        if not path.exists():
-            self.resumed = f"no model file at {path}"
-            return None
-        try:
-            m = load_model(path)
-            reason = self._mismatch(m)
-        except (ConfigError, ValueError, OSError) as exc:
-            reason = str(exc)
-        if reason is not None:
-            self.resume_refused += 1
-            self.resumed = f"refused {path}: {reason}"
-            log.error(f"not resuming from {path}: {reason}; starting from the prior (~/save "
-                      "replaces the file)")
-            return None
-        self.version = int(m.version)
-        self.resumed = f"version {m.version} from {path}"
-        log.info(f"resumed from {path}: model version {m.version}")
-        return m
 
     def _mismatch(self, m: Model) -> str | None:
         """Why model file ``m`` is not an estimate of this node's vehicle and terms."""

@@ -8,6 +8,7 @@ services follow the estimator's contract."""
 from __future__ import annotations
 
 import os
+import re
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -147,8 +148,24 @@ def test_payload_step_on_joint_states_is_alarmed_and_tracked(
         assert np.allclose(saved.theta, est.theta) and saved.version == node.version
         # which a node takes as its prior (as it takes dampest arm identify --out)
         again = ArmEstimatorNode(context=context, parameter_overrides=[
-            Parameter("prior", value=str(save))])
+            Parameter("prior", value=str(save)), Parameter("resume", value=False)])
+        assert np.array_equal(again.estimator.theta, saved.theta) and again.version == 0
+        again.destroy_node()
+        # and resumes from, with its version, when it is the node's save_path
+        again = ArmEstimatorNode(context=context, parameter_overrides=[
+            Parameter("save_path", value=str(save))])
         assert np.array_equal(again.estimator.theta, saved.theta)
+        assert again.version == saved.version and again.resumed.startswith(
+            f"version {saved.version} from ")
+        again.destroy_node()
+        # a file of another arm at save_path is refused with the reason and counted
+        other = tmp_path / "other.yaml"
+        other.write_text(re.sub(r"parameter_names: \[[^,]+,", "parameter_names: [x,",
+                                save.read_text()))
+        again = ArmEstimatorNode(context=context, parameter_overrides=[
+            Parameter("save_path", value=str(other))])
+        assert again.version == 0 and again.resume_refused == 1
+        assert "holds the base parameters of another arm" in again.resumed, again.resumed
         again.destroy_node()
     finally:
         ex.shutdown()
