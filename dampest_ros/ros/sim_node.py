@@ -118,6 +118,9 @@ class SimNode(ParamNode):
             if str(self.p("effects")).strip() else Effects()
         sensors = SensorConfig.from_dict(read_mapping(self.p("sensors"))) \
             if str(self.p("sensors")).strip() else SensorConfig()
+        if self.p("protocol") == "optimal":  # the node publishes nothing meanwhile: say so
+            self.get_logger().info(f"designing protocol optimal for {self.p('vehicle')} "
+                                   "(about 30 s; protocol B starts at once)")
         self.live = LiveSimulation(load_vehicle(self.p("vehicle")), self.p("protocol"),
                                    self.p("duration"), self.p("seed"), effects, sensors,
                                    self.p("dt"), self.p("backend"))
