@@ -25,16 +25,12 @@ from numpy.typing import NDArray
 from rosbags.interfaces import (
     Connection,
     Qos,
-    QosDurability,
-    QosHistory,
-    QosLiveliness,
-    QosReliability,
-    QosTime,
 )
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
 from dampest_ros.core.measurements import TOPIC_TYPES, Series
 from dampest_ros.io import cdr
+from dampest_ros.io.bag_metadata import make_qos
 
 #: Topics published with the sensor-data QoS (best effort, volatile, depth 5).
 SENSOR_TOPICS = ("imu/data", "dvl/twist", "pressure", "thrusters/state")
@@ -46,7 +42,6 @@ LATCHED_TOPICS = ("dampest/model",)
 READ_CHUNK = 5_000
 
 _STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
-_INFINITE = QosTime(2147483647, 4294967295)  # "infinite" as rosbag2 writes it (and rosbags)
 
 
 class BagError(RuntimeError):
@@ -87,13 +82,10 @@ def offered_qos(topic: str) -> Qos:
     volatile, keep last 10.
     """
     if _is(topic, SENSOR_TOPICS):
-        rel, dur, depth = QosReliability.BEST_EFFORT, QosDurability.VOLATILE, 5
-    elif _is(topic, LATCHED_TOPICS):
-        rel, dur, depth = QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, 1
-    else:
-        rel, dur, depth = QosReliability.RELIABLE, QosDurability.VOLATILE, 10
-    return Qos(QosHistory.KEEP_LAST, depth, rel, dur, _INFINITE, _INFINITE,
-               QosLiveliness.AUTOMATIC, _INFINITE, False)
+        return make_qos(reliable=False, depth=5)
+    if _is(topic, LATCHED_TOPICS):
+        return make_qos(transient_local=True, depth=1)
+    return make_qos()
 
 
 def _message_type(topic: str, series: Series) -> str:

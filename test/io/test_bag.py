@@ -98,6 +98,10 @@ def test_metadata_offers_the_contract_qos(tmp_path: Path, recording: dict[str, S
     for topic in ("/truth/odom", "/dampest/velocity", "/dampest/acceleration",
                   "/dampest/wrench"):
         assert (qos[topic]["reliability"], qos[topic]["durability"]) == ("reliable", "volatile")
+    # infinite deadline, lifespan and lease as Jazzy's rosbag2 writes them (RMW's INT64_MAX ns)
+    for profile in qos.values():
+        for key in ("deadline", "lifespan", "liveliness_lease_duration"):
+            assert profile[key] == {"sec": 9223372036, "nsec": 854775807}, (key, profile)
     model = bag.offered_qos("vehicle/dampest/model")
     assert (model.reliability.name, model.durability.name, model.depth) == \
         ("RELIABLE", "TRANSIENT_LOCAL", 1)
