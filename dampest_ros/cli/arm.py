@@ -243,8 +243,9 @@ def _identify(args: argparse.Namespace) -> int:
     from dampest_ros.core.arm.fit import pseudo_inertia_eigenvalues
     from dampest_ros.core.arm.identify import (
         IdentifyConfig,
-        filter_joints,
+        filter_stretches,
         identify_arm,
+        interpolate,
         predict,
         torque_rmse,
     )
@@ -260,12 +261,14 @@ def _identify(args: argparse.Namespace) -> int:
     t1 = time.perf_counter()
     base = base_parameters(arm.model)
     nominal = full_parameters(arm.model, arm.dynamics)
-    res = identify_arm(arm.model, base, filter_joints(data.t, data.position, data.effort, cfg),
-                       nominal, cfg)
+    filtered, stretches = filter_stretches(data.t, data.position, data.effort, cfg)
+    res = identify_arm(arm.model, base, filtered, nominal, cfg)
     t2 = time.perf_counter()
     print(f"{args.bag}: {len(data.t)} samples of {len(names)} joints on {data.topic} "
           f"(read {t1 - t0:.1f} s, identified {t2 - t1:.1f} s); {base.size} base parameters, "
           f"rows used per joint {res.rows.tolist()}")
+    if stretches.describe():
+        print(f"{args.bag}: {stretches.describe()}")
     ind = [base.names[k] for k in base.independent]
     print(table(("base parameter", "OLS", "WLS", "sigma", "consistent", "nominal"),
                 [(f"b{k + 1} {ind[k]}", res.ols.theta[k], res.wls.theta[k], res.wls.std[k],
@@ -284,7 +287,9 @@ def _identify(args: argparse.Namespace) -> int:
         vdata, truth = val
         vcfg = IdentifyConfig(cutoff=cfg.cutoff, rate_out=1.0 / float(np.median(
             np.diff(vdata.t))), min_speed=cfg.min_speed, coulomb_width=cfg.coulomb_width)
-        fv = filter_joints(vdata.t, vdata.position, vdata.effort, vcfg)
+        fv, vstretches = filter_stretches(vdata.t, vdata.position, vdata.effort, vcfg)
+        if vstretches.describe():
+            print(f"{args.validate}: {vstretches.describe()}")
         measured = vdata.effort[fv.index]
         if truth is not None:
             floor = np.std(vdata.effort - truth.effort, axis=0)
@@ -296,7 +301,9 @@ def _identify(args: argparse.Namespace) -> int:
         shown: dict[str, np.ndarray] = {}
         for label, theta in (("WLS", res.wls.theta), ("consistent", res.consistent.theta),
                              ("OLS", res.ols.theta), ("nominal", base.of(nominal))):
-            tau = predict(arm.model, base, theta, fv.q, fv.qd, fv.qdd, vcfg)
+            # on the filtered grid, then at the measured samples' own (jittered) times
+            tau = interpolate(vdata.t[fv.index], fv.t,
+                              predict(arm.model, base, theta, fv.q, fv.qd, fv.qdd, vcfg))
             shown[label] = tau
             rmse, moving = torque_rmse(measured, tau, fv.qd, cfg.min_speed)
             rows.extend((label, n, rmse[j], moving[j], rmse[j] / floor[j])

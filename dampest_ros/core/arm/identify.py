@@ -11,10 +11,16 @@
 
 The noise floor of a joint's torque is estimated from the measurement itself: the power of
 τ − τ_filtered, divided by the share of a white noise's power the filter stops.
+
+Real joint streams are not a perfect clock. Stamps that jitter (steps off the median period
+by more than 1 %) are resampled onto a uniform grid by linear interpolation before filtering;
+a step longer than :data:`GAP_PERIODS` periods is a gap (lost messages, a pause), across which
+nothing is filtered: :func:`filter_stretches` filters each gap-free stretch on its own.
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -107,6 +113,42 @@ def _noise_bandwidth(cutoff: float, order: int = 4) -> float:
     return float(np.trapezoid(H * H, f))
 
 
+#: A step between two joint samples longer than this many sample periods (the median step),
+#: or not forward, is a gap: messages were lost or the stream paused. Shorter irregular
+#: steps are jitter of the sample times, which :func:`filter_joints` resamples away.
+GAP_PERIODS = 1.75
+
+
+def gaps(t: FloatArray, period: float | None = None) -> NDArray[np.int64]:
+    """Where joint samples have a gap: the indices i whose step t[i+1] − t[i] is not
+    forward or exceeds :data:`GAP_PERIODS` periods (``period``: the median step)."""
+    dt = np.diff(np.asarray(t, dtype=float))
+    if period is None:
+        period = float(np.median(dt))
+    return np.flatnonzero((dt <= 0.0) | (dt > GAP_PERIODS * period))
+
+
+def _on_grid(t: FloatArray, position: FloatArray, effort: FloatArray
+             ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.int64]]:
+    """Gap-free samples on a uniform grid from t[0]: as they are when every step is within
+    1 % of the median step, else linearly interpolated onto N points from t[0] to t[-1];
+    with the input row nearest each grid point."""
+    if np.all(np.abs(np.diff(t) / float(np.median(np.diff(t))) - 1.0) <= 0.01):
+        return t, position, effort, np.arange(len(t), dtype=np.int64)
+    period = (t[-1] - t[0]) / (len(t) - 1)  # zero-mean jitter: the mean step is the period
+    grid = t[0] + period * np.arange(len(t))
+    i = np.clip(np.searchsorted(t, grid), 1, len(t) - 1)
+    nearest = np.where(grid - t[i - 1] <= t[i] - grid, i - 1, i).astype(np.int64)
+    return grid, interpolate(grid, t, position), interpolate(grid, t, effort), nearest
+
+
+def interpolate(t_new: FloatArray, t: FloatArray, x: FloatArray) -> FloatArray:
+    """Columns of ``x`` (shape (N, n), sampled at increasing ``t``) linearly interpolated
+    at ``t_new`` (shape (M,)); shape (M, n). The validation evaluates a model's torque,
+    computed on the filtered grid, at the measured samples' own times with it."""
+    return np.stack([np.interp(t_new, t, x[:, j]) for j in range(x.shape[1])], axis=1)
+
+
 def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
                   config: IdentifyConfig) -> Filtered:
     """Filter, differentiate and decimate measured joint data.
@@ -114,7 +156,7 @@ def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
     Parameters
     ----------
     t : ndarray, shape (N,)
-        Sample times (s), uniformly spaced.
+        Sample times (s), increasing, without gaps; jitter is resampled away.
     position, effort : ndarray, shape (N, n)
         Measured joint positions (rad) and torques (N m).
     config : IdentifyConfig
@@ -126,20 +168,24 @@ def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
     Raises
     ------
     ValueError
-        If the samples are not uniformly spaced, too few, or the rates do not fit.
+        If the samples have a gap (see :func:`filter_stretches`), are too few, or the rates
+        do not fit.
     """
     t = np.asarray(t, dtype=float)
     if len(t) < 10:
         raise ValueError(f"{len(t)} samples; identification needs a run of many periods")
-    dt = np.diff(t)
-    rate = 1.0 / float(np.median(dt))
-    if np.any(np.abs(dt * rate - 1.0) > 0.01):
-        raise ValueError("joint samples are not uniformly spaced (gaps or jitter > 1 %); "
-                         "resample them or give one gap-free stretch")
+    bad = gaps(t)
+    if len(bad):
+        raise ValueError(f"joint samples have {len(bad)} gaps (steps over {GAP_PERIODS:g} "
+                         f"sample periods, the first after t = {t[bad[0]]:.3f} s); filter "
+                         "each gap-free stretch on its own (filter_stretches)")
+    t, position, effort, index = _on_grid(t, np.asarray(position, dtype=float),
+                                          np.asarray(effort, dtype=float))
+    rate = 1.0 / float(np.median(np.diff(t)))
     if not 0.0 < config.cutoff < rate / 2.0:
         raise ValueError(f"cutoff {config.cutoff} Hz must be in (0, {rate / 2:g}) Hz, the "
                          f"Nyquist frequency of the {rate:g} Hz samples")
-    if not 2.0 * config.cutoff <= config.rate_out <= rate:
+    if not 2.0 * config.cutoff <= config.rate_out <= 1.01 * rate:  # (the input rate is measured)
         raise ValueError(f"output rate {config.rate_out} Hz must be in [2 × cutoff, "
                          f"{rate:g}] Hz")
     # the ends see the filter's mirror images: drop 3 / cutoff seconds at each
@@ -172,7 +218,98 @@ def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
     # σ² ≈ mean((τ − τ_f)²) / share of white noise above the cutoff (the trajectory's own
     # content is far below it)
     noise = np.sqrt(stopped / len(t) / _stop_share(rate, config.cutoff))
-    return Filtered(t[keep], q, qd, qdd, tau, noise, keep.astype(np.int64))
+    return Filtered(t[keep], q, qd, qdd, tau, noise, index[keep])
+
+
+def min_stretch(rate: float, config: IdentifyConfig) -> float:
+    """The shortest gap-free stretch (s) :func:`filter_joints` takes at ``rate`` Hz."""
+    return (4 * int(np.ceil(3.0 * rate / config.cutoff)) + 1) / rate
+
+
+@dataclass(frozen=True)
+class Stretches:
+    """How :func:`filter_stretches` split a record.
+
+    Attributes
+    ----------
+    gaps : int
+        Gaps found (steps over :data:`GAP_PERIODS` periods, or back in time).
+    used, skipped : int
+        Gap-free stretches filtered, and those too short to filter.
+    seconds_skipped : float
+        Their length (s).
+    duplicates : int
+        Samples dropped for repeating an earlier stamp.
+    """
+
+    gaps: int
+    used: int
+    skipped: int
+    seconds_skipped: float
+    duplicates: int
+
+    def describe(self) -> str:
+        """One line for a log or a report ('' when the record had no gap)."""
+        if not self.gaps and not self.duplicates:
+            return ""
+        return (f"{self.gaps} gaps: {self.used} gap-free stretches filtered, {self.skipped} "
+                f"too short ({self.seconds_skipped:.3g} s) left out"
+                + (f"; {self.duplicates} samples with a repeated stamp dropped"
+                   if self.duplicates else ""))
+
+
+def filter_stretches(t: FloatArray, position: FloatArray, effort: FloatArray,
+                     config: IdentifyConfig) -> tuple[Filtered, Stretches]:
+    """:func:`filter_joints` on each gap-free stretch of a record, the results joined.
+
+    The samples are put in stamp order first (a repeated stamp keeps its first sample).
+    ``index`` of the result counts rows of the input as given; ``noise`` is the stretches'
+    RMS noise weighted by their length.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times (s).
+    position, effort : ndarray, shape (N, n)
+        rad, N m.
+    config : IdentifyConfig
+
+    Returns
+    -------
+    Filtered, Stretches
+
+    Raises
+    ------
+    ValueError
+        If no stretch is long enough, or the rates do not fit.
+    """
+    t = np.asarray(t, dtype=float)
+    order = np.argsort(t, kind="stable")
+    first = np.concatenate([[True], np.diff(t[order]) > 0.0])
+    order = order[first]
+    t, position, effort = t[order], np.asarray(position)[order], np.asarray(effort)[order]
+    if len(t) < 10:
+        raise ValueError(f"{len(t)} samples; identification needs a run of many periods")
+    bounds = np.concatenate([[0], gaps(t) + 1, [len(t)]])
+    shortest = min_stretch(1.0 / float(np.median(np.diff(t))), config)
+    parts: list[Filtered] = []
+    skipped = 0.0
+    for a, b in itertools.pairwise(bounds.tolist()):
+        if b - a < 10 or t[b - 1] - t[a] < shortest:
+            skipped += t[b - 1] - t[a]
+            continue
+        f = filter_joints(t[a:b], position[a:b], effort[a:b], config)
+        parts.append(Filtered(f.t, f.q, f.qd, f.qdd, f.tau, f.noise, order[f.index + a]))
+    info = Stretches(len(bounds) - 2, len(parts), len(bounds) - 1 - len(parts), float(skipped),
+                     int(np.count_nonzero(~first)))
+    if not parts:
+        raise ValueError(f"no gap-free stretch of joint data is {shortest:.3g} s long, the "
+                         f"least a {config.cutoff:g} Hz cutoff needs ({info.describe()})")
+    weights = np.array([len(f.t) for f in parts], dtype=float)
+    noise = np.sqrt(np.average([f.noise ** 2 for f in parts], axis=0, weights=weights))
+    t_, q, qd, qdd, tau, index = (np.concatenate([getattr(f, k) for f in parts])
+                                  for k in ("t", "q", "qd", "qdd", "tau", "index"))
+    return Filtered(t_, q, qd, qdd, tau, noise, index), info
 
 
 def accumulate(arm: ArmModel, data: Filtered, config: IdentifyConfig,

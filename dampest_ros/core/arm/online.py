@@ -8,8 +8,9 @@ Joint samples arrive in any pieces. They are filtered exactly as offline
 ones and the estimate lags the data by that margin plus one hop. Each decimated sample is
 one RLS update with the six joints as its six rows; a joint's row is zeroed where its
 friction does not follow the Coulomb model (:func:`dampest_ros.core.arm.identify.usable_rows`).
-The filter needs uniformly spaced samples: at a gap (a lost message, a pause) the samples
-before it whose window is not complete are dropped and the stream starts afresh after it.
+Jittered stamps are resampled onto a uniform grid in each window (as offline); at a gap
+(:func:`dampest_ros.core.arm.identify.gaps`: lost messages, a pause) the samples before it
+whose window is not complete are dropped and the stream starts afresh after it.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.arm.base import BaseParameters
-from dampest_ros.core.arm.identify import IdentifyConfig, filter_joints, usable_rows
+from dampest_ros.core.arm.identify import IdentifyConfig, filter_joints, gaps, usable_rows
 from dampest_ros.core.arm.model import ArmModel
 from dampest_ros.core.arm.regressor import regressor
 from dampest_ros.core.rigid_body import FORCE_NAMES
@@ -154,10 +155,10 @@ class ArmEstimator:
         self._tau = np.concatenate([self._tau, np.asarray(effort, dtype=float)])
         if len(self._t) < 2:
             return 0
-        dt = np.diff(self._t)
-        rate = 1.0 / float(np.median(dt[-100:]))
-        # a step off the rate by more than filter_joints accepts: restart after the last one
-        off = np.flatnonzero(np.abs(dt * rate - 1.0) > 0.01)
+        period = float(np.median(np.diff(self._t[-101:])))
+        rate = 1.0 / period
+        # a gap (filter_joints resamples jitter, not gaps): restart after the last one
+        off = gaps(self._t, period)
         if len(off):
             self.gaps += len(off)
             start_at = int(off[-1]) + 1
