@@ -252,8 +252,8 @@ class Stretches:
         """One line for a log or a report ('' when the record had no gap)."""
         if not self.gaps and not self.duplicates:
             return ""
-        return (f"{self.gaps} gaps: {self.used} gap-free stretches filtered, {self.skipped} "
-                f"too short ({self.seconds_skipped:.3g} s) left out"
+        return (f"{self.gaps} gap{'s' * (self.gaps != 1)}: {self.used} gap-free stretches "
+                f"filtered, {self.skipped} too short ({self.seconds_skipped:.3g} s) left out"
                 + (f"; {self.duplicates} samples with a repeated stamp dropped"
                    if self.duplicates else ""))
 
