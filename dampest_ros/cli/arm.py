@@ -93,7 +93,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     s.add_argument("--out", required=True, metavar="BAG",
                    help="bag directory to create (must not exist)")
 
-    i = sub.add_parser("identify", help=HELP["identify"], description=HELP["identify"],
+    i = sub.add_parser("identify", help=HELP["identify"], description=HELP["identify"] + (
+        ".\n\nJittered stamps are resampled onto a uniform grid; a step over 1.75 sample\n"
+        "periods is a gap, and each gap-free stretch is filtered on its own (the count\n"
+        "is printed)."),
                        epilog="example:\n" + EXAMPLES["identify"],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     i.add_argument("bag", metavar="BAG", help="rosbag2 bag with sensor_msgs/JointState")
