@@ -125,21 +125,44 @@ def gaps(t: FloatArray, period: float | None = None) -> NDArray[np.int64]:
     dt = np.diff(np.asarray(t, dtype=float))
     if period is None:
         period = float(np.median(dt))
+    return _gaps(dt, period)
+
+
+def _gaps(dt: FloatArray, period: float) -> NDArray[np.int64]:
     return np.flatnonzero((dt <= 0.0) | (dt > GAP_PERIODS * period))
 
 
-def _on_grid(t: FloatArray, position: FloatArray, effort: FloatArray
-             ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.int64]]:
-    """Gap-free samples on a uniform grid from t[0]: as they are when every step is within
-    1 % of the median step, else linearly interpolated onto N points from t[0] to t[-1];
-    with the input row nearest each grid point."""
-    if np.all(np.abs(np.diff(t) / float(np.median(np.diff(t))) - 1.0) <= 0.01):
-        return t, position, effort, np.arange(len(t), dtype=np.int64)
+class ShortDataError(ValueError):
+    """Too few joint samples to filter: fewer than 10, or not more than the four filter
+    edges (:func:`_edge`) a stretch needs."""
+
+
+def _require_samples(t: FloatArray) -> None:
+    if len(t) < 10:
+        raise ShortDataError(f"{len(t)} samples; identification needs a run of many periods")
+
+
+def _edge(rate: float, config: IdentifyConfig) -> int:
+    """Samples dropped at each end of a filtered stretch (3 / cutoff s, the filter's end
+    effects); a stretch needs more than four times as many."""
+    return int(np.ceil(3.0 * rate / config.cutoff))
+
+
+def _on_grid(t: FloatArray, dt: FloatArray, period: float, position: FloatArray,
+             effort: FloatArray
+             ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.int64], float]:
+    """Gap-free samples (steps ``dt``, median ``period``) on a uniform grid from t[0]: as
+    they are when every step is within 1 % of the median, else linearly interpolated onto
+    N points from t[0] to t[-1]; with the input row nearest each grid point and the grid's
+    period."""
+    if np.all(np.abs(dt / period - 1.0) <= 0.01):
+        return t, position, effort, np.arange(len(t), dtype=np.int64), period
     period = (t[-1] - t[0]) / (len(t) - 1)  # zero-mean jitter: the mean step is the period
     grid = t[0] + period * np.arange(len(t))
     i = np.clip(np.searchsorted(t, grid), 1, len(t) - 1)
     nearest = np.where(grid - t[i - 1] <= t[i] - grid, i - 1, i).astype(np.int64)
-    return grid, interpolate(grid, t, position), interpolate(grid, t, effort), nearest
+    return (grid, interpolate(grid, t, position), interpolate(grid, t, effort), nearest,
+            period)
 
 
 def interpolate(t_new: FloatArray, t: FloatArray, x: FloatArray) -> FloatArray:
@@ -172,27 +195,30 @@ def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
         do not fit.
     """
     t = np.asarray(t, dtype=float)
-    if len(t) < 10:
-        raise ValueError(f"{len(t)} samples; identification needs a run of many periods")
-    bad = gaps(t)
+    _require_samples(t)
+    dt = np.diff(t)
+    period = float(np.median(dt))
+    bad = _gaps(dt, period)
     if len(bad):
         raise ValueError(f"joint samples have {len(bad)} gaps (steps over {GAP_PERIODS:g} "
                          f"sample periods, the first after t = {t[bad[0]]:.3f} s); filter "
                          "each gap-free stretch on its own (filter_stretches)")
-    t, position, effort, index = _on_grid(t, np.asarray(position, dtype=float),
-                                          np.asarray(effort, dtype=float))
-    rate = 1.0 / float(np.median(np.diff(t)))
+    t, position, effort, index, period = _on_grid(t, dt, period,
+                                                  np.asarray(position, dtype=float),
+                                                  np.asarray(effort, dtype=float))
+    rate = 1.0 / period
     if not 0.0 < config.cutoff < rate / 2.0:
         raise ValueError(f"cutoff {config.cutoff} Hz must be in (0, {rate / 2:g}) Hz, the "
                          f"Nyquist frequency of the {rate:g} Hz samples")
+    # the ends see the filter's mirror images: drop 3 / cutoff seconds at each
+    edge = _edge(rate, config)
+    if len(t) <= 4 * edge:
+        raise ShortDataError(f"{len(t) / rate:.3g} s of joint data; at least "
+                             f"{4 * edge / rate:.3g} s are needed at a {config.cutoff:g} Hz "
+                             "cutoff")
     if not 2.0 * config.cutoff <= config.rate_out <= 1.01 * rate:  # (the input rate is measured)
         raise ValueError(f"output rate {config.rate_out} Hz must be in [2 × cutoff, "
                          f"{rate:g}] Hz")
-    # the ends see the filter's mirror images: drop 3 / cutoff seconds at each
-    edge = int(np.ceil(3.0 * rate / config.cutoff))
-    if len(t) <= 4 * edge:
-        raise ValueError(f"{len(t) / rate:.3g} s of joint data; at least "
-                         f"{4 * edge / rate:.3g} s are needed at a {config.cutoff:g} Hz cutoff")
     keep = np.arange(edge, len(t) - edge, max(1, round(rate / config.rate_out)))
     n = position.shape[1]
     q, qd, qdd, tau = (np.empty((len(keep), n)) for _ in range(4))
@@ -219,11 +245,6 @@ def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
     # content is far below it)
     noise = np.sqrt(stopped / len(t) / _stop_share(rate, config.cutoff))
     return Filtered(t[keep], q, qd, qdd, tau, noise, index[keep])
-
-
-def min_stretch(rate: float, config: IdentifyConfig) -> float:
-    """The shortest gap-free stretch (s) :func:`filter_joints` takes at ``rate`` Hz."""
-    return (4 * int(np.ceil(3.0 * rate / config.cutoff)) + 1) / rate
 
 
 @dataclass(frozen=True)
@@ -288,23 +309,26 @@ def filter_stretches(t: FloatArray, position: FloatArray, effort: FloatArray,
     first = np.concatenate([[True], np.diff(t[order]) > 0.0])
     order = order[first]
     t, position, effort = t[order], np.asarray(position)[order], np.asarray(effort)[order]
-    if len(t) < 10:
-        raise ValueError(f"{len(t)} samples; identification needs a run of many periods")
-    bounds = np.concatenate([[0], gaps(t) + 1, [len(t)]])
-    shortest = min_stretch(1.0 / float(np.median(np.diff(t))), config)
+    _require_samples(t)
+    dt = np.diff(t)
+    period = float(np.median(dt))
+    bounds = np.concatenate([[0], _gaps(dt, period) + 1, [len(t)]])
     parts: list[Filtered] = []
     skipped = 0.0
     for a, b in itertools.pairwise(bounds.tolist()):
-        if b - a < 10 or t[b - 1] - t[a] < shortest:
+        try:
+            f = filter_joints(t[a:b], position[a:b], effort[a:b], config)
+        except ShortDataError:  # too short to filter: left out
             skipped += t[b - 1] - t[a]
             continue
-        f = filter_joints(t[a:b], position[a:b], effort[a:b], config)
         parts.append(Filtered(f.t, f.q, f.qd, f.qdd, f.tau, f.noise, order[f.index + a]))
     info = Stretches(len(bounds) - 2, len(parts), len(bounds) - 1 - len(parts), float(skipped),
                      int(np.count_nonzero(~first)))
     if not parts:
-        raise ValueError(f"no gap-free stretch of joint data is {shortest:.3g} s long, the "
-                         f"least a {config.cutoff:g} Hz cutoff needs ({info.describe()})")
+        need = 4 * _edge(1.0 / period, config) * period
+        raise ShortDataError(f"no gap-free stretch of joint data is over {need:.3g} s long, "
+                             f"the least a {config.cutoff:g} Hz cutoff needs "
+                             f"({info.describe()})")
     weights = np.array([len(f.t) for f in parts], dtype=float)
     noise = np.sqrt(np.average([f.noise ** 2 for f in parts], axis=0, weights=weights))
     t_, q, qd, qdd, tau, index = (np.concatenate([getattr(f, k) for f in parts])
