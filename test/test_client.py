@@ -226,7 +226,7 @@ def nan_file(path: Path, good: Path) -> Path:
 
 
 def test_model_server_refuses_a_non_finite_model_at_start(tmp_path: Path) -> None:
-    """Issue 11: a NaN in a model file's theta was served by model_server_node. At start, by
+    """A NaN in a model file's theta was served by model_server_node. At start, by
     model_file or by --params-file, the node logs one error naming the entry and exits with
     status 2, no traceback."""
     import subprocess
@@ -335,7 +335,7 @@ def test_bad_model_at_runtime_is_refused_and_the_client_keeps_the_last_good_one(
 
 
 def test_client_reports_the_age_of_its_model_and_a_lost_server(tmp_path: Path) -> None:
-    """Issue 12: a client whose server died kept 'available' true. With timeout=1 s: the age
+    """A client whose server died kept 'available' true. With timeout=1 s: the age
     grows from the model's arrival; 1 s after the server left the graph the client is lost
     (available false, the last model kept and evaluated); a new server makes it available
     again with a fresh model."""

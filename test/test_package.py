@@ -168,7 +168,7 @@ def third_party_imports() -> dict[str, str]:
 
 
 def test_package_xml_declares_every_third_party_import() -> None:
-    """rosdep install on a full ROS 2 install must leave no import failing (issue 15)."""
+    """rosdep install on a full ROS 2 install must leave no import failing."""
     root = ET.parse(REPO / "package.xml").getroot()
     run = {e.text for e in root if e.tag in ("exec_depend", "depend") and e.text}
     imports = third_party_imports()

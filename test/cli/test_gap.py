@@ -1,4 +1,4 @@
-"""dampest gap: acceptance on a simulated bag with hidden effects (issue 6).
+"""dampest gap: acceptance on a simulated bag with hidden effects.
 
 The bag (protocol B, 600 s, default sensor noise) hides a 1 N buoyancy offset and a −10 %
 thrust-gain error; the model the user believes (``sim_model.yaml``) also has X_uu = 100
@@ -90,7 +90,7 @@ def test_unknown_candidate_is_an_error(measured: Path,
     assert "warp_drive" in err and "current" in err
 
 
-# --- issue 11 -------------------------------------------------------------------------------
+# --- what gap prints and writes, bad options, several logs ------------------------------
 
 
 def test_printed_magnitudes_are_what_the_model_file_holds(

@@ -1,4 +1,4 @@
-"""dampest gap's report figure: units on every axis, a PSD axis of a few decades (issue 15)."""
+"""dampest gap's report figure: units on every axis, a PSD axis of a few decades."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""dampest identify: acceptance on simulator bags with realistic noise (issue 3)."""
+"""dampest identify: acceptance on simulator bags with realistic noise."""
 
 from __future__ import annotations
 
@@ -208,12 +208,12 @@ def test_table_says_what_the_data_determine_on_foreign_physics(
     assert "structural misfit" in line and "--select" in line
 
 
-# --- bad numbers and absurd options (issue 11) -------------------------------------------------
+# --- bad numbers and absurd options -------------------------------------------------
 
 
 def test_nan_cell_in_a_csv_drops_the_row_and_says_so(
         short_b: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """Issue 11: one NaN cell in a 1300-row CSV made every coefficient 'collinear (variance
+    """One NaN cell in a 1300-row CSV made every coefficient 'collinear (variance
     inflation inf)', and the model was written with exit status 0. The row is dropped and
     counted; the fit is that of the clean log to a fraction of its σ."""
     lines = (short_b / "samples.csv").read_text().splitlines()[:1301]
@@ -237,7 +237,7 @@ def test_nan_cell_in_a_csv_drops_the_row_and_says_so(
 
 def test_every_model_reader_refuses_a_non_finite_model(
         short_b: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """Issue 11: a NaN in a model file was taken as a number. identify --prior, validate,
+    """A NaN in a model file was taken as a number. identify --prior, validate,
     gap --model and export refuse it with exit status 2 and one line naming the entry."""
     import yaml
 
@@ -287,7 +287,7 @@ def test_identified_model_carries_its_flown_speeds_to_the_export(
 def test_absurd_options_are_refused_with_one_line(
         short_b: Path, argv: list[str], option: str,
         capsys: pytest.CaptureFixture[str]) -> None:
-    """Issue 11: a delay beyond the log or negative, a cutoff at or above Nyquist or ≤ 0, a
+    """A delay beyond the log or negative, a cutoff at or above Nyquist or ≤ 0, a
     rate that needs gigabytes: one line naming the option and the fix, exit status 2, before
     any work (the 1e9 Hz rate would take 90 TB)."""
     capsys.readouterr()

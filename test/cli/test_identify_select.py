@@ -1,4 +1,4 @@
-"""dampest identify: the library search (--select) and the default misfit check (issue 10)."""
+"""dampest identify: the library search (--select) and the default misfit check."""
 
 from __future__ import annotations
 

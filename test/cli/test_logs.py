@@ -1,4 +1,4 @@
-"""Logs as users have them (issue 10, section 4): .csv.gz, --start/--end, --holdout, the seed
+"""Logs as users have them: .csv.gz, --start/--end, --holdout, the seed
 paper's CSV flavour, and dampest validate, on seeded simulations with known truth."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""dampest simulate and identify with the vehicle file's sensors: section (issue 15): a bag of
+"""dampest simulate and identify with the vehicle file's sensors: section: a bag of
 a vehicle with an off-centre DVL and a rotated IMU identifies to the truth with the same file
 (and not with the preset that lacks the section); a file whose frame_id does not match the
 bag's gets one warning line per topic on stderr."""

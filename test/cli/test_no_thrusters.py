@@ -1,4 +1,4 @@
-"""A vehicle without thrusters (issue 10 §2): τ from tau_* CSV columns or a body-wrench topic
+"""A vehicle without thrusters: τ from tau_* CSV columns or a body-wrench topic
 (geometry_msgs/WrenchStamped, FLU, --wrench-topic) identifies as with thrusters; what needs
 thrusters (simulate, thruster telemetry) refuses with one line and exit 2. Seeded simulation
 of the BlueROV2 Heavy, protocol B."""

@@ -1,4 +1,4 @@
-"""Sim-to-real gap workflow (issue 6) on simulator data with hidden effects.
+"""Sim-to-real gap workflow on simulator data with hidden effects.
 
 Every case flies protocol B for 600 s with the BlueROV2 Heavy preset, default (realistic)
 sensor noise (``SensorConfig()``: gyro 0.002 rad/s white + 1e-5 rad/s/√s bias walk, DVL
@@ -408,7 +408,7 @@ def test_two_effects_all_seeds(pair: tuple[str, str], seed: int) -> None:
     assert {a.key, b.key} <= set(result.named[:3]), result.named
 
 
-# --- issue 11: what gap writes is a valid model, and what it says is what it writes ----------
+# --- what gap writes is a valid model, and what it says is what it writes ----------
 
 
 def _short(rows: int = 6000, body: RigidBody | None = None,

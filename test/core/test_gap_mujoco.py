@@ -1,4 +1,4 @@
-"""Sim-to-real gap on physics we did not write: the MuJoCo backend (issue 11, item 7).
+"""Sim-to-real gap on physics we did not write: the MuJoCo backend.
 
 Each vehicle flies protocol B for 600 s in MuJoCo's ellipsoid fluid model (default sensor
 noise, through the CSV of ``dampest simulate``); the model is fitted on a clean run (no

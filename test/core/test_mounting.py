@@ -1,4 +1,4 @@
-"""Sensor mounting (issue 15): the vehicle file's sensors: section, the simulator's off-centre
+"""Sensor mounting: the vehicle file's sensors: section, the simulator's off-centre
 sensors against hand-computed truth, the preprocessing (offline and online) that undoes the
 mounting, identification with a 0.3 m DVL offset and a rotated IMU equal to the centred case
 within σ (and not without the correction), frame_id checks, and a DVL on TwistStamped."""

@@ -1,4 +1,4 @@
-"""Term selection over the damping library (issue 10, section 3): names, de-duplication,
+"""Term selection over the damping library: names, de-duplication,
 rank-revealing solve, and structure found from data whose drag law the library lacks."""
 
 from __future__ import annotations
@@ -220,7 +220,7 @@ def test_numerically_equal_columns_are_dropped_with_the_reason(body: RigidBody) 
     assert r.theta[j] == pytest.approx(80.0, rel=0.01)
 
 
-# --- memory: passive and consistent in both domains (issue 11, item 6) --------------------
+# --- memory: passive and consistent in both domains --------------------
 
 
 def memory_law(nu: np.ndarray, c: float, rate: float) -> np.ndarray:

@@ -1,5 +1,5 @@
 """Bags that cannot feed identification or replay: one line naming the input and the fix,
-exit 2 (issue 12)."""
+exit 2."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Node faults (issue 12): bad parameters at start and at runtime, two nodes of one name, the
+"""Node faults: bad parameters at start and at runtime, two nodes of one name, the
 estimator's drop counters, resume from the saved model, orphaned temporary files, SIGINT and
 SIGTERM. Every case asserts the exit status, the line logged, the counter or the value kept.
 

@@ -1,4 +1,4 @@
-"""Recorder and reindex faults (issue 12): bit rot, a bag still being recorded, a full disk,
+"""Recorder and reindex faults: bit rot, a bag still being recorded, a full disk,
 partial files; every case asserts what is reported and what is kept."""
 
 from __future__ import annotations

@@ -118,7 +118,7 @@ def test_samples_without_attitude_or_segments_are_level_and_split_at_gaps() -> N
         dcsv.samples_from_columns(cols)
 
 
-# --- .csv.gz and the flavours of logs (issue 10, section 4) ---------------------------------
+# --- .csv.gz and the flavours of logs ---------------------------------
 
 
 def test_gz_round_trip_is_exact_and_reads_like_csv(tmp_path: Path) -> None:
@@ -238,7 +238,7 @@ def test_plain_columns_pass_unchanged_and_ambiguity_names_the_map_entry() -> Non
 
 
 def test_rows_with_non_finite_cells_are_dropped_counted_and_split(tmp_path: Path) -> None:
-    """Issue 11: one NaN cell made every coefficient 'collinear (variance inflation inf)'.
+    """One NaN cell made every coefficient 'collinear (variance inflation inf)'.
     read_log drops the rows whose used columns are not finite, counts them per column and
     starts a new segment after each hole (a single row left between two holes goes too);
     columns the log does not read are not looked at."""

@@ -616,7 +616,7 @@ def test_cli_export_import_round_trip_keeps_m_a_and_switches(tmp_path: Path,
     np.testing.assert_allclose(back.theta, orig.theta, rtol=1e-12)
 
 
-# --- honest exports (issue 11) ----------------------------------------------------------------
+# --- honest exports ----------------------------------------------------------------
 
 
 def heavy_with(tmp_path: Path, heavy: Vehicle, values: dict[str, float],
@@ -639,7 +639,7 @@ def heavy_with(tmp_path: Path, heavy: Vehicle, values: dict[str, float],
 @pytest.mark.parametrize("fmt", ["gz", "urdf", "uuv"])
 def test_export_refuses_a_non_dissipative_model_unless_forced(
         tmp_path: Path, heavy: Vehicle, fmt: str, capsys: pytest.CaptureFixture[str]) -> None:
-    """Issue 11: Z_ww = −61 was exported (zWabsW +61.25) and the simulator built from it
+    """Z_ww = −61 was exported (zWabsW +61.25) and the simulator built from it
     diverged. Every format refuses it with exit status 2 and one line naming Z_ww and the
     velocity on the flown envelope; --force writes it, saying so in the file."""
     path = heavy_with(tmp_path, heavy, {"Z_ww": -61.25}, flown=1.0)
@@ -685,7 +685,7 @@ def test_dissipativity_checks_memory_gains_and_defaults_to_a_speed_box(
 @pytest.mark.parametrize("fmt", ["gz", "urdf", "uuv"])
 def test_export_lists_coefficients_held_at_prior(
         tmp_path: Path, heavy: Vehicle, fmt: str, capsys: pytest.CaptureFixture[str]) -> None:
-    """Issue 11: a coefficient the data did not determine was exported as if measured. Its
+    """A coefficient the data did not determine was exported as if measured. Its
     prior value is written, listed under HELD AT PRIOR in the file with the reason, warned
     about (ExportWarning, and a line on stderr from the command)."""
     held = {"Y_vv": "poorly determined: 95 % half-width 274 exceeds 50% of its scale"}

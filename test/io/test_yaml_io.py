@@ -255,7 +255,7 @@ def test_added_mass_switches_round_trip_through_the_file_and_the_parameters(
 
 
 def test_model_file_says_which_coefficients_the_data_determined(tmp_path: Path) -> None:
-    """Issue 11: a coefficient flagged 'not identified' was written as theta (its prior, std
+    """A coefficient flagged 'not identified' was written as theta (its prior, std
     NaN) like any estimate. The file now carries model.identified and the reasons
     (model.held); the node parameters carry the same; files without the field read as all
     identified, and the unidentified lists earlier identify versions wrote are read as held."""
@@ -304,7 +304,7 @@ def test_model_file_says_which_coefficients_the_data_determined(tmp_path: Path) 
 ])
 def test_every_reader_refuses_non_finite_numbers(tmp_path: Path, entry: str, index: int,
                                                   value: float, match: str) -> None:
-    """Issue 11: a NaN in a model file's theta was served by model_server_node and the client
+    """A NaN in a model file's theta was served by model_server_node and the client
     returned a NaN feed-forward. The file, its text, its node parameters and the evaluable
     Model all refuse it, naming the entry; a held coefficient's σ may be NaN."""
     model, theta = damping_from_spec({"linear": {"X_u": 13.7, "Y_v": 2.0},

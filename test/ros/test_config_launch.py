@@ -1,4 +1,4 @@
-"""Parameter files and launch files (issue 15): config/<node>.params.yaml holds every
+"""Parameter files and launch files: config/<node>.params.yaml holds every
 parameter a node declares, with its default and a comment, and loads with --params-file;
 launch/*.launch.py (``launch`` itself is not installable here) parse, name executables that
 setup.py installs and parameter files that exist, and are installed by setup.py."""

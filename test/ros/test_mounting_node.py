@@ -1,4 +1,4 @@
-"""preprocess_node and sensor mounting (issue 15): the node takes the vehicle file's sensors:
+"""preprocess_node and sensor mounting: the node takes the vehicle file's sensors:
 section, a DVL on geometry_msgs/TwistStamped (parameter dvl_type), and counts messages whose
 header.frame_id is not the configured one (diagnostics frame_id_mismatch, one warning)."""
 

@@ -1,4 +1,4 @@
-"""Issue 5, one code path: live, replayed and offline estimation give the same model.
+"""One code path: live, replayed and offline estimation give the same model.
 
 1. live: sim_node → preprocess_node → estimator_node (λ = 1) while recorder_node writes a bag;
 2. replay: that bag → replay_node → a fresh preprocess_node → estimator_node (λ = 1);
