@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from dampest_ros.client import ModelClient
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.model import Model
-from dampest_ros.core.rigid_body import ConfigError, coriolis_force
-from dampest_ros.core.vehicle import damping_from_spec
+from dampest_ros.core.physics.rigid_body import ConfigError, coriolis_force
+from dampest_ros.core.physics.vehicle import damping_from_spec
 from dampest_ros.io.yaml_io import damping_spec, load_vehicle, save_model, vehicle_path
 
 SPEC: dict[str, Any] = {
@@ -181,7 +181,7 @@ def test_added_mass_switches_reach_the_client_from_file_and_parameters(tmp_path:
     model.added_mass_terms.* served as parameters)."""
     import yaml
 
-    from dampest_ros.core.rigid_body import AddedMassTerms
+    from dampest_ros.core.physics.rigid_body import AddedMassTerms
 
     switches = {"inertial": False, "coriolis": True, "munk": False}
     doc = yaml.safe_load(vehicle_path("bluerov2_heavy").read_text())

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from dampest_ros.core import frames
+from dampest_ros.core.physics import frames
 from dampest_ros.core.batch import fit
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.samples import Samples

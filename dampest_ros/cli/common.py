@@ -191,7 +191,7 @@ def _fmt(x: object) -> str:
 def speed_table(samples_nu: np.ndarray) -> str:
     """Min / max / RMS of each velocity component; ``samples_nu`` shape (N, 6), m/s and
     rad/s."""
-    from dampest_ros.core.rigid_body import DOF_NAMES  # numpy: not for --help
+    from dampest_ros.core.physics.rigid_body import DOF_NAMES  # numpy: not for --help
 
     rows = [(DOF_NAMES[i], float(samples_nu[:, i].min()), float(samples_nu[:, i].max()),
              math.sqrt(float((samples_nu[:, i] ** 2).mean()))) for i in range(6)]

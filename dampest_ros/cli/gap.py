@@ -27,9 +27,9 @@ from dampest_ros.core.gap.search import GapOptions, GapResult, correction, find_
 from dampest_ros.core.gap.update import free_run_errors, updated_model
 from dampest_ros.core.measurements import JointSeries
 from dampest_ros.core.model import Model
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.core.samples import Samples
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.remote import is_url, local_log
 from dampest_ros.io.yaml_io import load_vehicle, save_model

@@ -31,7 +31,7 @@ from dampest_ros.core.batch import Fit, FitOptions
 from dampest_ros.core.estimator import restrict
 from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.pool import Drift, LogStatistics, MapLogs, log_statistics
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.io.remote import glob_url, is_url, local_log, local_name
 from dampest_ros.io.yaml_io import load_vehicle
 

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 from dampest_ros.cli.common import add_protocol_option, add_vehicle_option, describe
 
 if TYPE_CHECKING:
-    from dampest_ros.core.vehicle import Vehicle
+    from dampest_ros.core.physics.vehicle import Vehicle
 
 EXAMPLE = ("example:\n  dampest simulate --vehicle bluerov2_heavy --protocol B --duration 600 "
            "--seed 1 --out bags/b600")

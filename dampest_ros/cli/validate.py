@@ -44,8 +44,8 @@ from dampest_ros.cli.common import (
 if TYPE_CHECKING:
     import numpy as np
 
-    from dampest_ros.core.damping import DampingModel
-    from dampest_ros.core.rigid_body import RigidBody
+    from dampest_ros.core.physics.damping import DampingModel
+    from dampest_ros.core.physics.rigid_body import RigidBody
     from dampest_ros.core.samples import Samples
 
 EXAMPLE = ("example:\n"
@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
 
     from dampest_ros.cli.common import table
     from dampest_ros.cli.inputs import cut, load_model_for, load_samples
-    from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
+    from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
     from dampest_ros.core.validate import free_run_error, longest_segment, metrics
     from dampest_ros.io.csv import write_table
     from dampest_ros.io.yaml_io import load_vehicle

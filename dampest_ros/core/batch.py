@@ -25,12 +25,12 @@ from dampest_ros.core.covariance import (
     block_length,
     robust_covariance,
 )
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.dissipative import dissipation_points, impose, misfit_report
 from dampest_ros.core.model import Model
 from dampest_ros.core.quadratic import solve_normal
 from dampest_ros.core.regression import NormalEquations, accumulate, total_sum_of_squares
-from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import CHUNK, Samples
 
 FloatArray = NDArray[np.float64]

@@ -7,10 +7,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.quadratic import solve_normal
 from dampest_ros.core.regression import NormalEquations, accumulate
-from dampest_ros.core.rigid_body import RigidBody
+from dampest_ros.core.physics.rigid_body import RigidBody
 from dampest_ros.core.samples import Samples
 
 FloatArray = NDArray[np.float64]

@@ -18,8 +18,8 @@ from statistics import NormalDist
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.rigid_body import DOF_NAMES
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.rigid_body import DOF_NAMES
 from dampest_ros.core.samples import CHUNK
 
 FloatArray = NDArray[np.float64]

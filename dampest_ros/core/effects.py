@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
-from dampest_ros.core.terms import CrossSpec, cross_term, memory_term
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError, RigidBody
+from dampest_ros.core.physics.terms import CrossSpec, cross_term, memory_term
+from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
 

@@ -6,7 +6,7 @@ builds the parallel-filtered regression
 Inputs per sample stamp (integer nanoseconds, identical on the four streams): velocity ν,
 acceleration ν̇ and wrench τ (FRD, SI) and the attitude for g(η) (the IMU orientation at the
 sample instant, ROS order [x, y, z, w], FLU → ENU; converted through
-:mod:`dampest_ros.core.frames`). Samples are processed in chunks of ``chunk`` (the regression
+:mod:`dampest_ros.core.physics.frames`). Samples are processed in chunks of ``chunk`` (the regression
 is vectorised over a chunk; the RLS updates sample by sample).
 
 The dampest/* topics carry the preprocessor's samples in that form
@@ -27,13 +27,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core import frames
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics import frames
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.dissipative import project
 from dampest_ros.core.model import Model
 from dampest_ros.core.online.regression import OnlineRegression
 from dampest_ros.core.online.sample import OnlineSample
-from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
 from dampest_ros.core.rls.least_squares import (
     OUTLIER_GATE,
     Diagnostics,
@@ -41,7 +41,7 @@ from dampest_ros.core.rls.least_squares import (
     RLSConfig,
 )
 from dampest_ros.core.samples import wire_stamp
-from dampest_ros.core.vehicle import Vehicle, measured_wrench_scale
+from dampest_ros.core.physics.vehicle import Vehicle, measured_wrench_scale
 
 FloatArray = NDArray[np.float64]
 

@@ -36,8 +36,8 @@ from numpy.typing import NDArray
 from scipy import signal
 
 from dampest_ros.core.design import Design, FourierTrajectory, Kinematic
-from dampest_ros.core.rigid_body import ConfigError
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.vehicle_design import design_vehicle, nominal_wrench, vehicle_limits
 
 FloatArray = NDArray[np.float64]
@@ -230,7 +230,7 @@ def speed_limits(vehicle: Vehicle, fraction: float = 0.5,
     fraction : float
     tau_measured : ndarray, shape (n, 6), optional
         Measured τ (N, N·m); gives τ_max for a vehicle without thrusters
-        (:meth:`~dampest_ros.core.vehicle.Vehicle.wrench_scale`).
+        (:meth:`~dampest_ros.core.physics.vehicle.Vehicle.wrench_scale`).
 
     Returns
     -------

@@ -15,14 +15,14 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.dissipative import envelope, power_rows
-from dampest_ros.core.rigid_body import (
+from dampest_ros.core.physics.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,
     ConfigError,
 )
-from dampest_ros.core.vehicle import damping_from_spec
+from dampest_ros.core.physics.vehicle import damping_from_spec
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

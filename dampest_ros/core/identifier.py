@@ -26,15 +26,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.batch import Fit, FitOptions, fit
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.regression import memory_states
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.validate import force_scores
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
 #: A prior by name: (parameter names, mean θ, standard deviation), each of length p.

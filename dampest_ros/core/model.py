@@ -18,14 +18,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identified import (
     BoolArray,
     check_model_numbers,
     damping_from_names,
     identified_mask,
 )
-from dampest_ros.core.rigid_body import AddedMassTerms, ConfigError, split_coriolis_force
+from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, split_coriolis_force
 
 FloatArray = NDArray[np.float64]
 

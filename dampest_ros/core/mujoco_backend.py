@@ -40,11 +40,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.effects import Effects
-from dampest_ros.core.frames import quat_to_matrix
-from dampest_ros.core.geometry import Geometry
-from dampest_ros.core.rigid_body import AddedMassTerms, ConfigError, RigidBody, skew
+from dampest_ros.core.physics.frames import quat_to_matrix
+from dampest_ros.core.physics.geometry import Geometry
+from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, RigidBody, skew
 from dampest_ros.core.trajectory import Trajectory
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
 

@@ -27,9 +27,9 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from dampest_ros.core.batch import Fit, FitOptions, fit
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.regression import NormalEquations, accumulate
-from dampest_ros.core.rigid_body import ConfigError, RigidBody
+from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 
 FloatArray = NDArray[np.float64]

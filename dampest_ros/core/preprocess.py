@@ -3,7 +3,7 @@
 Pipeline, all vectorised over whole segments:
 
 1. Frames: IMU, DVL and thruster data (or a body-wrench topic) from ROS (FLU/ENU) to
-   Fossen (FRD/NED); then each sensor from its mounting (:mod:`dampest_ros.core.mounting`)
+   Fossen (FRD/NED); then each sensor from its mounting (:mod:`dampest_ros.core.physics.mounting`)
    to the body origin and axes: the IMU's attitude, rates and specific force (its lever-arm
    terms with ω̇ differentiated from the gyro as in step 4), the DVL velocity (lever arm with
    the gyro at the DVL stamps), the pressure depth through the attitude. Messages whose
@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from scipy import fft as sp_fft
 from scipy import integrate
 
-from dampest_ros.core import frames
+from dampest_ros.core.physics import frames
 from dampest_ros.core.measurements import (
     ImuSeries,
     JointSeries,
@@ -43,7 +43,7 @@ from dampest_ros.core.measurements import (
     TwistSeries,
     WrenchSeries,
 )
-from dampest_ros.core.mounting import (
+from dampest_ros.core.physics.mounting import (
     Mounting,
     depth_offset,
     dvl_to_body,
@@ -52,9 +52,9 @@ from dampest_ros.core.mounting import (
     rotate,
     specific_force_at_origin,
 )
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.samples import Samples
-from dampest_ros.core.thrusters import Thrusters
+from dampest_ros.core.physics.thrusters import Thrusters
 
 FloatArray = NDArray[np.float64]
 

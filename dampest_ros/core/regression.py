@@ -16,10 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.frames import matrix_from_euler
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.preprocess import zero_phase
-from dampest_ros.core.rigid_body import RigidBody
+from dampest_ros.core.physics.rigid_body import RigidBody
 from dampest_ros.core.samples import CHUNK, Samples
 
 FloatArray = NDArray[np.float64]

@@ -32,7 +32,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 
 #: A released message: (role, stamp (s), payload as pushed).
 Message = tuple[str, float, Any]

@@ -37,14 +37,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.alpha import Alpha, AlphaBank
-from dampest_ros.core.damping import TERM_KINDS, Basis, DampingModel, DampingTerm
+from dampest_ros.core.physics.alpha import Alpha, AlphaBank
+from dampest_ros.core.physics.damping import TERM_KINDS, Basis, DampingModel, DampingTerm
 from dampest_ros.core.memory_rates import MemoryEvidence, memory_evidence
 from dampest_ros.core.quadratic import solve_normal
 from dampest_ros.core.regression import NormalEquations, accumulate, fold_index, iter_regression
-from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError, RigidBody
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
-from dampest_ros.core.terms import (
+from dampest_ros.core.physics.terms import (
     FAMILIES,
     CrossSpec,
     cross_term,

@@ -12,12 +12,12 @@ in ROS frames (FLU body ``base_link``, ENU world ``odom``), at each sensor's own
 - ``thrusters/state``: JointSeries, ``base_link``; rotor speed (rad/s), logged thrust (N).
 
 By default the sensors sit at the body origin with axes aligned to the body, so their frames
-differ from ``base_link`` only by name; a :class:`~dampest_ros.core.mounting.Mounting` (the
+differ from ``base_link`` only by name; a :class:`~dampest_ros.core.physics.mounting.Mounting` (the
 vehicle file's ``sensors:`` section) puts them elsewhere: the DVL then measures the velocity
 of its own point in its own axes, the IMU the rates and specific force of its point in its
 axes and the attitude of its axes, the pressure sensor the depth of its point, and each
 message carries the mounting's frame_id. Every FRD/NED → FLU/ENU conversion goes through
-:mod:`dampest_ros.core.frames`.
+:mod:`dampest_ros.core.physics.frames`.
 
 Between integration steps the models interpolate the truth: ν by the cubic Hermite polynomial
 through (ν, ν̇) at the two neighbouring steps (its derivative is the IMU's ν̇), the NED
@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.frames import (
+from dampest_ros.core.physics.frames import (
     body_vec,
     matrix_to_quat,
     quat_frd_ned_to_flu_enu,
@@ -61,7 +61,7 @@ from dampest_ros.core.measurements import (
     TwistSeries,
     WrenchSeries,
 )
-from dampest_ros.core.mounting import (
+from dampest_ros.core.physics.mounting import (
     DEFAULT_FRAME_IDS,
     Mounting,
     SensorMount,
@@ -70,7 +70,7 @@ from dampest_ros.core.mounting import (
     lever_velocity,
     rotate,
 )
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.trajectory import Trajectory
 
 FloatArray = NDArray[np.float64]
@@ -82,7 +82,7 @@ BoolArray = NDArray[np.bool_]
 UNUSED_VARIANCE = 1.0e6
 
 #: Frame ids of the sensor messages (those of the IMU, DVL and pressure sensor: defaults of a
-#: :class:`~dampest_ros.core.mounting.Mounting`).
+#: :class:`~dampest_ros.core.physics.mounting.Mounting`).
 FRAME_IDS: dict[str, str] = {
     "truth/odom": "odom",
     "imu/data": DEFAULT_FRAME_IDS["imu"],

@@ -16,16 +16,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.control import VelocityPI
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.effects import Effects, true_vehicle
 from dampest_ros.core.excitation import Excitation, ProtocolStream
 from dampest_ros.core.excitation import protocol as make_protocol
-from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.measurements import Recording
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
 from dampest_ros.core.trajectory import Trajectory
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
 

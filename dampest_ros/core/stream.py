@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from dampest_ros.core.control import VelocityPI
 from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import protocol as make_protocol
-from dampest_ros.core.frames import (
+from dampest_ros.core.physics.frames import (
     body_vec,
     euler_from_matrix,
     quat_frd_ned_to_flu_enu,
@@ -39,7 +39,7 @@ from dampest_ros.core.measurements import (
     Recording,
     TwistSeries,
 )
-from dampest_ros.core.mounting import Mounting
+from dampest_ros.core.physics.mounting import Mounting
 from dampest_ros.core.sensors import (
     FRAME_IDS,
     NOISE_STREAMS,
@@ -54,7 +54,7 @@ from dampest_ros.core.sensors import (
 )
 from dampest_ros.core.simulate import make_plant
 from dampest_ros.core.trajectory import Trajectory
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
 

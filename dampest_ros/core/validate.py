@@ -24,10 +24,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import fft, signal
 
-from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.frames import matrix_from_euler
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.regression import iter_regression
-from dampest_ros.core.rigid_body import ConfigError, RigidBody
+from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.samples import CHUNK, Samples
 
 FloatArray = NDArray[np.float64]

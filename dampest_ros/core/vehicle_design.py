@@ -9,7 +9,7 @@ thrust holds, :func:`dampest_ros.core.excitation.speed_limits`), roll and pitch 
 ±25°, the depth within ±``depth_span``, and every thruster's thrust for the nominal model's
 τ = M ν̇ + C(ν)ν + D(ν)ν + g(η) within ``thrust_share`` of its largest (the rest is the
 velocity controller's margin). The regressor is the damping regressor Φ(ν) of the vehicle's
-terms (what batch identification fits, :meth:`dampest_ros.core.damping.DampingModel.
+terms (what batch identification fits, :meth:`dampest_ros.core.physics.damping.DampingModel.
 regressor`), each row in units of its DOF's thrust range and each column in units of its
 RMS over the speed envelope (velocities uniform within ± the limits): the condition number
 then measures how well the data separate the coefficients and how much of each column's
@@ -31,7 +31,7 @@ from dampest_ros.core.design import (
     Kinematic,
     optimise,
 )
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
 

@@ -41,7 +41,7 @@ column-map entry that settles it:
   ``wx: gyro_x`` … or ``wx: wx`` … declare it;
 - no ``tau_*`` columns but ``thrust_<name>`` (N) or ``rpm_<name>`` (rev/min, through the
   vehicle's thrust curve) per thruster: τ = T_alloc f with the vehicle's allocation matrix
-  (:class:`dampest_ros.core.thrusters.Thrusters`).
+  (:class:`dampest_ros.core.physics.thrusters.Thrusters`).
 
 **Frames.** Every body vector in the CSV (velocities, accelerations, forces) is in Fossen's
 FRD body frame (x forward, y starboard, z down), the frame of the core and of
@@ -72,10 +72,10 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from dampest_ros.core.frames import matrix_from_euler
+from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.measurements import FloatArray
 from dampest_ros.core.samples import Samples
-from dampest_ros.core.thrusters import Thrusters
+from dampest_ros.core.physics.thrusters import Thrusters
 
 #: Body velocity ν = [u v w p q r] (FRD).
 VELOCITY_COLUMNS = ("u", "v", "w", "p", "q", "r")

@@ -1,7 +1,7 @@
 """Vehicle presets and the model file (a ROS 2 parameters file), read and written as YAML.
 
 Vehicle presets (``config/vehicles/<name>.yaml``) are loaded by name or path into a
-:class:`dampest_ros.core.vehicle.Vehicle`.
+:class:`dampest_ros.core.physics.vehicle.Vehicle`.
 
 The model file is a valid ROS 2 parameters file, so ``--ros-args --params-file`` loads it as
 well as :func:`load_model` does (docs/architecture.md §1, §3)::
@@ -36,7 +36,7 @@ indices where letters such as ``N`` or ``Y`` would read as booleans. Damping coe
 positive when dissipative (force on the left-hand side is +D(ν)ν).
 
 ``M_A`` and ``added_mass_terms`` say which effects of the added mass act on the plant the
-model describes (:class:`~dampest_ros.core.rigid_body.AddedMassTerms`: ``inertial`` M_A ν̇,
+model describes (:class:`~dampest_ros.core.physics.rigid_body.AddedMassTerms`: ``inertial`` M_A ν̇,
 ``coriolis`` C_A(ν)ν, ``munk`` its Munk moments); the switches are a namespace of three
 booleans, so ``model.added_mass_terms.coriolis`` is a ROS parameter. Files without them (older
 ones) mean all effects act, and C(ν)ν is that of M as a whole.
@@ -63,13 +63,13 @@ from typing import Any
 import numpy as np
 import yaml
 
-from dampest_ros.core.alpha import Alpha
-from dampest_ros.core.damping import TERM_KINDS, DampingModel
+from dampest_ros.core.physics.alpha import Alpha
+from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel
 from dampest_ros.core.identified import check_model_numbers
 from dampest_ros.core.measurements import FloatArray
 from dampest_ros.core.model import Model
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
-from dampest_ros.core.vehicle import Vehicle, damping_from_spec
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
+from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 
 SIGN_CONVENTION = "dissipative_positive"
 _REQUIRED = ("sign_convention", "parameter_names", "theta", "theta_std", "M", "version")
@@ -145,7 +145,7 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
     ----------
     name_or_path : str or Path
         A preset name such as ``bluerov2_heavy`` or a path to a YAML file with the sections
-        ``vehicle``, ``damping`` and ``thrusters`` (see :mod:`dampest_ros.core.vehicle`).
+        ``vehicle``, ``damping`` and ``thrusters`` (see :mod:`dampest_ros.core.physics.vehicle`).
 
     Returns
     -------
@@ -173,7 +173,7 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
 def damping_spec(model: DampingModel, theta: FloatArray) -> dict[str, Any]:
     """The ``damping`` mapping of a vehicle preset for a model and its coefficients.
 
-    The inverse of :func:`dampest_ros.core.vehicle.damping_from_spec`: that function rebuilds
+    The inverse of :func:`dampest_ros.core.physics.vehicle.damping_from_spec`: that function rebuilds
     the same parameter names, θ and regressor from the result.
 
     Parameters

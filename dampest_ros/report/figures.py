@@ -15,8 +15,8 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from dampest_ros.core import validate
-from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES
 
 FloatArray = NDArray[np.float64]
 

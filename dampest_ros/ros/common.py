@@ -246,7 +246,7 @@ def model_file_check(name: str) -> Callable[[Any], str | None]:
     non-finite numbers, …), prefixed with the parameter's name."""
 
     def check(value: Any) -> str | None:
-        from dampest_ros.core.rigid_body import ConfigError
+        from dampest_ros.core.physics.rigid_body import ConfigError
         from dampest_ros.io.yaml_io import load_model
 
         if not str(value).strip():
@@ -263,7 +263,7 @@ def model_file_check(name: str) -> Callable[[Any], str | None]:
 def vehicle_check(value: Any) -> str | None:
     """A :class:`Param` check for a vehicle preset name or YAML path: the reason
     :func:`~dampest_ros.io.yaml_io.load_vehicle` refuses it, or None."""
-    from dampest_ros.core.rigid_body import ConfigError
+    from dampest_ros.core.physics.rigid_body import ConfigError
     from dampest_ros.io.yaml_io import load_vehicle
 
     try:

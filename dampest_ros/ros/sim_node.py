@@ -21,10 +21,10 @@ from rclpy.clock import Clock, ClockType
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import FluidPressure, Imu, JointState
 
-from dampest_ros.core import frames
+from dampest_ros.core.physics import frames
 from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import LIVE_PROTOCOLS
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.sensors import SensorConfig
 from dampest_ros.core.simulate import BACKENDS
 from dampest_ros.core.stream import LiveSimulation

@@ -15,9 +15,9 @@ import pytest
 
 from dampest_ros.cli.inputs import load_model_for
 from dampest_ros.cli.main import main
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.model import Model
-from dampest_ros.core.terms import CrossSpec, cross_term
+from dampest_ros.core.physics.terms import CrossSpec, cross_term
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 
 

@@ -11,7 +11,7 @@ import pytest
 
 from dampest_ros.cli.main import main
 from dampest_ros.core.regression import target
-from dampest_ros.core.rigid_body import coriolis_force, munk_moment
+from dampest_ros.core.physics.rigid_body import coriolis_force, munk_moment
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.validate import metrics, predicted_force
 from dampest_ros.io import csv as dcsv
@@ -129,7 +129,7 @@ def test_bad_window_or_holdout_is_one_line_and_exit_2(
 def seed_flavour(s: Samples, rpm: bool) -> dict[str, np.ndarray]:
     """The seed paper's flavour of samples: ax..az the IMU's specific force with az ≈ +g at
     rest, wx..wz gyro rates (= p, q, r), per-thruster thrust (or rpm) and no tau columns."""
-    from dampest_ros.core.frames import matrix_from_euler
+    from dampest_ros.core.physics.frames import matrix_from_euler
 
     cols = dcsv.samples_to_columns(s)
     down = matrix_from_euler(s.euler)[:, 2, :]

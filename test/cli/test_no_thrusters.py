@@ -12,11 +12,11 @@ import pytest
 import yaml
 
 from dampest_ros.cli.main import main
-from dampest_ros.core import frames
+from dampest_ros.core.physics import frames
 from dampest_ros.core.estimator import CORRELATION_SECONDS, EstimatorConfig, OnlineEstimator
 from dampest_ros.core.measurements import JointSeries, WrenchSeries
 from dampest_ros.core.preprocess import thruster_wrench
-from dampest_ros.core.vehicle import measured_wrench_scale
+from dampest_ros.core.physics.vehicle import measured_wrench_scale
 from dampest_ros.io.bag import read_bag, write_bag
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model, vehicle_path
 
@@ -197,7 +197,7 @@ def test_preprocess_node_takes_the_wrench_topic_without_thrusters(run: Path) -> 
     from rclpy.serialization import serialize_message
 
     from dampest_ros.core.online.preprocessor import OnlinePreprocessor
-    from dampest_ros.core.rigid_body import ConfigError
+    from dampest_ros.core.physics.rigid_body import ConfigError
     from dampest_ros.ros.convert import publications
     from dampest_ros.ros.preprocess_node import PreprocessNode
 

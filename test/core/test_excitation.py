@@ -11,7 +11,7 @@ import pytest
 from dampest_ros.core import excitation
 from dampest_ros.core.excitation import LIVE_PROTOCOLS, protocol
 from dampest_ros.core.simulate import run
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.vehicle_design import design_vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 

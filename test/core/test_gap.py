@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.gap.data import GapData
@@ -56,13 +56,13 @@ from dampest_ros.core.gap.search import NO_FURTHER, GapResult, find_gap, rejecti
 from dampest_ros.core.gap.update import divergence_reason, updated_model
 from dampest_ros.core.measurements import JointSeries
 from dampest_ros.core.preprocess import PreprocessConfig, preprocess
-from dampest_ros.core.rigid_body import DOF_NAMES, AddedMassTerms, RigidBody
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, AddedMassTerms, RigidBody
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.selection import DEFAULT_CROSS
 from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
 from dampest_ros.core.simulate import run
-from dampest_ros.core.terms import CrossSpec, cross_term, linear_term, quadratic_term
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.terms import CrossSpec, cross_term, linear_term, quadratic_term
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 
 DURATION = 600.0

@@ -8,7 +8,7 @@ import pytest
 from dampest_ros.core.control import VelocityPI, tracking_rms
 from dampest_ros.core.identified import damping_from_names
 from dampest_ros.core.model import Model
-from dampest_ros.core.rigid_body import ConfigError, coriolis_force
+from dampest_ros.core.physics.rigid_body import ConfigError, coriolis_force
 from dampest_ros.core.simulate import Simulator, track
 from dampest_ros.io.yaml_io import load_vehicle
 
@@ -60,7 +60,7 @@ def test_coriolis_force_honours_the_added_mass_switches(switches: dict[str, bool
     """
     from dataclasses import replace
 
-    from dampest_ros.core.rigid_body import AddedMassTerms
+    from dampest_ros.core.physics.rigid_body import AddedMassTerms
 
     v = load_vehicle("torpedo_auv")
     terms = AddedMassTerms(**switches)

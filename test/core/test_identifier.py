@@ -9,11 +9,11 @@ import pytest
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.identifier import DampingIdentifier
 from dampest_ros.core.preprocess import preprocess
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
 from dampest_ros.core.simulate import run
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 
 

@@ -13,8 +13,8 @@ import yaml
 
 from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import make_excitation
-from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
-from dampest_ros.core.geometry import Geometry
+from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.physics.geometry import Geometry
 from dampest_ros.core.mujoco_backend import (
     MujocoSimulator,
     compile_model,
@@ -22,10 +22,10 @@ from dampest_ros.core.mujoco_backend import (
     plant_vehicle,
 )
 from dampest_ros.core.regression import target
-from dampest_ros.core.rigid_body import AddedMassTerms, ConfigError, coriolis_force
+from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, coriolis_force
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.simulate import run
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 
 mujoco = pytest.importorskip("mujoco")

@@ -11,7 +11,7 @@ import pytest
 from scipy import signal
 
 from dampest_ros.core.batch import FitOptions, fit
-from dampest_ros.core.damping import filter_memory
+from dampest_ros.core.physics.damping import filter_memory
 from dampest_ros.core.dissipative import envelope
 from dampest_ros.core.effects import Effects
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
@@ -22,12 +22,12 @@ from dampest_ros.core.online.regression import LowPass, OnlineRegression
 from dampest_ros.core.online.sample import OnlineConfig, to_samples
 from dampest_ros.core.preprocess import PreprocessConfig, preprocess
 from dampest_ros.core.regression import iter_regression
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.rls.least_squares import RecursiveLeastSquares, RLSConfig
 from dampest_ros.core.sensors import SensorConfig, measure
 from dampest_ros.core.simulate import run
 from dampest_ros.core.trajectory import Trajectory
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 from dampest_ros.report.convergence import band_coverage
 
@@ -94,7 +94,7 @@ def test_samples_follow_the_truth(vehicle: Vehicle, flight: tuple[Trajectory, Re
 
 
 def _euler(traj: Trajectory) -> np.ndarray:
-    from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
+    from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
     return euler_from_matrix(quat_to_matrix(traj.quaternion))
 
 
@@ -231,9 +231,9 @@ def test_parallel_filter_keeps_the_regression_exact(vehicle: Vehicle) -> None:
 
 def test_regression_matches_the_batch_path_and_memory(vehicle: Vehicle) -> None:
     """Without the low-pass, (Φ, y) equal batch.iter_regression, memory states included."""
-    from dampest_ros.core.damping import DampingModel
+    from dampest_ros.core.physics.damping import DampingModel
     from dampest_ros.core.online.sample import OnlineSample
-    from dampest_ros.core.terms import memory_term
+    from dampest_ros.core.physics.terms import memory_term
     model = DampingModel([*vehicle.damping.terms, memory_term({"u": [2.0], "r": [0.5]})])
     rng = np.random.default_rng(2)
     n = 200

@@ -10,7 +10,7 @@ import pytest
 
 from dampest_ros.core.batch import FitOptions, fit
 from dampest_ros.core.excitation import make_excitation
-from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.pool import (
     LogStatistics,
     drift,
@@ -20,7 +20,7 @@ from dampest_ros.core.pool import (
 )
 from dampest_ros.core.samples import Samples
 from dampest_ros.core.simulate import run
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 
 OPTIONS = FitOptions(method="wls", cutoff=2.0, gyro_bias=0.0, dvl_bias=0.0)

@@ -19,7 +19,7 @@ from dampest_ros.core.preprocess import (
 from dampest_ros.core.sensors import SensorConfig, measure
 from dampest_ros.core.simulate import run
 from dampest_ros.core.trajectory import Trajectory
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 
 QUIET = SensorConfig(gyro_noise=0, gyro_bias_walk=0, accel_noise=0, accel_bias_walk=0,

@@ -11,7 +11,7 @@ from dampest_ros.core.measurements import Recording
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import DEFAULT_TOPICS, TOPIC_ROLES
 from dampest_ros.core.reorder import StampOrder
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.sensors import SensorConfig, measure
 from dampest_ros.core.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle

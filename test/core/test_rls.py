@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.rls.least_squares import RecursiveLeastSquares, RLSConfig
 from dampest_ros.core.rls.monitors import CorrelationFactor, Cusum, InnovationMonitor
 from dampest_ros.core.rls.update import forget, rls_update, scaled_trace

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dampest_ros.core.frames import matrix_from_euler, matrix_to_quat
+from dampest_ros.core.physics.frames import matrix_from_euler, matrix_to_quat
 from dampest_ros.core.measurements import (
     ImuSeries,
     JointSeries,

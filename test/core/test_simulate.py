@@ -12,11 +12,11 @@ import yaml
 
 from dampest_ros.core.effects import Effects
 from dampest_ros.core.excitation import PROTOCOLS, make_excitation
-from dampest_ros.core.frames import euler_from_matrix, quat_to_matrix
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.simulate import Simulator, run
 from dampest_ros.core.trajectory import Trajectory
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 
 PRESET_DIR = Path(__file__).resolve().parents[2] / "config" / "vehicles"
 

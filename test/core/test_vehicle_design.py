@@ -8,8 +8,8 @@ import pytest
 
 from dampest_ros.core.design import FourierTrajectory
 from dampest_ros.core.excitation import protocol, speed_limits
-from dampest_ros.core.frames import matrix_from_euler
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.frames import matrix_from_euler
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.vehicle_design import (
     COORDINATES,
     _problem,

@@ -156,7 +156,7 @@ def motion(n: int = 2000, rate: float = 100.0) -> dict[str, np.ndarray]:
 
 def specific_force(m: dict[str, np.ndarray]) -> np.ndarray:
     """f = v̇ + ω × v − g Rᵀe_z (what an IMU at the body origin measures, FRD)."""
-    from dampest_ros.core.frames import matrix_from_euler
+    from dampest_ros.core.physics.frames import matrix_from_euler
 
     nu = np.stack([m[c] for c in dcsv.VELOCITY_COLUMNS], axis=1)
     v_dot = np.stack([m[c] for c in ("ax", "ay", "az")], axis=1)

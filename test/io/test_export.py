@@ -20,8 +20,8 @@ import yaml
 
 from dampest_ros.cli.main import main
 from dampest_ros.core.model import Model
-from dampest_ros.core.rigid_body import ConfigError
-from dampest_ros.core.vehicle import Vehicle, damping_from_spec
+from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 from dampest_ros.io.export.common import ExportWarning, NotDissipativeError, imported_mass
 from dampest_ros.io.export.convert import export_model, import_model
 from dampest_ros.io.export.gz import export_gz, import_gz
@@ -527,7 +527,7 @@ def test_cli_import_urdf_without_rigid_body_needs_a_vehicle(tmp_path: Path) -> N
 
 def switched_file(tmp_path: Path, heavy: Vehicle, **switches: bool) -> Path:
     """The heavy's model with model.M_A and the given added-mass switches."""
-    from dampest_ros.core.rigid_body import AddedMassTerms
+    from dampest_ros.core.physics.rigid_body import AddedMassTerms
     return save_model(tmp_path / "switched.yaml", Model(heavy.damping.parameter_names, heavy.theta,
                                                         np.zeros(heavy.damping.n_params),
                                                         heavy.body.M, damping=heavy.damping,
@@ -572,7 +572,7 @@ def test_gz_maps_the_added_mass_switches_and_reads_them_back(
 
 
 def load_terms(**kw: bool) -> Any:
-    from dampest_ros.core.rigid_body import AddedMassTerms
+    from dampest_ros.core.physics.rigid_body import AddedMassTerms
     return AddedMassTerms(**kw)
 
 

@@ -15,8 +15,8 @@ import pytest
 import yaml
 
 from dampest_ros.core.model import Model
-from dampest_ros.core.rigid_body import ConfigError
-from dampest_ros.core.vehicle import damping_from_spec
+from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.physics.vehicle import damping_from_spec
 from dampest_ros.io import yaml_io
 
 PRESETS = Path(__file__).resolve().parents[2] / "config" / "vehicles"
@@ -122,7 +122,7 @@ def test_model_file_round_trip(tmp_path: Path) -> None:
 def test_model_file_is_a_ros_parameters_file(tmp_path: Path) -> None:
     """rcl's own YAML parser (as for --params-file) reads every entry with the right type."""
     model, theta = damping_from_spec(FULL_SPEC)
-    from dampest_ros.core.rigid_body import AddedMassTerms
+    from dampest_ros.core.physics.rigid_body import AddedMassTerms
     # σ of the two coefficients held at their prior: not estimated (inf, nan)
     std = np.r_[np.inf, np.nan, np.full(theta.size - 2, 0.5)]
     held = dict(zip(model.parameter_names[:2], ["no data", "n"], strict=True))
@@ -209,7 +209,7 @@ def test_added_mass_switches_round_trip_through_the_file_and_the_parameters(
         tmp_path: Path) -> None:
     """model.M_A and model.added_mass_terms go into the file and the model.* parameters and
     come back exactly; older files without them read as all switches on, no M_A."""
-    from dampest_ros.core.rigid_body import AddedMassTerms
+    from dampest_ros.core.physics.rigid_body import AddedMassTerms
 
     model, theta = damping_from_spec({"linear": {"X_u": 13.7, "N_r": 0.5}})
     v = yaml_io.load_vehicle("bluerov2_heavy")

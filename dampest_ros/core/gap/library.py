@@ -23,9 +23,9 @@ from dampest_ros.core.gap.model_effects import (
     Cross,
     Memory,
 )
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.selection import DEFAULT_CROSS
-from dampest_ros.core.terms import CrossSpec
+from dampest_ros.core.physics.terms import CrossSpec
 
 
 def library(names: Sequence[str] | None = None) -> list[Effect]:

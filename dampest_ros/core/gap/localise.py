@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from scipy import signal
 
 from dampest_ros.core.gap.data import rms
-from dampest_ros.core.rigid_body import DOF_NAMES
+from dampest_ros.core.physics.rigid_body import DOF_NAMES
 from dampest_ros.core.samples import Samples
 
 FloatArray = NDArray[np.float64]

@@ -8,17 +8,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.damping import DampingModel, filter_memory
+from dampest_ros.core.physics.damping import DampingModel, filter_memory
 from dampest_ros.core.gap.data import Chunk, GapData
 from dampest_ros.core.gap.effects import Effect, LinearEffect
-from dampest_ros.core.rigid_body import (
+from dampest_ros.core.physics.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,
     AddedMassTerms,
     ConfigError,
     added_coriolis_force,
 )
-from dampest_ros.core.terms import CrossSpec, cross_term
+from dampest_ros.core.physics.terms import CrossSpec, cross_term
 
 FloatArray = NDArray[np.float64]
 

@@ -11,10 +11,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from dampest_ros.core.damping import DampingModel, DampingTerm
+from dampest_ros.core.physics.damping import DampingModel, DampingTerm
 from dampest_ros.core.gap.data import FORCE_UNITS, GapData, bind
 from dampest_ros.core.gap.effects import Effect
-from dampest_ros.core.rigid_body import (
+from dampest_ros.core.physics.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,
     AddedMassTerms,
@@ -22,7 +22,7 @@ from dampest_ros.core.rigid_body import (
     RigidBody,
 )
 from dampest_ros.core.samples import Samples
-from dampest_ros.core.terms import CrossSpec, cross_term, linear_term, memory_term, quadratic_term
+from dampest_ros.core.physics.terms import CrossSpec, cross_term, linear_term, memory_term, quadratic_term
 from dampest_ros.core.validate import free_run_error, longest_segment
 
 FloatArray = NDArray[np.float64]

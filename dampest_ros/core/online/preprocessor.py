@@ -7,7 +7,7 @@ messages of a :data:`~dampest_ros.core.measurements.Recording` in stamp order th
 very same methods), so live topics and replayed bags take one code path.
 
 State estimation (FRD body, NED world; frames converted only through
-:mod:`dampest_ros.core.frames`):
+:mod:`dampest_ros.core.physics.frames`):
 
 - **Linear velocity**: a filterpy ``KalmanFilter`` per stream with state
   x = [v_NED (3), b_a (3)] (NED velocity, accelerometer bias in the body frame). Prediction
@@ -22,7 +22,7 @@ State estimation (FRD body, NED world; frames converted only through
   lags by L = T (α/β − ½) (its error for a constant ω̈ is −L ω̈); ω̇ is read L later so that
   ω, ω̇ and τ refer to the same instant.
 - **Attitude** from the IMU orientation; **depth** from the pressure.
-- **Mounting** (:mod:`dampest_ros.core.mounting`, the vehicle's ``sensors:``): the IMU's
+- **Mounting** (:mod:`dampest_ros.core.physics.mounting`, the vehicle's ``sensors:``): the IMU's
   attitude, rates and specific force are turned to the body axes, its specific force moved to
   the origin with ω̇ from the angular filter; the DVL velocity is turned to the body axes and
   its lever arm removed with ω of the angular filter at the DVL stamp; the depth of the
@@ -60,7 +60,7 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 from numpy.typing import NDArray
 
-from dampest_ros.core import frames
+from dampest_ros.core.physics import frames
 from dampest_ros.core.measurements import (
     ImuSeries,
     JointSeries,
@@ -70,7 +70,7 @@ from dampest_ros.core.measurements import (
     WrenchSeries,
     stamp_order,
 )
-from dampest_ros.core.mounting import (
+from dampest_ros.core.physics.mounting import (
     Mounting,
     cross,
     depth_offset,
@@ -81,7 +81,7 @@ from dampest_ros.core.mounting import (
 )
 from dampest_ros.core.online.sample import DEFAULT_TOPICS, OnlineConfig, OnlineSample, topic_roles
 from dampest_ros.core.preprocess import DataError, body_wrench
-from dampest_ros.core.thrusters import Thrusters
+from dampest_ros.core.physics.thrusters import Thrusters
 
 FloatArray = NDArray[np.float64]
 

@@ -16,10 +16,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from dampest_ros.core.damping import DampingModel
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.regression import target
-from dampest_ros.core.rigid_body import ConfigError, RigidBody
+from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.samples import Samples
 
 FloatArray = NDArray[np.float64]
@@ -113,7 +113,7 @@ class OnlineRegression:
         h = 1.0 / self.rate
         lam = model.memory_rates
         self._mem_a = np.exp(-lam * h)
-        # first-order hold, as in dampest_ros.core.damping.filter_memory
+        # first-order hold, as in dampest_ros.core.physics.damping.filter_memory
         with np.errstate(divide="ignore", invalid="ignore"):
             self._mem_b1 = (lam * h - 1.0 + self._mem_a) / (lam * lam * h)
             self._mem_b0 = (1.0 - self._mem_a) / lam - self._mem_b1

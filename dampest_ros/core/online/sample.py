@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.preprocess import DataError
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.samples import Samples
 
 FloatArray = NDArray[np.float64]

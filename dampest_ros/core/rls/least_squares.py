@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
 from dampest_ros.core.rls.monitors import CorrelationFactor, InnovationMonitor, OutlierGate, ew_mean
 from dampest_ros.core.rls.update import BLOCK, FORGETTING_MODES, block_update, scaled_trace, step
 

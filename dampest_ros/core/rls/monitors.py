@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.rigid_body import FORCE_NAMES, ConfigError
+from dampest_ros.core.physics.rigid_body import FORCE_NAMES, ConfigError
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

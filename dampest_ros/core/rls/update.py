@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import lapack
 
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 
 FloatArray = NDArray[np.float64]
 

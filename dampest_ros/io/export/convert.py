@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from dampest_ros.core.model import Model
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export import FORMATS, IMPORT_FORMATS
 from dampest_ros.io.export.common import Exported, Imported
 from dampest_ros.io.export.gz import export_gz, import_gz

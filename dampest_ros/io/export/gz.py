@@ -30,11 +30,11 @@ from typing import Any
 
 import numpy as np
 
-from dampest_ros.core.damping import FloatArray
-from dampest_ros.core.frames import body_twist
+from dampest_ros.core.physics.damping import FloatArray
+from dampest_ros.core.physics.frames import body_twist
 from dampest_ros.core.model import Model
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export import FRAMES
 from dampest_ros.io.export.common import (
     Coefficient,

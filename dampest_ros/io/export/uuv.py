@@ -19,10 +19,10 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from dampest_ros.core.damping import FloatArray
-from dampest_ros.core.frames import body_twist
+from dampest_ros.core.physics.damping import FloatArray
+from dampest_ros.core.physics.frames import body_twist
 from dampest_ros.core.model import Model
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export.common import (
     Coefficient,
     Exported,

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 
 FloatArray = NDArray[np.float64]
 

@@ -1,11 +1,11 @@
-"""Frame conventions (dampest_ros.core.frames): FRD/NED (Fossen) against FLU/ENU (REP-103)."""
+"""Frame conventions (dampest_ros.core.physics.frames): FRD/NED (Fossen) against FLU/ENU (REP-103)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from dampest_ros.core.frames import (
+from dampest_ros.core.physics.frames import (
     body_twist,
     body_vec,
     euler_from_matrix,

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 
 FloatArray = NDArray[np.float64]
 

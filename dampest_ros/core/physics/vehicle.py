@@ -25,11 +25,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.damping import DampingModel, DampingTerm
-from dampest_ros.core.geometry import Geometry
-from dampest_ros.core.mounting import Mounting
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
-from dampest_ros.core.terms import (
+from dampest_ros.core.physics.damping import DampingModel, DampingTerm
+from dampest_ros.core.physics.geometry import Geometry
+from dampest_ros.core.physics.mounting import Mounting
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
+from dampest_ros.core.physics.terms import (
     CrossSpec,
     added_mass_term,
     coriolis_term,
@@ -39,7 +39,7 @@ from dampest_ros.core.terms import (
     quadratic_term,
     residual_term,
 )
-from dampest_ros.core.thrusters import Thrusters
+from dampest_ros.core.physics.thrusters import Thrusters
 
 FloatArray = NDArray[np.float64]
 
@@ -159,7 +159,7 @@ class Vehicle:
         The file the vehicle was read from ("" when built in code), for messages.
     mounting : Mounting
         Where the IMU, DVL and pressure sensor sit, from a ``sensors:`` section
-        (:mod:`dampest_ros.core.mounting`; default: at the origin, aligned).
+        (:mod:`dampest_ros.core.physics.mounting`; default: at the origin, aligned).
     """
 
     name: str
@@ -205,7 +205,7 @@ class Vehicle:
 
     def wrench_scale(self, tau: FloatArray | None = None) -> FloatArray:
         """The largest generalised force per DOF, shape (6,) (N, N·m): the thrusters'
-        :attr:`~dampest_ros.core.thrusters.Thrusters.max_wrench`, or without thrusters that
+        :attr:`~dampest_ros.core.physics.thrusters.Thrusters.max_wrench`, or without thrusters that
         of the measured τ (:func:`measured_wrench_scale`).
 
         Parameters

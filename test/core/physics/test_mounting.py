@@ -14,17 +14,17 @@ import yaml
 
 from dampest_ros.core.batch import Fit, FitOptions, fit
 from dampest_ros.core.excitation import make_excitation
-from dampest_ros.core.frames import matrix_from_euler, matrix_to_quat
+from dampest_ros.core.physics.frames import matrix_from_euler, matrix_to_quat
 from dampest_ros.core.measurements import ImuSeries, PressureSeries, Recording, TwistSeries
-from dampest_ros.core.mounting import Mounting, SensorMount
+from dampest_ros.core.physics.mounting import Mounting, SensorMount
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import to_samples
 from dampest_ros.core.preprocess import preprocess
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.sensors import SensorConfig, measure
 from dampest_ros.core.simulate import run
 from dampest_ros.core.trajectory import Trajectory
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle, vehicle_path
 
 G, RHO, ATM = 9.81, 1000.0, 101325.0

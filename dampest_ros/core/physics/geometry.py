@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.rigid_body import ConfigError
 
 #: MuJoCo's default ellipsoid fluid coefficients: blunt drag, slender drag, angular drag,
 #: Kutta lift, Magnus lift.

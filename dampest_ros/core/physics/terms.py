@@ -44,9 +44,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.alpha import Alpha, dof_index
-from dampest_ros.core.damping import Basis, DampingTerm, unit
-from dampest_ros.core.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
+from dampest_ros.core.physics.alpha import Alpha, dof_index
+from dampest_ros.core.physics.damping import Basis, DampingTerm, unit
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 
 FloatArray = NDArray[np.float64]
 

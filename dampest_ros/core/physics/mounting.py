@@ -12,7 +12,7 @@ Positions are metres from the body origin in the vehicle file's body frame, Foss
 frame of the thruster positions and r_g, r_b). ``rpy`` (rad) are the ZYX Euler angles of the
 sensor's axes in that FRD frame: R_bs = Rz(yaw) Ry(pitch) Rx(roll) takes a vector in the
 sensor's axes to the body's. A sensor's message holds FLU vectors of its own frame
-(REP-103), converted to the sensor's FRD axes by :mod:`dampest_ros.core.frames` like any
+(REP-103), converted to the sensor's FRD axes by :mod:`dampest_ros.core.physics.frames` like any
 body vector. (A URDF joint of the same sensor, written in FLU, has xyz = (x, −y, −z) and
 rpy = (roll, −pitch, −yaw).) Defaults: every sensor at the origin, aligned with the body,
 frame ids ``imu_link``, ``dvl_link``, ``pressure_link``.
@@ -41,8 +41,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.frames import matrix_from_euler
-from dampest_ros.core.rigid_body import ConfigError
+from dampest_ros.core.physics.frames import matrix_from_euler
+from dampest_ros.core.physics.rigid_body import ConfigError
 
 FloatArray = NDArray[np.float64]
 

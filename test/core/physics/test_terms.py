@@ -1,14 +1,14 @@
-"""Term constructors (dampest_ros.core.terms) checked against independent forms."""
+"""Term constructors (dampest_ros.core.physics.terms) checked against independent forms."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from dampest_ros.core.damping import DampingModel
-from dampest_ros.core.rigid_body import ConfigError, coriolis_force
-from dampest_ros.core.terms import coriolis_term
-from dampest_ros.core.vehicle import damping_from_spec
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.rigid_body import ConfigError, coriolis_force
+from dampest_ros.core.physics.terms import coriolis_term
+from dampest_ros.core.physics.vehicle import damping_from_spec
 
 
 def test_the_coriolis_term_is_fossens_added_mass_coriolis_of_its_corrections() -> None:

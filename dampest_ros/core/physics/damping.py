@@ -15,8 +15,8 @@ finite-dimensional form of ∫ K(t−s) ν(s) ds with K(t) = Σ_m c_m e^{−λ_m
 All velocities are in Fossen's FRD body frame, relative to the water. Coefficients are stored
 positive when dissipative (force on the left-hand side is +D(ν)ν).
 
-The scalar functions α(ν) are in :mod:`dampest_ros.core.alpha`, the term constructors and the
-library of candidate terms with their names in :mod:`dampest_ros.core.terms`.
+The scalar functions α(ν) are in :mod:`dampest_ros.core.physics.alpha`, the term constructors and the
+library of candidate terms with their names in :mod:`dampest_ros.core.physics.terms`.
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.alpha import Alpha, AlphaBank
-from dampest_ros.core.rigid_body import DOF_NAMES, ConfigError
+from dampest_ros.core.physics.alpha import Alpha, AlphaBank
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
 
 FloatArray = NDArray[np.float64]
 

@@ -1,4 +1,4 @@
-"""Rigid body (dampest_ros.core.rigid_body): M, C(ν), g(η) and configuration checks."""
+"""Rigid body (dampest_ros.core.physics.rigid_body): M, C(ν), g(η) and configuration checks."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
-from dampest_ros.core.frames import matrix_from_euler
-from dampest_ros.core.rigid_body import (
+from dampest_ros.core.physics.frames import matrix_from_euler
+from dampest_ros.core.physics.rigid_body import (
     ConfigError,
     RigidBody,
     coriolis_force,
@@ -19,7 +19,7 @@ from dampest_ros.core.rigid_body import (
     rigid_body_mass,
     skew,
 )
-from dampest_ros.core.vehicle import Vehicle
+from dampest_ros.core.physics.vehicle import Vehicle
 
 PRESET_DIR = Path(__file__).resolve().parents[2] / "config" / "vehicles"
 PRESETS = sorted(PRESET_DIR.glob("*.yaml"))

@@ -1,7 +1,7 @@
 """Rigid-body and restoring parts of Fossen's equation: M, C(ν) and g(η).
 
 All quantities are in Fossen's body frame (FRD) and world frame (NED); see
-:mod:`dampest_ros.core.frames` for the conversion to ROS frames.
+:mod:`dampest_ros.core.physics.frames` for the conversion to ROS frames.
 
 Functions are vectorised over leading sample axes.
 """

@@ -1,14 +1,14 @@
-"""Damping terms (dampest_ros.core.damping): regressor, names, dissipativity, memory, scaling."""
+"""Damping terms (dampest_ros.core.physics.damping): regressor, names, dissipativity, memory, scaling."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from dampest_ros.core.alpha import Alpha, AlphaBank
-from dampest_ros.core.damping import DampingModel, filter_memory, psd_project
-from dampest_ros.core.rigid_body import ConfigError
-from dampest_ros.core.terms import (
+from dampest_ros.core.physics.alpha import Alpha, AlphaBank
+from dampest_ros.core.physics.damping import DampingModel, filter_memory, psd_project
+from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.physics.terms import (
     CrossSpec,
     added_mass_term,
     cross_term,
@@ -17,7 +17,7 @@ from dampest_ros.core.terms import (
     quadratic_term,
     residual_term,
 )
-from dampest_ros.core.vehicle import nondim_scales
+from dampest_ros.core.physics.vehicle import nondim_scales
 
 CROSS = [
     CrossSpec(1, 1, Alpha.parse("|r|")),  # Y_vr: Y ← v |r|
