@@ -27,7 +27,7 @@ _HOME = {
     "load_vehicle": "dampest_ros.io.yaml_io",
     "read_bag": "dampest_ros.io.bag",
     "read_csv": "dampest_ros.io.csv",
-    "preprocess": "dampest_ros.core.preprocess",
+    "preprocess": "dampest_ros.core.signals.preprocess",
     "DampingIdentifier": "dampest_ros.core.identifier",
     "Model": "dampest_ros.core.model",
     "load_model": "dampest_ros.io.yaml_io",
@@ -43,7 +43,7 @@ if TYPE_CHECKING:
     from dampest_ros.core.gap.search import find_gap
     from dampest_ros.core.identifier import DampingIdentifier
     from dampest_ros.core.model import Model
-    from dampest_ros.core.preprocess import preprocess
+    from dampest_ros.core.signals.preprocess import preprocess
     from dampest_ros.core.simulate import simulate
     from dampest_ros.io.bag import read_bag
     from dampest_ros.io.csv import read_csv

@@ -29,9 +29,9 @@ from dampest_ros.core.physics.mounting import frame_id_note
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import OnlineConfig
 from dampest_ros.core.pool import drift, pooled_fit, pooled_samples
-from dampest_ros.core.preprocess import DataError
+from dampest_ros.core.signals.preprocess import DataError
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.selection import Selection, select_terms
 from dampest_ros.core.validate import force_scores
 from dampest_ros.core.physics.vehicle import Vehicle

@@ -20,9 +20,9 @@ from dampest_ros.cli.common import Progress, tau_topic, topic_roles
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.delay import profile_delay
 from dampest_ros.core.model import Model
-from dampest_ros.core.preprocess import DataError, PreprocessConfig, preprocess
+from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, preprocess
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.bag import BagSource, bag_summary, check_role_types
 from dampest_ros.io.csv import is_csv, load_column_map, read_log

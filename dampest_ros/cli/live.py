@@ -18,7 +18,7 @@ from dampest_ros.core.control import DEFAULT_BANDWIDTH
 from dampest_ros.core.effects import Effects, true_vehicle
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
 from dampest_ros.core.model import Model
-from dampest_ros.core.preprocess import DataError
+from dampest_ros.core.signals.preprocess import DataError
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import save_model

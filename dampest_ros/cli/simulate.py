@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from dampest_ros.core.effects import Effects, true_vehicle
     from dampest_ros.core.excitation import protocol
     from dampest_ros.core.model import Model
-    from dampest_ros.core.preprocess import PreprocessConfig, preprocess
+    from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
     from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
     from dampest_ros.core.simulate import run as run_sim
     from dampest_ros.io.bag import write_bag

@@ -46,7 +46,7 @@ if TYPE_CHECKING:
 
     from dampest_ros.core.physics.damping import DampingModel
     from dampest_ros.core.physics.rigid_body import RigidBody
-    from dampest_ros.core.samples import Samples
+    from dampest_ros.core.signals.samples import Samples
 
 EXAMPLE = ("example:\n"
            "  dampest identify bags/run1 --vehicle bluerov2_heavy --out model.yaml\n"
@@ -88,7 +88,7 @@ def model_forces(samples: Samples, model: DampingModel, body: RigidBody, theta: 
     """
     import numpy as np
 
-    from dampest_ros.core.preprocess import zero_phase
+    from dampest_ros.core.signals.preprocess import zero_phase
     from dampest_ros.core.validate import predicted_force
 
     theta = np.asarray(theta, dtype=float)

@@ -31,7 +31,7 @@ from dampest_ros.core.model import Model
 from dampest_ros.core.quadratic import solve_normal
 from dampest_ros.core.regression import NormalEquations, accumulate, total_sum_of_squares
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError, RigidBody
-from dampest_ros.core.samples import CHUNK, Samples
+from dampest_ros.core.signals.samples import CHUNK, Samples
 
 FloatArray = NDArray[np.float64]
 

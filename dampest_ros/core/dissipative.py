@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import DOF_NAMES
-from dampest_ros.core.samples import CHUNK
+from dampest_ros.core.signals.samples import CHUNK
 
 FloatArray = NDArray[np.float64]
 #: Rounds of :func:`impose` and the worst points each adds to the constraint.

@@ -10,7 +10,7 @@ sample instant, ROS order [x, y, z, w], FLU → ENU; converted through
 is vectorised over a chunk; the RLS updates sample by sample).
 
 The dampest/* topics carry the preprocessor's samples in that form
-(:func:`~dampest_ros.core.samples.wire_stamp`, :func:`attitude_quaternion`);
+(:func:`~dampest_ros.core.signals.samples.wire_stamp`, :func:`attitude_quaternion`);
 :meth:`OnlineEstimator.add_sample` feeds a sample exactly as it arrives through them, so that
 an offline run (``dampest identify --method rls``) takes the nodes' code path number for
 number.
@@ -40,7 +40,7 @@ from dampest_ros.core.rls.least_squares import (
     RecursiveLeastSquares,
     RLSConfig,
 )
-from dampest_ros.core.samples import wire_stamp
+from dampest_ros.core.signals.samples import wire_stamp
 from dampest_ros.core.physics.vehicle import Vehicle, measured_wrench_scale
 
 FloatArray = NDArray[np.float64]

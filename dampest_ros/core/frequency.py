@@ -19,7 +19,7 @@ from scipy import optimize, signal
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.regression import iter_regression
 from dampest_ros.core.physics.rigid_body import RigidBody
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
 

@@ -32,7 +32,7 @@ from dampest_ros.core.excitation import speed_limits
 from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.regression import memory_states
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.validate import force_scores
 from dampest_ros.core.physics.vehicle import Vehicle
 

@@ -30,7 +30,7 @@ from dampest_ros.core.batch import Fit, FitOptions, fit
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.regression import NormalEquations, accumulate
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
 

@@ -43,7 +43,7 @@ from dampest_ros.core.memory_rates import MemoryEvidence, memory_evidence
 from dampest_ros.core.quadratic import solve_normal
 from dampest_ros.core.regression import NormalEquations, accumulate, fold_index, iter_regression
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError, RigidBody
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.physics.terms import (
     FAMILIES,
     CrossSpec,

@@ -1,7 +1,7 @@
 """Sensor models: turn a ground-truth :class:`Trajectory` into the messages a vehicle logs.
 
 The trajectory is in Fossen's frames (FRD body, NED world) at the integration step; the
-output is one :class:`~dampest_ros.core.measurements.Series` per topic of the topic contract,
+output is one :class:`~dampest_ros.core.signals.measurements.Series` per topic of the topic contract,
 in ROS frames (FLU body ``base_link``, ENU world ``odom``), at each sensor's own rate:
 
 - ``truth/odom``: OdometrySeries, ``odom`` → ``base_link``; ENU position, FLU→ENU
@@ -52,7 +52,7 @@ from dampest_ros.core.physics.frames import (
     wxyz_to_xyzw,
 )
 from dampest_ros.core.interpolate import continuous, hermite, locate, nlerp
-from dampest_ros.core.measurements import (
+from dampest_ros.core.signals.measurements import (
     ImuSeries,
     JointSeries,
     OdometrySeries,

@@ -21,7 +21,7 @@ from dampest_ros.core.effects import Effects, true_vehicle
 from dampest_ros.core.excitation import Excitation, ProtocolStream
 from dampest_ros.core.excitation import protocol as make_protocol
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
-from dampest_ros.core.measurements import Recording
+from dampest_ros.core.signals.measurements import Recording
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
 from dampest_ros.core.trajectory import Trajectory

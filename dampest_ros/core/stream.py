@@ -31,7 +31,7 @@ from dampest_ros.core.physics.frames import (
     wxyz_to_xyzw,
 )
 from dampest_ros.core.interpolate import continuous, hermite, locate, nlerp
-from dampest_ros.core.measurements import (
+from dampest_ros.core.signals.measurements import (
     ImuSeries,
     JointSeries,
     OdometrySeries,

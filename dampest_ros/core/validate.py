@@ -1,7 +1,7 @@
 """Validation of an identified damping model on data.
 
 Everything here compares the model M ν̇ + C(ν)ν + D(ν)ν + g(η) = τ (FRD body, NED world)
-with measured :class:`~dampest_ros.core.samples.Samples`:
+with measured :class:`~dampest_ros.core.signals.samples.Samples`:
 
 - force domain: the damping force the data demand, y = τ − M ν̇ − C(ν)ν − g(η), against
   the model's Φ(ν)θ, with the same parallel low-pass as the fit (:func:`predicted_force`),
@@ -28,7 +28,7 @@ from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.regression import iter_regression
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
-from dampest_ros.core.samples import CHUNK, Samples
+from dampest_ros.core.signals.samples import CHUNK, Samples
 
 FloatArray = NDArray[np.float64]
 

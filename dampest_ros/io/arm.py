@@ -19,7 +19,7 @@ from dampest_ros.core.arm.design import DesignLimits
 from dampest_ros.core.arm.ffs import FourierTrajectory
 from dampest_ros.core.arm.model import ArmModel, JointDynamics, arm_from_urdf, joint_dynamics
 from dampest_ros.core.arm.online import ArmEstimate
-from dampest_ros.core.measurements import JointSeries, Series
+from dampest_ros.core.signals.measurements import JointSeries, Series
 from dampest_ros.io.bag import bag_summary, read_bag, write_bag
 from dampest_ros.io.yaml_io import atomic_write
 

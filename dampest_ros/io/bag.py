@@ -2,7 +2,7 @@
 
 Bags are rosbag2 directories (``metadata.yaml`` + storage file) that ``ros2 bag`` on Jazzy,
 rosbags and the mcap library read. Topic names are stored fully qualified (``/imu/data``) and
-returned relative (``imu/data``), as in :data:`dampest_ros.core.measurements.TOPIC_TYPES`.
+returned relative (``imu/data``), as in :data:`dampest_ros.core.signals.measurements.TOPIC_TYPES`.
 The log time of every message is its header stamp in nanoseconds.
 
 Messages are serialized and deserialized with the fixed-layout numpy codec of
@@ -28,7 +28,7 @@ from rosbags.interfaces import (
 )
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
-from dampest_ros.core.measurements import TOPIC_TYPES, Series
+from dampest_ros.core.signals.measurements import TOPIC_TYPES, Series
 from dampest_ros.io import cdr
 from dampest_ros.io.bag_metadata import make_qos
 
@@ -435,7 +435,7 @@ def check_role_types(path: str | Path, roles: Mapping[str, str]) -> None:
 
 class BagSource:
     """Time windows of a bag's topics on demand: the
-    :class:`dampest_ros.core.preprocess.SeriesSource` that keeps a long log out of memory.
+    :class:`dampest_ros.core.signals.preprocess.SeriesSource` that keeps a long log out of memory.
 
     Parameters
     ----------

@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 from rosbags.typesys import Stores, get_typestore
 
-from dampest_ros.core.measurements import (
+from dampest_ros.core.signals.measurements import (
     AccelSeries,
     FloatArray,
     ImuSeries,

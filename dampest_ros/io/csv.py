@@ -45,7 +45,7 @@ column-map entry that settles it:
 
 **Frames.** Every body vector in the CSV (velocities, accelerations, forces) is in Fossen's
 FRD body frame (x forward, y starboard, z down), the frame of the core and of
-:class:`dampest_ros.core.samples.Samples`, which :func:`samples_to_columns` and
+:class:`dampest_ros.core.signals.samples.Samples`, which :func:`samples_to_columns` and
 :func:`samples_from_columns` convert to and from.
 
 **Bad cells.** A row with a non-finite value (``nan``, ``inf``, an empty cell read as nan) in a
@@ -73,8 +73,8 @@ import yaml
 from numpy.typing import NDArray
 
 from dampest_ros.core.physics.frames import matrix_from_euler
-from dampest_ros.core.measurements import FloatArray
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.measurements import FloatArray
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.physics.thrusters import Thrusters
 
 #: Body velocity ν = [u v w p q r] (FRD).

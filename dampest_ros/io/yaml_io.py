@@ -66,7 +66,7 @@ import yaml
 from dampest_ros.core.physics.alpha import Alpha
 from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel
 from dampest_ros.core.identified import check_model_numbers
-from dampest_ros.core.measurements import FloatArray
+from dampest_ros.core.signals.measurements import FloatArray
 from dampest_ros.core.model import Model
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec

@@ -20,7 +20,7 @@ from dampest_ros.core import validate
 from dampest_ros.core.batch import Fit
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, RigidBody
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.report.figures import (
     CSS,
     FORCE_UNITS,

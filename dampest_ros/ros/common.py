@@ -145,7 +145,7 @@ class Drain:
 
 def to_time(t: float) -> Time:
     """builtin_interfaces/Time from seconds (rounded to the nanosecond)."""
-    from dampest_ros.core.samples import wire_stamp  # (numpy: not at a node's start)
+    from dampest_ros.core.signals.samples import wire_stamp  # (numpy: not at a node's start)
 
     ns = wire_stamp(t)
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)

@@ -13,7 +13,7 @@ from nav_msgs.msg import Odometry
 from numpy.typing import NDArray
 from sensor_msgs.msg import FluidPressure, Imu, JointState
 
-from dampest_ros.core.measurements import (
+from dampest_ros.core.signals.measurements import (
     ImuSeries,
     JointSeries,
     OdometrySeries,

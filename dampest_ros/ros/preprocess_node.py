@@ -15,7 +15,7 @@ file's sensors: section; messages with another header.frame_id are counted
 The work is done by dampest_ros.core.online.preprocessor.OnlinePreprocessor (the same class
 replays bags).
 The sensor messages reach it in stamp order whatever the order of their arrival
-(dampest_ros.core.reorder.StampOrder, up to reorder_latency of stamp time; what is held is
+(dampest_ros.core.signals.reorder.StampOrder, up to reorder_latency of stamp time; what is held is
 released when no message has come for half a second), so that live data, a replayed bag and
 'dampest identify --method rls' give the same samples.
 """
@@ -39,7 +39,7 @@ from dampest_ros.core.physics import frames
 from dampest_ros.core.estimator import attitude_quaternion
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import OnlineConfig, OnlineSample, topic_roles
-from dampest_ros.core.reorder import StampOrder
+from dampest_ros.core.signals.reorder import StampOrder
 from dampest_ros.io.yaml_io import load_vehicle
 from dampest_ros.ros.common import (
     DIAGNOSTICS_TOPIC,

@@ -244,7 +244,7 @@ class RecorderNode(ParamNode):
         topics of the dampest contract (docs/architecture.md §3), so that subscribing once
         their publishers are found costs no import (~0.15 s cold). A type that does not load
         is left to :meth:`_discover`, which reports it."""
-        from dampest_ros.core.measurements import TOPIC_TYPES
+        from dampest_ros.core.signals.measurements import TOPIC_TYPES
 
         for name in self.p("topics"):
             msgtype = TOPIC_TYPES.get(name, ("", None))[0]

@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from dampest_ros.cli.main import main
-from dampest_ros.core.measurements import WrenchSeries
+from dampest_ros.core.signals.measurements import WrenchSeries
 from dampest_ros.io.arm import load_arm_model
 from dampest_ros.io.bag import write_bag
 

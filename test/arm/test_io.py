@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dampest_ros.core.measurements import JointSeries, WrenchSeries
+from dampest_ros.core.signals.measurements import JointSeries, WrenchSeries
 from dampest_ros.io.arm import ArmDataError, joint_series, read_joint_bag, write_joint_bag
 from dampest_ros.io.bag import read_bag, write_bag
 

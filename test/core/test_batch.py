@@ -15,7 +15,7 @@ from dampest_ros.core.estimator import restrict
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.regression import accumulate, iter_regression
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulate import run
 from dampest_ros.core.physics.terms import CrossSpec, cross_term
 from dampest_ros.core.physics.vehicle import Vehicle

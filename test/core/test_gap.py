@@ -54,10 +54,10 @@ from dampest_ros.core.gap.library import library
 from dampest_ros.core.gap.localise import concentration, localise
 from dampest_ros.core.gap.search import NO_FURTHER, GapResult, find_gap, rejection
 from dampest_ros.core.gap.update import divergence_reason, updated_model
-from dampest_ros.core.measurements import JointSeries
-from dampest_ros.core.preprocess import PreprocessConfig, preprocess
+from dampest_ros.core.signals.measurements import JointSeries
+from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, AddedMassTerms, RigidBody
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.selection import DEFAULT_CROSS
 from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
 from dampest_ros.core.simulate import run

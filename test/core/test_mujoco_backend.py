@@ -23,7 +23,7 @@ from dampest_ros.core.mujoco_backend import (
 )
 from dampest_ros.core.regression import target
 from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, coriolis_force
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulate import run
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle

@@ -16,11 +16,11 @@ from dampest_ros.core.dissipative import envelope
 from dampest_ros.core.effects import Effects
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
 from dampest_ros.core.excitation import Excitation, make_excitation, speed_limits
-from dampest_ros.core.measurements import Recording, TwistSeries
+from dampest_ros.core.signals.measurements import Recording, TwistSeries
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor, derivative_lag, window_mean
 from dampest_ros.core.online.regression import LowPass, OnlineRegression
 from dampest_ros.core.online.sample import OnlineConfig, to_samples
-from dampest_ros.core.preprocess import PreprocessConfig, preprocess
+from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
 from dampest_ros.core.regression import iter_regression
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.rls.least_squares import RecursiveLeastSquares, RLSConfig

@@ -18,7 +18,7 @@ from dampest_ros.core.pool import (
     pooled_fit,
     pooled_samples,
 )
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulate import run
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle

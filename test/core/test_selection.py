@@ -16,7 +16,7 @@ from dampest_ros.core.model import Model
 from dampest_ros.core.quadratic import rank_solve
 from dampest_ros.core.regression import accumulate
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.selection import select_terms
 from dampest_ros.core.physics.terms import added_mass_term, cross_term, library, linear_term, quadratic_term
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model

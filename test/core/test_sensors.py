@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.physics.frames import matrix_from_euler, matrix_to_quat
-from dampest_ros.core.measurements import (
+from dampest_ros.core.signals.measurements import (
     ImuSeries,
     JointSeries,
     OdometrySeries,

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
 
-from dampest_ros.core.measurements import (
+from dampest_ros.core.signals.measurements import (
     AccelSeries,
     ImuSeries,
     JointSeries,

@@ -15,7 +15,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from dampest_ros.core.measurements import ImuSeries, Series, TwistSeries
+from dampest_ros.core.signals.measurements import ImuSeries, Series, TwistSeries
 from dampest_ros.io import bag, cdr
 
 Tree = Callable[[Any], Any]

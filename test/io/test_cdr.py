@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from dampest_ros.core.measurements import (
+from dampest_ros.core.signals.measurements import (
     AccelSeries,
     ImuSeries,
     JointSeries,

@@ -17,7 +17,7 @@ from mcap.stream_reader import breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader
 
-from dampest_ros.core.measurements import ImuSeries, JointSeries, Series
+from dampest_ros.core.signals.measurements import ImuSeries, JointSeries, Series
 from dampest_ros.io import bag, cdr
 from dampest_ros.io.bag_metadata import make_qos
 from dampest_ros.io.recorder import BagRecorder, RecorderError

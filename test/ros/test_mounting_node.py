@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from dampest_ros.core.excitation import make_excitation
-from dampest_ros.core.measurements import TwistSeries
+from dampest_ros.core.signals.measurements import TwistSeries
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.sensors import measure
 from dampest_ros.core.simulate import run

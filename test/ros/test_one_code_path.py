@@ -8,7 +8,7 @@ Nothing may be lost on the way (every count is checked against the bag's), and t
 agree to 1e-6 in the norm max_i |Δθ_i| / max(|θ_i|, σ_i) (σ the RLS standard deviation: a
 coefficient near zero is compared on the scale of its own uncertainty). The sensor messages
 reach the preprocessor in a different interleaving on each path; its stamp-order stage
-(dampest_ros.core.reorder) makes the sequence, and so the samples, identical.
+(dampest_ros.core.signals.reorder) makes the sequence, and so the samples, identical.
 
 Live nodes (and the recorder) share one executor on ROS_DOMAIN_ID 65; the replay runs on 66,
 its node in a context of its own (it shuts that down when the bag has been played).

@@ -34,7 +34,7 @@ from rosbags.interfaces import ConnectionExtRosbag2  # noqa: E402
 from rosbags.rosbag2 import Reader  # noqa: E402
 from sensor_msgs.msg import Imu, JointState  # noqa: E402
 
-from dampest_ros.core.measurements import ImuSeries  # noqa: E402
+from dampest_ros.core.signals.measurements import ImuSeries  # noqa: E402
 from dampest_ros.io import bag  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]

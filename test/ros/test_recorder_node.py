@@ -24,7 +24,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 from rosgraph_msgs.msg import Clock as ClockMsg  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 
-from dampest_ros.core.measurements import ImuSeries  # noqa: E402
+from dampest_ros.core.signals.measurements import ImuSeries  # noqa: E402
 from dampest_ros.io import bag  # noqa: E402
 from dampest_ros.io.recorder import StorageError  # noqa: E402
 from dampest_ros.ros.common import RELIABLE_QOS, SENSOR_QOS  # noqa: E402

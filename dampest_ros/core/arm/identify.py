@@ -1,6 +1,6 @@
 """Arm identification from measured joint positions and torques, and its validation.
 
-1. q, q̇ by the zero-phase low-pass of :func:`dampest_ros.core.preprocess.zero_phase` (its
+1. q, q̇ by the zero-phase low-pass of :func:`dampest_ros.core.signals.preprocess.zero_phase` (its
    derivative option), q̈ by differencing the filtered q̇; τ through the same filter, so
    both sides of τ = Y π see the same gain and no delay.
 2. The first and last 3 / cutoff seconds dropped (the filter's end effects), decimation to
@@ -36,7 +36,7 @@ from dampest_ros.core.arm.fit import (
 )
 from dampest_ros.core.arm.model import ArmModel
 from dampest_ros.core.arm.regressor import regressor
-from dampest_ros.core.preprocess import zero_phase, zero_phase_many
+from dampest_ros.core.signals.preprocess import zero_phase, zero_phase_many
 
 FloatArray = NDArray[np.float64]
 

@@ -1,7 +1,7 @@
 """Sim-to-real gap: where measured data and a believed model disagree, and what is missing.
 
 A user has a model of the vehicle (M, the damping D(ν) with its θ, restoring data) and data
-from the real vehicle (:class:`~dampest_ros.core.samples.Samples`: ν, ν̇, τ, attitude, depth,
+from the real vehicle (:class:`~dampest_ros.core.signals.samples.Samples`: ν, ν̇, τ, attitude, depth,
 as a vehicle logs them; never ground truth). This package
 
 1. compares them through the one-step inverse-dynamics residual (FRD body, NED world)

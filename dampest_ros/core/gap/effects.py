@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.gap.data import Chunk, GapData
-from dampest_ros.core.preprocess import zero_phase
+from dampest_ros.core.signals.preprocess import zero_phase
 from dampest_ros.core.physics.rigid_body import coriolis_force, rigid_body_mass
 
 FloatArray = NDArray[np.float64]
@@ -455,7 +455,7 @@ class DvlBias(Effect):
     """Constant DVL velocity bias b (m/s, FRD) seen through the DVL/IMU fusion.
 
     The preprocessing fuses R v_dvl below the crossover f_c with the integrated IMU above it
-    (:func:`dampest_ros.core.preprocess.fuse_velocity`), so the logged velocity and its
+    (:func:`dampest_ros.core.signals.preprocess.fuse_velocity`), so the logged velocity and its
     derivative carry β = Rᵀ LP_c(R b) and β̇ = Rᵀ d/dt LP_c(R b) − ω × β (both → b and 0
     when the attitude changes slowly):
 

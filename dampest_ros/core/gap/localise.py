@@ -13,7 +13,7 @@ from scipy import signal
 
 from dampest_ros.core.gap.data import rms
 from dampest_ros.core.physics.rigid_body import DOF_NAMES
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

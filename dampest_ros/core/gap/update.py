@@ -21,7 +21,7 @@ from dampest_ros.core.physics.rigid_body import (
     ConfigError,
     RigidBody,
 )
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.physics.terms import CrossSpec, cross_term, linear_term, memory_term, quadratic_term
 from dampest_ros.core.validate import free_run_error, longest_segment
 

@@ -1,9 +1,9 @@
 """Causal preprocessing of live sensor messages into samples of ν, ν̇, τ: the online
-counterpart of :mod:`dampest_ros.core.preprocess`.
+counterpart of :mod:`dampest_ros.core.signals.preprocess`.
 
 One class, :class:`OnlinePreprocessor`, takes the messages one at a time (the ROS node calls
 it from its subscriptions) or a whole recording (:meth:`OnlinePreprocessor.run` feeds the
-messages of a :data:`~dampest_ros.core.measurements.Recording` in stamp order through the
+messages of a :data:`~dampest_ros.core.signals.measurements.Recording` in stamp order through the
 very same methods), so live topics and replayed bags take one code path.
 
 State estimation (FRD body, NED world; frames converted only through
@@ -30,7 +30,7 @@ State estimation (FRD body, NED world; frames converted only through
   is not the configured one are counted (``frame_id_mismatch``), the first of each topic
   reported in ``events``.
 - **τ** from the thruster JointState efforts through the allocation
-  (:func:`dampest_ros.core.preprocess.thruster_wrench`). Thruster telemetry is the mean over
+  (:func:`dampest_ros.core.signals.preprocess.thruster_wrench`). Thruster telemetry is the mean over
   the message period w before its stamp s, so it describes the window centre s − w/2.
 
 Samples are emitted at ``rate`` Hz on a grid phase-locked to the thrust window centres, all
@@ -61,7 +61,7 @@ from filterpy.kalman import KalmanFilter
 from numpy.typing import NDArray
 
 from dampest_ros.core.physics import frames
-from dampest_ros.core.measurements import (
+from dampest_ros.core.signals.measurements import (
     ImuSeries,
     JointSeries,
     PressureSeries,
@@ -80,7 +80,7 @@ from dampest_ros.core.physics.mounting import (
     specific_force_at_origin,
 )
 from dampest_ros.core.online.sample import DEFAULT_TOPICS, OnlineConfig, OnlineSample, topic_roles
-from dampest_ros.core.preprocess import DataError, body_wrench
+from dampest_ros.core.signals.preprocess import DataError, body_wrench
 from dampest_ros.core.physics.thrusters import Thrusters
 
 FloatArray = NDArray[np.float64]

@@ -20,7 +20,7 @@ from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.regression import target
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
 

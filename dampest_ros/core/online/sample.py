@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.preprocess import DataError
+from dampest_ros.core.signals.preprocess import DataError
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
 

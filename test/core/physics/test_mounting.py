@@ -15,11 +15,11 @@ import yaml
 from dampest_ros.core.batch import Fit, FitOptions, fit
 from dampest_ros.core.excitation import make_excitation
 from dampest_ros.core.physics.frames import matrix_from_euler, matrix_to_quat
-from dampest_ros.core.measurements import ImuSeries, PressureSeries, Recording, TwistSeries
+from dampest_ros.core.signals.measurements import ImuSeries, PressureSeries, Recording, TwistSeries
 from dampest_ros.core.physics.mounting import Mounting, SensorMount
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import to_samples
-from dampest_ros.core.preprocess import preprocess
+from dampest_ros.core.signals.preprocess import preprocess
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.sensors import SensorConfig, measure
 from dampest_ros.core.simulate import run

@@ -34,7 +34,7 @@ from scipy import fft as sp_fft
 from scipy import integrate
 
 from dampest_ros.core.physics import frames
-from dampest_ros.core.measurements import (
+from dampest_ros.core.signals.measurements import (
     ImuSeries,
     JointSeries,
     PressureSeries,
@@ -53,7 +53,7 @@ from dampest_ros.core.physics.mounting import (
     specific_force_at_origin,
 )
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.samples import Samples
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.physics.thrusters import Thrusters
 
 FloatArray = NDArray[np.float64]

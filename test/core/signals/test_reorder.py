@@ -1,4 +1,4 @@
-"""The stamp-order stage (dampest_ros.core.reorder): any arrival order within the latency gives
+"""The stamp-order stage (dampest_ros.core.signals.reorder): any arrival order within the latency gives
 the offline (stamp, role) order, so the online preprocessor's samples equal run(rec)'s."""
 
 from __future__ import annotations
@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.excitation import make_excitation
-from dampest_ros.core.measurements import Recording
+from dampest_ros.core.signals.measurements import Recording
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import DEFAULT_TOPICS, TOPIC_ROLES
-from dampest_ros.core.reorder import StampOrder
+from dampest_ros.core.signals.reorder import StampOrder
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.sensors import SensorConfig, measure
 from dampest_ros.core.simulate import run

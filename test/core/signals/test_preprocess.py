@@ -1,4 +1,4 @@
-"""Preprocessing: frames, fusion, segments, filters (dampest_ros.core.preprocess)."""
+"""Preprocessing: frames, fusion, segments, filters (dampest_ros.core.signals.preprocess)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.excitation import make_excitation
-from dampest_ros.core.measurements import TwistSeries
-from dampest_ros.core.preprocess import (
+from dampest_ros.core.signals.measurements import TwistSeries
+from dampest_ros.core.signals.preprocess import (
     DataError,
     PreprocessConfig,
     preprocess,

@@ -1,6 +1,6 @@
 """Synchronised samples of ν, ν̇, τ and attitude: what identification consumes.
 
-Produced by :mod:`dampest_ros.core.preprocess` from sensor topics, read from CSV, or
+Produced by :mod:`dampest_ros.core.signals.preprocess` from sensor topics, read from CSV, or
 published sample by sample by the preprocessing node. FRD body frame, NED world (Fossen).
 """
 
