@@ -33,7 +33,7 @@ _HOME = {
     "load_model": "dampest_ros.io.yaml_io",
     "save_model": "dampest_ros.io.yaml_io",
     "find_gap": "dampest_ros.core.gap.search",
-    "simulate": "dampest_ros.core.simulate",
+    "simulate": "dampest_ros.core.simulation.simulate",
 }
 
 __all__ = ["DampingIdentifier", "Model", "find_gap", "load_model", "load_vehicle", "preprocess",
@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from dampest_ros.core.identifier import DampingIdentifier
     from dampest_ros.core.model import Model
     from dampest_ros.core.signals.preprocess import preprocess
-    from dampest_ros.core.simulate import simulate
+    from dampest_ros.core.simulation.simulate import simulate
     from dampest_ros.io.bag import read_bag
     from dampest_ros.io.csv import read_csv
     from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model

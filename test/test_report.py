@@ -13,9 +13,9 @@ from matplotlib.figure import Figure
 
 from dampest_ros.core.physics import frames
 from dampest_ros.core.batch import fit
-from dampest_ros.core.excitation import make_excitation
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.simulate import run
+from dampest_ros.core.simulation.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle
 from dampest_ros.report.convergence import Tracking, rms_by_unit, write_convergence_report
 from dampest_ros.report.figures import PSD_DECADES, parameter_units

@@ -15,9 +15,9 @@ from dampest_ros.bench.runner import MUJOCO_VEHICLE, VEHICLE, child
 
 def simulate(out: str, duration: str, backend: str = "native", seed: str = "1"
               ) -> dict[str, float]:
-    from dampest_ros.core.excitation import make_excitation
-    from dampest_ros.core.sensors import measure
-    from dampest_ros.core.simulate import run
+    from dampest_ros.core.simulation.excitation import make_excitation
+    from dampest_ros.core.simulation.sensors import measure
+    from dampest_ros.core.simulation.simulate import run
     from dampest_ros.io.bag import write_bag
     from dampest_ros.io.yaml_io import load_vehicle
 

@@ -69,10 +69,10 @@ def publish_samples(seconds: str, speed: str, subscribers: str) -> dict[str, flo
         WrenchStamped,
     )
 
-    from dampest_ros.core.excitation import make_excitation
+    from dampest_ros.core.simulation.excitation import make_excitation
     from dampest_ros.core.online.preprocessor import OnlinePreprocessor
-    from dampest_ros.core.sensors import measure
-    from dampest_ros.core.simulate import run
+    from dampest_ros.core.simulation.sensors import measure
+    from dampest_ros.core.simulation.simulate import run
     from dampest_ros.io.yaml_io import load_vehicle
     from dampest_ros.ros.common import RELIABLE_QOS
     from dampest_ros.ros.preprocess_node import SampleMessages

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     import numpy as np
 
-#: Excitation protocols of the simulator (dampest_ros.core.excitation.PROTOCOLS, which a
+#: Excitation protocols of the simulator (dampest_ros.core.simulation.excitation.PROTOCOLS, which a
 #: test checks this against; not imported here, it pulls in scipy).
 PROTOCOLS = ("A", "B", "C", "fourier", "optimal")
 

@@ -14,8 +14,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.cli.common import table
-from dampest_ros.core.control import DEFAULT_BANDWIDTH
-from dampest_ros.core.effects import Effects, true_vehicle
+from dampest_ros.core.simulation.control import DEFAULT_BANDWIDTH
+from dampest_ros.core.simulation.effects import Effects, true_vehicle
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
 from dampest_ros.core.model import Model
 from dampest_ros.core.signals.preprocess import DataError
@@ -312,8 +312,8 @@ def _report(args: argparse.Namespace, out: Path, flight: Flight,
             effects: Effects, prior: Path) -> Path:
     """Tracking runs without and with the saved model's feed-forward, then the report."""
     from dampest_ros.client import ModelClient
-    from dampest_ros.core.control import VelocityPI
-    from dampest_ros.core.simulate import Simulator, track
+    from dampest_ros.core.simulation.control import VelocityPI
+    from dampest_ros.core.simulation.simulate import Simulator, track
     from dampest_ros.report.convergence import Tracking, rms_by_unit, write_convergence_report
     from dampest_ros.report.figures import parameter_units
 

@@ -29,7 +29,7 @@ from dampest_ros.cli.inputs import cut, load_samples
 from dampest_ros.cli.main import expected
 from dampest_ros.core.batch import Fit, FitOptions
 from dampest_ros.core.estimator import restrict
-from dampest_ros.core.excitation import speed_limits
+from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.core.pool import Drift, LogStatistics, MapLogs, log_statistics
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.io.remote import glob_url, is_url, local_log, local_name

@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 EXAMPLE = ("example:\n  dampest simulate --vehicle bluerov2_heavy --protocol B --duration 600 "
            "--seed 1 --out bags/b600")
 
-#: The plants (dampest_ros.core.simulate.BACKENDS; a test checks the two agree).
+#: The plants (dampest_ros.core.simulation.simulate.BACKENDS; a test checks the two agree).
 BACKENDS = ("native", "mujoco")
 
 
@@ -50,7 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--effects", metavar="YAML",
                    help="hidden effects to switch on, a YAML mapping (file or inline), e.g. "
                         "'current: [0.2, 0, 0]' (the fields of Effects in "
-                        "dampest_ros/core/effects.py)")
+                        "dampest_ros/core/simulation/effects.py)")
     p.add_argument("--sensors", metavar="YAML",
                    help="sensor settings (rates, noise), a YAML mapping (file or inline)")
 
@@ -63,12 +63,12 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from dampest_ros.cli.common import speed_table, table
-    from dampest_ros.core.effects import Effects, true_vehicle
-    from dampest_ros.core.excitation import protocol
+    from dampest_ros.core.simulation.effects import Effects, true_vehicle
+    from dampest_ros.core.simulation.excitation import protocol
     from dampest_ros.core.model import Model
     from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
-    from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
-    from dampest_ros.core.simulate import run as run_sim
+    from dampest_ros.core.simulation.sensors import SensorBias, SensorConfig, measure
+    from dampest_ros.core.simulation.simulate import run as run_sim
     from dampest_ros.io.bag import write_bag
     from dampest_ros.io.csv import samples_to_columns, write_csv
     from dampest_ros.io.yaml_io import load_vehicle, read_mapping, save_model
@@ -129,7 +129,7 @@ def _added_mass_note(vehicle: Vehicle) -> None:
     """Say so when the vehicle does not describe the MuJoCo plant's added mass faithfully."""
     import numpy as np
 
-    from dampest_ros.core.mujoco_backend import plant_vehicle
+    from dampest_ros.core.simulation.mujoco_backend import plant_vehicle
 
     plant = plant_vehicle(vehicle).body
     body = vehicle.body

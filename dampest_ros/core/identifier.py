@@ -6,7 +6,7 @@
 - :meth:`DampingIdentifier.fit` is ``dampest identify``'s batch path: the vehicle's terms
   (:func:`~dampest_ros.core.estimator.restrict`), its nominal θ as the prior (the value of what
   the data do not determine), the speeds the thrusters reach for the speed-coverage check
-  (:func:`~dampest_ros.core.excitation.speed_limits`), :func:`~dampest_ros.core.batch.fit`.
+  (:func:`~dampest_ros.core.simulation.excitation.speed_limits`), :func:`~dampest_ros.core.batch.fit`.
 - :meth:`DampingIdentifier.partial_fit` is the estimator node's path
   (:class:`~dampest_ros.core.estimator.OnlineEstimator`: parallel-filtered regression and
   recursive least squares with forgetting factor λ); successive calls continue the estimate.
@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from dampest_ros.core.batch import Fit, FitOptions, fit
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
-from dampest_ros.core.excitation import speed_limits
+from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.regression import memory_states
 from dampest_ros.core.physics.rigid_body import ConfigError

@@ -440,7 +440,7 @@ def free_run(samples: Samples, model: DampingModel, body: RigidBody, theta: Floa
     tau_hold : {'linear', 'zero'}
         τ between samples: ``linear`` interpolation (τ sampled at the instants, as the
         preprocessing gives it), or ``zero``-order hold of τ_n over [t_n, t_{n+1})
-        (τ_n the mean over the step, as :class:`~dampest_ros.core.trajectory.Trajectory`
+        (τ_n the mean over the step, as :class:`~dampest_ros.core.simulation.trajectory.Trajectory`
         logs it). g(η) is always interpolated linearly.
 
     Returns

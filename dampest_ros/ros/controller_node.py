@@ -17,7 +17,7 @@ from geometry_msgs.msg import Twist, TwistWithCovarianceStamped, WrenchStamped
 
 from dampest_ros.client import ModelClient
 from dampest_ros.core.physics import frames
-from dampest_ros.core.control import DEFAULT_BANDWIDTH, VelocityPI
+from dampest_ros.core.simulation.control import DEFAULT_BANDWIDTH, VelocityPI
 from dampest_ros.io.yaml_io import load_vehicle
 from dampest_ros.ros.common import (
     RELIABLE_QOS,

@@ -22,12 +22,12 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import FluidPressure, Imu, JointState
 
 from dampest_ros.core.physics import frames
-from dampest_ros.core.effects import Effects
-from dampest_ros.core.excitation import LIVE_PROTOCOLS
+from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.simulation.excitation import LIVE_PROTOCOLS
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.sensors import SensorConfig
-from dampest_ros.core.simulate import BACKENDS
-from dampest_ros.core.stream import LiveSimulation
+from dampest_ros.core.simulation.sensors import SensorConfig
+from dampest_ros.core.simulation.simulate import BACKENDS
+from dampest_ros.core.simulation.stream import LiveSimulation
 from dampest_ros.io.yaml_io import load_vehicle, read_mapping
 from dampest_ros.ros.common import (
     RELIABLE_QOS,
@@ -70,10 +70,10 @@ class SimNode(ParamNode):
               high=2**31 - 1),
         Param("rate_factor", 1.0, "simulated seconds per wall-clock second (1: real time)",
               low=0.01, high=1000.0),
-        Param("effects", "", "YAML mapping of hidden effects (dampest_ros.core.effects."
+        Param("effects", "", "YAML mapping of hidden effects (dampest_ros.core.simulation.effects."
               "Effects), e.g. '{damping_change_time: 200, damping_change_factor: 1.3}'",
               check=_mapping_ok(Effects)),
-        Param("sensors", "", "YAML mapping of sensor settings (dampest_ros.core.sensors."
+        Param("sensors", "", "YAML mapping of sensor settings (dampest_ros.core.simulation.sensors."
               "SensorConfig), e.g. '{dvl_rate: 5}'", check=_mapping_ok(SensorConfig)),
         Param("dt", 0.02, "integration step in s", low=0.001, high=0.1),
         Param("backend", "native", "the plant: native (our equations) or mujoco (MuJoCo's "

@@ -62,9 +62,9 @@ def test_choices_of_the_parsers_are_the_cores() -> None:
     """The parsers spell out choices the core defines (importing the core would load scipy
     for --help); they must agree."""
     from dampest_ros.core.batch import METHODS
-    from dampest_ros.core.excitation import PROTOCOLS
+    from dampest_ros.core.simulation.excitation import PROTOCOLS
     from dampest_ros.core.gap.search import GapOptions
-    from dampest_ros.core.simulate import BACKENDS
+    from dampest_ros.core.simulation.simulate import BACKENDS
 
     assert identify_options.METHODS == METHODS
     assert common.PROTOCOLS == PROTOCOLS

@@ -12,11 +12,11 @@ from dampest_ros.core.batch import FitOptions, fit
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.dissipative import envelope
 from dampest_ros.core.estimator import restrict
-from dampest_ros.core.excitation import make_excitation
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.regression import accumulate, iter_regression
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.simulate import run
+from dampest_ros.core.simulation.simulate import run
 from dampest_ros.core.physics.terms import CrossSpec, cross_term
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle

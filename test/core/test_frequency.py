@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from dampest_ros.core.batch import FitOptions, fit
-from dampest_ros.core.effects import Effects
-from dampest_ros.core.excitation import make_excitation
+from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.frequency import memory_impedance
 from dampest_ros.core.signals.preprocess import preprocess
-from dampest_ros.core.sensors import measure
-from dampest_ros.core.simulate import run
+from dampest_ros.core.simulation.sensors import measure
+from dampest_ros.core.simulation.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle
 
 

@@ -13,9 +13,9 @@ from scipy import signal
 from dampest_ros.core.batch import FitOptions, fit
 from dampest_ros.core.physics.damping import filter_memory
 from dampest_ros.core.dissipative import envelope
-from dampest_ros.core.effects import Effects
+from dampest_ros.core.simulation.effects import Effects
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
-from dampest_ros.core.excitation import Excitation, make_excitation, speed_limits
+from dampest_ros.core.simulation.excitation import Excitation, make_excitation, speed_limits
 from dampest_ros.core.signals.measurements import Recording, TwistSeries
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor, derivative_lag, window_mean
 from dampest_ros.core.online.regression import LowPass, OnlineRegression
@@ -24,9 +24,9 @@ from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
 from dampest_ros.core.regression import iter_regression
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.rls.least_squares import RecursiveLeastSquares, RLSConfig
-from dampest_ros.core.sensors import SensorConfig, measure
-from dampest_ros.core.simulate import run
-from dampest_ros.core.trajectory import Trajectory
+from dampest_ros.core.simulation.sensors import SensorConfig, measure
+from dampest_ros.core.simulation.simulate import run
+from dampest_ros.core.simulation.trajectory import Trajectory
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 from dampest_ros.report.convergence import band_coverage

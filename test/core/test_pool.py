@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.batch import FitOptions, fit
-from dampest_ros.core.excitation import make_excitation
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.pool import (
     LogStatistics,
@@ -19,7 +19,7 @@ from dampest_ros.core.pool import (
     pooled_samples,
 )
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.simulate import run
+from dampest_ros.core.simulation.simulate import run
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 

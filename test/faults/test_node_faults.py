@@ -416,8 +416,8 @@ def test_sim_node_holds_no_growing_container(context: Any) -> None:
     """Was: memory growing with the run. Between 10 s and 40 s of simulation, no list,
     dict, deque or array of the node, its simulation, plant and sensor stream changes size
     (79 of them; flown 1000x real time, 2 s of simulation per tick). The protocol is
-    generated block by block (dampest_ros.core.excitation; its held bytes are tested
-    against the duration in test/core/test_excitation.py)."""
+    generated block by block (dampest_ros.core.simulation.excitation; its held bytes are tested
+    against the duration in test/core/simulation/test_excitation.py)."""
     sim = SimNode(context=context, parameter_overrides=[
         Parameter("rate_factor", value=1000.0), Parameter("max_lag", value=2.0),
         Parameter("duration", value=600.0), Parameter("publish_clock", value=False)])

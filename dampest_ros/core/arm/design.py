@@ -1,7 +1,7 @@
 """Excitation design of an arm: FFS coefficients that minimise the condition number of the
 base regressor (friction columns included) over one period, within joint position,
 velocity, acceleration and torque limits, by the shared design engine
-(:mod:`dampest_ros.core.design`: scaling to the limits, L-BFGS-B on log cond, random FFS
+(:mod:`dampest_ros.core.simulation.design`: scaling to the limits, L-BFGS-B on log cond, random FFS
 coefficients within the same limits as the baseline).
 """
 
@@ -14,7 +14,7 @@ from dampest_ros.core.arm.base import BaseParameters
 from dampest_ros.core.arm.ffs import FourierTrajectory
 from dampest_ros.core.arm.model import ArmModel
 from dampest_ros.core.arm.regressor import regressor
-from dampest_ros.core.design import Design, DesignLimits, DesignProblem, optimise
+from dampest_ros.core.simulation.design import Design, DesignLimits, DesignProblem, optimise
 
 FloatArray = NDArray[np.float64]
 

@@ -1,5 +1,5 @@
 """Finite Fourier series (FFS) joint trajectories: the design engine's
-:class:`~dampest_ros.core.design.FourierTrajectory` (periodic, q, q̇, q̈ analytic; its
+:class:`~dampest_ros.core.simulation.design.FourierTrajectory` (periodic, q, q̇, q̈ analytic; its
 equations there) and the random coefficients a designed trajectory is compared against.
 """
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.design import FourierTrajectory
+from dampest_ros.core.simulation.design import FourierTrajectory
 
 FloatArray = NDArray[np.float64]
 

@@ -2,7 +2,7 @@
 
 A vehicle file's optional ``geometry:`` block, read and checked when the vehicle is loaded
 (so that a bad value is named with its file); the MuJoCo backend
-(:mod:`dampest_ros.core.mujoco_backend`) turns it into MuJoCo geoms with
+(:mod:`dampest_ros.core.simulation.mujoco_backend`) turns it into MuJoCo geoms with
 ``fluidshape="ellipsoid"``.
 """
 

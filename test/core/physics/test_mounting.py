@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from dampest_ros.core.batch import Fit, FitOptions, fit
-from dampest_ros.core.excitation import make_excitation
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.physics.frames import matrix_from_euler, matrix_to_quat
 from dampest_ros.core.signals.measurements import ImuSeries, PressureSeries, Recording, TwistSeries
 from dampest_ros.core.physics.mounting import Mounting, SensorMount
@@ -21,9 +21,9 @@ from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import to_samples
 from dampest_ros.core.signals.preprocess import preprocess
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.sensors import SensorConfig, measure
-from dampest_ros.core.simulate import run
-from dampest_ros.core.trajectory import Trajectory
+from dampest_ros.core.simulation.sensors import SensorConfig, measure
+from dampest_ros.core.simulation.simulate import run
+from dampest_ros.core.simulation.trajectory import Trajectory
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle, vehicle_path
 
@@ -156,7 +156,7 @@ def test_off_centre_sensors_measure_their_own_point_and_axes() -> None:
 def test_streaming_simulator_mounts_sensors_like_measure(vehicle: Vehicle) -> None:
     """The sim node's SensorStream (via LiveSimulation, from the vehicle's sensors:) gives the
     messages measure() gives for the same mounting."""
-    from dampest_ros.core.stream import SensorStream
+    from dampest_ros.core.simulation.stream import SensorStream
 
     traj = run(vehicle, make_excitation("B", vehicle, 10.0, seed=1))
     want = measure(traj, RHO, G, EXACT, mounting=MOUNTED)

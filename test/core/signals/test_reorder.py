@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dampest_ros.core.excitation import make_excitation
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.signals.measurements import Recording
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import DEFAULT_TOPICS, TOPIC_ROLES
 from dampest_ros.core.signals.reorder import StampOrder
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.sensors import SensorConfig, measure
-from dampest_ros.core.simulate import run
+from dampest_ros.core.simulation.sensors import SensorConfig, measure
+from dampest_ros.core.simulation.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle
 
 RATES = {"imu": 200.0, "dvl": 8.0, "pressure": 20.0, "thrusters": 50.0}

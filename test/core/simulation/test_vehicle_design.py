@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dampest_ros.core.design import FourierTrajectory
-from dampest_ros.core.excitation import protocol, speed_limits
+from dampest_ros.core.simulation.design import FourierTrajectory
+from dampest_ros.core.simulation.excitation import protocol, speed_limits
 from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.physics.vehicle import Vehicle
-from dampest_ros.core.vehicle_design import (
+from dampest_ros.core.simulation.vehicle_design import (
     COORDINATES,
     _problem,
     _quadratic_form,

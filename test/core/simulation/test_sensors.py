@@ -1,4 +1,4 @@
-"""Sensor models (dampest_ros.core.sensors): frames, physics, interpolation, noise, rates."""
+"""Sensor models (dampest_ros.core.simulation.sensors): frames, physics, interpolation, noise, rates."""
 
 from __future__ import annotations
 
@@ -16,15 +16,15 @@ from dampest_ros.core.signals.measurements import (
     PressureSeries,
     TwistSeries,
 )
-from dampest_ros.core.sensors import (
+from dampest_ros.core.simulation.sensors import (
     UNUSED_VARIANCE,
     SensorBias,
     SensorConfig,
     measure,
     sample_times,
 )
-from dampest_ros.core.stream import LiveSimulation
-from dampest_ros.core.trajectory import Trajectory
+from dampest_ros.core.simulation.stream import LiveSimulation
+from dampest_ros.core.simulation.trajectory import Trajectory
 from dampest_ros.io.yaml_io import load_vehicle
 
 RHO, G = 1025.0, 9.81

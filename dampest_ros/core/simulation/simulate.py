@@ -15,16 +15,16 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.control import VelocityPI
+from dampest_ros.core.simulation.control import VelocityPI
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.effects import Effects, true_vehicle
-from dampest_ros.core.excitation import Excitation, ProtocolStream
-from dampest_ros.core.excitation import protocol as make_protocol
+from dampest_ros.core.simulation.effects import Effects, true_vehicle
+from dampest_ros.core.simulation.excitation import Excitation, ProtocolStream
+from dampest_ros.core.simulation.excitation import protocol as make_protocol
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.signals.measurements import Recording
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.sensors import SensorBias, SensorConfig, measure
-from dampest_ros.core.trajectory import Trajectory
+from dampest_ros.core.simulation.sensors import SensorBias, SensorConfig, measure
+from dampest_ros.core.simulation.trajectory import Trajectory
 from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
@@ -322,7 +322,7 @@ def make_plant(vehicle: Vehicle, effects: Effects | None = None, dt: float = 0.0
                          record=record)
     if backend == "mujoco":
         # imported here: MuJoCo loads a native library
-        from dampest_ros.core.mujoco_backend import MujocoSimulator
+        from dampest_ros.core.simulation.mujoco_backend import MujocoSimulator
 
         return MujocoSimulator(vehicle, effects, dt=dt, position=position,
                                quaternion=quaternion, record=record)
@@ -405,7 +405,7 @@ def simulate(vehicle: Vehicle, protocol: str = "B", duration: float = 600.0, see
     ----------
     vehicle : Vehicle
     protocol : {'A', 'B', 'C', 'fourier', 'optimal'}
-        Excitation (:func:`~dampest_ros.core.excitation.protocol`).
+        Excitation (:func:`~dampest_ros.core.simulation.excitation.protocol`).
     duration : float
         Seconds flown.
     seed : int

@@ -1,9 +1,9 @@
-"""Streaming sensor models: the messages of :func:`dampest_ros.core.sensors.measure`, produced
+"""Streaming sensor models: the messages of :func:`dampest_ros.core.simulation.sensors.measure`, produced
 incrementally as the simulator advances (for the simulator node, where a controller closes
 the loop and the trajectory is not known in advance).
 
 Same physics, frames, interpolation (cubic Hermite for ν and position, nlerp for attitude),
-noise levels and message layout as :mod:`dampest_ros.core.sensors` (whose helpers it uses);
+noise levels and message layout as :mod:`dampest_ros.core.simulation.sensors` (whose helpers it uses);
 the sample grids are global (t0 + k / rate), so chunking does not change the stamps. The
 noise streams are spawned from the seed in the same order but drawn sample by sample, so a
 stream is statistically, not bitwise, the same as ``measure`` on the whole trajectory.
@@ -17,9 +17,9 @@ from collections import deque
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.control import VelocityPI
-from dampest_ros.core.effects import Effects
-from dampest_ros.core.excitation import protocol as make_protocol
+from dampest_ros.core.simulation.control import VelocityPI
+from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.simulation.excitation import protocol as make_protocol
 from dampest_ros.core.physics.frames import (
     body_vec,
     euler_from_matrix,
@@ -30,7 +30,7 @@ from dampest_ros.core.physics.frames import (
     world_vec,
     wxyz_to_xyzw,
 )
-from dampest_ros.core.interpolate import continuous, hermite, locate, nlerp
+from dampest_ros.core.simulation.interpolate import continuous, hermite, locate, nlerp
 from dampest_ros.core.signals.measurements import (
     ImuSeries,
     JointSeries,
@@ -40,7 +40,7 @@ from dampest_ros.core.signals.measurements import (
     TwistSeries,
 )
 from dampest_ros.core.physics.mounting import Mounting
-from dampest_ros.core.sensors import (
+from dampest_ros.core.simulation.sensors import (
     FRAME_IDS,
     NOISE_STREAMS,
     UNUSED_VARIANCE,
@@ -52,8 +52,8 @@ from dampest_ros.core.sensors import (
     imu_reading,
     sensor_depth,
 )
-from dampest_ros.core.simulate import make_plant
-from dampest_ros.core.trajectory import Trajectory
+from dampest_ros.core.simulation.simulate import make_plant
+from dampest_ros.core.simulation.trajectory import Trajectory
 from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
@@ -70,13 +70,13 @@ class SensorStream:
     bias : SensorBias
     seed : int
     mounting : Mounting, optional
-        Where the IMU, DVL and pressure sensor sit (as :func:`~dampest_ros.core.sensors.measure`
+        Where the IMU, DVL and pressure sensor sit (as :func:`~dampest_ros.core.simulation.sensors.measure`
         models them; default: at the origin, aligned).
 
     Notes
     -----
     Feed :meth:`add` with chunks that overlap by one step (the last step of the previous
-    chunk first), as :meth:`dampest_ros.core.simulate.Simulator.take_log` with ``keep=1``
+    chunk first), as :meth:`dampest_ros.core.simulation.simulate.Simulator.take_log` with ``keep=1``
     gives them. Each call returns the messages whose stamps fall after those already
     returned and up to the chunk's end (thruster windows up to the end of its last step).
     """
@@ -260,14 +260,14 @@ class LiveSimulation:
     """The simulator flown step by step with its sensors streamed: the core of the sim node.
 
     The excitation protocol is tracked by the velocity PI controller of
-    :func:`dampest_ros.core.simulate.run`, unless an external wrench command is in force
+    :func:`dampest_ros.core.simulation.simulate.run`, unless an external wrench command is in force
     (:meth:`command`), which then replaces the controller's output.
 
     Parameters
     ----------
     vehicle : Vehicle
     protocol : str
-        One of :data:`dampest_ros.core.excitation.LIVE_PROTOCOLS` (generated block by
+        One of :data:`dampest_ros.core.simulation.excitation.LIVE_PROTOCOLS` (generated block by
         block: memory does not grow with the duration).
     duration : float
         Length of the protocol (s); :attr:`done` after it.
@@ -277,7 +277,7 @@ class LiveSimulation:
     dt : float
         Integration step (s).
     backend : {'native', 'mujoco'}
-        The plant (:func:`dampest_ros.core.simulate.make_plant`).
+        The plant (:func:`dampest_ros.core.simulation.simulate.make_plant`).
     """
 
     def __init__(self, vehicle: Vehicle, protocol: str = "B", duration: float = 300.0,

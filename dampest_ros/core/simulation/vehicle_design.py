@@ -1,11 +1,11 @@
 """Excitation design of a vehicle: finite-Fourier-series references optimised for the
 conditioning of its damping regressor, by the design engine the arm uses
-(:mod:`dampest_ros.core.design`).
+(:mod:`dampest_ros.core.simulation.design`).
 
 The six FFS coordinates are the body velocities' integrals: q = [x, y, z, φ, θ, ψ] with
 q̇ = ν (FRD; m/s, rad/s), so the references are ν_ref = q̇, roll and pitch φ, θ and the depth
 z around its mean. Limits: |ν| within the speed limits (the steady speed half the largest
-thrust holds, :func:`dampest_ros.core.excitation.speed_limits`), roll and pitch within
+thrust holds, :func:`dampest_ros.core.simulation.excitation.speed_limits`), roll and pitch within
 ±25°, the depth within ±``depth_span``, and every thruster's thrust for the nominal model's
 τ = M ν̇ + C(ν)ν + D(ν)ν + g(η) within ``thrust_share`` of its largest (the rest is the
 velocity controller's margin). The regressor is the damping regressor Φ(ν) of the vehicle's
@@ -23,7 +23,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.design import (
+from dampest_ros.core.simulation.design import (
     Design,
     DesignLimits,
     DesignProblem,

@@ -1,4 +1,4 @@
-"""MuJoCo backend (dampest_ros.core.mujoco_backend): what MuJoCo's fluid model applies,
+"""MuJoCo backend (dampest_ros.core.simulation.mujoco_backend): what MuJoCo's fluid model applies,
 measured, and the faithful vehicle description of the two presets."""
 
 from __future__ import annotations
@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 import yaml
 
-from dampest_ros.core.effects import Effects
-from dampest_ros.core.excitation import make_excitation
+from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.physics.geometry import Geometry
-from dampest_ros.core.mujoco_backend import (
+from dampest_ros.core.simulation.mujoco_backend import (
     MujocoSimulator,
     compile_model,
     plant_added_mass,
@@ -24,7 +24,7 @@ from dampest_ros.core.mujoco_backend import (
 from dampest_ros.core.regression import target
 from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, coriolis_force
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.simulate import run
+from dampest_ros.core.simulation.simulate import run
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 

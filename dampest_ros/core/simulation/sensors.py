@@ -51,7 +51,7 @@ from dampest_ros.core.physics.frames import (
     world_vec,
     wxyz_to_xyzw,
 )
-from dampest_ros.core.interpolate import continuous, hermite, locate, nlerp
+from dampest_ros.core.simulation.interpolate import continuous, hermite, locate, nlerp
 from dampest_ros.core.signals.measurements import (
     ImuSeries,
     JointSeries,
@@ -71,7 +71,7 @@ from dampest_ros.core.physics.mounting import (
     rotate,
 )
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.trajectory import Trajectory
+from dampest_ros.core.simulation.trajectory import Trajectory
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

@@ -18,7 +18,7 @@ block. The offline simulation and the simulator node fly the same :class:`Protoc
 - ``optimal``: finite-Fourier-series velocity, roll, pitch and depth references (period
   10 s, 5 harmonics up to 0.5 Hz) whose coefficients are optimised for the condition number
   of the damping regressor within the speed limits, ±25° of roll and pitch, ±2 m of depth
-  and 70 % of every thruster's thrust (:mod:`dampest_ros.core.vehicle_design`, the arm's
+  and 70 % of every thruster's thrust (:mod:`dampest_ros.core.simulation.vehicle_design`, the arm's
   design engine); the design and its condition numbers are :attr:`ProtocolStream.design`.
 - ``hover`` (the simulator node only): station keeping at constant depth.
 """
@@ -35,10 +35,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from dampest_ros.core.design import Design, FourierTrajectory, Kinematic
+from dampest_ros.core.simulation.design import Design, FourierTrajectory, Kinematic
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
-from dampest_ros.core.vehicle_design import design_vehicle, nominal_wrench, vehicle_limits
+from dampest_ros.core.simulation.vehicle_design import design_vehicle, nominal_wrench, vehicle_limits
 
 FloatArray = NDArray[np.float64]
 
@@ -124,7 +124,7 @@ class ProtocolStream:
     """A protocol generated block by block (:data:`BLOCK` control ticks at a time).
 
     Read it forward, tick by tick (:meth:`command`, :meth:`feedforward`: what
-    :func:`dampest_ros.core.simulate.run` and the simulator node do), or whole
+    :func:`dampest_ros.core.simulation.simulate.run` and the simulator node do), or whole
     (:meth:`sample`); memory is that of two blocks whatever the duration.
 
     Parameters

@@ -10,7 +10,7 @@ no frame conversion: the free joint's ``qpos`` is the NED position of the body o
 the FRD → NED quaternion [w, x, y, z]; ``qvel`` is [NED velocity of the body origin, FRD
 angular velocity]; generalised forces are [NED force at the origin, FRD moment about it].
 
-What the pinned MuJoCo (4.0.0) applies, measured (``test/core/test_mujoco_backend.py``)
+What the pinned MuJoCo (4.0.0) applies, measured (``test/core/simulation/test_mujoco_backend.py``)
 ----------------------------------------------------------------------------------------
 - Added mass: only its velocity terms. Each geom carries a diagonal virtual mass and
   inertia (from its ellipsoid, times the fluid density); the force −C_A(ν)ν, Coriolis and
@@ -39,11 +39,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.effects import Effects
+from dampest_ros.core.simulation.effects import Effects
 from dampest_ros.core.physics.frames import quat_to_matrix
 from dampest_ros.core.physics.geometry import Geometry
 from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, RigidBody, skew
-from dampest_ros.core.trajectory import Trajectory
+from dampest_ros.core.simulation.trajectory import Trajectory
 from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
@@ -200,7 +200,7 @@ def _collect_warning(text: str) -> None:
 
 class MujocoSimulator:
     """The vehicle in MuJoCo, one control step at a time (same interface as
-    :class:`dampest_ros.core.simulate.Simulator`).
+    :class:`dampest_ros.core.simulation.simulate.Simulator`).
 
     Thrusters and the hidden thruster effects are computed here and applied as one body
     wrench (six actuators), held over the control step; buoyancy acts up at r_b; MuJoCo
