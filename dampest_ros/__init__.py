@@ -29,7 +29,7 @@ _HOME = {
     "read_csv": "dampest_ros.io.csv",
     "preprocess": "dampest_ros.core.signals.preprocess",
     "DampingIdentifier": "dampest_ros.core.identifier",
-    "Model": "dampest_ros.core.model",
+    "Model": "dampest_ros.core.identification.model",
     "load_model": "dampest_ros.io.yaml_io",
     "save_model": "dampest_ros.io.yaml_io",
     "find_gap": "dampest_ros.core.gap.search",
@@ -42,7 +42,7 @@ __all__ = ["DampingIdentifier", "Model", "find_gap", "load_model", "load_vehicle
 if TYPE_CHECKING:
     from dampest_ros.core.gap.search import find_gap
     from dampest_ros.core.identifier import DampingIdentifier
-    from dampest_ros.core.model import Model
+    from dampest_ros.core.identification.model import Model
     from dampest_ros.core.signals.preprocess import preprocess
     from dampest_ros.core.simulation.simulate import simulate
     from dampest_ros.io.bag import read_bag

@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.model import Model
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.io.yaml_io import load_model, model_from_parameters
 

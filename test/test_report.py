@@ -12,7 +12,7 @@ import pytest
 from matplotlib.figure import Figure
 
 from dampest_ros.core.physics import frames
-from dampest_ros.core.batch import fit
+from dampest_ros.core.identification.batch import fit
 from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.simulate import run

@@ -107,7 +107,7 @@ def run_import(args: argparse.Namespace) -> int:
     """Read the file's hydrodynamics into a model file."""
     import numpy as np
 
-    from dampest_ros.core.model import Model
+    from dampest_ros.core.identification.model import Model
     from dampest_ros.io.export.common import imported_mass_parts
     from dampest_ros.io.export.convert import import_model
     from dampest_ros.io.yaml_io import load_vehicle, save_model

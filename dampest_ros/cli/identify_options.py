@@ -1,7 +1,7 @@
 """dampest identify: identify the damping model from a bag or a CSV file.
 
 Batch methods (--method ols, wls, ridge, bounded, map) preprocess the whole log at once
-(dampest_ros/core/signals/preprocess.py, dampest_ros/core/batch.py). --method rls instead replays
+(dampest_ros/core/signals/preprocess.py, dampest_ros/core/identification/batch.py). --method rls instead replays
 the bag's sensor messages through the online path of the nodes: the causal preprocessor
 (messages in stamp order), the samples as the dampest/* topics carry them, and the
 estimator node's recursive least squares with its default prior and settings, so that its
@@ -34,7 +34,7 @@ EXAMPLE = ("examples:\n"
            "  dampest identify 'bags/dive_*' --vehicle bluerov2_heavy --workers 2 "
            "--drift-plot drift.png --out pooled.yaml")
 
-#: Batch methods (dampest_ros.core.batch.METHODS; a test checks the two agree).
+#: Batch methods (dampest_ros.core.identification.batch.METHODS; a test checks the two agree).
 METHODS = ("ols", "wls", "ridge", "bounded", "map")
 
 

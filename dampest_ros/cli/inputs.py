@@ -18,8 +18,8 @@ import numpy as np
 
 from dampest_ros.cli.common import Progress, tau_topic, topic_roles
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.delay import profile_delay
-from dampest_ros.core.model import Model
+from dampest_ros.core.identification.delay import profile_delay
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, preprocess
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.signals.samples import Samples

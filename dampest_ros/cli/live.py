@@ -17,7 +17,7 @@ from dampest_ros.cli.common import table
 from dampest_ros.core.simulation.control import DEFAULT_BANDWIDTH
 from dampest_ros.core.simulation.effects import Effects, true_vehicle
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
-from dampest_ros.core.model import Model
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.signals.preprocess import DataError
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     e = flight.estimator
     batch = None
     if args.batch:
-        from dampest_ros.core.batch import FitOptions, fit
+        from dampest_ros.core.identification.batch import FitOptions, fit
         from dampest_ros.core.online.sample import to_samples
         c = time.perf_counter()
         try:

@@ -1,5 +1,5 @@
 """dampest identify over several logs: each log reduced on a Dask worker, one pooled fit, the
-drift of the damping between the logs (the maths: dampest_ros/core/pool.py).
+drift of the damping between the logs (the maths: dampest_ros/core/identification/pool.py).
 
 Workers read the logs themselves (paths as the workers see them), so nothing but the logs'
 preprocessed samples and statistics travels; a log named by URL is copied to the worker
@@ -27,10 +27,10 @@ import numpy as np
 from dampest_ros.cli.common import table, term_list
 from dampest_ros.cli.inputs import cut, load_samples
 from dampest_ros.cli.main import expected
-from dampest_ros.core.batch import Fit, FitOptions
+from dampest_ros.core.identification.batch import Fit, FitOptions
 from dampest_ros.core.estimator import restrict
 from dampest_ros.core.simulation.excitation import speed_limits
-from dampest_ros.core.pool import Drift, LogStatistics, MapLogs, log_statistics
+from dampest_ros.core.identification.pool import Drift, LogStatistics, MapLogs, log_statistics
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.io.remote import glob_url, is_url, local_log, local_name
 from dampest_ros.io.yaml_io import load_vehicle
@@ -197,7 +197,7 @@ def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray
     """Map :func:`reduce_log` over the logs on Dask (:func:`map_logs_on_dask`).
 
     Yields the statistics of the logs that worked (in the given order), the reason of each
-    that failed, and a :data:`~dampest_ros.core.pool.MapLogs` that runs a function on each
+    that failed, and a :data:`~dampest_ros.core.identification.pool.MapLogs` that runs a function on each
     log on a worker (the pooled fit's passes over the samples).
     """
     work = partial(reduce_log, args=args, prior=prior, prior_std=prior_std)

@@ -29,8 +29,8 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.physics import frames
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.dissipative import project
-from dampest_ros.core.model import Model
+from dampest_ros.core.identification.dissipative import project
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.online.regression import OnlineRegression
 from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
@@ -80,7 +80,7 @@ class EstimatorConfig:
         twice that.
     dissipative : bool
         Publish the estimate projected onto νᵀD(ν)ν ≥ 0 over the flown envelope
-        (:func:`~dampest_ros.core.dissipative.project`), the constraint the batch fit imposes;
+        (:func:`~dampest_ros.core.identification.dissipative.project`), the constraint the batch fit imposes;
         the coefficients it moves are marked as not identified. False: the raw RLS estimate.
     """
 
@@ -390,7 +390,7 @@ class OnlineEstimator:
                 "unexcited": d.unexcited or ["none"], "change_alarm": bool(d.alarm), **extra}
 
     def to_model(self, version: int, **extra: Any) -> Model:
-        """The current estimate as a :class:`~dampest_ros.core.model.Model`: θ (projected
+        """The current estimate as a :class:`~dampest_ros.core.identification.model.Model`: θ (projected
         when the config says so), its σ, the coefficients not identified (:attr:`held`), the
         body's mass matrix, added mass and switches, and :meth:`model_extra` (``extra``
         overrides or adds entries, e.g. ``source``)."""

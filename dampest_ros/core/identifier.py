@@ -6,12 +6,12 @@
 - :meth:`DampingIdentifier.fit` is ``dampest identify``'s batch path: the vehicle's terms
   (:func:`~dampest_ros.core.estimator.restrict`), its nominal θ as the prior (the value of what
   the data do not determine), the speeds the thrusters reach for the speed-coverage check
-  (:func:`~dampest_ros.core.simulation.excitation.speed_limits`), :func:`~dampest_ros.core.batch.fit`.
+  (:func:`~dampest_ros.core.simulation.excitation.speed_limits`), :func:`~dampest_ros.core.identification.batch.fit`.
 - :meth:`DampingIdentifier.partial_fit` is the estimator node's path
   (:class:`~dampest_ros.core.estimator.OnlineEstimator`: parallel-filtered regression and
   recursive least squares with forgetting factor λ); successive calls continue the estimate.
 - :meth:`DampingIdentifier.score` is ``dampest identify --holdout``'s score
-  (:func:`~dampest_ros.core.validate.force_scores`).
+  (:func:`~dampest_ros.core.identification.validate.force_scores`).
 
 All quantities FRD body frame, SI units.
 """
@@ -25,15 +25,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.batch import Fit, FitOptions, fit
+from dampest_ros.core.identification.batch import Fit, FitOptions, fit
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.core.online.sample import OnlineSample
-from dampest_ros.core.regression import memory_states
+from dampest_ros.core.identification.regression import memory_states
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.validate import force_scores
+from dampest_ros.core.identification.validate import force_scores
 from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
@@ -65,7 +65,7 @@ class DampingIdentifier:
         Term kinds to identify, e.g. ``("linear", "quadratic")`` (default: all the
         vehicle's).
     method : {'ols', 'wls', 'ridge', 'bounded', 'map'}
-        Batch solver of :meth:`fit` (:class:`~dampest_ros.core.batch.FitOptions`);
+        Batch solver of :meth:`fit` (:class:`~dampest_ros.core.identification.batch.FitOptions`);
         :meth:`partial_fit` is always the RLS.
     cutoff : float
         Parallel low-pass of the regression (Hz), for both paths and :meth:`score`.
@@ -78,16 +78,16 @@ class DampingIdentifier:
         the default prior width in the RLS).
     structure : DampingModel, optional
         The term structure :meth:`fit` identifies instead of the vehicle's (e.g. what
-        :func:`~dampest_ros.core.selection.select_terms` chose); parameters the vehicle does
+        :func:`~dampest_ros.core.identification.selection.select_terms` chose); parameters the vehicle does
         not have start from 0. :meth:`partial_fit` identifies the vehicle's terms only.
     **fit_options
-        Further :class:`~dampest_ros.core.batch.FitOptions` fields (``ridge``, ``block``,
+        Further :class:`~dampest_ros.core.identification.batch.FitOptions` fields (``ridge``, ``block``,
         ``max_vif``, ``dissipative``, …).
 
     Attributes
     ----------
     model_ : Model
-        The identified model (:class:`~dampest_ros.core.model.Model`: θ, σ, what the data
+        The identified model (:class:`~dampest_ros.core.identification.model.Model`: θ, σ, what the data
         did not determine, the term structure, the mass matrix), ready for
         :func:`dampest_ros.io.yaml_io.save_model`.
     coef_ : ndarray, shape (p,)
@@ -231,6 +231,6 @@ class DampingIdentifier:
     def score(self, samples: Samples) -> FloatArray:
         """Per-DOF R² (Nash–Sutcliffe) of the damping force on ``samples``, shape (6,): the
         force the data demand, y = τ − M ν̇ − C(ν)ν − g(η), against Φ(ν)θ, both low-passed
-        at ``cutoff`` (:func:`~dampest_ros.core.validate.force_scores`)."""
+        at ``cutoff`` (:func:`~dampest_ros.core.identification.validate.force_scores`)."""
         model = self._fitted()
         return force_scores(samples, model, self.vehicle.body, self.coef_, self.cutoff)["nse"]

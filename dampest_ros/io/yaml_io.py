@@ -47,7 +47,7 @@ holds its prior value (never an estimate) and ``held`` gives the reason, as para
 all identified, except those written by earlier ``dampest identify`` versions, whose
 ``unidentified`` / ``unidentified_reason`` lists are read as ``held``. Every reader refuses a
 non-finite θ, M or σ of an identified coefficient
-(:func:`~dampest_ros.core.identified.check_model_numbers`).
+(:func:`~dampest_ros.core.identification.identified.check_model_numbers`).
 """
 
 from __future__ import annotations
@@ -65,9 +65,9 @@ import yaml
 
 from dampest_ros.core.physics.alpha import Alpha
 from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel
-from dampest_ros.core.identified import check_model_numbers
+from dampest_ros.core.identification.identified import check_model_numbers
 from dampest_ros.core.signals.measurements import FloatArray
-from dampest_ros.core.model import Model
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 

@@ -14,7 +14,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from dampest_ros.core import validate
+from dampest_ros.core.identification import validate
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES
 

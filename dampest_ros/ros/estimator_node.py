@@ -35,7 +35,7 @@ from std_msgs.msg import String
 from dampest_ros.core.physics import frames
 from dampest_ros.core.estimator import EstimatorConfig
 from dampest_ros.core.identifier import DampingIdentifier
-from dampest_ros.core.model import Model
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.rls.least_squares import OUTLIER_GATE
 from dampest_ros.core.rls.update import FORGETTING_MODES

@@ -21,7 +21,7 @@ from typing import Any
 
 from std_msgs.msg import String
 
-from dampest_ros.core.model import Model
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.io.yaml_io import (
     load_model,

@@ -58,7 +58,7 @@ from dampest_ros.core.signals.measurements import JointSeries
 from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, AddedMassTerms, RigidBody
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.selection import DEFAULT_CROSS
+from dampest_ros.core.identification.selection import DEFAULT_CROSS
 from dampest_ros.core.simulation.sensors import SensorBias, SensorConfig, measure
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.core.physics.terms import CrossSpec, cross_term, linear_term, quadratic_term

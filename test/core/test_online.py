@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from dampest_ros.core.batch import FitOptions, fit
+from dampest_ros.core.identification.batch import FitOptions, fit
 from dampest_ros.core.physics.damping import filter_memory
-from dampest_ros.core.dissipative import envelope
+from dampest_ros.core.identification.dissipative import envelope
 from dampest_ros.core.simulation.effects import Effects
 from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
 from dampest_ros.core.simulation.excitation import Excitation, make_excitation, speed_limits
@@ -21,7 +21,7 @@ from dampest_ros.core.online.preprocessor import OnlinePreprocessor, derivative_
 from dampest_ros.core.online.regression import LowPass, OnlineRegression
 from dampest_ros.core.online.sample import OnlineConfig, to_samples
 from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
-from dampest_ros.core.regression import iter_regression
+from dampest_ros.core.identification.regression import iter_regression
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.rls.least_squares import RecursiveLeastSquares, RLSConfig
 from dampest_ros.core.simulation.sensors import SensorConfig, measure

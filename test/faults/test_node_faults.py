@@ -26,7 +26,7 @@ rclpy = pytest.importorskip("rclpy")
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from dampest_ros.core.model import Model  # noqa: E402
+from dampest_ros.core.identification.model import Model  # noqa: E402
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model  # noqa: E402
 from dampest_ros.ros.common import DIAGNOSTICS_TOPIC, ParamNode  # noqa: E402
 from dampest_ros.ros.controller_node import ControllerNode  # noqa: E402

@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 from dampest_ros.cli.main import main
-from dampest_ros.core.model import Model
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 from dampest_ros.io.export.common import ExportWarning, NotDissipativeError, imported_mass

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from dampest_ros.core.model import Model
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import damping_from_spec
 from dampest_ros.io import yaml_io

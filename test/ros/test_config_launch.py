@@ -64,7 +64,7 @@ def test_parameter_files_load_with_params_file_and_name_every_declared_parameter
     """Each node started with --params-file config/<node>.params.yaml (plus what it needs,
     given after it) declares exactly the file's parameters (besides rclpy's own and the
     model.* of the model servers)."""
-    from dampest_ros.core.model import Model
+    from dampest_ros.core.identification.model import Model
     from dampest_ros.io.yaml_io import load_vehicle, save_model
 
     monkeypatch.setenv("ROS_DOMAIN_ID", "81")

@@ -9,7 +9,7 @@ as a vehicle logs them; never ground truth). This package
        r(t) = τ − (M ν̇ + C(ν)ν + D(ν)ν + g(η))       (N, N·m),  shape (N, 6)
 
    i.e. ``batch.target − Φθ`` with the same parallel zero-phase low-pass as the
-   identification (:func:`dampest_ros.core.batch.iter_regression`; :mod:`.data`);
+   identification (:func:`dampest_ros.core.identification.batch.iter_regression`; :mod:`.data`);
 2. localises it (:func:`.localise.localise`): per DOF, velocity regime, frequency band
    (Welch PSD), time segment, attitude and depth;
 3. names the missing effect (:func:`.search.find_gap`): every candidate
@@ -17,7 +17,7 @@ as a vehicle logs them; never ground truth). This package
    prediction ρ(p) of the residual it would leave in data analysed with the believed model
    (``r ≈ ρ(p) + noise``). Candidates are screened by fitting their linearisation on the first
    ``split`` (70 %) of the time and scoring the residual reduction on the rest (held out), with
-   the error-reduction ratio and the BIC change as in :mod:`dampest_ros.core.selection`; the
+   the error-reduction ratio and the BIC change as in :mod:`dampest_ros.core.identification.selection`; the
    best significant one is refined on its exact (nonlinear) model with
    ``scipy.optimize.least_squares``, added, all added effects are refitted jointly, and the
    search repeats until no candidate is significant: "no further missing effect found";
@@ -29,7 +29,7 @@ evaluated vectorised over chunks of samples, then low-passed like the regression
 current constant in NED, buoyancy offset, CG offset, thrust-gain error, thruster dead-zone
 (needs the logged rotor speeds), τ → ν delay, added-mass error (scale and per DOF), a missing
 linear or quadratic damping coefficient per DOF, each cross-coupling of
-:data:`dampest_ros.core.selection.DEFAULT_CROSS`, fluid memory per DOF, gyro bias and DVL bias.
+:data:`dampest_ros.core.identification.selection.DEFAULT_CROSS`, fluid memory per DOF, gyro bias and DVL bias.
 
 Signs: with the model's residual r = τ − model(ν, ν̇, η), an effect that adds a force F to the
 left-hand side of the true equation (M ν̇ + … + g + F = τ) leaves ρ = F.

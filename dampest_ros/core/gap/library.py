@@ -24,7 +24,7 @@ from dampest_ros.core.gap.model_effects import (
     Memory,
 )
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.selection import DEFAULT_CROSS
+from dampest_ros.core.identification.selection import DEFAULT_CROSS
 from dampest_ros.core.physics.terms import CrossSpec
 
 

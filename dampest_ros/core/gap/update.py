@@ -23,7 +23,7 @@ from dampest_ros.core.physics.rigid_body import (
 )
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.physics.terms import CrossSpec, cross_term, linear_term, memory_term, quadratic_term
-from dampest_ros.core.validate import free_run_error, longest_segment
+from dampest_ros.core.identification.validate import free_run_error, longest_segment
 
 FloatArray = NDArray[np.float64]
 
@@ -183,7 +183,7 @@ def free_run_errors(data: GapData, effects: Sequence[tuple[Effect, FloatArray]],
                     seconds: float = 120.0) -> dict[str, Any] | str:
     """Free-run velocity RMSE of the believed model and of the model with the effects.
 
-    Uses :func:`dampest_ros.core.validate.free_run_error`. The model
+    Uses :func:`dampest_ros.core.identification.validate.free_run_error`. The model
     with the effects has the changed damping terms, M and added-mass switches; effects that
     change the applied force (thrust gain, buoyancy, delay, dead-zone) enter as a corrected
     τ. Current, CG offset and sensor biases depend on the state and are not represented in

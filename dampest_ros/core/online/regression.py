@@ -1,5 +1,5 @@
 """The causal regression that feeds the RLS: the online counterpart of
-:func:`dampest_ros.core.batch.iter_regression`.
+:func:`dampest_ros.core.identification.batch.iter_regression`.
 
 :class:`LowPass` is the causal "parallel filter": the same Butterworth low-pass (second-order
 sections) applied to y and to every column of Φ (O(p) per sample), so that LP(y) = LP(Φ) θ
@@ -18,7 +18,7 @@ from scipy import signal
 
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.online.sample import OnlineSample
-from dampest_ros.core.regression import target
+from dampest_ros.core.identification.regression import target
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.signals.samples import Samples
 
@@ -79,7 +79,7 @@ class LowPass:
 
 class OnlineRegression:
     """Samples → parallel-filtered (Φ, y) for the RLS, with the batch path's regressor and
-    target (:meth:`DampingModel.regressor`, :func:`dampest_ros.core.batch.target`).
+    target (:meth:`DampingModel.regressor`, :func:`dampest_ros.core.identification.batch.target`).
 
     Samples can be given one at a time or in chunks (vectorised, the same result); a stamp
     gap longer than 1.5 sample periods or an unusable sample starts a new segment: the

@@ -1,5 +1,5 @@
 """The damping terms by kind (linear, quadratic, cross, memory, added-mass, Coriolis,
-residual) and the library of candidate terms that :mod:`dampest_ros.core.selection`
+residual) and the library of candidate terms that :mod:`dampest_ros.core.identification.selection`
 searches.
 
 Parameter names (SNAME style, ASCII; F is the force letter X..N, j, k velocity letters u..r).

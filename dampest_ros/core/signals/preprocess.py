@@ -77,7 +77,7 @@ class PreprocessConfig:
         differentiated; about the IMU rate.
     cutoff : float
         Light zero-phase low-pass on ν, ν̇ and τ (Hz) against sensor noise; the regression
-        applies its own, stronger, parallel filter (:mod:`dampest_ros.core.batch`).
+        applies its own, stronger, parallel filter (:mod:`dampest_ros.core.identification.batch`).
     crossover : float
         DVL/IMU fusion crossover (Hz).
     max_gap : float

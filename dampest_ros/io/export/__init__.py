@@ -20,11 +20,11 @@ only; they act in its M_A ν̇). Terms a format cannot express (fluid memory, re
 dropped silently.
 
 Two things are never exported silently. Coefficients the data did not determine
-(``model.identified`` false, :attr:`~dampest_ros.core.model.Model.held`) are written with
+(``model.identified`` false, :attr:`~dampest_ros.core.identification.model.Model.held`) are written with
 the value the model holds (their prior) and listed as such in the file's header, with an
 :class:`~.common.ExportWarning`. A model that generates energy somewhere on a grid over its flown
 speeds (``model.flown_speeds``, else a default box; see
-:func:`~dampest_ros.core.identified.non_dissipative`) is refused with
+:func:`~dampest_ros.core.identification.identified.non_dissipative`) is refused with
 :class:`~.common.NotDissipativeError`, which names the coefficient and the velocity; with
 ``force=True`` it is exported and the header says that it is not dissipative.
 

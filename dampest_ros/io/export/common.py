@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from dampest_ros.core.physics.damping import DampingModel, FloatArray
-from dampest_ros.core.identified import non_dissipative
-from dampest_ros.core.model import Model
+from dampest_ros.core.identification.identified import non_dissipative
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 from dampest_ros.io.yaml_io import SIGN_CONVENTION
@@ -282,8 +282,8 @@ def merge(items: Iterable[tuple[str, Coefficient, float]],
 
 def checked(mf: Model, force: bool, source: str | None) -> tuple[list[str], list[str]]:
     """The held-at-prior coefficients (``"name = value (reason)"``) and where the model
-    generates energy (:func:`~dampest_ros.core.identified.non_dissipative` over
-    :attr:`Model.flown <dampest_ros.core.model.Model.flown>`).
+    generates energy (:func:`~dampest_ros.core.identification.identified.non_dissipative` over
+    :attr:`Model.flown <dampest_ros.core.identification.model.Model.flown>`).
 
     Raises
     ------

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from dampest_ros.core.model import Model
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export import FORMATS, IMPORT_FORMATS
 from dampest_ros.io.export.common import Exported, Imported

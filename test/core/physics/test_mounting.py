@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
-from dampest_ros.core.batch import Fit, FitOptions, fit
+from dampest_ros.core.identification.batch import Fit, FitOptions, fit
 from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.physics.frames import matrix_from_euler, matrix_to_quat
 from dampest_ros.core.signals.measurements import ImuSeries, PressureSeries, Recording, TwistSeries

@@ -21,7 +21,7 @@ from dampest_ros.core.simulation.mujoco_backend import (
     plant_added_mass,
     plant_vehicle,
 )
-from dampest_ros.core.regression import target
+from dampest_ros.core.identification.regression import target
 from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, coriolis_force
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.simulate import run

@@ -331,7 +331,7 @@ def test_protocols_fly_the_bluerov2(protocol: str) -> None:
 def test_added_mass_switches_reach_the_physics(terms: dict[str, bool]) -> None:
     """With any switches, τ − M ν̇ − C(ν)ν − g(η) on the ground truth is D(ν)ν exactly
     (no motor lag: the logged step-mean τ is the τ of the logged ν̇)."""
-    from dampest_ros.core.regression import target
+    from dampest_ros.core.identification.regression import target
     from dampest_ros.core.signals.samples import Samples
 
     d = preset("bluerov2_heavy")

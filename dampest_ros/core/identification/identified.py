@@ -1,6 +1,6 @@
 """What every reader of an identified model checks, and what the data determined.
 
-Two checks every reader of a model (:class:`~dampest_ros.core.model.Model`) shares:
+Two checks every reader of a model (:class:`~dampest_ros.core.identification.model.Model`) shares:
 :func:`check_model_numbers` (θ, M and the σ of the identified coefficients finite) and
 :func:`non_dissipative` (νᵀD(ν)ν ≥ 0 over a grid of the speed envelope, memory gains ≥ 0).
 A model says per coefficient whether the data determined it (``held``: name → why it stayed
@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.dissipative import envelope, power_rows
+from dampest_ros.core.identification.dissipative import envelope, power_rows
 from dampest_ros.core.physics.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,
@@ -112,8 +112,8 @@ def non_dissipative(model: DampingModel, theta: FloatArray,
                     flown: FloatArray | None = None) -> list[str]:
     """Where a damping model generates energy, in words (empty: it dissipates everywhere).
 
-    Checked as the fit constrains it (:func:`~dampest_ros.core.batch.fit`): the static terms
-    on the grid over the flown envelope (:func:`~dampest_ros.core.batch.envelope`), reporting
+    Checked as the fit constrains it (:func:`~dampest_ros.core.identification.batch.fit`): the static terms
+    on the grid over the flown envelope (:func:`~dampest_ros.core.identification.batch.envelope`), reporting
     the point of the most negative νᵀD(ν)ν and the coefficient whose share θ_j g_j(ν) of
     that power is the most negative; and every memory gain c ≥ 0 (a passive kernel).
 

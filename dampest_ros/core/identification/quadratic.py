@@ -2,7 +2,7 @@
 singular (rank-revealing), with some parameters held, and under linear inequalities E β ≥ h.
 
 The batch fit, the structure search and the projection of the online estimate onto the
-dissipativity constraint (:mod:`dampest_ros.core.dissipative`) solve with these.
+dissipativity constraint (:mod:`dampest_ros.core.identification.dissipative`) solve with these.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from scipy import optimize, signal
 
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.regression import iter_regression
+from dampest_ros.core.identification.regression import iter_regression
 from dampest_ros.core.physics.rigid_body import RigidBody
 from dampest_ros.core.signals.samples import Samples
 

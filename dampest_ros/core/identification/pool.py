@@ -26,9 +26,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from dampest_ros.core.batch import Fit, FitOptions, fit
+from dampest_ros.core.identification.batch import Fit, FitOptions, fit
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.regression import NormalEquations, accumulate
+from dampest_ros.core.identification.regression import NormalEquations, accumulate
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.signals.samples import Samples
 
@@ -48,7 +48,7 @@ class LogStatistics:
     samples : Samples
         Its preprocessed samples.
     normal : NormalEquations
-        Their statistics (:func:`~dampest_ros.core.batch.accumulate`, 5 folds).
+        Their statistics (:func:`~dampest_ros.core.identification.batch.accumulate`, 5 folds).
     fit : Fit
         The log's own estimate (for the drift).
     """
@@ -107,7 +107,7 @@ MapLogs = Callable[[Callable[[LogStatistics, int], Any]], list[Any]]
 def on_samples(log: LogStatistics, k: int, fn: Callable[[Samples, int], Any],
                firsts: Sequence[int]) -> Any:
     """``fn`` on log k's samples, told where they begin in the pooled set (a
-    :data:`~dampest_ros.core.covariance.MapParts` call, run where the log is)."""
+    :data:`~dampest_ros.core.identification.covariance.MapParts` call, run where the log is)."""
     return fn(log.samples, firsts[k])
 
 
@@ -118,7 +118,7 @@ def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBo
     """The fit of all the logs' samples at once, from their summed statistics (the reduce).
 
     θ, its covariance and every per-DOF figure equal those of
-    :func:`~dampest_ros.core.batch.fit` on :func:`pooled_samples` to rounding; only the
+    :func:`~dampest_ros.core.identification.batch.fit` on :func:`pooled_samples` to rounding; only the
     cross-validation folds differ (see :func:`pooled_normal`). The covariances' passes over
     the samples run log by log through ``map_logs`` (default: here, one after the other).
     ``samples`` is :func:`pooled_samples` of ``logs`` when the caller has made it already.

@@ -5,7 +5,7 @@ Per sample n (FRD): y_n = τ_n − M ν̇_n − C(ν_n)ν_n − g(η_n) = Φ(ν_
 and Φ (:func:`iter_regression`), and reduced to normal equations per degree of freedom i and
 cross-validation fold f (:func:`accumulate`): A_{f,i} = Σ Φ_iᵀ Φ_i, b_{f,i} = Σ Φ_iᵀ y_i,
 c_{f,i} = Σ y_i². Memory does not grow with the length of the data; the statistics of several
-logs add up (:mod:`dampest_ros.core.pool`).
+logs add up (:mod:`dampest_ros.core.identification.pool`).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ import numpy as np
 from scipy import optimize
 
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.dissipative import dissipation_points, envelope, power_rows, project
+from dampest_ros.core.identification.dissipative import dissipation_points, envelope, power_rows, project
 from dampest_ros.core.estimator import restrict
 from dampest_ros.io.yaml_io import load_vehicle
 

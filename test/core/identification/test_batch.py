@@ -1,4 +1,4 @@
-"""Batch identification (dampest_ros.core.batch) on exact simulator samples."""
+"""Batch identification (dampest_ros.core.identification.batch) on exact simulator samples."""
 
 from __future__ import annotations
 
@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.physics.alpha import Alpha
-from dampest_ros.core.batch import FitOptions, fit
+from dampest_ros.core.identification.batch import FitOptions, fit
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.dissipative import envelope
+from dampest_ros.core.identification.dissipative import envelope
 from dampest_ros.core.estimator import restrict
 from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
-from dampest_ros.core.regression import accumulate, iter_regression
+from dampest_ros.core.identification.regression import accumulate, iter_regression
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.core.physics.terms import CrossSpec, cross_term

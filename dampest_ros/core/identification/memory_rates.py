@@ -1,6 +1,6 @@
 """Fluid memory in the data: per DOF, the rate λ of a memory state found by a profile
 search (the regression is linear in the gain c for a fixed λ) and the evidence for it
-(:class:`MemoryEvidence`), for :func:`dampest_ros.core.selection.select_terms`."""
+(:class:`MemoryEvidence`), for :func:`dampest_ros.core.identification.selection.select_terms`."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ from numpy.typing import NDArray
 from scipy import optimize
 
 from dampest_ros.core.physics.damping import DampingModel, filter_memory
-from dampest_ros.core.frequency import memory_impedance
+from dampest_ros.core.identification.frequency import memory_impedance
 from dampest_ros.core.signals.preprocess import zero_phase
-from dampest_ros.core.quadratic import solve_normal
-from dampest_ros.core.regression import NormalEquations, accumulate, iter_regression
+from dampest_ros.core.identification.quadratic import solve_normal
+from dampest_ros.core.identification.regression import NormalEquations, accumulate, iter_regression
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, RigidBody
 from dampest_ros.core.signals.samples import Samples
 

@@ -1,4 +1,4 @@
-"""Validation metrics (dampest_ros.core.validate) on known signals and on simulated data."""
+"""Validation metrics (dampest_ros.core.identification.validate) on known signals and on simulated data."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.physics import frames
-from dampest_ros.core import validate as val
+from dampest_ros.core.identification import validate as val
 from dampest_ros.core.simulation.effects import Effects, true_vehicle
 from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.physics.rigid_body import ConfigError

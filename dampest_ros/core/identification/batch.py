@@ -1,11 +1,11 @@
 """Offline batch identification of the damping parameters θ from samples.
 
 Regression form (FRD, per sample n): y_n = τ_n − M ν̇_n − C(ν_n)ν_n − g(η_n) = Φ(ν_n) θ + e_n,
-reduced to per-DOF, per-fold normal equations (:mod:`dampest_ros.core.regression`).
+reduced to per-DOF, per-fold normal equations (:mod:`dampest_ros.core.identification.regression`).
 Everything here (OLS, per-DOF weighted LS, ridge, bounded LS, MAP, held-out residuals,
 AIC/BIC) is closed-form in them; the covariance is block-robust plus the sensor-bias budget
-(:mod:`dampest_ros.core.covariance`), and the estimate is held dissipative
-(:mod:`dampest_ros.core.dissipative`).
+(:mod:`dampest_ros.core.identification.covariance`), and the estimate is held dissipative
+(:mod:`dampest_ros.core.identification.dissipative`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from scipy import linalg, stats
 from scipy.sparse import csgraph
 
-from dampest_ros.core.covariance import (
+from dampest_ros.core.identification.covariance import (
     MapParts,
     bias_covariance,
     block_count,
@@ -26,10 +26,10 @@ from dampest_ros.core.covariance import (
     robust_covariance,
 )
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.dissipative import dissipation_points, impose, misfit_report
-from dampest_ros.core.model import Model
-from dampest_ros.core.quadratic import solve_normal
-from dampest_ros.core.regression import NormalEquations, accumulate, total_sum_of_squares
+from dampest_ros.core.identification.dissipative import dissipation_points, impose, misfit_report
+from dampest_ros.core.identification.model import Model
+from dampest_ros.core.identification.quadratic import solve_normal
+from dampest_ros.core.identification.regression import NormalEquations, accumulate, total_sum_of_squares
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.signals.samples import CHUNK, Samples
 
@@ -191,7 +191,7 @@ class Fit:
 
     def to_model(self, damping: DampingModel, body: RigidBody,
                  extra: dict[str, Any] | None = None) -> Model:
-        """The fit as a :class:`~dampest_ros.core.model.Model`: θ and σ, the coefficients not
+        """The fit as a :class:`~dampest_ros.core.identification.model.Model`: θ and σ, the coefficients not
         identified held with their reason (``flags``, else the constraint), the body's mass
         matrix, added mass and switches, and as ``extra`` the method, sample count, 95 %
         intervals, per-DOF NSE and RMSE and condition number, plus ``extra``.
@@ -449,7 +449,7 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
         Samples per chunk.
     map_parts : MapParts, optional
         Runs the covariances' passes over the samples part by part where the parts are
-        held (:data:`~dampest_ros.core.covariance.MapParts`; default: ``samples`` at once).
+        held (:data:`~dampest_ros.core.identification.covariance.MapParts`; default: ``samples`` at once).
 
     Returns
     -------

@@ -1,4 +1,4 @@
-"""Pooled identification over several logs and the drift test (dampest_ros.core.pool)."""
+"""Pooled identification over several logs and the drift test (dampest_ros.core.identification.pool)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from dampest_ros.core.batch import FitOptions, fit
+from dampest_ros.core.identification.batch import FitOptions, fit
 from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
-from dampest_ros.core.pool import (
+from dampest_ros.core.identification.pool import (
     LogStatistics,
     drift,
     log_statistics,
