@@ -121,7 +121,7 @@ def receive(kind: str, samples: str) -> dict[str, float]:
     node: Node
     count: Callable[[], int]
     if kind == "estimator":
-        from dampest_ros.core.estimator import STREAMS
+        from dampest_ros.core.online.estimator import STREAMS
         from dampest_ros.ros.estimator_node import EstimatorNode
         est = EstimatorNode()
         node = est

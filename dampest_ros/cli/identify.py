@@ -22,7 +22,7 @@ from dampest_ros.cli.pool import (
 )
 from dampest_ros.core.identification.batch import Fit, FitOptions
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.estimator import EstimatorConfig, restrict
+from dampest_ros.core.online.estimator import EstimatorConfig, restrict
 from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
 from dampest_ros.core.physics.mounting import frame_id_note

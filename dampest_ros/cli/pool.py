@@ -28,7 +28,7 @@ from dampest_ros.cli.common import table, term_list
 from dampest_ros.cli.inputs import cut, load_samples
 from dampest_ros.cli.main import expected
 from dampest_ros.core.identification.batch import Fit, FitOptions
-from dampest_ros.core.estimator import restrict
+from dampest_ros.core.online.estimator import restrict
 from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.core.identification.pool import Drift, LogStatistics, MapLogs, log_statistics
 from dampest_ros.core.physics.rigid_body import ConfigError

@@ -4,11 +4,11 @@
 ``score`` for its per-DOF R²; the result in the attributes that end in ``_``.
 
 - :meth:`DampingIdentifier.fit` is ``dampest identify``'s batch path: the vehicle's terms
-  (:func:`~dampest_ros.core.estimator.restrict`), its nominal θ as the prior (the value of what
+  (:func:`~dampest_ros.core.online.estimator.restrict`), its nominal θ as the prior (the value of what
   the data do not determine), the speeds the thrusters reach for the speed-coverage check
   (:func:`~dampest_ros.core.simulation.excitation.speed_limits`), :func:`~dampest_ros.core.identification.batch.fit`.
 - :meth:`DampingIdentifier.partial_fit` is the estimator node's path
-  (:class:`~dampest_ros.core.estimator.OnlineEstimator`: parallel-filtered regression and
+  (:class:`~dampest_ros.core.online.estimator.OnlineEstimator`: parallel-filtered regression and
   recursive least squares with forgetting factor λ); successive calls continue the estimate.
 - :meth:`DampingIdentifier.score` is ``dampest identify --holdout``'s score
   (:func:`~dampest_ros.core.identification.validate.force_scores`).
@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, restrict
+from dampest_ros.core.online.estimator import EstimatorConfig, OnlineEstimator, restrict
 from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.identification.regression import memory_states
@@ -95,7 +95,7 @@ class DampingIdentifier:
     cov_ : ndarray, shape (p, p)
         Covariance of θ: the batch fit's (NaN rows for coefficients held at their prior), or
         the RLS's correlation scaled by its standard deviations
-        (:attr:`~dampest_ros.core.rls.least_squares.RecursiveLeastSquares.std`).
+        (:attr:`~dampest_ros.core.online.rls.least_squares.RecursiveLeastSquares.std`).
     names_ : list of str
         Parameter names, θ order (also :attr:`feature_names`).
     fit_ : Fit or None

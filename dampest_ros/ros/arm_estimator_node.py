@@ -39,7 +39,7 @@ from dampest_ros.core.arm.base import base_parameters
 from dampest_ros.core.arm.identify import IdentifyConfig
 from dampest_ros.core.arm.online import ArmEstimate, ArmEstimator
 from dampest_ros.core.arm.regressor import full_parameters
-from dampest_ros.core.rls.least_squares import RLSConfig
+from dampest_ros.core.online.rls.least_squares import RLSConfig
 from dampest_ros.io.arm import (
     ArmDataError,
     arm_model_parameters,

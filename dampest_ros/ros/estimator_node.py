@@ -15,7 +15,7 @@ atomic write of the model file to save_path), ~/freeze (std_srvs/SetBool: stop o
 updating). With resume (default) it starts from the model file at save_path with its version
 when the file holds this vehicle's coefficients (else it says why, counts it and starts from
 the prior); temporary files of a killed save are removed at start. The work is done by
-dampest_ros.core.estimator.OnlineEstimator."""
+dampest_ros.core.online.estimator.OnlineEstimator."""
 
 from __future__ import annotations
 
@@ -33,12 +33,12 @@ from geometry_msgs.msg import (
 from std_msgs.msg import String
 
 from dampest_ros.core.physics import frames
-from dampest_ros.core.estimator import EstimatorConfig
+from dampest_ros.core.online.estimator import EstimatorConfig
 from dampest_ros.core.identifier import DampingIdentifier
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.rls.least_squares import OUTLIER_GATE
-from dampest_ros.core.rls.update import FORGETTING_MODES
+from dampest_ros.core.online.rls.least_squares import OUTLIER_GATE
+from dampest_ros.core.online.rls.update import FORGETTING_MODES
 from dampest_ros.io.yaml_io import (
     load_model,
     load_vehicle,
@@ -169,7 +169,7 @@ class EstimatorNode(EstimatorParamNode):
         try:
             if name == "terms":
                 kinds = [t.strip() for t in str(value).split(",") if t.strip()]
-                from dampest_ros.core.estimator import restrict
+                from dampest_ros.core.online.estimator import restrict
                 v = load_vehicle(self.p("vehicle"))
                 restrict(v.damping, v.theta, kinds)
             if name == "cutoff" and not value < 0.5 * self.p("rate"):

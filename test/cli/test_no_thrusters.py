@@ -13,7 +13,7 @@ import yaml
 
 from dampest_ros.cli.main import main
 from dampest_ros.core.physics import frames
-from dampest_ros.core.estimator import CORRELATION_SECONDS, EstimatorConfig, OnlineEstimator
+from dampest_ros.core.online.estimator import CORRELATION_SECONDS, EstimatorConfig, OnlineEstimator
 from dampest_ros.core.signals.measurements import JointSeries, WrenchSeries
 from dampest_ros.core.signals.preprocess import thruster_wrench
 from dampest_ros.core.physics.vehicle import measured_wrench_scale

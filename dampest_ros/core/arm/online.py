@@ -1,5 +1,5 @@
 """Online arm identification: the vehicle's recursive least squares
-(:class:`dampest_ros.core.rls.least_squares.RecursiveLeastSquares`, with its forgetting,
+(:class:`dampest_ros.core.online.rls.least_squares.RecursiveLeastSquares`, with its forgetting,
 noise estimate and CUSUM change alarm) on the arm's base parameters and joint friction.
 
 Joint samples arrive in any pieces. They are filtered exactly as offline
@@ -25,7 +25,7 @@ from dampest_ros.core.arm.identify import IdentifyConfig, filter_joints, gaps, u
 from dampest_ros.core.arm.model import ArmModel
 from dampest_ros.core.arm.regressor import regressor
 from dampest_ros.core.physics.rigid_body import FORCE_NAMES
-from dampest_ros.core.rls.least_squares import RecursiveLeastSquares, RLSConfig
+from dampest_ros.core.online.rls.least_squares import RecursiveLeastSquares, RLSConfig
 
 FloatArray = NDArray[np.float64]
 

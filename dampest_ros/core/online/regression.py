@@ -144,7 +144,7 @@ class OnlineRegression:
         gate : callable, optional
             ``gate(Φ, y)`` of raw (unfiltered) rows, Φ (n, 6, p) and y (n, 6), returns which
             to reject, shape (n,) bool (e.g.
-            :meth:`~dampest_ros.core.rls.least_squares.RecursiveLeastSquares.outliers`). A
+            :meth:`~dampest_ros.core.online.rls.least_squares.RecursiveLeastSquares.outliers`). A
             rejected row enters the low-pass as zeros: y = Φθ + e holds for it with any θ, so
             the filtered regression stays exact, and the sample adds nothing else.
 

@@ -11,7 +11,7 @@ from dampest_ros.core.physics.alpha import Alpha
 from dampest_ros.core.identification.batch import FitOptions, fit
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.dissipative import envelope
-from dampest_ros.core.estimator import restrict
+from dampest_ros.core.online.estimator import restrict
 from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.identification.regression import accumulate, iter_regression

@@ -14,7 +14,7 @@ from dampest_ros.core.identification.batch import FitOptions, fit
 from dampest_ros.core.physics.damping import filter_memory
 from dampest_ros.core.identification.dissipative import envelope
 from dampest_ros.core.simulation.effects import Effects
-from dampest_ros.core.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
+from dampest_ros.core.online.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
 from dampest_ros.core.simulation.excitation import Excitation, make_excitation, speed_limits
 from dampest_ros.core.signals.measurements import Recording, TwistSeries
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor, derivative_lag, window_mean
@@ -23,7 +23,7 @@ from dampest_ros.core.online.sample import OnlineConfig, to_samples
 from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
 from dampest_ros.core.identification.regression import iter_regression
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.rls.least_squares import RecursiveLeastSquares, RLSConfig
+from dampest_ros.core.online.rls.least_squares import RecursiveLeastSquares, RLSConfig
 from dampest_ros.core.simulation.sensors import SensorConfig, measure
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.core.simulation.trajectory import Trajectory

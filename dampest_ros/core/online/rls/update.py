@@ -16,7 +16,7 @@ The Joseph form is evaluated without forming I − KΦ, as P⁻ + A + Aᵀ with
 A = K (½ S Kᵀ − Gᵀ) (= P⁻ − K Gᵀ − G Kᵀ + K S Kᵀ): two p × 6 by 6 × p products, O(6 p²) per
 sample, and symmetric by construction.
 
-**Blocks** (:meth:`~dampest_ros.core.rls.least_squares.RecursiveLeastSquares.update_many`): n
+**Blocks** (:meth:`~dampest_ros.core.online.rls.least_squares.RecursiveLeastSquares.update_many`): n
 consecutive samples are one update of the stacked sample (6n rows) with P̃ = P / λⁿ and the
 noise of sample j (0-based) scaled by λ^{−(n−1−j)}: in information form both give λⁿ Ω + Σ_j
 λ^{n−1−j} Φ_jᵀ R⁻¹ Φ_j, so θ and P are the sequential ones (to rounding). With S̃ = C Cᵀ

@@ -1,6 +1,6 @@
 """The recursive least-squares estimator (:class:`RecursiveLeastSquares`): the update of
-:mod:`dampest_ros.core.rls.update` with its settings, the monitors of
-:mod:`dampest_ros.core.rls.monitors`, the uncertainty of θ and the diagnostics.
+:mod:`dampest_ros.core.online.rls.update` with its settings, the monitors of
+:mod:`dampest_ros.core.online.rls.monitors`, the uncertainty of θ and the diagnostics.
 
 Uncertainty (:attr:`RecursiveLeastSquares.std`): P is the covariance of θ when the residuals
 are white with the weighting variances R. They are neither: the noise level is estimated
@@ -22,8 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
-from dampest_ros.core.rls.monitors import CorrelationFactor, InnovationMonitor, OutlierGate, ew_mean
-from dampest_ros.core.rls.update import BLOCK, FORGETTING_MODES, block_update, scaled_trace, step
+from dampest_ros.core.online.rls.monitors import CorrelationFactor, InnovationMonitor, OutlierGate, ew_mean
+from dampest_ros.core.online.rls.update import BLOCK, FORGETTING_MODES, block_update, scaled_trace, step
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

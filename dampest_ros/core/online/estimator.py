@@ -1,7 +1,7 @@
 """The online estimator behind the estimator node: joins the sample streams by exact stamp,
 builds the parallel-filtered regression
 (:class:`~dampest_ros.core.online.regression.OnlineRegression`) and runs the RLS
-(:class:`~dampest_ros.core.rls.least_squares.RecursiveLeastSquares`).
+(:class:`~dampest_ros.core.online.rls.least_squares.RecursiveLeastSquares`).
 
 Inputs per sample stamp (integer nanoseconds, identical on the four streams): velocity ν,
 acceleration ν̇ and wrench τ (FRD, SI) and the attitude for g(η) (the IMU orientation at the
@@ -34,7 +34,7 @@ from dampest_ros.core.identification.model import Model
 from dampest_ros.core.online.regression import OnlineRegression
 from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
-from dampest_ros.core.rls.least_squares import (
+from dampest_ros.core.online.rls.least_squares import (
     OUTLIER_GATE,
     Diagnostics,
     RecursiveLeastSquares,
@@ -47,7 +47,7 @@ FloatArray = NDArray[np.float64]
 
 STREAMS = ("velocity", "acceleration", "wrench", "attitude")
 #: Block length (s) over which the residual correlation that widens θ's standard deviation is
-#: measured (:class:`~dampest_ros.core.rls.monitors.CorrelationFactor`): residuals stay
+#: measured (:class:`~dampest_ros.core.online.rls.monitors.CorrelationFactor`): residuals stay
 #: correlated over seconds (sensor-bias drift, model error).
 CORRELATION_SECONDS = 5.0
 _WIDTH = {"velocity": 6, "acceleration": 6, "wrench": 6, "attitude": 4}
@@ -75,7 +75,7 @@ class EstimatorConfig:
         Partial samples (not all streams seen) older than this (s) are dropped.
     outlier_gate : float
         Squared Mahalanobis distance above which a raw sample is rejected
-        (:class:`~dampest_ros.core.rls.monitors.OutlierGate`; ≤ 0: none). The gate opens after
+        (:class:`~dampest_ros.core.online.rls.monitors.OutlierGate`; ≤ 0: none). The gate opens after
         :data:`CORRELATION_SECONDS` of samples and its innovation variances average over
         twice that.
     dissipative : bool

@@ -1,4 +1,4 @@
-"""Recursive least squares (dampest_ros.core.rls) against filterpy, batch LS and known truth."""
+"""Recursive least squares (dampest_ros.core.online.rls) against filterpy, batch LS and known truth."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.rls.least_squares import RecursiveLeastSquares, RLSConfig
-from dampest_ros.core.rls.monitors import CorrelationFactor, Cusum, InnovationMonitor
-from dampest_ros.core.rls.update import forget, rls_update, scaled_trace
+from dampest_ros.core.online.rls.least_squares import RecursiveLeastSquares, RLSConfig
+from dampest_ros.core.online.rls.monitors import CorrelationFactor, Cusum, InnovationMonitor
+from dampest_ros.core.online.rls.update import forget, rls_update, scaled_trace
 
 
 def random_problem(seed: int, n: int, p: int, noise: float = 0.1
@@ -342,7 +342,7 @@ def test_outlier_gate_rejects_a_gross_error_and_not_gaussian_innovations() -> No
     spike during the warm-up is not judged."""
     from scipy import stats
 
-    from dampest_ros.core.rls.monitors import OutlierGate
+    from dampest_ros.core.online.rls.monitors import OutlierGate
     Phi, y, theta = random_problem(9, 20000, 4, noise=0.5)
     gate = OutlierGate(float(stats.chi2.isf(1e-6, 6)), warmup=200, window=500.0)
     P = np.eye(4) * 1e-6  # the estimate is the truth, well known
