@@ -41,8 +41,8 @@ __all__ = ["DampingIdentifier", "Model", "find_gap", "load_model", "load_vehicle
 
 if TYPE_CHECKING:
     from dampest_ros.core.gap.search import find_gap
-    from dampest_ros.core.identifier import DampingIdentifier
     from dampest_ros.core.identification.model import Model
+    from dampest_ros.core.identifier import DampingIdentifier
     from dampest_ros.core.signals.preprocess import preprocess
     from dampest_ros.core.simulation.simulate import simulate
     from dampest_ros.io.bag import read_bag

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from dampest_ros.client import ModelClient
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.model import Model
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, coriolis_force
 from dampest_ros.core.physics.vehicle import damping_from_spec
 from dampest_ros.io.yaml_io import damping_spec, load_vehicle, save_model, vehicle_path

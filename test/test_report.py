@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from dampest_ros.core.physics import frames
 from dampest_ros.core.identification.batch import fit
-from dampest_ros.core.simulation.excitation import make_excitation
+from dampest_ros.core.physics import frames
 from dampest_ros.core.signals.samples import Samples
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle
 from dampest_ros.report.convergence import Tracking, rms_by_unit, write_convergence_report

@@ -69,8 +69,8 @@ def publish_samples(seconds: str, speed: str, subscribers: str) -> dict[str, flo
         WrenchStamped,
     )
 
-    from dampest_ros.core.simulation.excitation import make_excitation
     from dampest_ros.core.online.preprocessor import OnlinePreprocessor
+    from dampest_ros.core.simulation.excitation import make_excitation
     from dampest_ros.core.simulation.sensors import measure
     from dampest_ros.core.simulation.simulate import run
     from dampest_ros.io.yaml_io import load_vehicle

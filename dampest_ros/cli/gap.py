@@ -25,11 +25,11 @@ from dampest_ros.core.gap.localise import LocalRow, concentration, localise, res
 from dampest_ros.core.gap.model_effects import Memory
 from dampest_ros.core.gap.search import GapOptions, GapResult, correction, find_gap
 from dampest_ros.core.gap.update import free_run_errors, updated_model
-from dampest_ros.core.signals.measurements import JointSeries
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
-from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.measurements import JointSeries
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.remote import is_url, local_log
 from dampest_ros.io.yaml_io import load_vehicle, save_model

@@ -21,20 +21,20 @@ from dampest_ros.cli.pool import (
     reduce_all,
 )
 from dampest_ros.core.identification.batch import Fit, FitOptions
-from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.online.estimator import EstimatorConfig, restrict
-from dampest_ros.core.simulation.excitation import speed_limits
-from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
-from dampest_ros.core.physics.mounting import frame_id_note
-from dampest_ros.core.online.preprocessor import OnlinePreprocessor
-from dampest_ros.core.online.sample import OnlineConfig
 from dampest_ros.core.identification.pool import drift, pooled_fit, pooled_samples
-from dampest_ros.core.signals.preprocess import DataError
-from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
-from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.identification.selection import Selection, select_terms
 from dampest_ros.core.identification.validate import force_scores
+from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
+from dampest_ros.core.online.estimator import EstimatorConfig, restrict
+from dampest_ros.core.online.preprocessor import OnlinePreprocessor
+from dampest_ros.core.online.sample import OnlineConfig
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.mounting import frame_id_note
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.preprocess import DataError
+from dampest_ros.core.signals.samples import Samples
+from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.io.bag import bag_summary, read_bag
 from dampest_ros.io.remote import is_url
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model

@@ -1,9 +1,9 @@
 """dampest identify: identify the damping model from a bag or a CSV file.
 
 Batch methods (--method ols, wls, ridge, bounded, map) preprocess the whole log at once
-(dampest_ros/core/signals/preprocess.py, dampest_ros/core/identification/batch.py). --method rls instead replays
-the bag's sensor messages through the online path of the nodes: the causal preprocessor
-(messages in stamp order), the samples as the dampest/* topics carry them, and the
+(dampest_ros/core/signals/preprocess.py, dampest_ros/core/identification/batch.py). --method rls
+instead replays the bag's sensor messages through the online path of the nodes: the causal
+preprocessor (messages in stamp order), the samples as the dampest/* topics carry them, and the
 estimator node's recursive least squares with its default prior and settings, so that its
 result is the estimator node's on the same data.
 

@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 
 from dampest_ros.cli.common import Progress, tau_topic, topic_roles
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.delay import profile_delay
 from dampest_ros.core.identification.model import Model
-from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, preprocess
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
-from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, preprocess
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.io.bag import BagSource, bag_summary, check_role_types
 from dampest_ros.io.csv import is_csv, load_column_map, read_log
 from dampest_ros.io.yaml_io import load_model

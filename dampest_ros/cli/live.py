@@ -14,13 +14,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.cli.common import table
-from dampest_ros.core.simulation.control import DEFAULT_BANDWIDTH
-from dampest_ros.core.simulation.effects import Effects, true_vehicle
-from dampest_ros.core.online.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
 from dampest_ros.core.identification.model import Model
-from dampest_ros.core.signals.preprocess import DataError
+from dampest_ros.core.online.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.preprocess import DataError
+from dampest_ros.core.simulation.control import DEFAULT_BANDWIDTH
+from dampest_ros.core.simulation.effects import Effects, true_vehicle
 from dampest_ros.io.yaml_io import save_model
 
 FloatArray = NDArray[np.float64]

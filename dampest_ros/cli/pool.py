@@ -28,10 +28,10 @@ from dampest_ros.cli.common import table, term_list
 from dampest_ros.cli.inputs import cut, load_samples
 from dampest_ros.cli.main import expected
 from dampest_ros.core.identification.batch import Fit, FitOptions
-from dampest_ros.core.online.estimator import restrict
-from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.core.identification.pool import Drift, LogStatistics, MapLogs, log_statistics
+from dampest_ros.core.online.estimator import restrict
 from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.io.remote import glob_url, is_url, local_log, local_name
 from dampest_ros.io.yaml_io import load_vehicle
 
@@ -197,8 +197,8 @@ def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray
     """Map :func:`reduce_log` over the logs on Dask (:func:`map_logs_on_dask`).
 
     Yields the statistics of the logs that worked (in the given order), the reason of each
-    that failed, and a :data:`~dampest_ros.core.identification.pool.MapLogs` that runs a function on each
-    log on a worker (the pooled fit's passes over the samples).
+    that failed, and a :data:`~dampest_ros.core.identification.pool.MapLogs` that runs a function on
+    each log on a worker (the pooled fit's passes over the samples).
     """
     work = partial(reduce_log, args=args, prior=prior, prior_std=prior_std)
     with map_logs_on_dask(paths, work, args, "reduced") as (client, done, failed):

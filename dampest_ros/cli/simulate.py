@@ -63,10 +63,10 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from dampest_ros.cli.common import speed_table, table
-    from dampest_ros.core.simulation.effects import Effects, true_vehicle
-    from dampest_ros.core.simulation.excitation import protocol
     from dampest_ros.core.identification.model import Model
     from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
+    from dampest_ros.core.simulation.effects import Effects, true_vehicle
+    from dampest_ros.core.simulation.excitation import protocol
     from dampest_ros.core.simulation.sensors import SensorBias, SensorConfig, measure
     from dampest_ros.core.simulation.simulate import run as run_sim
     from dampest_ros.io.bag import write_bag

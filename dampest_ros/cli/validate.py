@@ -88,8 +88,8 @@ def model_forces(samples: Samples, model: DampingModel, body: RigidBody, theta: 
     """
     import numpy as np
 
-    from dampest_ros.core.signals.preprocess import zero_phase
     from dampest_ros.core.identification.validate import predicted_force
+    from dampest_ros.core.signals.preprocess import zero_phase
 
     theta = np.asarray(theta, dtype=float)
     static = theta.copy()
@@ -116,8 +116,8 @@ def run(args: argparse.Namespace) -> int:
 
     from dampest_ros.cli.common import table
     from dampest_ros.cli.inputs import cut, load_model_for, load_samples
-    from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
     from dampest_ros.core.identification.validate import free_run_error, longest_segment, metrics
+    from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
     from dampest_ros.io.csv import write_table
     from dampest_ros.io.yaml_io import load_vehicle
 

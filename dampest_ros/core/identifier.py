@@ -4,9 +4,10 @@
 ``score`` for its per-DOF R²; the result in the attributes that end in ``_``.
 
 - :meth:`DampingIdentifier.fit` is ``dampest identify``'s batch path: the vehicle's terms
-  (:func:`~dampest_ros.core.online.estimator.restrict`), its nominal θ as the prior (the value of what
-  the data do not determine), the speeds the thrusters reach for the speed-coverage check
-  (:func:`~dampest_ros.core.simulation.excitation.speed_limits`), :func:`~dampest_ros.core.identification.batch.fit`.
+  (:func:`~dampest_ros.core.online.estimator.restrict`), its nominal θ as the prior (the value of
+  what the data do not determine), the speeds the thrusters reach for the speed-coverage check
+  (:func:`~dampest_ros.core.simulation.excitation.speed_limits`),
+  :func:`~dampest_ros.core.identification.batch.fit`.
 - :meth:`DampingIdentifier.partial_fit` is the estimator node's path
   (:class:`~dampest_ros.core.online.estimator.OnlineEstimator`: parallel-filtered regression and
   recursive least squares with forgetting factor λ); successive calls continue the estimate.
@@ -26,15 +27,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
-from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.online.estimator import EstimatorConfig, OnlineEstimator, restrict
-from dampest_ros.core.simulation.excitation import speed_limits
-from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.identification.regression import memory_states
-from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.identification.validate import force_scores
+from dampest_ros.core.online.estimator import EstimatorConfig, OnlineEstimator, restrict
+from dampest_ros.core.online.sample import OnlineSample
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.samples import Samples
+from dampest_ros.core.simulation.excitation import speed_limits
 
 FloatArray = NDArray[np.float64]
 #: A prior by name: (parameter names, mean θ, standard deviation), each of length p.
@@ -78,17 +79,17 @@ class DampingIdentifier:
         the default prior width in the RLS).
     structure : DampingModel, optional
         The term structure :meth:`fit` identifies instead of the vehicle's (e.g. what
-        :func:`~dampest_ros.core.identification.selection.select_terms` chose); parameters the vehicle does
-        not have start from 0. :meth:`partial_fit` identifies the vehicle's terms only.
+        :func:`~dampest_ros.core.identification.selection.select_terms` chose); parameters the
+        vehicle does not have start from 0. :meth:`partial_fit` identifies the vehicle's terms only.
     **fit_options
-        Further :class:`~dampest_ros.core.identification.batch.FitOptions` fields (``ridge``, ``block``,
-        ``max_vif``, ``dissipative``, …).
+        Further :class:`~dampest_ros.core.identification.batch.FitOptions` fields (``ridge``,
+        ``block``, ``max_vif``, ``dissipative``, …).
 
     Attributes
     ----------
     model_ : Model
-        The identified model (:class:`~dampest_ros.core.identification.model.Model`: θ, σ, what the data
-        did not determine, the term structure, the mass matrix), ready for
+        The identified model (:class:`~dampest_ros.core.identification.model.Model`: θ, σ, what the
+        data did not determine, the term structure, the mass matrix), ready for
         :func:`dampest_ros.io.yaml_io.save_model`.
     coef_ : ndarray, shape (p,)
         θ.

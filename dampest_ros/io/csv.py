@@ -73,9 +73,9 @@ import yaml
 from numpy.typing import NDArray
 
 from dampest_ros.core.physics.frames import matrix_from_euler
+from dampest_ros.core.physics.thrusters import Thrusters
 from dampest_ros.core.signals.measurements import FloatArray
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.physics.thrusters import Thrusters
 
 #: Body velocity ν = [u v w p q r] (FRD).
 VELOCITY_COLUMNS = ("u", "v", "w", "p", "q", "r")

@@ -63,13 +63,13 @@ from typing import Any
 import numpy as np
 import yaml
 
+from dampest_ros.core.identification.identified import check_model_numbers
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.alpha import Alpha
 from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel
-from dampest_ros.core.identification.identified import check_model_numbers
-from dampest_ros.core.signals.measurements import FloatArray
-from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
+from dampest_ros.core.signals.measurements import FloatArray
 
 SIGN_CONVENTION = "dissipative_positive"
 _REQUIRED = ("sign_convention", "parameter_names", "theta", "theta_std", "M", "version")
@@ -173,8 +173,8 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
 def damping_spec(model: DampingModel, theta: FloatArray) -> dict[str, Any]:
     """The ``damping`` mapping of a vehicle preset for a model and its coefficients.
 
-    The inverse of :func:`dampest_ros.core.physics.vehicle.damping_from_spec`: that function rebuilds
-    the same parameter names, θ and regressor from the result.
+    The inverse of :func:`dampest_ros.core.physics.vehicle.damping_from_spec`: that function
+    rebuilds the same parameter names, θ and regressor from the result.
 
     Parameters
     ----------

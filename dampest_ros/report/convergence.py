@@ -15,8 +15,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from dampest_ros.core.simulation.control import tracking_rms
 from dampest_ros.core.physics.rigid_body import DOF_NAMES
+from dampest_ros.core.simulation.control import tracking_rms
 from dampest_ros.report.figures import (
     CSS,
     VEL_UNITS,

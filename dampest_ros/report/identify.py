@@ -2,7 +2,8 @@
 figures (relative links, so the directory can be copied or zipped as is): measured vs predicted
 damping force, residual spectrum and autocorrelation with whiteness bounds, coefficients with
 95 % intervals vs a prior (and a truth when known), a free-run velocity overlay, excitation
-coverage, and the tables of coefficients and metrics (:mod:`dampest_ros.core.identification.validate`).
+coverage, and the tables of coefficients and metrics
+(:mod:`dampest_ros.core.identification.validate`).
 """
 
 from __future__ import annotations
@@ -61,8 +62,8 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
     body : RigidBody
         M and restoring data used by the fit.
     fit : Fit
-        Result of :func:`dampest_ros.core.identification.batch.fit`; ``fit.flags`` marks unidentified
-        parameters, which are shown as such, not as numbers.
+        Result of :func:`dampest_ros.core.identification.batch.fit`; ``fit.flags`` marks
+        unidentified parameters, which are shown as such, not as numbers.
     prior : array of shape (p,) or mapping name → value, optional
         Prior / nominal coefficients to compare with.
     truth : array of shape (p,) or mapping name → value, optional
@@ -75,13 +76,14 @@ def write_report(out_dir: str | Path, samples: Samples, model: DampingModel, bod
         The fit's parallel low-pass (Hz), so that predicted and measured force are compared
         as the fit saw them; 0: unfiltered.
     tau_hold : {'linear', 'zero'}
-        τ between samples in the free run (see :func:`dampest_ros.core.identification.validate.free_run`).
+        τ between samples in the free run (see
+        :func:`dampest_ros.core.identification.validate.free_run`).
     force_seconds, free_run_seconds : float
         Length of the force plot and of the free run (s), from the start of the longest
         segment.
     heldout : mapping of str to ndarray, each shape (6,), optional
-        :func:`dampest_ros.core.identification.validate.metrics` of the damping force on data the fit did
-        not use (``nse`` is shown as R², ``rmse`` in N and N·m).
+        :func:`dampest_ros.core.identification.validate.metrics` of the damping force on data the
+        fit did not use (``nse`` is shown as R², ``rmse`` in N and N·m).
     heldout_note : str
         What was held out, in words.
 

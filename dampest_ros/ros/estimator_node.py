@@ -32,13 +32,13 @@ from geometry_msgs.msg import (
 )
 from std_msgs.msg import String
 
-from dampest_ros.core.physics import frames
-from dampest_ros.core.online.estimator import EstimatorConfig
-from dampest_ros.core.identifier import DampingIdentifier
 from dampest_ros.core.identification.model import Model
-from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.identifier import DampingIdentifier
+from dampest_ros.core.online.estimator import EstimatorConfig
 from dampest_ros.core.online.rls.least_squares import OUTLIER_GATE
 from dampest_ros.core.online.rls.update import FORGETTING_MODES
+from dampest_ros.core.physics import frames
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.io.yaml_io import (
     load_model,
     load_vehicle,

@@ -35,10 +35,10 @@ from geometry_msgs.msg import (
 )
 from sensor_msgs.msg import FluidPressure, Imu, JointState
 
-from dampest_ros.core.physics import frames
 from dampest_ros.core.online.estimator import attitude_quaternion
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import OnlineConfig, OnlineSample, topic_roles
+from dampest_ros.core.physics import frames
 from dampest_ros.core.signals.reorder import StampOrder
 from dampest_ros.io.yaml_io import load_vehicle
 from dampest_ros.ros.common import (

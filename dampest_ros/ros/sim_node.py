@@ -22,9 +22,9 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import FluidPressure, Imu, JointState
 
 from dampest_ros.core.physics import frames
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.simulation.effects import Effects
 from dampest_ros.core.simulation.excitation import LIVE_PROTOCOLS
-from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.simulation.sensors import SensorConfig
 from dampest_ros.core.simulation.simulate import BACKENDS
 from dampest_ros.core.simulation.stream import LiveSimulation

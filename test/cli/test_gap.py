@@ -15,8 +15,8 @@ import pytest
 
 from dampest_ros.cli.inputs import load_model_for
 from dampest_ros.cli.main import main
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.model import Model
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.terms import CrossSpec, cross_term
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 

@@ -61,9 +61,9 @@ def test_shared_options_have_one_help_text() -> None:
 def test_choices_of_the_parsers_are_the_cores() -> None:
     """The parsers spell out choices the core defines (importing the core would load scipy
     for --help); they must agree."""
+    from dampest_ros.core.gap.search import GapOptions
     from dampest_ros.core.identification.batch import METHODS
     from dampest_ros.core.simulation.excitation import PROTOCOLS
-    from dampest_ros.core.gap.search import GapOptions
     from dampest_ros.core.simulation.simulate import BACKENDS
 
     assert identify_options.METHODS == METHODS

@@ -11,9 +11,9 @@ import pytest
 
 from dampest_ros.cli.main import main
 from dampest_ros.core.identification.regression import target
+from dampest_ros.core.identification.validate import metrics, predicted_force
 from dampest_ros.core.physics.rigid_body import coriolis_force, munk_moment
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.identification.validate import metrics, predicted_force
 from dampest_ros.io import csv as dcsv
 from dampest_ros.io.yaml_io import load_model, load_vehicle
 

@@ -12,11 +12,11 @@ import pytest
 import yaml
 
 from dampest_ros.cli.main import main
-from dampest_ros.core.physics import frames
 from dampest_ros.core.online.estimator import CORRELATION_SECONDS, EstimatorConfig, OnlineEstimator
+from dampest_ros.core.physics import frames
+from dampest_ros.core.physics.vehicle import measured_wrench_scale
 from dampest_ros.core.signals.measurements import JointSeries, WrenchSeries
 from dampest_ros.core.signals.preprocess import thruster_wrench
-from dampest_ros.core.physics.vehicle import measured_wrench_scale
 from dampest_ros.io.bag import read_bag, write_bag
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model, vehicle_path
 

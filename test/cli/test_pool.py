@@ -15,8 +15,8 @@ from dampest_ros.cli.inputs import load_samples
 from dampest_ros.cli.main import main
 from dampest_ros.cli.pool import expand_inputs
 from dampest_ros.core.identification.batch import FitOptions, fit
-from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.core.signals.samples import Samples
+from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.io.yaml_io import load_model, load_vehicle
 
 REPO = Path(__file__).resolve().parents[2]

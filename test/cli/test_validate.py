@@ -7,9 +7,9 @@ import numpy as np
 
 from dampest_ros.cli.validate import model_forces
 from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.terms import linear_term, memory_term
 from dampest_ros.core.signals.preprocess import zero_phase
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.physics.terms import linear_term, memory_term
 from dampest_ros.io.yaml_io import load_vehicle
 
 

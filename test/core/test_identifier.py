@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.identifier import DampingIdentifier
-from dampest_ros.core.signals.preprocess import preprocess
 from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.preprocess import preprocess
 from dampest_ros.core.signals.samples import Samples
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.sensors import SensorBias, SensorConfig, measure
 from dampest_ros.core.simulation.simulate import run
-from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 
 

@@ -28,8 +28,8 @@ from std_srvs.srv import SetBool, Trigger  # noqa: E402
 
 from dampest_ros.client import ModelClient  # noqa: E402
 from dampest_ros.core.identification.batch import fit, parameter_scale  # noqa: E402
-from dampest_ros.core.online.sample import to_samples  # noqa: E402
 from dampest_ros.core.identification.regression import accumulate  # noqa: E402
+from dampest_ros.core.online.sample import to_samples  # noqa: E402
 from dampest_ros.io.yaml_io import load_model, load_vehicle, loads_model  # noqa: E402
 from dampest_ros.ros.common import LATCHED_QOS  # noqa: E402
 from dampest_ros.ros.estimator_node import EstimatorNode  # noqa: E402
@@ -103,8 +103,8 @@ def test_no_message_lost_and_speed(pipeline: dict[str, Any]) -> None:
 
 
 def test_estimate_matches_batch_on_the_same_samples(pipeline: dict[str, Any]) -> None:
-    """After 120 s of protocol B: RLS (λ = 1) against dampest_ros.core.identification.batch.fit on exactly
-    the samples the estimator used."""
+    """After 120 s of protocol B: RLS (λ = 1) against dampest_ros.core.identification.batch.fit on
+    exactly the samples the estimator used."""
     est = pipeline["est"].estimator
     v = load_vehicle("bluerov2_heavy")
     s = to_samples(est.samples_log, 50.0)

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import yaml
 
-from dampest_ros.core.simulation.excitation import make_excitation
-from dampest_ros.core.signals.measurements import TwistSeries
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
+from dampest_ros.core.signals.measurements import TwistSeries
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.sensors import measure
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.io.cdr import stamps_to_ns

@@ -17,8 +17,8 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 
-from dampest_ros.core.simulation.excitation import make_excitation  # noqa: E402
 from dampest_ros.core.physics.frames import body_twist  # noqa: E402
+from dampest_ros.core.simulation.excitation import make_excitation  # noqa: E402
 from dampest_ros.core.simulation.simulate import run  # noqa: E402
 from dampest_ros.io.yaml_io import load_vehicle  # noqa: E402
 from dampest_ros.ros.common import RELIABLE_QOS, SENSOR_QOS  # noqa: E402

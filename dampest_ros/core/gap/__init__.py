@@ -1,8 +1,8 @@
 """Sim-to-real gap: where measured data and a believed model disagree, and what is missing.
 
 A user has a model of the vehicle (M, the damping D(ν) with its θ, restoring data) and data
-from the real vehicle (:class:`~dampest_ros.core.signals.samples.Samples`: ν, ν̇, τ, attitude, depth,
-as a vehicle logs them; never ground truth). This package
+from the real vehicle (:class:`~dampest_ros.core.signals.samples.Samples`: ν, ν̇, τ, attitude,
+depth, as a vehicle logs them; never ground truth). This package
 
 1. compares them through the one-step inverse-dynamics residual (FRD body, NED world)
 
@@ -17,10 +17,11 @@ as a vehicle logs them; never ground truth). This package
    prediction ρ(p) of the residual it would leave in data analysed with the believed model
    (``r ≈ ρ(p) + noise``). Candidates are screened by fitting their linearisation on the first
    ``split`` (70 %) of the time and scoring the residual reduction on the rest (held out), with
-   the error-reduction ratio and the BIC change as in :mod:`dampest_ros.core.identification.selection`; the
-   best significant one is refined on its exact (nonlinear) model with
-   ``scipy.optimize.least_squares``, added, all added effects are refitted jointly, and the
-   search repeats until no candidate is significant: "no further missing effect found";
+   the error-reduction ratio and the BIC change as in
+   :mod:`dampest_ros.core.identification.selection`; the best significant one is refined on its
+   exact (nonlinear) model with ``scipy.optimize.least_squares``, added, all added effects are
+   refitted jointly, and the search repeats until no candidate is significant: "no further missing
+   effect found";
 4. applies what it found to the believed model and compares the free runs of both
    (:mod:`.update`).
 
@@ -29,7 +30,8 @@ evaluated vectorised over chunks of samples, then low-passed like the regression
 current constant in NED, buoyancy offset, CG offset, thrust-gain error, thruster dead-zone
 (needs the logged rotor speeds), τ → ν delay, added-mass error (scale and per DOF), a missing
 linear or quadratic damping coefficient per DOF, each cross-coupling of
-:data:`dampest_ros.core.identification.selection.DEFAULT_CROSS`, fluid memory per DOF, gyro bias and DVL bias.
+:data:`dampest_ros.core.identification.selection.DEFAULT_CROSS`, fluid memory per DOF, gyro bias and
+DVL bias.
 
 Signs: with the model's residual r = τ − model(ν, ν̇, η), an effect that adds a force F to the
 left-hand side of the true equation (M ν̇ + … + g + F = τ) leaves ρ = F.

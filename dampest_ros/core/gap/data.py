@@ -11,15 +11,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.dissipative import envelope
+from dampest_ros.core.identification.regression import iter_regression
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.frames import matrix_from_euler
+from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
+from dampest_ros.core.physics.thrusters import Thrusters
 from dampest_ros.core.signals.measurements import JointSeries
 from dampest_ros.core.signals.preprocess import zero_phase
-from dampest_ros.core.identification.regression import iter_regression
-from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.signals.samples import CHUNK, Samples
-from dampest_ros.core.physics.thrusters import Thrusters
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

@@ -10,10 +10,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.gap.data import Chunk, GapData
-from dampest_ros.core.signals.preprocess import zero_phase
+from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.physics.rigid_body import coriolis_force, rigid_body_mass
+from dampest_ros.core.signals.preprocess import zero_phase
 
 FloatArray = NDArray[np.float64]
 

@@ -23,8 +23,8 @@ from dampest_ros.core.gap.model_effects import (
     Cross,
     Memory,
 )
-from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.identification.selection import DEFAULT_CROSS
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.terms import CrossSpec
 
 

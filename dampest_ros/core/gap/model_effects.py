@@ -8,9 +8,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.physics.damping import DampingModel, filter_memory
 from dampest_ros.core.gap.data import Chunk, GapData
 from dampest_ros.core.gap.effects import Effect, LinearEffect
+from dampest_ros.core.physics.damping import DampingModel, filter_memory
 from dampest_ros.core.physics.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,

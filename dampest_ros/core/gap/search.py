@@ -11,11 +11,11 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, optimize
 
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData, bind, rms
 from dampest_ros.core.gap.effects import Effect
 from dampest_ros.core.gap.library import library
 from dampest_ros.core.gap.update import updated_model
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 
 FloatArray = NDArray[np.float64]

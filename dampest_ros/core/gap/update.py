@@ -11,9 +11,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from dampest_ros.core.physics.damping import DampingModel, DampingTerm
 from dampest_ros.core.gap.data import FORCE_UNITS, GapData, bind
 from dampest_ros.core.gap.effects import Effect
+from dampest_ros.core.identification.validate import free_run_error, longest_segment
+from dampest_ros.core.physics.damping import DampingModel, DampingTerm
 from dampest_ros.core.physics.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,
@@ -21,9 +22,14 @@ from dampest_ros.core.physics.rigid_body import (
     ConfigError,
     RigidBody,
 )
+from dampest_ros.core.physics.terms import (
+    CrossSpec,
+    cross_term,
+    linear_term,
+    memory_term,
+    quadratic_term,
+)
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.physics.terms import CrossSpec, cross_term, linear_term, memory_term, quadratic_term
-from dampest_ros.core.identification.validate import free_run_error, longest_segment
 
 FloatArray = NDArray[np.float64]
 

@@ -25,11 +25,15 @@ from dampest_ros.core.identification.covariance import (
     block_length,
     robust_covariance,
 )
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.dissipative import dissipation_points, impose, misfit_report
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.identification.quadratic import solve_normal
-from dampest_ros.core.identification.regression import NormalEquations, accumulate, total_sum_of_squares
+from dampest_ros.core.identification.regression import (
+    NormalEquations,
+    accumulate,
+    total_sum_of_squares,
+)
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.signals.samples import CHUNK, Samples
 
@@ -191,9 +195,9 @@ class Fit:
 
     def to_model(self, damping: DampingModel, body: RigidBody,
                  extra: dict[str, Any] | None = None) -> Model:
-        """The fit as a :class:`~dampest_ros.core.identification.model.Model`: θ and σ, the coefficients not
-        identified held with their reason (``flags``, else the constraint), the body's mass
-        matrix, added mass and switches, and as ``extra`` the method, sample count, 95 %
+        """The fit as a :class:`~dampest_ros.core.identification.model.Model`: θ and σ, the
+        coefficients not identified held with their reason (``flags``, else the constraint), the
+        body's mass matrix, added mass and switches, and as ``extra`` the method, sample count, 95 %
         intervals, per-DOF NSE and RMSE and condition number, plus ``extra``.
 
         Parameters
@@ -449,7 +453,8 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
         Samples per chunk.
     map_parts : MapParts, optional
         Runs the covariances' passes over the samples part by part where the parts are
-        held (:data:`~dampest_ros.core.identification.covariance.MapParts`; default: ``samples`` at once).
+        held (:data:`~dampest_ros.core.identification.covariance.MapParts`; default: ``samples`` at
+        once).
 
     Returns
     -------

@@ -20,9 +20,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import NormalEquations, iter_regression
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import RigidBody
 from dampest_ros.core.signals.samples import CHUNK, Samples
 
@@ -39,7 +39,8 @@ def whole(samples: Samples) -> MapParts:
 
 
 class CovarianceOptions(Protocol):
-    """The settings the covariances read (:class:`~dampest_ros.core.identification.batch.FitOptions`)."""
+    """The settings the covariances read
+    (:class:`~dampest_ros.core.identification.batch.FitOptions`)."""
 
     @property
     def block(self) -> float: ...  # longest block (s)

@@ -7,9 +7,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import NormalEquations, accumulate
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import RigidBody
 from dampest_ros.core.signals.samples import Samples
 

@@ -4,9 +4,9 @@ coefficients make it, and the closest estimate that does not.
 For the static terms the power the damping takes out of the motion is linear in θ:
 νᵀD(ν)ν = g(ν)ᵀθ with g(ν) = Φ(ν)ᵀν (:func:`power_rows`), so "dissipative at the velocities
 ν_k" is the set of linear inequalities g(ν_k)ᵀθ ≥ 0. The batch fit imposes them on its
-normal equations (:func:`dampest_ros.core.identification.batch.fit`); the online estimate is projected onto
-them in the metric of its information matrix (:func:`project`), which for a forgetting factor
-of 1 is the same problem. Both check every point of a grid over the flown envelope
+normal equations (:func:`dampest_ros.core.identification.batch.fit`); the online estimate is
+projected onto them in the metric of its information matrix (:func:`project`), which for a
+forgetting factor of 1 is the same problem. Both check every point of a grid over the flown envelope
 (:func:`envelope`).
 """
 

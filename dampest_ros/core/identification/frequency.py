@@ -16,8 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize, signal
 
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.regression import iter_regression
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import RigidBody
 from dampest_ros.core.signals.samples import Samples
 

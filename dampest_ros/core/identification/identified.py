@@ -15,8 +15,8 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.dissipative import envelope, power_rows
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,
@@ -112,10 +112,11 @@ def non_dissipative(model: DampingModel, theta: FloatArray,
                     flown: FloatArray | None = None) -> list[str]:
     """Where a damping model generates energy, in words (empty: it dissipates everywhere).
 
-    Checked as the fit constrains it (:func:`~dampest_ros.core.identification.batch.fit`): the static terms
-    on the grid over the flown envelope (:func:`~dampest_ros.core.identification.batch.envelope`), reporting
-    the point of the most negative νᵀD(ν)ν and the coefficient whose share θ_j g_j(ν) of
-    that power is the most negative; and every memory gain c ≥ 0 (a passive kernel).
+    Checked as the fit constrains it (:func:`~dampest_ros.core.identification.batch.fit`): the
+    static terms on the grid over the flown envelope
+    (:func:`~dampest_ros.core.identification.batch.envelope`), reporting the point of the most
+    negative νᵀD(ν)ν and the coefficient whose share θ_j g_j(ν) of that power is the most negative;
+    and every memory gain c ≥ 0 (a passive kernel).
 
     Parameters
     ----------

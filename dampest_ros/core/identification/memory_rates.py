@@ -11,12 +11,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from dampest_ros.core.physics.damping import DampingModel, filter_memory
 from dampest_ros.core.identification.frequency import memory_impedance
-from dampest_ros.core.signals.preprocess import zero_phase
 from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import NormalEquations, accumulate, iter_regression
+from dampest_ros.core.physics.damping import DampingModel, filter_memory
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, RigidBody
+from dampest_ros.core.signals.preprocess import zero_phase
 from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]

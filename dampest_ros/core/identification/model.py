@@ -4,8 +4,8 @@ A :class:`Model` holds what identification found (θ by name with its standard d
 which coefficients the data determined and why the others were held), what it needs to be
 evaluated (the damping term structure, the mass matrix M = M_RB + M_A with the added mass and
 its switches) and where it came from (version, provenance entries). The batch fit
-(:meth:`dampest_ros.core.identification.batch.Fit.to_model`), the online estimator, the gap workflow and the
-importers produce one; the model file (:mod:`dampest_ros.io.yaml_io`), the model server, the
+(:meth:`dampest_ros.core.identification.batch.Fit.to_model`), the online estimator, the gap workflow
+and the importers produce one; the model file (:mod:`dampest_ros.io.yaml_io`), the model server, the
 client and the exporters read and write one. Controllers evaluate it: D(ν), D(ν)ν with its
 uncertainty, and C(ν)ν with the plant's added-mass switches (FRD body frame, SI units).
 """
@@ -18,13 +18,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.identified import (
     BoolArray,
     check_model_numbers,
     damping_from_names,
     identified_mask,
 )
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, split_coriolis_force
 
 FloatArray = NDArray[np.float64]

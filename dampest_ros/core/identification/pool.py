@@ -27,8 +27,8 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.regression import NormalEquations, accumulate
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.signals.samples import Samples
 
@@ -118,8 +118,8 @@ def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBo
     """The fit of all the logs' samples at once, from their summed statistics (the reduce).
 
     θ, its covariance and every per-DOF figure equal those of
-    :func:`~dampest_ros.core.identification.batch.fit` on :func:`pooled_samples` to rounding; only the
-    cross-validation folds differ (see :func:`pooled_normal`). The covariances' passes over
+    :func:`~dampest_ros.core.identification.batch.fit` on :func:`pooled_samples` to rounding; only
+    the cross-validation folds differ (see :func:`pooled_normal`). The covariances' passes over
     the samples run log by log through ``map_logs`` (default: here, one after the other).
     ``samples`` is :func:`pooled_samples` of ``logs`` when the caller has made it already.
     """

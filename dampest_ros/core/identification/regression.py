@@ -18,8 +18,8 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.frames import matrix_from_euler
-from dampest_ros.core.signals.preprocess import zero_phase
 from dampest_ros.core.physics.rigid_body import RigidBody
+from dampest_ros.core.signals.preprocess import zero_phase
 from dampest_ros.core.signals.samples import CHUNK, Samples
 
 FloatArray = NDArray[np.float64]

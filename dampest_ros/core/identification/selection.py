@@ -37,13 +37,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.physics.alpha import Alpha, AlphaBank
-from dampest_ros.core.physics.damping import TERM_KINDS, Basis, DampingModel, DampingTerm
 from dampest_ros.core.identification.memory_rates import MemoryEvidence, memory_evidence
 from dampest_ros.core.identification.quadratic import solve_normal
-from dampest_ros.core.identification.regression import NormalEquations, accumulate, fold_index, iter_regression
+from dampest_ros.core.identification.regression import (
+    NormalEquations,
+    accumulate,
+    fold_index,
+    iter_regression,
+)
+from dampest_ros.core.physics.alpha import Alpha, AlphaBank
+from dampest_ros.core.physics.damping import TERM_KINDS, Basis, DampingModel, DampingTerm
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError, RigidBody
-from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.physics.terms import (
     FAMILIES,
     CrossSpec,
@@ -52,6 +56,7 @@ from dampest_ros.core.physics.terms import (
     library_name,
     memory_term,
 )
+from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
 

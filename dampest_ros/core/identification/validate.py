@@ -24,9 +24,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import fft, signal
 
+from dampest_ros.core.identification.regression import iter_regression
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.frames import matrix_from_euler
-from dampest_ros.core.identification.regression import iter_regression
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.signals.samples import CHUNK, Samples
 
@@ -45,8 +45,8 @@ def predicted_force(samples: Samples, model: DampingModel, body: RigidBody,
     """Measured and predicted damping force per sample.
 
     y = τ − M ν̇ − C(ν)ν − g(η) and ŷ = Φ(ν)θ, both from
-    :func:`dampest_ros.core.identification.batch.iter_regression`, so with the fit's ``cutoff`` they are
-    filtered exactly as the fit saw them (parallel zero-phase low-pass per segment).
+    :func:`dampest_ros.core.identification.batch.iter_regression`, so with the fit's ``cutoff`` they
+    are filtered exactly as the fit saw them (parallel zero-phase low-pass per segment).
 
     Parameters
     ----------

@@ -6,8 +6,8 @@ builds the parallel-filtered regression
 Inputs per sample stamp (integer nanoseconds, identical on the four streams): velocity ν,
 acceleration ν̇ and wrench τ (FRD, SI) and the attitude for g(η) (the IMU orientation at the
 sample instant, ROS order [x, y, z, w], FLU → ENU; converted through
-:mod:`dampest_ros.core.physics.frames`). Samples are processed in chunks of ``chunk`` (the regression
-is vectorised over a chunk; the RLS updates sample by sample).
+:mod:`dampest_ros.core.physics.frames`). Samples are processed in chunks of ``chunk`` (the
+regression is vectorised over a chunk; the RLS updates sample by sample).
 
 The dampest/* topics carry the preprocessor's samples in that form
 (:func:`~dampest_ros.core.signals.samples.wire_stamp`, :func:`attitude_quaternion`);
@@ -27,21 +27,21 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.physics import frames
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.dissipative import project
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.online.regression import OnlineRegression
-from dampest_ros.core.online.sample import OnlineSample
-from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
 from dampest_ros.core.online.rls.least_squares import (
     OUTLIER_GATE,
     Diagnostics,
     RecursiveLeastSquares,
     RLSConfig,
 )
-from dampest_ros.core.signals.samples import wire_stamp
+from dampest_ros.core.online.sample import OnlineSample
+from dampest_ros.core.physics import frames
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, measured_wrench_scale
+from dampest_ros.core.signals.samples import wire_stamp
 
 FloatArray = NDArray[np.float64]
 
@@ -75,13 +75,15 @@ class EstimatorConfig:
         Partial samples (not all streams seen) older than this (s) are dropped.
     outlier_gate : float
         Squared Mahalanobis distance above which a raw sample is rejected
-        (:class:`~dampest_ros.core.online.rls.monitors.OutlierGate`; ≤ 0: none). The gate opens after
+        (:class:`~dampest_ros.core.online.rls.monitors.OutlierGate`; ≤ 0: none). The gate opens
+        after
         :data:`CORRELATION_SECONDS` of samples and its innovation variances average over
         twice that.
     dissipative : bool
         Publish the estimate projected onto νᵀD(ν)ν ≥ 0 over the flown envelope
-        (:func:`~dampest_ros.core.identification.dissipative.project`), the constraint the batch fit imposes;
-        the coefficients it moves are marked as not identified. False: the raw RLS estimate.
+        (:func:`~dampest_ros.core.identification.dissipative.project`), the constraint the batch fit
+        imposes; the coefficients it moves are marked as not identified. False: the raw RLS
+        estimate.
     """
 
     forgetting_factor: float = 0.999
@@ -390,9 +392,9 @@ class OnlineEstimator:
                 "unexcited": d.unexcited or ["none"], "change_alarm": bool(d.alarm), **extra}
 
     def to_model(self, version: int, **extra: Any) -> Model:
-        """The current estimate as a :class:`~dampest_ros.core.identification.model.Model`: θ (projected
-        when the config says so), its σ, the coefficients not identified (:attr:`held`), the
-        body's mass matrix, added mass and switches, and :meth:`model_extra` (``extra``
+        """The current estimate as a :class:`~dampest_ros.core.identification.model.Model`: θ
+        (projected when the config says so), its σ, the coefficients not identified (:attr:`held`),
+        the body's mass matrix, added mass and switches, and :meth:`model_extra` (``extra``
         overrides or adds entries, e.g. ``source``)."""
         return Model(self.names, self.theta, self.theta_std, self.M, version, self.model,
                      self.model_extra(**extra), M_A=self.body.added_mass,

@@ -60,16 +60,8 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 from numpy.typing import NDArray
 
+from dampest_ros.core.online.sample import DEFAULT_TOPICS, OnlineConfig, OnlineSample, topic_roles
 from dampest_ros.core.physics import frames
-from dampest_ros.core.signals.measurements import (
-    ImuSeries,
-    JointSeries,
-    PressureSeries,
-    Recording,
-    TwistSeries,
-    WrenchSeries,
-    stamp_order,
-)
 from dampest_ros.core.physics.mounting import (
     Mounting,
     cross,
@@ -79,9 +71,17 @@ from dampest_ros.core.physics.mounting import (
     imu_to_body,
     specific_force_at_origin,
 )
-from dampest_ros.core.online.sample import DEFAULT_TOPICS, OnlineConfig, OnlineSample, topic_roles
-from dampest_ros.core.signals.preprocess import DataError, body_wrench
 from dampest_ros.core.physics.thrusters import Thrusters
+from dampest_ros.core.signals.measurements import (
+    ImuSeries,
+    JointSeries,
+    PressureSeries,
+    Recording,
+    TwistSeries,
+    WrenchSeries,
+    stamp_order,
+)
+from dampest_ros.core.signals.preprocess import DataError, body_wrench
 
 FloatArray = NDArray[np.float64]
 

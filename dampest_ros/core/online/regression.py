@@ -16,9 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.identification.regression import target
+from dampest_ros.core.online.sample import OnlineSample
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.signals.samples import Samples
 

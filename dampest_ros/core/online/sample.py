@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.signals.preprocess import DataError
 from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.signals.preprocess import DataError
 from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]

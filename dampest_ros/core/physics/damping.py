@@ -15,8 +15,8 @@ finite-dimensional form of ∫ K(t−s) ν(s) ds with K(t) = Σ_m c_m e^{−λ_m
 All velocities are in Fossen's FRD body frame, relative to the water. Coefficients are stored
 positive when dissipative (force on the left-hand side is +D(ν)ν).
 
-The scalar functions α(ν) are in :mod:`dampest_ros.core.physics.alpha`, the term constructors and the
-library of candidate terms with their names in :mod:`dampest_ros.core.physics.terms`.
+The scalar functions α(ν) are in :mod:`dampest_ros.core.physics.alpha`, the term constructors and
+the library of candidate terms with their names in :mod:`dampest_ros.core.physics.terms`.
 """
 
 from __future__ import annotations

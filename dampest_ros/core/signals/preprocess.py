@@ -34,15 +34,6 @@ from scipy import fft as sp_fft
 from scipy import integrate
 
 from dampest_ros.core.physics import frames
-from dampest_ros.core.signals.measurements import (
-    ImuSeries,
-    JointSeries,
-    PressureSeries,
-    Recording,
-    Series,
-    TwistSeries,
-    WrenchSeries,
-)
 from dampest_ros.core.physics.mounting import (
     Mounting,
     depth_offset,
@@ -53,8 +44,17 @@ from dampest_ros.core.physics.mounting import (
     specific_force_at_origin,
 )
 from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.physics.thrusters import Thrusters
+from dampest_ros.core.signals.measurements import (
+    ImuSeries,
+    JointSeries,
+    PressureSeries,
+    Recording,
+    Series,
+    TwistSeries,
+    WrenchSeries,
+)
+from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
 

@@ -1,7 +1,8 @@
 """Physical effects that can be hidden in simulated data (current, thrust errors, body
 offsets, extra cross-coupling, fluid memory, sensor biases, delay, a damping change), and the
 vehicle as the physics then sees it (:func:`true_vehicle`). The simulators
-(:mod:`dampest_ros.core.simulation.simulate`, :mod:`dampest_ros.core.simulation.mujoco_backend`) apply them.
+(:mod:`dampest_ros.core.simulation.simulate`, :mod:`dampest_ros.core.simulation.mujoco_backend`)
+apply them.
 """
 
 from __future__ import annotations

@@ -35,10 +35,14 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from dampest_ros.core.simulation.design import Design, FourierTrajectory, Kinematic
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
-from dampest_ros.core.simulation.vehicle_design import design_vehicle, nominal_wrench, vehicle_limits
+from dampest_ros.core.simulation.design import Design, FourierTrajectory, Kinematic
+from dampest_ros.core.simulation.vehicle_design import (
+    design_vehicle,
+    nominal_wrench,
+    vehicle_limits,
+)
 
 FloatArray = NDArray[np.float64]
 

@@ -39,12 +39,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.simulation.effects import Effects
 from dampest_ros.core.physics.frames import quat_to_matrix
 from dampest_ros.core.physics.geometry import Geometry
 from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, RigidBody, skew
-from dampest_ros.core.simulation.trajectory import Trajectory
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.simulation.trajectory import Trajectory
 
 FloatArray = NDArray[np.float64]
 

@@ -1,8 +1,8 @@
 """Sensor models: turn a ground-truth :class:`Trajectory` into the messages a vehicle logs.
 
 The trajectory is in Fossen's frames (FRD body, NED world) at the integration step; the
-output is one :class:`~dampest_ros.core.signals.measurements.Series` per topic of the topic contract,
-in ROS frames (FLU body ``base_link``, ENU world ``odom``), at each sensor's own rate:
+output is one :class:`~dampest_ros.core.signals.measurements.Series` per topic of the topic
+contract, in ROS frames (FLU body ``base_link``, ENU world ``odom``), at each sensor's own rate:
 
 - ``truth/odom``: OdometrySeries, ``odom`` → ``base_link``; ENU position, FLU→ENU
   attitude, FLU body twist.
@@ -51,16 +51,6 @@ from dampest_ros.core.physics.frames import (
     world_vec,
     wxyz_to_xyzw,
 )
-from dampest_ros.core.simulation.interpolate import continuous, hermite, locate, nlerp
-from dampest_ros.core.signals.measurements import (
-    ImuSeries,
-    JointSeries,
-    OdometrySeries,
-    PressureSeries,
-    Recording,
-    TwistSeries,
-    WrenchSeries,
-)
 from dampest_ros.core.physics.mounting import (
     DEFAULT_FRAME_IDS,
     Mounting,
@@ -71,6 +61,16 @@ from dampest_ros.core.physics.mounting import (
     rotate,
 )
 from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.signals.measurements import (
+    ImuSeries,
+    JointSeries,
+    OdometrySeries,
+    PressureSeries,
+    Recording,
+    TwistSeries,
+    WrenchSeries,
+)
+from dampest_ros.core.simulation.interpolate import continuous, hermite, locate, nlerp
 from dampest_ros.core.simulation.trajectory import Trajectory
 
 FloatArray = NDArray[np.float64]

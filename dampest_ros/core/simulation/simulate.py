@@ -15,17 +15,17 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.simulation.control import VelocityPI
 from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.measurements import Recording
+from dampest_ros.core.simulation.control import VelocityPI
 from dampest_ros.core.simulation.effects import Effects, true_vehicle
 from dampest_ros.core.simulation.excitation import Excitation, ProtocolStream
 from dampest_ros.core.simulation.excitation import protocol as make_protocol
-from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
-from dampest_ros.core.signals.measurements import Recording
-from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.simulation.sensors import SensorBias, SensorConfig, measure
 from dampest_ros.core.simulation.trajectory import Trajectory
-from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
 

@@ -1,10 +1,10 @@
-"""Streaming sensor models: the messages of :func:`dampest_ros.core.simulation.sensors.measure`, produced
-incrementally as the simulator advances (for the simulator node, where a controller closes
+"""Streaming sensor models: the messages of :func:`dampest_ros.core.simulation.sensors.measure`,
+produced incrementally as the simulator advances (for the simulator node, where a controller closes
 the loop and the trajectory is not known in advance).
 
 Same physics, frames, interpolation (cubic Hermite for ν and position, nlerp for attitude),
-noise levels and message layout as :mod:`dampest_ros.core.simulation.sensors` (whose helpers it uses);
-the sample grids are global (t0 + k / rate), so chunking does not change the stamps. The
+noise levels and message layout as :mod:`dampest_ros.core.simulation.sensors` (whose helpers it
+uses); the sample grids are global (t0 + k / rate), so chunking does not change the stamps. The
 noise streams are spawned from the seed in the same order but drawn sample by sample, so a
 stream is statistically, not bitwise, the same as ``measure`` on the whole trajectory.
 """
@@ -17,9 +17,6 @@ from collections import deque
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.simulation.control import VelocityPI
-from dampest_ros.core.simulation.effects import Effects
-from dampest_ros.core.simulation.excitation import protocol as make_protocol
 from dampest_ros.core.physics.frames import (
     body_vec,
     euler_from_matrix,
@@ -30,7 +27,8 @@ from dampest_ros.core.physics.frames import (
     world_vec,
     wxyz_to_xyzw,
 )
-from dampest_ros.core.simulation.interpolate import continuous, hermite, locate, nlerp
+from dampest_ros.core.physics.mounting import Mounting
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.measurements import (
     ImuSeries,
     JointSeries,
@@ -39,7 +37,10 @@ from dampest_ros.core.signals.measurements import (
     Recording,
     TwistSeries,
 )
-from dampest_ros.core.physics.mounting import Mounting
+from dampest_ros.core.simulation.control import VelocityPI
+from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.simulation.excitation import protocol as make_protocol
+from dampest_ros.core.simulation.interpolate import continuous, hermite, locate, nlerp
 from dampest_ros.core.simulation.sensors import (
     FRAME_IDS,
     NOISE_STREAMS,
@@ -54,7 +55,6 @@ from dampest_ros.core.simulation.sensors import (
 )
 from dampest_ros.core.simulation.simulate import make_plant
 from dampest_ros.core.simulation.trajectory import Trajectory
-from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
 
@@ -70,8 +70,9 @@ class SensorStream:
     bias : SensorBias
     seed : int
     mounting : Mounting, optional
-        Where the IMU, DVL and pressure sensor sit (as :func:`~dampest_ros.core.simulation.sensors.measure`
-        models them; default: at the origin, aligned).
+        Where the IMU, DVL and pressure sensor sit (as
+        :func:`~dampest_ros.core.simulation.sensors.measure` models them; default: at the origin,
+        aligned).
 
     Notes
     -----

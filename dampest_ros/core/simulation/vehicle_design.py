@@ -23,6 +23,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.simulation.design import (
     Design,
     DesignLimits,
@@ -31,7 +32,6 @@ from dampest_ros.core.simulation.design import (
     Kinematic,
     optimise,
 )
-from dampest_ros.core.physics.vehicle import Vehicle
 
 FloatArray = NDArray[np.float64]
 

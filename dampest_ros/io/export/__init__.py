@@ -20,8 +20,8 @@ only; they act in its M_A ν̇). Terms a format cannot express (fluid memory, re
 dropped silently.
 
 Two things are never exported silently. Coefficients the data did not determine
-(``model.identified`` false, :attr:`~dampest_ros.core.identification.model.Model.held`) are written with
-the value the model holds (their prior) and listed as such in the file's header, with an
+(``model.identified`` false, :attr:`~dampest_ros.core.identification.model.Model.held`) are written
+with the value the model holds (their prior) and listed as such in the file's header, with an
 :class:`~.common.ExportWarning`. A model that generates energy somewhere on a grid over its flown
 speeds (``model.flown_speeds``, else a default box; see
 :func:`~dampest_ros.core.identification.identified.non_dissipative`) is refused with

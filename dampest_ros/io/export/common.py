@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from dampest_ros.core.physics.damping import DampingModel, FloatArray
 from dampest_ros.core.identification.identified import non_dissipative
 from dampest_ros.core.identification.model import Model
+from dampest_ros.core.physics.damping import DampingModel, FloatArray
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 from dampest_ros.io.yaml_io import SIGN_CONVENTION

@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.damping import FloatArray
 from dampest_ros.core.physics.frames import body_twist
-from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export import FRAMES

@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dampest_ros.core.physics.damping import FloatArray
 from dampest_ros.core.identification.model import Model
+from dampest_ros.core.physics.damping import FloatArray
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, rigid_body_mass
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export.common import (

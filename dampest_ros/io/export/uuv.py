@@ -19,9 +19,9 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.damping import FloatArray
 from dampest_ros.core.physics.frames import body_twist
-from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export.common import (
     Coefficient,

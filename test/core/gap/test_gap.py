@@ -45,24 +45,24 @@ from typing import Any
 import numpy as np
 import pytest
 
-from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.simulation.effects import Effects
-from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.gap.data import GapData
 from dampest_ros.core.gap.effects import Buoyancy, Current
 from dampest_ros.core.gap.library import library
 from dampest_ros.core.gap.localise import concentration, localise
 from dampest_ros.core.gap.search import NO_FURTHER, GapResult, find_gap, rejection
 from dampest_ros.core.gap.update import divergence_reason, updated_model
-from dampest_ros.core.signals.measurements import JointSeries
-from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
-from dampest_ros.core.physics.rigid_body import DOF_NAMES, AddedMassTerms, RigidBody
-from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.identification.selection import DEFAULT_CROSS
-from dampest_ros.core.simulation.sensors import SensorBias, SensorConfig, measure
-from dampest_ros.core.simulation.simulate import run
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, AddedMassTerms, RigidBody
 from dampest_ros.core.physics.terms import CrossSpec, cross_term, linear_term, quadratic_term
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.measurements import JointSeries
+from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
+from dampest_ros.core.signals.samples import Samples
+from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.simulation.excitation import make_excitation
+from dampest_ros.core.simulation.sensors import SensorBias, SensorConfig, measure
+from dampest_ros.core.simulation.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle
 
 DURATION = 600.0

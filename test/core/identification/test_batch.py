@@ -7,18 +7,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dampest_ros.core.physics.alpha import Alpha
 from dampest_ros.core.identification.batch import FitOptions, fit
-from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.identification.dissipative import envelope
-from dampest_ros.core.online.estimator import restrict
-from dampest_ros.core.simulation.excitation import make_excitation
-from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.identification.regression import accumulate, iter_regression
-from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.simulation.simulate import run
+from dampest_ros.core.online.estimator import restrict
+from dampest_ros.core.physics.alpha import Alpha
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.physics.terms import CrossSpec, cross_term
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.samples import Samples
+from dampest_ros.core.simulation.excitation import make_excitation
+from dampest_ros.core.simulation.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle
 
 EXACT = FitOptions(method="ols", cutoff=0.0, gyro_bias=0.0, dvl_bias=0.0)

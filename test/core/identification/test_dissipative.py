@@ -5,9 +5,14 @@ from __future__ import annotations
 import numpy as np
 from scipy import optimize
 
-from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.identification.dissipative import dissipation_points, envelope, power_rows, project
+from dampest_ros.core.identification.dissipative import (
+    dissipation_points,
+    envelope,
+    power_rows,
+    project,
+)
 from dampest_ros.core.online.estimator import restrict
+from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.io.yaml_io import load_vehicle
 
 # flown extremes (m/s, rad/s): min and max per DOF

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from dampest_ros.core.identification.batch import FitOptions, fit
-from dampest_ros.core.simulation.effects import Effects
-from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.identification.frequency import memory_impedance
 from dampest_ros.core.signals.preprocess import preprocess
+from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.sensors import measure
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dampest_ros.core.simulation.control import VelocityPI, tracking_rms
 from dampest_ros.core.identification.identified import damping_from_names
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.rigid_body import ConfigError, coriolis_force
+from dampest_ros.core.simulation.control import VelocityPI, tracking_rms
 from dampest_ros.core.simulation.simulate import Simulator, track
 from dampest_ros.io.yaml_io import load_vehicle
 

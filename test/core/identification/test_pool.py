@@ -1,4 +1,5 @@
-"""Pooled identification over several logs and the drift test (dampest_ros.core.identification.pool)."""
+"""Pooled identification over several logs and the drift test
+(dampest_ros.core.identification.pool)."""
 
 from __future__ import annotations
 
@@ -9,8 +10,6 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.identification.batch import FitOptions, fit
-from dampest_ros.core.simulation.excitation import make_excitation
-from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.identification.pool import (
     LogStatistics,
     drift,
@@ -18,9 +17,11 @@ from dampest_ros.core.identification.pool import (
     pooled_fit,
     pooled_samples,
 )
-from dampest_ros.core.signals.samples import Samples
-from dampest_ros.core.simulation.simulate import run
+from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.samples import Samples
+from dampest_ros.core.simulation.excitation import make_excitation
+from dampest_ros.core.simulation.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle
 
 OPTIONS = FitOptions(method="wls", cutoff=2.0, gyro_bias=0.0, dvl_bias=0.0)

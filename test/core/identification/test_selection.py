@@ -8,17 +8,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dampest_ros.core.physics.alpha import Alpha, AlphaBank
 from dampest_ros.core.identification.batch import FitOptions, fit
-from dampest_ros.core.physics.damping import DampingModel, filter_memory
-from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.identification.quadratic import rank_solve
 from dampest_ros.core.identification.regression import accumulate
-from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
-from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.identification.selection import select_terms
-from dampest_ros.core.physics.terms import added_mass_term, cross_term, library, linear_term, quadratic_term
+from dampest_ros.core.physics.alpha import Alpha, AlphaBank
+from dampest_ros.core.physics.damping import DampingModel, filter_memory
+from dampest_ros.core.physics.frames import matrix_from_euler
+from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
+from dampest_ros.core.physics.terms import (
+    added_mass_term,
+    cross_term,
+    library,
+    linear_term,
+    quadratic_term,
+)
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 
 RATE = 50.0

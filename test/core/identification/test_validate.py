@@ -1,19 +1,20 @@
-"""Validation metrics (dampest_ros.core.identification.validate) on known signals and on simulated data."""
+"""Validation metrics (dampest_ros.core.identification.validate) on known signals and on simulated
+data."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from dampest_ros.core.physics import frames
 from dampest_ros.core.identification import validate as val
+from dampest_ros.core.physics import frames
+from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.effects import Effects, true_vehicle
 from dampest_ros.core.simulation.excitation import make_excitation
-from dampest_ros.core.physics.rigid_body import ConfigError
-from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.core.simulation.trajectory import Trajectory
-from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 
 

@@ -11,23 +11,23 @@ import pytest
 from scipy import signal
 
 from dampest_ros.core.identification.batch import FitOptions, fit
-from dampest_ros.core.physics.damping import filter_memory
 from dampest_ros.core.identification.dissipative import envelope
-from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.identification.regression import iter_regression
 from dampest_ros.core.online.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
-from dampest_ros.core.simulation.excitation import Excitation, make_excitation, speed_limits
-from dampest_ros.core.signals.measurements import Recording, TwistSeries
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor, derivative_lag, window_mean
 from dampest_ros.core.online.regression import LowPass, OnlineRegression
-from dampest_ros.core.online.sample import OnlineConfig, to_samples
-from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
-from dampest_ros.core.identification.regression import iter_regression
-from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.online.rls.least_squares import RecursiveLeastSquares, RLSConfig
+from dampest_ros.core.online.sample import OnlineConfig, to_samples
+from dampest_ros.core.physics.damping import filter_memory
+from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.measurements import Recording, TwistSeries
+from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
+from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.simulation.excitation import Excitation, make_excitation, speed_limits
 from dampest_ros.core.simulation.sensors import SensorConfig, measure
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.core.simulation.trajectory import Trajectory
-from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 from dampest_ros.report.convergence import band_coverage
 
@@ -231,8 +231,8 @@ def test_parallel_filter_keeps_the_regression_exact(vehicle: Vehicle) -> None:
 
 def test_regression_matches_the_batch_path_and_memory(vehicle: Vehicle) -> None:
     """Without the low-pass, (Φ, y) equal batch.iter_regression, memory states included."""
-    from dampest_ros.core.physics.damping import DampingModel
     from dampest_ros.core.online.sample import OnlineSample
+    from dampest_ros.core.physics.damping import DampingModel
     from dampest_ros.core.physics.terms import memory_term
     model = DampingModel([*vehicle.damping.terms, memory_term({"u": [2.0], "r": [0.5]})])
     rng = np.random.default_rng(2)

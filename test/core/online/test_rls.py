@@ -1,4 +1,5 @@
-"""Recursive least squares (dampest_ros.core.online.rls) against filterpy, batch LS and known truth."""
+"""Recursive least squares (dampest_ros.core.online.rls) against filterpy, batch LS and known
+truth."""
 
 from __future__ import annotations
 
@@ -8,10 +9,10 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.online.rls.least_squares import RecursiveLeastSquares, RLSConfig
 from dampest_ros.core.online.rls.monitors import CorrelationFactor, Cusum, InnovationMonitor
 from dampest_ros.core.online.rls.update import forget, rls_update, scaled_trace
+from dampest_ros.core.physics.rigid_body import ConfigError
 
 
 def random_problem(seed: int, n: int, p: int, noise: float = 0.1

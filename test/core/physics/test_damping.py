@@ -1,4 +1,5 @@
-"""Damping terms (dampest_ros.core.physics.damping): regressor, names, dissipativity, memory, scaling."""
+"""Damping terms (dampest_ros.core.physics.damping): regressor, names, dissipativity, memory,
+scaling."""
 
 from __future__ import annotations
 

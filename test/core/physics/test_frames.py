@@ -1,4 +1,5 @@
-"""Frame conventions (dampest_ros.core.physics.frames): FRD/NED (Fossen) against FLU/ENU (REP-103)."""
+"""Frame conventions (dampest_ros.core.physics.frames): FRD/NED (Fossen) against FLU/ENU
+(REP-103)."""
 
 from __future__ import annotations
 

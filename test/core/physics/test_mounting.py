@@ -13,18 +13,18 @@ import pytest
 import yaml
 
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
-from dampest_ros.core.simulation.excitation import make_excitation
-from dampest_ros.core.physics.frames import matrix_from_euler, matrix_to_quat
-from dampest_ros.core.signals.measurements import ImuSeries, PressureSeries, Recording, TwistSeries
-from dampest_ros.core.physics.mounting import Mounting, SensorMount
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import to_samples
-from dampest_ros.core.signals.preprocess import preprocess
+from dampest_ros.core.physics.frames import matrix_from_euler, matrix_to_quat
+from dampest_ros.core.physics.mounting import Mounting, SensorMount
 from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.measurements import ImuSeries, PressureSeries, Recording, TwistSeries
+from dampest_ros.core.signals.preprocess import preprocess
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.sensors import SensorConfig, measure
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.core.simulation.trajectory import Trajectory
-from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle, vehicle_path
 
 G, RHO, ATM = 9.81, 1000.0, 101325.0

@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dampest_ros.core.simulation.excitation import make_excitation
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.measurements import TwistSeries
 from dampest_ros.core.signals.preprocess import (
     DataError,
@@ -16,10 +16,10 @@ from dampest_ros.core.signals.preprocess import (
     segments_from_gaps,
     zero_phase,
 )
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.sensors import SensorConfig, measure
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.core.simulation.trajectory import Trajectory
-from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 
 QUIET = SensorConfig(gyro_noise=0, gyro_bias_walk=0, accel_noise=0, accel_bias_walk=0,

@@ -1,17 +1,17 @@
-"""The stamp-order stage (dampest_ros.core.signals.reorder): any arrival order within the latency gives
-the offline (stamp, role) order, so the online preprocessor's samples equal run(rec)'s."""
+"""The stamp-order stage (dampest_ros.core.signals.reorder): any arrival order within the latency
+gives the offline (stamp, role) order, so the online preprocessor's samples equal run(rec)'s."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from dampest_ros.core.simulation.excitation import make_excitation
-from dampest_ros.core.signals.measurements import Recording
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import DEFAULT_TOPICS, TOPIC_ROLES
-from dampest_ros.core.signals.reorder import StampOrder
 from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.signals.measurements import Recording
+from dampest_ros.core.signals.reorder import StampOrder
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.sensors import SensorConfig, measure
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle

@@ -8,10 +8,10 @@ import functools
 import numpy as np
 import pytest
 
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.simulation import excitation
 from dampest_ros.core.simulation.excitation import LIVE_PROTOCOLS, protocol
 from dampest_ros.core.simulation.simulate import run
-from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.simulation.vehicle_design import design_vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 

@@ -11,21 +11,21 @@ import numpy as np
 import pytest
 import yaml
 
-from dampest_ros.core.simulation.effects import Effects
-from dampest_ros.core.simulation.excitation import make_excitation
+from dampest_ros.core.identification.regression import target
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.physics.geometry import Geometry
+from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, coriolis_force
+from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.samples import Samples
+from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.mujoco_backend import (
     MujocoSimulator,
     compile_model,
     plant_added_mass,
     plant_vehicle,
 )
-from dampest_ros.core.identification.regression import target
-from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, coriolis_force
-from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.simulate import run
-from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.yaml_io import load_vehicle
 
 mujoco = pytest.importorskip("mujoco")

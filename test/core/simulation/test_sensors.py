@@ -1,4 +1,5 @@
-"""Sensor models (dampest_ros.core.simulation.sensors): frames, physics, interpolation, noise, rates."""
+"""Sensor models (dampest_ros.core.simulation.sensors): frames, physics, interpolation, noise,
+rates."""
 
 from __future__ import annotations
 

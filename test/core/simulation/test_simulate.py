@@ -1,4 +1,5 @@
-"""Simulator (dampest_ros.core.simulation.simulate): steady states, energy, current, hidden effects, runs."""
+"""Simulator (dampest_ros.core.simulation.simulate): steady states, energy, current, hidden effects,
+runs."""
 
 from __future__ import annotations
 
@@ -10,13 +11,13 @@ import numpy as np
 import pytest
 import yaml
 
-from dampest_ros.core.simulation.effects import Effects
-from dampest_ros.core.simulation.excitation import PROTOCOLS, make_excitation
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.simulation.effects import Effects
+from dampest_ros.core.simulation.excitation import PROTOCOLS, make_excitation
 from dampest_ros.core.simulation.simulate import Simulator, run
 from dampest_ros.core.simulation.trajectory import Trajectory
-from dampest_ros.core.physics.vehicle import Vehicle
 
 PRESET_DIR = Path(__file__).resolve().parents[2] / "config" / "vehicles"
 

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dampest_ros.core.simulation.design import FourierTrajectory
-from dampest_ros.core.simulation.excitation import protocol, speed_limits
 from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.simulation.design import FourierTrajectory
+from dampest_ros.core.simulation.excitation import protocol, speed_limits
 from dampest_ros.core.simulation.vehicle_design import (
     COORDINATES,
     _problem,

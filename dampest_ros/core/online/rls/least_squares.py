@@ -21,9 +21,20 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from dampest_ros.core.online.rls.monitors import (
+    CorrelationFactor,
+    InnovationMonitor,
+    OutlierGate,
+    ew_mean,
+)
+from dampest_ros.core.online.rls.update import (
+    BLOCK,
+    FORGETTING_MODES,
+    block_update,
+    scaled_trace,
+    step,
+)
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
-from dampest_ros.core.online.rls.monitors import CorrelationFactor, InnovationMonitor, OutlierGate, ew_mean
-from dampest_ros.core.online.rls.update import BLOCK, FORGETTING_MODES, block_update, scaled_trace, step
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

@@ -1,7 +1,8 @@
 """The recursive least-squares update of the stacked damping parameters θ, one sample (6 rows)
 at a time, in blocks of samples, and the forgetting that keeps P bounded.
 
-Model per sample n (FRD body frame; the target and regressor of :mod:`dampest_ros.core.identification.batch`):
+Model per sample n (FRD body frame; the target and regressor of
+:mod:`dampest_ros.core.identification.batch`):
 
     y_n = Φ_n θ + e_n,    y_n ∈ ℝ⁶ (N, N·m),  Φ_n ∈ ℝ^{6×p},  e_n ~ N(0, R),  R = diag(r)
 
