@@ -30,7 +30,7 @@ pytestmark = pytest.mark.slow
 SPEED = 0.25
 VEHICLES = {"rov": "config/vehicles/bluerov2_heavy_mujoco.yaml",
             "torpedo": "config/vehicles/torpedo_auv.yaml"}
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")

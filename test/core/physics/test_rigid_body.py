@@ -21,7 +21,7 @@ from dampest_ros.core.physics.rigid_body import (
 )
 from dampest_ros.core.physics.vehicle import Vehicle
 
-PRESET_DIR = Path(__file__).resolve().parents[2] / "config" / "vehicles"
+PRESET_DIR = Path(__file__).resolve().parents[3] / "config" / "vehicles"
 PRESETS = sorted(PRESET_DIR.glob("*.yaml"))
 
 

@@ -31,7 +31,7 @@ from dampest_ros.io.yaml_io import load_vehicle
 mujoco = pytest.importorskip("mujoco")
 
 PRESETS = ("bluerov2_heavy_mujoco", "torpedo_auv")
-PRESETS_DIR = Path(__file__).resolve().parents[2] / "config" / "vehicles"
+PRESETS_DIR = Path(__file__).resolve().parents[3] / "config" / "vehicles"
 
 
 def _quiet(v: Vehicle, coef: tuple[float, ...] = (0, 0, 0, 0, 0), viscosity: float = 0.0

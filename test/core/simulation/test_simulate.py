@@ -19,7 +19,7 @@ from dampest_ros.core.simulation.excitation import PROTOCOLS, make_excitation
 from dampest_ros.core.simulation.simulate import Simulator, run
 from dampest_ros.core.simulation.trajectory import Trajectory
 
-PRESET_DIR = Path(__file__).resolve().parents[2] / "config" / "vehicles"
+PRESET_DIR = Path(__file__).resolve().parents[3] / "config" / "vehicles"
 
 
 def preset(name: str) -> dict[str, Any]:
