@@ -35,4 +35,8 @@ DVL bias.
 
 Signs: with the model's residual r = τ − model(ν, ν̇, η), an effect that adds a force F to the
 left-hand side of the true equation (M ν̇ + … + g + F = τ) leaves ρ = F.
+
+May import: :mod:`dampest_ros.core.identification`, :mod:`dampest_ros.core.signals` and
+:mod:`dampest_ros.core.physics`; never the simulators (:mod:`dampest_ros.core.simulation`): the
+gap is found from logs alone.
 """
