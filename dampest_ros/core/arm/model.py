@@ -9,6 +9,7 @@ kg m²), the inertia taken about the joint frame's origin (not the centre of mas
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -204,9 +205,10 @@ def mjcf(arm: ArmModel, dynamics: JointDynamics, timestep: float = 0.001,
         pad = "  " * depth
         m = arm.inertial[j]
         com = m[1:4] / m[0]
-        # inertia about the centre of mass: I_c = I_o − m S(c)ᵀ S(c) (parallel axis)
+        # inertia about the centre of mass: I_c = I_o − m S(c)ᵀ S(c) (parallel axis); |c|² is
+        # summed exactly (fsum), so the file does not depend on the CPU's SIMD summation order
         Io = np.array([[m[4], m[5], m[7]], [m[5], m[6], m[8]], [m[7], m[8], m[9]]])
-        Ic = Io - m[0] * (np.dot(com, com) * np.eye(3) - np.outer(com, com))
+        Ic = Io - m[0] * (math.fsum(com * com) * np.eye(3) - np.outer(com, com))
         full = np.array([Ic[0, 0], Ic[1, 1], Ic[2, 2], Ic[0, 1], Ic[0, 2], Ic[1, 2]])
         d = dynamics
         lines.extend([
