@@ -8,7 +8,6 @@ from __future__ import annotations
 import html
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -18,14 +17,16 @@ from numpy.typing import NDArray
 from dampest_ros.core.physics.rigid_body import DOF_NAMES
 from dampest_ros.core.simulation.control import tracking_rms
 from dampest_ros.report.figures import (
-    CSS,
     VEL_UNITS,
     Values,
     aligned,
+    generated_utc,
     grid,
+    html_head,
     html_table,
     num,
     save_figure,
+    write_index,
 )
 
 FloatArray = NDArray[np.float64]
@@ -224,16 +225,67 @@ def write_convergence_report(out_dir: str | Path, names: Sequence[str], t: Float
         raise ValueError(f"theta and std need shape {(len(t), len(names))}, got "
                          f"{theta.shape} and {std.shape}")
     truth_v, batch_v = aligned(truth, names), aligned(batch, names)
+    _write_csv(out / "convergence.csv", names, t, theta, std)
+    heading = html.escape(title or "Online identification")
+    parts = [
+        *html_head(heading),
+        f'<p class="meta">generated {generated_utc()} · dampest_ros</p>',
+        "<h2>Summary</h2>",
+        html_table(["", ""], [[html.escape(k), html.escape(v)] for k, v in summary]),
+        f"<h2>Final estimate (t = {t[-1]:.1f} s)</h2>",
+        '<p class="note">Recursive least squares on the live samples; damping coefficients '
+        "in SI units, positive when dissipative. The batch column is the least-squares fit "
+        "on the same samples, all weighted equally. The coverage is the share of the "
+        "recorded instants of the second half of the run at which the truth lay within "
+        "±2σ of the estimate (about 95 % when σ is right). The estimate over time, from the "
+        "prior at t = 0, is in <code>convergence.csv</code>.</p>",
+        _final_table(names, t, theta, std, truth_v, batch_v),
+        "<h2>Convergence</h2>",
+        *_convergence_images(out, names, t, theta, std, groups, truth_v, units or {}),
+    ]
+    if tracking is not None:
+        parts += _tracking_section(tracking, out)
+    parts.append("</body></html>")
+    return write_index(out, parts)
+
+
+def _write_csv(path: Path, names: list[str], t: FloatArray, theta: FloatArray,
+               std: FloatArray) -> None:
+    """Write the estimate over time as CSV: columns ``t`` (s), the p parameters and their
+    ``_std``; ``t`` has shape (K,), ``theta`` and ``std`` shape (K, p)."""
     header = ",".join(["t"] + names + [f"{n}_std" for n in names])
-    np.savetxt(out / "convergence.csv", np.column_stack([t, theta, std]), delimiter=",",
-               header=header, comments="", fmt="%.9g")
+    np.savetxt(path, np.column_stack([t, theta, std]), delimiter=",", header=header,
+               comments="", fmt="%.9g")
+
+
+def _convergence_images(out: Path, names: list[str], t: FloatArray, theta: FloatArray,
+                        std: FloatArray, groups: Mapping[str, Sequence[str]],
+                        truth_v: FloatArray | None, units: Mapping[str, str]) -> list[str]:
+    """Draw one convergence figure per term kind of ``groups`` into ``out``; their ``<img>``
+    tags.
+
+    ``t`` has shape (K,) (s), ``theta`` and ``std`` shape (K, p), ``truth_v`` shape (p,);
+    ``units`` gives each parameter's SI unit.
+    """
     figs = []
     for kind, members in groups.items():
         idx = [names.index(n) for n in members]
         png = _convergence_figure(kind, members, t, theta[:, idx], std[:, idx],
                                   truth_v[idx] if truth_v is not None else None,
-                                  units or {}, out / f"convergence_{kind}.png")
+                                  units, out / f"convergence_{kind}.png")
         figs.append(f'<img src="{png}" alt="{html.escape(kind)} coefficients over time">')
+    return figs
+
+
+def _final_table(names: list[str], t: FloatArray, theta: FloatArray, std: FloatArray,
+                 truth_v: FloatArray | None, batch_v: FloatArray | None) -> str:
+    """The table of the final estimate: value and std, error against the truth, whether the
+    truth lies within ±2σ, the ±2σ coverage over the last half (:func:`band_coverage`), and
+    the batch estimate with its error.
+
+    ``t`` has shape (K,) (s), ``theta`` and ``std`` shape (K, p), ``truth_v`` and ``batch_v``
+    shape (p,).
+    """
     head = ["parameter", "estimate", "std", "truth", "error %", "truth within ±2σ",
             "±2σ coverage, last half"]
     coverage = (band_coverage(t, theta, std, truth_v) if truth_v is not None
@@ -252,46 +304,27 @@ def write_convergence_report(out_dir: str | Path, names: Sequence[str], t: Float
             b_err = (batch_v[j] - tr) / tr * 100 if tr and np.isfinite(tr) else np.nan
             row += [num(batch_v[j]), num(b_err, 3)]
         rows.append(row)
-    parts = [
-        "<!DOCTYPE html>",
-        '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>{html.escape(title or 'Online identification')}</title>"
-        f"<style>{CSS}</style></head><body>",
-        f"<h1>{html.escape(title or 'Online identification')}</h1>",
-        f'<p class="meta">generated {datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC")} · '
-        "dampest_ros</p>",
-        "<h2>Summary</h2>",
-        html_table(["", ""], [[html.escape(k), html.escape(v)] for k, v in summary]),
-        f"<h2>Final estimate (t = {t[-1]:.1f} s)</h2>",
-        '<p class="note">Recursive least squares on the live samples; damping coefficients '
-        "in SI units, positive when dissipative. The batch column is the least-squares fit "
-        "on the same samples, all weighted equally. The coverage is the share of the "
-        "recorded instants of the second half of the run at which the truth lay within "
-        "±2σ of the estimate (about 95 % when σ is right). The estimate over time, from the "
-        "prior at t = 0, is in <code>convergence.csv</code>.</p>",
-        html_table(head, rows),
-        "<h2>Convergence</h2>", *figs,
+    return html_table(head, rows)
+
+
+def _tracking_section(tracking: Tracking, out: Path) -> list[str]:
+    """The velocity-tracking heading, note, RMS table (one column per velocity unit) and
+    figure (drawn into ``out``)."""
+    dofs = ", ".join(DOF_NAMES[i] for i in tracking.dofs)
+    by_unit = list(dict.fromkeys(u for r in tracking.rms.values() for u in r))
+    return [
+        "<h2>Velocity tracking with the identified model</h2>",
+        '<p class="note">The per-DOF velocity PI of <code>controller_node</code> flies sine '
+        f"references in {html.escape(dofs)} on the simulator (the true vehicle), alone "
+        "and with the feed-forward D(ν<sub>ref</sub>)ν<sub>ref</sub> + "
+        "C(ν<sub>ref</sub>)ν<sub>ref</sub> of the final model. RMS over the DOFs of "
+        "each unit apart (m/s and rad/s are not added) after the first "
+        f"{tracking.t[tracking.skip] - tracking.t[0]:.0f} s.</p>",
+        html_table(["controller", *(f"RMS error ({u}; " + ", ".join(
+            DOF_NAMES[i] for i in tracking.dofs if VEL_UNITS[i] == u) + ")"
+            for u in by_unit)],
+               [[html.escape(k), *(num(v.get(u, np.nan), 4) for u in by_unit)]
+                for k, v in tracking.rms.items()]),
+        f'<img src="{_tracking_figure(tracking, out / "tracking.png")}" '
+        'alt="velocity tracking">',
     ]
-    if tracking is not None:
-        dofs = ", ".join(DOF_NAMES[i] for i in tracking.dofs)
-        by_unit = list(dict.fromkeys(u for r in tracking.rms.values() for u in r))
-        parts += [
-            "<h2>Velocity tracking with the identified model</h2>",
-            '<p class="note">The per-DOF velocity PI of <code>controller_node</code> flies sine '
-            f"references in {html.escape(dofs)} on the simulator (the true vehicle), alone "
-            "and with the feed-forward D(ν<sub>ref</sub>)ν<sub>ref</sub> + "
-            "C(ν<sub>ref</sub>)ν<sub>ref</sub> of the final model. RMS over the DOFs of "
-            "each unit apart (m/s and rad/s are not added) after the first "
-            f"{tracking.t[tracking.skip] - tracking.t[0]:.0f} s.</p>",
-            html_table(["controller", *(f"RMS error ({u}; " + ", ".join(
-                DOF_NAMES[i] for i in tracking.dofs if VEL_UNITS[i] == u) + ")"
-                for u in by_unit)],
-                   [[html.escape(k), *(num(v.get(u, np.nan), 4) for u in by_unit)]
-                    for k, v in tracking.rms.items()]),
-            f'<img src="{_tracking_figure(tracking, out / "tracking.png")}" '
-            'alt="velocity tracking">',
-        ]
-    parts.append("</body></html>")
-    index = out / "index.html"
-    index.write_text("\n".join(parts), encoding="utf-8")
-    return index

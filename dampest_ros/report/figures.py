@@ -1,6 +1,6 @@
 """Shared pieces of the HTML reports: units of coefficients and axes, the figures every report
 draws (damping force, residual spectrum and autocorrelation, coefficients with intervals, free
-run, excitation coverage), HTML tables and the style sheet. Figures are drawn with
+run, excitation coverage), HTML tables, the style sheet and the page frame. Figures are drawn with
 matplotlib's object API on the Agg canvas (no pyplot state, no display).
 """
 
@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import html
 from collections.abc import Mapping, Sequence
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -313,3 +314,24 @@ tr.flag td{background:#fff1f0}td.reason{text-align:left;max-width:34em;font-size
 img{max-width:100%;border:1px solid #ddd;margin:.3em 0 1em}
 .note{color:#555;font-size:.92em;max-width:60em}
 """
+
+
+def html_head(heading: str) -> list[str]:
+    """The lines of a report page up to its ``<h1>``: doctype, title and :data:`CSS`.
+
+    ``heading`` is HTML (escaped by the caller); it is both the title and the ``<h1>``.
+    """
+    return ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+            f"<title>{heading}</title><style>{CSS}</style></head><body>", f"<h1>{heading}</h1>"]
+
+
+def generated_utc() -> str:
+    """The current time for a report's header, e.g. ``2024-05-01 12:00:00 UTC``."""
+    return datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+def write_index(out: Path, parts: Sequence[str]) -> Path:
+    """Write the lines ``parts`` as ``out/index.html`` (UTF-8) and return its path."""
+    index = out / "index.html"
+    index.write_text("\n".join(parts), encoding="utf-8")
+    return index

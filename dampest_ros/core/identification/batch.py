@@ -415,6 +415,220 @@ def parameter_scale(ne: NormalEquations, theta: FloatArray) -> FloatArray:
     return np.asarray(np.maximum(np.abs(theta), 0.1 * explained[i] / col))
 
 
+@dataclass(frozen=True)
+class _Problem:
+    """The normal equations of a fit with its method's regularisation, solved for given
+    per-DOF weights.
+
+    Attributes
+    ----------
+    ne : NormalEquations
+        Per-DOF, per-fold statistics of y = Φ(ν)θ + e.
+    opts : FitOptions
+        The method (``ridge`` and ``map`` add to the equations, ``ols`` weights all DOFs
+        alike) and its settings.
+    prior : ndarray, shape (p,)
+        Value of the parameters that are not free, and the prior mean of MAP (SI units of θ).
+    prior_std : ndarray, shape (p,), optional
+        Prior standard deviations of MAP.
+    lower : ndarray, shape (p,), optional
+        Lower bounds (``bounded``; −inf: none).
+    """
+
+    ne: NormalEquations
+    opts: FitOptions
+    prior: FloatArray
+    prior_std: FloatArray | None
+    lower: FloatArray | None
+
+    @property
+    def n(self) -> int:
+        """Number of samples the normal equations hold."""
+        return int(self.ne.n.sum())
+
+    def equations(self, weights: FloatArray, exclude: int | None = None
+                  ) -> tuple[FloatArray, FloatArray]:
+        """A, shape (p, p), and b, shape (p,), of the weighted normal equations summed over the
+        folds but ``exclude``, with the ridge (relative to diag A) or the MAP prior 1/σ² added.
+
+        Raises
+        ------
+        ConfigError
+            ``map`` without ``prior_std``.
+        """
+        A, b, _ = self.ne.total(weights, exclude)
+        if self.opts.method == "ridge":
+            A = A + self.opts.ridge * np.diag(np.diag(A))
+        if self.opts.method == "map":
+            if self.prior_std is None:
+                raise ConfigError("prior", "MAP needs a prior with standard deviations")
+            P = 1.0 / np.maximum(np.asarray(self.prior_std, float), 1e-12) ** 2
+            A = A + np.diag(P)
+            b = b + P * self.prior
+        return A, b
+
+    def solve(self, weights: FloatArray, free: NDArray[np.bool_],
+              basis: FloatArray | None = None, exclude: int | None = None,
+              power: FloatArray | None = None) -> FloatArray:
+        """θ, shape (p,), from :meth:`equations` (:func:`solve_normal`): the ``free``
+        parameters, shape (p,), estimated in the directions ``basis`` spans, shape
+        (p_free, r), and kept to g_kᵀθ ≥ 0 for the rows of ``power``, shape (m, p); the others
+        at the prior."""
+        A, b = self.equations(weights, exclude)
+        return solve_normal(A, b, free, self.prior, self.lower, basis, power)
+
+    def weights(self, theta: FloatArray) -> FloatArray:
+        """Per-DOF weights 1/σ_i², shape (6,), for the residuals of ``theta`` (ones for
+        ``ols``).
+
+        σ_i² = max(RSS_i / N, (FLOOR · RMS y_i)²), in N² and (N·m)²: the DOF's noise variance,
+        never below what its own force scale makes credible.
+        """
+        if self.opts.method == "ols":
+            return np.ones(6)
+        N = self.n
+        force_rms = np.sqrt(self.ne.c.sum(0) / N)  # RMS target force per DOF (N, N·m)
+        s2 = np.maximum(self.ne.rss(theta) / N, (FLOOR * force_rms) ** 2)
+        return np.asarray(1.0 / np.maximum(s2, 1e-300))
+
+
+def _excited(ne: NormalEquations, names: list[str]
+             ) -> tuple[NDArray[np.bool_], dict[str, str]]:
+    """The parameters whose regressor column is not zero in these data, shape (p,), and a
+    flag for each of the others.
+
+    Unweighted: the weights do not excite anything.
+    """
+    d = np.diag(ne.total(np.ones(6))[0])
+    live = d > 1e-12 * max(float(d.max()), 1e-300)
+    flags = {n: "no excitation: its regressor column is zero in these data"
+             for n, ok in zip(names, live, strict=True) if not ok}
+    return live, flags
+
+
+def _reweighted(problem: _Problem, live: NDArray[np.bool_]) -> FloatArray:
+    """Per-DOF weights 1/σ_i², shape (6,), after three rounds of reweighting from equal
+    weights, each on the residuals of the ``live`` parameters, shape (p,), fitted with the
+    previous weights (:meth:`_Problem.weights`)."""
+    w = np.ones(6)
+    for _ in range(3):
+        w = problem.weights(problem.solve(w, live))
+    return w
+
+
+def _free(model: DampingModel, samples: Samples, opts: FitOptions, live: NDArray[np.bool_],
+          prior: FloatArray, flags: dict[str, str]) -> NDArray[np.bool_]:
+    """The parameters the fit estimates, shape (p,): excited (``live``) and, with
+    ``opts.speed_range``, not quadratic terms of a DOF flown too slowly
+    (:func:`speed_coverage_flags`).
+
+    ``flags`` gains the speed-coverage flags, and the flag of every other parameter says that
+    it is held at its ``prior`` value, shape (p,).
+    """
+    names = model.parameter_names
+    if opts.speed_range is not None:
+        flags.update(speed_coverage_flags(model, samples, np.asarray(opts.speed_range)))
+    free = live & np.array([n not in flags for n in names])
+    for j in np.flatnonzero(~free):
+        flags[names[j]] = f"held at prior {prior[j]:.4g} ({flags[names[j]]})"
+    return free
+
+
+def _covariance(samples: Samples, model: DampingModel, body: RigidBody, theta: FloatArray,
+                w: FloatArray, ne: NormalEquations, free: NDArray[np.bool_], T: FloatArray,
+                opts: FitOptions, chunk: int, map_parts: MapParts | None) -> FloatArray:
+    """Covariance of θ̂, shape (p, p): the block-robust one (:func:`robust_covariance`) plus
+    the sensor-bias budget (:func:`bias_covariance`), both in the directions ``T``, shape
+    (p_free, r), spans; ``w``, shape (6,), are the fit's per-DOF weights."""
+    return (robust_covariance(samples, model, body, theta, w, ne, free, T, opts, chunk,
+                              map_parts)
+            + bias_covariance(samples, model, body, theta, w, free, T, opts, chunk, map_parts))
+
+
+def _combinations(W: FloatArray, s: FloatArray, names: list[str], free: NDArray[np.bool_],
+                  theta: FloatArray, cov: FloatArray, flags: dict[str, str]
+                  ) -> list[Combination]:
+    """What the data determine of the free parameters in undetermined directions
+    (:func:`combinations_of`); ``flags`` gains, for each member not flagged yet, that only its
+    combination is identified.
+
+    Parameters
+    ----------
+    W : ndarray, shape (p_free, k)
+        Undetermined directions (scaled coordinates), from :func:`determined_directions`.
+    s : ndarray, shape (p_free,)
+        The column scaling.
+    names : list of str
+        All parameter names, shape (p,).
+    free : ndarray of bool, shape (p,)
+    theta : ndarray, shape (p,)
+    cov : ndarray, shape (p, p)
+    flags : dict of str to str
+    """
+    fi = np.flatnonzero(free)
+    combos = combinations_of(W, s, [names[j] for j in fi], theta[fi], cov[np.ix_(fi, fi)])
+    for c in combos:
+        for n in c.names:
+            flags.setdefault(n, f"not identified on its own: only {c} is")
+    return combos
+
+
+def _dissipative(problem: _Problem, model: DampingModel, samples: Samples, theta: FloatArray,
+                 cov: FloatArray, w: FloatArray, free: NDArray[np.bool_], T: FloatArray,
+                 chunk: int) -> tuple[FloatArray, dict[str, str], FloatArray]:
+    """With ``dissipative``, impose νᵀD(ν)ν ≥ 0 where ``theta`` violates it, on every sample
+    and over the flown envelope (:func:`impose`).
+
+    Returns
+    -------
+    theta : ndarray, shape (p,)
+        The constrained estimate (``theta`` when nothing is violated).
+    constrained : dict of str to str
+        Parameters an active constraint moved, and why (:func:`misfit_report`).
+    power : ndarray, shape (m, p)
+        The constraint rows g_k (νᵀD(ν)ν = g_kᵀθ, W) the estimate is held to; m = 0 when none.
+    """
+    constrained: dict[str, str] = {}
+    power = np.zeros((0, len(theta)))
+    if not (problem.opts.dissipative and model.n_params):
+        return theta, constrained, power
+    pts, on_data = dissipation_points(model, theta, samples.nu, chunk=chunk)
+    if len(pts):
+        constrained = misfit_report(model, theta, pts[:1000], on_data[:1000], cov, free)
+        theta, power = impose(
+            theta, pts, model, lambda E: problem.solve(w, free, T, power=E),
+            lambda th: dissipation_points(model, th, samples.nu, chunk=chunk)[0])
+    return theta, constrained, power
+
+
+def _cross_validated_rss(problem: _Problem, w: FloatArray, free: NDArray[np.bool_],
+                         T: FloatArray, power: FloatArray) -> FloatArray:
+    """Held-out residual sum of squares per DOF, shape (6,) (N², (N·m)²): each fold scored
+    with the estimate fitted on the others, with the same weights ``w``, directions ``T`` and
+    constraints ``power``."""
+    cv = np.zeros(6)
+    for f in range(len(problem.ne.n)):
+        th_f = problem.solve(w, free, T, exclude=f, power=power)
+        cv += problem.ne.rss(th_f, fold=f)
+    return cv
+
+
+def _scaled_condition(ne: NormalEquations, free: NDArray[np.bool_]) -> float:
+    """Condition number of the unweighted normal-equation matrix of the ``free`` parameters,
+    shape (p,), with its columns scaled to a unit diagonal (1 when none is free)."""
+    A_s, _, _ = ne.total(np.ones(6))
+    d = np.sqrt(np.maximum(np.diag(A_s[np.ix_(free, free)]), 1e-300))
+    ev = np.linalg.eigvalsh(A_s[np.ix_(free, free)] / np.outer(d, d)) if free.any() else [1.0]
+    return float(max(ev) / max(min(ev), 1e-300))
+
+
+def _effective_samples(samples: Samples, n: int, cutoff: float) -> float:
+    """n_eff = 2 · cutoff · T of AIC/BIC (T the duration, s; ``cutoff`` in Hz), at most the
+    sample count ``n``; ``n`` without a low-pass."""
+    duration = len(samples) / samples.rate if samples.rate else float(n)
+    return min(float(n), 2 * cutoff * duration) if cutoff > 0 else float(n)
+
+
 def fit(samples: Samples, model: DampingModel, body: RigidBody,
         options: FitOptions | None = None, prior: FloatArray | None = None,
         prior_std: FloatArray | None = None, normal: NormalEquations | None = None,
@@ -467,82 +681,24 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
         raise ConfigError("samples", f"{len(samples)} samples are too few for {p} parameters")
     ne = normal or accumulate(samples, model, body, chunk=chunk, cutoff=opts.cutoff)
     prior_v = np.zeros(p) if prior is None else np.asarray(prior, dtype=float)
-    N = int(ne.n.sum())
-    lower = model.lower_bounds() if opts.method == "bounded" else None
-    force_rms = np.sqrt(ne.c.sum(0) / N)  # RMS target force per DOF (N, N·m)
-
-    def solve(weights: FloatArray, free_: NDArray[np.bool_], basis: FloatArray | None = None,
-              exclude: int | None = None, power: FloatArray | None = None) -> FloatArray:
-        A, b, _ = ne.total(weights, exclude)
-        if opts.method == "ridge":
-            A = A + opts.ridge * np.diag(np.diag(A))
-        if opts.method == "map":
-            if prior_std is None:
-                raise ConfigError("prior", "MAP needs a prior with standard deviations")
-            P = 1.0 / np.maximum(np.asarray(prior_std, float), 1e-12) ** 2
-            A = A + np.diag(P)
-            b = b + P * prior_v
-        return solve_normal(A, b, free_, prior_v, lower, basis, power)
-
-    def weights_for(theta: FloatArray) -> FloatArray:
-        if opts.method == "ols":
-            return np.ones(6)
-        # σ_i² = max(RSS_i / N, (FLOOR · RMS y_i)²): the DOF's noise variance, never below
-        # what its own force scale makes credible → weights 1/σ_i²
-        s2 = np.maximum(ne.rss(theta) / N, (FLOOR * force_rms) ** 2)
-        return np.asarray(1.0 / np.maximum(s2, 1e-300))
-
-    # columns that are zero in these data (unweighted: the weights do not excite anything)
-    d = np.diag(ne.total(np.ones(6))[0])
-    live = d > 1e-12 * max(float(d.max()), 1e-300)
-    flags = {n: "no excitation: its regressor column is zero in these data"
-             for n, ok in zip(names, live, strict=True) if not ok}
-    w = np.ones(6)
-    theta = solve(w, live)
-    for _ in range(3):
-        w = weights_for(theta)
-        theta = solve(w, live)
-    if opts.speed_range is not None:
-        flags.update(speed_coverage_flags(model, samples, np.asarray(opts.speed_range)))
-    free = live & np.array([n not in flags for n in names])
-    held = ~free
-    for j in np.flatnonzero(held):
-        flags[names[j]] = f"held at prior {prior_v[j]:.4g} ({flags[names[j]]})"
+    problem = _Problem(ne, opts, prior_v, prior_std,
+                       model.lower_bounds() if opts.method == "bounded" else None)
+    live, flags = _excited(ne, names)
+    w = _reweighted(problem, live)
+    free = _free(model, samples, opts, live, prior_v, flags)
     T, W, s = determined_directions(ne.total(w)[0], free, opts.max_vif)
-    theta = solve(w, free, T)
-    cov = robust_covariance(samples, model, body, theta, w, ne, free, T, opts, chunk, map_parts) \
-        + bias_covariance(samples, model, body, theta, w, free, T, opts, chunk, map_parts)
-    fi = np.flatnonzero(free)
-    combos = combinations_of(W, s, [names[j] for j in fi], theta[fi], cov[np.ix_(fi, fi)])
-    for c in combos:
-        for n in c.names:
-            flags.setdefault(n, f"not identified on its own: only {c} is")
+    theta = problem.solve(w, free, T)
+    cov = _covariance(samples, model, body, theta, w, ne, free, T, opts, chunk, map_parts)
+    combos = _combinations(W, s, names, free, theta, cov, flags)
     flags.update(_flags(theta, cov, names, parameter_scale(ne, theta), opts,
                         free & np.array([n not in flags for n in names])))
-    constrained: dict[str, str] = {}
-    power = np.zeros((0, p))
-    if opts.dissipative and model.n_params:
-        # impose νᵀD(ν)ν ≥ 0 where the estimate violates it, on every sample and grid point
-        pts, on_data = dissipation_points(model, theta, samples.nu, chunk=chunk)
-        if len(pts):
-            constrained = misfit_report(model, theta, pts[:1000], on_data[:1000], cov, free)
-            theta, power = impose(
-                theta, pts, model, lambda E: solve(w, free, T, power=E),
-                lambda th: dissipation_points(model, th, samples.nu, chunk=chunk)[0])
-    cv = np.zeros(6)
-    for f in range(len(ne.n)):
-        th_f = solve(w, free, T, exclude=f, power=power)
-        cv += ne.rss(th_f, fold=f)
+    theta, constrained, power = _dissipative(problem, model, samples, theta, cov, w, free, T,
+                                             chunk)
+    N = problem.n
     rss = ne.rss(theta)
-    tss = total_sum_of_squares(ne)
-    A_s, _, _ = ne.total(np.ones(6))
-    d = np.sqrt(np.maximum(np.diag(A_s[np.ix_(free, free)]), 1e-300))
-    ev = np.linalg.eigvalsh(A_s[np.ix_(free, free)] / np.outer(d, d)) if free.any() else [1.0]
-    duration = len(samples) / samples.rate if samples.rate else float(N)
     return Fit(names=names, theta=theta, cov=cov, sigma=np.sqrt(rss / N), method=opts.method,
-               n=N, rss=rss, tss=tss, cond=float(max(ev) / max(min(ev), 1e-300)), flags=flags,
-               cv_rmse=np.sqrt(cv / N),
-               n_eff=min(float(N), 2 * opts.cutoff * duration) if opts.cutoff > 0 else float(N),
+               n=N, rss=rss, tss=total_sum_of_squares(ne), cond=_scaled_condition(ne, free),
+               flags=flags, cv_rmse=np.sqrt(_cross_validated_rss(problem, w, free, T, power) / N),
+               n_eff=_effective_samples(samples, N, opts.cutoff),
                blocks=block_count(samples, block_length(samples, opts, T.shape[1])),
-               held=held, combinations=combos,
-               constrained=constrained, rank=T.shape[1])
+               held=~free, combinations=combos, constrained=constrained, rank=T.shape[1])

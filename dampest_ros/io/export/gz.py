@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -96,6 +96,14 @@ def _check_frame(frame: str) -> str:
     return frame
 
 
+def _added_mass_in(frame: str, M_A: FloatArray) -> FloatArray:
+    """An added-mass matrix, shape (6, 6) (kg, kg·m, kg·m²), converted between FRD and the
+    link ``frame``: T M_A T with T = diag(``_FLIP``) for ``flu`` (its own inverse, so either
+    way), unchanged for ``frd``."""
+    T = np.diag(_FLIP) if frame == "flu" else np.eye(6)
+    return np.asarray(T @ M_A @ T)
+
+
 def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "base_link",
               frame: str = "flu", source: str | None = None, force: bool = False) -> Exported:
     """The gz-sim Hydrodynamics plugin element for a model.
@@ -149,8 +157,7 @@ def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "ba
                         "buildCoriolisMatrix); they act in M_A nudot only")
     added: dict[str, float] = {}
     if M_A is not None:
-        T = np.diag(_FLIP) if frame == "flu" else np.eye(6)
-        link = T @ M_A @ T
+        link = _added_mass_in(frame, M_A)
         for i in range(6):
             for j in range(6):
                 if i == j or link[i, j] != 0.0:
@@ -195,6 +202,151 @@ def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "ba
     return exported_result("gz", text, left_out, mass_notes + notes, held, unsafe)
 
 
+@dataclass
+class _GzTags:
+    """The coefficient tags of one Hydrodynamics plugin, in FRD and dampest signs (dissipative
+    > 0), indices 0..5 = force X..N (i) and velocity u..r (j, k).
+
+    Attributes
+    ----------
+    lin : dict (i, j) → float
+        ``<iJ>``: coefficient of ν_j in force i.
+    quad : dict i → float
+        ``<iIabsI>``: coefficient of ν_i |ν_i|.
+    abs_cross : dict (i, j, k) → float
+        Other ``<iJabsK>``: coefficient of ν_j |ν_k|.
+    lin_cross : dict (i, j, k) → float
+        ``<iJK>``: coefficient of ν_j ν_k.
+    link_mass : ndarray, shape (6, 6)
+        −``<iDotJ>`` in the link frame (kg, kg·m, kg·m²); meaningful when ``has_added``.
+    has_added : bool
+        Whether the plugin has any ``<iDotJ>``.
+    disabled : dict of str to bool
+        ``<disable_added_mass>`` and ``<disable_coriolis>``, where given.
+    notes : list of str
+        What was ignored or interpreted.
+    """
+
+    lin: dict[tuple[int, int], float] = field(default_factory=dict)
+    quad: dict[int, float] = field(default_factory=dict)
+    abs_cross: dict[tuple[int, int, int], float] = field(default_factory=dict)
+    lin_cross: dict[tuple[int, int, int], float] = field(default_factory=dict)
+    link_mass: FloatArray = field(default_factory=lambda: np.zeros((6, 6)))
+    has_added: bool = False
+    disabled: dict[str, bool] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def _gz_plugin(root: ET.Element, label: str, link_name: str | None) -> ET.Element:
+    """The one Hydrodynamics ``<plugin>`` under ``root`` (of link ``link_name`` when given).
+
+    Raises
+    ------
+    ConfigError
+        None, or several without ``link_name``.
+    """
+    plugins = [e for e in root.iter("plugin")
+               if e.get("name", "").endswith("systems::Hydrodynamics")
+               or "hydrodynamics-system" in e.get("filename", "")]
+    if link_name is not None:
+        plugins = [p for p in plugins if (p.findtext("link_name") or "").strip() == link_name]
+    if not plugins:
+        raise ConfigError(label, "no gz-sim Hydrodynamics <plugin> "
+                                 "(filename gz-sim-hydrodynamics-system)"
+                                 + (f" for link {link_name!r}" if link_name else ""))
+    if len(plugins) > 1:
+        links = [(p.findtext("link_name") or "").strip() for p in plugins]
+        raise ConfigError(label, f"{len(plugins)} Hydrodynamics plugins (links {links}); "
+                                 f"choose one with link_name")
+    return plugins[0]
+
+
+def _read_gz_tags(plugin: ET.Element, frame: str) -> _GzTags:
+    """The switches and coefficients of a plugin, converted from the link ``frame`` and the
+    gz signs (SNAME, negative when dissipative) to FRD and dampest signs; other tags are noted
+    as ignored (but those of :data:`_GZ_OTHER`).
+
+    Raises
+    ------
+    ConfigError
+        A non-numeric coefficient or a switch that is not a boolean.
+    """
+    tags = _GzTags()
+    F, V = _GZ_FORCE, _GZ_VEL
+    for el in plugin:
+        if not isinstance(el.tag, str):
+            continue
+        tag = el.tag
+        if tag in ("disable_added_mass", "disable_coriolis"):
+            tags.disabled[tag] = xml_bool(el.text, f"<{tag}>")
+            continue
+        m = re.fullmatch(f"([{F}])(Dot)?([{V}])(?:(abs)?([{V}]))?", tag)
+        if m is None:
+            if tag not in _GZ_OTHER:
+                tags.notes.append(f"<{tag}> ignored (not a Hydrodynamics coefficient).")
+            continue
+        i, j = F.index(m.group(1)), V.index(m.group(3))
+        value = xml_float(el.text, f"<{tag}>")
+        if m.group(2):
+            if m.group(5):
+                tags.notes.append(f"<{tag}> ignored (not a Hydrodynamics coefficient).")
+                continue
+            tags.link_mass[i, j] = neg(value)
+            tags.has_added = True
+            continue
+        if m.group(5) is None:
+            tags.lin[(i, j)] = neg(_gz_sign(i, j, -1, frame) * value)
+            continue
+        k = V.index(m.group(5))
+        if m.group(4):
+            coef = neg(_gz_sign(i, j, -1, frame) * value)
+            if i == j == k:
+                tags.quad[i] = coef
+            else:
+                tags.abs_cross[(i, j, k)] = coef
+        else:
+            tags.lin_cross[(i, j, k)] = neg(_gz_sign(i, j, k, frame) * value)
+            if i == j == k:
+                tags.notes.append(
+                    f"<{tag}> read as {FORCE_NAMES[i]}*{DOF_NAMES[i]}*{DOF_NAMES[i]} (signed, "
+                    f"gz-sim >= 7); files for older gz-sim meant {DOF_NAMES[i]}|{DOF_NAMES[i]}|: "
+                    f"use <{tag[:2]}abs{tag[2]}>.")
+    return tags
+
+
+def _damping_spec(tags: _GzTags) -> tuple[dict[str, float], dict[str, float],
+                                           list[dict[str, Any]]]:
+    """The ``linear``, ``quadratic`` and ``cross`` sections of a damping spec for the
+    coefficients of ``tags``: diagonal linear terms first, then the off-diagonal ones; cross
+    terms named ``Y_vr`` (``Y_vr_lin`` for a signed ν_k when an |ν_k| term has that name)."""
+    lin = tags.lin
+    lin_spec = {linear_name(i, i): lin[(i, i)] for i in range(6) if (i, i) in lin}
+    lin_spec.update({linear_name(i, j): v for (i, j), v in sorted(lin.items()) if i != j})
+    quad_spec = {f"{FORCE_NAMES[i]}_{DOF_NAMES[i]}{DOF_NAMES[i]}": tags.quad[i]
+                 for i in range(6) if i in tags.quad}
+    taken = set(lin_spec) | set(quad_spec)
+    cross: list[dict[str, Any]] = []
+    for (i, j, k), v in sorted(tags.abs_cross.items()):
+        name = f"{FORCE_NAMES[i]}_{DOF_NAMES[j]}{DOF_NAMES[k]}"
+        taken.add(name)
+        cross.append({"row": FORCE_NAMES[i], "col": DOF_NAMES[j],
+                      "alpha": f"|{DOF_NAMES[k]}|", "name": name, "value": v})
+    for (i, j, k), v in sorted(tags.lin_cross.items()):
+        name = f"{FORCE_NAMES[i]}_{DOF_NAMES[j]}{DOF_NAMES[k]}"
+        name = f"{name}_lin" if name in taken else name
+        cross.append({"row": FORCE_NAMES[i], "col": DOF_NAMES[j], "alpha": DOF_NAMES[k],
+                      "name": name, "value": v})
+    return lin_spec, quad_spec, cross
+
+
+def _added_mass_terms(disabled: dict[str, bool]) -> AddedMassTerms:
+    """The added-mass switches of a plugin. gz-sim's defaults (no tag): both effects act; its
+    C_A(ν)ν holds the Munk moments."""
+    coriolis = not disabled.get("disable_coriolis", False)
+    return AddedMassTerms(inertial=not disabled.get("disable_added_mass", False),
+                          coriolis=coriolis, munk=coriolis)
+
+
 def import_gz(source: str | Path, *, frame: str = "flu",
               link_name: str | None = None) -> Imported:
     """Read the gz-sim Hydrodynamics plugin back into dampest conventions.
@@ -223,91 +375,11 @@ def import_gz(source: str | Path, *, frame: str = "flu",
     """
     frame = _check_frame(frame)
     root, label = parse_xml(source)
-    plugins = [e for e in root.iter("plugin")
-               if e.get("name", "").endswith("systems::Hydrodynamics")
-               or "hydrodynamics-system" in e.get("filename", "")]
-    if link_name is not None:
-        plugins = [p for p in plugins if (p.findtext("link_name") or "").strip() == link_name]
-    if not plugins:
-        raise ConfigError(label, "no gz-sim Hydrodynamics <plugin> "
-                                 "(filename gz-sim-hydrodynamics-system)"
-                                 + (f" for link {link_name!r}" if link_name else ""))
-    if len(plugins) > 1:
-        links = [(p.findtext("link_name") or "").strip() for p in plugins]
-        raise ConfigError(label, f"{len(plugins)} Hydrodynamics plugins (links {links}); "
-                                 f"choose one with link_name")
-    plugin = plugins[0]
-    notes: list[str] = []
-    lin: dict[tuple[int, int], float] = {}
-    quad: dict[int, float] = {}
-    abs_cross: dict[tuple[int, int, int], float] = {}
-    lin_cross: dict[tuple[int, int, int], float] = {}
-    link_mass = np.zeros((6, 6))
-    has_added = False
-    F, V = _GZ_FORCE, _GZ_VEL
-    disabled: dict[str, bool] = {}
-    for el in plugin:
-        if not isinstance(el.tag, str):
-            continue
-        tag = el.tag
-        if tag in ("disable_added_mass", "disable_coriolis"):
-            disabled[tag] = xml_bool(el.text, f"<{tag}>")
-            continue
-        m = re.fullmatch(f"([{F}])(Dot)?([{V}])(?:(abs)?([{V}]))?", tag)
-        if m is None:
-            if tag not in _GZ_OTHER:
-                notes.append(f"<{tag}> ignored (not a Hydrodynamics coefficient).")
-            continue
-        i, j = F.index(m.group(1)), V.index(m.group(3))
-        value = xml_float(el.text, f"<{tag}>")
-        if m.group(2):
-            if m.group(5):
-                notes.append(f"<{tag}> ignored (not a Hydrodynamics coefficient).")
-                continue
-            link_mass[i, j] = neg(value)
-            has_added = True
-            continue
-        if m.group(5) is None:
-            lin[(i, j)] = neg(_gz_sign(i, j, -1, frame) * value)
-            continue
-        k = V.index(m.group(5))
-        if m.group(4):
-            coef = neg(_gz_sign(i, j, -1, frame) * value)
-            if i == j == k:
-                quad[i] = coef
-            else:
-                abs_cross[(i, j, k)] = coef
-        else:
-            lin_cross[(i, j, k)] = neg(_gz_sign(i, j, k, frame) * value)
-            if i == j == k:
-                notes.append(f"<{tag}> read as {FORCE_NAMES[i]}*{DOF_NAMES[i]}*{DOF_NAMES[i]}"
-                             f" (signed, gz-sim >= 7); files for older gz-sim meant "
-                             f"{DOF_NAMES[i]}|{DOF_NAMES[i]}|: use <{tag[:2]}abs{tag[2]}>.")
-    lin_spec = {linear_name(i, i): lin[(i, i)] for i in range(6) if (i, i) in lin}
-    lin_spec.update({linear_name(i, j): v for (i, j), v in sorted(lin.items()) if i != j})
-    quad_spec = {f"{FORCE_NAMES[i]}_{DOF_NAMES[i]}{DOF_NAMES[i]}": quad[i]
-                 for i in range(6) if i in quad}
-    taken = set(lin_spec) | set(quad_spec)
-    cross: list[dict[str, Any]] = []
-    for (i, j, k), v in sorted(abs_cross.items()):
-        name = f"{FORCE_NAMES[i]}_{DOF_NAMES[j]}{DOF_NAMES[k]}"
-        taken.add(name)
-        cross.append({"row": FORCE_NAMES[i], "col": DOF_NAMES[j],
-                      "alpha": f"|{DOF_NAMES[k]}|", "name": name, "value": v})
-    for (i, j, k), v in sorted(lin_cross.items()):
-        name = f"{FORCE_NAMES[i]}_{DOF_NAMES[j]}{DOF_NAMES[k]}"
-        name = f"{name}_lin" if name in taken else name
-        cross.append({"row": FORCE_NAMES[i], "col": DOF_NAMES[j], "alpha": DOF_NAMES[k],
-                      "name": name, "value": v})
-    added = None
-    if has_added:
-        T = np.diag(_FLIP) if frame == "flu" else np.eye(6)
-        added = T @ link_mass @ T
-    notes.append(f"Read from link '{(plugin.findtext('link_name') or '').strip()}' as "
-                 f"{frame.upper()}.")
-    # gz-sim's defaults (no tag): both effects act; its C_A(ν)ν holds the Munk moments
-    coriolis = not disabled.get("disable_coriolis", False)
-    terms = AddedMassTerms(inertial=not disabled.get("disable_added_mass", False),
-                           coriolis=coriolis, munk=coriolis)
+    plugin = _gz_plugin(root, label, link_name)
+    tags = _read_gz_tags(plugin, frame)
+    lin_spec, quad_spec, cross = _damping_spec(tags)
+    added = _added_mass_in(frame, tags.link_mass) if tags.has_added else None
+    notes = [*tags.notes, f"Read from link '{(plugin.findtext('link_name') or '').strip()}' as "
+                          f"{frame.upper()}."]
     return replace(build_imported("gz", lin_spec, quad_spec, cross, added, None, notes),
-                   added_mass_terms=terms)
+                   added_mass_terms=_added_mass_terms(tags.disabled))
