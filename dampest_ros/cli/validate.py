@@ -109,6 +109,7 @@ def model_forces(samples: Samples, model: DampingModel, body: RigidBody, theta: 
 
 def run(args: argparse.Namespace) -> int:
     """Load model and log, print the per-DOF scores, write the forces."""
+    import sys
     import time
     from pathlib import Path
 
@@ -145,6 +146,12 @@ def run(args: argparse.Namespace) -> int:
                 [(f"{DOF_NAMES[i]}/{FORCE_NAMES[i]}", float(force["nse"][i]),
                   float(force["rmse"][i]), FORCE_UNITS[i], float(free["nse"][i]),
                   float(free["rmse"][i]), VEL_UNITS[i]) for i in range(6)]))
+    if np.isfinite(free["diverged_after"][0]):
+        print(f"free run: no score (—): the model's velocity diverged "
+              f"{free['diverged_after'][0]:.1f} s after the start, although the integration is "
+              "sub-stepped for its stiffness: "
+              "the identified model is unstable on this log's τ (the force scores above "
+              "still hold; check the fit's held-out R² and dissipativity)", file=sys.stderr)
     if args.out:
         columns = {"time": samples.t}
         for kind in ("damping", "hydro", "target"):

@@ -18,6 +18,7 @@ or, for the free run, a cheap fixed-step RK4 step per sample.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -421,8 +422,10 @@ def free_run(samples: Samples, model: DampingModel, body: RigidBody, theta: Floa
              segment: int | slice | None = None, tau_hold: str = "linear") -> FloatArray:
     """Simulate the velocity the model predicts from the measured thrust and attitude.
 
-    Integrates M ν̇ = τ − C(ν)ν − D(ν)ν − Σ c_m z_m − g(η), ż = −λ z + ν[dof] by fixed-step
-    RK4 at the sample rate, driven by the measured τ and by g(η) of the measured attitude
+    Integrates M ν̇ = τ − C(ν)ν − D(ν)ν − Σ c_m z_m − g(η), ż = −λ z + ν[dof] by RK4,
+    sub-stepped where the sample step is too long for the model's stiffness there
+    (:func:`rk4_substeps`; a stiff yaw or a fast memory state would otherwise make the
+    integration itself diverge), driven by the measured τ and by g(η) of the measured attitude
     (``samples.euler``), from the measured ν at the first row. Memory states start at their
     steady value z = ν[dof]/λ. No current: ν is taken as relative to the water. Nothing
     feeds the measured ν back, so force errors accumulate as velocity errors (damped by the
@@ -498,23 +501,106 @@ def free_run(samples: Samples, model: DampingModel, body: RigidBody, theta: Floa
         out[:6] = M_inv @ (Fk - cor - d)
         return out
 
+    def rk4(x: FloatArray, h: float, f0: FloatArray, fm: FloatArray, f1: FloatArray
+            ) -> FloatArray:
+        k1 = rhs(x, f0)
+        k2 = rhs(x + 0.5 * h * k1, fm)
+        k3 = rhs(x + 0.5 * h * k2, fm)
+        k4 = rhs(x + h * k3, f1)
+        return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+    steps = rk4_substeps(samples.nu[rows], np.diff(t), model, body, theta)
     nu0 = samples.nu[rows.start]
     x = np.concatenate([nu0, nu0[dofs] / lam if nm else np.zeros(0)])
     out = np.full((n, 6), np.nan)
     out[0] = nu0
     limit = 1e6
-    for k in range(n - 1):
-        h = float(t[k + 1] - t[k])
-        k1 = rhs(x, F_start[k])
-        k2 = rhs(x + 0.5 * h * k1, F_mid[k])
-        k3 = rhs(x + 0.5 * h * k2, F_mid[k])
-        k4 = rhs(x + h * k3, F_end[k])
-        x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    with np.errstate(over="ignore", invalid="ignore"):  # a divergence is caught below
+        _integrate(rk4, x, t, steps, (F_start, F_mid, F_end), out, limit)
+    return out
+
+
+def _integrate(rk4: Callable[[FloatArray, float, FloatArray, FloatArray, FloatArray],
+                             FloatArray],
+               x: FloatArray, t: FloatArray, steps: NDArray[np.int64],
+               forcing: tuple[FloatArray, FloatArray, FloatArray], out: FloatArray,
+               limit: float) -> None:
+    """The free run's steps from state ``x``, ν written into ``out`` (n, 6) row by row up to
+    the first row whose |ν|₁ reaches ``limit`` (or is NaN)."""
+    F_start, F_mid, F_end = forcing
+    for k in range(len(t) - 1):
+        m = int(steps[k])
+        h = float(t[k + 1] - t[k]) / m
+        if m == 1:  # the forcing at the step's start, middle and end as precomputed
+            x = rk4(x, h, F_start[k], F_mid[k], F_end[k])
+        else:  # F(s) = F_start + s (F_end − F_start) over the step, s ∈ [0, 1], both holds
+            dF = F_end[k] - F_start[k]
+            for j in range(m):
+                x = rk4(x, h, F_start[k] + (j / m) * dF, F_start[k] + ((j + 0.5) / m) * dF,
+                        F_start[k] + ((j + 1) / m) * dF)
         s = float(np.abs(x[:6]).sum())
         if not s < limit:  # also catches NaN
             break
         out[k + 1] = x[:6]
-    return out
+
+
+#: Largest h·ρ a sub-step of the free run may take: RK4 is stable on the negative real axis
+#: up to h·ρ ≈ 2.785; 2 leaves room for the simulated ν straying from the measured one.
+STABLE_STEP = 2.0
+#: Most sub-steps per sample step (a model stiffer than this is reported as diverging).
+MAX_SUBSTEPS = 256
+
+
+def rk4_substeps(nu: FloatArray, dt: FloatArray, model: DampingModel, body: RigidBody,
+                 theta: FloatArray, chunk: int = CHUNK) -> NDArray[np.int64]:
+    """How many RK4 sub-steps each sample step of the free run needs to stay stable.
+
+    The stiffness at a sample is the spectral radius ρ of M⁻¹ ∂(D(ν)ν)/∂ν (static terms, at
+    the measured ν; the Jacobian by forward differences, vectorised) and the fastest memory
+    rate λ; a step of length h needs ⌈h·max(ρ_k, ρ_k+1)/:data:`STABLE_STEP`⌉ sub-steps, at
+    most :data:`MAX_SUBSTEPS`.
+
+    Parameters
+    ----------
+    nu : ndarray, shape (n, 6)
+        Measured ν (m/s, rad/s) at the rows of the run.
+    dt : ndarray, shape (n - 1,)
+        Sample steps (s).
+    model : DampingModel
+    body : RigidBody
+    theta : ndarray, shape (p,)
+    chunk : int
+        Rows evaluated at once (memory).
+
+    Returns
+    -------
+    ndarray of int, shape (n - 1,)
+        Sub-steps per sample step, ≥ 1.
+    """
+    K = model.static_gain(np.asarray(theta, dtype=float))
+    M_inv = np.linalg.inv(body.M_inertial)
+
+    def force(x: FloatArray) -> FloatArray:
+        # D(ν)ν = (α(ν) K) ν, rows of (N, 6)
+        return np.einsum("nij,nj->ni", (model.alphas(x) @ K).reshape(-1, 6, 6), x)
+
+    rho = np.empty(len(nu))
+    for a in range(0, len(nu), chunk):
+        v = nu[a:a + chunk]
+        eps = 1e-6 * np.maximum(1.0, np.abs(v))  # (N, 6), per component
+        base = force(v)
+        J = np.empty((len(v), 6, 6))
+        for j in range(6):
+            e = np.zeros(6)
+            e[j] = 1.0
+            J[:, :, j] = (force(v + eps[:, j:j + 1] * e) - base) / eps[:, j:j + 1]
+        rho[a:a + chunk] = np.abs(np.linalg.eigvals(M_inv @ J)).max(axis=1)
+    lam = model.memory_rates
+    if lam.size:
+        rho = np.maximum(rho, float(np.abs(lam).max()))
+    # the stiffer end of each step decides
+    need = np.asarray(dt) * np.maximum(rho[:-1], rho[1:]) / STABLE_STEP
+    return np.clip(np.ceil(need), 1, MAX_SUBSTEPS).astype(np.int64)
 
 
 def free_run_error(samples: Samples, model: DampingModel, body: RigidBody, theta: FloatArray,
@@ -523,7 +609,9 @@ def free_run_error(samples: Samples, model: DampingModel, body: RigidBody, theta
     """:func:`metrics` of the free-run velocity against the measured ν on one segment.
 
     Parameters are those of :func:`free_run`. ``rmse`` (m/s, rad/s) and ``nrmse``
-    (RMSE / std of the measured ν) are the headline numbers; a diverged run gives inf.
+    (RMSE / std of the measured ν) are the headline numbers; a diverged run gives inf, and
+    ``diverged_after`` says when (s after the run's start, NaN if it did not; the same in
+    every DOF).
 
     Returns
     -------
@@ -531,8 +619,13 @@ def free_run_error(samples: Samples, model: DampingModel, body: RigidBody, theta
     """
     rows = _rows(samples, segment)
     sim = free_run(samples, model, body, theta, rows, tau_hold)
+    finite = np.isfinite(sim).all(axis=1)
+    after = np.nan if finite.all() else float(samples.t[rows][np.argmin(finite) - 1]
+                                              - samples.t[rows.start])
     sim = np.where(np.isfinite(sim), sim, np.inf)
-    return metrics(samples.nu[rows], sim, samples.nu_dot[rows], samples.rate)
+    scores = metrics(samples.nu[rows], sim, samples.nu_dot[rows], samples.rate)
+    scores["diverged_after"] = np.full(6, after)
+    return scores
 
 
 # --- physics -------------------------------------------------------------------------------

@@ -61,6 +61,34 @@ def test_free_run_with_true_theta_reproduces_the_measured_velocity(
     assert np.all(lin["nrmse"] > err["nrmse"]) and np.all(lin["nrmse"] < 0.2)
 
 
+def test_free_run_sub_steps_a_model_too_stiff_for_the_sample_step(
+        vehicle: Vehicle, sim: Samples) -> None:
+    # every 5th row (10 Hz) and a yaw damping N_r = 40 N·m·s/rad: h·ρ ≈ 7 > 2.785, where one
+    # RK4 step per sample diverges (it did before the sub-steps: inf in every DOF)
+    ten = Samples(sim.t[::5], sim.nu[::5], sim.nu_dot[::5], sim.tau[::5], sim.euler[::5],
+                  sim.depth[::5], sim.segment[::5])
+    stiff = vehicle.theta.copy()
+    stiff[vehicle.damping.parameter_names.index("N_r")] = 40.0
+    steps = val.rk4_substeps(ten.nu, np.diff(ten.t), vehicle.damping, vehicle.body, stiff)
+    assert steps.min() == steps.max() == 4  # measured: ρ ≈ 70 1/s everywhere
+    err = val.free_run_error(ten, vehicle.damping, vehicle.body, stiff)
+    assert np.all(np.isfinite(err["nrmse"])) and np.all(np.isnan(err["diverged_after"]))
+    assert np.all(err["nrmse"] < 1.1), err["nrmse"]  # measured 0.24–1.03: wrong, not diverged
+    # the 50 Hz run of the true model takes one step per sample: the path it always took
+    assert val.rk4_substeps(sim.nu, np.diff(sim.t), vehicle.damping, vehicle.body,
+                            vehicle.theta).max() == 1
+
+
+def test_free_run_of_an_unstable_model_says_when_it_diverged(vehicle: Vehicle,
+                                                              sim: Samples) -> None:
+    unstable = vehicle.theta.copy()
+    unstable[vehicle.damping.parameter_names.index("N_rr")] = -50.0  # energy in at any |r|
+    err = val.free_run_error(sim, vehicle.damping, vehicle.body, unstable)
+    assert np.all(np.isinf(err["rmse"]))
+    after = err["diverged_after"]
+    assert np.all(after == after[0]) and 0.0 < after[0] < sim.t[-1] - sim.t[0]
+
+
 def test_free_run_with_wrong_quadratic_damping_is_clearly_worse(
         vehicle: Vehicle, sim: Samples) -> None:
     true = val.free_run_error(sim, vehicle.damping, vehicle.body, vehicle.theta,
