@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -210,9 +211,14 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
                             prior=prior_spec(args)).online(
         EstimatorConfig(forgetting_factor=args.forgetting_factor, rate=args.rate,
                         cutoff=args.cutoff))
+    stamps: list[float] = []
     for sample in pre.run(rec, topics):
+        stamps.append(sample.t)
         est.add_sample(sample)
     est.process(force=True)
+    if est.counts["used"] == 0:
+        raise DataError(no_rls_sample(rec[topics["imu"].lstrip("/")].stamp,
+                                      np.asarray(stamps), pre.cfg, est.regression.settle))
     d = est.rls.diagnostics(condition=True)
     c = pre.counts
     roles = [r for r in (*DEFAULT_TOPICS, "wrench") if r in topics or r == "pressure"]
@@ -242,6 +248,37 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
         save_model(Path(args.out), est.to_model(1, source=str(args.input), method="rls"))
         print(f"wrote {args.out}")
     return 0
+
+
+def no_rls_sample(imu: np.ndarray, stamps: np.ndarray, cfg: OnlineConfig,
+                  settle: float) -> str:
+    """Why the RLS used no sample of a log, and what it needs.
+
+    Parameters
+    ----------
+    imu : ndarray, shape (m,)
+        Stamps of the IMU messages (s).
+    stamps : ndarray, shape (n,)
+        Stamps of the online preprocessor's samples (s).
+    cfg : OnlineConfig
+        The preprocessor's settings: ``rate`` (``--rate``, Hz) and ``max_imu_gap`` (s).
+    settle : float
+        Seconds after each restart of the RLS's filter whose samples only settle it.
+    """
+    head = f"--method rls used 0 of {len(stamps)} samples"
+    step = float(np.median(np.diff(imu))) if len(imu) > 1 else math.inf
+    if step > cfg.max_imu_gap:
+        return (f"{head}: the IMU comes at {1.0 / step:.3g} Hz, and the online path restarts "
+                f"its inertial filters at every IMU step over {cfg.max_imu_gap:g} s; it "
+                "needs an IMU well above --rate: use a batch method (the default)")
+    seen = 1.0 / float(np.median(np.diff(stamps))) if len(stamps) > 1 else 0.0
+    if seen < cfg.rate / 1.5:
+        return (f"{head}: they come at {seen:.3g} Hz but the RLS runs at --rate "
+                f"{cfg.rate:g} Hz, so every step restarts its filter before it settles; "
+                f"give --rate {math.floor(seen):d} (with --cutoff below {seen / 2:.3g} Hz) "
+                "or use a batch method")
+    return (f"{head}: no gap-free stretch of the log is longer than the {settle:g} s the "
+            "filter needs to settle; use a batch method")
 
 
 def selection_table(selection: Selection) -> str:

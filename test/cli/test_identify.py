@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from dampest_ros.cli.main import main
+from dampest_ros.io.bag import read_bag, write_bag
 from dampest_ros.io.yaml_io import load_model
 
 
@@ -184,6 +185,24 @@ def test_rls_forgetting_factor_and_unsupported_inputs(
         assert main(["identify", *argv, "--vehicle", "bluerov2_heavy", "--method",
                      "rls"]) == 2
         assert needle in capsys.readouterr().err
+
+
+def test_rls_that_uses_no_sample_says_why_and_writes_nothing(
+        short_b: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An IMU at 9 Hz: every IMU step restarts the online path's inertial filters, so no
+    sample is used; the command fails with the rate it saw and what to use instead, and
+    writes no model (it used to write the prior and exit 0)."""
+    rec = read_bag(short_b / "bag")
+    imu = rec["imu/data"]
+    rec["imu/data"] = imu.select(np.arange(0, len(imu), 22))  # 200 Hz → 9.09 Hz
+    bag = write_bag(tmp_path / "imu9", rec)
+    out = tmp_path / "rls.yaml"
+    capsys.readouterr()
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy", "--method", "rls",
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "used 0 of" in err and "IMU comes at 9.09 Hz" in err and "batch method" in err, err
+    assert not out.exists()
 
 
 def test_table_says_what_the_data_determine_on_foreign_physics(
