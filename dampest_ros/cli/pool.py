@@ -238,9 +238,12 @@ def drift_table(d: Drift, pooled: Fit) -> str:
             k = int(d.change_after[j])
             where = (f"after {Path(d.logs[k]).name}: {d.shift[j]:+.4g} ± "
                      f"{d.shift_std[j]:.2g}")
+        verdict = "CHANGED" if d.moved[j] else "no change"
+        if d.dof[j] == 0:  # fewer than two logs identify it: nothing to compare
+            n = int(np.isfinite(d.theta[:, j]).sum())
+            verdict = f"not tested: identified in {n} of {len(d.logs)} logs"
         rows.append((name, float(pooled.theta[j]), float(pooled.std[j]), float(d.chi2[j]),
-                     int(d.dof[j]), float(d.p_value[j]),
-                     "CHANGED" if d.moved[j] else "no change", where))
+                     int(d.dof[j]), float(d.p_value[j]), verdict, where))
     return table(("parameter", "pooled", "std", "chi2", "dof", "p", "drift", "where"), rows)
 
 

@@ -151,7 +151,8 @@ class Drift:
     chi2 : ndarray, shape (p,)
         Σ_b ((θ_b − θ̄)/σ_b)² over the logs that identify it, θ̄ the precision-weighted mean.
     dof : ndarray of int, shape (p,)
-        Its degrees of freedom (logs that identify it − 1).
+        Its degrees of freedom (logs that identify it − 1; 0 when fewer than two do: then
+        χ² and the p-value are NaN, the coefficient is not tested).
     p_value : ndarray, shape (p,)
     moved : ndarray of bool, shape (p,)
         p_value below ``alpha`` / p (Bonferroni over the coefficients).
@@ -211,9 +212,11 @@ def drift(logs: Sequence[LogStatistics], alpha: float = 0.01) -> Drift:
     th = np.where(ok, theta, 0.0)
     mean, _ = _weighted(th, w)
     # χ² = Σ_b w_b (θ_b − θ̄)², B_j − 1 degrees of freedom
-    chi2 = np.where(ok, w * (th - mean) ** 2, 0.0).sum(axis=0)
-    dof = ok.sum(axis=0) - 1
-    p_value = np.where(dof > 0, stats.chi2.sf(chi2, np.maximum(dof, 1)), 1.0)
+    dof = np.maximum(ok.sum(axis=0) - 1, 0)
+    tested = dof > 0  # identified by two logs or more
+    chi2 = np.where(tested, np.where(ok, w * (th - mean) ** 2, 0.0).sum(axis=0), np.nan)
+    p_value = np.where(tested, stats.chi2.sf(np.where(tested, chi2, 0.0),
+                                             np.maximum(dof, 1)), np.nan)
     moved = (dof > 0) & (p_value < alpha / max(len(names), 1))
     B, p = theta.shape
     change_after = np.full(p, -1, dtype=np.int64)

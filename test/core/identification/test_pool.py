@@ -103,3 +103,31 @@ def test_a_20_percent_change_is_found_between_the_right_logs(vehicle: Vehicle) -
     assert not quiet.moved.any(), [n for n, m in zip(quiet.names, quiet.moved, strict=True)
                                    if m]
     assert np.all(quiet.change_after == -1)
+
+
+def test_a_coefficient_fewer_than_two_logs_identify_is_not_tested(vehicle: Vehicle) -> None:
+    """K_pp identified in one log of two, N_rr in none: degrees of freedom 0, no χ² and no
+    p-value, never 'changed', and the table says why instead of printing dof −1."""
+    from dataclasses import replace
+
+    from dampest_ros.cli.pool import drift_table
+
+    logs = [log_statistics(f"day{k}", noisy_log(vehicle, 20 + k), vehicle.damping,
+                           vehicle.body, OPTIONS) for k in range(2)]
+    names = logs[0].fit.names
+    kpp, nrr = names.index("K_pp"), names.index("N_rr")
+    held = []
+    for k, log in enumerate(logs):  # held at the prior, as a fit without excitation holds it
+        flags = {**log.fit.flags, "N_rr": "not excited"}
+        if k == 1:
+            flags["K_pp"] = "not excited"
+        held.append(replace(log, fit=replace(log.fit, flags=flags)))
+    d = drift(held)
+    for j in (kpp, nrr):
+        assert d.dof[j] == 0 and np.isnan(d.chi2[j]) and np.isnan(d.p_value[j])
+        assert not d.moved[j]
+    assert d.dof[names.index("X_uu")] == 1 and np.isfinite(d.p_value[names.index("X_uu")])
+    text = drift_table(d, logs[0].fit)
+    assert "not tested: identified in 1 of 2 logs" in text
+    assert "not tested: identified in 0 of 2 logs" in text
+    assert " -1 " not in text
