@@ -72,7 +72,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"{args.input}: {len(samples)} samples ({len(samples) / samples.rate:.0f} s in "
           f"{int(samples.segment.max()) + 1} segment(s)), {result.method}, "
           f"condition number {result.cond:.3g}, {elapsed:.1f} s")
-    print(report_table(result, prior))
+    scores = None
+    if held is not None:
+        scores = force_scores(held, model, vehicle.body, result.theta, args.cutoff)
+    print(report_table(result, prior, scores))
     print()
     print(table(("dof", "RMSE", "NSE", "CV RMSE"),
                 [(DOF_NAMES[i], float(result.rmse[i]), float(result.r2[i]),
@@ -85,11 +88,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"constrained: {name}: {why}")
     if not args.select:
         print(misfit_check(samples, model, vehicle.body, args), end="")
-    scores = None
-    if held is not None:
-        scores = force_scores(held, model, vehicle.body, result.theta, args.cutoff)
+    if held is not None and scores is not None:
         print()
         print(heldout_text(held, scores))
+        for line in unpredictive(result.names, scores):
+            print(line)
     if args.out:
         write_model(Path(args.out), result, model, vehicle.body, source=str(args.input),
                     heldout=scores, flown=samples.nu)
@@ -335,21 +338,44 @@ def misfit_check(samples: Samples, model: DampingModel, body: RigidBody,
                          f"dampest identify {args.input} --vehicle {args.vehicle} --select\n")
 
 
-def report_table(result: Fit, prior: np.ndarray) -> str:
+def force_dof(name: str) -> int:
+    """The DOF whose force equation a coefficient sits in (``N_rv`` → 5), −1 if none."""
+    head = name.split("_", 1)[0]
+    return FORCE_NAMES.index(head) if head in FORCE_NAMES else -1
+
+
+def unpredictive(names: list[str], scores: dict[str, np.ndarray]) -> list[str]:
+    """One line per DOF whose held-out R² is below 0, naming its coefficients: they fit the
+    training part but predict the held-out part worse than its mean does."""
+    lines = []
+    for i in np.flatnonzero(scores["nse"] < 0):
+        mine = [n for n in names if force_dof(n) == i]
+        lines.append(f"not predictive: {FORCE_NAMES[i]}: held-out R² {scores['nse'][i]:.3g} "
+                     f"< 0, so {', '.join(mine) or 'its coefficients'} are not usable as "
+                     "identified: the structure misses this DOF's physics or the held-out "
+                     "part leaves the flown envelope (try --select, or more excitation)")
+    return lines
+
+
+def report_table(result: Fit, prior: np.ndarray,
+                 heldout: dict[str, np.ndarray] | None = None) -> str:
     """Parameter table: estimate, std, 95 % interval, prior and what the data determine.
 
     A parameter held at its prior shows no estimate ("held at prior"); one that is only part
     of a combination, poorly determined or held by the dissipativity constraint shows its
-    value with the status (not identified); the reasons follow the table."""
+    value with the status (not identified); one identified in a DOF whose held-out R²
+    (``heldout["nse"]``, shape (6,)) is below 0 says so; the reasons follow the table."""
     ci = result.interval()
     members = {n for c in result.combinations for n in c.names}
+    bad = set() if heldout is None else set(np.flatnonzero(heldout["nse"] < 0).tolist())
     rows: list[tuple[str | float, ...]] = []
     for j, name in enumerate(result.names):
         if result.held[j]:
             rows.append((name, "held at prior", "", "", "", float(prior[j]),
                          "not identified"))
             continue
-        status = ("identified" if result.identified[j] else
+        status = ("not predictive (held-out R² < 0)" if force_dof(name) in bad else
+                  "identified" if result.identified[j] else
                   "constrained, not identified" if name in result.constrained else
                   "combination only, not identified" if name in members else
                   "poorly determined, not identified")
@@ -384,11 +410,14 @@ def write_model(path: Path, result: Fit, model: DampingModel, body: RigidBody,
     false, ``model.held`` with the reason), the flown speeds (``flown_speeds``: per-DOF
     smallest and largest of ``flown``, ν of the fitted samples, the envelope exports check
     dissipativity on), with a held-out part, its per-DOF R² and RMSE (``heldout_r2``,
-    ``heldout_rmse``), and ``more`` entries (e.g. the logs pooled)."""
+    ``heldout_rmse``) and the coefficients of the DOFs whose held-out R² is below 0
+    (``not_predictive``), and ``more`` entries (e.g. the logs pooled)."""
     more = {**(more or {}), "source": source}
     if heldout is not None:
         more["heldout_r2"] = [float(x) for x in heldout["nse"]]
         more["heldout_rmse"] = [float(x) for x in heldout["rmse"]]
+        bad = set(np.flatnonzero(heldout["nse"] < 0).tolist())
+        more["not_predictive"] = [n for n in result.names if force_dof(n) in bad] or ["none"]
     if flown is not None:
         more["flown_speeds"] = {"min": [float(x) for x in flown.min(axis=0)],
                                 "max": [float(x) for x in flown.max(axis=0)]}

@@ -9,7 +9,7 @@ import pytest
 
 from dampest_ros.cli.main import main
 from dampest_ros.io.bag import read_bag, write_bag
-from dampest_ros.io.yaml_io import load_model
+from dampest_ros.io.yaml_io import load_model, load_vehicle
 
 
 def simulate_b(root: Path, duration: float, seed: int) -> Path:
@@ -356,3 +356,29 @@ def test_gap_keeps_the_held_coefficients_of_the_model_it_was_given(
     final = load_model(out)
     assert final.held == {"K_pp": "no excitation"} and np.isnan(final.theta_std[j])
     np.testing.assert_array_equal(final.theta, load_model(given).theta)
+
+
+def test_a_dof_whose_heldout_r2_is_negative_is_not_reported_identified() -> None:
+    """A held-out R² below 0 in pitch: M_q and M_qq say 'not predictive' in the table and in a
+    line naming them; the other DOFs' coefficients stay 'identified'."""
+    from dampest_ros.cli.identify import report_table, unpredictive
+    from dampest_ros.core.identification.batch import FitOptions, fit
+    from dampest_ros.core.physics import frames
+    from dampest_ros.core.signals.samples import Samples
+    from dampest_ros.core.simulation.excitation import make_excitation
+    from dampest_ros.core.simulation.simulate import run
+
+    vehicle = load_vehicle("bluerov2_heavy")
+    traj = run(vehicle, make_excitation("B", vehicle, 30.0, seed=4))
+    euler = frames.euler_from_matrix(frames.quat_to_matrix(traj.quaternion))
+    samples = Samples(traj.t, traj.nu, traj.nu_dot, traj.tau, euler, traj.position[:, 2],
+                      np.zeros(len(traj), dtype=np.int64))
+    result = fit(samples, vehicle.damping, vehicle.body, FitOptions())
+    scores = {"nse": np.array([0.99, 0.98, 0.99, 0.97, -278.0, 0.99])}
+    rows = {line.split()[0]: line for line in report_table(result, vehicle.theta,
+                                                            scores).splitlines()[2:]}
+    assert "not predictive" in rows["M_q"] and "not predictive" in rows["M_qq"]
+    assert all("not predictive" not in rows[n] and rows[n].rstrip().endswith("identified")
+               for n in ("X_u", "N_rr"))
+    (line,) = unpredictive(result.names, scores)
+    assert line.startswith("not predictive: M: held-out R² -278 < 0, so M_q, M_qq ")
