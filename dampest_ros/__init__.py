@@ -5,8 +5,7 @@ The library in a few lines::
     import dampest_ros as dr
 
     vehicle = dr.load_vehicle("bluerov2_heavy")
-    samples = dr.preprocess(dr.read_bag("my_bag"), vehicle.thrusters, vehicle.body.gravity,
-                            vehicle.body.rho)
+    samples = dr.preprocess(dr.read_bag("my_bag"), vehicle)
     identified = dr.DampingIdentifier(vehicle).fit(samples)
     print(dict(zip(identified.names_, identified.coef_)))
     dr.save_model("model.yaml", identified.model_)  # the model file every node and tool reads

@@ -23,8 +23,7 @@ def test_the_readme_example_identifies_a_simulated_bag(tmp_path: Path) -> None:
 
     # the README's lines
     vehicle = dr.load_vehicle("bluerov2_heavy")
-    samples = dr.preprocess(dr.read_bag(tmp_path / "my_bag"), vehicle.thrusters,
-                            vehicle.body.gravity, vehicle.body.rho)
+    samples = dr.preprocess(dr.read_bag(tmp_path / "my_bag"), vehicle)
     identified = dr.DampingIdentifier(vehicle).fit(samples)
     path = dr.save_model(tmp_path / "model.yaml", identified.model_)
 

@@ -157,16 +157,14 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
     rec = BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),
                     together=[topics["imu"], tau_topic(topics)])
     frame_notes: list[str] = []
-    samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho, cfg,
-                         topics, mounting=vehicle.mounting, notes=frame_notes)
+    samples = preprocess(rec, vehicle, cfg, topics, notes=frame_notes)
     for note in frame_notes:  # a frame_id other than the vehicle file's sensors: section
         print(f"{p.name}: warning: {note}", file=sys.stderr)
     if auto:
         delay = profile_delay(samples, vehicle.damping, vehicle.body)
         print(f"estimated delay of the response after the thrust: {delay * 1000:.0f} ms",
               file=sys.stderr)
-        samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
-                             replace(cfg, delay=delay), topics, mounting=vehicle.mounting)
+        samples = preprocess(rec, vehicle, replace(cfg, delay=delay), topics)
     return samples
 
 

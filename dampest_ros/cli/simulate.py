@@ -98,8 +98,7 @@ def run(args: argparse.Namespace) -> int:
                    "seed": int(args.seed), "effects": str(effects.as_dict() or "none")},
             M_A=truth.body.added_mass, added_mass_terms=truth.body.added_mass_terms))
     if args.csv:
-        samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
-                             PreprocessConfig(), mounting=vehicle.mounting)
+        samples = preprocess(rec, vehicle, PreprocessConfig())
         write_csv(args.csv, samples_to_columns(samples))
     elapsed = time.perf_counter() - t0
     print(f"wrote {out} ({args.storage}) in {elapsed:.1f} s: {args.duration:.0f} s of "

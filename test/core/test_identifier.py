@@ -28,7 +28,7 @@ def flight(vehicle: Vehicle) -> tuple[Samples, Samples]:
     traj = run(vehicle, make_excitation("B", vehicle, 120.0, seed=1), dt=0.02)
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, SensorConfig(), SensorBias(),
                   seed=1)
-    s = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho)
+    s = preprocess(rec, vehicle)
     k = int(0.7 * len(s))
     return s.take(slice(0, k)), s.take(slice(k, len(s)))
 

@@ -231,3 +231,13 @@ def small_rotation(dtheta: FloatArray) -> FloatArray:
     # exp(δθ/2) = [cos(|δθ|/2), sin(|δθ|/2) δθ/|δθ|]; sin(a/2)/a = ½ sinc(a / 2π), safe at 0
     return np.concatenate([np.cos(angle / 2.0), 0.5 * np.sinc(angle / (2.0 * np.pi)) * dtheta],
                           axis=1)
+
+
+def continuous(q: FloatArray) -> FloatArray:
+    """Flip quaternion signs so that consecutive ones have a non-negative dot product."""
+    if len(q) < 2:
+        return q
+    flip = np.where(np.einsum("ni,ni->n", q[1:], q[:-1]) < 0.0, -1.0, 1.0)
+    # sign_k = Π_{j ≤ k} sign(q_{j−1} · q_j): the running product of the flips
+    sign = np.concatenate([[1.0], np.cumprod(flip)])
+    return q * sign[:, None]

@@ -3,10 +3,11 @@
 Pipeline, all vectorised over whole segments:
 
 1. Frames: IMU, DVL and thruster data (or a body-wrench topic) from ROS (FLU/ENU) to
-   Fossen (FRD/NED); then each sensor from its mounting (:mod:`dampest_ros.core.physics.mounting`)
-   to the body origin and axes: the IMU's attitude, rates and specific force (its lever-arm
-   terms with ω̇ differentiated from the gyro as in step 4), the DVL velocity (lever arm with
-   the gyro at the DVL stamps), the pressure depth through the attitude. Messages whose
+   Fossen (FRD/NED); then each sensor from the vehicle's mounting
+   (:mod:`dampest_ros.core.physics.mounting`) to the body origin and axes: the IMU's
+   attitude, rates and specific force (its lever-arm terms with ω̇ differentiated from the
+   gyro as in step 4), the DVL velocity (lever arm with the gyro at the DVL stamps), the
+   pressure depth through the attitude. Messages whose
    frame_id is not the configured one are counted (one note per topic).
 2. DVL gaps longer than ``max_gap`` split the data into segments (nothing is invented inside
    a long gap); DVL samples that disagree with the inertially fused velocity are dropped.
@@ -25,7 +26,7 @@ Pipeline, all vectorised over whole segments:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any, Protocol
 
 import numpy as np
@@ -36,6 +37,7 @@ from scipy import integrate
 from dampest_ros.core.physics import frames
 from dampest_ros.core.physics.mounting import (
     Mounting,
+    SensorMount,
     depth_offset,
     dvl_to_body,
     frame_id_note,
@@ -45,6 +47,7 @@ from dampest_ros.core.physics.mounting import (
 )
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.thrusters import Thrusters
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.measurements import (
     ImuSeries,
     JointSeries,
@@ -326,10 +329,15 @@ def body_wrench(series: JointSeries | WrenchSeries, thrusters: Thrusters | None)
     """
     if isinstance(series, WrenchSeries):
         return frames.body_twist(np.concatenate([series.force, series.torque], axis=1))
+    return thruster_wrench(series, _need_thrusters(thrusters))
+
+
+def _need_thrusters(thrusters: Thrusters | None) -> Thrusters:
+    """``thrusters``, or DataError if the vehicle has none."""
     if thrusters is None:
         raise DataError("τ from thruster telemetry needs the vehicle's thrusters; the vehicle "
                         "has none (give a body-wrench topic, role 'wrench', instead)")
-    return thruster_wrench(series, thrusters)
+    return thrusters
 
 
 def _tau_columns(series: JointSeries | WrenchSeries) -> tuple[FloatArray, ...]:
@@ -377,10 +385,9 @@ class MemorySource:
         return s.select(np.arange(int(lo), int(hi)))
 
 
-def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravity: float,
-               rho: float, config: PreprocessConfig | None = None,
-               topics: dict[str, str] | None = None,
-               report: dict[str, float] | None = None, mounting: Mounting | None = None,
+def preprocess(rec: Recording | SeriesSource, vehicle: Vehicle,
+               config: PreprocessConfig | None = None, topics: dict[str, str] | None = None,
+               *, report: dict[str, float] | None = None,
                notes: list[str] | None = None) -> Samples:
     """Synchronise and filter sensor topics into samples of ν, ν̇, τ.
 
@@ -388,24 +395,20 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
     ----------
     rec : Recording or SeriesSource
         Topic → series, ROS frames (as read from a bag), or a source that reads windows.
-    thrusters : Thrusters or None
-        Allocation (names must match the JointState names); may be None with a ``wrench``
-        topic.
-    gravity, rho : float
-        g (m/s²) and water density (kg/m³).
+    vehicle : Vehicle
+        Gives the thrusters (allocation; names must match the JointState names; may be None
+        with a ``wrench`` topic), g (m/s²) and the water density (kg/m³) of its body, and the
+        mounting of its IMU, DVL and pressure sensor.
     config : PreprocessConfig, optional
     topics : dict, optional
         Role → topic name for ``imu``, ``dvl``, ``pressure``, ``thrusters`` and, optionally,
         ``wrench``: a body-wrench topic (WrenchStamped, FLU) that gives τ instead of the
-        thruster telemetry (then ``thrusters`` is not read).
+        thruster telemetry (then the thrusters are not read).
     report : dict, optional
         Filled with counts: ``rejected_nonfinite_or_unordered``, ``dvl_outliers``,
         ``segments``, ``dropped_seconds`` (data in gaps and too-short segments) and, per
         sensor topic with messages of another frame_id than the mounting's,
         ``frame_id_mismatch <topic>``.
-    mounting : Mounting, optional
-        Where the IMU, DVL and pressure sensor sit (the vehicle's; default: at the origin,
-        aligned).
     notes : list of str, optional
         Appended: one line per sensor topic whose messages carry another frame_id than the
         mounting gives, for the user, with their count: all of the DVL and pressure topics,
@@ -417,133 +420,199 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
         FRD/NED, uniformly sampled segments.
     """
     cfg = config or PreprocessConfig()
-    mount = mounting or Mounting()
     src: SeriesSource = MemorySource(rec) if isinstance(rec, dict) else rec
-    names = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
-             "thrusters": "thrusters/state", **(topics or {})}
-    # where τ comes from: a body-wrench topic, else thruster telemetry and the allocation
-    tau_topic = names.get("wrench") or names["thrusters"]
-    tau_kind: type[Series] = WrenchSeries if names.get("wrench") else JointSeries
-    if tau_kind is JointSeries and thrusters is None:
-        raise DataError("τ from thruster telemetry needs the vehicle's thrusters; the vehicle "
-                        "has none (give a body-wrench topic, role 'wrench', instead)")
-    have = src.topics()
-    for topic in (names["imu"], names["dvl"], tau_topic):
-        if topic not in have:
-            raise DataError(f"topic {topic!r} missing; the data has {sorted(have)}")
-    # the small topics whole, the large ones (IMU, τ) per stretch below
-    dvl: TwistSeries = _need(src.series(names["dvl"]), names["dvl"], TwistSeries)
-    pres = src.series(names["pressure"]) if names["pressure"] in have else None
-    dvl_ok = _clean(dvl, dvl.linear)
-    rejected = int((~dvl_ok).sum())
-    dvl = dvl if dvl_ok.all() else dvl.select(dvl_ok)  # type: ignore[assignment]
-    # DVL velocity in its own axes (FRD); to the body origin per window, with the gyro
-    t_dvl, v_dvl = dvl.stamp, frames.body_vec(dvl.linear)
-    # messages per (topic, frame_id) that is not the configured one
-    foreign: dict[tuple[str, str], int] = {}
-
-    def check_frame(topic: str, series: Series, expected: str, count: int) -> None:
-        if count and series.frame_id != expected:
-            key = (topic, series.frame_id)
-            foreign[key] = foreign.get(key, 0) + count
-
-    check_frame(names["dvl"], dvl, mount.dvl.frame_id, len(dvl))
-    if pres is not None:
-        check_frame(names["pressure"], pres, mount.pressure.frame_id, len(pres))
-    # τ telemetry period and phase from the first messages
-    head = _need(src.series(tau_topic, None, t_dvl[0] + 10.0), tau_topic, tau_kind, minimum=2)
-    window = float(np.median(np.diff(head.stamp)))
-    phase = float(((head.stamp[0] - window / 2) * cfg.rate) % 1.0)
-    ratio = max(1, round(cfg.inertial_rate / cfg.rate))
-    n_outliers = 0
-    lo, hi = max(t_dvl[0], head.stamp[0]), t_dvl[-1]
+    names = _resolve_topics(src, topics, vehicle.thrusters)
+    tally = _Tally()
+    t_dvl, v_dvl, pressure = _read_dvl_and_pressure(src, names, vehicle.mounting, tally)
+    window, phase, first = _telemetry_timing(src, names, t_dvl, cfg.rate)
+    lo, hi = max(t_dvl[0], first), t_dvl[-1]
     if hi - lo < cfg.min_segment + 2 * cfg.trim:
         raise DataError(f"the topics overlap for only {max(hi - lo, 0.0):.1f} s")
+    inputs = _Inputs(src, names, vehicle, cfg, t_dvl, v_dvl, pressure, window,
+                     max(1, round(cfg.inertial_rate / cfg.rate)))
+    out, n_segments = _assemble(inputs, _output_grids(t_dvl, lo, hi, phase, cfg), tally)
+    _tell(tally, names, vehicle.mounting, n_segments,
+          max(hi - lo - len(out) / cfg.rate, 0.0), report, notes)
+    if len(out) == 0:
+        raise DataError(f"no gap-free stretch of at least {cfg.min_segment + 2 * cfg.trim:.0f} s"
+                        " (DVL gaps split the data)")
+    return out
 
-    rate_f = cfg.rate * ratio
+
+@dataclass(frozen=True)
+class _Topics:
+    """The topics :func:`preprocess` reads, by role, and where τ comes from."""
+
+    imu: str
+    dvl: str
+    pressure: str
+    has_pressure: bool
+    #: the τ topic: a body-wrench topic (WrenchSeries), else thruster telemetry (JointSeries)
+    tau: str
+    tau_kind: type[Series]
+
+    def frame_ids(self, mount: Mounting) -> dict[str, str]:
+        """Sensor topic → the frame_id its messages should carry."""
+        return {self.imu: mount.imu.frame_id, self.dvl: mount.dvl.frame_id,
+                self.pressure: mount.pressure.frame_id}
+
+
+def _resolve_topics(src: SeriesSource, topics: dict[str, str] | None,
+                    thrusters: Thrusters | None) -> _Topics:
+    """The topic of every role (defaults overridden by ``topics``), checked to be in ``src``.
+
+    Raises
+    ------
+    DataError
+        τ from thruster telemetry without thrusters, or the IMU, DVL or τ topic missing.
+    """
+    names = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
+             "thrusters": "thrusters/state", **(topics or {})}
+    tau = names.get("wrench") or names["thrusters"]
+    tau_kind: type[Series] = WrenchSeries if names.get("wrench") else JointSeries
+    if tau_kind is JointSeries:
+        _need_thrusters(thrusters)
+    have = src.topics()
+    for topic in (names["imu"], names["dvl"], tau):
+        if topic not in have:
+            raise DataError(f"topic {topic!r} missing; the data has {sorted(have)}")
+    return _Topics(names["imu"], names["dvl"], names["pressure"], names["pressure"] in have,
+                   tau, tau_kind)
+
+
+@dataclass
+class _Tally:
+    """What :func:`preprocess` counts on the way, for its report and notes."""
+
+    #: messages with non-finite values or stamps out of order (dropped)
+    rejected: int = 0
+    #: DVL samples that disagree with the inertial velocity (dropped)
+    outliers: int = 0
+    #: messages per (topic, frame_id) whose frame_id is not the configured one
+    foreign: dict[tuple[str, str], int] = field(default_factory=dict)
+
+    def frame_id(self, topic: str, series: Series, expected: str, count: int) -> None:
+        """Count ``count`` messages of ``topic`` if its frame_id is not ``expected``."""
+        if count and series.frame_id != expected:
+            key = (topic, series.frame_id)
+            self.foreign[key] = self.foreign.get(key, 0) + count
+
+
+def _read_dvl_and_pressure(src: SeriesSource, names: _Topics, mount: Mounting, tally: _Tally
+                           ) -> tuple[FloatArray, FloatArray, PressureSeries | None]:
+    """The small topics, read whole (the large ones, IMU and τ, are read per stretch).
+
+    Drops DVL messages that are non-finite or out of order and counts them; counts foreign
+    frame_ids of the DVL and pressure topics.
+
+    Returns
+    -------
+    t_dvl : ndarray, shape (M,)
+        DVL stamps (s), strictly increasing.
+    v_dvl : ndarray, shape (M, 3)
+        DVL velocity in the DVL's own axes (FRD, m/s); moved to the body origin per stretch,
+        with the gyro.
+    pressure : PressureSeries or None
+        None without a pressure topic or with fewer than two messages.
+    """
+    dvl: TwistSeries = _need(src.series(names.dvl), names.dvl, TwistSeries)
+    pres = src.series(names.pressure) if names.has_pressure else None
+    dvl_ok = _clean(dvl, dvl.linear)
+    tally.rejected += int((~dvl_ok).sum())
+    dvl = dvl if dvl_ok.all() else dvl.select(dvl_ok)  # type: ignore[assignment]
+    tally.frame_id(names.dvl, dvl, mount.dvl.frame_id, len(dvl))
+    if pres is not None:
+        tally.frame_id(names.pressure, pres, mount.pressure.frame_id, len(pres))
     pressure = pres if isinstance(pres, PressureSeries) and len(pres) > 1 else None
+    return dvl.stamp, frames.body_vec(dvl.linear), pressure
 
-    def window_(t: FloatArray, core: slice) -> tuple[FloatArray, ...] | None:
-        """ν, ν̇, R, τ, depth on the output grid t (one stretch of a segment with margins),
-        or None where IMU or τ data do not cover it; counts rejections in the core."""
-        nonlocal n_outliers, rejected
-        pad = 1.0
-        imu: ImuSeries = _need(src.series(names["imu"], t[0] - pad, t[-1] + pad),
-                               names["imu"], ImuSeries, minimum=0)
-        thr: JointSeries | WrenchSeries = _need(src.series(tau_topic, t[0] - pad, t[-1] + pad),
-                                                tau_topic, tau_kind, minimum=0)
-        t_core = (t[core.start], t[core.stop - 1])
-        for series, ok in ((imu, _clean(imu, imu.orientation, imu.angular_velocity,
-                                        imu.linear_acceleration)),
-                           (thr, _clean(thr, *_tau_columns(thr)))):
-            in_core = (series.stamp >= t_core[0]) & (series.stamp <= t_core[1])
-            rejected += int((~ok & in_core).sum())
-            if series is imu:
-                check_frame(names["imu"], imu, mount.imu.frame_id, int(in_core.sum()))
-        imu_ok = _clean(imu, imu.orientation, imu.angular_velocity, imu.linear_acceleration)
-        thr_ok = _clean(thr, *_tau_columns(thr))
-        imu = imu if imu_ok.all() else imu.select(imu_ok)  # type: ignore[assignment]
-        thr = thr if thr_ok.all() else thr.select(thr_ok)  # type: ignore[assignment]
-        if len(imu) < 2 or len(thr) < 2 or imu.stamp[0] > t[0] or imu.stamp[-1] < t[-1] \
-                or thr.stamp[0] - window > t[0] or thr.stamp[-1] < t[-1]:
-            return None
-        tf = t[0] + np.arange((len(t) - 1) * ratio + 1) / rate_f
-        ts = imu.stamp
-        # attitude: normalised linear interpolation of sign-aligned quaternions
-        q = imu.orientation[:, [3, 0, 1, 2]]
-        flip = np.cumsum(np.r_[0, np.einsum("ij,ij->i", q[1:], q[:-1]) < 0]) % 2 == 1
-        q[flip] *= -1.0
-        gyro = frames.body_vec(imu.angular_velocity)
-        R, om, f = imu_to_body(mount.imu, frames.rotation(frames.quat_to_matrix(
-            _interp(tf, ts, q))), _interp(tf, ts, gyro),
-            _interp(tf, ts, frames.body_vec(imu.linear_acceleration)))
-        # the IMU's lever arm, with ω̇ differentiated from the gyro like ν̇ below
-        f = specific_force_at_origin(mount.imu, f, om, zero_phase(
-            om, rate_f, cfg.cutoff, derivative=True)) if not mount.imu.centred else f
-        inside = (t_dvl >= t[0] - 1.0) & (t_dvl <= t[-1] + 1.0)
-        td = t_dvl[inside]
-        # v = R_bs v_s − ω × r, with the gyro (body axes) at the DVL stamps
-        vd = dvl_to_body(mount.dvl, v_dvl[inside], np.zeros((len(td), 3)) if mount.dvl.centred
-                         else _interp(td, ts, rotate(mount.imu.rotation, gyro)))
-        v, v_ned_dot = fuse_velocity(tf, R, f, td, vd, gravity, cfg.crossover)
-        keep = dvl_inliers(td, vd, tf, v, cfg.outlier_sigma)
-        in_core = (td >= t_core[0]) & (td < t_core[1] + 0.5 / cfg.rate)
-        n_outliers += int((~keep & in_core).sum())
-        if not keep.all():
-            v, v_ned_dot = fuse_velocity(tf, R, f, td[keep], vd[keep], gravity, cfg.crossover)
-        # body-frame derivative: v̇ = Rᵀ d/dt(R v) − ω × v
-        v_dot = v_ned_dot - np.cross(om, v)
-        # the same zero-phase low-pass on everything the regression sees; ν and ν̇ also get
-        # the moving average that the window-averaged thrust telemetry already has. The
-        # angular derivative is taken on the fine grid, where it is accurate.
-        nu = zero_phase(np.concatenate([v, om], axis=1), rate_f, cfg.cutoff, window=window)
-        nu_dot = np.concatenate([zero_phase(v_dot, rate_f, cfg.cutoff, window=window),
-                                 zero_phase(om, rate_f, cfg.cutoff, derivative=True,
-                                            window=window)], axis=1)
-        # τ telemetry is the mean over the message period before its stamp
-        tau = zero_phase(_interp(t - cfg.delay, thr.stamp - window / 2,
-                                 body_wrench(thr, thrusters)), cfg.rate, cfg.cutoff)
-        depth = ((_interp(t, pressure.stamp, pressure.fluid_pressure[:, None])[:, 0]
-                  - cfg.atmospheric_pressure) / (rho * gravity)) if pressure is not None \
-            else np.full(len(t), np.nan)
-        if pressure is not None and not mount.pressure.centred:
-            # z_o = z_s − (R r_p)_z: the origin's depth from the sensor's
-            depth = depth - depth_offset(mount.pressure, R[::ratio])
-        return nu[::ratio], nu_dot[::ratio], R[::ratio], tau, depth
 
-    # stretches of `stretch` seconds computed with `margin` seconds on each side (more than
-    # the slowest filter's memory, the fusion crossover): memory stays flat with bag length
-    # and the result equals processing the whole segment at once
-    stretch = max(1, round(cfg.stretch * cfg.rate))
-    margin = round(10.0 / cfg.crossover * cfg.rate)
+def _telemetry_timing(src: SeriesSource, names: _Topics, t_dvl: FloatArray, rate: float
+                      ) -> tuple[float, float, float]:
+    """Message period, output-grid phase and first stamp of the τ topic, from its messages
+    up to 10 s after the first DVL stamp.
+
+    Parameters
+    ----------
+    t_dvl : ndarray, shape (M,)
+        DVL stamps (s).
+    rate : float
+        Output sample rate (Hz).
+
+    Returns
+    -------
+    window : float
+        Median message period (s): the window each τ message is the mean over.
+    phase : float
+        Fraction of an output step, in [0, 1), that puts the grid on the window centres.
+    first : float
+        Stamp of the first τ message (s).
+    """
+    head = _need(src.series(names.tau, None, t_dvl[0] + 10.0), names.tau, names.tau_kind,
+                 minimum=2)
+    window = float(np.median(np.diff(head.stamp)))
+    phase = float(((head.stamp[0] - window / 2) * rate) % 1.0)
+    return window, phase, head.stamp[0]
+
+
+def _output_grids(t_dvl: FloatArray, lo: float, hi: float, phase: float,
+                  cfg: PreprocessConfig) -> list[tuple[int, FloatArray]]:
+    """Output time grids of the segments that DVL gaps leave, within [lo, hi].
+
+    Segments shorter than ``min_segment + 2 trim`` are left out.
+
+    Returns
+    -------
+    list of (k, t)
+        Index of the segment among all gap-split ones, and its grid (s), shape (n,), at
+        ``cfg.rate`` phase-locked to the centres of the thrust telemetry windows.
+    """
     grids: list[tuple[int, FloatArray]] = []
-    n_trim = round(cfg.trim * cfg.rate)
     for k, (a, b) in enumerate(segments_from_gaps(t_dvl, cfg.max_gap)):
         a, b = max(a, lo), min(b, hi)
         if b - a >= cfg.min_segment + 2 * cfg.trim:
-            # output grid: phase-locked to the centres of the thrust telemetry windows
             grids.append((k, (np.arange(np.ceil(a * cfg.rate - phase),
                                         np.floor(b * cfg.rate - phase) + 1) + phase) / cfg.rate))
+    return grids
+
+
+@dataclass(frozen=True)
+class _Inputs:
+    """What every stretch of :func:`preprocess` reads."""
+
+    src: SeriesSource
+    names: _Topics
+    vehicle: Vehicle
+    cfg: PreprocessConfig
+    #: DVL stamps (M,) (s) and velocities (M, 3) in the DVL's axes (FRD, m/s)
+    t_dvl: FloatArray
+    v_dvl: FloatArray
+    pressure: PressureSeries | None
+    #: τ telemetry message period (s)
+    window: float
+    #: inertial grid steps per output step
+    ratio: int
+
+
+def _assemble(inputs: _Inputs, grids: list[tuple[int, FloatArray]], tally: _Tally
+              ) -> tuple[Samples, int]:
+    """Samples of all segments, computed a stretch at a time, trimmed at the segment ends.
+
+    Stretches of ``stretch`` seconds are computed with ``margin`` seconds on each side (more
+    than the slowest filter's memory, the fusion crossover): memory stays flat with bag
+    length and the result equals processing the whole segment at once. Stretches without
+    IMU or τ data are left out.
+
+    Returns
+    -------
+    samples : Samples
+    n_segments : int
+        Segments with samples (the stretches of one segment stay one segment).
+    """
+    cfg = inputs.cfg
+    stretch = max(1, round(cfg.stretch * cfg.rate))
+    margin = round(10.0 / cfg.crossover * cfg.rate)
+    n_trim = round(cfg.trim * cfg.rate)
     # the output is written in place (no list of parts joined at the end: half the memory)
     size = sum(max(len(t) - 2 * n_trim, 0) for _, t in grids)
     out = Samples(np.empty(size), np.empty((size, 6)), np.empty((size, 6)),
@@ -556,7 +625,7 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
             i1 = min(i0 + stretch, len(t) - n_trim)
             e0, e1 = max(0, i0 - margin), min(len(t), i1 + margin)
             core = slice(i0 - e0, i1 - e0)
-            result = window_(t[e0:e1], core)
+            result = _stretch(inputs, t[e0:e1], core, tally)
             if result is None:
                 continue
             nu, nu_dot, R, tau, depth = result
@@ -564,24 +633,274 @@ def preprocess(rec: Recording | SeriesSource, thrusters: Thrusters | None, gravi
             out.t[m], out.nu[m], out.nu_dot[m], out.tau[m] = t[i0:i1], nu[core], nu_dot[core], \
                 tau[core]
             out.euler[m], out.depth[m] = frames.euler_from_matrix(R[core]), depth[core]
-            # stretches of one segment stay one segment
             if not kept_segments or kept_segments[-1] != k:
                 kept_segments.append(k)
             out.segment[m] = len(kept_segments) - 1
             n += i1 - i0
-    for (topic, found), count in sorted(foreign.items()):
-        expected = {names["imu"]: mount.imu.frame_id, names["dvl"]: mount.dvl.frame_id,
-                    names["pressure"]: mount.pressure.frame_id}[topic]
+    return (out.take(slice(0, n)) if n < size else out), len(kept_segments)
+
+
+def _stretch(inputs: _Inputs, t: FloatArray, core: slice, tally: _Tally
+             ) -> tuple[FloatArray, ...] | None:
+    """ν, ν̇, R, τ and depth on one stretch of a segment's output grid, with its margins.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Output grid (s) of the stretch and its margins.
+    core : slice
+        The stretch within ``t``, without the margins: rejections are counted there.
+
+    Returns
+    -------
+    nu, nu_dot, tau : ndarray, shape (n, 6)
+        Body velocity (m/s, rad/s), its derivative (m/s², rad/s²), τ (N, N·m); FRD.
+    R : ndarray, shape (n, 3, 3)
+        Body (FRD) → NED.
+    depth : ndarray, shape (n,)
+        Depth of the body origin (m); NaN without pressure data.
+    None
+        Where the IMU or τ data do not cover ``t``.
+    """
+    cfg, mount, ratio = inputs.cfg, inputs.vehicle.mounting, inputs.ratio
+    t_core = (t[core.start], t[core.stop - 1])
+    read = _read_stretch(inputs, t, t_core, tally)
+    if read is None:
+        return None
+    imu, thr = read
+    rate_f = cfg.rate * ratio
+    tf = t[0] + np.arange((len(t) - 1) * ratio + 1) / rate_f
+    R, om, f = _imu_at_origin(imu, mount.imu, tf, rate_f, cfg.cutoff)
+    td, vd = _dvl_at_origin(imu, mount, inputs.t_dvl, inputs.v_dvl, t)
+    v, v_dot, outliers = _fuse_without_outliers(tf, R, f, om, td, vd,
+                                                inputs.vehicle.body.gravity, cfg, t_core)
+    tally.outliers += outliers
+    nu, nu_dot = _filtered_motion(v, v_dot, om, rate_f, cfg.cutoff, inputs.window)
+    # τ telemetry is the mean over the message period before its stamp
+    tau = zero_phase(_interp(t - cfg.delay, thr.stamp - inputs.window / 2,
+                             body_wrench(thr, inputs.vehicle.thrusters)), cfg.rate, cfg.cutoff)
+    depth = _depth(inputs.pressure, mount.pressure, t, R[::ratio], cfg.atmospheric_pressure,
+                   inputs.vehicle.body.rho, inputs.vehicle.body.gravity)
+    return nu[::ratio], nu_dot[::ratio], R[::ratio], tau, depth
+
+
+def _read_stretch(inputs: _Inputs, t: FloatArray, t_core: tuple[float, float], tally: _Tally
+                  ) -> tuple[ImuSeries, JointSeries | WrenchSeries] | None:
+    """The IMU and τ messages around a stretch's grid, without non-finite or unordered ones.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Output grid (s) of the stretch and its margins; read with 1 s more on each side.
+    t_core : (float, float)
+        First and last time (s) of the stretch without its margins: the messages dropped
+        there and the IMU's messages of a foreign frame_id are counted.
+
+    Returns
+    -------
+    imu : ImuSeries
+    tau : JointSeries or WrenchSeries
+        The τ topic's messages.
+    None
+        Where either does not cover ``t`` (τ messages: their windows).
+    """
+    pad = 1.0
+    names = inputs.names
+    imu: ImuSeries = _need(inputs.src.series(names.imu, t[0] - pad, t[-1] + pad),
+                           names.imu, ImuSeries, minimum=0)
+    thr: JointSeries | WrenchSeries = _need(inputs.src.series(names.tau, t[0] - pad,
+                                                              t[-1] + pad),
+                                            names.tau, names.tau_kind, minimum=0)
+    imu_ok = _clean(imu, imu.orientation, imu.angular_velocity, imu.linear_acceleration)
+    thr_ok = _clean(thr, *_tau_columns(thr))
+    imu_core, thr_core = ((s.stamp >= t_core[0]) & (s.stamp <= t_core[1]) for s in (imu, thr))
+    tally.rejected += int((~imu_ok & imu_core).sum()) + int((~thr_ok & thr_core).sum())
+    tally.frame_id(names.imu, imu, inputs.vehicle.mounting.imu.frame_id, int(imu_core.sum()))
+    imu = imu if imu_ok.all() else imu.select(imu_ok)  # type: ignore[assignment]
+    thr = thr if thr_ok.all() else thr.select(thr_ok)  # type: ignore[assignment]
+    if len(imu) < 2 or len(thr) < 2 or imu.stamp[0] > t[0] or imu.stamp[-1] < t[-1] \
+            or thr.stamp[0] - inputs.window > t[0] or thr.stamp[-1] < t[-1]:
+        return None
+    return imu, thr
+
+
+def _imu_at_origin(imu: ImuSeries, mount: SensorMount, tf: FloatArray, rate: float,
+                   cutoff: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Attitude, angular velocity and specific force at the body origin on the grid ``tf``.
+
+    Parameters
+    ----------
+    imu : ImuSeries
+        ROS frames, covering ``tf``.
+    mount : SensorMount
+        The IMU's.
+    tf : ndarray, shape (N,)
+        Uniform inertial grid (s).
+    rate : float
+        Its rate (Hz).
+    cutoff : float
+        Low-pass (Hz) of the ω̇ in the lever-arm terms, as ν̇ gets.
+
+    Returns
+    -------
+    R : ndarray, shape (N, 3, 3)
+        Body (FRD) → NED.
+    omega : ndarray, shape (N, 3)
+        Body angular velocity (FRD, rad/s).
+    f : ndarray, shape (N, 3)
+        Specific force at the body origin (FRD, m/s²).
+    """
+    ts = imu.stamp
+    # attitude: normalised linear interpolation of sign-aligned quaternions
+    q = frames.continuous(imu.orientation[:, [3, 0, 1, 2]])
+    R, om, f = imu_to_body(mount, frames.rotation(frames.quat_to_matrix(_interp(tf, ts, q))),
+                           _interp(tf, ts, frames.body_vec(imu.angular_velocity)),
+                           _interp(tf, ts, frames.body_vec(imu.linear_acceleration)))
+    if not mount.centred:
+        # the IMU's lever arm, with ω̇ differentiated from the gyro like ν̇
+        f = specific_force_at_origin(mount, f, om, zero_phase(om, rate, cutoff,
+                                                              derivative=True))
+    return R, om, f
+
+
+def _dvl_at_origin(imu: ImuSeries, mount: Mounting, t_dvl: FloatArray, v_dvl: FloatArray,
+                   t: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The DVL samples within 1 s of the grid ``t`` (s), moved to the body origin and axes:
+    v = R_bs v_s − ω × r, with the gyro (body axes) at the DVL stamps.
+
+    Parameters
+    ----------
+    imu : ImuSeries
+        For the gyro, ROS frames.
+    t_dvl, v_dvl : ndarray, shapes (M,), (M, 3)
+        DVL stamps (s) and velocities in the DVL's axes (FRD, m/s).
+
+    Returns
+    -------
+    td, vd : ndarray, shapes (K,), (K, 3)
+        Stamps (s) and body velocities over ground at the origin (FRD, m/s).
+    """
+    inside = (t_dvl >= t[0] - 1.0) & (t_dvl <= t[-1] + 1.0)
+    td = t_dvl[inside]
+    omega = np.zeros((len(td), 3)) if mount.dvl.centred else _interp(
+        td, imu.stamp, rotate(mount.imu.rotation, frames.body_vec(imu.angular_velocity)))
+    return td, dvl_to_body(mount.dvl, v_dvl[inside], omega)
+
+
+def _fuse_without_outliers(tf: FloatArray, R: FloatArray, f: FloatArray, omega: FloatArray,
+                           td: FloatArray, vd: FloatArray, gravity: float,
+                           cfg: PreprocessConfig, t_core: tuple[float, float]
+                           ) -> tuple[FloatArray, FloatArray, int]:
+    """:func:`fuse_velocity`, again without the DVL samples that :func:`dvl_inliers`
+    rejects, and the body-frame derivative of the velocity.
+
+    Parameters
+    ----------
+    tf, R, f : ndarray, shapes (N,), (N, 3, 3), (N, 3)
+        As :func:`fuse_velocity`.
+    omega : ndarray, shape (N, 3)
+        Body angular velocity (FRD, rad/s).
+    td, vd : ndarray, shapes (K,), (K, 3)
+        DVL stamps (s) and body velocities (FRD, m/s).
+    gravity : float
+        m/s².
+    t_core : (float, float)
+        Span (s) in which rejected DVL samples are counted.
+
+    Returns
+    -------
+    v, v_dot : ndarray, shape (N, 3)
+        Body velocity over ground (m/s) and its body-frame derivative (m/s²).
+    outliers : int
+        DVL samples rejected within ``t_core``.
+    """
+    v, v_ned_dot = fuse_velocity(tf, R, f, td, vd, gravity, cfg.crossover)
+    keep = dvl_inliers(td, vd, tf, v, cfg.outlier_sigma)
+    in_core = (td >= t_core[0]) & (td < t_core[1] + 0.5 / cfg.rate)
+    if not keep.all():
+        v, v_ned_dot = fuse_velocity(tf, R, f, td[keep], vd[keep], gravity, cfg.crossover)
+    # body-frame derivative: v̇ = Rᵀ d/dt(R v) − ω × v
+    return v, v_ned_dot - np.cross(omega, v), int((~keep & in_core).sum())
+
+
+def _filtered_motion(v: FloatArray, v_dot: FloatArray, omega: FloatArray, rate: float,
+                     cutoff: float, window: float) -> tuple[FloatArray, FloatArray]:
+    """ν and ν̇ through the light zero-phase low-pass and the moving average that the
+    window-averaged thrust telemetry already has; ω̇ by differentiating ω on this (fine)
+    grid, where it is accurate.
+
+    Parameters
+    ----------
+    v, v_dot, omega : ndarray, shape (N, 3)
+        Body velocity (m/s), its derivative (m/s²), angular velocity (rad/s); FRD.
+    rate : float
+        Their sample rate (Hz).
+    cutoff : float
+        Hz.
+    window : float
+        Moving-average length (s).
+
+    Returns
+    -------
+    nu, nu_dot : ndarray, shape (N, 6)
+    """
+    nu = zero_phase(np.concatenate([v, omega], axis=1), rate, cutoff, window=window)
+    nu_dot = np.concatenate([zero_phase(v_dot, rate, cutoff, window=window),
+                             zero_phase(omega, rate, cutoff, derivative=True, window=window)],
+                            axis=1)
+    return nu, nu_dot
+
+
+def _depth(pressure: PressureSeries | None, mount: SensorMount, t: FloatArray, R: FloatArray,
+           atmospheric: float, rho: float, gravity: float) -> FloatArray:
+    """Depth of the body origin on the grid ``t`` (s), from absolute pressure.
+
+    Parameters
+    ----------
+    pressure : PressureSeries or None
+        Pa; None gives NaN.
+    mount : SensorMount
+        The pressure sensor's.
+    R : ndarray, shape (n, 3, 3)
+        Body (FRD) → NED on ``t``.
+    atmospheric, rho, gravity : float
+        Pa, kg/m³, m/s².
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        m.
+    """
+    if pressure is None:
+        return np.full(len(t), np.nan)
+    depth = (_interp(t, pressure.stamp, pressure.fluid_pressure[:, None])[:, 0]
+             - atmospheric) / (rho * gravity)
+    if not mount.centred:
+        # z_o = z_s − (R r_p)_z: the origin's depth from the sensor's
+        depth = depth - depth_offset(mount, R)
+    return depth
+
+
+def _tell(tally: _Tally, names: _Topics, mount: Mounting, n_segments: int, dropped: float,
+          report: dict[str, float] | None, notes: list[str] | None) -> None:
+    """Fill ``report`` with the counts and append to ``notes`` one line per topic and foreign
+    frame_id (each if given).
+
+    Parameters
+    ----------
+    n_segments : int
+        Segments in the output.
+    dropped : float
+        Seconds of the topics' overlap not in the output (s).
+    """
+    for (topic, found), count in sorted(tally.foreign.items()):
+        expected = names.frame_ids(mount)[topic]
         if notes is not None:
             notes.append(frame_id_note(topic, count, found, expected))
         if report is not None:
             report[f"frame_id_mismatch {topic}"] = report.get(
                 f"frame_id_mismatch {topic}", 0.0) + count
     if report is not None:
-        report.update(rejected_nonfinite_or_unordered=float(rejected),
-                      dvl_outliers=float(n_outliers), segments=float(len(kept_segments)),
-                      dropped_seconds=float(max(hi - lo - n / cfg.rate, 0.0)))
-    if n == 0:
-        raise DataError(f"no gap-free stretch of at least {cfg.min_segment + 2 * cfg.trim:.0f} s"
-                        " (DVL gaps split the data)")
-    return out.take(slice(0, n)) if n < size else out
+        report.update(rejected_nonfinite_or_unordered=float(tally.rejected),
+                      dvl_outliers=float(tally.outliers), segments=float(n_segments),
+                      dropped_seconds=float(dropped))

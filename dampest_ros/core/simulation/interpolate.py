@@ -60,18 +60,9 @@ def linear(k: Knots, y: FloatArray) -> FloatArray:
     return y[k.i] + k.s * (y[k.j] - y[k.i])
 
 
-def continuous(q: FloatArray) -> FloatArray:
-    """Flip quaternion signs so that consecutive ones have a non-negative dot product."""
-    if len(q) < 2:
-        return q
-    flip = np.where(np.einsum("ni,ni->n", q[1:], q[:-1]) < 0.0, -1.0, 1.0)
-    # sign_k = Π_{j ≤ k} sign(q_{j−1} · q_j): the running product of the flips
-    sign = np.concatenate([[1.0], np.cumprod(flip)])
-    return q * sign[:, None]
-
-
 def nlerp(k: Knots, q: FloatArray) -> FloatArray:
-    """Normalised linear interpolation of sign-continuous quaternions (N, 4) → (M, 4)."""
+    """Normalised linear interpolation of sign-continuous quaternions (N, 4) → (M, 4)
+    (:func:`dampest_ros.core.physics.frames.continuous`)."""
     qs = linear(k, q)
     # q(s) = ((1 − s) q0 + s q1) / ‖·‖
     return qs / np.linalg.norm(qs, axis=1, keepdims=True)

@@ -43,6 +43,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.physics.frames import (
     body_vec,
+    continuous,
     matrix_to_quat,
     quat_frd_ned_to_flu_enu,
     quat_mul,
@@ -70,7 +71,7 @@ from dampest_ros.core.signals.measurements import (
     TwistSeries,
     WrenchSeries,
 )
-from dampest_ros.core.simulation.interpolate import continuous, hermite, locate, nlerp
+from dampest_ros.core.simulation.interpolate import hermite, locate, nlerp
 from dampest_ros.core.simulation.trajectory import Trajectory
 
 FloatArray = NDArray[np.float64]

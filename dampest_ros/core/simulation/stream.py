@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.physics.frames import (
     body_vec,
+    continuous,
     euler_from_matrix,
     quat_frd_ned_to_flu_enu,
     quat_mul,
@@ -40,7 +41,7 @@ from dampest_ros.core.signals.measurements import (
 from dampest_ros.core.simulation.control import VelocityPI
 from dampest_ros.core.simulation.effects import Effects
 from dampest_ros.core.simulation.excitation import protocol as make_protocol
-from dampest_ros.core.simulation.interpolate import continuous, hermite, locate, nlerp
+from dampest_ros.core.simulation.interpolate import hermite, locate, nlerp
 from dampest_ros.core.simulation.sensors import (
     FRAME_IDS,
     NOISE_STREAMS,

@@ -86,7 +86,7 @@ def _simulate(effects: dict[str, Any], seed: int, plant: dict[str, bool] | None 
     traj = run(v, make_excitation("B", v, DURATION, seed=seed), e)
     rec = measure(traj, v.body.rho, v.body.gravity, SensorConfig(),
                   SensorBias(e.gyro_bias, e.accel_bias, e.dvl_bias), seed=seed)
-    samples = preprocess(rec, v.thrusters, v.body.gravity, v.body.rho, PreprocessConfig())
+    samples = preprocess(rec, v, PreprocessConfig())
     joints = rec["thrusters/state"]
     assert isinstance(joints, JointSeries)
     return samples, joints

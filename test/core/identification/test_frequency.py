@@ -19,8 +19,7 @@ def test_rational_fit_recovers_the_memory_rate_from_multisine_data() -> None:
     v = load_vehicle("platform_a")
     effects = Effects(memory=({"dof": "u", "rate": 2.0, "c": 20.0},))
     traj = run(v, make_excitation("C", v, 400.0, seed=3), effects)
-    s = preprocess(measure(traj, v.body.rho, v.body.gravity, seed=3), v.thrusters,
-                   v.body.gravity, v.body.rho)
+    s = preprocess(measure(traj, v.body.rho, v.body.gravity, seed=3), v)
     theta = fit(s, v.damping, v.body, FitOptions(gyro_bias=0.0, dvl_bias=0.0)).theta
     imp = memory_impedance(s, v.damping, v.body, theta, [0])[0]
     assert abs(imp.rate - 2.0) <= 0.1 * 2.0

@@ -315,8 +315,7 @@ def test_hovering_for_an_hour_keeps_the_covariance_bounded(
     sensors = SensorConfig(imu_rate=50.0, dvl_dropout_rate=0.0, thruster_rate=10.0,
                            truth_rate=10.0, pressure_rate=10.0)
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, sensors, seed=4)
-    s = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
-                   PreprocessConfig(rate=10.0, inertial_rate=50.0, cutoff=4.0))
+    s = preprocess(rec, vehicle, PreprocessConfig(rate=10.0, inertial_rate=50.0, cutoff=4.0))
     assert s.t[-1] - s.t[0] > 3500.0
     from dampest_ros.core.online.sample import OnlineSample
     samples = [OnlineSample(float(s.t[k]), s.nu[k], s.nu_dot[k], s.tau[k], s.euler[k],

@@ -176,9 +176,9 @@ def test_offline_preprocessing_removes_the_mounting(vehicle: Vehicle, flight: Tr
     sensors to a fraction of their spread; without it, the DVL lever arm alone is wrong by
     ω × r (≈ 0.1 m/s RMS on this flight)."""
     g, rho = vehicle.body.gravity, vehicle.body.rho
-    centred = preprocess(measure(flight, rho, g, EXACT), vehicle.thrusters, g, rho)
-    mounted = preprocess(measure(flight, rho, g, EXACT, mounting=MOUNTED), vehicle.thrusters,
-                         g, rho, mounting=MOUNTED)
+    centred = preprocess(measure(flight, rho, g, EXACT), vehicle)
+    mounted = preprocess(measure(flight, rho, g, EXACT, mounting=MOUNTED),
+                         replace(vehicle, mounting=MOUNTED))
     np.testing.assert_array_equal(mounted.t, centred.t)
     spread = np.std(centred.nu, axis=0)
     assert np.all(np.sqrt(np.mean((mounted.nu - centred.nu) ** 2, axis=0)) < 0.01 * spread)
@@ -186,8 +186,7 @@ def test_offline_preprocessing_removes_the_mounting(vehicle: Vehicle, flight: Tr
     err_dot = np.sqrt(np.mean((mounted.nu_dot - centred.nu_dot) ** 2, axis=0))
     assert np.all(err_dot < 0.05 * spread_dot), err_dot / spread_dot
     assert np.max(np.abs(mounted.depth - centred.depth)) < 2e-3  # m
-    lever = preprocess(measure(flight, rho, g, EXACT, mounting=LEVER), vehicle.thrusters,
-                       g, rho)
+    lever = preprocess(measure(flight, rho, g, EXACT, mounting=LEVER), vehicle)
     assert np.sqrt(np.mean((lever.nu[:, 1] - centred.nu[:, 1]) ** 2)) > 0.05  # m/s
 
 
@@ -206,7 +205,7 @@ def test_identification_with_mounted_sensors_equals_the_centred_case(
 
     def identify(rec_mount: Mounting | None, pre_mount: Mounting | None) -> Fit:
         rec = measure(flight, rho, g, seed=3, mounting=rec_mount)
-        s = preprocess(rec, vehicle.thrusters, g, rho, mounting=pre_mount)
+        s = preprocess(rec, replace(vehicle, mounting=pre_mount or Mounting()))
         return fit(s, vehicle.damping, vehicle.body, FitOptions())
 
     centred = identify(None, None)
@@ -255,7 +254,7 @@ def test_foreign_frame_ids_are_counted_and_reported_once(vehicle: Vehicle) -> No
     rec["dvl/twist"] = replace(rec["dvl/twist"], frame_id="dvl")
     notes: list[str] = []
     report: dict[str, float] = {}
-    same = preprocess(rec, vehicle.thrusters, g, rho, report=report, notes=notes)
+    same = preprocess(rec, vehicle, report=report, notes=notes)
     n_dvl = len(rec["dvl/twist"])
     assert notes == [f"dvl/twist: {n_dvl} message(s) with header.frame_id 'dvl', expected "
                      "'dvl_link' (the sensors: section of the vehicle file); used with the "
@@ -263,11 +262,11 @@ def test_foreign_frame_ids_are_counted_and_reported_once(vehicle: Vehicle) -> No
     assert report["frame_id_mismatch dvl/twist"] == n_dvl
     # counted, not changed: the samples are those of the right frame_id
     rec["dvl/twist"] = replace(rec["dvl/twist"], frame_id="dvl_link")
-    np.testing.assert_array_equal(same.nu, preprocess(rec, vehicle.thrusters, g, rho).nu)
+    np.testing.assert_array_equal(same.nu, preprocess(rec, vehicle).nu)
     # the IMU's, counted once per message the output covers
     rec["imu/data"] = replace(rec["imu/data"], frame_id="imu")
     notes.clear()
-    preprocess(rec, vehicle.thrusters, g, rho, notes=notes)
+    preprocess(rec, vehicle, notes=notes)
     (line,) = notes
     assert line.startswith("imu/data: ") and "'imu', expected 'imu_link'" in line
     # online: a counter, and one event per topic
@@ -335,8 +334,8 @@ def test_dvl_as_twist_stamped_reads_and_preprocesses_like_twist_with_covariance(
     assert isinstance(dvl, TwistSeries) and dvl.frame_id == "dvl_link"
     np.testing.assert_array_equal(dvl.stamp, rec["dvl/twist"].stamp)
     np.testing.assert_array_equal(dvl.linear, rec["dvl/twist"].linear)  # type: ignore[attr-defined]
-    want = preprocess(rec, vehicle.thrusters, g, rho)
-    got = preprocess(back, vehicle.thrusters, g, rho)
+    want = preprocess(rec, vehicle)
+    got = preprocess(back, vehicle)
     np.testing.assert_array_equal(got.nu, want.nu)
     # online: no covariance in a TwistStamped, so the configured DVL noise weighs it
     samples = OnlinePreprocessor(vehicle.thrusters, g, rho).run(back)

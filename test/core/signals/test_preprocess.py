@@ -40,7 +40,7 @@ def traj(vehicle: Vehicle) -> Trajectory:
 def test_noise_free_velocity_and_acceleration_match_the_truth(vehicle: Vehicle,
                                                               traj: Trajectory) -> None:
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, QUIET, seed=4)
-    s = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho)
+    s = preprocess(rec, vehicle)
     # the truth filtered the way the preprocessing filters (light low-pass + telemetry window)
     nu = zero_phase(traj.nu, 50.0, 10.0, window=0.02)
     nu_dot = zero_phase(traj.nu, 50.0, 10.0, derivative=True, window=0.02)
@@ -58,9 +58,8 @@ def test_noise_free_velocity_and_acceleration_match_the_truth(vehicle: Vehicle,
 def test_processing_in_stretches_equals_processing_at_once(vehicle: Vehicle,
                                                            traj: Trajectory) -> None:
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, seed=5)
-    whole = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho)
-    parts = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
-                       PreprocessConfig(stretch=15.0))
+    whole = preprocess(rec, vehicle)
+    parts = preprocess(rec, vehicle, PreprocessConfig(stretch=15.0))
     np.testing.assert_array_equal(parts.t, whole.t)
     np.testing.assert_array_equal(parts.segment, whole.segment)
     for name in ("nu", "nu_dot", "tau", "euler"):
@@ -77,8 +76,7 @@ def test_long_dvl_gaps_split_segments_short_ones_are_bridged(vehicle: Vehicle,
     cut = ((dvl.stamp > 40.0) & (dvl.stamp < 43.0)) | ((dvl.stamp > 80.0) & (dvl.stamp < 80.5))
     rec = {**rec, "dvl/twist": dvl.select(~cut)}
     report: dict[str, float] = {}
-    s = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
-                   report=report)
+    s = preprocess(rec, vehicle, report=report)
     assert report["segments"] == 2
     assert int(s.segment.max()) == 1
     assert not np.any((s.t > 40.0) & (s.t < 43.0))  # nothing invented inside the long gap
@@ -90,15 +88,13 @@ def test_long_dvl_gaps_split_segments_short_ones_are_bridged(vehicle: Vehicle,
 def test_missing_topic_and_bad_values_are_reported(vehicle: Vehicle, traj: Trajectory) -> None:
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, QUIET, seed=4)
     with pytest.raises(DataError, match=r"'dvl/twist' missing.*imu/data"):
-        preprocess({k: v for k, v in rec.items() if k != "dvl/twist"}, vehicle.thrusters,
-                   vehicle.body.gravity, vehicle.body.rho)
+        preprocess({k: v for k, v in rec.items() if k != "dvl/twist"}, vehicle)
     dvl = rec["dvl/twist"]
     assert isinstance(dvl, TwistSeries)
     bad = dvl.linear.copy()
     bad[10] = np.nan
     report: dict[str, float] = {}
-    preprocess({**rec, "dvl/twist": replace(dvl, linear=bad)}, vehicle.thrusters,
-               vehicle.body.gravity, vehicle.body.rho, report=report)
+    preprocess({**rec, "dvl/twist": replace(dvl, linear=bad)}, vehicle, report=report)
     assert report["rejected_nonfinite_or_unordered"] == 1
     with pytest.raises(ValueError, match="cutoff"):
         PreprocessConfig(cutoff=30.0)
