@@ -22,6 +22,7 @@ from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.plausibility import frame_notes
 from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, preprocess
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.io.bag import BagSource, bag_summary, check_role_types
@@ -148,7 +149,8 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
         raise DataError(f"{p}: expected a rosbag2 directory or a .csv / .csv.gz file")
     topics = bag_topics(p, vehicle, args)
     cfg = PreprocessConfig(max_gap=args.max_gap)
-    given = check_options(args, args.rate, bag_summary(p).duration, resample=True,
+    summary = bag_summary(p)
+    given = check_options(args, args.rate, summary.duration, resample=True,
                           min_rate=2 * cfg.cutoff)
     auto = given is None
     delay = 0.0 if given is None else given
@@ -156,9 +158,10 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
     # windows are read as the preprocessing needs them: memory stays flat with bag length
     rec = BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),
                     together=[topics["imu"], tau_topic(topics)])
-    frame_notes: list[str] = []
-    samples = preprocess(rec, vehicle, cfg, topics, notes=frame_notes)
-    for note in frame_notes:  # a frame_id other than the vehicle file's sensors: section
+    warn_implausible(rec, topics, summary.start, vehicle.body.gravity, p.name)
+    id_notes: list[str] = []
+    samples = preprocess(rec, vehicle, cfg, topics, notes=id_notes)
+    for note in id_notes:  # a frame_id other than the vehicle file's sensors: section
         print(f"{p.name}: warning: {note}", file=sys.stderr)
     if auto:
         delay = profile_delay(samples, vehicle.damping, vehicle.body)
@@ -166,6 +169,21 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
               file=sys.stderr)
         samples = preprocess(rec, vehicle, replace(cfg, delay=delay), topics)
     return samples
+
+
+#: Seconds at the start of a log whose messages the frame plausibility checks read.
+PLAUSIBILITY_SECONDS = 300.0
+
+
+def warn_implausible(source: BagSource, topics: dict[str, str], start: float, gravity: float,
+                     name: str) -> None:
+    """Print a warning line per frame mistake the first :data:`PLAUSIBILITY_SECONDS` of the
+    used topics show (:func:`~dampest_ros.core.signals.plausibility.frame_notes`)."""
+    have = set(source.topics())
+    head = {t: source.series(t, start, start + PLAUSIBILITY_SECONDS)
+            for t in dict.fromkeys(topics.values()) if t.lstrip("/") in have}
+    for note in frame_notes(head, gravity):
+        print(f"{name}: warning: {note}", file=sys.stderr)
 
 
 def cut(samples: Samples, args: argparse.Namespace) -> Samples:
