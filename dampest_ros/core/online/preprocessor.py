@@ -327,10 +327,11 @@ class OnlinePreprocessor:
         return True
 
     def _frame(self, role: str, frame_id: str | None) -> None:
-        """Count a message whose frame_id is not the mounting's (None: not checked); the
-        first of each role goes to ``events``."""
-        expected = getattr(self.mount, role).frame_id
-        if frame_id is None or frame_id == expected:
+        """Count a message whose frame_id is not the one the vehicle file declares (None: not
+        checked; :meth:`SensorMount.foreign`); the first of each role goes to ``events``."""
+        mount = getattr(self.mount, role)
+        expected = mount.frame_id
+        if frame_id is None or not mount.foreign(frame_id):
             return
         self.counts["frame_id_mismatch"] += 1
         seen = self.foreign_frames.get(role, ("", 0))[1]

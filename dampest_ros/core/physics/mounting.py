@@ -76,11 +76,22 @@ class SensorMount:
         Its point from the body origin (m, FRD).
     rpy : tuple of 3 float
         ZYX Euler angles (rad) of its axes in the body frame (FRD).
+    declared : bool
+        Whether the vehicle file gives ``frame_id``: only then is a message of another
+        frame_id a mistake worth a warning (:meth:`foreign`); the usual log stamps every
+        sensor ``base_link``, and a vehicle file without a ``sensors:`` section says nothing
+        about it.
     """
 
     frame_id: str
     position: tuple[float, float, float] = _ORIGIN
     rpy: tuple[float, float, float] = _ORIGIN
+    declared: bool = field(default=False, compare=False)
+
+    def foreign(self, frame_id: str) -> bool:
+        """True when the vehicle file declares this sensor's frame_id and ``frame_id`` is
+        another one."""
+        return self.declared and frame_id != self.frame_id
 
     @cached_property
     def rotation(self) -> FloatArray:
@@ -121,7 +132,7 @@ class SensorMount:
             raise ConfigError(f"{where}.frame_id", f"must be a non-empty string, got "
                                                    f"{frame_id!r}")
         return cls(frame_id, _three(f"{where}.position", d.get("position", _ORIGIN)),
-                   _three(f"{where}.rpy", d.get("rpy", _ORIGIN)))
+                   _three(f"{where}.rpy", d.get("rpy", _ORIGIN)), declared="frame_id" in d)
 
 
 @dataclass(frozen=True)

@@ -491,9 +491,10 @@ class _Tally:
     #: messages per (topic, frame_id) whose frame_id is not the configured one
     foreign: dict[tuple[str, str], int] = field(default_factory=dict)
 
-    def frame_id(self, topic: str, series: Series, expected: str, count: int) -> None:
-        """Count ``count`` messages of ``topic`` if its frame_id is not ``expected``."""
-        if count and series.frame_id != expected:
+    def frame_id(self, topic: str, series: Series, mount: SensorMount, count: int) -> None:
+        """Count ``count`` messages of ``topic`` if the vehicle file declares another
+        frame_id for its sensor (:meth:`SensorMount.foreign`)."""
+        if count and mount.foreign(series.frame_id):
             key = (topic, series.frame_id)
             self.foreign[key] = self.foreign.get(key, 0) + count
 
@@ -520,9 +521,9 @@ def _read_dvl_and_pressure(src: SeriesSource, names: _Topics, mount: Mounting, t
     dvl_ok = _clean(dvl, dvl.linear)
     tally.rejected += int((~dvl_ok).sum())
     dvl = dvl if dvl_ok.all() else dvl.select(dvl_ok)  # type: ignore[assignment]
-    tally.frame_id(names.dvl, dvl, mount.dvl.frame_id, len(dvl))
+    tally.frame_id(names.dvl, dvl, mount.dvl, len(dvl))
     if pres is not None:
-        tally.frame_id(names.pressure, pres, mount.pressure.frame_id, len(pres))
+        tally.frame_id(names.pressure, pres, mount.pressure, len(pres))
     pressure = pres if isinstance(pres, PressureSeries) and len(pres) > 1 else None
     return dvl.stamp, frames.body_vec(dvl.linear), pressure
 
@@ -715,7 +716,7 @@ def _read_stretch(inputs: _Inputs, t: FloatArray, t_core: tuple[float, float], t
     thr_ok = _clean(thr, *_tau_columns(thr))
     imu_core, thr_core = ((s.stamp >= t_core[0]) & (s.stamp <= t_core[1]) for s in (imu, thr))
     tally.rejected += int((~imu_ok & imu_core).sum()) + int((~thr_ok & thr_core).sum())
-    tally.frame_id(names.imu, imu, inputs.vehicle.mounting.imu.frame_id, int(imu_core.sum()))
+    tally.frame_id(names.imu, imu, inputs.vehicle.mounting.imu, int(imu_core.sum()))
     imu = imu if imu_ok.all() else imu.select(imu_ok)  # type: ignore[assignment]
     thr = thr if thr_ok.all() else thr.select(thr_ok)  # type: ignore[assignment]
     if len(imu) < 2 or len(thr) < 2 or imu.stamp[0] > t[0] or imu.stamp[-1] < t[-1] \

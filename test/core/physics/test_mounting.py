@@ -249,11 +249,23 @@ def short(vehicle: Vehicle) -> Recording:
 
 
 def test_foreign_frame_ids_are_counted_and_reported_once(vehicle: Vehicle) -> None:
+    """Against the frame_ids a vehicle file declares; without a sensors: section any frame_id
+    is taken silently (the usual log stamps every sensor base_link)."""
     g, rho = vehicle.body.gravity, vehicle.body.rho
     rec = short(vehicle)
     rec["dvl/twist"] = replace(rec["dvl/twist"], frame_id="dvl")
-    notes: list[str] = []
+    rec["imu/data"] = replace(rec["imu/data"], frame_id="base_link")
+    quiet: list[str] = []
     report: dict[str, float] = {}
+    preprocess(rec, vehicle, report=report, notes=quiet)
+    assert quiet == [] and not any(k.startswith("frame_id") for k in report)
+    pre = OnlinePreprocessor(vehicle.thrusters, g, rho)
+    pre.run(rec)
+    assert pre.counts["frame_id_mismatch"] == 0
+    vehicle = replace(vehicle, mounting=Mounting.from_dict(
+        {k: {"frame_id": f"{k}_link"} for k in ("imu", "dvl", "pressure")}))
+    rec["imu/data"] = replace(rec["imu/data"], frame_id="imu_link")
+    notes: list[str] = []
     same = preprocess(rec, vehicle, report=report, notes=notes)
     n_dvl = len(rec["dvl/twist"])
     assert notes == [f"dvl/twist: {n_dvl} message(s) with header.frame_id 'dvl', expected "
@@ -270,7 +282,7 @@ def test_foreign_frame_ids_are_counted_and_reported_once(vehicle: Vehicle) -> No
     (line,) = notes
     assert line.startswith("imu/data: ") and "'imu', expected 'imu_link'" in line
     # online: a counter, and one event per topic
-    pre = OnlinePreprocessor(vehicle.thrusters, g, rho)
+    pre = OnlinePreprocessor(vehicle.thrusters, g, rho, mounting=vehicle.mounting)
     pre.run(rec)
     assert pre.counts["frame_id_mismatch"] == len(rec["imu/data"])
     assert [e for e in pre.events if "frame_id" in e] == [
