@@ -164,9 +164,15 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
     for note in id_notes:  # a frame_id other than the vehicle file's sensors: section
         print(f"{p.name}: warning: {note}", file=sys.stderr)
     if auto:
-        delay = profile_delay(samples, vehicle.damping, vehicle.body)
-        print(f"estimated delay of the response after the thrust: {delay * 1000:.0f} ms",
-              file=sys.stderr)
+        found = profile_delay(samples, vehicle.damping, vehicle.body)
+        delay = found.delay
+        print(f"estimated delay of the response after the thrust: {delay * 1000:.1f} ms "
+              f"± {found.std * 1000:.2g} ms (statistical; up to ±{500 / samples.rate:.0f} ms "
+              "more if τ is stamped at the start or end of its sample period)", file=sys.stderr)
+        if found.at_bound:
+            print(f"warning: the delay found is at the end of the searched "
+                  f"{found.bounds[0]:g}..{found.bounds[1]:g} s: the true one may lie beyond; "
+                  "give --delay S", file=sys.stderr)
         samples = preprocess(rec, vehicle, replace(cfg, delay=delay), topics)
     return samples
 

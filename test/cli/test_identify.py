@@ -141,6 +141,22 @@ def test_delay_auto_finds_and_corrects_a_thrust_delay(tmp_path: Path,
             assert abs(value - t) <= 0.02 * t, name
 
 
+def test_delay_auto_finds_a_commanded_wrench_lead_with_its_sigma(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A command that leads the motion by 0.6 s (beyond the 0.5 s the search used to stop
+    at): found within 3σ (and 20 ms), the σ printed."""
+    bag = tmp_path / "bag"
+    assert main(["simulate", "--duration", "120", "--seed", "5", "--out", str(bag),
+                 "--effects", "{delay: 0.6}"]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy", "--delay", "auto"]) == 0
+    line = capsys.readouterr().err.split("after the thrust:")[1].splitlines()[0]
+    delay_ms, std_ms = (float(x) for x in line.split(" (")[0].replace("ms", "").split("±"))
+    # measured 599.3 ± 0.23 ms: 3.0 σ, the rest within the ±10 ms of τ's stamp convention
+    assert 0.0 < std_ms < 2.0, line
+    assert abs(delay_ms - 600.0) <= 10.0 and "±10 ms more if τ is stamped" in line, line
+
+
 @pytest.fixture(scope="module")
 def short_b(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """60 s, seed 2."""
