@@ -1,12 +1,18 @@
-"""rosbag2 bags (MCAP or SQLite3) of measurement series, written and read with rosbags.
+"""Bags of measurement series: rosbag2 (MCAP or SQLite3) written and read, ROS 1 read, with
+rosbags.
 
-Bags are rosbag2 directories (``metadata.yaml`` + storage file) that ``ros2 bag`` on Jazzy,
-rosbags and the mcap library read. Topic names are stored fully qualified (``/imu/data``) and
-returned relative (``imu/data``), as in :data:`dampest_ros.core.signals.measurements.TOPIC_TYPES`.
-The log time of every message is its header stamp in nanoseconds.
+Bags written here are rosbag2 directories (``metadata.yaml`` + storage file) that ``ros2 bag``
+on Jazzy, rosbags and the mcap library read; the log time of every message is its header
+stamp in nanoseconds. Bags are read by one reader for both generations: a rosbag2 directory,
+or a ROS 1 bag (a ``.bag`` file, format 2.0, as most published marine datasets are), whose
+messages rosbags converts from the ROS 1 wire format to CDR as they are read (ROS 1 type
+names such as ``sensor_msgs/Imu`` become ``sensor_msgs/msg/Imu``). Topic names are stored
+fully qualified (``/imu/data``) and returned relative (``imu/data``), as in
+:data:`dampest_ros.core.signals.measurements.TOPIC_TYPES`.
 
 Messages are serialized and deserialized with the fixed-layout numpy codec of
-:mod:`dampest_ros.io.cdr`; the only per-message Python work is the rosbags read or write call.
+:mod:`dampest_ros.io.cdr`; the only per-message Python work is the rosbags read or write call
+(and, for a ROS 1 bag, rosbags' conversion of the message to CDR).
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from rosbags.interfaces import (
     Connection,
     Qos,
 )
+from rosbags.rosbag1 import Reader as Ros1Reader
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
 from dampest_ros.core.signals.measurements import TOPIC_TYPES, Series
@@ -42,6 +49,8 @@ LATCHED_TOPICS = ("dampest/model",)
 READ_CHUNK = 5_000
 
 _STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
+#: File name suffix of a ROS 1 bag.
+ROS1_SUFFIX = ".bag"
 
 
 class BagError(RuntimeError):
@@ -164,19 +173,36 @@ def _files(path: Path) -> str:
     return str(path)
 
 
+def is_ros1_bag(path: str | Path) -> bool:
+    """Whether ``path`` names a ROS 1 bag: not a directory, its name ending in ``.bag``."""
+    p = Path(path)
+    return p.suffix.lower() == ROS1_SUFFIX and not p.is_dir()
+
+
+def is_bag(path: str | Path) -> bool:
+    """Whether ``path`` is a bag to read: a rosbag2 directory or a ROS 1 ``.bag`` file."""
+    p = Path(path)
+    return p.is_dir() or (p.is_file() and is_ros1_bag(p))
+
+
 class _Bag:
-    """A rosbags Reader whose failures become :class:`BagError` naming the files."""
+    """A rosbags Reader of either generation (:func:`is_ros1_bag` chooses) whose failures
+    become :class:`BagError` naming the files; messages come out as CDR."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         if not self.path.exists():
             raise FileNotFoundError(f"no bag at {self.path}")
+        self.ros1 = is_ros1_bag(self.path)
         try:
-            self.reader = Reader(self.path)
+            self.reader: Reader | Ros1Reader = (Ros1Reader if self.ros1 else Reader)(self.path)
             self.reader.open()
         except Exception as exc:
             hint = ""
-            if self.path.is_dir() and any(self.path.glob("*.mcap")):
+            if self.ros1:
+                hint = ("; it is not a ROS 1 bag (format 2.0), or it is truncated: a recording "
+                        "that was interrupted needs 'rosbag reindex' (ROS 1) first")
+            elif self.path.is_dir() and any(self.path.glob("*.mcap")):
                 hint = (f"; if its recording was interrupted, 'dampest reindex {self.path}' "
                         "rebuilds metadata.yaml and recovers it up to its last complete chunk")
             raise BagError(f"cannot read bag {_files(self.path)}: {exc}{hint}") from exc
@@ -188,17 +214,20 @@ class _Bag:
         self.reader.close()
 
     def messages(self, conns: Sequence[Connection], start: int | None = None,
-                 stop: int | None = None) -> Iterator[tuple[Connection, bytes]]:
+                 stop: int | None = None) -> Iterator[tuple[Connection, bytes | memoryview]]:
         if not conns:  # rosbags reads every topic for an empty selection
             return
+        # a ROS 1 message to CDR by rosbags (the ROS 2 Jazzy definitions; std_msgs/Header
+        # loses its seq): the CDR codec then decodes both generations alike
+        to_cdr = cdr.typestore().ros1_to_cdr if self.ros1 else None
         try:
             for conn, _, data in self.reader.messages(connections=conns, start=start,
                                                       stop=stop):
-                yield conn, data
+                yield conn, data if to_cdr is None else to_cdr(data, conn.msgtype)
         except Exception as exc:
             raise BagError(f"cannot read bag {_files(self.path)}: {exc}") from exc
 
-    def decode(self, topic: str, msgtype: str, raw: list[bytes]) -> Series:
+    def decode(self, topic: str, msgtype: str, raw: list[bytes | memoryview]) -> Series:
         try:
             return cdr.decode(msgtype, raw)
         except Exception as exc:
@@ -251,7 +280,8 @@ class _Assembler:
 def read_bag(path: str | Path, topics: Sequence[str] | None = None,
              progress: Callable[[int, int], None] | None = None,
              start: float | None = None, stop: float | None = None) -> dict[str, Series]:
-    """Read the series of a rosbag2 bag (MCAP or SQLite3 directory, or a single storage file).
+    """Read the series of a bag: a rosbag2 bag (MCAP or SQLite3 directory, or a single
+    storage file) or a ROS 1 ``.bag`` file.
 
     Parameters
     ----------
@@ -296,7 +326,7 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
             if typ not in cdr.SERIES_CLASSES:
                 raise TypeError(f"topic {name} has type {typ}, which has no series class; "
                                 f"readable types: {sorted(cdr.SERIES_CLASSES)}")
-        raw: dict[str, list[bytes]] = {name: [] for name in key}
+        raw: dict[str, list[bytes | memoryview]] = {name: [] for name in key}
         window = start is not None or stop is not None
         parts = {name: _Assembler(0 if window else int(info[name].msgcount or 0))
                  for name in key}
@@ -339,7 +369,8 @@ class TopicSummary:
 
 @dataclass(frozen=True)
 class BagSummary:
-    """What a bag holds: storage, time range of the log times (s) and its topics."""
+    """What a bag holds: storage (``mcap``, ``sqlite3`` or ``ros1``), time range of the log
+    times (s) and its topics."""
 
     path: Path
     storage: str
@@ -359,7 +390,8 @@ class BagSummary:
 
 
 def bag_summary(path: str | Path) -> BagSummary:
-    """Topics, types, counts and time range of a bag, from its metadata (no messages read).
+    """Topics, types, counts and time range of a bag, from its metadata or, for a ROS 1 bag,
+    its index (no messages read).
 
     Parameters
     ----------
@@ -377,7 +409,8 @@ def bag_summary(path: str | Path) -> BagSummary:
         start = 0 if empty else r.start_time
         end = 0 if empty else r.end_time - 1  # rosbags: end_time is one past the last
         files = [bag.path] if bag.path.is_file() else list(bag.path.iterdir())
-        storage = "mcap" if any(f.suffix == ".mcap" for f in files) else "sqlite3"
+        storage = ("ros1" if bag.ros1 else
+                   "mcap" if any(f.suffix == ".mcap" for f in files) else "sqlite3")
     return BagSummary(bag.path, storage, start / 1e9, end / 1e9, topics)
 
 
@@ -440,7 +473,7 @@ class BagSource:
     Parameters
     ----------
     path : str or Path
-        rosbag2 directory (MCAP or SQLite3).
+        rosbag2 directory (MCAP or SQLite3) or ROS 1 ``.bag`` file.
     progress : callable, optional
         Called as ``progress(seconds_read, seconds_total)`` as windows are read.
     together : sequence of str
