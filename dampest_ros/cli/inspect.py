@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     topics = topic_roles(args)
     tau = "body wrench" if "wrench" in topics else "thruster"
     needed = [topics["imu"], topics["dvl"], tau_topic(topics)]
-    missing = [t for t in needed if t.lstrip("/") not in have]
+    missing = [t for t in needed if t not in have]
     problems = role_type_errors(summary, topics)
     if missing:
         problems.insert(0, f"missing {missing} (use --imu-topic etc. with dampest identify "
