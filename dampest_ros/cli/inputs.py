@@ -24,7 +24,7 @@ from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, preprocess
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.io.bag import BagSource, bag_summary, check_role_types
+from dampest_ros.io.bag import BagSource, bag_summary, check_role_types, is_bag
 from dampest_ros.io.csv import is_csv, load_column_map, read_log
 from dampest_ros.io.yaml_io import load_model
 
@@ -130,8 +130,8 @@ def check_options(args: argparse.Namespace, rate: float, span: float, *,
 
 
 def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
-    """Samples from a rosbag2 directory (MCAP or SQLite3) or a CSV file, after
-    :func:`check_options`."""
+    """Samples from a rosbag2 directory (MCAP or SQLite3), a ROS 1 ``.bag`` file or a CSV
+    file, after :func:`check_options`."""
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p} does not exist")
@@ -144,8 +144,9 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
         check_options(args, samples.rate, float(samples.t[-1] - samples.t[0]),
                       resample=False)
         return samples
-    if not p.is_dir():
-        raise DataError(f"{p}: expected a rosbag2 directory or a .csv / .csv.gz file")
+    if not is_bag(p):
+        raise DataError(f"{p}: expected a rosbag2 directory, a ROS 1 .bag file or a .csv / "
+                        ".csv.gz file")
     topics = bag_topics(p, vehicle, args)
     cfg = PreprocessConfig(max_gap=args.max_gap)
     given = check_options(args, args.rate, bag_summary(p).duration, resample=True,
