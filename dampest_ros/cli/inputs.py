@@ -24,7 +24,7 @@ from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, preprocess
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.io.bag import BagSource, bag_summary, check_role_types, is_bag
+from dampest_ros.io.bag import BagSource, check_role_types, is_bag
 from dampest_ros.io.csv import is_csv, load_column_map, read_log
 from dampest_ros.io.yaml_io import load_model
 
@@ -147,27 +147,32 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
     if not is_bag(p):
         raise DataError(f"{p}: expected a rosbag2 directory, a ROS 1 .bag file or a .csv / "
                         ".csv.gz file")
+    return _bag_samples(p, vehicle, args)
+
+
+def _bag_samples(p: Path, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
+    """Samples of a bag (rosbag2 or ROS 1), after :func:`check_options`; the bag is read a
+    window at a time as the preprocessing needs it, so memory stays flat with its length."""
     topics = bag_topics(p, vehicle, args)
     cfg = PreprocessConfig(max_gap=args.max_gap)
-    given = check_options(args, args.rate, bag_summary(p).duration, resample=True,
-                          min_rate=2 * cfg.cutoff)
-    auto = given is None
-    delay = 0.0 if given is None else given
-    cfg = replace(cfg, rate=args.rate, delay=delay)
-    # windows are read as the preprocessing needs them: memory stays flat with bag length
-    rec = BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),
-                    together=[topics["imu"], tau_topic(topics)])
-    frame_notes: list[str] = []
-    samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho, cfg,
-                         topics, mounting=vehicle.mounting, notes=frame_notes)
-    for note in frame_notes:  # a frame_id other than the vehicle file's sensors: section
-        print(f"{p.name}: warning: {note}", file=sys.stderr)
-    if auto:
-        delay = profile_delay(samples, vehicle.damping, vehicle.body)
-        print(f"estimated delay of the response after the thrust: {delay * 1000:.0f} ms",
-              file=sys.stderr)
+    with BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),
+                   together=[topics["imu"], tau_topic(topics)]) as rec:
+        given = check_options(args, args.rate, rec.summary.duration, resample=True,
+                              min_rate=2 * cfg.cutoff)
+        auto = given is None
+        cfg = replace(cfg, rate=args.rate, delay=0.0 if given is None else given)
+        frame_notes: list[str] = []
         samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
-                             replace(cfg, delay=delay), topics, mounting=vehicle.mounting)
+                             cfg, topics, mounting=vehicle.mounting, notes=frame_notes)
+        for note in frame_notes:  # a frame_id other than the vehicle file's sensors: section
+            print(f"{p.name}: warning: {note}", file=sys.stderr)
+        if auto:
+            delay = profile_delay(samples, vehicle.damping, vehicle.body)
+            print(f"estimated delay of the response after the thrust: {delay * 1000:.0f} ms",
+                  file=sys.stderr)
+            samples = preprocess(rec, vehicle.thrusters, vehicle.body.gravity,
+                                 vehicle.body.rho, replace(cfg, delay=delay), topics,
+                                 mounting=vehicle.mounting)
     return samples
 
 

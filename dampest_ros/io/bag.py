@@ -310,51 +310,58 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
         If the bag is missing its metadata, corrupt or truncated; names the files.
     """
     with _Bag(path) as bag:
-        info = bag.reader.topics
-        if topics is None:
-            wanted = {_relative(t): t for t, i in info.items() if i.msgtype in cdr.SERIES_CLASSES}
-        else:
-            by_rel = {_relative(t): t for t in info}
-            missing = [t for t in topics if _relative(t) not in by_rel]
-            if missing:
-                have = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(info.items()))
-                raise MissingTopicError(f"topics {missing} not in bag {path}; it has: {have}")
-            wanted = {t: by_rel[_relative(t)] for t in topics}
-        key = {name: out for out, name in wanted.items()}
-        msgtype = {name: str(info[name].msgtype) for name in key}
-        for name, typ in msgtype.items():
-            if typ not in cdr.SERIES_CLASSES:
-                raise TypeError(f"topic {name} has type {typ}, which has no series class; "
-                                f"readable types: {sorted(cdr.SERIES_CLASSES)}")
-        raw: dict[str, list[bytes | memoryview]] = {name: [] for name in key}
-        window = start is not None or stop is not None
-        parts = {name: _Assembler(0 if window else int(info[name].msgcount or 0))
-                 for name in key}
-        conns = [c for name in key for c in info[name].connections]
-        total = sum(int(info[name].msgcount or 0) for name in key)
-        done = 0
-        ns = (None if start is None else round(start * 1e9),
-              None if stop is None else round(stop * 1e9))
-        for conn, data in bag.messages(conns, *ns):
-            buf = raw[conn.topic]
-            buf.append(data)
-            if len(buf) == READ_CHUNK:
-                parts[conn.topic].add(bag.decode(conn.topic, msgtype[conn.topic], buf))
-                buf.clear()
-                done += READ_CHUNK
-                if progress is not None:
-                    progress(done, total)
-        out: dict[str, Series] = {}
-        for name, buf in raw.items():
-            if buf or parts[name].first is None:
-                parts[name].add(bag.decode(name, msgtype[name], buf))
-            series = parts[name].result()
-            if not window and info[name].msgcount and len(series) != info[name].msgcount:
-                raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "
-                               f"{len(series)} of its {info[name].msgcount} messages")
-            out[key[name]] = series
-        if progress is not None:
-            progress(total, total)
+        return _read(bag, topics, progress, start, stop)
+
+
+def _read(bag: _Bag, topics: Sequence[str] | None,
+          progress: Callable[[int, int], None] | None, start: float | None,
+          stop: float | None) -> dict[str, Series]:
+    """:func:`read_bag` on a bag already open."""
+    info = bag.reader.topics
+    if topics is None:
+        wanted = {_relative(t): t for t, i in info.items() if i.msgtype in cdr.SERIES_CLASSES}
+    else:
+        by_rel = {_relative(t): t for t in info}
+        missing = [t for t in topics if _relative(t) not in by_rel]
+        if missing:
+            have = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(info.items()))
+            raise MissingTopicError(f"topics {missing} not in bag {bag.path}; it has: {have}")
+        wanted = {t: by_rel[_relative(t)] for t in topics}
+    key = {name: out for out, name in wanted.items()}
+    msgtype = {name: str(info[name].msgtype) for name in key}
+    for name, typ in msgtype.items():
+        if typ not in cdr.SERIES_CLASSES:
+            raise TypeError(f"topic {name} has type {typ}, which has no series class; "
+                            f"readable types: {sorted(cdr.SERIES_CLASSES)}")
+    raw: dict[str, list[bytes | memoryview]] = {name: [] for name in key}
+    window = start is not None or stop is not None
+    parts = {name: _Assembler(0 if window else int(info[name].msgcount or 0))
+             for name in key}
+    conns = [c for name in key for c in info[name].connections]
+    total = sum(int(info[name].msgcount or 0) for name in key)
+    done = 0
+    ns = (None if start is None else round(start * 1e9),
+          None if stop is None else round(stop * 1e9))
+    for conn, data in bag.messages(conns, *ns):
+        buf = raw[conn.topic]
+        buf.append(data)
+        if len(buf) == READ_CHUNK:
+            parts[conn.topic].add(bag.decode(conn.topic, msgtype[conn.topic], buf))
+            buf.clear()
+            done += READ_CHUNK
+            if progress is not None:
+                progress(done, total)
+    out: dict[str, Series] = {}
+    for name, buf in raw.items():
+        if buf or parts[name].first is None:
+            parts[name].add(bag.decode(name, msgtype[name], buf))
+        series = parts[name].result()
+        if not window and info[name].msgcount and len(series) != info[name].msgcount:
+            raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "
+                           f"{len(series)} of its {info[name].msgcount} messages")
+        out[key[name]] = series
+    if progress is not None:
+        progress(total, total)
     return out
 
 
@@ -403,14 +410,19 @@ def bag_summary(path: str | Path) -> BagSummary:
         ``start``/``end``: first and last log time (s); 0 for an empty bag.
     """
     with _Bag(path) as bag:
-        r = bag.reader
-        topics = {t: TopicSummary(t, str(i.msgtype), i.msgcount) for t, i in r.topics.items()}
-        empty = r.message_count == 0
-        start = 0 if empty else r.start_time
-        end = 0 if empty else r.end_time - 1  # rosbags: end_time is one past the last
-        files = [bag.path] if bag.path.is_file() else list(bag.path.iterdir())
-        storage = ("ros1" if bag.ros1 else
-                   "mcap" if any(f.suffix == ".mcap" for f in files) else "sqlite3")
+        return _summary(bag)
+
+
+def _summary(bag: _Bag) -> BagSummary:
+    """:func:`bag_summary` of a bag already open."""
+    r = bag.reader
+    topics = {t: TopicSummary(t, str(i.msgtype), i.msgcount) for t, i in r.topics.items()}
+    empty = r.message_count == 0
+    start = 0 if empty else r.start_time
+    end = 0 if empty else r.end_time - 1  # rosbags: end_time is one past the last
+    files = [bag.path] if bag.path.is_file() else list(bag.path.iterdir())
+    storage = ("ros1" if bag.ros1 else
+               "mcap" if any(f.suffix == ".mcap" for f in files) else "sqlite3")
     return BagSummary(bag.path, storage, start / 1e9, end / 1e9, topics)
 
 
@@ -479,16 +491,30 @@ class BagSource:
     together : sequence of str
         Topics read in one pass per window (their messages share the bag's chunks, which
         would otherwise be decompressed once per topic).
+
+    The bag stays open until :meth:`close` (or the end of a ``with`` block): opening a ROS 1
+    bag reads its whole index, which per window would cost in proportion to the bag.
     """
 
     def __init__(self, path: str | Path,
                  progress: Callable[[int, int], None] | None = None,
                  together: Sequence[str] = ()) -> None:
         self.path = Path(path)
-        self.summary = bag_summary(self.path)
+        self._bag = _Bag(self.path)
+        self.summary = _summary(self._bag)
         self.progress = progress
         self.together = [_relative(t) for t in together]
         self._cache: tuple[tuple[float, float], dict[str, Series]] | None = None
+
+    def __enter__(self) -> BagSource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the bag."""
+        self._bag.__exit__()
 
     def topics(self) -> list[str]:
         """Topic names (without the leading ``/``)."""
@@ -499,10 +525,9 @@ class BagSource:
         """Messages of ``topic`` logged in [start, stop) (s); the whole topic by default."""
         name = _relative(topic)
         if start is None or stop is None or name not in self.together:
-            return read_bag(self.path, [topic], start=start, stop=stop)[name]
+            return _read(self._bag, [topic], None, start, stop)[name]
         if self._cache is None or self._cache[0] != (start, stop):
-            self._cache = ((start, stop), read_bag(self.path, self.together, start=start,
-                                                   stop=stop))
+            self._cache = ((start, stop), _read(self._bag, self.together, None, start, stop))
         out = self._cache[1][name]
         if self.progress is not None:
             total = self.summary.end - self.summary.start
