@@ -36,6 +36,14 @@ def describe(p: argparse.ArgumentParser, description: str, example: str,
     p.epilog = example
 
 
+#: What the bag input of identify, validate, gap and inspect may be (their --help).
+BAG_HELP = (
+    "Bags are rosbag2 directories (MCAP or SQLite3, as ros2 bag records them) or ROS 1 bags "
+    "(.bag files, as most published marine datasets are), read the same way: a ROS 1 "
+    "sensor_msgs/Imu is the sensor_msgs/msg/Imu the topic options expect (see the "
+    "examples). Topic names are the same with or without the leading /: --imu-topic "
+    "/imu/data is --imu-topic imu/data.")
+
 #: What the CSV input of identify, validate and gap may look like (their --help).
 CSV_HELP = (
     "CSV logs (.csv, or gzip-compressed .csv.gz) are in the seed format "
