@@ -36,6 +36,14 @@ def describe(p: argparse.ArgumentParser, description: str, example: str,
     p.epilog = example
 
 
+#: What the bag input of identify, validate, gap and inspect may be (their --help).
+BAG_HELP = (
+    "Bags are rosbag2 directories (MCAP or SQLite3, as ros2 bag records them) or ROS 1 bags "
+    "(.bag files, as most published marine datasets are), read the same way: a ROS 1 "
+    "sensor_msgs/Imu is the sensor_msgs/msg/Imu the topic options expect (see the "
+    "examples). Topic names are the same with or without the leading /: --imu-topic "
+    "/imu/data is --imu-topic imu/data.")
+
 #: What the CSV input of identify, validate and gap may look like (their --help).
 CSV_HELP = (
     "CSV logs (.csv, or gzip-compressed .csv.gz) are in the seed format "
@@ -57,12 +65,27 @@ DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
                   "thrusters": "thrusters/state"}
 
 
+def topic_name(text: str) -> str:
+    """A ``--*-topic`` value as the commands name a bag's topics: without the leading ``/``
+    (bags store ``/imu/data``; ``/imu/data`` and ``imu/data`` are the same topic).
+
+    The type of every topic option (its default too), so that the names are normalised
+    here, once, for every command that reads them.
+    """
+    name = text.strip().lstrip("/")
+    if not name:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a topic name (e.g. imu/data)")
+    return name
+
+
 def add_topic_options(p: argparse.ArgumentParser) -> None:
-    """--imu-topic, --dvl-topic, --pressure-topic, --thrusters-topic, --wrench-topic."""
+    """--imu-topic, --dvl-topic, --pressure-topic, --thrusters-topic, --wrench-topic (values
+    normalised by :func:`topic_name`)."""
     for role, name in DEFAULT_TOPICS.items():
-        p.add_argument(f"--{role}-topic", default=name, metavar="TOPIC",
-                       help=f"topic of the {role} data (default: {name})")
-    p.add_argument("--wrench-topic", metavar="TOPIC",
+        p.add_argument(f"--{role}-topic", default=name, type=topic_name, metavar="TOPIC",
+                       help=f"topic of the {role} data, with or without the leading / "
+                            f"(default: {name})")
+    p.add_argument("--wrench-topic", type=topic_name, metavar="TOPIC",
                    help="topic of the body wrench τ (geometry_msgs/WrenchStamped, FLU; the "
                         "contract's 'wrench'), read instead of the thruster telemetry: the "
                         "vehicle then needs no thrusters (default: none, τ from "

@@ -30,7 +30,7 @@ from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigEr
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.measurements import JointSeries
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.io.bag import bag_summary, read_bag
+from dampest_ros.io.bag import bag_summary, is_bag, read_bag
 from dampest_ros.io.remote import is_url, local_log
 from dampest_ros.io.yaml_io import load_vehicle, save_model
 from dampest_ros.report.figures import psd_limits, psd_unit
@@ -43,11 +43,10 @@ def _joints(path: str, args: argparse.Namespace, vehicle: Vehicle) -> JointSerie
     a vehicle without thrusters or a bag without the thruster topic (τ from --wrench-topic):
     the candidates that need rotor speeds then say so."""
     p = Path(path)
-    if not p.is_dir() or vehicle.thrusters is None:
+    if not is_bag(p) or vehicle.thrusters is None:
         return None
     topic = args.thrusters_topic
-    if args.wrench_topic and topic.lstrip("/") not in {
-            t.lstrip("/") for t in bag_summary(p).topics}:
+    if args.wrench_topic and topic not in {t.lstrip("/") for t in bag_summary(p).topics}:
         return None
     series = read_bag(p, [topic])[topic]
     if not isinstance(series, JointSeries):

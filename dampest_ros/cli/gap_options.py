@@ -1,7 +1,7 @@
 """dampest gap: where do a simulator model and measured data disagree, and what is missing?
 
 Compares the model (--model, the damping model the user believes, with --vehicle for mass,
-restoring data and thrusters) with a measured bag or CSV through the one-step
+restoring data and thrusters) with a measured bag (rosbag2 or ROS 1) or CSV through the one-step
 inverse-dynamics residual and a free run, localises the residual, then names the missing
 physical effects one at a time by their held-out evidence (dampest_ros/core/gap/), until
 no candidate is significant. Uses only what a real vehicle logs (IMU, DVL, pressure,
@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 
 from dampest_ros.cli.common import (
+    BAG_HELP,
     CSV_HELP,
     add_columns_option,
     add_cutoff_option,
@@ -36,11 +37,12 @@ MIN_HELDOUT = 0.03
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of dampest gap (its work: dampest_ros.cli.gap.run)."""
-    describe(p, __doc__, EXAMPLE, CSV_HELP)
+    describe(p, __doc__, EXAMPLE, BAG_HELP, CSV_HELP)
     p.add_argument("input", metavar="MEASURED", nargs="+",
-                   help="rosbag2 directory (MCAP or SQLite3) or .csv / .csv.gz file from the "
-                        "vehicle; several (or a quoted glob, or a .txt list) are pooled one "
-                        "after the other in time (read on Dask), the last part held out")
+                   help="rosbag2 directory (MCAP or SQLite3), ROS 1 .bag file, or .csv / "
+                        ".csv.gz file from the vehicle; several (or a quoted glob, or a .txt "
+                        "list) are pooled one after the other in time (read on Dask), the "
+                        "last part held out")
     p.add_argument("--model", required=True, metavar="MODEL",
                    help="model YAML (ROS 2 parameters file) of the damping you believe, e.g. "
                         "the simulator's; its M is used as M_RB + M_A")

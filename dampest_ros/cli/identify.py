@@ -36,7 +36,7 @@ from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.preprocess import DataError
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.excitation import speed_limits
-from dampest_ros.io.bag import bag_summary, read_bag
+from dampest_ros.io.bag import bag_summary, is_bag, read_bag
 from dampest_ros.io.remote import is_url
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 
@@ -195,14 +195,15 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     path = Path(args.input)
     if not path.exists():
         raise FileNotFoundError(f"{path} does not exist")
-    if not path.is_dir():
-        raise DataError(f"--method rls replays the sensor messages of a rosbag2 directory; "
-                        f"{path} is not one (a CSV holds samples, not messages)")
+    if not is_bag(path):
+        raise DataError(f"--method rls replays the sensor messages of a bag (rosbag2 "
+                        f"directory or ROS 1 .bag file); {path} is not one (a CSV holds "
+                        "samples, not messages)")
     summary = bag_summary(path)
     check_options(args, args.rate, summary.duration, resample=True)
     topics = bag_topics(path, vehicle, args)
     have = {t.lstrip("/") for t in summary.topics}
-    if topics["pressure"].lstrip("/") not in have:
+    if topics["pressure"] not in have:
         del topics["pressure"]  # optional, as in the batch path
     if "wrench" in topics:
         del topics["thrusters"]  # τ from the body wrench: the thruster topic is not read

@@ -7,8 +7,8 @@ preprocessor (messages in stamp order), the samples as the dampest/* topics carr
 estimator node's recursive least squares with its default prior and settings, so that its
 result is the estimator node's on the same data.
 
-INPUT is a rosbag2 directory (MCAP or SQLite3) with IMU, DVL, pressure and thruster topics,
-or a CSV log.
+INPUT is a bag (a rosbag2 directory, MCAP or SQLite3, or a ROS 1 .bag file) with IMU, DVL,
+pressure and thruster (or body wrench) topics, or a CSV log.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 
 from dampest_ros.cli.common import (
+    BAG_HELP,
     CSV_HELP,
     add_columns_option,
     add_cutoff_option,
@@ -32,7 +33,9 @@ EXAMPLE = ("examples:\n"
            "  dampest identify bags/b600 --vehicle bluerov2_heavy --select --holdout 0.3 "
            "--report report\n"
            "  dampest identify 'bags/dive_*' --vehicle bluerov2_heavy --workers 2 "
-           "--drift-plot drift.png --out pooled.yaml")
+           "--drift-plot drift.png --out pooled.yaml\n"
+           "  dampest identify survey.bag --vehicle bluerov2_heavy --wrench-topic /wrench "
+           "--out model.yaml")
 
 #: Batch methods (dampest_ros.core.identification.batch.METHODS; a test checks the two agree).
 METHODS = ("ols", "wls", "ridge", "bounded", "map")
@@ -40,14 +43,14 @@ METHODS = ("ols", "wls", "ridge", "bounded", "map")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of dampest identify (its work: dampest_ros.cli.identify.run)."""
-    describe(p, __doc__, EXAMPLE, CSV_HELP)
+    describe(p, __doc__, EXAMPLE, BAG_HELP, CSV_HELP)
     p.add_argument("input", metavar="INPUT", nargs="+",
-                   help="rosbag2 directory, .csv or .csv.gz file, or an fsspec URL of one "
-                        "(e.g. s3://…, copied where it is read); several (or a quoted glob "
-                        "pattern such as 'bags/dive_*', or a .txt file listing logs one per "
-                        "line) are pooled into one model, each log preprocessed on its own "
-                        "Dask worker, and the drift of every coefficient between the logs "
-                        "is tested")
+                   help="rosbag2 directory, ROS 1 .bag file, .csv or .csv.gz file, or an "
+                        "fsspec URL of one (e.g. s3://…, copied where it is read); several "
+                        "(or a quoted glob pattern such as 'bags/dive_*', or a .txt file "
+                        "listing logs one per line) are pooled into one model, each log "
+                        "preprocessed on its own Dask worker, and the drift of every "
+                        "coefficient between the logs is tested")
     add_vehicle_option(p)
     p.add_argument("--terms", help="comma list of the preset's terms to identify, e.g. "
                                    "linear,quadratic (default: all terms of the preset)")

@@ -25,7 +25,7 @@ from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.plausibility import frame_notes
 from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, preprocess
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.io.bag import BagSource, bag_summary, check_role_types
+from dampest_ros.io.bag import BagSource, check_role_types, is_bag
 from dampest_ros.io.csv import is_csv, load_column_map, read_log
 from dampest_ros.io.yaml_io import load_model
 
@@ -131,8 +131,8 @@ def check_options(args: argparse.Namespace, rate: float, span: float, *,
 
 
 def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
-    """Samples from a rosbag2 directory (MCAP or SQLite3) or a CSV file, after
-    :func:`check_options`."""
+    """Samples from a rosbag2 directory (MCAP or SQLite3), a ROS 1 ``.bag`` file or a CSV
+    file, after :func:`check_options`."""
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p} does not exist")
@@ -145,35 +145,39 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
         check_options(args, samples.rate, float(samples.t[-1] - samples.t[0]),
                       resample=False)
         return samples
-    if not p.is_dir():
-        raise DataError(f"{p}: expected a rosbag2 directory or a .csv / .csv.gz file")
+    if not is_bag(p):
+        raise DataError(f"{p}: expected a rosbag2 directory, a ROS 1 .bag file or a .csv / "
+                        ".csv.gz file")
+    return _bag_samples(p, vehicle, args)
+
+
+def _bag_samples(p: Path, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
+    """Samples of a bag (rosbag2 or ROS 1), after :func:`check_options`; the bag is read a
+    window at a time as the preprocessing needs it, so memory stays flat with its length."""
     topics = bag_topics(p, vehicle, args)
     cfg = PreprocessConfig(max_gap=args.max_gap)
-    summary = bag_summary(p)
-    given = check_options(args, args.rate, summary.duration, resample=True,
-                          min_rate=2 * cfg.cutoff)
-    auto = given is None
-    delay = 0.0 if given is None else given
-    cfg = replace(cfg, rate=args.rate, delay=delay)
-    # windows are read as the preprocessing needs them: memory stays flat with bag length
-    rec = BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),
-                    together=[topics["imu"], tau_topic(topics)])
-    warn_implausible(rec, topics, summary.start, vehicle.body.gravity, p.name)
-    id_notes: list[str] = []
-    samples = preprocess(rec, vehicle, cfg, topics, notes=id_notes)
-    for note in id_notes:  # a frame_id other than the vehicle file's sensors: section
-        print(f"{p.name}: warning: {note}", file=sys.stderr)
-    if auto:
-        found = profile_delay(samples, vehicle.damping, vehicle.body)
-        delay = found.delay
-        print(f"estimated delay of the response after the thrust: {delay * 1000:.1f} ms "
-              f"± {found.std * 1000:.2g} ms (statistical; up to ±{500 / samples.rate:.0f} ms "
-              "more if τ is stamped at the start or end of its sample period)", file=sys.stderr)
-        if found.at_bound:
-            print(f"warning: the delay found is at the end of the searched "
-                  f"{found.bounds[0]:g}..{found.bounds[1]:g} s: the true one may lie beyond; "
-                  "give --delay S", file=sys.stderr)
-        samples = preprocess(rec, vehicle, replace(cfg, delay=delay), topics)
+    with BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),
+                   together=[topics["imu"], tau_topic(topics)]) as rec:
+        given = check_options(args, args.rate, rec.summary.duration, resample=True,
+                              min_rate=2 * cfg.cutoff)
+        auto = given is None
+        cfg = replace(cfg, rate=args.rate, delay=0.0 if given is None else given)
+        warn_implausible(rec, topics, rec.summary.start, vehicle.body.gravity, p.name)
+        id_notes: list[str] = []
+        samples = preprocess(rec, vehicle, cfg, topics, notes=id_notes)
+        for note in id_notes:  # a frame_id other than the vehicle file's sensors: section
+            print(f"{p.name}: warning: {note}", file=sys.stderr)
+        if auto:
+            found = profile_delay(samples, vehicle.damping, vehicle.body)
+            print(f"estimated delay of the response after the thrust: "
+                  f"{found.delay * 1000:.1f} ms ± {found.std * 1000:.2g} ms (statistical; up "
+                  f"to ±{500 / samples.rate:.0f} ms more if τ is stamped at the start or end "
+                  "of its sample period)", file=sys.stderr)
+            if found.at_bound:
+                print(f"warning: the delay found is at the end of the searched "
+                      f"{found.bounds[0]:g}..{found.bounds[1]:g} s: the true one may lie "
+                      "beyond; give --delay S", file=sys.stderr)
+            samples = preprocess(rec, vehicle, replace(cfg, delay=found.delay), topics)
     return samples
 
 

@@ -1,4 +1,4 @@
-"""dampest inspect: what a bag holds and whether it can feed identification.
+"""dampest inspect: what a bag (rosbag2 or ROS 1) holds and whether it can feed identification.
 
 Prints every topic with its message type, count, rate, gaps and longest gap, then whether
 the topics identification needs (IMU, DVL and thruster state or a body wrench) are there
@@ -9,15 +9,24 @@ from __future__ import annotations
 
 import argparse
 
-from dampest_ros.cli.common import add_topic_options, describe, table, tau_topic, topic_roles
+from dampest_ros.cli.common import (
+    BAG_HELP,
+    add_topic_options,
+    describe,
+    table,
+    tau_topic,
+    topic_roles,
+)
 
-EXAMPLE = "example:\n  dampest inspect bags/sample"
+EXAMPLE = ("examples:\n  dampest inspect bags/sample\n"
+           "  dampest inspect survey.bag --imu-topic /imu/data --wrench-topic /wrench")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of dampest inspect."""
-    describe(p, __doc__, EXAMPLE)
-    p.add_argument("bag", metavar="BAG", help="rosbag2 directory (MCAP or SQLite3)")
+    describe(p, __doc__, EXAMPLE, BAG_HELP)
+    p.add_argument("bag", metavar="BAG",
+                   help="rosbag2 directory (MCAP or SQLite3) or ROS 1 .bag file")
     p.add_argument("--gap", type=float, default=0.5, metavar="S",
                    help="report gaps longer than this many seconds (default: 0.5)")
     add_topic_options(p)
@@ -50,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     topics = topic_roles(args)
     tau = "body wrench" if "wrench" in topics else "thruster"
     needed = [topics["imu"], topics["dvl"], tau_topic(topics)]
-    missing = [t for t in needed if t.lstrip("/") not in have]
+    missing = [t for t in needed if t not in have]
     problems = role_type_errors(summary, topics)
     if missing:
         problems.insert(0, f"missing {missing} (use --imu-topic etc. with dampest identify "

@@ -1,4 +1,4 @@
-"""dampest validate: score a model YAML on another log (bag or CSV).
+"""dampest validate: score a model YAML on another log (rosbag2 or ROS 1 bag, or CSV).
 
 The model (written by dampest identify --out, or any model file) is held fixed and
 compared with a log it was not identified from, in two ways, per DOF:
@@ -31,6 +31,7 @@ import argparse
 from typing import TYPE_CHECKING
 
 from dampest_ros.cli.common import (
+    BAG_HELP,
     CSV_HELP,
     add_columns_option,
     add_cutoff_option,
@@ -50,7 +51,8 @@ if TYPE_CHECKING:
 
 EXAMPLE = ("example:\n"
            "  dampest identify bags/run1 --vehicle bluerov2_heavy --out model.yaml\n"
-           "  dampest validate model.yaml bags/run2 --vehicle bluerov2_heavy --out forces.csv")
+           "  dampest validate model.yaml bags/run2 --vehicle bluerov2_heavy --out forces.csv\n"
+           "  dampest validate model.yaml survey.bag --vehicle bluerov2_heavy")
 
 FORCE_UNITS = ("N", "N", "N", "N·m", "N·m", "N·m")
 VEL_UNITS = ("m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s")
@@ -58,12 +60,12 @@ VEL_UNITS = ("m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of dampest validate."""
-    describe(p, __doc__, EXAMPLE, CSV_HELP)
+    describe(p, __doc__, EXAMPLE, BAG_HELP, CSV_HELP)
     p.add_argument("model", metavar="MODEL",
                    help="model YAML (ROS 2 parameters file), e.g. from dampest identify --out")
     p.add_argument("input", metavar="LOG",
-                   help="rosbag2 directory (MCAP or SQLite3) or .csv / .csv.gz file in any "
-                        "flavour identify reads")
+                   help="rosbag2 directory (MCAP or SQLite3), ROS 1 .bag file, or .csv / "
+                        ".csv.gz file in any flavour identify reads")
     add_vehicle_option(p)
     p.add_argument("--out", metavar="FORCES.csv",
                    help="write time, damping_X..N, hydro_X..N, target_X..N per sample here")

@@ -1,12 +1,18 @@
-"""rosbag2 bags (MCAP or SQLite3) of measurement series, written and read with rosbags.
+"""Bags of measurement series: rosbag2 (MCAP or SQLite3) written and read, ROS 1 read, with
+rosbags.
 
-Bags are rosbag2 directories (``metadata.yaml`` + storage file) that ``ros2 bag`` on Jazzy,
-rosbags and the mcap library read. Topic names are stored fully qualified (``/imu/data``) and
-returned relative (``imu/data``), as in :data:`dampest_ros.core.signals.measurements.TOPIC_TYPES`.
-The log time of every message is its header stamp in nanoseconds.
+Bags written here are rosbag2 directories (``metadata.yaml`` + storage file) that ``ros2 bag``
+on Jazzy, rosbags and the mcap library read; the log time of every message is its header
+stamp in nanoseconds. Bags are read by one reader for both generations: a rosbag2 directory,
+or a ROS 1 bag (a ``.bag`` file, format 2.0, as most published marine datasets are), whose
+messages rosbags converts from the ROS 1 wire format to CDR as they are read (ROS 1 type
+names such as ``sensor_msgs/Imu`` become ``sensor_msgs/msg/Imu``). Topic names are stored
+fully qualified (``/imu/data``) and returned relative (``imu/data``), as in
+:data:`dampest_ros.core.signals.measurements.TOPIC_TYPES`.
 
 Messages are serialized and deserialized with the fixed-layout numpy codec of
-:mod:`dampest_ros.io.cdr`; the only per-message Python work is the rosbags read or write call.
+:mod:`dampest_ros.io.cdr`; the only per-message Python work is the rosbags read or write call
+(and, for a ROS 1 bag, rosbags' conversion of the message to CDR).
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from rosbags.interfaces import (
     Connection,
     Qos,
 )
+from rosbags.rosbag1 import Reader as Ros1Reader
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
 from dampest_ros.core.signals.measurements import TOPIC_TYPES, Series
@@ -42,6 +49,8 @@ LATCHED_TOPICS = ("dampest/model",)
 READ_CHUNK = 5_000
 
 _STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
+#: File name suffix of a ROS 1 bag.
+ROS1_SUFFIX = ".bag"
 
 
 class BagError(RuntimeError):
@@ -164,19 +173,36 @@ def _files(path: Path) -> str:
     return str(path)
 
 
+def is_ros1_bag(path: str | Path) -> bool:
+    """Whether ``path`` names a ROS 1 bag: not a directory, its name ending in ``.bag``."""
+    p = Path(path)
+    return p.suffix.lower() == ROS1_SUFFIX and not p.is_dir()
+
+
+def is_bag(path: str | Path) -> bool:
+    """Whether ``path`` is a bag to read: a rosbag2 directory or a ROS 1 ``.bag`` file."""
+    p = Path(path)
+    return p.is_dir() or (p.is_file() and is_ros1_bag(p))
+
+
 class _Bag:
-    """A rosbags Reader whose failures become :class:`BagError` naming the files."""
+    """A rosbags Reader of either generation (:func:`is_ros1_bag` chooses) whose failures
+    become :class:`BagError` naming the files; messages come out as CDR."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         if not self.path.exists():
             raise FileNotFoundError(f"no bag at {self.path}")
+        self.ros1 = is_ros1_bag(self.path)
         try:
-            self.reader = Reader(self.path)
+            self.reader: Reader | Ros1Reader = (Ros1Reader if self.ros1 else Reader)(self.path)
             self.reader.open()
         except Exception as exc:
             hint = ""
-            if self.path.is_dir() and any(self.path.glob("*.mcap")):
+            if self.ros1:
+                hint = ("; it is not a ROS 1 bag (format 2.0), or it is truncated: a recording "
+                        "that was interrupted needs 'rosbag reindex' (ROS 1) first")
+            elif self.path.is_dir() and any(self.path.glob("*.mcap")):
                 hint = (f"; if its recording was interrupted, 'dampest reindex {self.path}' "
                         "rebuilds metadata.yaml and recovers it up to its last complete chunk")
             raise BagError(f"cannot read bag {_files(self.path)}: {exc}{hint}") from exc
@@ -188,17 +214,20 @@ class _Bag:
         self.reader.close()
 
     def messages(self, conns: Sequence[Connection], start: int | None = None,
-                 stop: int | None = None) -> Iterator[tuple[Connection, bytes]]:
+                 stop: int | None = None) -> Iterator[tuple[Connection, bytes | memoryview]]:
         if not conns:  # rosbags reads every topic for an empty selection
             return
+        # a ROS 1 message to CDR by rosbags (the ROS 2 Jazzy definitions; std_msgs/Header
+        # loses its seq): the CDR codec then decodes both generations alike
+        to_cdr = cdr.typestore().ros1_to_cdr if self.ros1 else None
         try:
             for conn, _, data in self.reader.messages(connections=conns, start=start,
                                                       stop=stop):
-                yield conn, data
+                yield conn, data if to_cdr is None else to_cdr(data, conn.msgtype)
         except Exception as exc:
             raise BagError(f"cannot read bag {_files(self.path)}: {exc}") from exc
 
-    def decode(self, topic: str, msgtype: str, raw: list[bytes]) -> Series:
+    def decode(self, topic: str, msgtype: str, raw: list[bytes | memoryview]) -> Series:
         try:
             return cdr.decode(msgtype, raw)
         except Exception as exc:
@@ -251,7 +280,8 @@ class _Assembler:
 def read_bag(path: str | Path, topics: Sequence[str] | None = None,
              progress: Callable[[int, int], None] | None = None,
              start: float | None = None, stop: float | None = None) -> dict[str, Series]:
-    """Read the series of a rosbag2 bag (MCAP or SQLite3 directory, or a single storage file).
+    """Read the series of a bag: a rosbag2 bag (MCAP or SQLite3 directory, or a single
+    storage file) or a ROS 1 ``.bag`` file.
 
     Parameters
     ----------
@@ -280,51 +310,58 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
         If the bag is missing its metadata, corrupt or truncated; names the files.
     """
     with _Bag(path) as bag:
-        info = bag.reader.topics
-        if topics is None:
-            wanted = {_relative(t): t for t, i in info.items() if i.msgtype in cdr.SERIES_CLASSES}
-        else:
-            by_rel = {_relative(t): t for t in info}
-            missing = [t for t in topics if _relative(t) not in by_rel]
-            if missing:
-                have = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(info.items()))
-                raise MissingTopicError(f"topics {missing} not in bag {path}; it has: {have}")
-            wanted = {t: by_rel[_relative(t)] for t in topics}
-        key = {name: out for out, name in wanted.items()}
-        msgtype = {name: str(info[name].msgtype) for name in key}
-        for name, typ in msgtype.items():
-            if typ not in cdr.SERIES_CLASSES:
-                raise TypeError(f"topic {name} has type {typ}, which has no series class; "
-                                f"readable types: {sorted(cdr.SERIES_CLASSES)}")
-        raw: dict[str, list[bytes]] = {name: [] for name in key}
-        window = start is not None or stop is not None
-        parts = {name: _Assembler(0 if window else int(info[name].msgcount or 0))
-                 for name in key}
-        conns = [c for name in key for c in info[name].connections]
-        total = sum(int(info[name].msgcount or 0) for name in key)
-        done = 0
-        ns = (None if start is None else round(start * 1e9),
-              None if stop is None else round(stop * 1e9))
-        for conn, data in bag.messages(conns, *ns):
-            buf = raw[conn.topic]
-            buf.append(data)
-            if len(buf) == READ_CHUNK:
-                parts[conn.topic].add(bag.decode(conn.topic, msgtype[conn.topic], buf))
-                buf.clear()
-                done += READ_CHUNK
-                if progress is not None:
-                    progress(done, total)
-        out: dict[str, Series] = {}
-        for name, buf in raw.items():
-            if buf or parts[name].first is None:
-                parts[name].add(bag.decode(name, msgtype[name], buf))
-            series = parts[name].result()
-            if not window and info[name].msgcount and len(series) != info[name].msgcount:
-                raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "
-                               f"{len(series)} of its {info[name].msgcount} messages")
-            out[key[name]] = series
-        if progress is not None:
-            progress(total, total)
+        return _read(bag, topics, progress, start, stop)
+
+
+def _read(bag: _Bag, topics: Sequence[str] | None,
+          progress: Callable[[int, int], None] | None, start: float | None,
+          stop: float | None) -> dict[str, Series]:
+    """:func:`read_bag` on a bag already open."""
+    info = bag.reader.topics
+    if topics is None:
+        wanted = {_relative(t): t for t, i in info.items() if i.msgtype in cdr.SERIES_CLASSES}
+    else:
+        by_rel = {_relative(t): t for t in info}
+        missing = [t for t in topics if _relative(t) not in by_rel]
+        if missing:
+            have = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(info.items()))
+            raise MissingTopicError(f"topics {missing} not in bag {bag.path}; it has: {have}")
+        wanted = {t: by_rel[_relative(t)] for t in topics}
+    key = {name: out for out, name in wanted.items()}
+    msgtype = {name: str(info[name].msgtype) for name in key}
+    for name, typ in msgtype.items():
+        if typ not in cdr.SERIES_CLASSES:
+            raise TypeError(f"topic {name} has type {typ}, which has no series class; "
+                            f"readable types: {sorted(cdr.SERIES_CLASSES)}")
+    raw: dict[str, list[bytes | memoryview]] = {name: [] for name in key}
+    window = start is not None or stop is not None
+    parts = {name: _Assembler(0 if window else int(info[name].msgcount or 0))
+             for name in key}
+    conns = [c for name in key for c in info[name].connections]
+    total = sum(int(info[name].msgcount or 0) for name in key)
+    done = 0
+    ns = (None if start is None else round(start * 1e9),
+          None if stop is None else round(stop * 1e9))
+    for conn, data in bag.messages(conns, *ns):
+        buf = raw[conn.topic]
+        buf.append(data)
+        if len(buf) == READ_CHUNK:
+            parts[conn.topic].add(bag.decode(conn.topic, msgtype[conn.topic], buf))
+            buf.clear()
+            done += READ_CHUNK
+            if progress is not None:
+                progress(done, total)
+    out: dict[str, Series] = {}
+    for name, buf in raw.items():
+        if buf or parts[name].first is None:
+            parts[name].add(bag.decode(name, msgtype[name], buf))
+        series = parts[name].result()
+        if not window and info[name].msgcount and len(series) != info[name].msgcount:
+            raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "
+                           f"{len(series)} of its {info[name].msgcount} messages")
+        out[key[name]] = series
+    if progress is not None:
+        progress(total, total)
     return out
 
 
@@ -339,7 +376,8 @@ class TopicSummary:
 
 @dataclass(frozen=True)
 class BagSummary:
-    """What a bag holds: storage, time range of the log times (s) and its topics."""
+    """What a bag holds: storage (``mcap``, ``sqlite3`` or ``ros1``), time range of the log
+    times (s) and its topics."""
 
     path: Path
     storage: str
@@ -359,7 +397,8 @@ class BagSummary:
 
 
 def bag_summary(path: str | Path) -> BagSummary:
-    """Topics, types, counts and time range of a bag, from its metadata (no messages read).
+    """Topics, types, counts and time range of a bag, from its metadata or, for a ROS 1 bag,
+    its index (no messages read).
 
     Parameters
     ----------
@@ -371,13 +410,19 @@ def bag_summary(path: str | Path) -> BagSummary:
         ``start``/``end``: first and last log time (s); 0 for an empty bag.
     """
     with _Bag(path) as bag:
-        r = bag.reader
-        topics = {t: TopicSummary(t, str(i.msgtype), i.msgcount) for t, i in r.topics.items()}
-        empty = r.message_count == 0
-        start = 0 if empty else r.start_time
-        end = 0 if empty else r.end_time - 1  # rosbags: end_time is one past the last
-        files = [bag.path] if bag.path.is_file() else list(bag.path.iterdir())
-        storage = "mcap" if any(f.suffix == ".mcap" for f in files) else "sqlite3"
+        return _summary(bag)
+
+
+def _summary(bag: _Bag) -> BagSummary:
+    """:func:`bag_summary` of a bag already open."""
+    r = bag.reader
+    topics = {t: TopicSummary(t, str(i.msgtype), i.msgcount) for t, i in r.topics.items()}
+    empty = r.message_count == 0
+    start = 0 if empty else r.start_time
+    end = 0 if empty else r.end_time - 1  # rosbags: end_time is one past the last
+    files = [bag.path] if bag.path.is_file() else list(bag.path.iterdir())
+    storage = ("ros1" if bag.ros1 else
+               "mcap" if any(f.suffix == ".mcap" for f in files) else "sqlite3")
     return BagSummary(bag.path, storage, start / 1e9, end / 1e9, topics)
 
 
@@ -440,22 +485,36 @@ class BagSource:
     Parameters
     ----------
     path : str or Path
-        rosbag2 directory (MCAP or SQLite3).
+        rosbag2 directory (MCAP or SQLite3) or ROS 1 ``.bag`` file.
     progress : callable, optional
         Called as ``progress(seconds_read, seconds_total)`` as windows are read.
     together : sequence of str
         Topics read in one pass per window (their messages share the bag's chunks, which
         would otherwise be decompressed once per topic).
+
+    The bag stays open until :meth:`close` (or the end of a ``with`` block): opening a ROS 1
+    bag reads its whole index, which per window would cost in proportion to the bag.
     """
 
     def __init__(self, path: str | Path,
                  progress: Callable[[int, int], None] | None = None,
                  together: Sequence[str] = ()) -> None:
         self.path = Path(path)
-        self.summary = bag_summary(self.path)
+        self._bag = _Bag(self.path)
+        self.summary = _summary(self._bag)
         self.progress = progress
         self.together = [_relative(t) for t in together]
         self._cache: tuple[tuple[float, float], dict[str, Series]] | None = None
+
+    def __enter__(self) -> BagSource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the bag."""
+        self._bag.__exit__()
 
     def topics(self) -> list[str]:
         """Topic names (without the leading ``/``)."""
@@ -466,10 +525,9 @@ class BagSource:
         """Messages of ``topic`` logged in [start, stop) (s); the whole topic by default."""
         name = _relative(topic)
         if start is None or stop is None or name not in self.together:
-            return read_bag(self.path, [topic], start=start, stop=stop)[name]
+            return _read(self._bag, [topic], None, start, stop)[name]
         if self._cache is None or self._cache[0] != (start, stop):
-            self._cache = ((start, stop), read_bag(self.path, self.together, start=start,
-                                                   stop=stop))
+            self._cache = ((start, stop), _read(self._bag, self.together, None, start, stop))
         out = self._cache[1][name]
         if self.progress is not None:
             total = self.summary.end - self.summary.start

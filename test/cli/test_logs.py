@@ -1,20 +1,31 @@
 """Logs as users have them: .csv.gz, --start/--end, --holdout, the seed
-paper's CSV flavour, and dampest validate, on seeded simulations with known truth."""
+paper's CSV flavour, dampest validate, ROS 1 bags written by other tools and topic names with
+a leading slash, on seeded simulations with known truth."""
 
 from __future__ import annotations
 
 import gzip
+import subprocess
+import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
+from rosbags.rosbag1 import Writer as Ros1Writer
+from rosbags.rosbag2 import Reader as Ros2Reader
+from rosbags.typesys import Stores, get_typestore
 
 from dampest_ros.cli.main import main
 from dampest_ros.core.identification.regression import target
 from dampest_ros.core.identification.validate import metrics, predicted_force
+from dampest_ros.core.physics import frames
 from dampest_ros.core.physics.rigid_body import coriolis_force, munk_moment
+from dampest_ros.core.signals.measurements import JointSeries
+from dampest_ros.core.signals.preprocess import thruster_wrench
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.io import csv as dcsv
+from dampest_ros.io.bag import read_bag
 from dampest_ros.io.yaml_io import load_model, load_vehicle
 
 VEHICLE = load_vehicle("bluerov2_heavy")
@@ -258,3 +269,146 @@ def test_validate_help_and_bad_input(logs: Path, capsys: pytest.CaptureFixture[s
                  "--vehicle", "bluerov2_heavy", "--start", "400"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("dampest validate: error: --start:"), err
+
+
+# --- ROS 1 bags and topic names ---------------------------------------------------------------
+
+JAZZY, NOETIC = get_typestore(Stores.ROS2_JAZZY), get_typestore(Stores.ROS1_NOETIC)
+
+
+def ros1_message(msg: Any, seq: int, msgtype: str) -> bytes:
+    """A message as a ROS 1 node publishes it: rosbags' Noetic serialisation, seq counting."""
+    msg.header.seq = seq
+    return bytes(NOETIC.serialize_ros1(msg, msgtype))
+
+
+def body_wrench_messages(bag: Path) -> list[tuple[int, Any]]:
+    """(log time ns, Noetic WrenchStamped) of the thrust the bag's thrusters/state gave (FLU)."""
+    joints = read_bag(bag, ["thrusters/state"])["thrusters/state"]
+    assert isinstance(joints, JointSeries) and VEHICLE.thrusters is not None
+    tau = frames.body_twist(thruster_wrench(joints, VEHICLE.thrusters))
+    T = NOETIC.types
+    out = []
+    for t, row in zip(joints.stamp, tau, strict=True):
+        ns = round(float(t) * 1e9)
+        stamp = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+        vec = [T["geometry_msgs/msg/Vector3"](*map(float, v)) for v in (row[:3], row[3:])]
+        out.append((ns, T["geometry_msgs/msg/WrenchStamped"](
+            T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id="base_link"),
+            T["geometry_msgs/msg/Wrench"](*vec))))
+    return out
+
+
+def write_ros1_bag(src: Path, dst: Path) -> None:
+    """The sensor topics of rosbag2 bag ``src`` as the ROS 1 bag ``dst``, written by rosbags'
+    rosbag1 Writer: every message deserialised and serialised again by rosbags' typestores
+    (ROS 1 wire format, seq counting per topic), plus τ as a body wrench on /wrench."""
+    with Ros2Reader(src) as reader, Ros1Writer(dst) as writer:
+        conns = {}
+        seq: dict[str, int] = {}
+        for c in reader.connections:
+            if c.topic != "/truth/odom":
+                conns[c.id] = writer.add_connection(c.topic, c.msgtype, typestore=NOETIC)
+        for c, log_ns, raw in reader.messages([c for c in reader.connections
+                                               if c.id in conns]):
+            msg = NOETIC.deserialize_ros1(JAZZY.cdr_to_ros1(raw, c.msgtype), c.msgtype)
+            seq[c.topic] = seq.get(c.topic, -1) + 1
+            writer.write(conns[c.id], log_ns, ros1_message(msg, seq[c.topic], c.msgtype))
+        wrench = writer.add_connection("/wrench", "geometry_msgs/msg/WrenchStamped",
+                                       typestore=NOETIC)
+        for k, (log_ns, msg) in enumerate(body_wrench_messages(src)):
+            writer.write(wrench, log_ns, ros1_message(msg, k, "geometry_msgs/msg/WrenchStamped"))
+
+
+@pytest.fixture(scope="module")
+def ros1(logs: Path) -> Path:
+    """The 120 s test log as ROS 1 bags by two tools that are not ours: converted.bag by the
+    rosbags-convert command, written.bag by rosbags' rosbag1 Writer (with a /wrench topic)."""
+    convert = Path(sys.executable).with_name("rosbags-convert")
+    subprocess.run([str(convert), "--src", str(logs / "test"), "--dst",
+                    str(logs / "converted.bag")], check=True, capture_output=True)
+    write_ros1_bag(logs / "test", logs / "written.bag")
+    return logs
+
+
+def identified(log: Path, out: Path, *extra: str) -> Any:
+    assert main(["identify", str(log), "--vehicle", "bluerov2_heavy", "--out", str(out),
+                 *extra]) == 0
+    return load_model(out)
+
+
+def test_identify_on_ros1_bags_gives_the_theta_of_the_rosbag2_bag(ros1: Path) -> None:
+    """The same messages give the same θ to the last bit: max |Δθ|/σ = 0."""
+    ref = identified(ros1 / "test", ros1 / "ros2.yaml")
+    for name in ("converted", "written"):
+        got = identified(ros1 / f"{name}.bag", ros1 / f"{name}.yaml")
+        assert got.parameter_names == ref.parameter_names
+        assert np.max(np.abs(got.theta - ref.theta) / ref.theta_std) == 0.0, name
+        np.testing.assert_array_equal(got.theta_std, ref.theta_std)
+
+
+def test_inspect_lists_the_topics_and_rates_of_a_ros1_bag(
+        ros1: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    capsys.readouterr()
+    assert main(["inspect", str(ros1 / "written.bag")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith(f"{ros1 / 'written.bag'} (ros1): ")
+    rows = {r[0]: r[1:4] for r in (ln.split() for ln in lines[3:-1])}
+    assert rows.keys() == {"/imu/data", "/dvl/twist", "/pressure", "/thrusters/state",
+                           "/wrench"}
+    expected = {"/imu/data": ("sensor_msgs/msg/Imu", 200.0),
+                "/pressure": ("sensor_msgs/msg/FluidPressure", 20.0),
+                "/thrusters/state": ("sensor_msgs/msg/JointState", 50.0),
+                "/wrench": ("geometry_msgs/msg/WrenchStamped", 50.0)}
+    for topic, (msgtype, rate) in expected.items():
+        assert rows[topic][0] == msgtype
+        assert int(rows[topic][1]) == round(120 * rate) + 1, topic
+        assert float(rows[topic][2]) == pytest.approx(rate, rel=1e-3), topic
+    assert lines[-1] == "ready for identification: IMU, DVL and thruster topics present"
+
+
+def test_topic_options_take_names_with_or_without_the_leading_slash(
+        ros1: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--imu-topic /imu/data and --wrench-topic /wrench, on the ROS 1 bag and the rosbag2 bag:
+    τ from the body wrench gives the thruster telemetry's θ (to 1e-9)."""
+    ref = identified(ros1 / "test", ros1 / "plain.yaml")
+    slashed = identified(ros1 / "test", ros1 / "slashed.yaml", "--imu-topic", "/imu/data",
+                         "--dvl-topic", "/dvl/twist", "--thrusters-topic", "/thrusters/state")
+    np.testing.assert_array_equal(slashed.theta, ref.theta)
+    wrench = identified(ros1 / "written.bag", ros1 / "wrench.yaml", "--imu-topic",
+                        "/imu/data", "--wrench-topic", "/wrench")
+    np.testing.assert_allclose(wrench.theta, ref.theta, rtol=1e-9, atol=1e-9)
+    capsys.readouterr()
+    assert main(["inspect", str(ros1 / "written.bag"), "--wrench-topic", "/wrench"]) == 0
+    assert capsys.readouterr().out.splitlines()[-1].endswith("IMU, DVL and body wrench topics "
+                                                             "present")
+
+
+def test_validate_scores_a_ros1_bag_as_the_rosbag2_bag(
+        ros1: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    truth = ros1 / "train" / "truth_model.yaml"
+    printed: list[list[str]] = []
+    for log in (ros1 / "test", ros1 / "converted.bag"):
+        capsys.readouterr()
+        assert main(["validate", str(truth), str(log), "--vehicle", "bluerov2_heavy"]) == 0
+        first, *rest = capsys.readouterr().out.replace(str(log), "LOG").splitlines()
+        printed.append([first.rsplit(";", 1)[0], *rest])  # without the time it took
+    assert printed[0] == printed[1]
+
+
+@pytest.mark.parametrize("command", ["identify", "inspect", "validate"])
+def test_truncated_or_foreign_ros1_bag_is_one_line_and_exit_2(
+        ros1: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str) -> None:
+    data = (ros1 / "converted.bag").read_bytes()
+    for name, content in (("cut.bag", data[:len(data) // 3]), ("text.bag", b"time,u,v\n")):
+        path = tmp_path / name
+        path.write_bytes(content)
+        args = {"identify": [str(path)], "inspect": [str(path)],
+                "validate": [str(ros1 / "train" / "truth_model.yaml"), str(path)]}[command]
+        capsys.readouterr()
+        assert main([command, *args] + ([] if command == "inspect" else
+                                         ["--vehicle", "bluerov2_heavy"])) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1, err
+        assert err[0].startswith(f"dampest {command}: error: cannot read bag {path}: "), err
+        assert "not a ROS 1 bag (format 2.0), or it is truncated" in err[0]

@@ -1,5 +1,6 @@
 """rosbag2 bags: written by write_bag, read back by rosbags, by the mcap library and by
-read_bag, message for message."""
+read_bag, message for message; ROS 1 bags written by rosbags' rosbag1 Writer (messages in the
+ROS 1 wire format by rosbags' ROS 1 Noetic typestore), read by the same reader."""
 
 from __future__ import annotations
 
@@ -13,7 +14,9 @@ import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
+from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
 
 from dampest_ros.core.signals.measurements import ImuSeries, Series, TwistSeries
 from dampest_ros.io import bag, cdr
@@ -247,3 +250,68 @@ def test_read_bag_reports_progress_to_the_end(tmp_path: Path, monkeypatch: pytes
     assert calls[-1] == (total, total)
     assert [d for d, _ in calls] == sorted(d for d, _ in calls)
     assert len(calls) > 2
+
+
+# --- ROS 1 bags ------------------------------------------------------------------------------
+
+
+def write_ros1(path: Path, recording: dict[str, Series], typestore: Any, to_ros: ToRos,
+               compression: str = "none") -> Path:
+    """``recording`` as a ROS 1 bag written by rosbags alone: each message built by the test
+    conftest's reference conversion, serialised by rosbags' ROS 1 Noetic typestore with its
+    header seq counting up as a ROS 1 publisher's does; log time = header stamp."""
+    noetic = get_typestore(Stores.ROS1_NOETIC)
+    writer = Ros1Writer(path)
+    if compression != "none":
+        writer.set_compression(Ros1Writer.CompressionFormat[compression.upper()])
+    with writer:
+        for topic, s in recording.items():
+            msgtype = cdr.message_type(s)
+            conn = writer.add_connection("/" + topic, msgtype, typestore=noetic)
+            for i in range(len(s)):
+                ros2 = typestore.serialize_cdr(to_ros(s, i), msgtype)
+                msg = noetic.deserialize_ros1(typestore.cdr_to_ros1(ros2, msgtype), msgtype)
+                msg.header.seq = i
+                writer.write(conn, stamp_ns(s, i), bytes(noetic.serialize_ros1(msg, msgtype)))
+    return path
+
+
+@pytest.mark.parametrize("compression", ["none", "lz4", "bz2"])
+def test_ros1_bag_reads_exactly_like_the_rosbag2_bag(
+        compression: str, tmp_path: Path, recording: dict[str, Series], typestore: Any,
+        to_ros: ToRos, assert_same: AssertSame, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every series bit for bit, whole and in read chunks that do not divide the counts;
+    the summary and BagSource's windows as for the rosbag2 bag of the same messages."""
+    ros1 = write_ros1(tmp_path / "run.bag", recording, typestore, to_ros, compression)
+    ros2 = bag.write_bag(tmp_path / "run", recording)
+    assert bag.is_bag(ros1) and bag.is_bag(ros2) and not bag.is_bag(tmp_path / "x.csv")
+    out = bag.read_bag(ros1)
+    assert out.keys() == recording.keys()
+    for topic, s in recording.items():
+        assert_same(out[topic], s)
+    monkeypatch.setattr(bag, "READ_CHUNK", 7)
+    out = bag.read_bag(ros1, ["/imu/data", "thrusters/state"])
+    assert_same(out["/imu/data"], recording["imu/data"])
+    assert_same(out["thrusters/state"], recording["thrusters/state"])
+    a, b = bag.bag_summary(ros1), bag.bag_summary(ros2)
+    assert (a.storage, b.storage) == ("ros1", "mcap")
+    assert (a.topics, a.start, a.end) == (b.topics, b.start, b.end)
+    assert a.topics["/imu/data"] == bag.TopicSummary("/imu/data", "sensor_msgs/msg/Imu", 400)
+    window = bag.BagSource(ros1, together=["imu/data"]).series("/imu/data", 0.5, 1.25)
+    assert len(window) == 150  # 200 Hz, [0.5, 1.25) s
+    assert_same(window, bag.BagSource(ros2).series("imu/data", 0.5, 1.25))
+
+
+@pytest.mark.parametrize("keep", [0.0, 0.1, 0.5, 0.9, 0.999])
+def test_truncated_ros1_bag_error_names_the_file(keep: float, tmp_path: Path,
+                                                 recording: dict[str, Series], typestore: Any,
+                                                 to_ros: ToRos) -> None:
+    """A ROS 1 bag cut short (its index is at the end), or not a bag at all: BagError
+    naming the file and the cause, whether the summary or the messages are asked for."""
+    path = write_ros1(tmp_path / "run.bag", recording, typestore, to_ros)
+    data = path.read_bytes()
+    path.write_bytes(data[:int(keep * len(data))] if keep else b"not a bag\n")
+    for read in (bag.bag_summary, bag.read_bag):
+        with pytest.raises(bag.BagError, match=r"cannot read bag .*run\.bag: .*ROS 1") as err:
+            read(path)
+        assert "\n" not in str(err.value)
