@@ -26,14 +26,18 @@ from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, pre
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.io.bag import BagSource, bag_summary, check_role_types
 from dampest_ros.io.csv import is_csv, load_column_map, read_log
+from dampest_ros.io.csv_folder import folder_notes, is_csv_folder, resolve_topic
 from dampest_ros.io.yaml_io import load_model
 
 
 def bag_topics(path: Path, vehicle: Vehicle, args: argparse.Namespace) -> dict[str, str]:
-    """:func:`topic_roles` of a bag, after checking that τ can be had: without
+    """:func:`topic_roles` of a bag (or CSV folder: its topics that the options name),
+    after checking that τ can be had: without
     ``--wrench-topic`` it comes from thruster telemetry, which needs the vehicle's thrusters
     (ConfigError naming both ways)."""
     topics = topic_roles(args)
+    if is_csv_folder(path):  # a topic option may name a file of the folder
+        topics = {role: resolve_topic(path, t) for role, t in topics.items()}
     if "wrench" not in topics:
         vehicle.need_thrusters(f"τ from the thruster telemetry of {path.name} "
                                f"({topics['thrusters']})",
@@ -130,8 +134,9 @@ def check_options(args: argparse.Namespace, rate: float, span: float, *,
 
 
 def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
-    """Samples from a rosbag2 directory (MCAP or SQLite3) or a CSV file, after
-    :func:`check_options`."""
+    """Samples from a rosbag2 directory (MCAP or SQLite3), a folder of per-topic CSV files
+    (read as a bag, :mod:`dampest_ros.io.csv_folder`) or a CSV file, after
+    :func:`check_options`; what was read how (time units, flavours) on stderr."""
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p} does not exist")
@@ -145,7 +150,11 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
                       resample=False)
         return samples
     if not p.is_dir():
-        raise DataError(f"{p}: expected a rosbag2 directory or a .csv / .csv.gz file")
+        raise DataError(f"{p}: expected a rosbag2 directory, a folder of per-topic CSV files "
+                        "or a .csv / .csv.gz file")
+    if is_csv_folder(p):
+        for note in folder_notes(p):
+            print(f"{p.name}: {note}", file=sys.stderr)
     topics = bag_topics(p, vehicle, args)
     cfg = PreprocessConfig(max_gap=args.max_gap)
     given = check_options(args, args.rate, bag_summary(p).duration, resample=True,

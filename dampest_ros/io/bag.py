@@ -279,6 +279,9 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
     BagError
         If the bag is missing its metadata, corrupt or truncated; names the files.
     """
+    from dampest_ros.io import csv_folder  # a folder of per-topic CSV files reads like a bag
+    if csv_folder.is_csv_folder(path):
+        return csv_folder.read_csv_folder(path, topics, start, stop)
     with _Bag(path) as bag:
         info = bag.reader.topics
         if topics is None:
@@ -370,6 +373,9 @@ def bag_summary(path: str | Path) -> BagSummary:
     BagSummary
         ``start``/``end``: first and last log time (s); 0 for an empty bag.
     """
+    from dampest_ros.io import csv_folder  # a folder of per-topic CSV files reads like a bag
+    if csv_folder.is_csv_folder(path):
+        return csv_folder.folder_summary(path)
     with _Bag(path) as bag:
         r = bag.reader
         topics = {t: TopicSummary(t, str(i.msgtype), i.msgcount) for t, i in r.topics.items()}

@@ -15,6 +15,7 @@ sampled data (the arm's joint streams, the single-file CSV log):
 from __future__ import annotations
 
 from itertools import pairwise
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -109,9 +110,35 @@ def stretch_bounds(t: FloatArray, breaks: NDArray[np.bool_] | None = None
     return np.concatenate([[0], np.flatnonzero(cut) + 1, [len(t)]]).astype(np.int64)
 
 
+class Uniform(NamedTuple):
+    """A log on one uniform clock (:func:`resample_uniform`).
+
+    Attributes
+    ----------
+    t : ndarray, shape (M,)
+        Time (s).
+    x : ndarray, shape (M, n)
+        The columns at ``t``.
+    segment : ndarray of int, shape (M,)
+        Index of the gap-free stretch of each row, from 0.
+    period : float
+        The clock's period (s).
+    resampled : bool
+        Whether the rows were interpolated (False: the input's uniform rows).
+    gaps : int
+        Gaps found where no break was given.
+    """
+
+    t: FloatArray
+    x: FloatArray
+    segment: NDArray[np.int64]
+    period: float
+    resampled: bool
+    gaps: int
+
+
 def resample_uniform(t: FloatArray, x: FloatArray,
-                     breaks: NDArray[np.bool_] | None = None
-                     ) -> tuple[FloatArray, FloatArray, NDArray[np.int64], int]:
+                     breaks: NDArray[np.bool_] | None = None) -> Uniform:
     """A whole log on one uniform clock, stretch by stretch.
 
     Every gap-free stretch (:func:`stretch_bounds`) of two rows or more goes onto a grid of
@@ -130,12 +157,12 @@ def resample_uniform(t: FloatArray, x: FloatArray,
 
     Returns
     -------
-    t : ndarray, shape (M,)
-    x : ndarray, shape (M, n)
-    segment : ndarray of int, shape (M,)
-        Index of the stretch of each row, from 0.
-    gap_count : int
-        Gaps found (not counting ``breaks``).
+    Uniform
+
+    Raises
+    ------
+    ValueError
+        When no two consecutive rows are without a gap between them.
     """
     bounds = stretch_bounds(t, breaks)
     spans = [(a, b) for a, b in pairwise(bounds.tolist()) if b - a >= 2]
@@ -144,8 +171,11 @@ def resample_uniform(t: FloatArray, x: FloatArray,
     steps = sum(b - a - 1 for a, b in spans)
     period = sum(float(t[b - 1] - t[a]) for a, b in spans) / steps
     dt = np.concatenate([np.diff(t[a:b]) for a, b in spans])
-    uniform = bool(np.all(np.abs(dt / np.median(dt) - 1.0) <= JITTER))
+    median = float(np.median(dt))
+    uniform = bool(np.all(np.abs(dt / median - 1.0) <= JITTER))
     parts = [on_grid(t[a:b], x[a:b], None if uniform else period)[:2] for a, b in spans]
     segment = np.repeat(np.arange(len(parts), dtype=np.int64), [len(p[0]) for p in parts])
-    return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
-            segment, len(gaps(t)))
+    return Uniform(np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
+                   segment, median if uniform else period, not uniform,
+                   len(np.setdiff1d(gaps(t), np.flatnonzero(breaks) if breaks is not None
+                                    else [])))
