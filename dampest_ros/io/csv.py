@@ -57,12 +57,12 @@ run across the hole), and a stretch of one row left between drops goes too.
 
 **Time** (:func:`read_log`). The ``time`` column may count s, ms, µs or ns: the unit is
 detected from the stamps' magnitude and steps (the rule of :mod:`dampest_ros.io.csv_table`),
-named in the notes and converted to seconds. Time must increase from row to row (the error
-names the line). Rows need not be evenly spaced: a step over 1.75 median steps is a gap that
-splits the log, and when the steps inside the gap-free stretches are uneven (beyond 1 % of
-the median) every stretch is resampled by linear interpolation onto one uniform clock whose
-period is the mean step inside the stretches (:mod:`dampest_ros.core.signals.resample`); a
-rate is never read from one step.
+named in the notes unless it is seconds, and converted to seconds. Time must increase from
+row to row (the error names the line). Rows need not be evenly spaced: a step over 1.75
+median steps is a gap that splits the log, and when the steps inside the gap-free stretches
+are uneven (beyond 1 % of the median) every stretch is resampled by linear interpolation
+onto one uniform clock whose period is the mean step inside the stretches
+(:mod:`dampest_ros.core.signals.resample`); a rate is never read from one step.
 
 Numbers are written with ``%.17g``, so a write/read round trip is exact. A file whose name
 ends in ``.csv.gz`` is gzip-compressed and otherwise the same. Files with other column names
@@ -367,9 +367,9 @@ def read_log(path: str | Path, thrusters: Thrusters | None, gravity: float,
     columns, clock = uniform_clock(columns, max_gap)
     declared = set(column_map.values()) if column_map else set()
     standard, notes = interpret_columns(columns, thrusters, gravity, declared, where, max_gap)
-    return (samples_from_columns(standard, max_gap),
-            [f"time column {time_name!r} read in {UNIT_WORDS[unit]}", *dropped, *clock,
-             *notes])
+    unit_note = [] if unit == "s" else [f"time column {time_name!r} read in "
+                                        f"{UNIT_WORDS[unit]} (detected), converted to seconds"]
+    return samples_from_columns(standard, max_gap), [*unit_note, *dropped, *clock, *notes]
 
 
 def uniform_clock(columns: Mapping[str, FloatArray], max_gap: float = 1.0

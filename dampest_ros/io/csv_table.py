@@ -15,7 +15,8 @@ file, and where it applies the line of the file (1 = the header) and the column.
 2. *Time from some start* (simulation, a logger's own clock): the largest unit in which the
    median step is at most 1 s, i.e. the streams are taken to run at 1 Hz or faster.
 
-The unit found is named on stderr by the commands, so a wrong guess is seen.
+The unit found is named on stderr by the commands (for a single CSV when it is not seconds),
+so a wrong guess is seen.
 """
 
 from __future__ import annotations
