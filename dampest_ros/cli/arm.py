@@ -248,11 +248,11 @@ def _identify(args: argparse.Namespace) -> int:
         IdentifyConfig,
         filter_stretches,
         identify_arm,
-        interpolate,
         predict,
         torque_rmse,
     )
     from dampest_ros.core.arm.regressor import full_parameters
+    from dampest_ros.core.signals.resample import interpolate
     from dampest_ros.io.arm import load_arm, read_joint_bag
 
     cfg = IdentifyConfig(cutoff=args.cutoff, rate_out=args.rate_out, min_speed=args.min_speed)

@@ -58,7 +58,11 @@ CSV_HELP = (
     "(DVL bottom lock); identify, validate and gap all assume still water, so they are used "
     "as the velocity through the water too, except by gap's 'current' candidate, which "
     "estimates a constant current and applies the damping to ν − ν_c. A log of velocity "
-    "through the water (water-track DVL) is read the same way.")
+    "through the water (water-track DVL) is read the same way. Time may be in s, ms, µs or "
+    "ns (detected; named on stderr unless seconds); uneven rows are resampled onto one "
+    "uniform clock with the mean step, split at steps over 1.75 median steps. A folder of "
+    "per-topic CSV files (rostopic echo -p, bag-to-CSV tools) is read like a bag: topics "
+    "from the file names, or name a file with --imu-topic FILE.csv etc.")
 
 #: Topic roles and their default names (docs/architecture.md §3).
 DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",

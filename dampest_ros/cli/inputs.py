@@ -27,14 +27,18 @@ from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, pre
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.io.bag import BagSource, check_role_types, is_bag
 from dampest_ros.io.csv import is_csv, load_column_map, read_log
+from dampest_ros.io.csv_folder import folder_notes, is_csv_folder, resolve_topic
 from dampest_ros.io.yaml_io import load_model
 
 
 def bag_topics(path: Path, vehicle: Vehicle, args: argparse.Namespace) -> dict[str, str]:
-    """:func:`topic_roles` of a bag, after checking that τ can be had: without
+    """:func:`topic_roles` of a bag (or CSV folder: its topics that the options name),
+    after checking that τ can be had: without
     ``--wrench-topic`` it comes from thruster telemetry, which needs the vehicle's thrusters
     (ConfigError naming both ways)."""
     topics = topic_roles(args)
+    if is_csv_folder(path):  # a topic option may name a file of the folder
+        topics = {role: resolve_topic(path, t) for role, t in topics.items()}
     if "wrench" not in topics:
         vehicle.need_thrusters(f"τ from the thruster telemetry of {path.name} "
                                f"({topics['thrusters']})",
@@ -131,8 +135,9 @@ def check_options(args: argparse.Namespace, rate: float, span: float, *,
 
 
 def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
-    """Samples from a rosbag2 directory (MCAP or SQLite3), a ROS 1 ``.bag`` file or a CSV
-    file, after :func:`check_options`."""
+    """Samples from a rosbag2 directory (MCAP or SQLite3), a ROS 1 ``.bag`` file, a folder of
+    per-topic CSV files (read as a bag, :mod:`dampest_ros.io.csv_folder`) or a CSV file,
+    after :func:`check_options`; what was read how (time units, flavours) on stderr."""
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p} does not exist")
@@ -146,14 +151,18 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
                       resample=False)
         return samples
     if not is_bag(p):
-        raise DataError(f"{p}: expected a rosbag2 directory, a ROS 1 .bag file or a .csv / "
-                        ".csv.gz file")
+        raise DataError(f"{p}: expected a rosbag2 directory, a ROS 1 .bag file, a folder of "
+                        "per-topic CSV files or a .csv / .csv.gz file")
+    if is_csv_folder(p):
+        for note in folder_notes(p):
+            print(f"{p.name}: {note}", file=sys.stderr)
     return _bag_samples(p, vehicle, args)
 
 
 def _bag_samples(p: Path, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
-    """Samples of a bag (rosbag2 or ROS 1), after :func:`check_options`; the bag is read a
-    window at a time as the preprocessing needs it, so memory stays flat with its length."""
+    """Samples of a bag (rosbag2, ROS 1 or a CSV folder), after :func:`check_options`; the
+    bag is read a window at a time as the preprocessing needs it, so memory stays flat with
+    its length."""
     topics = bag_topics(p, vehicle, args)
     cfg = PreprocessConfig(max_gap=args.max_gap)
     with BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),

@@ -37,7 +37,7 @@ COMMANDS: dict[str, Command] = {
                         "dampest_ros.cli.validate:add_arguments", "dampest_ros.cli.validate:run"),
     "gap": Command("find where a model and measured data disagree and name the missing effect",
                    "dampest_ros.cli.gap_options:add_arguments", "dampest_ros.cli.gap:run"),
-    "inspect": Command("topics, rates, gaps and readiness of a bag",
+    "inspect": Command("topics, rates, gaps and readiness of a bag, CSV folder or CSV",
                        "dampest_ros.cli.inspect:add_arguments", "dampest_ros.cli.inspect:run"),
     "export": Command("write a model as gz-sim, URDF or UUV Simulator hydrodynamics",
                       "dampest_ros.cli.export:add_arguments", "dampest_ros.cli.export:run"),

@@ -309,6 +309,9 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
     BagError
         If the bag is missing its metadata, corrupt or truncated; names the files.
     """
+    from dampest_ros.io import csv_folder  # a folder of per-topic CSV files reads like a bag
+    if csv_folder.is_csv_folder(path):
+        return csv_folder.read_csv_folder(path, topics, start, stop)
     with _Bag(path) as bag:
         return _read(bag, topics, progress, start, stop)
 
@@ -409,6 +412,9 @@ def bag_summary(path: str | Path) -> BagSummary:
     BagSummary
         ``start``/``end``: first and last log time (s); 0 for an empty bag.
     """
+    from dampest_ros.io import csv_folder  # a folder of per-topic CSV files reads like a bag
+    if csv_folder.is_csv_folder(path):
+        return csv_folder.folder_summary(path)
     with _Bag(path) as bag:
         return _summary(bag)
 
@@ -485,7 +491,8 @@ class BagSource:
     Parameters
     ----------
     path : str or Path
-        rosbag2 directory (MCAP or SQLite3) or ROS 1 ``.bag`` file.
+        rosbag2 directory (MCAP or SQLite3), ROS 1 ``.bag`` file or a folder of per-topic CSV
+        files (:mod:`dampest_ros.io.csv_folder`).
     progress : callable, optional
         Called as ``progress(seconds_read, seconds_total)`` as windows are read.
     together : sequence of str
@@ -499,9 +506,15 @@ class BagSource:
     def __init__(self, path: str | Path,
                  progress: Callable[[int, int], None] | None = None,
                  together: Sequence[str] = ()) -> None:
+        from dampest_ros.io import csv_folder  # a folder of per-topic CSV files reads like a bag
+
         self.path = Path(path)
-        self._bag = _Bag(self.path)
-        self.summary = _summary(self._bag)
+        self._bag: _Bag | None = None
+        if csv_folder.is_csv_folder(self.path):  # parsed once, cached by csv_folder
+            self.summary = csv_folder.folder_summary(self.path)
+        else:
+            self._bag = _Bag(self.path)
+            self.summary = _summary(self._bag)
         self.progress = progress
         self.together = [_relative(t) for t in together]
         self._cache: tuple[tuple[float, float], dict[str, Series]] | None = None
@@ -514,7 +527,14 @@ class BagSource:
 
     def close(self) -> None:
         """Close the bag."""
-        self._bag.__exit__()
+        if self._bag is not None:
+            self._bag.__exit__()
+
+    def _read(self, topics: Sequence[str], start: float | None, stop: float | None
+              ) -> dict[str, Series]:
+        if self._bag is None:
+            return read_bag(self.path, topics, start=start, stop=stop)
+        return _read(self._bag, topics, None, start, stop)
 
     def topics(self) -> list[str]:
         """Topic names (without the leading ``/``)."""
@@ -525,9 +545,9 @@ class BagSource:
         """Messages of ``topic`` logged in [start, stop) (s); the whole topic by default."""
         name = _relative(topic)
         if start is None or stop is None or name not in self.together:
-            return _read(self._bag, [topic], None, start, stop)[name]
+            return self._read([topic], start, stop)[name]
         if self._cache is None or self._cache[0] != (start, stop):
-            self._cache = ((start, stop), _read(self._bag, self.together, None, start, stop))
+            self._cache = ((start, stop), self._read(self.together, start, stop))
         out = self._cache[1][name]
         if self.progress is not None:
             total = self.summary.end - self.summary.start

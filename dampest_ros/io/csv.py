@@ -48,10 +48,21 @@ FRD body frame (x forward, y starboard, z down), the frame of the core and of
 :class:`dampest_ros.core.signals.samples.Samples`, which :func:`samples_to_columns` and
 :func:`samples_from_columns` convert to and from.
 
-**Bad cells.** A row with a non-finite value (``nan``, ``inf``, an empty cell read as nan) in a
-column the log uses is dropped by :func:`read_log`, which counts the rows per column in its
+**Bad cells.** Columns the log does not use are not parsed (text there does no harm); a cell
+of a used column that is not a number is an error naming the file, line and column. A row
+with a non-finite value (``nan``, ``inf``, an empty cell read as nan) in a column the log
+uses other than time is dropped by :func:`read_log`, which counts the rows per column in its
 notes; the log is split into segments where rows were dropped (filters and derivatives never
 run across the hole), and a stretch of one row left between drops goes too.
+
+**Time** (:func:`read_log`). The ``time`` column may count s, ms, µs or ns: the unit is
+detected from the stamps' magnitude and steps (the rule of :mod:`dampest_ros.io.csv_table`),
+named in the notes unless it is seconds, and converted to seconds. Time must increase from
+row to row (the error names the line). Rows need not be evenly spaced: a step over 1.75
+median steps is a gap that splits the log, and when the steps inside the gap-free stretches
+are uneven (beyond 1 % of the median) every stretch is resampled by linear interpolation
+onto one uniform clock whose period is the mean step inside the stretches
+(:mod:`dampest_ros.core.signals.resample`); a rate is never read from one step.
 
 Numbers are written with ``%.17g``, so a write/read round trip is exact. A file whose name
 ends in ``.csv.gz`` is gzip-compressed and otherwise the same. Files with other column names
@@ -60,10 +71,8 @@ are read through a column map (``their name: our name``, see :func:`load_column_
 
 from __future__ import annotations
 
-import csv as _csv
-import gzip
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from itertools import pairwise
 from pathlib import Path
 from typing import Any
@@ -75,7 +84,9 @@ from numpy.typing import NDArray
 from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.physics.thrusters import Thrusters
 from dampest_ros.core.signals.measurements import FloatArray
+from dampest_ros.core.signals.resample import GAP_PERIODS, resample_uniform
 from dampest_ros.core.signals.samples import Samples
+from dampest_ros.io.csv_table import CsvError, numeric_columns, read_head, seconds
 
 #: Body velocity ν = [u v w p q r] (FRD).
 VELOCITY_COLUMNS = ("u", "v", "w", "p", "q", "r")
@@ -89,6 +100,8 @@ REQUIRED_COLUMNS = ("time", *VELOCITY_COLUMNS, *ACCELERATION_COLUMNS, "depth", *
 BASE_COLUMNS = ("time", *VELOCITY_COLUMNS, "depth")
 #: Our names of an IMU's specific force (FRD, m/s²), for a column map.
 SPECIFIC_FORCE_COLUMNS = ("acc_x", "acc_y", "acc_z")
+#: How the notes name a time unit.
+UNIT_WORDS = {"s": "seconds", "ms": "milliseconds", "µs": "microseconds", "ns": "nanoseconds"}
 #: Our names of gyro rates (FRD, rad/s), for a column map.
 GYRO_COLUMNS = ("gyro_x", "gyro_y", "gyro_z")
 
@@ -97,13 +110,6 @@ def is_csv(path: str | Path) -> bool:
     """Whether ``path`` names a CSV log (``.csv`` or gzip-compressed ``.csv.gz``)."""
     name = Path(path).name.lower()
     return name.endswith((".csv", ".csv.gz"))
-
-
-def _open_text(path: Path) -> Any:
-    """``path`` opened for reading text, through gzip when its name ends in ``.gz``."""
-    if path.name.lower().endswith(".gz"):
-        return gzip.open(path, "rt", newline="")
-    return path.open(newline="")
 
 
 def write_csv(path: str | Path, columns: Mapping[str, Any]) -> Path:
@@ -155,7 +161,8 @@ def write_table(path: str | Path, columns: Mapping[str, Any]) -> Path:
 
 
 def read_csv(path: str | Path, column_map: Mapping[str, str] | None = None,
-             required: Sequence[str] = REQUIRED_COLUMNS) -> dict[str, FloatArray]:
+             required: Sequence[str] = REQUIRED_COLUMNS,
+             keep: Callable[[str], bool] | None = None) -> dict[str, FloatArray]:
     """Read a CSV file into columns.
 
     Parameters
@@ -167,41 +174,32 @@ def read_csv(path: str | Path, column_map: Mapping[str, str] | None = None,
         the map are kept.
     required : sequence of str
         Our names that must be present (default :data:`REQUIRED_COLUMNS`).
+    keep : callable, optional
+        Whether a column (our name) is read; the others are not parsed (text there does no
+        harm). Default: every column.
 
     Returns
     -------
     dict of str to ndarray, each shape (N,)
-        In file order, under our names.
+        In file order, under our names; time as in the file (see :func:`read_log` for the
+        unit).
 
     Raises
     ------
-    ValueError
-        Naming the file and the missing required columns, or the first unreadable line.
+    CsvError
+        Naming the file and the missing required columns, or the line and column of the
+        first cell that is not a number.
     """
     path = Path(path)
-    try:
-        with _open_text(path) as f:
-            header = next(_csv.reader(f), None)
-    except (OSError, EOFError, UnicodeDecodeError) as exc:  # e.g. a corrupt .gz
-        raise ValueError(f"{path}: cannot read: {exc}") from None
-    if not header:
-        raise ValueError(f"{path}: empty file, expected a header line")
-    names = [(column_map or {}).get(h.strip(), h.strip()) for h in header]
+    header, _ = read_head(path)
+    names = [(column_map or {}).get(h, h) for h in header]
     dups = sorted({n for n in names if names.count(n) > 1})
     if dups:
-        raise ValueError(f"{path}: columns {dups} appear more than once")
+        raise CsvError(f"{path}: columns {dups} appear more than once")
     _check_required(names, required, str(path), mapped=column_map is not None)
-    try:
-        with warnings.catch_warnings():  # a header-only file is a valid empty table
-            warnings.filterwarnings("ignore", "loadtxt: input contained no data")
-            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, dtype=float)
-    except (ValueError, OSError, EOFError) as exc:
-        raise ValueError(f"{path}: {exc}") from None
-    if data.size == 0:
-        data = np.zeros((0, len(names)))
-    if data.shape[1] != len(names):
-        raise ValueError(f"{path}: {data.shape[1]} values per row, {len(names)} columns")
-    return {n: data[:, i].copy() for i, n in enumerate(names)}
+    wanted = [(h, n) for h, n in zip(header, names, strict=True) if keep is None or keep(n)]
+    data = numeric_columns(path, header, [h for h, _ in wanted])
+    return {n: data[h] for h, n in wanted}
 
 
 def _check_required(names: Sequence[str], required: Sequence[str], where: str,
@@ -209,7 +207,7 @@ def _check_required(names: Sequence[str], required: Sequence[str], where: str,
     missing = [c for c in required if c not in names]
     if missing:
         hint = "" if mapped else " (a column map renames other names to these)"
-        raise ValueError(f"{where}: missing required columns {missing}{hint}; "
+        raise CsvError(f"{where}: missing required columns {missing}{hint}; "
                          f"columns present: {list(names)}")
 
 
@@ -362,14 +360,61 @@ def read_log(path: str | Path, thrusters: Thrusters | None, gravity: float,
         A missing column or an ambiguous flavour, naming the column-map entry that settles it.
     """
     where = str(path)
-    columns, dropped = drop_nonfinite(read_csv(path, column_map, required=BASE_COLUMNS),
-                                      max_gap)
+    columns = read_csv(path, column_map, required=BASE_COLUMNS, keep=used_column)
+    time_name = next((k for k, v in (column_map or {}).items() if v == "time"), "time")
+    columns["time"], unit = seconds(columns["time"], where, time_name)
+    columns, dropped = drop_nonfinite(columns, max_gap)
+    columns, clock = uniform_clock(columns, max_gap)
     declared = set(column_map.values()) if column_map else set()
     standard, notes = interpret_columns(columns, thrusters, gravity, declared, where, max_gap)
-    return samples_from_columns(standard, max_gap), dropped + notes
+    unit_note = [] if unit == "s" else [f"time column {time_name!r} read in "
+                                        f"{UNIT_WORDS[unit]} (detected), converted to seconds"]
+    return samples_from_columns(standard, max_gap), [*unit_note, *dropped, *clock, *notes]
 
 
-def _used(name: str) -> bool:
+def uniform_clock(columns: Mapping[str, FloatArray], max_gap: float = 1.0
+                  ) -> tuple[dict[str, FloatArray], list[str]]:
+    """The rows on one uniform clock, split into segments at gaps
+    (:func:`dampest_ros.core.signals.resample.resample_uniform`: a step over 1.75 median
+    steps, a ``segment`` change, or a step over ``max_gap`` without a ``segment`` column).
+
+    Parameters
+    ----------
+    columns : mapping of str to ndarray, each shape (N,)
+        Time in seconds, increasing.
+    max_gap : float
+        Without a ``segment`` column, steps longer than this (s) split the log too.
+
+    Returns
+    -------
+    columns : dict of str to ndarray, each shape (M,)
+        Resampled by linear interpolation when the steps are uneven; with a ``segment``
+        column.
+    notes : list of str
+        One line when the rows were resampled or split.
+    """
+    t = np.asarray(columns["time"], dtype=float)
+    names = [k for k in columns if k not in ("time", "segment")]
+    breaks = np.diff(_segment_index(columns, max_gap)) != 0
+    x = np.stack([np.asarray(columns[k], dtype=float) for k in names], axis=1) \
+        if names else np.zeros((len(t), 0))
+    u = resample_uniform(t, x, breaks)
+    out = {"time": u.t, **{k: u.x[:, j] for j, k in enumerate(names)},
+           "segment": u.segment.astype(float)}
+    notes = []
+    if u.resampled:
+        dt = np.diff(t)
+        notes.append(f"time steps uneven ({float(dt.min()):.4g} to {float(dt.max()):.4g} s): "
+                     f"resampled by linear interpolation onto a uniform {1 / u.period:.5g} Hz "
+                     f"clock (the mean step within the gap-free stretches), {len(t)} rows → "
+                     f"{len(u.t)} samples")
+    if u.gaps:
+        notes.append(f"{u.gaps} gap(s) (steps over {GAP_PERIODS:g} median steps): the log is split "
+                     f"there ({int(u.segment.max()) + 1} segments)")
+    return out, notes
+
+
+def used_column(name: str) -> bool:
     """Whether :func:`read_log` reads a column (our name)."""
     return name in (*BASE_COLUMNS, *ACCELERATION_COLUMNS, *FORCE_COLUMNS,
                     *SPECIFIC_FORCE_COLUMNS, *GYRO_COLUMNS, *ATTITUDE_COLUMNS, "segment") \
@@ -402,7 +447,7 @@ def drop_nonfinite(columns: Mapping[str, FloatArray], max_gap: float = 1.0
     """
     out = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
     n = len(out["time"])
-    bad = {k: ~np.isfinite(v) for k, v in out.items() if _used(k)}
+    bad = {k: ~np.isfinite(v) for k, v in out.items() if used_column(k)}
     keep = ~np.logical_or.reduce(list(bad.values())) if bad else np.ones(n, dtype=bool)
     if keep.all():
         return out, []

@@ -4,6 +4,7 @@ with friction columns, base parameters, least squares and physically consistent 
 data and the online estimator. numpy/scipy, Pinocchio and MuJoCo only (no io, cli or ros).
 
 May import: the Fourier design engine of :mod:`dampest_ros.core.simulation.design`, the
-filtering of :mod:`dampest_ros.core.signals.preprocess`, the recursive least squares of
+filtering of :mod:`dampest_ros.core.signals.preprocess` and the resampling of
+:mod:`dampest_ros.core.signals.resample`, the recursive least squares of
 :mod:`dampest_ros.core.online.rls` and :mod:`dampest_ros.core.physics`.
 """

@@ -12,10 +12,10 @@
 The noise floor of a joint's torque is estimated from the measurement itself: the power of
 τ − τ_filtered, divided by the share of a white noise's power the filter stops.
 
-Real joint streams are not a perfect clock. Stamps that jitter (steps off the median period
-by more than 1 %) are resampled onto a uniform grid by linear interpolation before filtering;
-a step longer than :data:`GAP_PERIODS` periods is a gap (lost messages, a pause), across which
-nothing is filtered: :func:`filter_stretches` filters each gap-free stretch on its own.
+Real joint streams are not a perfect clock: jitter and gaps follow the one rule of
+:mod:`dampest_ros.core.signals.resample` (jittered stamps resampled onto a uniform grid with
+the stretch's mean step before filtering; a step over ``GAP_PERIODS`` periods is a gap, across
+which nothing is filtered: :func:`filter_stretches` filters each gap-free stretch on its own).
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ from dampest_ros.core.arm.fit import (
 from dampest_ros.core.arm.model import ArmModel
 from dampest_ros.core.arm.regressor import regressor
 from dampest_ros.core.signals.preprocess import zero_phase, zero_phase_many
+from dampest_ros.core.signals.resample import GAP_PERIODS, on_grid, step_gaps
 
 FloatArray = NDArray[np.float64]
 
@@ -113,25 +114,6 @@ def _noise_bandwidth(cutoff: float, order: int = 4) -> float:
     return float(np.trapezoid(H * H, f))
 
 
-#: A step between two joint samples longer than this many sample periods (the median step),
-#: or not forward, is a gap: messages were lost or the stream paused. Shorter irregular
-#: steps are jitter of the sample times, which :func:`filter_joints` resamples away.
-GAP_PERIODS = 1.75
-
-
-def gaps(t: FloatArray, period: float | None = None) -> NDArray[np.int64]:
-    """Where joint samples have a gap: the indices i whose step t[i+1] − t[i] is not
-    forward or exceeds :data:`GAP_PERIODS` periods (``period``: the median step)."""
-    dt = np.diff(np.asarray(t, dtype=float))
-    if period is None:
-        period = float(np.median(dt))
-    return _gaps(dt, period)
-
-
-def _gaps(dt: FloatArray, period: float) -> NDArray[np.int64]:
-    return np.flatnonzero((dt <= 0.0) | (dt > GAP_PERIODS * period))
-
-
 class ShortDataError(ValueError):
     """Too few joint samples to filter: fewer than 10, or not more than the four filter
     edges (:func:`_edge`) a stretch needs."""
@@ -146,30 +128,6 @@ def _edge(rate: float, config: IdentifyConfig) -> int:
     """Samples dropped at each end of a filtered stretch (3 / cutoff s, the filter's end
     effects); a stretch needs more than four times as many."""
     return int(np.ceil(3.0 * rate / config.cutoff))
-
-
-def _on_grid(t: FloatArray, dt: FloatArray, period: float, position: FloatArray,
-             effort: FloatArray
-             ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.int64], float]:
-    """Gap-free samples (steps ``dt``, median ``period``) on a uniform grid from t[0]: as
-    they are when every step is within 1 % of the median, else linearly interpolated onto
-    N points from t[0] to t[-1]; with the input row nearest each grid point and the grid's
-    period."""
-    if np.all(np.abs(dt / period - 1.0) <= 0.01):
-        return t, position, effort, np.arange(len(t), dtype=np.int64), period
-    period = (t[-1] - t[0]) / (len(t) - 1)  # zero-mean jitter: the mean step is the period
-    grid = t[0] + period * np.arange(len(t))
-    i = np.clip(np.searchsorted(t, grid), 1, len(t) - 1)
-    nearest = np.where(grid - t[i - 1] <= t[i] - grid, i - 1, i).astype(np.int64)
-    return (grid, interpolate(grid, t, position), interpolate(grid, t, effort), nearest,
-            period)
-
-
-def interpolate(t_new: FloatArray, t: FloatArray, x: FloatArray) -> FloatArray:
-    """Columns of ``x`` (shape (N, n), sampled at increasing ``t``) linearly interpolated
-    at ``t_new`` (shape (M,)); shape (M, n). The validation evaluates a model's torque,
-    computed on the filtered grid, at the measured samples' own times with it."""
-    return np.stack([np.interp(t_new, t, x[:, j]) for j in range(x.shape[1])], axis=1)
 
 
 def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
@@ -198,14 +156,15 @@ def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
     _require_samples(t)
     dt = np.diff(t)
     period = float(np.median(dt))
-    bad = _gaps(dt, period)
+    bad = step_gaps(dt, period)
     if len(bad):
         raise ValueError(f"joint samples have {len(bad)} gaps (steps over {GAP_PERIODS:g} "
                          f"sample periods, the first after t = {t[bad[0]]:.3f} s); filter "
                          "each gap-free stretch on its own (filter_stretches)")
-    t, position, effort, index, period = _on_grid(t, dt, period,
-                                                  np.asarray(position, dtype=float),
-                                                  np.asarray(effort, dtype=float))
+    n = np.shape(position)[1]
+    t, both, index, period = on_grid(t, np.hstack([np.asarray(position, dtype=float),
+                                                   np.asarray(effort, dtype=float)]))
+    position, effort = both[:, :n], both[:, n:]
     rate = 1.0 / period
     if not 0.0 < config.cutoff < rate / 2.0:
         raise ValueError(f"cutoff {config.cutoff} Hz must be in (0, {rate / 2:g}) Hz, the "
@@ -220,7 +179,6 @@ def filter_joints(t: FloatArray, position: FloatArray, effort: FloatArray,
         raise ValueError(f"output rate {config.rate_out} Hz must be in [2 × cutoff, "
                          f"{rate:g}] Hz")
     keep = np.arange(edge, len(t) - edge, max(1, round(rate / config.rate_out)))
-    n = position.shape[1]
     q, qd, qdd, tau = (np.empty((len(keep), n)) for _ in range(4))
     # in windows of chunk_seconds with a margin of 10 / cutoff s on each side (what
     # zero_phase mirrors at an end): the same result as one pass, a fraction of the memory
@@ -312,7 +270,7 @@ def filter_stretches(t: FloatArray, position: FloatArray, effort: FloatArray,
     _require_samples(t)
     dt = np.diff(t)
     period = float(np.median(dt))
-    bounds = np.concatenate([[0], _gaps(dt, period) + 1, [len(t)]])
+    bounds = np.concatenate([[0], step_gaps(dt, period) + 1, [len(t)]])
     parts: list[Filtered] = []
     skipped = 0.0
     for a, b in itertools.pairwise(bounds.tolist()):

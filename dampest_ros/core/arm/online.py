@@ -21,11 +21,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.arm.base import BaseParameters
-from dampest_ros.core.arm.identify import IdentifyConfig, filter_joints, gaps, usable_rows
+from dampest_ros.core.arm.identify import IdentifyConfig, filter_joints, usable_rows
 from dampest_ros.core.arm.model import ArmModel
 from dampest_ros.core.arm.regressor import regressor
 from dampest_ros.core.online.rls.least_squares import RecursiveLeastSquares, RLSConfig
 from dampest_ros.core.physics.rigid_body import FORCE_NAMES
+from dampest_ros.core.signals.resample import gaps
 
 FloatArray = NDArray[np.float64]
 

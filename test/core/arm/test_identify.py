@@ -19,12 +19,12 @@ from dampest_ros.core.arm.identify import (
     filter_joints,
     filter_stretches,
     identify_arm,
-    interpolate,
     predict,
     torque_rmse,
 )
 from dampest_ros.core.arm.regressor import full_parameters, regressor
 from dampest_ros.core.arm.simulate import REALISTIC, simulate_arm
+from dampest_ros.core.signals.resample import interpolate
 from dampest_ros.io.arm import load_arm
 
 
