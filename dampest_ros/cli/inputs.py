@@ -25,7 +25,7 @@ from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.plausibility import frame_notes
 from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, preprocess
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.io.bag import BagSource, check_role_types, is_bag
+from dampest_ros.io.bag import BagSource, MissingTopicError, check_role_types, is_bag
 from dampest_ros.io.csv import is_csv, load_column_map, read_log
 from dampest_ros.io.csv_folder import folder_notes, is_csv_folder, resolve_topic
 from dampest_ros.io.yaml_io import load_model
@@ -199,8 +199,11 @@ def warn_implausible(source: BagSource, topics: dict[str, str], start: float, gr
     """Print a warning line per frame mistake the first :data:`PLAUSIBILITY_SECONDS` of the
     used topics show (:func:`~dampest_ros.core.signals.plausibility.frame_notes`)."""
     have = set(source.topics())
-    head = {t: source.series(t, start, start + PLAUSIBILITY_SECONDS)
-            for t in dict.fromkeys(topics.values()) if t.lstrip("/") in have}
+    try:
+        head = {t: source.series(t, start, start + PLAUSIBILITY_SECONDS)
+                for t in dict.fromkeys(topics.values()) if t.lstrip("/") in have}
+    except MissingTopicError:  # a topic read with it is missing: the preprocessing says so
+        return
     for note in frame_notes(head, gravity):
         print(f"{name}: warning: {note}", file=sys.stderr)
 
