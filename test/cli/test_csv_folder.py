@@ -124,6 +124,29 @@ def test_folder_identifies_like_the_bag_of_the_same_recording(
     assert np.all(bag.theta_std > 0)
 
 
+def test_folder_of_the_mujoco_torpedo_identifies_like_its_bag(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Physics we did not write: MuJoCo's torpedo (60 s, protocol B), stamps jittered ±30 %,
+    as a rosbag2 bag and as a rostopic CSV folder: the same θ."""
+    assert main(["simulate", "--backend", "mujoco", "--vehicle", "torpedo_auv", "--protocol",
+                 "B", "--duration", "60", "--seed", "2", "--out", str(tmp_path / "sim")]) == 0
+    rng = np.random.default_rng(8)
+    rec = {t: jittered(s, rng) for t, s in read_bag(tmp_path / "sim").items()
+           if t in FILE_NAMES}
+    write_bag(tmp_path / "bag", rec)
+    (tmp_path / "csv").mkdir()
+    for topic, series in rec.items():
+        write_rostopic_csv(tmp_path / "csv" / FILE_NAMES[topic], series, rng)
+    capsys.readouterr()
+    models = []
+    for log in ("bag", "csv"):
+        assert main(["identify", str(tmp_path / log), "--vehicle", "torpedo_auv", "--out",
+                     str(tmp_path / f"{log}.yaml")]) == 0
+        models.append(load_model(tmp_path / f"{log}.yaml"))
+    bag, folder = models
+    assert np.max(np.abs(folder.theta - bag.theta) / bag.theta_std) < 1e-6
+
+
 def test_inspect_folder_names_files_columns_rates_and_time_unit(
         recording: Path, capsys: pytest.CaptureFixture[str]) -> None:
     capsys.readouterr()

@@ -412,3 +412,22 @@ def test_truncated_or_foreign_ros1_bag_is_one_line_and_exit_2(
         assert len(err) == 1, err
         assert err[0].startswith(f"dampest {command}: error: cannot read bag {path}: "), err
         assert "not a ROS 1 bag (format 2.0), or it is truncated" in err[0]
+
+
+def test_ros1_bag_of_the_mujoco_torpedo_identifies_as_its_rosbag2_bag(
+        tmp_path: Path) -> None:
+    """Physics we did not write: MuJoCo's torpedo (60 s, protocol B), converted to ROS 1 by
+    rosbags-convert, gives the θ of the rosbag2 bag to the last bit."""
+    bag = tmp_path / "torpedo"
+    assert main(["simulate", "--backend", "mujoco", "--vehicle", "torpedo_auv", "--protocol",
+                 "B", "--duration", "60", "--seed", "2", "--out", str(bag)]) == 0
+    convert = Path(sys.executable).with_name("rosbags-convert")
+    subprocess.run([str(convert), "--src", str(bag), "--dst", str(tmp_path / "torpedo.bag")],
+                   check=True, capture_output=True)
+    models = []
+    for log in (bag, tmp_path / "torpedo.bag"):
+        assert main(["identify", str(log), "--vehicle", "torpedo_auv", "--out",
+                     str(tmp_path / f"{log.name}.yaml")]) == 0
+        models.append(load_model(tmp_path / f"{log.name}.yaml"))
+    ref, got = models
+    assert np.max(np.abs(got.theta - ref.theta) / ref.theta_std) == 0.0

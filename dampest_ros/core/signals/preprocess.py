@@ -425,7 +425,7 @@ def preprocess(rec: Recording | SeriesSource, vehicle: Vehicle,
     tally = _Tally()
     t_dvl, v_dvl, pressure = _read_dvl_and_pressure(src, names, vehicle.mounting, tally)
     window, phase, first = _telemetry_timing(src, names, t_dvl, cfg.rate)
-    lo, hi = max(t_dvl[0], first), t_dvl[-1]
+    lo, hi = max(t_dvl[0], first), _covered_until(src, names, t_dvl[-1])
     if hi - lo < cfg.min_segment + 2 * cfg.trim:
         raise DataError(f"the topics overlap for only {max(hi - lo, 0.0):.1f} s")
     inputs = _Inputs(src, names, vehicle, cfg, t_dvl, v_dvl, pressure, window,
@@ -554,6 +554,18 @@ def _telemetry_timing(src: SeriesSource, names: _Topics, t_dvl: FloatArray, rate
     window = float(np.median(np.diff(head.stamp)))
     phase = float(((head.stamp[0] - window / 2) * rate) % 1.0)
     return window, phase, head.stamp[0]
+
+
+def _covered_until(src: SeriesSource, names: _Topics, end: float) -> float:
+    """The last time (s) up to ``end`` that the IMU and τ messages both reach: a DVL message
+    stamped after the last IMU or τ message (jittered stamps) would otherwise end the grid
+    where no stretch can be computed, and the stretch holding it would be left out whole."""
+    pad = 2.0
+    for topic in (names.imu, names.tau):
+        stamps = src.series(topic, end - pad, end + pad).stamp
+        if len(stamps):
+            end = min(end, float(stamps.max()))
+    return end
 
 
 def _output_grids(t_dvl: FloatArray, lo: float, hi: float, phase: float,
