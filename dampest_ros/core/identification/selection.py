@@ -349,11 +349,10 @@ def _search(samples: Samples, base: DampingModel, body: RigidBody,
     mem0 = base.term("freq")
     duration = len(samples) / samples.rate
     n_eff = min(float(len(samples)), 2.0 * cutoff * duration)
-    bounds = (0.05, 20.0)
     rates: dict[int, float] = {}
     dropped: dict[str, str] = {}
     if mem0 is None and memory_dofs:
-        evidence = memory_evidence(samples, base, body, memory_dofs, cutoff, bounds)
+        evidence = memory_evidence(samples, base, body, memory_dofs, cutoff)
         for ev in evidence:
             if ev.contradiction:
                 dropped[f"memory on {DOF_NAMES[ev.dof]}"] = ev.contradiction
@@ -544,7 +543,7 @@ def _search(samples: Samples, base: DampingModel, body: RigidBody,
     memory = []
     for d in list(keep_mem):
         others = _with_terms(base, keep_cross, {k: v for k, v in keep_mem.items() if k != d})
-        ev = memory_evidence(samples, others, body, [d], cutoff, bounds)[0]
+        ev = memory_evidence(samples, others, body, [d], cutoff)[0]
         memory.append(ev)
         if ev.contradiction:
             dropped[f"memory on {DOF_NAMES[d]}"] = f"removed after the search: {ev.contradiction}"
