@@ -21,6 +21,9 @@ from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
 
+#: Search range of a memory rate λ (1/s): below it a trend or an offset, above it plain damping.
+RATE_BOUNDS = (0.05, 20.0)
+
 
 @dataclass(frozen=True)
 class MemoryEvidence:
@@ -80,7 +83,7 @@ class MemoryEvidence:
 
 def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int,
                  weights: FloatArray, cutoff: float, ne: NormalEquations,
-                 bounds: tuple[float, float] = (0.05, 20.0)) -> tuple[float, float, float]:
+                 bounds: tuple[float, float] = RATE_BOUNDS) -> tuple[float, float, float]:
     """Memory rate λ of one DOF by minimising the profiled weighted RSS over log λ, among
     passive memories (gain c ≥ 0).
 
@@ -145,7 +148,7 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
 
 def memory_evidence(samples: Samples, base: DampingModel, body: RigidBody,
                     dofs: Sequence[int], cutoff: float,
-                    bounds: tuple[float, float] = (0.05, 20.0)) -> list[MemoryEvidence]:
+                    bounds: tuple[float, float] = RATE_BOUNDS) -> list[MemoryEvidence]:
     """Both estimates of a memory state in each DOF of ``dofs`` on top of ``base``.
 
     The time domain profiles the rate among passive memories (:func:`profile_rate`, per-DOF

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,6 +44,7 @@ from dampest_ros.core.identification.regression import (
     accumulate,
     fold_index,
     iter_regression,
+    total_sum_of_squares,
 )
 from dampest_ros.core.physics.alpha import Alpha, AlphaBank
 from dampest_ros.core.physics.damping import TERM_KINDS, Basis, DampingModel, DampingTerm
@@ -315,6 +316,13 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     return selection
 
 
+#: A value per candidate (shape (|C|,)) or of one term.
+_Real = FloatArray | float
+
+#: A column of one row's regression: (row, column index in the normal equations, name).
+_Column = tuple[int, int, str]
+
+
 def _search(samples: Samples, base: DampingModel, body: RigidBody,
             shared: Sequence[DampingTerm], cross: Sequence[dict[str, str]] | None,
             families: Sequence[str], memory_dofs: Sequence[int], cutoff: float, folds: int,
@@ -322,11 +330,56 @@ def _search(samples: Samples, base: DampingModel, body: RigidBody,
             strict_base: bool, rounds: int, exchange: float) -> Selection:
     """The stepwise search of :func:`select_terms` on top of the single-row terms ``base``;
     the ``shared`` terms count in the budget and join the selected model."""
-    n_shared = sum(t.n_params for t in shared)
     base_names = base.parameter_names
     specs = library(families) if cross is None else [CrossSpec.from_dict(c) for c in cross]
     specs = [sp for sp in specs if sp.label not in base_names]
-    # features: the base's single-entry columns first, then the candidates (simplest first)
+    feats, base_cols, cand = _feature_columns(base, specs)
+    m = len(feats)
+    # memory: the base's states, then candidate states with profiled rates
+    mem0 = base.term("freq")
+    rates, dropped = _memory_rates(samples, base, body,
+                                   memory_dofs if mem0 is None else (), cutoff)
+    mem_rates, mem_dofs, base_mem, cand_mem = _memory_columns(mem0, rates, m)
+    ne = _feature_equations(samples, feats, mem_rates, mem_dofs, body, folds, cutoff)
+    zero, corr, same_as = _equal_columns(ne.A.sum(0)[0][:m, :m], tol)
+    usable, unsearched = _searchable(cand, base_cols, feats, zero, corr, same_as)
+    dropped.update(unsearched)
+    duration = len(samples) / samples.rate
+    search = _Stepwise(ne, m, [*base_cols, *base_mem], [*usable, *cand_mem], zero,
+                       base.n_params + sum(t.n_params for t in shared),
+                       min(float(len(samples)), 2.0 * cutoff * duration),
+                       _Rules(max_terms, min_improvement, min_err, tol, strict_base, exchange),
+                       "base: " + "+".join([*base.kinds, *(t.kind for t in shared)]))
+    search.run(rounds)
+    final = search.chosen_names()
+    base = _without(base, [n for n in base_names if n not in final])
+    spec_of = {sp.label: sp for _, _, sp in cand}
+    keep_cross = [spec_of[st.added] for st in search.steps[1:]
+                  if st.added in spec_of and st.added in final]
+    keep_mem = {d: rates[d] for d, col, _ in cand_mem if col in search.chosen[d]}
+    keep_mem, memory, removed = _refine_memory(samples, base, body, keep_cross, keep_mem, cutoff)
+    dropped.update(removed)
+    model = _with_terms(base, keep_cross, keep_mem, shared)
+    return Selection(model, search.steps, {f"freq.{DOF_NAMES[d]}.lambda1": lam
+                                           for d, lam in keep_mem.items()}, dropped,
+                     total_sum_of_squares(ne), memory)
+
+
+def _feature_columns(base: DampingModel, specs: Sequence[CrossSpec]
+                     ) -> tuple[list[tuple[int, Alpha]], list[_Column],
+                                list[tuple[int, int, CrossSpec]]]:
+    """The distinct features g_k(ν) = α_k(ν) ν_col of the base's static terms and of the
+    candidates, the base's single-entry columns first, then the candidates' (simplest first).
+
+    Returns
+    -------
+    feats : list of (int, Alpha), length m
+        (col, α) of each feature k, one per canonical product (:func:`_key`).
+    base_cols : list of (row, feature, name)
+        The base's static parameters.
+    cand : list of (row, feature, CrossSpec)
+        The candidates, in the order of ``specs``.
+    """
     keys: dict[tuple[Any, ...], int] = {}
     feats: list[tuple[int, Alpha]] = []
 
@@ -337,49 +390,99 @@ def _search(samples: Samples, base: DampingModel, body: RigidBody,
             feats.append((col, alpha))
         return keys[k]
 
-    base_cols: list[tuple[int, int, str]] = []  # (row, feature, name)
+    base_cols: list[_Column] = []
     for t in base.terms:
         if t.kind != "freq":
             for bs in t.bases:
                 r, col = _single_entry(bs)
                 base_cols.append((r, feature(col, bs.alpha), bs.name))
     cand = [(sp.row, feature(sp.col, sp.alpha), sp) for sp in specs]
-    m = len(feats)
-    # memory: the base's states, then candidate states with profiled rates
-    mem0 = base.term("freq")
-    duration = len(samples) / samples.rate
-    n_eff = min(float(len(samples)), 2.0 * cutoff * duration)
-    bounds = (0.05, 20.0)
+    return feats, base_cols, cand
+
+
+def _memory_rates(samples: Samples, base: DampingModel, body: RigidBody,
+                  dofs: Sequence[int], cutoff: float) -> tuple[dict[int, float], dict[str, str]]:
+    """Profiled rate λ (1/s) of a memory state in each DOF of ``dofs`` on top of ``base``
+    (:func:`memory_evidence`); the DOFs whose state is not passive fluid memory go to the
+    second mapping with the reason (``"memory on u"`` → why)."""
     rates: dict[int, float] = {}
     dropped: dict[str, str] = {}
-    if mem0 is None and memory_dofs:
-        evidence = memory_evidence(samples, base, body, memory_dofs, cutoff, bounds)
-        for ev in evidence:
+    if dofs:
+        for ev in memory_evidence(samples, base, body, dofs, cutoff):
             if ev.contradiction:
                 dropped[f"memory on {DOF_NAMES[ev.dof]}"] = ev.contradiction
             else:
                 rates[ev.dof] = ev.rate
+    return rates, dropped
+
+
+def _memory_columns(mem0: DampingTerm | None, rates: dict[int, float], m: int
+                    ) -> tuple[FloatArray, NDArray[np.int64], list[_Column], list[_Column]]:
+    """The memory states after the m features: the base's (``mem0``), then one candidate
+    state per DOF of ``rates``.
+
+    Returns
+    -------
+    mem_rates : ndarray, shape (s,)
+        Rate λ of each state (1/s).
+    mem_dofs : ndarray of int, shape (s,)
+        The DOF (and row) of each state.
+    base_mem, cand_mem : list of (row, column, name)
+        The base's states (column m + k) and the candidate states.
+    """
+    n0 = mem0.n_states if mem0 is not None else 0
     mem_rates = np.r_[mem0.rates if mem0 is not None else [], list(rates.values())]
     mem_dofs = np.r_[mem0.state_dofs if mem0 is not None else [], list(rates)].astype(np.int64)
-    n0 = mem0.n_states if mem0 is not None else 0
-    if mem0 is not None:
-        base_cols += [(int(d), m + k, nm) for k, (d, nm) in
-                      enumerate(zip(mem0.state_dofs, mem0.parameter_names, strict=True))]
-    ne = _feature_equations(samples, feats, mem_rates, mem_dofs, body, folds, cutoff)
-    N = float(ne.n.sum())
-    G0 = ne.A.sum(0)[0][:m, :m]  # the features' Gram matrix (the same in every row)
-    # zero and numerically equal columns (up to scale), compared with those before them
+    base_mem = [] if mem0 is None else [
+        (int(d), m + k, nm)
+        for k, (d, nm) in enumerate(zip(mem0.state_dofs, mem0.parameter_names, strict=True))]
+    cand_mem = [(d, m + n0 + k, f"memory on {DOF_NAMES[d]} (λ = {lam:.3g} 1/s)")
+                for k, (d, lam) in enumerate(rates.items())]
+    return mem_rates, mem_dofs, base_mem, cand_mem
+
+
+def _equal_columns(G0: FloatArray, tol: float
+                   ) -> tuple[NDArray[np.bool_], FloatArray, NDArray[np.int64]]:
+    """Zero and numerically equal (up to scale) feature columns, from their Gram matrix.
+
+    Parameters
+    ----------
+    G0 : ndarray, shape (m, m)
+        Σ g_k g_l over the data (the same in every row).
+    tol : float
+        Columns with |corr| > 1 − ``tol`` are equal.
+
+    Returns
+    -------
+    zero : ndarray of bool, shape (m,)
+    corr : ndarray, shape (m, m)
+        |correlation| (about zero) of each pair.
+    same_as : ndarray of int, shape (m,)
+        The first earlier column, not zero and not itself a copy, that column k equals; −1 if
+        none.
+    """
     g = np.diag(G0)
     zero = g <= 1e-12 * max(float(g.max()), 1e-300)
     with np.errstate(invalid="ignore", divide="ignore"):
+        # |corr_kl| = |G_kl| / √(G_kk G_ll)
         corr = np.abs(G0) / np.sqrt(np.outer(g, g))
-    same_as = np.full(m, -1)
-    for k in range(m):
+    same_as = np.full(len(g), -1)
+    for k in range(len(g)):
         if not zero[k]:
             earlier = np.flatnonzero((corr[k, :k] > 1.0 - tol) & ~zero[:k] & (same_as[:k] < 0))
             same_as[k] = earlier[0] if len(earlier) else -1
+    return zero, corr, same_as
+
+
+def _searchable(cand: Sequence[tuple[int, int, CrossSpec]], base_cols: Sequence[_Column],
+                feats: Sequence[tuple[int, Alpha]], zero: NDArray[np.bool_], corr: FloatArray,
+                same_as: NDArray[np.int64]) -> tuple[list[_Column], dict[str, str]]:
+    """The candidates worth searching, as (row, feature, name); the others (zero in these
+    data, or equal to an earlier column) with the reason. A candidate whose column is a base
+    parameter's in its row is neither."""
     row_names = {(r, f): nm for r, f, nm in base_cols}
-    usable: list[tuple[int, int, str]] = []  # (row, column, name)
+    usable: list[_Column] = []
+    dropped: dict[str, str] = {}
     for r, f, sp in cand:
         if (r, f) in row_names:
             continue  # the same column as a base parameter of this row
@@ -395,166 +498,278 @@ def _search(samples: Samples, base: DampingModel, body: RigidBody,
         else:
             usable.append((r, f, sp.label))
         row_names.setdefault((r, f), sp.label)
-    for k, d in enumerate(mem_dofs[n0:]):
-        usable.append((int(d), m + n0 + k, f"memory on {DOF_NAMES[int(d)]} "
-                                           f"(λ = {rates[int(d)]:.3g} 1/s)"))
-    spec_of = {sp.label: sp for _, _, sp in cand}
-    # stepwise search, every row at once: forward while a candidate qualifies and the budget
-    # allows, then backward (a later term can make an earlier one redundant), repeated
-    chosen = {i: [f for r, f, _ in base_cols if r == i] for i in range(6)}
-    name_of = {(r, f): nm for r, f, nm in [*base_cols, *usable]}
-    # the base's memory states, and its columns the data leave at zero (the fit flags them
-    # 'no excitation' rather than the selection hiding them)
-    keep_always = {(r, f) for r, f, _ in base_cols if f >= m or zero[f]}
-    from_base = {(r, f) for r, f, _ in base_cols}
-    pool = {i: [f for r, f, _ in usable if r == i] for i in range(6)}
-    rss = np.array([ne.c.sum(0)[i] - _fit_row(ne, i, chosen[i]) for i in range(6)])
-    tss = np.maximum(ne.c.sum(0), 1e-300)
+    return usable, dropped
 
-    def refresh(i: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        return _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], chosen[i],
-                         np.array(pool[i], dtype=np.int64), tol)
 
-    state = {i: refresh(i) for i in range(6)}
-    cv = np.array([float(state[i][0]) for i in range(6)])
-    k_now = base.n_params + n_shared
-    log_n = float(np.log(n_eff))
+def _refine_memory(samples: Samples, base: DampingModel, body: RigidBody,
+                   cross: Sequence[CrossSpec], rates: dict[int, float], cutoff: float
+                   ) -> tuple[dict[int, float], list[MemoryEvidence], dict[str, str]]:
+    """Each chosen memory state's rate again, with the other chosen terms in place, and its
+    check in both domains: a state that is no longer passive memory there goes.
 
-    def crit(r: FloatArray, k: int) -> tuple[float, float]:
-        ll = n_eff * float(np.sum(np.log(np.maximum(r, 1e-300) / N)))
-        return ll + k * log_n, ll + 2.0 * k
+    Returns
+    -------
+    rates : dict
+        DOF → refined rate λ (1/s) of the states that stay.
+    memory : list of MemoryEvidence
+        One per chosen state, kept or not.
+    dropped : dict
+        ``"memory on u"`` → why it was removed.
+    """
+    rates = dict(rates)
+    memory: list[MemoryEvidence] = []
+    dropped: dict[str, str] = {}
+    for d in list(rates):
+        others = _with_terms(base, cross, {k: v for k, v in rates.items() if k != d})
+        ev = memory_evidence(samples, others, body, [d], cutoff)[0]
+        memory.append(ev)
+        if ev.contradiction:
+            dropped[f"memory on {DOF_NAMES[d]}"] = f"removed after the search: {ev.contradiction}"
+            del rates[d]
+        else:
+            rates[d] = ev.rate
+    return rates, memory, dropped
 
-    def record(label: str, i: int) -> None:
-        bic, aic = crit(rss, k_now)
-        steps.append(SelectionStep(label, k_now, rss.copy(), bic, aic,
-                                   1.0 - rss[i] / max(steps[-1].rss[i], 1e-300), cv.copy()))
 
-    bic, aic = crit(rss, k_now)
-    steps = [SelectionStep("base: " + "+".join([*base.kinds, *(t.kind for t in shared)]), k_now,
-                           rss.copy(), bic, aic, 0.0, cv.copy())]
-    def best_addition(rows: Sequence[int] = range(6)) -> tuple[float, int, int] | None:
-        """(score, row, pool index) of the candidate with the largest held-out gain (score
-        = change of the row's held-out unexplained share, < 0) among those that qualify."""
+@dataclass(frozen=True)
+class _Rules:
+    """The test a term passes to enter the model and to stay in it, and the budget (the
+    parameters of :func:`select_terms` of the same names)."""
+
+    max_terms: int
+    min_improvement: float
+    min_err: float
+    tol: float
+    strict_base: bool
+    exchange: float
+
+    def qualifies(self, dbic: _Real, gain: _Real, rss_without: _Real, cv_with: _Real,
+                  cv_without: _Real, passive: NDArray[np.bool_] | bool) -> NDArray[np.bool_]:
+        """Whether a term passes, elementwise over candidates: it lowers BIC by more than
+        ``min_improvement``, removes at least ``min_err`` of its row's residual sum of squares
+        without it, lowers its row's held-out RSS, and is passive (a memory state only with a
+        gain c > 0). Scalars or arrays of one shape (ΔBIC, RSS and held-out RSS in N²)."""
+        return ((dbic < -self.min_improvement) & (gain >= self.min_err * rss_without)
+                & (cv_with < cv_without) & np.isfinite(cv_with) & passive)
+
+
+class _Removal(NamedTuple):
+    """What taking the term ``col`` out of ``row`` would do."""
+
+    row: int
+    col: int
+    rss: float  # the row's RSS without the term
+    cv: float  # the row's held-out RSS without it
+    dbic: float  # BIC with the term − without it
+    loss: float  # held-out R² the row loses
+    weak: bool  # it no longer passes the test it entered by
+
+
+class _Stepwise:
+    """The stepwise search over the six rows at once, and its path.
+
+    Forward while a candidate qualifies and the budget allows, then backward (a later term
+    can make an earlier one redundant), repeated. Every candidate's in-sample and held-out
+    gain in its row is kept up to date (:func:`_held_out`), so a step costs no pass over data.
+
+    Parameters
+    ----------
+    ne : NormalEquations
+        Per-fold normal equations of every column in every row, A (F, 6, p, p).
+    m : int
+        Number of library features; columns ≥ m are memory states.
+    base_cols, usable : sequence of (row, column, name)
+        The base's parameters (chosen at the start) and the candidates.
+    zero : ndarray of bool, shape (m,)
+        Features that are zero in the data (a base one stays).
+    k0 : int
+        Parameters of the base, the shared terms included.
+    n_eff : float
+        Independent samples of the low-passed regression.
+    rules : _Rules
+    label : str
+        Name of the first row of the path.
+    """
+
+    def __init__(self, ne: NormalEquations, m: int, base_cols: Sequence[_Column],
+                 usable: Sequence[_Column], zero: NDArray[np.bool_], k0: int, n_eff: float,
+                 rules: _Rules, label: str) -> None:
+        self.ne, self.m, self.rules, self.n_eff = ne, m, rules, n_eff
+        self.log_n = float(np.log(n_eff))
+        self.N = float(ne.n.sum())
+        self.chosen = {i: [f for r, f, _ in base_cols if r == i] for i in range(6)}
+        self.pool = {i: [f for r, f, _ in usable if r == i] for i in range(6)}
+        self.name_of = {(r, f): nm for r, f, nm in [*base_cols, *usable]}
+        # the base's memory states, and its columns the data leave at zero (the fit flags them
+        # 'no excitation' rather than the selection hiding them)
+        self.keep_always = {(r, f) for r, f, _ in base_cols if f >= m or zero[f]}
+        self.from_base = {(r, f) for r, f, _ in base_cols}
+        tss = total_sum_of_squares(ne)
+        self.rss = np.array([tss[i] - _fit_row(ne, i, self.chosen[i]) for i in range(6)])
+        self.tss = np.maximum(tss, 1e-300)
+        self.trials = {i: self._held_out(i, self.chosen[i], self.pool[i]) for i in range(6)}
+        self.cv = np.array([float(self.trials[i][0]) for i in range(6)])
+        self.k = k0
+        bic, aic = self._criteria()
+        self.steps = [SelectionStep(label, self.k, self.rss.copy(), bic, aic, 0.0,
+                                    self.cv.copy())]
+
+    def run(self, rounds: int) -> None:
+        """At most ``rounds`` forward-then-backward rounds, until one changes nothing."""
+        for _ in range(rounds):
+            added = self._forward()
+            if not self._backward() and not added:
+                break
+
+    def chosen_names(self) -> set[str]:
+        """Names of the parameters in the model now."""
+        return {self.name_of[(i, f)] for i in range(6) for f in self.chosen[i]}
+
+    def _held_out(self, i: int, S: Sequence[int], C: Sequence[int]
+                  ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """:func:`_held_out` of row ``i``: the columns S, and S plus each one of C."""
+        ne = self.ne
+        return _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], S, np.array(C, dtype=np.int64),
+                         self.rules.tol)
+
+    def _criteria(self) -> tuple[float, float]:
+        """(BIC, AIC) of the model now (dimensionless)."""
+        # n_eff Σ_i log(RSS_i / N): −2 log-likelihood up to a constant
+        ll = self.n_eff * float(np.sum(np.log(np.maximum(self.rss, 1e-300) / self.N)))
+        # BIC = … + k log n_eff, AIC = … + 2k
+        return ll + self.k * self.log_n, ll + 2.0 * self.k
+
+    def _delta_bic(self, rss_with: _Real, rss_without: _Real) -> FloatArray:
+        """BIC with one parameter more in a row − BIC without it, from the row's RSS with and
+        without it (N², scalars or arrays)."""
+        # ΔBIC = n_eff log(RSS_with / RSS_without) + log n_eff
+        return self.n_eff * np.log(np.maximum(rss_with, 1e-300)
+                                   / np.maximum(rss_without, 1e-300)) + self.log_n
+
+    def _record(self, label: str, i: int) -> None:
+        """Append the model now to the path, ``label`` the change made in row ``i``."""
+        bic, aic = self._criteria()
+        # error-reduction ratio: 1 − RSS_i / RSS_i before the change
+        err = 1.0 - self.rss[i] / max(self.steps[-1].rss[i], 1e-300)
+        self.steps.append(SelectionStep(label, self.k, self.rss.copy(), bic, aic, err,
+                                        self.cv.copy()))
+
+    def _best_addition(self, rows: Sequence[int] = range(6)) -> tuple[float, int, int] | None:
+        """(score, row, pool index) of the candidate in ``rows`` with the largest held-out
+        gain among those that qualify; None if none does."""
         best: tuple[float, int, int] | None = None
         for i in rows:
-            _, cv_c, gain, coef = state[i]
+            _, cv_c, gain, coef = self.trials[i]
             if not len(cv_c):
                 continue
-            new = np.maximum(rss[i] - gain, 1e-300)
-            dbic = n_eff * np.log(new / max(rss[i], 1e-300)) + log_n
+            dbic = self._delta_bic(self.rss[i] - gain, self.rss[i])
             # a memory state enters only as passive memory (gain c > 0)
-            passive = (np.array(pool[i]) < m) | (coef > 0)
-            good = ((dbic < -min_improvement) & (gain >= min_err * rss[i])
-                    & (cv_c < cv[i]) & np.isfinite(cv_c) & passive)
+            passive = (np.array(self.pool[i]) < self.m) | (coef > 0)
+            good = self.rules.qualifies(dbic, gain, self.rss[i], cv_c, self.cv[i], passive)
             if good.any():
-                score = np.where(good, (cv_c - cv[i]) / tss[i], np.inf)
+                # score: change of the row's held-out unexplained share, (CV_c − CV_i) / TSS_i
+                score = np.where(good, (cv_c - self.cv[i]) / self.tss[i], np.inf)
                 j = int(np.argmin(score))
                 if best is None or score[j] < best[0]:
                     best = (float(score[j]), i, j)
         return best
 
-    def remove(i: int, col: int, rss_wo: float, cv_wo: float) -> None:
-        nonlocal k_now
-        rss[i], cv[i] = rss_wo, cv_wo
-        chosen[i].remove(col)
-        k_now -= 1
-        state[i] = refresh(i)
-        record("− " + name_of[(i, col)], i)
+    def _add(self, i: int, j: int) -> None:
+        """Move candidate ``j`` of the pool of row ``i`` into the model."""
+        f = self.pool[i].pop(j)
+        self.cv[i] = float(self.trials[i][1][j])
+        self.rss[i] = max(float(self.rss[i] - self.trials[i][2][j]), 0.0)
+        self.chosen[i].append(f)
+        self.k += 1
+        self.trials[i] = self._held_out(i, self.chosen[i], self.pool[i])
+        self._record(self.name_of[(i, f)], i)
 
-    def add(i: int, j: int) -> None:
-        nonlocal k_now
-        f = pool[i].pop(j)
-        cv[i] = float(state[i][1][j])
-        rss[i] = max(float(rss[i] - state[i][2][j]), 0.0)
-        chosen[i].append(f)
-        k_now += 1
-        state[i] = refresh(i)
-        record(name_of[(i, f)], i)
+    def _removal(self, i: int, col: int) -> _Removal:
+        """What removing column ``col`` from row ``i`` would do: a searched term is weak when it
+        no longer passes the test it entered by, a base one (unless ``strict_base``) when its
+        removal lowers BIC."""
+        rest = [c for c in self.chosen[i] if c != col]
+        cv_wo, _, gain, coef = self._held_out(i, rest, [col])
+        rss_wo = self.rss[i] + float(gain[0])
+        dbic = float(self._delta_bic(self.rss[i], rss_wo))
+        if (i, col) in self.from_base and not self.rules.strict_base:
+            weak = dbic > 0.0
+        else:
+            weak = not self.rules.qualifies(dbic, rss_wo - self.rss[i], rss_wo, self.cv[i],
+                                            float(cv_wo), col < self.m or float(coef[0]) > 0)
+        # held-out R² lost: (CV without − CV with) / TSS
+        loss = (float(cv_wo) - self.cv[i]) / self.tss[i]
+        return _Removal(i, col, rss_wo, float(cv_wo), dbic, loss, weak)
 
-    for _ in range(rounds):
-        changed = False
-        while k_now < max_terms:
-            best = best_addition()
+    def _remove(self, r: _Removal) -> None:
+        """Take the term of ``r`` out of the model; it does not return to the pool."""
+        self.rss[r.row], self.cv[r.row] = r.rss, r.cv
+        self.chosen[r.row].remove(r.col)
+        self.k -= 1
+        self.trials[r.row] = self._held_out(r.row, self.chosen[r.row], self.pool[r.row])
+        self._record("− " + self.name_of[(r.row, r.col)], r.row)
+
+    def _forward(self) -> bool:
+        """Add the best qualifying candidate while there is one and the budget allows;
+        whether any was added."""
+        added = False
+        while self.k < self.rules.max_terms:
+            best = self._best_addition()
             if best is None:
                 break
-            add(best[1], best[2])
-            changed = True
+            self._add(best[1], best[2])
+            added = True
+        return added
+
+    def _backward(self) -> bool:
+        """Remove the weakest term (largest ΔBIC) while one is weak, then, at the budget, try
+        an exchange; whether the model changed. A removed term does not come back (no
+        cycling)."""
+        removed = False
         while True:
-            # the weakest term: a searched one that no longer passes the test it entered by,
-            # or a base one whose removal lowers BIC; it does not come back (no cycling)
-            worst: tuple[float, int, int, float, float] | None = None
-            cheapest: tuple[float, int, int, float, float] | None = None
-            cheapest_in: dict[int, tuple[float, int, int, float, float]] = {}
-            for i in range(6):
-                for col in chosen[i]:
-                    if (i, col) in keep_always:
-                        continue
-                    rest = [c for c in chosen[i] if c != col]
-                    cv_wo, _, gain, coef = _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], rest,
-                                                     np.array([col], dtype=np.int64), tol)
-                    rss_wo = rss[i] + float(gain[0])
-                    dbic = n_eff * float(np.log(max(rss[i], 1e-300) / max(rss_wo, 1e-300))) \
-                        + log_n
-                    weak = dbic > 0.0 if ((i, col) in from_base and not strict_base) else not (
-                        dbic < -min_improvement and rss_wo - rss[i] >= min_err * rss_wo
-                        and cv[i] < float(cv_wo) and (col < m or float(coef[0]) > 0))
-                    if weak and (worst is None or dbic > worst[0]):
-                        worst = (dbic, i, col, rss_wo, float(cv_wo))
-                    loss = (float(cv_wo) - cv[i]) / tss[i]
-                    if cheapest is None or loss < cheapest[0]:
-                        cheapest = (loss, i, col, rss_wo, float(cv_wo))
-                    if i not in cheapest_in or loss < cheapest_in[i][0]:
-                        cheapest_in[i] = (loss, i, col, rss_wo, float(cv_wo))
-            if worst is not None:
-                remove(*worst[1:])
-                changed = True
-                continue
-            # at the budget: exchange the term whose loss costs least held-out R² for the best
-            # candidate when that gains more than twice as much
-            if k_now < max_terms:
+            removals = [self._removal(i, col) for i in range(6) for col in self.chosen[i]
+                        if (i, col) not in self.keep_always]
+            weak = [r for r in removals if r.weak]
+            if not weak:
                 break
-            best = best_addition()
-            if best is not None and cheapest is not None and -best[0] > exchange * cheapest[0]:
-                remove(*cheapest[1:])
-                changed = True
-                break
-            # no DOF left behind: the worst-explained DOF takes the place of the cheapest term
-            # of a DOF that stays better explained than the worst one is now (the smallest
-            # held-out R² of the six rises with every such exchange, so they end)
-            r2 = 1.0 - cv / tss
-            w = int(np.argmin(r2))
-            best = best_addition([w])
-            if best is not None:
-                donors = [c for i, c in cheapest_in.items() if i != w and r2[i] - c[0] > r2[w]]
-                if donors:
-                    remove(*min(donors)[1:])
-                    add(best[1], best[2])
-                    changed = True
-            break
-        if not changed:
-            break
-    final = {name_of[(i, f)] for i in range(6) for f in chosen[i]}
-    base = _without(base, [n for n in base_names if n not in final])
-    keep_cross = [spec_of[st.added] for st in steps[1:]
-                  if st.added in spec_of and st.added in final]
-    keep_mem = {int(d): rates[int(d)] for k, d in enumerate(mem_dofs[n0:])
-                if m + n0 + k in chosen[int(d)]}
-    # refine each chosen memory rate with the other chosen terms in place, and check it again
-    # in both domains: a state that is no longer passive memory there goes
-    memory = []
-    for d in list(keep_mem):
-        others = _with_terms(base, keep_cross, {k: v for k, v in keep_mem.items() if k != d})
-        ev = memory_evidence(samples, others, body, [d], cutoff, bounds)[0]
-        memory.append(ev)
-        if ev.contradiction:
-            dropped[f"memory on {DOF_NAMES[d]}"] = f"removed after the search: {ev.contradiction}"
-            del keep_mem[d]
-        else:
-            keep_mem[d] = ev.rate
-    model = _with_terms(base, keep_cross, keep_mem, shared)
-    return Selection(model, steps, {f"freq.{DOF_NAMES[d]}.lambda1": lam
-                                    for d, lam in keep_mem.items()}, dropped,
-                     np.asarray(ne.c.sum(0), dtype=float), memory)
+            self._remove(max(weak, key=lambda r: r.dbic))
+            removed = True
+        return self._exchange(removals) or removed
+
+    def _exchange(self, removals: Sequence[_Removal]) -> bool:
+        """At the budget, exchange the term whose removal costs least held-out R² for the best
+        candidate when that gains ``exchange`` times as much; else let the worst-explained DOF
+        take the place of a term of another (:meth:`_lift_worst_dof`). Whether a term went."""
+        if self.k < self.rules.max_terms:
+            return False
+        best = self._best_addition()
+        if best is not None and removals:
+            cheapest = min(removals, key=lambda r: r.loss)
+            if -best[0] > self.rules.exchange * cheapest.loss:
+                self._remove(cheapest)
+                return True
+        return self._lift_worst_dof(removals)
+
+    def _lift_worst_dof(self, removals: Sequence[_Removal]) -> bool:
+        """No DOF left behind: the worst-explained DOF takes the place of the cheapest term of
+        a DOF that stays better explained than the worst one is now (the smallest held-out R²
+        of the six rises with every such exchange, so they end). Whether it did."""
+        # held-out R²_i = 1 − CV_i / TSS_i
+        r2 = 1.0 - self.cv / self.tss
+        w = int(np.argmin(r2))
+        best = self._best_addition([w])
+        if best is None:
+            return False
+        cheapest_in: dict[int, _Removal] = {}
+        for r in removals:
+            if r.row not in cheapest_in or r.loss < cheapest_in[r.row].loss:
+                cheapest_in[r.row] = r
+        donors = [r for i, r in cheapest_in.items() if i != w and r2[i] - r.loss > r2[w]]
+        if not donors:
+            return False
+        self._remove(min(donors, key=lambda r: (r.loss, r.row)))
+        self._add(best[1], best[2])
+        return True
 
 
 def _least_squares(samples: Samples, model: DampingModel, body: RigidBody, cutoff: float
