@@ -15,6 +15,7 @@ from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData, bind, rms
 from dampest_ros.core.gap.effects import Effect
 from dampest_ros.core.gap.library import library
 from dampest_ros.core.gap.update import updated_model
+from dampest_ros.core.identification.regression import information_criteria
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 
@@ -217,8 +218,8 @@ def _lsq(X: FloatArray, y: FloatArray, w: FloatArray) -> FloatArray:
 
 
 def _bic(rss: FloatArray, n: float, n_eff: float, k: int) -> float:
-    """n_eff Σ_i log(RSS_i / n) + k log n_eff."""
-    return float(n_eff * np.sum(np.log(np.maximum(rss, 1e-300) / n)) + k * np.log(n_eff))
+    """n_eff Σ_i log(RSS_i / n) + k log n_eff (:func:`information_criteria`)."""
+    return information_criteria(rss, n, n_eff, k)[0]
 
 
 def screen(data: GapData, effect: Effect, r: FloatArray, w: FloatArray,

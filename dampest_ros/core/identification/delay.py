@@ -18,18 +18,13 @@ from dampest_ros.core.signals.samples import Samples
 FloatArray = NDArray[np.float64]
 
 
-def _criteria(ne: NormalEquations, idx: NDArray[np.int64], weights: FloatArray, n_eff: float
-              ) -> tuple[FloatArray, float, float]:
-    """RSS per DOF, BIC and AIC of the least-squares fit on the columns ``idx``."""
-    A = np.einsum("i,fipq->pq", weights, ne.A)[np.ix_(idx, idx)]
-    b = np.einsum("i,fip->p", weights, ne.b)[idx]
-    theta = solve_normal(A, b, np.ones(len(idx), dtype=bool), np.zeros(len(idx)))
-    full = np.zeros(ne.A.shape[-1])
-    full[idx] = theta
-    rss = np.maximum(ne.rss(full), 1e-300)
-    n = float(ne.n.sum())
-    ll = n_eff * float(np.sum(np.log(rss / n)))
-    return rss, ll + len(idx) * float(np.log(n_eff)), ll + 2.0 * len(idx)
+def _rss(ne: NormalEquations) -> FloatArray:
+    """RSS per DOF of the unweighted least-squares fit on every column, shape (6,)."""
+    p = ne.A.shape[-1]
+    A = ne.A.sum(axis=(0, 1))
+    b = ne.b.sum(axis=(0, 1))
+    theta = solve_normal(A, b, np.ones(p, dtype=bool), np.zeros(p))
+    return np.asarray(np.maximum(ne.rss(theta), 1e-300))
 
 
 def shift_tau(samples: Samples, delay: float) -> Samples:
@@ -96,9 +91,7 @@ def profile_delay(samples: Samples, model: DampingModel, body: RigidBody, cutoff
     """
 
     def cost(delay: float) -> float:
-        ne = accumulate(shift_tau(samples, delay), model, body, folds=1, cutoff=cutoff)
-        idx = np.arange(model.n_params)
-        rss, _, _ = _criteria(ne, idx, np.ones(6), 1.0)
+        rss = _rss(accumulate(shift_tau(samples, delay), model, body, folds=1, cutoff=cutoff))
         # scale-free: sum of the per-DOF log residuals (DOFs with large forces do not rule)
         return float(np.sum(np.log(np.maximum(rss, 1e-300))))
 

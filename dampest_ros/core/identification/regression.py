@@ -177,6 +177,27 @@ def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: in
     return NormalEquations(A, b, c, n)
 
 
+def information_criteria(rss: FloatArray, n: float, n_eff: float, k: int
+                         ) -> tuple[float, float]:
+    """(BIC, AIC) of a fit with ``k`` parameters from its residual sums of squares.
+
+    Parameters
+    ----------
+    rss : ndarray, shape (6,)
+        RSS per DOF.
+    n : float
+        Samples the RSS sums over.
+    n_eff : float
+        Independent samples among them (the low-pass makes neighbours dependent).
+    k : int
+        Parameters fitted.
+    """
+    # n_eff Σ_i log(RSS_i / n): −2 log-likelihood up to a constant
+    ll = n_eff * float(np.sum(np.log(np.maximum(rss, 1e-300) / n)))
+    # BIC = … + k log n_eff, AIC = … + 2k
+    return ll + k * float(np.log(n_eff)), ll + 2.0 * k
+
+
 def total_sum_of_squares(ne: NormalEquations) -> FloatArray:
     """Σ (y − ȳ)² per DOF from the normal equations' Σ y² and the mean of y, shape (6,).
 

@@ -43,6 +43,7 @@ from dampest_ros.core.identification.regression import (
     NormalEquations,
     accumulate,
     fold_index,
+    information_criteria,
     iter_regression,
     total_sum_of_squares,
 )
@@ -634,10 +635,7 @@ class _Stepwise:
 
     def _criteria(self) -> tuple[float, float]:
         """(BIC, AIC) of the model now (dimensionless)."""
-        # n_eff Σ_i log(RSS_i / N): −2 log-likelihood up to a constant
-        ll = self.n_eff * float(np.sum(np.log(np.maximum(self.rss, 1e-300) / self.N)))
-        # BIC = … + k log n_eff, AIC = … + 2k
-        return ll + self.k * self.log_n, ll + 2.0 * self.k
+        return information_criteria(self.rss, self.N, self.n_eff, self.k)
 
     def _delta_bic(self, rss_with: _Real, rss_without: _Real) -> FloatArray:
         """BIC with one parameter more in a row − BIC without it, from the row's RSS with and
