@@ -5,6 +5,8 @@ import os
 from setuptools import find_packages, setup
 
 PACKAGE_NAME = "dampest_ros"
+#: Optional: several logs pooled on Dask, logs named by URL (no rosdep key: pip only).
+POOL_EXTRA = ["dask", "distributed", "fsspec"]
 
 # The single list of ROS 2 node executables: script name -> "module:function".
 # Each becomes a console script (installed to lib/dampest_ros for `ros2 run`).
@@ -60,6 +62,8 @@ setup(
         "matplotlib",
         "PyYAML",
     ],
+    # pip install 'dampest_ros[pool]': several logs on Dask, logs named by fsspec URL
+    extras_require={"pool": POOL_EXTRA},
     zip_safe=True,
     maintainer="dampest_ros maintainers",
     maintainer_email="dampest@example.com",

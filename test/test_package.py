@@ -140,19 +140,23 @@ ROSDEP_KEYS = {
     "mcap_ros2": "mcap-ros2-support",
     "mujoco": "python3-mujoco-pip",
     "pinocchio": "pinocchio",
-    "dask": "python3-dask",
-    "fsspec": "python3-fsspec",
 }
+#: Imports with no rosdep key: the pip extra 'pool' of setup.py (README.md names it); the
+#: code that needs them says how to install them.
+OPTIONAL = {"dask", "distributed", "fsspec"}
+#: Every key rosdep resolves on Jazzy (ros/rosdistro, August 2026; a copy kept here).
+ROSDEP_JAZZY = REPO / "test" / "data" / "rosdep_keys_jazzy.txt"
 #: Imports that are not run dependencies: the peers the arm benchmark compares with
 #: (requirements/peers.txt, ``make bench-peers``; dampest_ros.bench.arm imports them only there).
 BENCH_PEERS = {"figaroh"}
 
 
 def third_party_imports() -> dict[str, str]:
-    """Top-level name → a file importing it, for every import in dampest_ros/ that is
-    neither the standard library nor dampest_ros (lazy imports inside functions included)."""
+    """Top-level name → a file importing it, for every import in dampest_ros/ and launch/
+    that is neither the standard library nor dampest_ros (lazy imports inside functions
+    included)."""
     found: dict[str, str] = {}
-    for path in sorted((REPO / PACKAGE).rglob("*.py")):
+    for path in sorted([*(REPO / PACKAGE).rglob("*.py"), *(REPO / "launch").glob("*.py")]):
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if isinstance(node, ast.Import):
                 names = [a.name for a in node.names]
@@ -174,5 +178,35 @@ def test_package_xml_declares_every_third_party_import() -> None:
     imports = third_party_imports()
     assert {"numpy", "rclpy", "rosbags", "yaml"} <= set(imports)  # the scan sees imports
     missing = {name: (ROSDEP_KEYS.get(name, name), where) for name, where in imports.items()
-               if ROSDEP_KEYS.get(name, name) not in run and name not in BENCH_PEERS}
+               if ROSDEP_KEYS.get(name, name) not in run
+               and name not in BENCH_PEERS | OPTIONAL}
     assert not missing, f"package.xml lacks exec_depend for (import: (key, file)) {missing}"
+    assert "ament_index_python" in imports and "dask" in imports  # launch/ and pool scanned
+
+
+def test_every_package_xml_key_resolves_on_jazzy() -> None:
+    """rosdep install fails on the first key it cannot resolve: every dependency of
+    package.xml is a key of the Jazzy list (ament_python is a build type, not a key)."""
+    keys = {line.strip() for line in ROSDEP_JAZZY.read_text().splitlines()
+            if line.strip() and not line.startswith("#")}
+    assert len(keys) > 4000 and "rclpy" in keys and "ament_python" not in keys
+    root = ET.parse(REPO / "package.xml").getroot()
+    deps = {e.tag: [] for e in root if e.tag.endswith("depend")}
+    for e in root:
+        if e.tag.endswith("depend") and e.text:
+            deps[e.tag].append(e.text.strip())
+    unknown = {tag: [k for k in ks if k not in keys] for tag, ks in deps.items()}
+    assert not any(unknown.values()), f"not rosdep keys on Jazzy: {unknown}"
+
+
+def test_optional_imports_are_the_pool_extra_and_say_how_to_install() -> None:
+    """Dask and fsspec: setup.py's 'pool' extra, and a one-line refusal without them."""
+    setup_text = (REPO / "setup.py").read_text()
+    assert 'POOL_EXTRA = ["dask", "distributed", "fsspec"]' in setup_text
+    assert 'extras_require={"pool": POOL_EXTRA}' in setup_text
+    code = ("import sys; sys.modules['dask'] = None; sys.modules['dask.distributed'] = None\n"
+            "from dampest_ros.cli.pool import need_dask\n"
+            "try:\n    need_dask()\nexcept Exception as exc:\n    print(exc)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=REPO, check=True).stdout
+    assert "pip install dask distributed fsspec" in out and "'pool' extra" in out, out

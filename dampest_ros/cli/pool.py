@@ -119,6 +119,25 @@ def reduce_log(path: str, args: argparse.Namespace, prior: np.ndarray | None,
     return log_statistics(path, samples, model, vehicle.body, options, prior, prior_std)
 
 
+#: How to get what pooling needs: the 'pool' extra of setup.py (Dask has no rosdep key).
+POOL_HINT = "pip install dask distributed fsspec (dampest_ros's optional 'pool' extra)"
+
+
+def need_dask() -> None:
+    """Refuse, in one line saying how to install it, when Dask is missing.
+
+    Raises
+    ------
+    ConfigError
+        Naming the logs option and :data:`POOL_HINT`.
+    """
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError as exc:
+        raise ConfigError("LOG LOG ...", f"several logs are read on Dask, which is not "
+                                          f"installed ({exc}); {POOL_HINT}") from exc
+
+
 def _client(args: argparse.Namespace, n_logs: int) -> Any:
     """A Dask client: on --scheduler, or on a LocalCluster of --workers processes."""
     from dask.distributed import Client
@@ -159,6 +178,7 @@ def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: arg
     reason of each that failed; the cluster lives until the block ends. The workers keep
     nothing: their memory does not grow with the number of logs.
     """
+    need_dask()
     from dask.distributed import as_completed
     client = _client(args, len(paths))
     done: dict[str, Any] = {}

@@ -37,7 +37,11 @@ def _filesystem(url: str) -> tuple[Any, str]:
     ConfigError
         fsspec does not know the scheme or misses its package (URL, reason, fix).
     """
-    import fsspec
+    try:
+        import fsspec
+    except ImportError as exc:
+        raise ConfigError(url, "logs named by URL are read with fsspec, which is not installed; "
+                               "pip install fsspec (dampest_ros's optional 'pool' extra)") from exc
     try:
         return fsspec.core.url_to_fs(url)
     except (ImportError, ValueError) as exc:
