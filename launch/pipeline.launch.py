@@ -5,9 +5,12 @@ config/<node>.params.yaml (every parameter, its default and meaning).
     ros2 launch dampest_ros pipeline.launch.py                     # the simulated vehicle
     ros2 launch dampest_ros pipeline.launch.py sim:=false          # a real vehicle's topics
     ros2 launch dampest_ros pipeline.launch.py namespace:=/rov1 record:=true
+    ros2 launch dampest_ros pipeline.launch.py controller:=true     # the model in the loop
 
 Arguments: sim (true: start sim_node and run every node on its /clock), vehicle (the preset
-or vehicle YAML of every node), namespace, controller (start controller_node), record (start
+or vehicle YAML of every node), namespace, controller (start controller_node; off by default:
+the simulated vehicle obeys its cmd_wrench instead of the excitation protocol, so a controller
+holding a zero reference stops identification), record (start
 recorder_node: a bag of the sensor, sample, model and diagnostics topics in the working
 directory). A value of a parameter file is changed with a copy of the file, or at runtime
 with ros2 param set.
@@ -37,8 +40,9 @@ def generate_launch_description() -> LaunchDescription:
                               description="vehicle preset name or YAML path"),
         DeclareLaunchArgument("namespace", default_value="",
                               description="namespace of every node and topic"),
-        DeclareLaunchArgument("controller", default_value="true",
-                              description="start controller_node"),
+        DeclareLaunchArgument("controller", default_value="false",
+                              description="start controller_node (the vehicle then follows "
+                                          "its commands, not the excitation protocol)"),
         DeclareLaunchArgument("record", default_value="false",
                               description="start recorder_node"),
         Node(package="dampest_ros", executable="sim_node", name="sim_node",

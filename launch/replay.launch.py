@@ -6,8 +6,13 @@ reads its parameter file config/<node>.params.yaml.
     ros2 launch dampest_ros replay.launch.py bag:=bags/pool_run rate:=5.0 vehicle:=my_rov.yaml
 
 Arguments: bag (required: rosbag2 directory or .mcap/.db3 file), rate (bag seconds per
-wall-clock second), vehicle (the preset or vehicle YAML of the pipeline). The bag's topics are
-played under their recorded names (the replay_node parameter remap renames them).
+wall-clock second), vehicle (the preset or vehicle YAML of the pipeline), topics (the bag
+topics played; by default the sensor topics only, so that a bag recorded with `dampest record`
+does not replay its dampest/* outputs into the running preprocess and estimator nodes; add
+wrench for a vehicle that logs its body wrench). The topics are played under their recorded
+names (the replay_node parameter remap renames them).
+
+    ros2 launch dampest_ros replay.launch.py bag:=my_bag topics:="[imu/data, dvl/twist, wrench]"
 """
 
 import os
@@ -20,6 +25,8 @@ from launch_ros.actions import Node
 from launch import LaunchDescription
 
 CONFIG = os.path.join(get_package_share_directory("dampest_ros"), "config")
+#: What the pipeline's preprocess_node reads (docs/architecture.md §3), not its outputs.
+SENSOR_TOPICS = "[imu/data, dvl/twist, pressure, thrusters/state]"
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -30,11 +37,14 @@ def generate_launch_description() -> LaunchDescription:
                               description="bag seconds per wall-clock second"),
         DeclareLaunchArgument("vehicle", default_value="bluerov2_heavy",
                               description="vehicle preset name or YAML path"),
+        DeclareLaunchArgument("topics", default_value=SENSOR_TOPICS,
+                              description="bag topics to play (YAML list)"),
         Node(package="dampest_ros", executable="replay_node", name="replay_node",
              output="screen",
              parameters=[os.path.join(CONFIG, "replay_node.params.yaml"),
                          {"bag": LaunchConfiguration("bag"),
-                          "rate": LaunchConfiguration("rate"), "clock": True}]),
+                          "rate": LaunchConfiguration("rate"), "clock": True,
+                          "topics": LaunchConfiguration("topics")}]),
         Node(package="dampest_ros", executable="preprocess_node", name="preprocess_node",
              output="screen",
              parameters=[os.path.join(CONFIG, "preprocess_node.params.yaml"), common]),

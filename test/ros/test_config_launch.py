@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import importlib.util
 from pathlib import Path
 from typing import Any
 
@@ -141,3 +142,78 @@ def test_setup_installs_every_launch_file() -> None:
                  and isinstance(n.value, str) and n.value.endswith(".launch.py")]
     assert sorted(installed) == [f"launch/{p.name}" for p in LAUNCH_FILES]
     assert [p.name for p in LAUNCH_FILES] == ["pipeline.launch.py", "replay.launch.py"]
+
+
+class Recorded:
+    """A stand-in for a launch class: keeps its arguments."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self.args, self.kwargs = args, kwargs
+
+
+def launch_description(path: Path, share: Path, monkeypatch: pytest.MonkeyPatch
+                       ) -> list[Recorded]:
+    """Run ``generate_launch_description()`` of a launch file against minimal stand-ins for
+    launch, launch_ros and ament_index_python (none is installable here): its entities."""
+    import types
+
+    def module(name: str, **attrs: Any) -> types.ModuleType:
+        m = types.ModuleType(name)
+        vars(m).update(attrs)
+        monkeypatch.setitem(__import__("sys").modules, name, m)
+        return m
+
+    module("ament_index_python")
+    module("ament_index_python.packages", get_package_share_directory=lambda pkg: str(share))
+    module("launch", LaunchDescription=lambda entities: list(entities))
+    for name, cls in (("launch.actions", "DeclareLaunchArgument"),
+                      ("launch.conditions", "IfCondition"),
+                      ("launch.substitutions", "LaunchConfiguration"),
+                      ("launch_ros.actions", "Node")):
+        module(name, **{cls: type(cls, (Recorded,), {})})
+    module("launch_ros")
+    spec = importlib.util.spec_from_file_location(path.stem.replace(".", "_"), path)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    entities: list[Recorded] = mod.generate_launch_description()
+    return entities
+
+
+@pytest.mark.parametrize("path", LAUNCH_FILES, ids=[p.name for p in LAUNCH_FILES])
+def test_launch_description_runs_with_existing_executables_files_and_arguments(
+        path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each launch file's description, built: every node an installed executable with its
+    own existing parameter file first, every LaunchConfiguration a declared argument."""
+    entities = launch_description(path, REPO, monkeypatch)
+    args = {e.args[0]: e.kwargs for e in entities if type(e).__name__ == "DeclareLaunchArgument"}
+    nodes = [e for e in entities if type(e).__name__ == "Node"]
+    assert len(nodes) >= 3
+    for node in nodes:
+        exe = node.kwargs["executable"]
+        assert exe in node_scripts() and node.kwargs["package"] == "dampest_ros"
+        first = Path(node.kwargs["parameters"][0])
+        assert first == REPO / "config" / f"{exe}.params.yaml" and first.is_file()
+        for extra in node.kwargs["parameters"][1:]:
+            declared = set(params_file(exe)) | {"use_sim_time"}
+            assert set(extra) <= declared, (exe, set(extra) - declared)
+            for value in extra.values():
+                if type(value).__name__ == "LaunchConfiguration":
+                    assert value.args[0] in args, value.args[0]
+
+
+def test_pipeline_identifies_by_default_and_replay_plays_sensors_only(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The default pipeline starts no controller (the simulated vehicle would follow its
+    zero reference instead of the excitation); replay plays the sensor topics, not a
+    recording's dampest/* outputs into the running nodes."""
+    pipeline = launch_description(REPO / "launch" / "pipeline.launch.py", REPO, monkeypatch)
+    args = {e.args[0]: e.kwargs for e in pipeline
+            if type(e).__name__ == "DeclareLaunchArgument"}
+    assert args["controller"]["default_value"] == "false"
+    replay = launch_description(REPO / "launch" / "replay.launch.py", REPO, monkeypatch)
+    args = {e.args[0]: e.kwargs for e in replay if type(e).__name__ == "DeclareLaunchArgument"}
+    topics = yaml.safe_load(args["topics"]["default_value"])
+    assert topics == ["imu/data", "dvl/twist", "pressure", "thrusters/state"]
+    (player,) = [e for e in replay if e.kwargs.get("executable") == "replay_node"]
+    assert player.kwargs["parameters"][1]["topics"].args[0] == "topics"
