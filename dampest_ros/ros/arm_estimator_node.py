@@ -294,7 +294,7 @@ class ArmEstimatorNode(EstimatorParamNode):
             level = 1
             message = "not excited: " + ", ".join(
                 self.names[j] for j in np.flatnonzero(~d.excited))
-        self.pub_diag.publish(diagnostic_array(self, "dampest arm estimator", values, level,
+        self.pub_diag.publish(diagnostic_array(self, "arm estimation", values, level,
                                                message))
 
     def _reset(self) -> None:

@@ -541,11 +541,13 @@ class EstimatorParamNode(ModelParamNode):
         return res
 
 
-def diagnostic_array(node: Node, name: str, values: dict[str, Any], level: int = 0,
+def diagnostic_array(node: Node, task: str, values: dict[str, Any], level: int = 0,
                      message: str = "ok", stamp: Time | None = None) -> DiagnosticArray:
-    """A DiagnosticArray with one status of key/value pairs."""
-    status = DiagnosticStatus(level=bytes([level]), name=name, message=message,
-                              hardware_id=node.get_fully_qualified_name())
+    """A DiagnosticArray with one status of key/value pairs, named ``<node name>: <task>`` as
+    ROS's diagnostic aggregators expect (two vehicles' nodes, namespaced, stay apart by
+    hardware_id, the fully qualified node name)."""
+    status = DiagnosticStatus(level=bytes([level]), name=f"{node.get_name()}: {task}",
+                              message=message, hardware_id=node.get_fully_qualified_name())
     status.values = [KeyValue(key=str(k), value=_text(v)) for k, v in values.items()]
     arr = DiagnosticArray()
     arr.header.stamp = stamp if stamp is not None else node.get_clock().now().to_msg()

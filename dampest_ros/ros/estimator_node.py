@@ -218,7 +218,7 @@ class EstimatorNode(EstimatorParamNode):
             level, message = 1, f"damping change detected: {', '.join(d.alarm_channels)}"
         elif d.unexcited:
             level, message = 1, f"not excited: {', '.join(d.unexcited)}"
-        self.pub_diag.publish(diagnostic_array(self, "dampest estimator", values, level,
+        self.pub_diag.publish(diagnostic_array(self, "damping estimation", values, level,
                                                message))
 
     def _reset(self) -> None:

@@ -242,7 +242,7 @@ class PreprocessNode(ParamNode):
         c["derivative_lag_s"] = self.pre.derivative_lag
         problems = c["rejected_nonfinite"] + c["rejected_stale"] + c["clock_resets"]
         self.pub_diag.publish(diagnostic_array(
-            self, "dampest preprocess", c, level=1 if problems else 0,
+            self, "preprocessing", c, level=1 if problems else 0,
             message=f"{problems} rejected or reset" if problems else "ok"))
 
 

@@ -71,7 +71,9 @@ def test_payload_step_on_joint_states_is_alarmed_and_tracked(
     probe.create_subscription(
         DiagnosticArray, DIAGNOSTICS_TOPIC,
         lambda m: warnings.extend((node.estimator.emitted, s.message) for s in m.status
-                                  if s.level == bytes([1]) and "change" in s.message), RELIABLE_QOS)
+                                  if s.level == bytes([1]) and "change" in s.message
+                                  and s.name == "arm_estimator_node: arm estimation"),
+        RELIABLE_QOS)
     probe.create_subscription(String, "dampest/arm_model", lambda m: models.append(m.data),
                               LATCHED_QOS)
     ex = SingleThreadedExecutor(context=context)
