@@ -52,6 +52,20 @@ CSV_HELP = (
     "estimates a constant current and applies the damping to ν − ν_c. A log of velocity "
     "through the water (water-track DVL) is read the same way.")
 
+#: What the attitude and velocity topics may be besides an IMU and a DVL (--help).
+SOURCE_HELP = {
+    "imu": (": sensor_msgs/Imu, or the attitude (and angular rate, if filled) of a "
+            "nav_msgs/Odometry or the attitude of a geometry_msgs/PoseStamped. An all-zero "
+            "or absent gyro is replaced by the body rates of the attitude, an all-zero or "
+            "absent accelerometer by the zero-phase derivative of the velocity, each said "
+            "in one line on stderr and in the model's provenance (substitutions). A state "
+            "estimator's navigation state alone: --imu-topic /nav/odom --dvl-topic "
+            "/nav/odom"),
+    "dvl": (": a DVL's TwistWithCovarianceStamped or TwistStamped, or a nav_msgs/Odometry "
+            "(its twist: the body velocity in the child frame). A value held between "
+            "updates (republished at a higher rate) is used at its updates only"),
+}
+
 #: Topic roles and their default names (docs/architecture.md §3).
 DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
                   "thrusters": "thrusters/state"}
@@ -61,7 +75,8 @@ def add_topic_options(p: argparse.ArgumentParser) -> None:
     """--imu-topic, --dvl-topic, --pressure-topic, --thrusters-topic, --wrench-topic."""
     for role, name in DEFAULT_TOPICS.items():
         p.add_argument(f"--{role}-topic", default=name, metavar="TOPIC",
-                       help=f"topic of the {role} data (default: {name})")
+                       help=f"topic of the {role} data{SOURCE_HELP.get(role, '')} (default: "
+                            f"{name})")
     p.add_argument("--wrench-topic", metavar="TOPIC",
                    help="topic of the body wrench τ (geometry_msgs/WrenchStamped, FLU; the "
                         "contract's 'wrench'), read instead of the thruster telemetry: the "

@@ -130,9 +130,11 @@ def check_options(args: argparse.Namespace, rate: float, span: float, *,
     return delay
 
 
-def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
+def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace,
+                 substitutions: list[str] | None = None) -> Samples:
     """Samples from a rosbag2 directory (MCAP or SQLite3) or a CSV file, after
-    :func:`check_options`."""
+    :func:`check_options`; each signal a bag lacks and what replaced it is printed on
+    stderr and appended to ``substitutions`` (:mod:`dampest_ros.core.signals.sources`)."""
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p} does not exist")
@@ -160,9 +162,14 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
                     together=[topics["imu"], tau_topic(topics)])
     warn_implausible(rec, topics, summary.start, vehicle.body.gravity, p.name)
     id_notes: list[str] = []
-    samples = preprocess(rec, vehicle, cfg, topics, notes=id_notes)
+    subs: list[str] = []
+    samples = preprocess(rec, vehicle, cfg, topics, notes=id_notes, substitutions=subs)
     for note in id_notes:  # a frame_id other than the vehicle file's sensors: section
         print(f"{p.name}: warning: {note}", file=sys.stderr)
+    for line in subs:
+        print(f"{p.name}: {line}", file=sys.stderr)
+    if substitutions is not None:
+        substitutions.extend(subs)
     if auto:
         delay = profile_delay(samples, vehicle.damping, vehicle.body)
         print(f"estimated delay of the response after the thrust: {delay * 1000:.0f} ms",
