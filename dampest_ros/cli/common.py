@@ -64,6 +64,20 @@ CSV_HELP = (
     "per-topic CSV files (rostopic echo -p, bag-to-CSV tools) is read like a bag: topics "
     "from the file names, or name a file with --imu-topic FILE.csv etc.")
 
+#: What the attitude and velocity topics may be besides an IMU and a DVL (--help).
+SOURCE_HELP = {
+    "imu": (": sensor_msgs/Imu, or the attitude (and angular rate, if filled) of a "
+            "nav_msgs/Odometry or the attitude of a geometry_msgs/PoseStamped. An all-zero "
+            "or absent gyro is replaced by the body rates of the attitude, an all-zero or "
+            "absent accelerometer by the zero-phase derivative of the velocity, each said "
+            "in one line on stderr and in the model's provenance (substitutions). A state "
+            "estimator's navigation state alone: --imu-topic /nav/odom --dvl-topic "
+            "/nav/odom"),
+    "dvl": (": a DVL's TwistWithCovarianceStamped or TwistStamped, or a nav_msgs/Odometry "
+            "(its twist: the body velocity in the child frame). A value held between "
+            "updates (republished at a higher rate) is used at its updates only"),
+}
+
 #: Topic roles and their default names (docs/architecture.md §3).
 DEFAULT_TOPICS = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
                   "thrusters": "thrusters/state"}
@@ -87,8 +101,8 @@ def add_topic_options(p: argparse.ArgumentParser) -> None:
     normalised by :func:`topic_name`)."""
     for role, name in DEFAULT_TOPICS.items():
         p.add_argument(f"--{role}-topic", default=name, type=topic_name, metavar="TOPIC",
-                       help=f"topic of the {role} data, with or without the leading / "
-                            f"(default: {name})")
+                       help=f"topic of the {role} data{SOURCE_HELP.get(role, '')}, with or "
+                            f"without the leading / (default: {name})")
     p.add_argument("--wrench-topic", type=topic_name, metavar="TOPIC",
                    help="topic of the body wrench τ (geometry_msgs/WrenchStamped, FLU; the "
                         "contract's 'wrench'), read instead of the thruster telemetry: the "

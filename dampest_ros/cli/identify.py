@@ -52,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
     if args.method == "rls":
         return run_rls(args, vehicle)
     model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
-    samples = cut(load_samples(args.input, vehicle, args), args)
+    substitutions: list[str] = []
+    samples = cut(load_samples(args.input, vehicle, args, substitutions), args)
     held = None
     if args.holdout is not None:
         samples, held = split_holdout(samples, args.holdout)
@@ -95,7 +96,8 @@ def run(args: argparse.Namespace) -> int:
             print(line)
     if args.out:
         write_model(Path(args.out), result, model, vehicle.body, source=str(args.input),
-                    heldout=scores, flown=samples.nu)
+                    heldout=scores, flown=samples.nu,
+                    more={"substitutions": substitutions} if substitutions else None)
         print(f"wrote {args.out}")
     if args.report:
         truth = None
@@ -202,8 +204,13 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     summary = bag_summary(path)
     check_options(args, args.rate, summary.duration, resample=True)
     topics = bag_topics(path, vehicle, args)
-    have = {t.lstrip("/") for t in summary.topics}
-    if topics["pressure"] not in have:
+    types = {t.lstrip("/"): i.msgtype for t, i in summary.topics.items()}
+    for role in ("imu", "dvl"):
+        found = types.get(topics[role], "")
+        if found in ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped"):
+            raise DataError(f"--method rls reads an IMU and a DVL; {topics[role]} ({role}) "
+                            f"carries {found}: identify it with a batch method (the default)")
+    if topics["pressure"] not in types:
         del topics["pressure"]  # optional, as in the batch path
     if "wrench" in topics:
         del topics["thrusters"]  # τ from the body wrench: the thruster topic is not read

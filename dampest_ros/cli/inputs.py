@@ -134,10 +134,13 @@ def check_options(args: argparse.Namespace, rate: float, span: float, *,
     return delay
 
 
-def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
+def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace,
+                 substitutions: list[str] | None = None) -> Samples:
     """Samples from a rosbag2 directory (MCAP or SQLite3), a ROS 1 ``.bag`` file, a folder of
     per-topic CSV files (read as a bag, :mod:`dampest_ros.io.csv_folder`) or a CSV file,
-    after :func:`check_options`; what was read how (time units, flavours) on stderr."""
+    after :func:`check_options`; what was read how (time units, flavours) on stderr, and each
+    signal a bag lacks and what replaced it on stderr and appended to ``substitutions``
+    (:mod:`dampest_ros.core.signals.sources`)."""
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p} does not exist")
@@ -156,10 +159,11 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace) -> Sampl
     if is_csv_folder(p):
         for note in folder_notes(p):
             print(f"{p.name}: {note}", file=sys.stderr)
-    return _bag_samples(p, vehicle, args)
+    return _bag_samples(p, vehicle, args, substitutions)
 
 
-def _bag_samples(p: Path, vehicle: Vehicle, args: argparse.Namespace) -> Samples:
+def _bag_samples(p: Path, vehicle: Vehicle, args: argparse.Namespace,
+                 substitutions: list[str] | None) -> Samples:
     """Samples of a bag (rosbag2, ROS 1 or a CSV folder), after :func:`check_options`; the
     bag is read a window at a time as the preprocessing needs it, so memory stays flat with
     its length."""
@@ -173,9 +177,14 @@ def _bag_samples(p: Path, vehicle: Vehicle, args: argparse.Namespace) -> Samples
         cfg = replace(cfg, rate=args.rate, delay=0.0 if given is None else given)
         warn_implausible(rec, topics, rec.summary.start, vehicle.body.gravity, p.name)
         id_notes: list[str] = []
-        samples = preprocess(rec, vehicle, cfg, topics, notes=id_notes)
+        subs: list[str] = []
+        samples = preprocess(rec, vehicle, cfg, topics, notes=id_notes, substitutions=subs)
         for note in id_notes:  # a frame_id other than the vehicle file's sensors: section
             print(f"{p.name}: warning: {note}", file=sys.stderr)
+        for line in subs:
+            print(f"{p.name}: {line}", file=sys.stderr)
+        if substitutions is not None:
+            substitutions.extend(subs)
         if auto:
             found = profile_delay(samples, vehicle.damping, vehicle.body)
             print(f"estimated delay of the response after the thrust: "

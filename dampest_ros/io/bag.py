@@ -70,8 +70,10 @@ class TopicTypeError(BagError):
 ROLE_TYPES = {role: TOPIC_TYPES[topic][0] for role, topic in (
     ("imu", "imu/data"), ("dvl", "dvl/twist"), ("pressure", "pressure"),
     ("thrusters", "thrusters/state"), ("wrench", "wrench"))}
-#: Other message types a role accepts: a DVL's velocity without covariance.
-ROLE_ALTERNATIVES = {"dvl": ("geometry_msgs/msg/TwistStamped",)}
+#: Other message types a role accepts: a DVL's velocity without covariance; a navigation
+#: state's body velocity and attitude (dampest_ros.core.signals.sources).
+ROLE_ALTERNATIVES = {"dvl": ("geometry_msgs/msg/TwistStamped", "nav_msgs/msg/Odometry"),
+                     "imu": ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped")}
 
 
 def _relative(topic: str) -> str:

@@ -37,6 +37,7 @@ from dampest_ros.core.signals.measurements import (
     ImuSeries,
     JointSeries,
     OdometrySeries,
+    PoseSeries,
     PressureSeries,
     Series,
     TwistSeries,
@@ -52,6 +53,7 @@ MESSAGE_TYPES: dict[type[Series], str] = {
     WrenchSeries: "geometry_msgs/msg/WrenchStamped",
     OdometrySeries: "nav_msgs/msg/Odometry",
     JointSeries: "sensor_msgs/msg/JointState",
+    PoseSeries: "geometry_msgs/msg/PoseStamped",
 }
 #: ROS 2 message type → series class it decodes to; a DVL may also send a TwistStamped
 #: (decoded to a TwistSeries with a zero covariance: none given).
@@ -317,6 +319,12 @@ def _wrench(b: _Builder) -> None:
     b.vector("torque", "wrench.torque")
 
 
+def _pose_stamped(b: _Builder) -> None:
+    _header(b)
+    b.vector("position", "pose.position")
+    b.vector("orientation", "pose.orientation", "xyzw")
+
+
 def _odometry(b: _Builder) -> None:
     _header(b)
     b.string("child_frame_id", "child_frame_id")
@@ -344,6 +352,7 @@ _LAYOUTS: dict[str, Callable[[_Builder], None]] = {
     "sensor_msgs/msg/FluidPressure": _pressure,
     "geometry_msgs/msg/WrenchStamped": _wrench,
     "nav_msgs/msg/Odometry": _odometry,
+    "geometry_msgs/msg/PoseStamped": _pose_stamped,
     "sensor_msgs/msg/JointState": _joint_state,
 }
 

@@ -241,3 +241,25 @@ def continuous(q: FloatArray) -> FloatArray:
     # sign_k = Π_{j ≤ k} sign(q_{j−1} · q_j): the running product of the flips
     sign = np.concatenate([[1.0], np.cumprod(flip)])
     return q * sign[:, None]
+
+
+def body_rates(q: FloatArray, q_dot: FloatArray) -> FloatArray:
+    """Body angular velocity from attitude quaternions and their time derivatives.
+
+    Parameters
+    ----------
+    q : ndarray, shape (M, 4)
+        Body-to-world unit quaternions [w, x, y, z] (as :func:`quat_to_matrix` reads them),
+        sign-continuous (:func:`continuous`).
+    q_dot : ndarray, shape (M, 4)
+        Their time derivatives (1/s).
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+        ω in the body frame of ``q`` (rad/s): FRD for an FRD→NED attitude.
+    """
+    conj = q * np.array([1.0, -1.0, -1.0, -1.0])
+    # q̇ = ½ q ⊗ [0, ω_body]  ⇒  ω_body = 2 vec(q* ⊗ q̇) / |q|² (|q| = 1 up to interpolation)
+    w = quat_mul(conj, q_dot)[:, 1:]
+    return np.asarray(2.0 * w / np.sum(q * q, axis=1, keepdims=True), dtype=float)

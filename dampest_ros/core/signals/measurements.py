@@ -120,6 +120,15 @@ class OdometrySeries(Series):
 
 
 @dataclass
+class PoseSeries(Series):
+    """geometry_msgs/PoseStamped: position (N, 3) m and orientation (N, 4) xyzw of the body
+    (``base_link``, FLU) in the header's world frame (ENU)."""
+
+    position: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    orientation: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
+
+
+@dataclass
 class WrenchSeries(Series):
     """geometry_msgs/WrenchStamped: force (N, 3) N, torque (N, 3) N·m, FLU."""
 

@@ -14,7 +14,8 @@ field, and the likely cause:
 - **yaw rate**: the gyro's rate about the world's up axis, (R ω)_z, follows the derivative of
   the orientation's heading ψ = atan2(R₂₁, R₁₁); slope below −0.5: one of them is FRD/NED.
 - **constant fields**: a field of a used topic that never changes over the log (all zeros:
-  not filled, e.g. an IMU without accelerometer).
+  not filled). An IMU's all-zero gyro or accelerometer is not among them: the preprocessing
+  replaces it and says so (:mod:`.sources`).
 
 Nothing here changes data: the caller prints the lines (:func:`frame_notes`).
 """
@@ -30,6 +31,7 @@ from dampest_ros.core.physics.frames import quat_to_matrix
 from dampest_ros.core.signals.measurements import (
     ImuSeries,
     OdometrySeries,
+    PoseSeries,
     PressureSeries,
     Series,
     TwistSeries,
@@ -143,6 +145,11 @@ USED_FIELDS: dict[type[Series], tuple[str, ...]] = {
     PressureSeries: ("fluid_pressure",),
     WrenchSeries: ("force", "torque"),
     OdometrySeries: ("orientation", "linear"),
+    PoseSeries: ("orientation",),
+}
+#: Fields whose all-zero values mean "no such sensor": the preprocessing substitutes them.
+SUBSTITUTED_FIELDS: dict[type[Series], tuple[str, ...]] = {
+    ImuSeries: ("angular_velocity", "linear_acceleration"),
 }
 
 
@@ -152,7 +159,8 @@ def constant_notes(topic: str, series: Series) -> list[str]:
     notes = []
     for name in USED_FIELDS.get(type(series), ()):
         values = getattr(series, name)
-        if len(values) < 2:
+        if len(values) < 2 or (name in SUBSTITUTED_FIELDS.get(type(series), ())
+                               and not np.any(values)):
             continue
         cols = values.reshape(len(values), -1)
         fixed = np.flatnonzero(np.ptp(cols, axis=0) == 0)
@@ -187,8 +195,9 @@ def frame_notes(series: Mapping[str, Series], gravity: float) -> list[str]:
             continue
         constant = constant_notes(topic, s)
         notes += constant
-        if not isinstance(s, ImuSeries) or any(n.split(": ")[1].startswith(
-                ("orientation", "linear_acceleration")) for n in constant):
+        if not isinstance(s, ImuSeries) or not np.any(s.linear_acceleration) or any(
+                n.split(": ")[1].startswith(("orientation", "linear_acceleration"))
+                for n in constant):
             continue
         R = quat_to_matrix(s.orientation[:, [3, 0, 1, 2]])  # [x, y, z, w] → [w, x, y, z]
         f = s.linear_acceleration

@@ -8,7 +8,10 @@ Pipeline, all vectorised over whole segments:
    attitude, rates and specific force (its lever-arm terms with ω̇ differentiated from the
    gyro as in step 4), the DVL velocity (lever arm with the gyro at the DVL stamps), the
    pressure depth through the attitude. Messages whose
-   frame_id is not the configured one are counted (one note per topic).
+   frame_id is not the configured one are counted (one note per topic). The attitude may
+   come from an Odometry or PoseStamped and the velocity from an Odometry instead
+   (:mod:`.sources`: the body's own frame, no mounting); a velocity held between updates is
+   kept at its updates only.
 2. DVL gaps longer than ``max_gap`` split the data into segments (nothing is invented inside
    a long gap); DVL samples that disagree with the inertially fused velocity are dropped.
 3. On a common grid at ``rate`` Hz per segment: attitude, gyro and specific force from the
@@ -18,7 +21,10 @@ Pipeline, all vectorised over whole segments:
 4. Linear velocity by a zero-phase complementary filter in the non-rotating NED frame: the
    DVL below ``crossover`` Hz and the integrated IMU acceleration R f + g above it
    (Butterworth pairs with |H_lp|² + |H_hp|² = 1, so the fusion is exact where both agree),
-   then rotated back to the body. Angular acceleration by differentiating ω.
+   then rotated back to the body. Angular acceleration by differentiating ω. Without an
+   accelerometer: the velocity alone (a cubic spline through its samples), ν̇ by
+   differentiating it like ω, and no DVL outlier test; without a gyro: ω from the
+   zero-phase derivative of the attitude's quaternion.
 5. The same light zero-phase low-pass (``cutoff``) on ν, ν̇ and τ; ν and ν̇ also get the
    moving average that window-averaged thrust telemetry has, so all three see the same
    filter. Segment ends are trimmed of filter transients.
@@ -33,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import fft as sp_fft
 from scipy import integrate
+from scipy.interpolate import CubicSpline
 
 from dampest_ros.core.physics import frames
 from dampest_ros.core.physics.mounting import (
@@ -54,10 +61,18 @@ from dampest_ros.core.signals.measurements import (
     PressureSeries,
     Recording,
     Series,
-    TwistSeries,
     WrenchSeries,
 )
 from dampest_ros.core.signals.samples import Samples
+from dampest_ros.core.signals.sources import (
+    ATTITUDE_TYPES,
+    VELOCITY_TYPES,
+    Sources,
+    as_imu,
+    held_note,
+    held_updates,
+    velocity_of,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -131,10 +146,13 @@ class PreprocessConfig:
         return cls(**{k: float(v) for k, v in d.items()})
 
 
-def _need(s: Series, topic: str, kind: type[Series], minimum: int = 10) -> Any:
-    """``s`` checked to be a ``kind`` with at least ``minimum`` messages."""
+def _need(s: Series, topic: str, kind: type[Series] | tuple[type[Series], ...],
+          minimum: int = 10) -> Any:
+    """``s`` checked to be a ``kind`` (or one of them) with at least ``minimum`` messages."""
     if not isinstance(s, kind):
-        raise DataError(f"topic {topic!r} is {type(s).__name__}, expected {kind.__name__}")
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        raise DataError(f"topic {topic!r} is {type(s).__name__}, expected "
+                        f"{' or '.join(k.__name__ for k in kinds)}")
     if len(s) < minimum:
         raise DataError(f"topic {topic!r} has only {len(s)} messages")
     return s
@@ -388,7 +406,8 @@ class MemorySource:
 def preprocess(rec: Recording | SeriesSource, vehicle: Vehicle,
                config: PreprocessConfig | None = None, topics: dict[str, str] | None = None,
                *, report: dict[str, float] | None = None,
-               notes: list[str] | None = None) -> Samples:
+               notes: list[str] | None = None,
+               substitutions: list[str] | None = None) -> Samples:
     """Synchronise and filter sensor topics into samples of ν, ν̇, τ.
 
     Parameters
@@ -403,7 +422,9 @@ def preprocess(rec: Recording | SeriesSource, vehicle: Vehicle,
     topics : dict, optional
         Role → topic name for ``imu``, ``dvl``, ``pressure``, ``thrusters`` and, optionally,
         ``wrench``: a body-wrench topic (WrenchStamped, FLU) that gives τ instead of the
-        thruster telemetry (then the thrusters are not read).
+        thruster telemetry (then the thrusters are not read). The ``imu`` topic may instead
+        be an Odometry or PoseStamped (attitude), the ``dvl`` topic an Odometry (velocity),
+        see :mod:`.sources`.
     report : dict, optional
         Filled with counts: ``rejected_nonfinite_or_unordered``, ``dvl_outliers``,
         ``segments``, ``dropped_seconds`` (data in gaps and too-short segments) and, per
@@ -413,6 +434,9 @@ def preprocess(rec: Recording | SeriesSource, vehicle: Vehicle,
         Appended: one line per sensor topic whose messages carry another frame_id than the
         mounting gives, for the user, with their count: all of the DVL and pressure topics,
         the IMU's within the processed stretches (it is read a window at a time).
+    substitutions : list of str, optional
+        Appended: one line per signal the topics lack and what replaces it (no
+        accelerometer, no gyro, a velocity held between updates; :mod:`.sources`).
 
     Returns
     -------
@@ -423,16 +447,22 @@ def preprocess(rec: Recording | SeriesSource, vehicle: Vehicle,
     src: SeriesSource = MemorySource(rec) if isinstance(rec, dict) else rec
     names = _resolve_topics(src, topics, vehicle.thrusters)
     tally = _Tally()
-    t_dvl, v_dvl, pressure = _read_dvl_and_pressure(src, names, vehicle.mounting, tally)
+    velocity: Series = _need(src.series(names.dvl), names.dvl, VELOCITY_TYPES)
+    sources = _sources(src, names, velocity)
+    mounting = sources.mounting(vehicle.mounting)
+    subs = sources.notes(names.imu, names.dvl)
+    t_dvl, v_dvl, pressure = _read_dvl_and_pressure(src, velocity, names, mounting, tally, subs)
     window, phase, first = _telemetry_timing(src, names, t_dvl, cfg.rate)
     lo, hi = max(t_dvl[0], first), _covered_until(src, names, t_dvl[-1])
     if hi - lo < cfg.min_segment + 2 * cfg.trim:
         raise DataError(f"the topics overlap for only {max(hi - lo, 0.0):.1f} s")
     inputs = _Inputs(src, names, vehicle, cfg, t_dvl, v_dvl, pressure, window,
-                     max(1, round(cfg.inertial_rate / cfg.rate)))
+                     max(1, round(cfg.inertial_rate / cfg.rate)), sources, mounting)
     out, n_segments = _assemble(inputs, _output_grids(t_dvl, lo, hi, phase, cfg), tally)
-    _tell(tally, names, vehicle.mounting, n_segments,
+    _tell(tally, names, mounting, n_segments,
           max(hi - lo - len(out) / cfg.rate, 0.0), report, notes)
+    if substitutions is not None:
+        substitutions.extend(subs)
     if len(out) == 0:
         raise DataError(f"no gap-free stretch of at least {cfg.min_segment + 2 * cfg.trim:.0f} s"
                         " (DVL gaps split the data)")
@@ -466,8 +496,10 @@ def _resolve_topics(src: SeriesSource, topics: dict[str, str] | None,
     DataError
         τ from thruster telemetry without thrusters, or the IMU, DVL or τ topic missing.
     """
-    names = {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
-             "thrusters": "thrusters/state", **(topics or {})}
+    # relative names, as sources list them: "/nav/odom" is the bag's "nav/odom"
+    names = {role: topic.lstrip("/") for role, topic in
+             {"imu": "imu/data", "dvl": "dvl/twist", "pressure": "pressure",
+              "thrusters": "thrusters/state", **(topics or {})}.items()}
     tau = names.get("wrench") or names["thrusters"]
     tau_kind: type[Series] = WrenchSeries if names.get("wrench") else JointSeries
     if tau_kind is JointSeries:
@@ -499,12 +531,34 @@ class _Tally:
             self.foreign[key] = self.foreign.get(key, 0) + count
 
 
-def _read_dvl_and_pressure(src: SeriesSource, names: _Topics, mount: Mounting, tally: _Tally
+#: Seconds of the attitude topic, from the first velocity message on, whose gyro and
+#: accelerometer fields say whether the topic has them (:meth:`Sources.of`).
+SOURCE_HEAD = 30.0
+
+
+def _sources(src: SeriesSource, names: _Topics, velocity: Series) -> Sources:
+    """What the attitude topic (role ``imu``, its first :data:`SOURCE_HEAD` seconds from the
+    first velocity message) and the velocity topic carry."""
+    head: Series = _need(src.series(names.imu, None, float(velocity.stamp[0]) + SOURCE_HEAD),
+                         names.imu, ATTITUDE_TYPES, minimum=2)
+    return Sources.of(as_imu(head), type(head), type(velocity))
+
+
+def _read_dvl_and_pressure(src: SeriesSource, dvl: Series, names: _Topics, mount: Mounting,
+                           tally: _Tally, subs: list[str]
                            ) -> tuple[FloatArray, FloatArray, PressureSeries | None]:
     """The small topics, read whole (the large ones, IMU and τ, are read per stretch).
 
     Drops DVL messages that are non-finite or out of order and counts them; counts foreign
-    frame_ids of the DVL and pressure topics.
+    frame_ids of the DVL and pressure topics. A velocity held between updates
+    (:func:`~.sources.held_updates`) is kept at its updates only, and said in ``subs``.
+
+    Parameters
+    ----------
+    dvl : TwistSeries or OdometrySeries
+        The velocity topic's messages.
+    subs : list of str
+        Appended: the held-velocity line.
 
     Returns
     -------
@@ -516,16 +570,20 @@ def _read_dvl_and_pressure(src: SeriesSource, names: _Topics, mount: Mounting, t
     pressure : PressureSeries or None
         None without a pressure topic or with fewer than two messages.
     """
-    dvl: TwistSeries = _need(src.series(names.dvl), names.dvl, TwistSeries)
     pres = src.series(names.pressure) if names.has_pressure else None
-    dvl_ok = _clean(dvl, dvl.linear)
+    dvl_ok = _clean(dvl, velocity_of(dvl))
     tally.rejected += int((~dvl_ok).sum())
-    dvl = dvl if dvl_ok.all() else dvl.select(dvl_ok)  # type: ignore[assignment]
+    dvl = dvl if dvl_ok.all() else dvl.select(dvl_ok)
     tally.frame_id(names.dvl, dvl, mount.dvl, len(dvl))
+    updates = held_updates(velocity_of(dvl))
+    if updates is not None:
+        subs.append(held_note(names.dvl, int(updates.sum()), len(dvl),
+                              float(dvl.stamp[-1] - dvl.stamp[0])))
+        dvl = dvl.select(updates)
     if pres is not None:
         tally.frame_id(names.pressure, pres, mount.pressure, len(pres))
     pressure = pres if isinstance(pres, PressureSeries) and len(pres) > 1 else None
-    return dvl.stamp, frames.body_vec(dvl.linear), pressure
+    return dvl.stamp, frames.body_vec(velocity_of(dvl)), pressure
 
 
 def _telemetry_timing(src: SeriesSource, names: _Topics, t_dvl: FloatArray, rate: float
@@ -605,6 +663,10 @@ class _Inputs:
     window: float
     #: inertial grid steps per output step
     ratio: int
+    #: what the attitude and velocity topics carry
+    sources: Sources
+    #: the vehicle's mounting, the body's own frame for an Odometry or PoseStamped source
+    mounting: Mounting
 
 
 def _assemble(inputs: _Inputs, grids: list[tuple[int, FloatArray]], tally: _Tally
@@ -675,7 +737,7 @@ def _stretch(inputs: _Inputs, t: FloatArray, core: slice, tally: _Tally
     None
         Where the IMU or τ data do not cover ``t``.
     """
-    cfg, mount, ratio = inputs.cfg, inputs.vehicle.mounting, inputs.ratio
+    cfg, mount, ratio, has = inputs.cfg, inputs.mounting, inputs.ratio, inputs.sources
     t_core = (t[core.start], t[core.stop - 1])
     read = _read_stretch(inputs, t, t_core, tally)
     if read is None:
@@ -683,11 +745,17 @@ def _stretch(inputs: _Inputs, t: FloatArray, core: slice, tally: _Tally
     imu, thr = read
     rate_f = cfg.rate * ratio
     tf = t[0] + np.arange((len(t) - 1) * ratio + 1) / rate_f
-    R, om, f = _imu_at_origin(imu, mount.imu, tf, rate_f, cfg.cutoff)
-    td, vd = _dvl_at_origin(imu, mount, inputs.t_dvl, inputs.v_dvl, t)
-    v, v_dot, outliers = _fuse_without_outliers(tf, R, f, om, td, vd,
-                                                inputs.vehicle.body.gravity, cfg, t_core)
-    tally.outliers += outliers
+    R, om, f = _imu_at_origin(imu, mount.imu, tf, rate_f, cfg.cutoff, has.gyro)
+    rates = (imu.stamp, rotate(mount.imu.rotation, frames.body_vec(imu.angular_velocity))) \
+        if has.gyro else (tf, om)
+    td, vd = _dvl_at_origin(rates, mount, inputs.t_dvl, inputs.v_dvl, t)
+    v_dot: FloatArray | None = None
+    if has.accel:
+        v, v_dot, outliers = _fuse_without_outliers(tf, R, f, om, td, vd,
+                                                    inputs.vehicle.body.gravity, cfg, t_core)
+        tally.outliers += outliers
+    else:  # no accelerometer: the velocity alone, differentiated with ω in _filtered_motion
+        v = CubicSpline(td, vd, axis=0)(tf)
     nu, nu_dot = _filtered_motion(v, v_dot, om, rate_f, cfg.cutoff, inputs.window)
     # τ telemetry is the mean over the message period before its stamp
     tau = zero_phase(_interp(t - cfg.delay, thr.stamp - inputs.window / 2,
@@ -719,8 +787,8 @@ def _read_stretch(inputs: _Inputs, t: FloatArray, t_core: tuple[float, float], t
     """
     pad = 1.0
     names = inputs.names
-    imu: ImuSeries = _need(inputs.src.series(names.imu, t[0] - pad, t[-1] + pad),
-                           names.imu, ImuSeries, minimum=0)
+    imu = as_imu(_need(inputs.src.series(names.imu, t[0] - pad, t[-1] + pad), names.imu,
+                       ATTITUDE_TYPES, minimum=0))
     thr: JointSeries | WrenchSeries = _need(inputs.src.series(names.tau, t[0] - pad,
                                                               t[-1] + pad),
                                             names.tau, names.tau_kind, minimum=0)
@@ -728,7 +796,7 @@ def _read_stretch(inputs: _Inputs, t: FloatArray, t_core: tuple[float, float], t
     thr_ok = _clean(thr, *_tau_columns(thr))
     imu_core, thr_core = ((s.stamp >= t_core[0]) & (s.stamp <= t_core[1]) for s in (imu, thr))
     tally.rejected += int((~imu_ok & imu_core).sum()) + int((~thr_ok & thr_core).sum())
-    tally.frame_id(names.imu, imu, inputs.vehicle.mounting.imu, int(imu_core.sum()))
+    tally.frame_id(names.imu, imu, inputs.mounting.imu, int(imu_core.sum()))
     imu = imu if imu_ok.all() else imu.select(imu_ok)  # type: ignore[assignment]
     thr = thr if thr_ok.all() else thr.select(thr_ok)  # type: ignore[assignment]
     if len(imu) < 2 or len(thr) < 2 or imu.stamp[0] > t[0] or imu.stamp[-1] < t[-1] \
@@ -738,7 +806,8 @@ def _read_stretch(inputs: _Inputs, t: FloatArray, t_core: tuple[float, float], t
 
 
 def _imu_at_origin(imu: ImuSeries, mount: SensorMount, tf: FloatArray, rate: float,
-                   cutoff: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+                   cutoff: float, gyro: bool = True
+                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Attitude, angular velocity and specific force at the body origin on the grid ``tf``.
 
     Parameters
@@ -752,7 +821,11 @@ def _imu_at_origin(imu: ImuSeries, mount: SensorMount, tf: FloatArray, rate: flo
     rate : float
         Its rate (Hz).
     cutoff : float
-        Low-pass (Hz) of the ω̇ in the lever-arm terms, as ν̇ gets.
+        Low-pass (Hz) of the ω̇ in the lever-arm terms, as ν̇ gets, and of the attitude's
+        derivative without a gyro.
+    gyro : bool
+        Whether the IMU has a gyro; without one, ω is the body rate of the attitude
+        (:func:`_attitude_rates`).
 
     Returns
     -------
@@ -769,6 +842,8 @@ def _imu_at_origin(imu: ImuSeries, mount: SensorMount, tf: FloatArray, rate: flo
     R, om, f = imu_to_body(mount, frames.rotation(frames.quat_to_matrix(_interp(tf, ts, q))),
                            _interp(tf, ts, frames.body_vec(imu.angular_velocity)),
                            _interp(tf, ts, frames.body_vec(imu.linear_acceleration)))
+    if not gyro:
+        om = _attitude_rates(R, rate, cutoff)
     if not mount.centred:
         # the IMU's lever arm, with ω̇ differentiated from the gyro like ν̇
         f = specific_force_at_origin(mount, f, om, zero_phase(om, rate, cutoff,
@@ -776,15 +851,37 @@ def _imu_at_origin(imu: ImuSeries, mount: SensorMount, tf: FloatArray, rate: flo
     return R, om, f
 
 
-def _dvl_at_origin(imu: ImuSeries, mount: Mounting, t_dvl: FloatArray, v_dvl: FloatArray,
-                   t: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The DVL samples within 1 s of the grid ``t`` (s), moved to the body origin and axes:
-    v = R_bs v_s − ω × r, with the gyro (body axes) at the DVL stamps.
+def _attitude_rates(R: FloatArray, rate: float, cutoff: float) -> FloatArray:
+    """Body angular velocity from the attitude alone (no gyro), by the zero-phase derivative
+    of its quaternion (:func:`zero_phase`, as every derivative here).
 
     Parameters
     ----------
-    imu : ImuSeries
-        For the gyro, ROS frames.
+    R : ndarray, shape (N, 3, 3)
+        Body (FRD) → NED on a uniform grid.
+    rate, cutoff : float
+        The grid's rate and the low-pass of the derivative (Hz).
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        ω (FRD, rad/s).
+    """
+    q = frames.continuous(frames.matrix_to_quat(R))
+    # ω = 2 vec(q* ⊗ q̇), q̇ differentiated zero-phase
+    return frames.body_rates(q, zero_phase(q, rate, cutoff, derivative=True))
+
+
+def _dvl_at_origin(rates: tuple[FloatArray, FloatArray], mount: Mounting, t_dvl: FloatArray,
+                   v_dvl: FloatArray, t: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The DVL samples within 1 s of the grid ``t`` (s), moved to the body origin and axes:
+    v = R_bs v_s − ω × r, with the body rates at the DVL stamps.
+
+    Parameters
+    ----------
+    rates : (ndarray, ndarray), shapes (K,), (K, 3)
+        Stamps (s) and body angular velocities (FRD, rad/s) to interpolate: the gyro's,
+        or the attitude's on the inertial grid without one.
     t_dvl, v_dvl : ndarray, shapes (M,), (M, 3)
         DVL stamps (s) and velocities in the DVL's axes (FRD, m/s).
 
@@ -795,8 +892,7 @@ def _dvl_at_origin(imu: ImuSeries, mount: Mounting, t_dvl: FloatArray, v_dvl: Fl
     """
     inside = (t_dvl >= t[0] - 1.0) & (t_dvl <= t[-1] + 1.0)
     td = t_dvl[inside]
-    omega = np.zeros((len(td), 3)) if mount.dvl.centred else _interp(
-        td, imu.stamp, rotate(mount.imu.rotation, frames.body_vec(imu.angular_velocity)))
+    omega = np.zeros((len(td), 3)) if mount.dvl.centred else _interp(td, *rates)
     return td, dvl_to_body(mount.dvl, v_dvl[inside], omega)
 
 
@@ -836,16 +932,18 @@ def _fuse_without_outliers(tf: FloatArray, R: FloatArray, f: FloatArray, omega: 
     return v, v_ned_dot - np.cross(omega, v), int((~keep & in_core).sum())
 
 
-def _filtered_motion(v: FloatArray, v_dot: FloatArray, omega: FloatArray, rate: float,
+def _filtered_motion(v: FloatArray, v_dot: FloatArray | None, omega: FloatArray, rate: float,
                      cutoff: float, window: float) -> tuple[FloatArray, FloatArray]:
     """ν and ν̇ through the light zero-phase low-pass and the moving average that the
-    window-averaged thrust telemetry already has; ω̇ by differentiating ω on this (fine)
-    grid, where it is accurate.
+    window-averaged thrust telemetry already has; ω̇ (and v̇ when not given: no
+    accelerometer) by differentiating on this (fine) grid, where it is accurate.
 
     Parameters
     ----------
-    v, v_dot, omega : ndarray, shape (N, 3)
-        Body velocity (m/s), its derivative (m/s²), angular velocity (rad/s); FRD.
+    v, omega : ndarray, shape (N, 3)
+        Body velocity (m/s) and angular velocity (rad/s); FRD.
+    v_dot : ndarray, shape (N, 3), or None
+        Body-frame derivative of v (m/s²); None: differentiate v.
     rate : float
         Their sample rate (Hz).
     cutoff : float
@@ -857,6 +955,10 @@ def _filtered_motion(v: FloatArray, v_dot: FloatArray, omega: FloatArray, rate: 
     -------
     nu, nu_dot : ndarray, shape (N, 6)
     """
+    if v_dot is None:
+        nu, nu_dot = zero_phase_many(np.concatenate([v, omega], axis=1), rate, cutoff,
+                                     (False, True), window=window)
+        return nu, nu_dot
     nu = zero_phase(np.concatenate([v, omega], axis=1), rate, cutoff, window=window)
     nu_dot = np.concatenate([zero_phase(v_dot, rate, cutoff, window=window),
                              zero_phase(omega, rate, cutoff, derivative=True, window=window)],

@@ -74,12 +74,19 @@ def test_an_ned_orientation_in_an_enu_message_is_named(recording: dict[str, Seri
 
 
 def test_a_field_never_filled_is_named(recording: dict[str, Series]) -> None:
-    s = imu(recording)
-    bad = replace(s, linear_acceleration=np.zeros_like(s.linear_acceleration))
-    (line,) = frame_notes({"imu/data": bad}, G)
-    assert line.startswith(f"imu/data: linear_acceleration[0, 1, 2] is zero in all {len(s)} "
-                           "messages")
     dvl = recording["dvl/twist"]
+    empty = replace(dvl, linear=np.zeros_like(dvl.linear))
+    (line,) = frame_notes({"dvl/twist": empty}, G)
+    assert line.startswith(f"dvl/twist: linear[0, 1, 2] is zero in all {len(dvl)} messages")
     frozen = replace(dvl, linear=dvl.linear * [1.0, 1.0, 0.0] + [0.0, 0.0, 0.3])
     (line,) = frame_notes({"dvl/twist": frozen}, G)
     assert line.startswith("dvl/twist: linear[2] is constant")
+
+
+@pytest.mark.parametrize("field", ["angular_velocity", "linear_acceleration"])
+def test_an_imu_without_gyro_or_accelerometer_gives_no_line(recording: dict[str, Series],
+                                                              field: str) -> None:
+    # all zero: no such sensor, which the preprocessing replaces and names (signals.sources)
+    s = imu(recording)
+    empty = replace(s, **{field: np.zeros_like(getattr(s, field))})
+    assert frame_notes({"imu/data": empty}, G) == []

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.physics.vehicle import Vehicle
-from dampest_ros.core.signals.measurements import TwistSeries
+from dampest_ros.core.signals.measurements import ImuSeries, OdometrySeries, Series, TwistSeries
 from dampest_ros.core.signals.preprocess import (
     DataError,
     PreprocessConfig,
@@ -128,3 +128,36 @@ def test_a_dvl_message_after_the_last_imu_message_does_not_lose_the_log(
     assert n >= len(whole) - 2  # the grid's last point or two, no more
     # the moved DVL sample changes the fusion of the last seconds only
     np.testing.assert_allclose(got.nu[: n - 500], whole.nu[: n - 500], rtol=0, atol=1e-6)
+
+
+def _missing(rec: dict[str, Series], case: str) -> tuple[dict[str, Series], dict[str, str]]:
+    """The recording with the IMU's accelerometer or gyro emptied, or an Odometry alone."""
+    imu, odom = rec["imu/data"], rec["truth/odom"]
+    assert isinstance(imu, ImuSeries) and isinstance(odom, OdometrySeries)
+    if case == "odometry":
+        nav = replace(odom, angular=np.zeros_like(odom.angular))
+        return {"nav/odom": nav, "thrusters/state": rec["thrusters/state"]}, \
+            {"imu": "/nav/odom", "dvl": "/nav/odom"}
+    field = "linear_acceleration" if case == "no_accelerometer" else "angular_velocity"
+    return {**rec, "imu/data": replace(imu, **{field: np.zeros((len(imu), 3))})}, {}
+
+
+@pytest.mark.parametrize(("case", "said"), [
+    ("no_accelerometer", ["no accelerometer in imu/data"]),
+    ("no_gyro", ["no gyro in imu/data"]),
+    ("odometry", ["no accelerometer in nav/odom", "no gyro in nav/odom"])])
+def test_missing_signals_are_substituted_and_said(vehicle: Vehicle, traj: Trajectory,
+                                                  case: str, said: list[str]) -> None:
+    rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, QUIET, seed=4)
+    clean = preprocess(rec, vehicle)
+    subs: list[str] = []
+    data, topics = _missing(rec, case)
+    s = preprocess(data, vehicle, topics=topics, substitutions=subs)
+    assert [line.split(" (")[0] for line in subs] == said
+    np.testing.assert_array_equal(s.t, clean.t)
+    # noise-free sensors: the substitutes agree with the IMU/DVL fusion where the
+    # identification looks (its 2 Hz low-pass), relative to each signal's spread
+    for name in ("nu", "nu_dot"):
+        err = np.sqrt(np.mean(zero_phase(getattr(s, name) - getattr(clean, name), 50.0,
+                                         2.0) ** 2, axis=0))
+        assert np.all(err < 0.01 * np.std(getattr(clean, name), axis=0)), (name, err)
