@@ -196,9 +196,6 @@ def _descriptor(p: Param) -> ParameterDescriptor:
                                                          to_value=float(p.high), step=0.0)]
     if p.type_ is not None:
         d.type = p.type_.value
-    if isinstance(p.default, float):
-        # '-p duration:=90' arrives as an integer: accept it (validate() checks the number)
-        d.dynamic_typing = True
     return d
 
 
@@ -314,16 +311,31 @@ class ParamNode(Node):
                 reason = validate(p, given.value)
                 if reason is not None:
                     raise ValueError(f"parameter {reason}")
-                if isinstance(p.default, list) and p.default and \
-                        isinstance(p.default[0], float):  # '[1, 0, 0]': integers are numbers
-                    self._parameter_overrides[p.name] = Parameter(
-                        p.name, value=[float(v) for v in given.value])
+                # '-p duration:=90', '[1, 0, 0]': integers are numbers
+                self._parameter_overrides[p.name] = self._as_declared(given)
             self.declare_parameter(p.name, p.default, _descriptor(p))
             reason = validate(p, self.get_parameter(p.name).value)
             if reason is not None:
                 raise ValueError(f"parameter {reason}")
+        self.add_pre_set_parameters_callback(
+            lambda params: [self._as_declared(prm) for prm in params])
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
+
+    def _as_declared(self, prm: Parameter) -> Parameter:
+        """``prm`` with integers made floats where the parameter is a double (or a list of
+        doubles): ``-p rate:=2`` and ``ros2 param set … rate 2`` set 2.0, and the parameter
+        stays a double."""
+        spec = self._specs.get(prm.name)
+        if spec is None or isinstance(prm.value, bool):
+            return prm
+        if isinstance(spec.default, float) and isinstance(prm.value, int):
+            return Parameter(prm.name, Parameter.Type.DOUBLE, float(prm.value))
+        if isinstance(spec.default, list) and spec.default and isinstance(
+                spec.default[0], float) and isinstance(prm.value, list | tuple) and all(
+                isinstance(v, int | float) and not isinstance(v, bool) for v in prm.value):
+            return Parameter(prm.name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in prm.value])
+        return prm
 
     def create_subscription(self, msg_type: Any, topic: str, callback: Callable[..., None],
                             qos_profile: QoSProfile | int, *, drain: int | Drain = DRAIN_LIMIT,

@@ -446,3 +446,27 @@ def test_a_signal_while_a_node_is_still_starting_ends_it_quietly(sig: int) -> No
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err[-2000:]
     assert "Traceback" not in out + err
+
+
+def test_an_integer_for_a_double_parameter_is_that_double(context: Any) -> None:
+    """'-p gain:=2' and 'ros2 param set … gain 3' set 2.0 and 3.0: the parameter stays a
+    double (it became an integer, and a later 2.5 was then refused)."""
+    from dampest_ros.ros.common import Param
+
+    specs = [Param("gain", 1.5, "a gain", low=0.0, high=10.0),
+             Param("axis", [1.0, 0.0, 0.0], "an axis")]
+    node = ParamNode("double_probe", specs, context=context, parameter_overrides=[
+        Parameter("gain", value=2), Parameter("axis", value=[0, 1, 0])])
+    try:
+        gain = node.get_parameter("gain")
+        assert gain.type_ == Parameter.Type.DOUBLE and gain.value == 2.0
+        assert node.get_parameter("axis").value == [0.0, 1.0, 0.0]
+        for value in (3, 2.5):
+            (result,) = node.set_parameters([Parameter("gain", value=value)])
+            assert result.successful, result.reason
+            gain = node.get_parameter("gain")
+            assert gain.type_ == Parameter.Type.DOUBLE and gain.value == float(value)
+        (result,) = node.set_parameters([Parameter("gain", value=11)])
+        assert not result.successful and "range" in result.reason and "11" in result.reason
+    finally:
+        node.destroy_node()
