@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
@@ -125,6 +126,11 @@ def expected(exc: BaseException) -> bool:
     return False
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    """A signal handler that raises KeyboardInterrupt, as SIGINT's default one does."""
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dampest`` console script; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -132,6 +138,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # value); only its parser is built
     chosen = next((a for a in argv if not a.startswith("-")), "")
     args = build_parser((chosen,)).parse_args(argv)
+    # SIGTERM (systemd, docker, launch) ends a command as Ctrl-C does: what a command keeps on
+    # an interrupt (live and demo save the run so far) it keeps on SIGTERM too
+    signal.signal(signal.SIGTERM, _interrupt)
     try:
         return int(resolve(COMMANDS[args.command].run)(args))
     except KeyboardInterrupt:
