@@ -73,6 +73,9 @@ def _evaluable(m: Model) -> Model:
     return replace(m, damping=structure)
 
 
+#: Lists repeated in a row when a get answers nothing because the names changed meanwhile.
+STALE_RETRIES = 3
+
 class ModelUnavailableError(RuntimeError):
     """No model yet (the server has not answered, or its model is invalid)."""
 
@@ -115,6 +118,7 @@ class ModelClient:
         self._executor: Any = None
         self._thread: threading.Thread | None = None
         self._pending = False
+        self._stale = 0  # lists repeated in a row because the names changed meanwhile
         if node is not None:
             from rcl_interfaces.msg import ParameterEvent
             from rcl_interfaces.srv import GetParameters, ListParameters
@@ -208,7 +212,16 @@ class ModelClient:
         from rclpy.parameter import parameter_value_to_python
         try:
             values = future.result().values
+            if not values and names and self._stale < STALE_RETRIES and \
+                    self._list.service_is_ready() and self._cli.service_is_ready():
+                # a server that is there answers nothing when a name listed is gone: the
+                # model's names changed between the list and the get (a new structure, new
+                # provenance entries); list again
+                self._stale += 1
+                self.request()
+                return
             if not values and names:  # a server going away answers with nothing
+                self._stale = 0
                 self.node.get_logger().warning(
                     f"model server {self.server} answered none of the {len(names)} model "
                     f"parameters (stopping?); keeping "
@@ -219,6 +232,7 @@ class ModelClient:
                                             f"{len(names)} model parameters")
             m = model_from_parameters({n: parameter_value_to_python(v)
                                        for n, v in zip(names, values, strict=True)})
+            self._stale = 0
             self._set(_evaluable(m))
         except Exception as exc:  # a bad answer must not kill the caller's executor
             self._refuse(exc)

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from dampest_ros.client import ModelClient
+from dampest_ros.client import STALE_RETRIES, ModelClient
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, coriolis_force
@@ -323,9 +323,17 @@ def test_bad_model_at_runtime_is_refused_and_the_client_keeps_the_last_good_one(
             clients[1].errors[-1]
         assert clients[1].version == 4
         np.testing.assert_allclose(clients[1].damping_force(nu), want, rtol=1e-12)
-        # a server stopping while asked answers with no values: kept, logged, not a refusal
-        stopping = SimpleNamespace(result=lambda: SimpleNamespace(values=[]))
-        clients[1]._on_response(["model.theta", "model.version"], stopping)
+        # nothing answered by a server that is there: the names changed between the list and
+        # the get; the client lists again, quietly, and has the model again
+        empty = SimpleNamespace(result=lambda: SimpleNamespace(values=[]))
+        refreshes, errors = clients[0].refreshes, len(clients[0].errors)
+        clients[0]._on_response(["model.theta", "model.version"], empty)
+        assert clients[0]._stale == 1
+        spin_until(lambda: clients[0].refreshes > refreshes)
+        assert clients[0]._stale == 0 and len(clients[0].errors) == errors
+        # a server stopping while asked (nothing, again and again): kept, logged, not refused
+        clients[1]._stale = STALE_RETRIES
+        clients[1]._on_response(["model.theta", "model.version"], empty)
         assert len(clients[1].errors) == 1 and clients[1].version == 4
     finally:
         ex.shutdown()
