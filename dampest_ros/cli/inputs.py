@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from dampest_ros.cli.common import Progress, tau_topic, topic_roles
-from dampest_ros.core.identification.delay import profile_delay
+from dampest_ros.core.identification.delay import profile_delay, shift_tau
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
@@ -79,8 +79,8 @@ def check_options(args: argparse.Namespace, rate: float, span: float, *,
     span : float
         Seconds of log.
     resample : bool
-        The samples are made at ``--rate`` (a bag): the rate is checked, and ``--delay``
-        shifts τ (a CSV's τ is used as logged: a delay is refused).
+        The samples are made at ``--rate`` (a bag): the rate is checked. ``--delay`` shifts
+        τ in either case (a CSV's τ columns by :func:`delayed`).
     min_rate : float
         Lowest acceptable ``--rate`` (Hz), e.g. twice the preprocessing's own low-pass.
 
@@ -128,9 +128,6 @@ def check_options(args: argparse.Namespace, rate: float, span: float, *,
         raise ConfigError("--delay", f"{delay:g} s: must be ≥ 0 and shorter than the log "
                                      f"({span:.1f} s); typical thrust delays are 0-0.5 s, or "
                                      "give 'auto'")
-    if delay and not resample:
-        raise ConfigError("--delay", "a CSV's tau is used as logged; shift its tau columns "
-                                     "instead")
     return delay
 
 
@@ -150,9 +147,9 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace,
                                   max_gap=args.max_gap)
         for note in notes:
             print(f"{p.name}: {note}", file=sys.stderr)
-        check_options(args, samples.rate, float(samples.t[-1] - samples.t[0]),
-                      resample=False)
-        return samples
+        given = check_options(args, samples.rate, float(samples.t[-1] - samples.t[0]),
+                              resample=False)
+        return delayed(samples, vehicle, given)
     if not is_bag(p):
         raise DataError(f"{p}: expected a rosbag2 directory, a ROS 1 .bag file, a folder of "
                         "per-topic CSV files or a .csv / .csv.gz file")
@@ -186,17 +183,32 @@ def _bag_samples(p: Path, vehicle: Vehicle, args: argparse.Namespace,
         if substitutions is not None:
             substitutions.extend(subs)
         if auto:
-            found = profile_delay(samples, vehicle.damping, vehicle.body)
-            print(f"estimated delay of the response after the thrust: "
-                  f"{found.delay * 1000:.1f} ms ± {found.std * 1000:.2g} ms (statistical; up "
-                  f"to ±{500 / samples.rate:.0f} ms more if τ is stamped at the start or end "
-                  "of its sample period)", file=sys.stderr)
-            if found.at_bound:
-                print(f"warning: the delay found is at the end of the searched "
-                      f"{found.bounds[0]:g}..{found.bounds[1]:g} s: the true one may lie "
-                      "beyond; give --delay S", file=sys.stderr)
-            samples = preprocess(rec, vehicle, replace(cfg, delay=found.delay), topics)
+            delay = estimated_delay(samples, vehicle)
+            samples = preprocess(rec, vehicle, replace(cfg, delay=delay), topics)
     return samples
+
+
+def estimated_delay(samples: Samples, vehicle: Vehicle) -> float:
+    """``--delay auto``: the delay (s) of the response after τ that fits best
+    (:func:`~dampest_ros.core.identification.delay.profile_delay`), printed with its σ, and
+    a warning when it sits at an end of the search."""
+    found = profile_delay(samples, vehicle.damping, vehicle.body)
+    print(f"estimated delay of the response after the thrust: {found.delay * 1000:.1f} ms ± "
+          f"{found.std * 1000:.2g} ms (statistical; up to ±{500 / samples.rate:.0f} ms more if "
+          "τ is stamped at the start or end of its sample period)", file=sys.stderr)
+    if found.at_bound:
+        print(f"warning: the delay found is at the end of the searched "
+              f"{found.bounds[0]:g}..{found.bounds[1]:g} s: the true one may lie beyond; give "
+              "--delay S", file=sys.stderr)
+    return found.delay
+
+
+def delayed(samples: Samples, vehicle: Vehicle, delay: float | None) -> Samples:
+    """Samples of a CSV log with τ delayed by ``--delay`` (None: ``auto``,
+    :func:`estimated_delay`); the samples themselves when it is 0."""
+    if delay is None:
+        delay = estimated_delay(samples, vehicle)
+    return shift_tau(samples, delay) if delay else samples
 
 
 #: Seconds at the start of a log whose messages the frame plausibility checks read.
