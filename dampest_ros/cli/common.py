@@ -181,7 +181,12 @@ def add_preprocess_options(p: argparse.ArgumentParser) -> None:
                    help="DVL gaps longer than this (s) split the data (default: 1)")
     p.add_argument("--delay", default="0", metavar="S|auto",
                    help="delay (s) of the vehicle's response after the logged thrust, or "
-                        "'auto' to estimate it by cross-correlation and correct it (default: 0)")
+                        "'auto' to estimate it (the delay that fits best, printed with its σ) "
+                        "and correct it (default: 0)")
+    p.add_argument("--accept-frames", action="store_true",
+                   help="take a bag whose IMU frames look wrong (gravity sign, tilt, yaw "
+                        "rate against heading: refused by default, one line saying which) "
+                        "as it is, with the findings as warnings")
 
 
 class Progress:

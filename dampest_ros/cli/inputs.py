@@ -172,7 +172,8 @@ def _bag_samples(p: Path, vehicle: Vehicle, args: argparse.Namespace,
                               min_rate=2 * cfg.cutoff)
         auto = given is None
         cfg = replace(cfg, rate=args.rate, delay=0.0 if given is None else given)
-        warn_implausible(rec, topics, rec.summary.start, vehicle.body.gravity, p.name)
+        check_frames(rec, topics, rec.summary.start, vehicle.body.gravity, p.name,
+                     getattr(args, "accept_frames", False))
         id_notes: list[str] = []
         subs: list[str] = []
         samples = preprocess(rec, vehicle, cfg, topics, notes=id_notes, substitutions=subs)
@@ -215,18 +216,31 @@ def delayed(samples: Samples, vehicle: Vehicle, delay: float | None) -> Samples:
 PLAUSIBILITY_SECONDS = 300.0
 
 
-def warn_implausible(source: BagSource, topics: dict[str, str], start: float, gravity: float,
-                     name: str) -> None:
-    """Print a warning line per frame mistake the first :data:`PLAUSIBILITY_SECONDS` of the
-    used topics show (:func:`~dampest_ros.core.signals.plausibility.frame_notes`)."""
+def check_frames(source: BagSource, topics: dict[str, str], start: float, gravity: float,
+                 name: str, accept: bool) -> None:
+    """Check the frames of the first :data:`PLAUSIBILITY_SECONDS` of the used topics
+    (:func:`~dampest_ros.core.signals.plausibility.frame_notes`): a never-changing field is a
+    warning line; a frame mistake refuses the log (one line with the first, the others as
+    warnings), unless ``accept`` (``--accept-frames``), when they are warnings too.
+
+    Raises
+    ------
+    DataError
+        A frame mistake, and ``accept`` is false.
+    """
     have = set(source.topics())
     try:
         head = {t: source.series(t, start, start + PLAUSIBILITY_SECONDS)
                 for t in dict.fromkeys(topics.values()) if t.lstrip("/") in have}
     except MissingTopicError:  # a topic read with it is missing: the preprocessing says so
         return
-    for note in frame_notes(head, gravity):
+    found = frame_notes(head, gravity)
+    shown = found.warnings + (found.errors if accept else found.errors[1:])
+    for note in shown:
         print(f"{name}: warning: {note}", file=sys.stderr)
+    if found.errors and not accept:
+        raise DataError(f"{name}: {found.errors[0]}; fix the log's frames, or give "
+                        "--accept-frames if they are right")
 
 
 def cut(samples: Samples, args: argparse.Namespace) -> Samples:

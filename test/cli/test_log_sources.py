@@ -230,3 +230,25 @@ def test_rls_refuses_a_navigation_state_in_one_line(flight: Flight,
                  "--method", "rls"]) == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "--method rls reads an IMU and a DVL" in line and "batch method" in line
+
+
+def test_an_frd_accelerometer_in_flu_messages_is_refused_by_name(
+        flight: Flight, capsys: pytest.CaptureFixture[str]) -> None:
+    """The accelerometer's y and z flipped (FRD inside FLU messages): the log is refused in
+    one line naming the topic, the field and the cause (the fit would take the flipped
+    specific force as measured); --accept-frames takes it as it is, with the warning."""
+    from dampest_ros.io.bag import read_bag
+
+    rec = read_bag(flight.bags["clean"])
+    imu = rec["imu/data"]
+    assert isinstance(imu, ImuSeries)
+    rec["imu/data"] = replace(imu, linear_acceleration=imu.linear_acceleration
+                              * [1.0, -1.0, -1.0])
+    bag = write_with_rosbags(flight.root / "frd_accelerometer", rec)
+    capsys.readouterr()
+    assert main(["identify", str(bag), "--vehicle", flight.vehicle]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "imu/data: linear_acceleration points down in the world" in line, line
+    assert "FRD accelerometer inside FLU messages" in line and "--accept-frames" in line
+    assert main(["identify", str(bag), "--vehicle", flight.vehicle, "--accept-frames"]) == 0
+    assert "warning: imu/data: linear_acceleration points down" in capsys.readouterr().err

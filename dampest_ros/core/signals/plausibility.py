@@ -17,12 +17,14 @@ field, and the likely cause:
   not filled). An IMU's all-zero gyro or accelerometer is not among them: the preprocessing
   replaces it and says so (:mod:`.sources`).
 
-Nothing here changes data: the caller prints the lines (:func:`frame_notes`).
+Nothing here changes data: the caller prints the lines (:func:`frame_notes`); the command
+line refuses a log with a frame mistake unless told the frames are right.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -174,7 +176,17 @@ def constant_notes(topic: str, series: Series) -> list[str]:
     return notes
 
 
-def frame_notes(series: Mapping[str, Series], gravity: float) -> list[str]:
+@dataclass(frozen=True)
+class FrameNotes:
+    """What the checks found: ``errors``, frame mistakes that make identification wrong
+    (gravity sign or gravity removed, tilt, yaw rate), and ``warnings``, fields that never
+    change; one line each, naming topic and field."""
+
+    errors: list[str]
+    warnings: list[str]
+
+
+def frame_notes(series: Mapping[str, Series], gravity: float) -> FrameNotes:
     """Every plausibility line for the topics a log feeds identification with.
 
     Parameters
@@ -186,15 +198,16 @@ def frame_notes(series: Mapping[str, Series], gravity: float) -> list[str]:
 
     Returns
     -------
-    list of str
-        One line each, naming the topic and field; empty when nothing looks wrong.
+    FrameNotes
+        Empty lists when nothing looks wrong.
     """
-    notes: list[str] = []
+    errors: list[str] = []
+    warnings: list[str] = []
     for topic, s in series.items():
         if len(s) == 0:
             continue
         constant = constant_notes(topic, s)
-        notes += constant
+        warnings += constant
         if not isinstance(s, ImuSeries) or not np.any(s.linear_acceleration) or any(
                 n.split(": ")[1].startswith(("orientation", "linear_acceleration"))
                 for n in constant):
@@ -202,8 +215,7 @@ def frame_notes(series: Mapping[str, Series], gravity: float) -> list[str]:
         R = quat_to_matrix(s.orientation[:, [3, 0, 1, 2]])  # [x, y, z, w] → [w, x, y, z]
         f = s.linear_acceleration
         gravity_line = gravity_note(topic, np.einsum("ij,ij->i", R[:, 2, :], f), gravity)
-        notes += [gravity_line] if gravity_line else []
         tilt = None if gravity_line else tilt_note(topic, R, f, gravity)
         yaw = yaw_rate_note(topic, s.stamp, R, s.angular_velocity)
-        notes += [n for n in (tilt, yaw) if n]
-    return notes
+        errors += [n for n in (gravity_line, tilt, yaw) if n]
+    return FrameNotes(errors, warnings)

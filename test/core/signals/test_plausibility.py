@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.signals.measurements import ImuSeries, Series
-from dampest_ros.core.signals.plausibility import frame_notes
+from dampest_ros.core.signals.plausibility import FrameNotes, frame_notes
 from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.sensors import measure
 from dampest_ros.core.simulation.simulate import run
@@ -36,13 +36,13 @@ def imu(recording: dict[str, Series]) -> ImuSeries:
 
 
 def test_a_clean_log_gives_no_line(recording: dict[str, Series]) -> None:
-    assert frame_notes(recording, G) == []
+    assert frame_notes(recording, G) == FrameNotes([], [])
 
 
 def test_an_frd_accelerometer_in_flu_messages_is_named(recording: dict[str, Series]) -> None:
     s = imu(recording)
     bad = replace(s, linear_acceleration=s.linear_acceleration * [1.0, -1.0, -1.0])
-    (line,) = frame_notes({"imu/data": bad}, G)
+    (line,) = frame_notes({"imu/data": bad}, G).errors
     assert line.startswith("imu/data: linear_acceleration points down in the world (median -9.")
     assert "FRD accelerometer inside FLU messages" in line
 
@@ -51,14 +51,14 @@ def test_gravity_removed_is_named(recording: dict[str, Series]) -> None:
     s = imu(recording)
     R_up = np.array([0.0, 0.0, G])
     level = replace(s, linear_acceleration=s.linear_acceleration - R_up)  # near level
-    (line,) = frame_notes({"imu/data": level}, G)
+    (line,) = frame_notes({"imu/data": level}, G).errors
     assert "has no gravity" in line
 
 
 def test_an_frd_gyro_in_flu_messages_is_named(recording: dict[str, Series]) -> None:
     s = imu(recording)
     bad = replace(s, angular_velocity=s.angular_velocity * [1.0, -1.0, -1.0])
-    (line,) = frame_notes({"imu/data": bad}, G)
+    (line,) = frame_notes({"imu/data": bad}, G).errors
     assert line.startswith("imu/data: angular_velocity turns against the orientation's heading")
     slope = float(line.split("(slope ")[1].split()[0])
     assert -1.1 < slope < -0.8  # measured -0.94 (native), -0.96 (MuJoCo)
@@ -69,17 +69,17 @@ def test_an_ned_orientation_in_an_enu_message_is_named(recording: dict[str, Seri
     agrees, the heading runs backwards."""
     s = imu(recording)
     bad = replace(s, orientation=s.orientation * [1.0, -1.0, -1.0, 1.0])
-    lines = frame_notes({"imu/data": bad}, G)
+    lines = frame_notes({"imu/data": bad}, G).errors
     assert any("turns against the orientation's heading" in line for line in lines), lines
 
 
 def test_a_field_never_filled_is_named(recording: dict[str, Series]) -> None:
     dvl = recording["dvl/twist"]
     empty = replace(dvl, linear=np.zeros_like(dvl.linear))
-    (line,) = frame_notes({"dvl/twist": empty}, G)
+    (line,) = frame_notes({"dvl/twist": empty}, G).warnings
     assert line.startswith(f"dvl/twist: linear[0, 1, 2] is zero in all {len(dvl)} messages")
     frozen = replace(dvl, linear=dvl.linear * [1.0, 1.0, 0.0] + [0.0, 0.0, 0.3])
-    (line,) = frame_notes({"dvl/twist": frozen}, G)
+    (line,) = frame_notes({"dvl/twist": frozen}, G).warnings
     assert line.startswith("dvl/twist: linear[2] is constant")
 
 
@@ -89,4 +89,4 @@ def test_an_imu_without_gyro_or_accelerometer_gives_no_line(recording: dict[str,
     # all zero: no such sensor, which the preprocessing replaces and names (signals.sources)
     s = imu(recording)
     empty = replace(s, **{field: np.zeros_like(getattr(s, field))})
-    assert frame_notes({"imu/data": empty}, G) == []
+    assert frame_notes({"imu/data": empty}, G) == FrameNotes([], [])
