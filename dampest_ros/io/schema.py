@@ -63,7 +63,8 @@ def _unknown_key(error: ValidationError) -> tuple[str, str] | None:
     return None
 
 
-def _expected(error: ValidationError) -> tuple[ValidationError, str]:
+def _expected(error: ValidationError, root: dict[str, Any], data: Any
+              ) -> tuple[ValidationError, str]:
     """The error to report and what its schema says is expected: the outermost ``oneOf``
     the error is inside (its alternatives are one value's forms), else the nearest error
     (``error`` or a parent) whose schema has a description."""
@@ -77,11 +78,31 @@ def _expected(error: ValidationError) -> tuple[ValidationError, str]:
         if isinstance(e.schema, dict) and "description" in e.schema:
             return e, str(e.schema["description"])
         e = e.parent
-    return error, str(error.message)
+    return _array_of(error, root, data)
 
 
-def _message(error: ValidationError) -> tuple[list[Any], str]:
-    """(key path, reason and fix) for one jsonschema error."""
+def _array_of(error: ValidationError, root: dict[str, Any], data: Any
+              ) -> tuple[ValidationError, str]:
+    """For an item of an array whose items have no description: an error for the whole
+    array (the key users write) with the array's description, else ``error`` as it is."""
+    schema_path, path = list(error.absolute_schema_path)[:-1], list(error.absolute_path)
+    while schema_path[-1:] == ["items"] and path and isinstance(path[-1], int):
+        schema_path, path = schema_path[:-1], path[:-1]
+    if len(path) == len(error.absolute_path):
+        return error, str(error.message)
+    node: Any = root
+    for key in schema_path:
+        node = node[key]
+    instance = data
+    for key in path:
+        instance = instance[key]
+    whole = ValidationError(error.message, instance=instance, schema=node, path=path)
+    return whole, str(node.get("description", error.message))
+
+
+def _message(error: ValidationError, root: dict[str, Any], data: Any
+             ) -> tuple[list[Any], str]:
+    """(key path, reason and fix) for one jsonschema error of ``data`` against ``root``."""
     path = list(error.absolute_path)
     if error.validator == "additionalProperties":
         found = _unknown_key(error)
@@ -92,7 +113,7 @@ def _message(error: ValidationError) -> tuple[list[Any], str]:
         key = missing.group(1) if missing else "?"
         wanted = error.schema.get("properties", {}).get(key, {}).get("description", "")
         return [*path, key], f"missing; add it ({wanted})" if wanted else "missing; add it"
-    where, expected = _expected(error)
+    where, expected = _expected(error, root, data)
     got = f"got {json.dumps(where.instance, default=str)}"
     words = [w for alt in (where.schema, *where.schema.get("anyOf", ()),
                            *where.schema.get("oneOf", ())) for w in alt.get("enum", ())]
@@ -113,7 +134,7 @@ def check(doc: YamlDoc, name: str) -> None:
     validator = jsonschema.Draft202012Validator(schema(name))
     error = best_match(validator.iter_errors(doc.data))
     if error is not None:
-        path, reason = _message(error)
+        path, reason = _message(error, schema(name), doc.data)
         raise doc.error(path, reason)
 
 
