@@ -38,8 +38,9 @@ setup(
     name=PACKAGE_NAME,
     version="0.1.0",
     packages=find_packages(exclude=["test*"]),
-    # the shipped arm descriptions (URDF + MJCF), read with importlib.resources
-    package_data={PACKAGE_NAME: ["data/arm/*.urdf", "data/arm/*.xml"]},
+    # the shipped arm descriptions (URDF + MJCF) and the JSON Schemas of the files users
+    # write, read with importlib.resources
+    package_data={PACKAGE_NAME: ["data/arm/*.urdf", "data/arm/*.xml", "schemas/*.schema.json"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE_NAME]),
         ("share/" + PACKAGE_NAME, ["package.xml"]),
@@ -61,6 +62,7 @@ setup(
         "mcap-ros2-support",
         "matplotlib",
         "PyYAML",
+        "jsonschema",
     ],
     # pip install 'dampest_ros[pool]': several logs on Dask, logs named by fsspec URL
     extras_require={"pool": POOL_EXTRA},

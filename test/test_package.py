@@ -134,6 +134,7 @@ ROSDEP_KEYS = {
     "scipy": "python3-scipy",
     "matplotlib": "python3-matplotlib",
     "yaml": "python3-yaml",
+    "jsonschema": "python3-jsonschema",
     "filterpy": "python3-filterpy-pip",
     "rosbags": "python3-rosbags-pip",
     "mcap": "mcap-ros2-support",

@@ -21,6 +21,7 @@ from dampest_ros.core.arm.model import ArmModel, JointDynamics, arm_from_urdf, j
 from dampest_ros.core.arm.online import ArmEstimate
 from dampest_ros.core.signals.measurements import JointSeries, Series
 from dampest_ros.io.bag import bag_summary, read_bag, write_bag
+from dampest_ros.io.schema import load_checked
 from dampest_ros.io.yaml_io import atomic_write
 
 FloatArray = NDArray[np.float64]
@@ -249,11 +250,15 @@ def load_trajectory(path: str | Path, n: int) -> tuple[FourierTrajectory, Design
 
     Raises
     ------
+    InputError
+        (a ValueError) naming the file, line and key: a duplicate or unknown key (the
+        closest valid one suggested), a missing entry, a wrong type or range (the schema
+        ``dampest_ros/schemas/arm_trajectory.schema.json``).
     ArmDataError
-        If the file is missing entries or its shapes do not fit n joints.
+        If its shapes do not fit n joints.
     """
+    doc = load_checked(path, "arm_trajectory").data
     try:
-        doc = yaml.safe_load(Path(path).read_text())
         a, b = np.asarray(doc["a"], dtype=float), np.asarray(doc["b"], dtype=float)
         traj = FourierTrajectory(np.asarray(doc["q0"], dtype=float), a, b,
                                  float(doc["base_frequency"]))
@@ -261,7 +266,7 @@ def load_trajectory(path: str | Path, n: int) -> tuple[FourierTrajectory, Design
         limits = None if lim is None else DesignLimits(
             *(np.asarray(lim[k], dtype=float)
               for k in ("lower", "upper", "velocity", "acceleration", "effort")))
-    except (KeyError, TypeError, ValueError, yaml.YAMLError) as exc:
+    except (KeyError, TypeError, ValueError) as exc:
         raise ArmDataError(f"trajectory file {path}: not a dampest arm trajectory "
                            f"({type(exc).__name__}: {exc}); write one with 'dampest arm "
                            "design'") from None

@@ -78,7 +78,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from dampest_ros.core.physics.frames import matrix_from_euler
@@ -87,6 +86,7 @@ from dampest_ros.core.signals.measurements import FloatArray
 from dampest_ros.core.signals.resample import GAP_PERIODS, resample_uniform
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.io.csv_table import CsvError, numeric_columns, read_head, seconds
+from dampest_ros.io.schema import load_checked
 
 #: Body velocity ν = [u v w p q r] (FRD).
 VELOCITY_COLUMNS = ("u", "v", "w", "p", "q", "r")
@@ -228,22 +228,25 @@ def load_column_map(path: str | Path) -> dict[str, str]:
     Returns
     -------
     dict of str to str
+
+    Raises
+    ------
+    InputError
+        (a ValueError) naming the file, line and entry: not a mapping, a duplicate key, a
+        target that is not one of our column names (the closest one suggested; the schema
+        ``dampest_ros/schemas/column_map.schema.json``).
+        Several columns mapped to one name too.
     """
-    path = Path(path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ValueError(f"{path}: not valid YAML: {exc}") from None
-    if isinstance(doc, dict) and set(doc) == {"columns"}:
-        doc = doc["columns"]
-    if not isinstance(doc, dict) or not all(
-            isinstance(k, str) and isinstance(v, str) for k, v in doc.items()):
-        raise ValueError(f"{path}: a column map is a mapping of column name to column name")
+    checked = load_checked(path, "column_map")
+    nested = set(checked.data) == {"columns"}
+    doc = {str(k): v for k, v in (checked.data["columns"] if nested else checked.data).items()}
     targets = list(doc.values())
     dups = sorted({t for t in targets if targets.count(t) > 1})
     if dups:
-        raise ValueError(f"{path}: several columns map to {dups}")
-    return dict(doc)
+        last = [k for k, v in doc.items() if v in dups][-1]
+        raise checked.error(["columns", last] if nested else [last],
+                            f"several columns map to {dups}; keep one")
+    return doc
 
 
 # --- identification samples ---------------------------------------------------------------

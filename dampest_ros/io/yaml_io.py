@@ -70,6 +70,8 @@ from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 from dampest_ros.core.signals.measurements import FloatArray
+from dampest_ros.io.schema import load_checked
+from dampest_ros.io.strict_yaml import YamlDoc, load_yaml, loads_yaml
 
 SIGN_CONVENTION = "dissipative_positive"
 _REQUIRED = ("sign_convention", "parameter_names", "theta", "theta_std", "M", "version")
@@ -77,10 +79,8 @@ _RESERVED = (*_REQUIRED, "terms", "M_A", "added_mass_terms", "identified", "held
 
 
 def _read_yaml(path: Path) -> Any:
-    try:
-        return yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError(str(path), f"not valid YAML: {exc}") from None
+    """A user's YAML file, duplicate keys refused (:mod:`dampest_ros.io.strict_yaml`)."""
+    return load_yaml(path).data
 
 
 def read_mapping(source: str) -> dict[str, Any]:
@@ -89,10 +89,7 @@ def read_mapping(source: str) -> dict[str, Any]:
     if path.is_file():
         data = _read_yaml(path)
     else:
-        try:
-            data = yaml.safe_load(source)
-        except yaml.YAMLError as exc:
-            raise ConfigError(source, f"neither a file nor valid YAML: {exc}") from None
+        data = loads_yaml(source, "inline YAML").data
     if not isinstance(data, dict):
         raise ConfigError(source, "must be a YAML mapping (key: value)")
     return data
@@ -153,18 +150,24 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
 
     Raises
     ------
-    ConfigError
-        Naming the invalid field (e.g. ``mass``) and the file.
+    InputError
+        A ConfigError naming the file, the line and the key: a duplicate key, a violation of
+        the vehicle schema (``dampest_ros/schemas/vehicle.schema.json``: an unknown key with
+        the closest valid one, a missing one, a wrong type or range) or of a physics check
+        (e.g. an inertia that is not positive definite).
     """
     path = vehicle_path(name_or_path)
-    doc = _read_yaml(path)
-    if not isinstance(doc, dict):
-        raise ConfigError(str(path), "a vehicle file is a mapping with sections vehicle, "
-                                     "damping, thrusters")
+    doc = load_checked(path, "vehicle")
     try:
-        return replace(Vehicle.from_dict(doc), source=str(path))
+        return replace(Vehicle.from_dict(doc.data), source=str(path))
     except ConfigError as exc:
-        raise ConfigError(exc.field, f"{exc.reason} (in {path})") from None
+        raise doc.error(_field_path(doc, exc.field), exc.reason) from None
+
+
+def _field_path(doc: YamlDoc, field_name: str) -> list[str]:
+    """The key path of a physics check's field (``inertia`` is ``vehicle.inertia``)."""
+    path = field_name.split(".")
+    return path if tuple(path[:1]) in doc.lines else ["vehicle", *path]
 
 
 # --- damping spec --------------------------------------------------------------------------

@@ -39,6 +39,8 @@ from rclpy.subscription import Subscription
 from rclpy.utilities import remove_ros_args
 from std_srvs.srv import SetBool, Trigger
 
+from dampest_ros.ros.params_files import UnknownParameterError, params_files
+
 #: Sensor topics: the sensor-data policies (best effort, volatile) with a deeper queue than
 #: its 5, for the bursts of a simulator running faster than real time.
 SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000,
@@ -300,7 +302,12 @@ def remove_orphaned_temp(path: Path) -> list[Path]:
 
 class ParamNode(Node):
     """A node whose parameters are declared from :class:`Param` specs and validated on set;
-    accepted changes go to :meth:`on_parameters` (after they are set)."""
+    accepted changes go to :meth:`on_parameters` (after they are set). An override for a
+    parameter it does not declare (a misspelt key of a params file) is refused with
+    :class:`UnknownParameterError`, except under :attr:`OVERRIDE_PREFIXES`."""
+
+    #: Overrides under these prefixes are parameters the node declares later (``model.``).
+    OVERRIDE_PREFIXES: tuple[str, ...] = ()
 
     def __init__(self, name: str, specs: Sequence[Param], **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
@@ -317,10 +324,18 @@ class ParamNode(Node):
             reason = validate(p, self.get_parameter(p.name).value)
             if reason is not None:
                 raise ValueError(f"parameter {reason}")
+        self._refuse_undeclared()
         self.add_pre_set_parameters_callback(
             lambda params: [self._as_declared(prm) for prm in params])
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
+
+    def _refuse_undeclared(self) -> None:
+        """Raise :class:`UnknownParameterError` for an override (params file, ``-p``) that
+        names no parameter of this node (rclpy would ignore it)."""
+        for name in self._parameter_overrides:
+            if not self.has_parameter(name) and not name.startswith(self.OVERRIDE_PREFIXES):
+                raise UnknownParameterError(name, list(self._specs), self.get_name())
 
     def _as_declared(self, prm: Parameter) -> Parameter:
         """``prm`` with integers made floats where the parameter is a double (or a list of
@@ -383,7 +398,10 @@ class ParamNode(Node):
 
 
 class ModelParamNode(ParamNode):
-    """A node that holds the model in the read-only (from outside) model.* parameters."""
+    """A node that holds the model in the read-only (from outside) model.* parameters
+    (a model file given with ``--params-file`` overrides them)."""
+
+    OVERRIDE_PREFIXES = ("model.",)
 
     def __init__(self, name: str, specs: Any, **kwargs: Any) -> None:
         self._internal = threading.local()
@@ -629,7 +647,9 @@ def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
         rclpy.init(args=argv)
         node = None
         refused = False
+        files: list[Any] = []  # the --params-file files (io.strict_yaml.YamlDoc)
         try:
+            files = params_files(argv)
             node = node_class()
             watch_duplicates(node)
             rclpy.spin(node)
@@ -638,6 +658,8 @@ def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
         except (ValueError, ParameterException, DuplicateNodeError) as exc:
             if node is not None and not isinstance(exc, DuplicateNodeError):
                 raise
+            if isinstance(exc, UnknownParameterError):
+                exc = exc.located(files)
             rclpy.logging.get_logger(name).error(f"cannot start: {exc}")
             refused = True
         except Exception:
