@@ -74,12 +74,15 @@ def run(args: argparse.Namespace) -> int:
     """Write the model in the format asked for; the warnings on stderr."""
     import warnings
 
+    from dampest_ros.cli.inputs import warn_unchecked
     from dampest_ros.io.export.common import ExportWarning
     from dampest_ros.io.export.convert import export_model
     from dampest_ros.io.yaml_io import load_model, load_vehicle
 
     model = load_model(args.model)
     vehicle = load_vehicle(args.vehicle) if args.vehicle else None
+    if vehicle is not None:
+        warn_unchecked(model.belongs_to(vehicle.identity, str(args.model)))
     with warnings.catch_warnings():
         # the left-out list is printed below, once
         warnings.simplefilter("ignore", ExportWarning)
@@ -124,7 +127,8 @@ def run_import(args: argparse.Namespace) -> int:
         imp.names, imp.theta, np.zeros(len(imp.names)), M_RB + M_A, damping=damping,
         extra={"source": f"dampest import {args.file} ({args.format})",
                "import_notes": "; ".join([*imp.notes, *mass_notes])},
-        M_A=M_A, added_mass_terms=terms))
+        M_A=M_A, added_mass_terms=terms,
+        identity=vehicle.identity if vehicle is not None else None))
     print(f"wrote {args.out}: {len(imp.names)} parameters from {args.file} ({args.format}); "
           + "; ".join(mass_notes))
     for note in imp.notes:
