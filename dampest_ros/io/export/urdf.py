@@ -27,22 +27,23 @@ from dampest_ros.core.physics.damping import FloatArray
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, rigid_body_mass
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export.common import (
-    Coefficient,
     Exported,
     Imported,
     added_mass_switches,
     build_imported,
-    checked,
     coefficients,
     export_added_mass,
     exported_result,
     header_lines,
+    held_at_prior,
     linear_name,
+    made_safe,
     merge,
     model_damping,
     neg,
     num,
     parse_xml,
+    policy_of,
     switches_left_out,
     xml_comment,
     xml_float,
@@ -54,7 +55,8 @@ _URDF_QUADRATIC = ("Xuu", "Yvv", "Zww", "Kpp", "Mqq", "Nrr")
 
 
 def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
-                source: str | None = None, force: bool = False) -> Exported:
+                source: str | None = None, force: bool = False,
+                clamp: bool = False) -> Exported:
     """The ``<hydrodynamics>`` block (RDML ``hydrodynamics`` / ``auv_controllers`` / ``blue``).
 
     Parameters
@@ -65,8 +67,9 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
         ``<weight>``, ``<buoyancy>`` and the centres of gravity and buoyancy.
     source : str, optional
         Where the model came from, for the header comment.
-    force : bool
-        Export a model that is not dissipative (the header says so).
+    force, clamp : bool
+        For coefficients that are not dissipative at every speed: write them as they are
+        (``force``) or the nearest dissipative set (``clamp``); the header says which.
 
     Returns
     -------
@@ -78,21 +81,17 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
     NotDissipativeError
         The model generates energy and ``force`` is False.
     """
-    held, unsafe = checked(mf, force, source)
     model, theta, left_out = model_damping(mf)
     coefs, other = coefficients(model, theta) if model is not None else ([], [])
     left_out += other
+    written = [c for c in coefs if c.row == c.col and (
+        c.kind == "const" or (c.kind == "abs" and c.k == c.row))]
+    left_out += [f"{c.name} = {num(c.value)} (off-diagonal or cross coupling: the block holds "
+                 f"diagonal damping only)" for c in coefs if c not in written]
+    written, safety = made_safe(written, policy_of(force, clamp), "urdf", source)
     notes: list[str] = []
-    lin: list[tuple[str, Coefficient, float]] = []
-    quad: list[tuple[str, Coefficient, float]] = []
-    for c in coefs:
-        if c.kind == "const" and c.row == c.col:
-            lin.append((_URDF_LINEAR[c.row], c, -c.value))
-        elif c.kind == "abs" and c.row == c.col == c.k:
-            quad.append((_URDF_QUADRATIC[c.row], c, -c.value))
-        else:
-            left_out.append(f"{c.name} = {num(c.value)} (off-diagonal or cross coupling: "
-                            f"the block holds diagonal damping only)")
+    lin = [(_URDF_LINEAR[c.row], c, -c.value) for c in written if c.kind == "const"]
+    quad = [(_URDF_QUADRATIC[c.row], c, -c.value) for c in written if c.kind == "abs"]
     left_out += switches_left_out(added_mass_switches(mf, vehicle), "the block")
     lin_v, quad_v = merge(lin, notes), merge(quad, notes)
     for names, values, what in ((_URDF_LINEAR, lin_v, "linear"),
@@ -125,7 +124,7 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
         ET.SubElement(block, "buoyancy").text = num(body.buoyancy)
         for tag, r in (("center_of_gravity", body.r_g), ("center_of_buoyancy", body.r_b)):
             ET.SubElement(block, tag, {a: num(x) for a, x in zip("xyz", r, strict=True)})
-    lines = [*header_lines(mf, source, held, unsafe),
+    lines = [*header_lines(mf, source, written, safety),
              "Target: <hydrodynamics> block of the Robotic Decision Making Lab 'hydrodynamics'",
              "library (auv_controllers, blue): Fossen FRD body frame (base_link_fsd), SNAME",
              "signs: D(nu) = -diag(linear_damping) - diag(quadratic_damping)|nu| and",
@@ -136,7 +135,8 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
         lines += ["LEFT OUT (the block has no place for them):", *(f"  {x}" for x in left_out)]
     ET.indent(block, "  ")
     text = f"<!--{xml_comment(lines)}-->\n{ET.tostring(block, encoding='unicode')}\n"
-    return exported_result("urdf", text, left_out, mass_notes + notes, held, unsafe)
+    return exported_result("urdf", text, left_out, mass_notes + notes, held_at_prior(mf),
+                           safety)
 
 
 def _numbers(el: ET.Element, what: str) -> list[float]:
