@@ -29,7 +29,13 @@ from dampest_ros.cli.pool import (
     reduce_all,
 )
 from dampest_ros.core.identification.batch import Fit, FitOptions
-from dampest_ros.core.identification.pool import drift, pooled_fit, pooled_samples
+from dampest_ros.core.identification.pool import (
+    LogStatistics,
+    consistency,
+    drift,
+    pooled_fit,
+    pooled_samples,
+)
 from dampest_ros.core.identification.selection import Selection, select_terms
 from dampest_ros.core.identification.validate import force_scores
 from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
@@ -135,6 +141,27 @@ def prior_of(model: DampingModel, nominal: np.ndarray, spec: Prior | None
     return (nominal, None) if spec is None else prior_arrays(model, nominal, spec)
 
 
+def inconsistent_logs(logs: list[LogStatistics], keep_all: bool) -> dict[str, str]:
+    """Test that the logs belong together (:func:`consistency`); print each that does not,
+    and unless ``keep_all`` take it out of ``logs`` (in place: the list
+    :func:`reduce_all`'s map runs over). Returns log → why it was left out."""
+    if len(logs) < 2:
+        return {}
+    c = consistency(logs)
+    out: dict[str, str] = {}
+    for b in c.left_out:
+        why = (f"its estimate is inconsistent with the other logs' (χ² {c.chi2[b]:.4g} on "
+               f"{c.dof[b]} coefficients, p = {c.p_value[b]:.2g} < {c.alpha:g}/{len(logs)}): "
+               "another vehicle, or its damping changed")
+        print(f"{'kept (--keep-all)' if keep_all else 'left out'}: {logs[b].name}: {why}"
+              + ("" if keep_all else "; --keep-all pools it anyway"), file=sys.stderr)
+        out[logs[b].name] = why
+    if keep_all:
+        return {}
+    logs[:] = [g for k, g in enumerate(logs) if k not in c.left_out]
+    return out
+
+
 def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> int:
     """Several logs: reduce each on Dask, fit them pooled, test the drift between them."""
     check_pooled_options(args)
@@ -142,6 +169,7 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
     model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
     prior, prior_std = prior_of(model, nominal, prior_spec(args, vehicle))
     with reduce_all(paths, args, prior, prior_std) as (logs, failed, map_logs):
+        failed.update(inconsistent_logs(logs, args.keep_all))
         samples = pooled_samples(logs)
         options = FitOptions(method=args.method, cutoff=args.cutoff,
                              speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
