@@ -269,16 +269,20 @@ def urdf_block(text: str) -> ET.Element:
 def test_urdf_bluerov2_heavy_block(heavy_file: Model, heavy: Vehicle) -> None:
     out = export_urdf(heavy_file, heavy)
     block = urdf_block(out.text)
-    lin, quad = block.find("linear_damping"), block.find("quadratic_damping")
-    am = block.find("added_mass")
+    lin, quad = block.find("damping/linear"), block.find("damping/quadratic")
+    am = block.find("inertial/added_mass")
     assert lin is not None and quad is not None and am is not None
     assert lin.get("Xu") == "-13.7" and float(lin.get("Zw", "")) == -33.0
     assert float(quad.get("Xuu", "")) == -141.0 and float(quad.get("Nrr", "")) == -1.5
     assert am.get("Xdu") == "-6.36" and am.get("Ndr") == "-0.222"
-    assert block.findtext("mass") == "13.5"
-    assert float(block.findtext("weight") or "") == pytest.approx(13.5 * 9.81)
-    assert float(block.findtext("buoyancy") or "") == pytest.approx(1000 * 9.81 * 0.0134)
-    cob = block.find("center_of_buoyancy")
+    mass, weight = block.find("inertial/mass"), block.find("hydrostatics/weight")
+    buoyancy = block.find("hydrostatics/buoyancy")
+    assert mass is not None and weight is not None and buoyancy is not None
+    assert mass.get("value") == "13.5"
+    assert float(weight.get("value", "")) == pytest.approx(13.5 * 9.81)
+    assert float(buoyancy.get("value", "")) == pytest.approx(1000 * 9.81 * 0.0134)
+    assert block.find("linear_damping") is None     # not the flat layout of April 2025
+    cob = block.find("hydrostatics/center_of_buoyancy")
     assert cob is not None and cob.get("z") == "-0.01"      # FRD: above the origin
     assert out.left_out == ()
 
@@ -295,7 +299,7 @@ def test_urdf_round_trip_and_force_law(heavy_file: Model, heavy: Vehicle) -> Non
     np.testing.assert_allclose(M, heavy.body.M, atol=1e-12)
     # hydrodynamics.cpp: D(ν) = -diag(linear) - diag(quadratic ⊙ |ν|), on the left-hand side
     block = urdf_block(out.text)
-    lin_el, quad_el = block.find("linear_damping"), block.find("quadratic_damping")
+    lin_el, quad_el = block.find("damping/linear"), block.find("damping/quadratic")
     assert lin_el is not None and quad_el is not None
     lin = np.array([float(lin_el.get(k, "")) for k in ("Xu", "Yv", "Zw", "Kp", "Mq", "Nr")])
     quad = np.array([float(quad_el.get(k, "")) for k in ("Xuu", "Yvv", "Zww", "Kpp", "Mqq",
@@ -320,6 +324,18 @@ def test_urdf_lists_what_the_block_cannot_hold(tmp_path: Path) -> None:
     for name in ("X_u", "N_r", "X_uu", "N_rr"):
         assert got[name] == pytest.approx(dict(zip(mf.parameter_names, mf.theta,
                                                    strict=True))[name], abs=1e-12)
+
+
+def test_urdf_import_reads_the_flat_layout_of_april_2025(heavy_file: Model) -> None:
+    flat = ("<robot><hydrodynamics><mass>13.5</mass><inertia ixx='0.26' iyy='0.23' izz='0.37'/>"
+            "<added_mass Xdu='-6.36' Ydv='-7.12' Zdw='-18.68' Kdp='-0.189' Mdq='-0.135' "
+            "Ndr='-0.222'/><linear_damping Xu='-13.7' Yv='0' Zw='-33' Kp='0' Mq='-0.8' "
+            "Nr='0'/><quadratic_damping Xuu='-141' Yvv='-217' Zww='-190' Kpp='-1.19' "
+            "Mqq='-0.47' Nrr='-1.5'/></hydrodynamics></robot>")
+    imp = import_urdf(flat)
+    assert imp.names == heavy_file.parameter_names
+    np.testing.assert_allclose(imp.theta, heavy_file.theta, atol=1e-12)
+    assert imp.rigid_body is not None and imp.rigid_body[0, 0] == 13.5
 
 
 def test_urdf_import_of_the_nested_auv_controllers_layout_and_of_text() -> None:
