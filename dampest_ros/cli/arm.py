@@ -321,23 +321,25 @@ def _identify(args: argparse.Namespace) -> int:
                              validation if val is not None else None)
         print(f"\nwrote {path}")
     if args.out:
-        _write_params(args.out, args, base, res, names)
+        _write_params(args.out, args, base, res, names, arm.model)
         print(f"\nwrote {args.out}")
     return 0
 
 
 def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
-                  names: tuple[str, ...]) -> None:
+                  names: tuple[str, ...], arm: Any) -> None:
     """The arm model file (the one arm_estimator_node saves and takes as its prior) with the
     WLS estimate as theta, and the OLS and physically consistent fits beside it."""
     import numpy as np
 
+    from dampest_ros.core.arm.model import arm_model_identity
     from dampest_ros.core.arm.online import ArmEstimate
     from dampest_ros.io.arm import save_arm_model
 
-    est = ArmEstimate(tuple(names), [base.names[k] for k in base.independent],
-                      res.wls.theta, res.wls.std, np.ones(base.size, dtype=bool),
-                      base.mapping())
+    kept = [base.names[k] for k in base.independent]
+    est = ArmEstimate(tuple(names), kept, res.wls.theta, res.wls.std,
+                      np.ones(base.size, dtype=bool), base.mapping(),
+                      identity=arm_model_identity(str(args.arm), arm, kept))
     save_arm_model(path, est, str(args.arm), {
         "source": f"dampest arm identify {args.bag}",
         "ols": [float(x) for x in res.ols.theta],

@@ -6,9 +6,12 @@ block (urdf) or the UUV Simulator hydrodynamic plugin block of an SDF (uuv), con
 reads gz or urdf back into a model file. The conventions and where they come from:
 dampest_ros/io/export/.
 
-export refuses a model that generates energy somewhere in its flown speed envelope (exit
-status 2, one line naming the coefficient and the velocity) unless --force; it warns about,
-and lists in the file, every coefficient the data did not determine.
+export refuses coefficients that the target would apply non-dissipatively at some speed
+(simulators apply linear and |v|v terms at every speed, not only where the vehicle flew): exit
+status 2, one line naming the coefficient and the speed where the damping turns, unless
+--clamp (the nearest dissipative set, labelled in the file) or --force (as is, labelled NOT
+DISSIPATIVE). The file labels every coefficient estimate, constrained (was ...) or held at
+prior.
 """
 
 from __future__ import annotations
@@ -46,9 +49,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="gz, uuv: the link the plugin acts on (default: base_link)")
     p.add_argument("--frame", choices=FRAMES, default="flu",
                    help="gz: frame of that link, flu (Gazebo/REP-103, default) or frd")
-    p.add_argument("--force", action="store_true",
-                   help="export a model that is not dissipative (nu'D(nu)nu < 0 somewhere in "
-                        "its flown speeds); the file then says so")
+    safety = p.add_mutually_exclusive_group()
+    safety.add_argument("--clamp", action="store_true",
+                        help="when the coefficients would make the target's damping "
+                             "non-dissipative at some speed (simulators apply them at every "
+                             "speed), write the nearest dissipative set instead; the file "
+                             "says what was changed")
+    safety.add_argument("--force", action="store_true",
+                        help="write such coefficients as they are; the file says NOT "
+                             "DISSIPATIVE beyond the speed where the damping turns")
 
 
 def add_import_arguments(q: argparse.ArgumentParser) -> None:
@@ -74,17 +83,21 @@ def run(args: argparse.Namespace) -> int:
     """Write the model in the format asked for; the warnings on stderr."""
     import warnings
 
+    from dampest_ros.cli.inputs import warn_unchecked
     from dampest_ros.io.export.common import ExportWarning
     from dampest_ros.io.export.convert import export_model
     from dampest_ros.io.yaml_io import load_model, load_vehicle
 
     model = load_model(args.model)
     vehicle = load_vehicle(args.vehicle) if args.vehicle else None
+    if vehicle is not None:
+        warn_unchecked(model.belongs_to(vehicle.identity, str(args.model)))
     with warnings.catch_warnings():
         # the left-out list is printed below, once
         warnings.simplefilter("ignore", ExportWarning)
         result = export_model(model, args.format, vehicle, link_name=args.link_name,
-                              frame=args.frame, source=str(args.model), force=args.force)
+                              frame=args.frame, source=str(args.model), force=args.force,
+                              clamp=args.clamp)
     if args.out:
         Path(args.out).write_text(result.text, encoding="utf-8")
         print(f"wrote {args.out} ({args.format})", file=sys.stderr)
@@ -100,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"warning: not identified, exported at its prior: {line}", file=sys.stderr)
     for line in result.non_dissipative:
         print(f"warning: not dissipative (--force): {line}", file=sys.stderr)
+    for name, was in result.constrained.items():
+        print(f"warning: constrained (--clamp): {name} = 0 (was {was:.6g})", file=sys.stderr)
     return 0
 
 
@@ -124,7 +139,8 @@ def run_import(args: argparse.Namespace) -> int:
         imp.names, imp.theta, np.zeros(len(imp.names)), M_RB + M_A, damping=damping,
         extra={"source": f"dampest import {args.file} ({args.format})",
                "import_notes": "; ".join([*imp.notes, *mass_notes])},
-        M_A=M_A, added_mass_terms=terms))
+        M_A=M_A, added_mass_terms=terms,
+        identity=vehicle.identity if vehicle is not None else None))
     print(f"wrote {args.out}: {len(imp.names)} parameters from {args.file} ({args.format}); "
           + "; ".join(mass_notes))
     for note in imp.notes:

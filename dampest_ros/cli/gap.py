@@ -26,6 +26,7 @@ from dampest_ros.core.gap.model_effects import Memory
 from dampest_ros.core.gap.search import GapOptions, GapResult, correction, find_gap
 from dampest_ros.core.gap.update import free_run_errors, updated_model
 from dampest_ros.core.identification.model import Model
+from dampest_ros.core.physics.identity import Identity
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.measurements import JointSeries
@@ -143,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
     print(steps_table(data, result) if result.steps else "no effect named.")
     print(f"\n{result.conclusion}.")
     # the model file first: it does not depend on the free run
-    final = final_model(data, result, mf, args, logs)
+    final = final_model(data, result, mf, args, logs, vehicle.identity)
     if args.out:
         save_model(Path(args.out), final)
     free = free_run_errors(data, result.effects)
@@ -243,9 +244,11 @@ def _param_key(key: str) -> str:
 
 
 def final_model(data: GapData, result: GapResult, mf: Model, args: argparse.Namespace,
-                logs: dict[str, list[str]] | None = None) -> Model:
+                logs: dict[str, list[str]] | None = None,
+                identity: Identity | None = None) -> Model:
     """The believed model with the named effects applied, its σ and what they updated;
-    ``logs``: the logs pooled and left out (:func:`pooled_logs`), recorded in ``extra``."""
+    ``logs``: the logs pooled and left out (:func:`pooled_logs`), recorded in ``extra``;
+    ``identity``: the vehicle's (else the believed model's)."""
     upd = updated_model(data, result.effects)
     std = dict(zip(mf.parameter_names, mf.theta_std.tolist(), strict=True))
     effects: dict[str, Any] = {}
@@ -277,7 +280,8 @@ def final_model(data: GapData, result: GapResult, mf: Model, args: argparse.Name
     held = {n: why for n, why in mf.held.items() if n in names and n not in updated}
     return Model(names, upd.theta, np.array([std.get(n, 0.0) for n in names]), upd.M,
                  damping=upd.model, extra=extra, M_A=upd.M_A,
-                 added_mass_terms=upd.added_mass_terms, held=held)
+                 added_mass_terms=upd.added_mass_terms, held=held,
+                 identity=identity or mf.identity)
 
 
 # --- report ------------------------------------------------------------------------------

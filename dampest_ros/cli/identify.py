@@ -12,7 +12,14 @@ from typing import Any
 import numpy as np
 
 from dampest_ros.cli.common import DEFAULT_TOPICS, table, term_list
-from dampest_ros.cli.inputs import bag_topics, check_options, cut, load_samples, split_holdout
+from dampest_ros.cli.inputs import (
+    bag_topics,
+    check_options,
+    cut,
+    load_samples,
+    split_holdout,
+    warn_unchecked,
+)
 from dampest_ros.cli.pool import (
     check_pooled_options,
     drift_table,
@@ -22,7 +29,13 @@ from dampest_ros.cli.pool import (
     reduce_all,
 )
 from dampest_ros.core.identification.batch import Fit, FitOptions
-from dampest_ros.core.identification.pool import drift, pooled_fit, pooled_samples
+from dampest_ros.core.identification.pool import (
+    LogStatistics,
+    consistency,
+    drift,
+    pooled_fit,
+    pooled_samples,
+)
 from dampest_ros.core.identification.selection import Selection, select_terms
 from dampest_ros.core.identification.validate import force_scores
 from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
@@ -63,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         values = dict(zip(model.parameter_names, nominal, strict=True))
         model = selection.model
         nominal = np.array([values.get(n, 0.0) for n in model.parameter_names])
-    spec = prior_spec(args)
+    spec = prior_spec(args, vehicle)
     prior = prior_of(model, nominal, spec)[0]
     identifier = DampingIdentifier(vehicle, method=args.method, cutoff=args.cutoff,
                                    prior=spec, structure=model).fit(samples)
@@ -95,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         for line in unpredictive(result.names, scores):
             print(line)
     if args.out:
-        write_model(Path(args.out), result, model, vehicle.body, source=str(args.input),
+        write_model(Path(args.out), result, model, vehicle, source=str(args.input),
                     heldout=scores, flown=samples.nu,
                     more={"substitutions": substitutions} if substitutions else None)
         print(f"wrote {args.out}")
@@ -113,11 +126,13 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def prior_spec(args: argparse.Namespace) -> Prior | None:
-    """--prior's model as a prior by name (names, θ, σ), or None without the option."""
+def prior_spec(args: argparse.Namespace, vehicle: Vehicle) -> Prior | None:
+    """--prior's model as a prior by name (names, θ, σ), or None without the option; a model
+    of another vehicle than ``vehicle`` is refused (ConfigError naming both)."""
     if not args.prior:
         return None
     pm = load_model(args.prior)
+    warn_unchecked(pm.belongs_to(vehicle.identity, str(args.prior)))
     return pm.parameter_names, pm.theta, pm.theta_std
 
 
@@ -128,13 +143,35 @@ def prior_of(model: DampingModel, nominal: np.ndarray, spec: Prior | None
     return (nominal, None) if spec is None else prior_arrays(model, nominal, spec)
 
 
+def inconsistent_logs(logs: list[LogStatistics], keep_all: bool) -> dict[str, str]:
+    """Test that the logs belong together (:func:`consistency`); print each that does not,
+    and unless ``keep_all`` take it out of ``logs`` (in place: the list
+    :func:`reduce_all`'s map runs over). Returns log → why it was left out."""
+    if len(logs) < 2:
+        return {}
+    c = consistency(logs)
+    out: dict[str, str] = {}
+    for b in c.left_out:
+        why = (f"its estimate is inconsistent with the other logs' (χ² {c.chi2[b]:.4g} on "
+               f"{c.dof[b]} coefficients, p = {c.p_value[b]:.2g} < {c.alpha:g}/{len(logs)}): "
+               "another vehicle, or its damping changed")
+        print(f"{'kept (--keep-all)' if keep_all else 'left out'}: {logs[b].name}: {why}"
+              + ("" if keep_all else "; --keep-all pools it anyway"), file=sys.stderr)
+        out[logs[b].name] = why
+    if keep_all:
+        return {}
+    logs[:] = [g for k, g in enumerate(logs) if k not in c.left_out]
+    return out
+
+
 def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> int:
     """Several logs: reduce each on Dask, fit them pooled, test the drift between them."""
     check_pooled_options(args)
     t0 = time.perf_counter()
     model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
-    prior, prior_std = prior_of(model, nominal, prior_spec(args))
+    prior, prior_std = prior_of(model, nominal, prior_spec(args, vehicle))
     with reduce_all(paths, args, prior, prior_std) as (logs, failed, map_logs):
+        failed.update(inconsistent_logs(logs, args.keep_all))
         samples = pooled_samples(logs)
         options = FitOptions(method=args.method, cutoff=args.cutoff,
                              speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
@@ -168,7 +205,7 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
             plot_drift(Path(args.drift_plot), d, result, parameter_units(model))
             print(f"wrote {args.drift_plot}")
     if args.out:
-        write_model(Path(args.out), result, model, vehicle.body, source=", ".join(paths),
+        write_model(Path(args.out), result, model, vehicle, source=", ".join(paths),
                     flown=samples.nu, more=more)
         print(f"wrote {args.out}")
     if args.report:
@@ -219,7 +256,7 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
                              OnlineConfig(rate=args.rate, max_dvl_gap=args.max_gap),
                              mounting=vehicle.mounting)
     est = DampingIdentifier(vehicle, term_list(args.terms) or None,
-                            prior=prior_spec(args)).online(
+                            prior=prior_spec(args, vehicle)).online(
         EstimatorConfig(forgetting_factor=args.forgetting_factor, rate=args.rate,
                         cutoff=args.cutoff))
     stamps: list[float] = []
@@ -409,17 +446,17 @@ def heldout_text(held: Samples, scores: dict[str, np.ndarray]) -> str:
                       units[i]) for i in range(6)]))
 
 
-def write_model(path: Path, result: Fit, model: DampingModel, body: RigidBody,
+def write_model(path: Path, result: Fit, model: DampingModel, vehicle: Vehicle,
                 source: str, heldout: dict[str, np.ndarray] | None = None,
                 flown: np.ndarray | None = None, more: dict[str, Any] | None = None
                 ) -> None:
-    """Save a fit as the model YAML with the body's mass matrix, added mass and added-mass
-    switches, its metrics, the coefficients the data did not determine (``model.identified``
-    false, ``model.held`` with the reason), the flown speeds (``flown_speeds``: per-DOF
-    smallest and largest of ``flown``, ν of the fitted samples, the envelope exports check
-    dissipativity on), with a held-out part, its per-DOF R² and RMSE (``heldout_r2``,
-    ``heldout_rmse``) and the coefficients of the DOFs whose held-out R² is below 0
-    (``not_predictive``), and ``more`` entries (e.g. the logs pooled)."""
+    """Save a fit as the model YAML of ``vehicle`` (its identity) with the body's mass matrix,
+    added mass and added-mass switches, its metrics, the coefficients the data did not
+    determine (``model.identified`` false, ``model.held`` with the reason), the flown speeds
+    (``flown_speeds``: per-DOF smallest and largest of ``flown``, ν of the fitted samples,
+    the envelope exports check dissipativity on), with a held-out part, its per-DOF R² and
+    RMSE (``heldout_r2``, ``heldout_rmse``) and the coefficients of the DOFs whose held-out
+    R² is below 0 (``not_predictive``), and ``more`` entries (e.g. the logs pooled)."""
     more = {**(more or {}), "source": source}
     if heldout is not None:
         more["heldout_r2"] = [float(x) for x in heldout["nse"]]
@@ -429,4 +466,4 @@ def write_model(path: Path, result: Fit, model: DampingModel, body: RigidBody,
     if flown is not None:
         more["flown_speeds"] = {"min": [float(x) for x in flown.min(axis=0)],
                                 "max": [float(x) for x in flown.max(axis=0)]}
-    save_model(path, result.to_model(model, body, more))
+    save_model(path, result.to_model(model, vehicle.body, more, vehicle.identity))

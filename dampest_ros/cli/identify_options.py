@@ -89,5 +89,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--drift-plot", metavar="PNG",
                    help="several logs: plot each coefficient's per-log estimate ± 2σ "
                         "against the log's start time to this PNG")
+    p.add_argument("--keep-all", action="store_true",
+                   help="several logs: pool every log, also those whose own estimate the "
+                        "others do not explain within their sigma (by default such a log, "
+                        "e.g. of another vehicle, is named and left out; keep them to see a "
+                        "drift of the damping between the logs)")
     add_topic_options(p)
     add_preprocess_options(p)

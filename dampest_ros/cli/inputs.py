@@ -335,10 +335,20 @@ def believed_body(vehicle: Vehicle, mf: Model) -> RigidBody:
                           ) from None
 
 
+def warn_unchecked(warning: str | None) -> None:
+    """Print the warning of :meth:`Model.belongs_to
+    <dampest_ros.core.identification.model.Model.belongs_to>` on stderr, if any."""
+    if warning is not None:
+        print(f"warning: {warning}", file=sys.stderr)
+
+
 def load_model_for(path: str, vehicle: Vehicle) -> tuple[Model, DampingModel, RigidBody]:
     """A model file with its term structure (the vehicle preset's when the file has none and
-    the same parameters) and the body it implies (:func:`believed_body`)."""
+    the same parameters) and the body it implies (:func:`believed_body`); a model of another
+    vehicle is refused (ConfigError naming both), one without an identity warned about on
+    stderr."""
     mf = load_model(path)
+    warn_unchecked(mf.belongs_to(vehicle.identity, path))
     model = mf.damping
     if model is None:
         if mf.parameter_names != vehicle.damping.parameter_names:

@@ -175,7 +175,8 @@ def write_prior(vehicle: Vehicle, factor: float, path: Path) -> Path:
     return save_model(path, Model(
         vehicle.damping.parameter_names, theta, std, vehicle.body.M, damping=vehicle.damping,
         extra={"source": f"{factor:g} x the nominal damping of {vehicle.name}"},
-        M_A=vehicle.body.added_mass, added_mass_terms=vehicle.body.added_mass_terms))
+        M_A=vehicle.body.added_mass, added_mass_terms=vehicle.body.added_mass_terms,
+        identity=vehicle.identity))
 
 
 @dataclass

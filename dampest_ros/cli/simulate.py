@@ -96,7 +96,8 @@ def run(args: argparse.Namespace) -> int:
             extra={"source": "dampest simulate", "vehicle": vehicle.name,
                    "protocol": args.protocol, "duration": float(args.duration),
                    "seed": int(args.seed), "effects": str(effects.as_dict() or "none")},
-            M_A=truth.body.added_mass, added_mass_terms=truth.body.added_mass_terms))
+            M_A=truth.body.added_mass, added_mass_terms=truth.body.added_mass_terms,
+            identity=vehicle.identity))
     if args.csv:
         samples = preprocess(rec, vehicle, PreprocessConfig())
         write_csv(args.csv, samples_to_columns(samples))

@@ -140,7 +140,8 @@ class DampingIdentifier:
                                                                              self.prior)
         self.fit_ = fit(samples, model, self.vehicle.body, options, prior=mean, prior_std=std)
         self.estimator_ = None
-        self.model_ = self.fit_.to_model(model, self.vehicle.body)
+        self.model_ = self.fit_.to_model(model, self.vehicle.body,
+                                         identity=self.vehicle.identity)
         self.coef_ = self.fit_.theta
         self.cov_ = self.fit_.cov
         self.names_ = list(self.fit_.names)

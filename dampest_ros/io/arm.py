@@ -19,6 +19,8 @@ from dampest_ros.core.arm.design import DesignLimits
 from dampest_ros.core.arm.ffs import FourierTrajectory
 from dampest_ros.core.arm.model import ArmModel, JointDynamics, arm_from_urdf, joint_dynamics
 from dampest_ros.core.arm.online import ArmEstimate
+from dampest_ros.core.physics.identity import Identity
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.signals.measurements import JointSeries, Series
 from dampest_ros.io.bag import bag_summary, read_bag, write_bag
 from dampest_ros.io.schema import load_checked
@@ -296,10 +298,14 @@ def arm_model_parameters(est: ArmEstimate, arm: str) -> dict[str, Any]:
     dict
         ``model.kind``, ``model.arm``, ``model.joint_names``, ``model.parameter_names``,
         ``model.theta``, ``model.theta_std``, ``model.identified``, ``model.mapping``,
-        ``model.version``: what ``--params-file`` gives for the file of
-        :func:`save_arm_model`.
+        ``model.version`` and, when the estimate has one, ``model.identity.*`` (kind, name,
+        hash, parts): what ``--params-file`` gives for the file of :func:`save_arm_model`.
     """
-    return {"model.kind": ARM_MODEL_KIND, "model.arm": str(arm),
+    identity = {} if est.identity is None else {
+        f"model.identity.{k}": v for k, v in est.identity.as_dict().items() if k != "parts"}
+    if est.identity is not None:
+        identity.update({f"model.identity.parts.{k}": v for k, v in est.identity.parts})
+    return {**identity, "model.kind": ARM_MODEL_KIND, "model.arm": str(arm),
             "model.joint_names": list(est.joint_names),
             "model.parameter_names": list(est.parameter_names),
             "model.theta": [float(x) for x in est.theta],
@@ -312,7 +318,13 @@ def arm_model_text(est: ArmEstimate, arm: str, extra: dict[str, Any] | None = No
     """The model file's text: a ROS 2 parameters file (``/**: ros__parameters: model:``);
     ``extra`` entries (plain YAML types, names other than the model's) are added to
     ``model``."""
-    model = {k.removeprefix("model."): v for k, v in arm_model_parameters(est, arm).items()}
+    model: dict[str, Any] = {}
+    for key, value in arm_model_parameters(est, arm).items():
+        *path, leaf = key.removeprefix("model.").split(".")
+        node = model
+        for part in path:
+            node = node.setdefault(part, {})
+        node[leaf] = value
     clash = sorted(set(extra or {}) & set(model))
     if clash:
         raise ValueError(f"extra entries {clash} would replace the model's own")
@@ -350,8 +362,13 @@ def load_arm_model(path: str | Path) -> ArmEstimate:
         theta = np.asarray(m["theta"], dtype=float)
         std = np.asarray(m["theta_std"], dtype=float)
         identified = np.asarray(m["identified"], dtype=bool)
+        identity = (Identity.from_dict(m["identity"], f" ({path})") if "identity" in m
+                    else None)
         est = ArmEstimate(tuple(str(x) for x in m["joint_names"]), names, theta, std,
-                          identified, [str(x) for x in m["mapping"]], int(m["version"]))
+                          identified, [str(x) for x in m["mapping"]], int(m["version"]),
+                          identity)
+    except ConfigError as exc:
+        raise ArmDataError(f"arm model file {path}: {exc}") from None
     except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as exc:
         raise ArmDataError(f"arm model file {path}: not readable as one ({type(exc).__name__}"
                            f": {exc}); write one with 'dampest arm identify --out' or "

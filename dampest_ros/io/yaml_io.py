@@ -20,6 +20,7 @@ well as :func:`load_model` does (docs/architecture.md §1, §3)::
           M_A: [...]            # 36 numbers, the added mass inside M (optional)
           added_mass_terms: {inertial: true, coriolis: true, munk: true}   # optional
           version: 1
+          identity: {kind: vehicle_damping, name: bluerov2_heavy, hash: ..., parts: {...}}
           terms:                # structure of D(ν), enough to rebuild it (values are theta)
             linear: [X_u, Y_v, Z_w, K_p, M_q, N_r]     # SNAME names (off-diagonal: Y_r, ...)
             quadratic: [X_uu, Y_vv, Z_ww, K_pp, M_qq, N_rr]
@@ -67,6 +68,7 @@ from dampest_ros.core.identification.identified import check_model_numbers
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.alpha import Alpha
 from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel
+from dampest_ros.core.physics.identity import ARM_KIND, VEHICLE_KIND, Identity, mismatch
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 from dampest_ros.core.signals.measurements import FloatArray
@@ -75,7 +77,7 @@ from dampest_ros.io.strict_yaml import YamlDoc, load_yaml, loads_yaml
 
 SIGN_CONVENTION = "dissipative_positive"
 _REQUIRED = ("sign_convention", "parameter_names", "theta", "theta_std", "M", "version")
-_RESERVED = (*_REQUIRED, "terms", "M_A", "added_mass_terms", "identified", "held")
+_RESERVED = (*_REQUIRED, "terms", "M_A", "added_mass_terms", "identified", "held", "identity")
 
 
 def _read_yaml(path: Path) -> Any:
@@ -412,6 +414,8 @@ def _model_mapping(m: Model) -> dict[str, Any]:
         model["added_mass_terms"] = m.added_mass_terms.as_dict()
     if m.damping is not None:
         model["terms"] = _terms_params(damping_spec(m.damping, m.theta))
+    if m.identity is not None:
+        model["identity"] = m.identity.as_dict()
     for key, value in m.extra.items():
         if key in _RESERVED:
             raise ValueError(f"extra key {key!r} is reserved")
@@ -484,12 +488,14 @@ def _model_from_mapping(model: Mapping[str, Any], path: Path) -> Model:
                                              f"{damping.parameter_names}, not {names} ({path})")
     M_A, terms = _added_mass_entries(model, path)
     held = _held_entries(model, names, path)
+    identity = (Identity.from_dict(model["identity"], f" ({path})") if "identity" in model
+                else None)
     check_model_numbers(names, arrays["theta"], arrays["theta_std"], arrays["M"], held,
                         f" ({path})")
     return Model(names, arrays["theta"], arrays["theta_std"], arrays["M"].reshape(6, 6),
                  int(model["version"]), damping,
                  {k: v for k, v in model.items() if k not in _RESERVED}, M_A=M_A,
-                 added_mass_terms=terms, held=held)
+                 added_mass_terms=terms, held=held, identity=identity)
 
 
 def _held_entries(model: Mapping[str, Any], names: list[str], path: Path) -> dict[str, str]:
@@ -548,3 +554,33 @@ def _added_mass_entries(model: Mapping[str, Any], path: Path
             raise ConfigError("model.M_A", f"missing: added_mass_terms {terms.as_dict()} turn "
                                            f"effects off and need M_A to split M ({path})")
     return M_A, terms
+
+
+#: ``model.kind`` of an arm's model file (:mod:`dampest_ros.io.arm`); a vehicle's has none.
+_ARM_FILE_KIND = "arm_base_parameters"
+
+
+def foreign_model(path: str | Path, expected: Identity) -> str | None:
+    """Why the file at ``path`` must not be replaced by a model of ``expected``: it holds a
+    model of another vehicle or arm, or is not a model file (None: no file, one of
+    ``expected``'s, or one without an identity of the same kind, which cannot be checked).
+
+    Used by the nodes' ``~/save`` before they write; the reason names both owners and the fix.
+    """
+    path = Path(path)
+    if not path.exists():
+        return None
+    try:
+        model = _model_section(_read_yaml(path), path)
+        found = (Identity.from_dict(model["identity"], f" ({path})") if "identity" in model
+                 else None)
+    except (ConfigError, OSError) as exc:
+        return f"{path} is not a model file ({exc}): move it away or set save_path elsewhere"
+    if found is None:
+        kind = ARM_KIND if model.get("kind") == _ARM_FILE_KIND else VEHICLE_KIND
+        if kind == expected.kind:
+            return None
+        return (f"{path} holds a {kind} model, not one of {expected.kind} "
+                f"{expected.label()}: set save_path to another file")
+    why = mismatch(found, expected, str(path))
+    return None if why is None else f"{why}; set save_path to another file"

@@ -37,9 +37,11 @@ from std_msgs.msg import String
 
 from dampest_ros.core.arm.base import base_parameters
 from dampest_ros.core.arm.identify import IdentifyConfig
+from dampest_ros.core.arm.model import arm_model_identity
 from dampest_ros.core.arm.online import ArmEstimate, ArmEstimator
 from dampest_ros.core.arm.regressor import full_parameters
 from dampest_ros.core.online.rls.least_squares import RLSConfig
+from dampest_ros.core.physics.identity import Identity, mismatch, unchecked
 from dampest_ros.io.arm import (
     ArmDataError,
     arm_model_parameters,
@@ -157,7 +159,7 @@ class ArmEstimatorNode(EstimatorParamNode):
         rls = RLSConfig(forgetting_factor=self.p("forgetting_factor"), adapt_weights=True,
                         noise_var=(0.01,) * 6, trace_max=10.0 * base.size)
         self.estimator = ArmEstimator(self.arm.model, base, theta0, std0, cfg, rls,
-                                      hop=self.p("hop"))
+                                      hop=self.p("hop"), identity=self.owner())
         self.names = tuple(self.arm.model.names)
         self._order: dict[tuple[str, ...], np.ndarray | None] = {}
         self._t: list[float] = []
@@ -165,8 +167,19 @@ class ArmEstimatorNode(EstimatorParamNode):
         self._tau: list[np.ndarray] = []
         self._last = -np.inf
 
+    def owner(self) -> Identity:
+        return arm_model_identity(str(self.p("arm")), self.arm.model, self._kept)
+
     def _mismatch(self, m: ArmEstimate) -> str | None:
-        """Why arm model ``m`` does not hold this arm's base parameters (None: it does)."""
+        """Why arm model ``m`` does not hold this arm's base parameters (None: it does; a
+        file without an identity is taken with a warning)."""
+        source = str(self.p("save_path"))
+        why = mismatch(m.identity, self.owner(), source)
+        if why is not None:
+            return why
+        warning = unchecked(m.identity, self.owner(), source)
+        if warning is not None:
+            self.get_logger().warning(warning)
         if m.parameter_names != self._kept:
             return (f"holds the base parameters of another arm ({len(m.parameter_names)} "
                     f"named, {self.p('arm')} has {len(self._kept)}: {self._kept[:3]} ...)")

@@ -39,6 +39,7 @@ from rclpy.subscription import Subscription
 from rclpy.utilities import remove_ros_args
 from std_srvs.srv import SetBool, Trigger
 
+from dampest_ros.core.physics.identity import Identity
 from dampest_ros.ros.params_files import UnknownParameterError, params_files
 
 #: Sensor topics: the sensor-data policies (best effort, volatile) with a deeper queue than
@@ -555,7 +556,18 @@ class EstimatorParamNode(ModelParamNode):
         res.success, res.message = True, f"reset to the prior (model version {self.version})"
         return res
 
+    def owner(self) -> Identity:
+        """The vehicle or arm this node estimates (its models' identity)."""
+        raise NotImplementedError
+
     def _srv_save(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        from dampest_ros.io.yaml_io import foreign_model
+
+        why = foreign_model(Path(self.p("save_path")).expanduser(), self.owner())
+        if why is not None:
+            self.get_logger().error(f"~/save refused: {why}")
+            res.success, res.message = False, f"not saved: {why}"
+            return res
         try:
             path = self._save()
         except (OSError, ValueError) as exc:

@@ -38,6 +38,7 @@ from dampest_ros.core.online.estimator import EstimatorConfig
 from dampest_ros.core.online.rls.least_squares import OUTLIER_GATE
 from dampest_ros.core.online.rls.update import FORGETTING_MODES
 from dampest_ros.core.physics import frames
+from dampest_ros.core.physics.identity import Identity
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.io.yaml_io import (
     load_model,
@@ -130,12 +131,19 @@ class EstimatorNode(EstimatorParamNode):
         self._used_at_publish = -1
         self._last_stamp = -1
 
+    def owner(self) -> Identity:
+        return self.estimator.vehicle.identity
+
     def _mismatch(self, m: Model) -> str | None:
-        """Why model file ``m`` is not an estimate of this node's vehicle and terms."""
+        """Why model file ``m`` is not an estimate of this node's vehicle and terms (a file
+        without a vehicle identity is taken with a warning)."""
         e = self.estimator
-        vehicle = m.extra.get("vehicle")
-        if vehicle is not None and vehicle != e.vehicle.name:
-            return f"it was saved for vehicle {vehicle}, this node estimates {e.vehicle.name}"
+        try:
+            warning = m.belongs_to(e.vehicle.identity, str(self.p("save_path")))
+        except ConfigError as exc:
+            return exc.reason
+        if warning is not None:
+            self.get_logger().warning(warning)
         if list(m.parameter_names) != list(e.names):
             missing = [n for n in e.names if n not in m.parameter_names]
             other = [n for n in m.parameter_names if n not in e.names]

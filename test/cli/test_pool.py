@@ -113,7 +113,7 @@ def test_five_bags_pool_exactly_skip_a_corrupt_one_and_show_a_20_percent_drift(
     capsys.readouterr()
     out = tmp_path / "pooled.yaml"
     assert main(["identify", str(tmp_path / "dive_*"), "--vehicle", "bluerov2_heavy",
-                 "--workers", "2", "--out", str(out)]) == 0
+                 "--workers", "2", "--keep-all", "--out", str(out)]) == 0
     printed = capsys.readouterr()
     assert f"left out: {broken}:" in printed.err and "Traceback" not in printed.err
     model = load_model(out)

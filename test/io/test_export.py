@@ -269,16 +269,20 @@ def urdf_block(text: str) -> ET.Element:
 def test_urdf_bluerov2_heavy_block(heavy_file: Model, heavy: Vehicle) -> None:
     out = export_urdf(heavy_file, heavy)
     block = urdf_block(out.text)
-    lin, quad = block.find("linear_damping"), block.find("quadratic_damping")
-    am = block.find("added_mass")
+    lin, quad = block.find("damping/linear"), block.find("damping/quadratic")
+    am = block.find("inertial/added_mass")
     assert lin is not None and quad is not None and am is not None
     assert lin.get("Xu") == "-13.7" and float(lin.get("Zw", "")) == -33.0
     assert float(quad.get("Xuu", "")) == -141.0 and float(quad.get("Nrr", "")) == -1.5
     assert am.get("Xdu") == "-6.36" and am.get("Ndr") == "-0.222"
-    assert block.findtext("mass") == "13.5"
-    assert float(block.findtext("weight") or "") == pytest.approx(13.5 * 9.81)
-    assert float(block.findtext("buoyancy") or "") == pytest.approx(1000 * 9.81 * 0.0134)
-    cob = block.find("center_of_buoyancy")
+    mass, weight = block.find("inertial/mass"), block.find("hydrostatics/weight")
+    buoyancy = block.find("hydrostatics/buoyancy")
+    assert mass is not None and weight is not None and buoyancy is not None
+    assert mass.get("value") == "13.5"
+    assert float(weight.get("value", "")) == pytest.approx(13.5 * 9.81)
+    assert float(buoyancy.get("value", "")) == pytest.approx(1000 * 9.81 * 0.0134)
+    assert block.find("linear_damping") is None     # not the flat layout of April 2025
+    cob = block.find("hydrostatics/center_of_buoyancy")
     assert cob is not None and cob.get("z") == "-0.01"      # FRD: above the origin
     assert out.left_out == ()
 
@@ -295,7 +299,7 @@ def test_urdf_round_trip_and_force_law(heavy_file: Model, heavy: Vehicle) -> Non
     np.testing.assert_allclose(M, heavy.body.M, atol=1e-12)
     # hydrodynamics.cpp: D(ν) = -diag(linear) - diag(quadratic ⊙ |ν|), on the left-hand side
     block = urdf_block(out.text)
-    lin_el, quad_el = block.find("linear_damping"), block.find("quadratic_damping")
+    lin_el, quad_el = block.find("damping/linear"), block.find("damping/quadratic")
     assert lin_el is not None and quad_el is not None
     lin = np.array([float(lin_el.get(k, "")) for k in ("Xu", "Yv", "Zw", "Kp", "Mq", "Nr")])
     quad = np.array([float(quad_el.get(k, "")) for k in ("Xuu", "Yvv", "Zww", "Kpp", "Mqq",
@@ -320,6 +324,18 @@ def test_urdf_lists_what_the_block_cannot_hold(tmp_path: Path) -> None:
     for name in ("X_u", "N_r", "X_uu", "N_rr"):
         assert got[name] == pytest.approx(dict(zip(mf.parameter_names, mf.theta,
                                                    strict=True))[name], abs=1e-12)
+
+
+def test_urdf_import_reads_the_flat_layout_of_april_2025(heavy_file: Model) -> None:
+    flat = ("<robot><hydrodynamics><mass>13.5</mass><inertia ixx='0.26' iyy='0.23' izz='0.37'/>"
+            "<added_mass Xdu='-6.36' Ydv='-7.12' Zdw='-18.68' Kdp='-0.189' Mdq='-0.135' "
+            "Ndr='-0.222'/><linear_damping Xu='-13.7' Yv='0' Zw='-33' Kp='0' Mq='-0.8' "
+            "Nr='0'/><quadratic_damping Xuu='-141' Yvv='-217' Zww='-190' Kpp='-1.19' "
+            "Mqq='-0.47' Nrr='-1.5'/></hydrodynamics></robot>")
+    imp = import_urdf(flat)
+    assert imp.names == heavy_file.parameter_names
+    np.testing.assert_allclose(imp.theta, heavy_file.theta, atol=1e-12)
+    assert imp.rigid_body is not None and imp.rigid_body[0, 0] == 13.5
 
 
 def test_urdf_import_of_the_nested_auv_controllers_layout_and_of_text() -> None:
@@ -420,11 +436,11 @@ def test_uuv_leaves_out_cross_quadratic_terms(tmp_path: Path) -> None:
 
 
 def test_uuv_held_at_prior_is_an_xml_comment(tmp_path: Path, heavy: Vehicle) -> None:
-    held = {"Y_vv": "poorly determined"}
+    held = {"Y_vv": "held at prior 217 (no excitation)"}
     with pytest.warns(ExportWarning):
         out = export_uuv(load_model(heavy_with(tmp_path, heavy, {}, held=held, flown=1.0)))
     comment = out.text[out.text.index("<!--"):out.text.index("-->")]
-    assert "HELD AT PRIOR" in comment and "Y_vv = 217.0 (poorly determined)" in comment
+    assert "Y_vv = 217.0: held at prior" in comment and "X_uu = 141.0: estimate" in comment
     hm = uuv_plugin(out.text).find("link/hydrodynamic_model")
     assert hm is not None and uuv_matrix(hm, "quadratic_damping")[1, 1] == -217.0
 
@@ -637,65 +653,75 @@ def heavy_with(tmp_path: Path, heavy: Vehicle, values: dict[str, float],
 
 
 @pytest.mark.parametrize("fmt", ["gz", "urdf", "uuv"])
-def test_export_refuses_a_non_dissipative_model_unless_forced(
+def test_export_refuses_a_non_dissipative_model_unless_clamped_or_forced(
         tmp_path: Path, heavy: Vehicle, fmt: str, capsys: pytest.CaptureFixture[str]) -> None:
-    """Z_ww = −61 was exported (zWabsW +61.25) and the simulator built from it
-    diverged. Every format refuses it with exit status 2 and one line naming Z_ww and the
-    velocity on the flown envelope; --force writes it, saying so in the file."""
+    """Z_ww = −61.25 with Z_w = 33: heave damping vanishes at |w| = 33/61.25 = 0.539 m/s and
+    the simulator gains energy beyond. Refused with exit status 2 and one line naming Z_ww,
+    the speed and the choices; --clamp writes Z_ww = 0 labelled constrained, --force writes
+    it labelled NOT DISSIPATIVE."""
     path = heavy_with(tmp_path, heavy, {"Z_ww": -61.25}, flown=1.0)
     out = tmp_path / f"hydro.{fmt}"
     capsys.readouterr()
     assert main(["export", str(path), "--format", fmt, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
-    # the power at w = ±0.8 (the flown edge): (Z_w + Z_ww |w|) w² = (33 − 61.25·0.8)·0.64
-    assert "not dissipative" in err and "Z_ww = -61.25 contributes -31.36 W" in err
-    assert "at ν = [0, 0, -0.8, 0, 0, 0]" in err and "νᵀD(ν)ν = -10.24 W" in err
-    assert "--force" in err and not out.exists()
+    assert (f"as {fmt} is not dissipative everywhere: Z_ww: the damping turns non-dissipative "
+            "beyond |nu| = 0.539 along (w +1.00)") in err
+    assert "--clamp" in err and "--force" in err and not out.exists()
+    assert main(["export", str(path), "--format", fmt, "--out", str(out), "--clamp"]) == 0
+    text = out.read_text()
+    assert "CONSTRAINED to the nearest dissipative model" in text
+    assert "changed: Z_ww = 0 (was -61.25)" in text and "Z_ww = 0: constrained (was -61.25)" \
+        in text and "Z_w = 33.0: estimate" in text
+    assert "warning: constrained (--clamp): Z_ww = 0 (was -61.25)" in capsys.readouterr().err
+    if fmt == "gz":
+        assert tags(text)["zWabsW"] == 0.0 and tags(text)["zW"] == -33.0
     assert main(["export", str(path), "--format", fmt, "--out", str(out), "--force"]) == 0
     text = out.read_text()
-    assert "NON-DISSIPATIVE, exported on request" in text and "Z_ww = -61.25" in text
+    assert "NOT DISSIPATIVE beyond |nu| = 0.539" in text and "Z_ww = -61.25: estimate" in text
     assert "warning: not dissipative (--force)" in capsys.readouterr().err
     if fmt == "gz":
         assert tags(text)["zWabsW"] == 61.25
 
 
-def test_dissipativity_checks_memory_gains_and_defaults_to_a_speed_box(
+def test_dissipativity_is_checked_at_every_speed_and_across_couplings(
         tmp_path: Path, heavy: Vehicle) -> None:
-    """Without flown speeds in the file the default box ±(2, 2, 2, 1, 1, 1) is checked: a
-    negative sway coefficient shows at its edge; a negative memory gain feeds energy back; a
-    dissipative model says which grid it passed."""
-    low = load_model(heavy_with(tmp_path, heavy, {"Y_v": -500.0}))
-    assert low.flown is None
-    # (Y_v + Y_vv |v|) v² at v = ±1: (−500 + 217)·1, the worst grid point
-    with pytest.raises(NotDissipativeError, match=r"νᵀD\(ν\)ν = -283 W at ν = \[0, -1, 0, "
-                                                  r"0, 0, 0\]: Y_v = -500 contributes -500 W"):
-        export_gz(low)
-    mem = model_file(tmp_path, {"linear": {"X_u": 13.7}, "freq": [{"dof": "u", "rate": 2.0,
-                                                                    "c": -5.0}]})
-    with pytest.raises(NotDissipativeError, match=r"freq\.u\.c1 = -5 < 0"):
-        export_urdf(mem)
+    """Dissipative over the flown speeds (|v| ≤ 0.5) is not enough: Y_v = 10, Y_vv = −5
+    turns at |v| = 2. A coupling Y_r = N_v = 30 with Y_v = 13.7, N_r = 1.5 makes the linear
+    part indefinite: energy near rest. --clamp drops what the check blames."""
+    far = load_model(heavy_with(tmp_path, heavy, {"Y_v": 10.0, "Y_vv": -5.0}, flown=1.0))
+    with pytest.raises(NotDissipativeError, match=r"Y_vv: the damping turns non-dissipative "
+                                                  r"beyond \|nu\| = 2 along \(v \+1\.00\)"):
+        export_gz(far)
+    coupled = model_file(tmp_path, {"linear": {"Y_v": 13.7, "N_r": 1.5, "Y_r": 30.0,
+                                               "N_v": 30.0}})
+    with pytest.raises(NotDissipativeError, match=r"non-dissipative near rest along "
+                                                  r"\(v [+-]0\.\d\d, r [+-]0\.\d\d\)"):
+        export_gz(coupled)
+    out = export_gz(coupled, clamp=True)
+    assert set(out.constrained) <= {"Y_r", "N_v"} and out.constrained
     fine = load_model(heavy_with(tmp_path, heavy, {}, flown=1.0))
-    assert "Dissipative: nu'D(nu)nu >= 0 on a grid over the flown speeds." in \
-        export_uuv(fine).text
-    fine = load_model(heavy_with(tmp_path, heavy, {}))
-    assert "default speed box" in export_uuv(fine).text
+    assert "Dissipative at every speed in this format's form" in export_uuv(fine).text
 
 
 @pytest.mark.parametrize("fmt", ["gz", "urdf", "uuv"])
-def test_export_lists_coefficients_held_at_prior(
+def test_export_labels_estimates_constrained_and_held_at_prior(
         tmp_path: Path, heavy: Vehicle, fmt: str, capsys: pytest.CaptureFixture[str]) -> None:
-    """A coefficient the data did not determine was exported as if measured. Its
-    prior value is written, listed under HELD AT PRIOR in the file with the reason, warned
-    about (ExportWarning, and a line on stderr from the command)."""
-    held = {"Y_vv": "poorly determined: 95 % half-width 274 exceeds 50% of its scale"}
+    """A poorly determined coefficient is the data's estimate (the gz file once said HELD AT
+    PRIOR for it); one held at its prior is labelled and warned about; one the fit's
+    dissipativity constraint set says what it was."""
+    held = {"Y_vv": "held at prior 217 (no excitation in v)",
+            "X_uu": "poorly determined: 95 % half-width 274 exceeds 50% of its scale",
+            "N_rr": "held by dissipativity: unconstrained N_rr = -3.2 ± 1 gives ..."}
     path = heavy_with(tmp_path, heavy, {}, held=held, flown=1.0)
     with pytest.warns(ExportWarning, match=r"holds 1 coefficient\(s\) .*Y_vv = 217\.0"):
         ex = export_model(load_model(path), fmt)
     assert ex.held == (f"Y_vv = 217.0 ({held['Y_vv']})",)
-    assert "HELD AT PRIOR (not identified" in ex.text and f"Y_vv = 217.0 ({held['Y_vv']})" \
-        in ex.text
+    for line in ("Y_vv = 217.0: held at prior", "X_uu = 141.0: estimate",
+                 "N_rr = 1.5: constrained (was -3.2)"):
+        assert line in ex.text, line
+    assert "HELD AT PRIOR" not in ex.text
     capsys.readouterr()
     assert main(["export", str(path), "--format", fmt, "--out", str(tmp_path / "x")]) == 0
-    assert "warning: not identified, exported at its prior: Y_vv = 217.0 (poorly " \
-        "determined" in capsys.readouterr().err
+    assert "warning: not identified, exported at its prior: Y_vv = 217.0 (held at prior" \
+        in capsys.readouterr().err

@@ -17,6 +17,8 @@ import numpy as np
 import pinocchio as pin  # type: ignore[import-untyped]
 from numpy.typing import NDArray
 
+from dampest_ros.core.physics.identity import Identity, arm_identity
+
 FloatArray = NDArray[np.float64]
 
 #: Names of the ten inertial parameters of a link, in Pinocchio's order.
@@ -264,3 +266,12 @@ def joint_dynamics(mj_model: Any, names: tuple[str, ...]) -> JointDynamics:
         armature=np.array(mj_model.dof_armature[dofs], dtype=float),
         damping=np.array(mj_model.dof_damping[dofs], dtype=float),
         frictionloss=np.array(mj_model.dof_frictionloss[dofs], dtype=float))
+
+
+def arm_model_identity(name: str, arm: ArmModel, base_names: list[str]) -> Identity:
+    """The identity of an arm's base-parameter model: ``name`` and the hashes of the joints
+    (names, parents, joint frames, axes) and of the base parameters' names
+    (:func:`~dampest_ros.core.physics.identity.arm_identity`)."""
+    return arm_identity(name, {"names": list(arm.names), "parents": arm.parents,
+                               "rotation": arm.rotation, "translation": arm.translation,
+                               "axis": arm.axis}, base_names)

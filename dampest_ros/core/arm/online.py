@@ -25,6 +25,7 @@ from dampest_ros.core.arm.identify import IdentifyConfig, filter_joints, usable_
 from dampest_ros.core.arm.model import ArmModel
 from dampest_ros.core.arm.regressor import regressor
 from dampest_ros.core.online.rls.least_squares import RecursiveLeastSquares, RLSConfig
+from dampest_ros.core.physics.identity import Identity
 from dampest_ros.core.physics.rigid_body import FORCE_NAMES
 from dampest_ros.core.signals.resample import gaps
 
@@ -51,6 +52,9 @@ class ArmEstimate:
         ``bk = kept + c · folded + ...`` (:meth:`BaseParameters.mapping`).
     version : int
         Bumped by the holder at every publication.
+    identity : Identity or None
+        The arm it belongs to (:func:`~dampest_ros.core.arm.model.arm_model_identity`); None
+        for files written before models carried one.
     """
 
     joint_names: tuple[str, ...]
@@ -60,6 +64,7 @@ class ArmEstimate:
     identified: NDArray[np.bool_]
     mapping: list[str]
     version: int = 1
+    identity: Identity | None = None
 
 
 class ArmEstimator:
@@ -83,15 +88,18 @@ class ArmEstimator:
         before the change: a 1 kg payload is re-identified to ~1 % within 15 s.
     hop : float
         Seconds of samples emitted per filtering pass.
+    identity : Identity, optional
+        The arm's, carried by every :meth:`estimate`.
     """
 
     def __init__(self, arm: ArmModel, base: BaseParameters, theta0: FloatArray,
                  std0: FloatArray, config: IdentifyConfig, rls: RLSConfig | None = None,
-                 hop: float = 1.0) -> None:
+                 hop: float = 1.0, identity: Identity | None = None) -> None:
         if arm.n != 6:
             raise ValueError(f"the RLS core takes six rows per sample; this arm has {arm.n} "
                              "joints")
         self.arm, self.base, self.config, self.hop = arm, base, config, float(hop)
+        self.identity = identity
         rls = rls or RLSConfig(forgetting_factor=0.9995, adapt_weights=True,
                                noise_var=(0.01,) * 6, trace_max=10.0 * base.size)
         self.rls = RecursiveLeastSquares(np.asarray(theta0, dtype=float),
@@ -123,7 +131,7 @@ class ArmEstimator:
                            [self.base.names[i] for i in self.base.independent],
                            self.theta.copy(), self.std.copy(),
                            np.asarray(self.std <= 0.5 * self.std0), self.base.mapping(),
-                           int(version))
+                           int(version), self.identity)
 
     @property
     def theta(self) -> FloatArray:

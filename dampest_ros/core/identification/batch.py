@@ -34,6 +34,7 @@ from dampest_ros.core.identification.regression import (
     total_sum_of_squares,
 )
 from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.identity import Identity
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.signals.samples import CHUNK, Samples
 
@@ -194,7 +195,8 @@ class Fit:
         return -2 * self.log_likelihood + self.n_free * float(np.log(self.n_eff))
 
     def to_model(self, damping: DampingModel, body: RigidBody,
-                 extra: dict[str, Any] | None = None) -> Model:
+                 extra: dict[str, Any] | None = None,
+                 identity: Identity | None = None) -> Model:
         """The fit as a :class:`~dampest_ros.core.identification.model.Model`: θ and σ, the
         coefficients not identified held with their reason (``flags``, else the constraint), the
         body's mass matrix, added mass and switches, and as ``extra`` the method, sample count, 95 %
@@ -207,6 +209,9 @@ class Fit:
         body : RigidBody
         extra : dict, optional
             More provenance (e.g. ``source``, ``flown_speeds``).
+        identity : Identity, optional
+            The vehicle the data are of (:attr:`Vehicle.identity
+            <dampest_ros.core.physics.vehicle.Vehicle.identity>`).
         """
         ci = self.interval()
         held = {n: self.flags.get(n) or self.constrained[n]
@@ -218,7 +223,7 @@ class Fit:
                    "condition_number": float(self.cond)}
         return Model(self.names, self.theta, self.std, body.M, damping=damping,
                      extra={**(extra or {}), **figures}, M_A=body.added_mass,
-                     added_mass_terms=body.added_mass_terms, held=held)
+                     added_mass_terms=body.added_mass_terms, held=held, identity=identity)
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,7 @@
 """What every reader of an identified model checks, and what the data determined.
 
-Two checks every reader of a model (:class:`~dampest_ros.core.identification.model.Model`) shares:
-:func:`check_model_numbers` (θ, M and the σ of the identified coefficients finite) and
-:func:`non_dissipative` (νᵀD(ν)ν ≥ 0 over a grid of the speed envelope, memory gains ≥ 0).
+The check every reader of a model (:class:`~dampest_ros.core.identification.model.Model`)
+shares: :func:`check_model_numbers` (θ, M and the σ of the identified coefficients finite).
 A model says per coefficient whether the data determined it (``held``: name → why it stayed
 at its prior; :func:`identified_mask`); a model file without its term structure has it
 rebuilt from the names (:func:`damping_from_names`).
@@ -15,7 +14,6 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.identification.dissipative import envelope, power_rows
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import (
     DOF_NAMES,
@@ -26,11 +24,6 @@ from dampest_ros.core.physics.vehicle import damping_from_spec
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
-
-#: Speeds (m/s, rad/s) whose box ±v :func:`non_dissipative` checks when a model carries no
-#: flown speeds (``model.flown_speeds``).
-DEFAULT_ENVELOPE = (2.0, 2.0, 2.0, 1.0, 1.0, 1.0)
-
 
 def damping_from_names(names: Sequence[str]) -> DampingModel:
     """Rebuild a damping model from SNAME names alone (linear ``X_u``, ``Y_r``; quadratic
@@ -106,49 +99,3 @@ def check_model_numbers(names: Sequence[str], theta: FloatArray, theta_std: Floa
            if not np.isfinite(v)]
     if bad:
         raise ConfigError("model.M", f"not finite: {', '.join(bad)}{where}")
-
-
-def non_dissipative(model: DampingModel, theta: FloatArray,
-                    flown: FloatArray | None = None) -> list[str]:
-    """Where a damping model generates energy, in words (empty: it dissipates everywhere).
-
-    Checked as the fit constrains it (:func:`~dampest_ros.core.identification.batch.fit`): the
-    static terms on the grid over the flown envelope
-    (:func:`~dampest_ros.core.identification.batch.envelope`), reporting the point of the most
-    negative νᵀD(ν)ν and the coefficient whose share θ_j g_j(ν) of that power is the most negative;
-    and every memory gain c ≥ 0 (a passive kernel).
-
-    Parameters
-    ----------
-    model : DampingModel
-    theta : ndarray, shape (p,)
-    flown : ndarray, shape (n, 6), optional
-        Velocities whose per-DOF smallest and largest values bound the envelope (e.g. the
-        lowest and highest flown); default ±:data:`DEFAULT_ENVELOPE`.
-
-    Returns
-    -------
-    list of str
-        E.g. ``"νᵀD(ν)ν = -10.1 W at ν = [0, 0, -0.8, 0, 0, 0]: Z_ww = -61 contributes
-        -31.2 W"``.
-    """
-    theta = np.asarray(theta, dtype=float)
-    names = model.parameter_names
-    if flown is None:
-        flown = np.array([DEFAULT_ENVELOPE]) * [[-1.0], [1.0]]
-    out = []
-    grid = envelope(np.asarray(flown, dtype=float))
-    share = power_rows(model, grid) * theta  # W per coefficient
-    power = share.sum(axis=1)
-    k = int(np.argmin(power))
-    # rounding: shares that cancel to ~1e-9 of their size are no violation
-    if power[k] < -1e-9 * np.abs(share[k]).sum():
-        j = int(np.argmin(share[k]))
-        speeds = ", ".join(f"{x:.3g}" for x in grid[k])
-        out.append(f"νᵀD(ν)ν = {power[k]:.4g} W at ν = [{speeds}]: {names[j]} = "
-                   f"{theta[j]:.4g} contributes {share[k, j]:.4g} W")
-    if model.term("freq") is not None:
-        mem = model.slice("freq")
-        out += [f"{n} = {c:.4g} < 0: a negative memory gain feeds energy back"
-                for n, c in zip(names[mem], theta[mem], strict=True) if c < 0]
-    return out

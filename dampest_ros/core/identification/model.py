@@ -25,6 +25,7 @@ from dampest_ros.core.identification.identified import (
     identified_mask,
 )
 from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.identity import Identity, mismatch, unchecked
 from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, split_coriolis_force
 
 FloatArray = NDArray[np.float64]
@@ -57,6 +58,9 @@ class Model:
     held : dict of str to str
         The coefficients the data did not determine (θ is their prior or the value a
         constraint allows), with the reason; empty: all identified.
+    identity : Identity or None
+        The vehicle it belongs to (:mod:`dampest_ros.core.physics.identity`); None only for
+        files written before models carried one.
 
     Raises
     ------
@@ -75,6 +79,7 @@ class Model:
     M_A: FloatArray | None = None
     added_mass_terms: AddedMassTerms | None = None
     held: dict[str, str] = field(default_factory=dict)
+    identity: Identity | None = None
 
     def __post_init__(self) -> None:
         self.parameter_names = [str(n) for n in self.parameter_names]
@@ -104,6 +109,32 @@ class Model:
         if terms is not None and not terms.all and self.M_A is None:
             raise ConfigError("model.M_A", f"added_mass_terms {terms.as_dict()} turn effects "
                                            "off and need M_A to split M")
+
+    def belongs_to(self, expected: Identity, source: str) -> str | None:
+        """Check that the model is one of ``expected``'s (the vehicle or arm in use).
+
+        Parameters
+        ----------
+        expected : Identity
+        source : str
+            The model's file, for the message.
+
+        Returns
+        -------
+        str or None
+            The warning for a model without an identity (written before models carried
+            one), else None.
+
+        Raises
+        ------
+        ConfigError
+            ``model.identity``: it belongs to another vehicle; the message names both and
+            the fix.
+        """
+        why = mismatch(self.identity, expected, source)
+        if why is not None:
+            raise ConfigError("model.identity", why)
+        return unchecked(self.identity, expected, source)
 
     # --- what the data determined ----------------------------------------------------------
 

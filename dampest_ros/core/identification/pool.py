@@ -239,3 +239,86 @@ def drift(logs: Sequence[LogStatistics], alpha: float = 0.01) -> Drift:
                  theta=np.where(ok, theta, np.nan), std=np.where(ok, std, np.nan),
                  chi2=chi2, dof=dof.astype(np.int64), p_value=p_value, moved=moved,
                  change_after=change_after, shift=shift, shift_std=shift_std, alpha=alpha)
+
+
+@dataclass
+class Consistency:
+    """Whether each log belongs with the others: its own estimate against theirs.
+
+    Attributes
+    ----------
+    logs : list of str
+        In the given order, shape (B,).
+    chi2 : ndarray, shape (B,)
+        Σ_j (θ_bj − θ̄_oj)² / (σ_bj² + σ(θ̄_oj)²) over the coefficients log b identifies, θ̄_o
+        the precision-weighted mean of the other logs kept, as :func:`drift` weighs them
+        (NaN: not tested).
+    dof : ndarray of int, shape (B,)
+        The number of those coefficients.
+    p_value : ndarray, shape (B,)
+    left_out : list of int
+        The logs found inconsistent (p below ``alpha`` / B, Bonferroni over the logs), in the
+        order they were taken out: the worst first, each test repeated without it.
+    alpha : float
+    """
+
+    logs: list[str]
+    chi2: FloatArray
+    dof: NDArray[np.int64]
+    p_value: FloatArray
+    left_out: list[int]
+    alpha: float
+
+
+def _against(logs: Sequence[LogStatistics], b: int, others: Sequence[int]
+             ) -> tuple[float, int]:
+    """χ² and degrees of freedom of log ``b``'s estimate against the precision-weighted
+    mean of ``others``, per coefficient as :func:`drift` weighs them, over the coefficients
+    log ``b`` and at least one other identify."""
+    mine = logs[b].fit
+    ok = np.array([logs[k].fit.identified for k in others]) & np.isfinite(
+        np.array([logs[k].fit.std for k in others]))
+    std = np.array([logs[k].fit.std for k in others])
+    w = np.where(ok & (std > 0), 1.0 / np.where(ok & (std > 0), std, 1.0) ** 2, 0.0)
+    mean, mean_std = _weighted(np.where(ok, np.array([logs[k].fit.theta for k in others]),
+                                        0.0), w)
+    use = mine.identified & np.isfinite(mean) & (mine.std > 0)
+    if not use.any():
+        return float("nan"), 0
+    # Σ_j (θ_bj − θ̄_oj)² / (σ_bj² + σ(θ̄_oj)²)
+    z2 = (mine.theta[use] - mean[use]) ** 2 / (mine.std[use] ** 2 + mean_std[use] ** 2)
+    return float(z2.sum()), int(use.sum())
+
+
+def consistency(logs: Sequence[LogStatistics], alpha: float = 0.001) -> Consistency:
+    """Test that the logs are of one vehicle: each log's estimate against the others'.
+
+    A log of another vehicle (or one whose damping changed) gives a θ_b the others' estimate
+    does not explain within the two covariances. The worst log whose p-value is below
+    ``alpha`` / B is taken out and the test repeated on the rest, while three logs or more
+    remain (with two, neither can be named).
+
+    Parameters
+    ----------
+    logs : sequence of LogStatistics
+        At least two.
+    alpha : float
+        Family-wise false-alarm probability over the logs. The σ of one short log are
+        somewhat optimistic (χ²/dof up to 2.5 between 60 s native logs of one vehicle), so
+        the default is 0.1 %; a log of another vehicle scores p ~ 1e-7.
+    """
+    B = len(logs)
+    kept = list(range(B))
+    chi2, dof = np.full(B, np.nan), np.zeros(B, dtype=np.int64)
+    left: list[int] = []
+    while True:
+        for b in kept:
+            chi2[b], dof[b] = _against(logs, b, [k for k in kept if k != b])
+        p_value = np.where(dof > 0, stats.chi2.sf(np.nan_to_num(chi2), np.maximum(dof, 1)),
+                           np.nan)
+        worst = min(kept, key=lambda k: (np.nan_to_num(p_value[k], nan=1.0), -k))
+        if len(kept) < 3 or not p_value[worst] < alpha / B:
+            break
+        kept.remove(worst)
+        left.append(worst)
+    return Consistency([g.name for g in logs], chi2, dof, p_value, left, alpha)

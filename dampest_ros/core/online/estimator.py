@@ -398,4 +398,5 @@ class OnlineEstimator:
         overrides or adds entries, e.g. ``source``)."""
         return Model(self.names, self.theta, self.theta_std, self.M, version, self.model,
                      self.model_extra(**extra), M_A=self.body.added_mass,
-                     added_mass_terms=self.body.added_mass_terms, held=self.held)
+                     added_mass_terms=self.body.added_mass_terms, held=self.held,
+                     identity=self.vehicle.identity)

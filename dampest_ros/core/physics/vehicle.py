@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.physics.damping import DampingModel, DampingTerm
 from dampest_ros.core.physics.geometry import Geometry
+from dampest_ros.core.physics.identity import Identity, vehicle_identity
 from dampest_ros.core.physics.mounting import Mounting
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
 from dampest_ros.core.physics.terms import (
@@ -172,6 +173,13 @@ class Vehicle:
     geometry: Geometry | None = None
     source: str = ""
     mounting: Mounting = field(default_factory=Mounting)
+
+    @property
+    def identity(self) -> Identity:
+        """Its name and the hashes of its rigid body, added mass and thrusters
+        (:func:`~dampest_ros.core.physics.identity.vehicle_identity`): what every model made
+        for it carries."""
+        return vehicle_identity(self.name, self.body, self.thrusters)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Vehicle:

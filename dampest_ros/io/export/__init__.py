@@ -19,14 +19,15 @@ only; they act in its M_A ν̇). Terms a format cannot express (fluid memory, re
 |U| or product α) are listed in the output and raised as :class:`~.common.ExportWarning`; nothing is
 dropped silently.
 
-Two things are never exported silently. Coefficients the data did not determine
-(``model.identified`` false, :attr:`~dampest_ros.core.identification.model.Model.held`) are written
-with the value the model holds (their prior) and listed as such in the file's header, with an
-:class:`~.common.ExportWarning`. A model that generates energy somewhere on a grid over its flown
-speeds (``model.flown_speeds``, else a default box; see
-:func:`~dampest_ros.core.identification.identified.non_dissipative`) is refused with
-:class:`~.common.NotDissipativeError`, which names the coefficient and the velocity; with
-``force=True`` it is exported and the header says that it is not dissipative.
+Two things are never exported silently. Each written coefficient is labelled in the file's
+header ``estimate``, ``constrained (was …)`` (by the fit's dissipativity constraint or by
+``clamp``) or ``held at prior`` (not determined by the data; also an
+:class:`~.common.ExportWarning`). And simulators apply the linear and |ν|ν terms at every
+speed, not only where the vehicle flew: the coefficients a format writes are checked in that
+format's form at every speed (:func:`~.common.turns`: per DOF linear ≥ 0 and quadratic
+≥ 0, couplings on ν directions); a set that turns non-dissipative is refused with
+:class:`~.common.NotDissipativeError` naming the coefficient and the speed, unless ``clamp``
+(the nearest dissipative set, labelled) or ``force`` (as is, labelled NOT DISSIPATIVE).
 
 This module itself only names the formats (no imports), so that ``dampest export --help``
 does not load numpy.

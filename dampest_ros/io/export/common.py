@@ -10,13 +10,12 @@ import re
 import warnings
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from dampest_ros.core.identification.identified import non_dissipative
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.damping import DampingModel, FloatArray
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
@@ -30,8 +29,9 @@ class ExportWarning(UserWarning):
 
 
 class NotDissipativeError(ValueError):
-    """The model generates energy (νᵀD(ν)ν < 0) somewhere in its speed envelope: a simulator
-    built from it gains energy and can diverge. The message names the coefficient and ν."""
+    """The coefficients a format would write generate energy (νᵀD(ν)ν < 0) at some speed: a
+    simulator built from them gains energy there. The message names the coefficient, the
+    speed and the choices (clamp, force)."""
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,10 @@ class Exported:
         ``"name = value (reason)"`` of the coefficients the data did not determine, written
         with the model's value (the prior) and listed in the header.
     non_dissipative : tuple of str
-        Where the model generates energy (only with ``force=True``; stated in the header).
+        Where the written damping turns non-dissipative (only with ``force``; stated in
+        the header).
+    constrained : dict of str to float
+        With ``clamp``: the coefficients set to 0, with the value they had.
     """
 
     format: str
@@ -90,6 +93,7 @@ class Exported:
     notes: tuple[str, ...] = ()
     held: tuple[str, ...] = ()
     non_dissipative: tuple[str, ...] = ()
+    constrained: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -280,30 +284,83 @@ def merge(items: Iterable[tuple[str, Coefficient, float]],
     return values
 
 
-def checked(mf: Model, force: bool, source: str | None) -> tuple[list[str], list[str]]:
-    """The held-at-prior coefficients (``"name = value (reason)"``) and where the model
-    generates energy (:func:`~dampest_ros.core.identification.identified.non_dissipative` over
-    :attr:`Model.flown <dampest_ros.core.identification.model.Model.flown>`).
+#: What an export does with a coefficient set that is not dissipative everywhere.
+POLICIES = ("refuse", "clamp", "force")
+
+
+@dataclass(frozen=True)
+class Safety:
+    """The dissipativity of what an export writes.
+
+    Attributes
+    ----------
+    policy : str
+        One of :data:`POLICIES`.
+    turns : list of Turn
+        Where the coefficients as estimated turn non-dissipative ([]: they never do).
+    changed : dict of str to float
+        With ``clamp``: name → the value the clamp replaced by 0.
+    """
+
+    policy: str
+    turns: list[Turn]
+    changed: dict[str, float]
+
+
+def policy_of(force: bool, clamp: bool) -> str:
+    """The policy of the ``force`` and ``clamp`` options (ValueError for both)."""
+    if force and clamp:
+        raise ValueError("--force and --clamp exclude each other: choose one")
+    return "force" if force else "clamp" if clamp else "refuse"
+
+
+def made_safe(coefs: Sequence[Coefficient], policy: str, fmt: str,
+              source: str | None) -> tuple[list[Coefficient], Safety]:
+    """The coefficients an export writes, checked for dissipativity at every speed in the
+    format's own form (:func:`turns`): refused, clamped (:func:`clamp`) or kept as they
+    are (``force``).
 
     Raises
     ------
     NotDissipativeError
-        When the model generates energy and ``force`` is False.
+        With ``refuse``, naming the coefficient, the speed where the damping turns and the
+        choices.
     """
-    held = [f"{n} = {num(mf.theta[mf.parameter_names.index(n)])} ({why})"
-            for n, why in mf.held.items()]
-    model, theta, _ = model_damping(mf)
-    unsafe = non_dissipative(model, theta, mf.flown) if model is not None else []
-    if unsafe and not force:
-        raise NotDissipativeError(f"{source or 'the model'} is not dissipative: "
-                                  f"{'; '.join(unsafe)}; a simulator built from it gains "
-                                  "energy and can diverge (fix the model, e.g. identify "
-                                  "with --select, or export anyway with --force)")
-    return held, unsafe
+    if policy not in POLICIES:
+        raise ValueError(f"unknown policy {policy!r}; use one of {POLICIES}")
+    found = turns(coefs)
+    if not found or policy == "force":
+        return list(coefs), Safety(policy, found, {})
+    if policy == "refuse":
+        raise NotDissipativeError(
+            f"{source or 'the model'} as {fmt} is not dissipative everywhere: "
+            f"{'; '.join(t.text() for t in found)}; a simulator gains energy there. "
+            "Export the nearest dissipative model with --clamp (labelled in the file) or "
+            "the model as it is with --force (labelled NOT DISSIPATIVE)")
+    clamped, changed = clamp(coefs)
+    return clamped, Safety(policy, found, changed)
+
+
+def label(mf: Model, name: str, safety: Safety) -> str:
+    """``estimate``, ``constrained (was …)`` or ``held at prior``: what a written
+    coefficient's value is."""
+    if name in safety.changed:
+        return f"constrained (was {num(safety.changed[name])})"
+    why = mf.held.get(name, "")
+    was = re.search(r"unconstrained \S+ = (\S+)", why)
+    if was is not None:
+        return f"constrained (was {was.group(1)})"
+    return "held at prior" if "prior" in why else "estimate"
+
+
+def held_at_prior(mf: Model) -> list[str]:
+    """``"name = value (reason)"`` of the coefficients whose value is their prior."""
+    return [f"{n} = {num(mf.theta[mf.parameter_names.index(n)])} ({why})"
+            for n, why in mf.held.items() if "prior" in why and "unconstrained" not in why]
 
 
 def exported_result(fmt: str, text: str, left_out: Sequence[str], notes: Sequence[str],
-              held: Sequence[str], unsafe: Sequence[str]) -> Exported:
+                    held: Sequence[str], safety: Safety) -> Exported:
     """The result, with an :class:`ExportWarning` for what was left out or held."""
     if left_out:
         warnings.warn(f"{fmt} export left out {len(left_out)} parameter(s): "
@@ -312,7 +369,9 @@ def exported_result(fmt: str, text: str, left_out: Sequence[str], notes: Sequenc
         warnings.warn(f"{fmt} export holds {len(held)} coefficient(s) the data did not "
                       "determine, at their prior: " + "; ".join(held), ExportWarning,
                       stacklevel=3)
-    return Exported(fmt, text, tuple(left_out), tuple(notes), tuple(held), tuple(unsafe))
+    unsafe = () if safety.changed else tuple(t.text() for t in safety.turns)
+    return Exported(fmt, text, tuple(left_out), tuple(notes), tuple(held), unsafe,
+                    dict(safety.changed))
 
 
 def xml_comment(lines: Sequence[str]) -> str:
@@ -321,22 +380,33 @@ def xml_comment(lines: Sequence[str]) -> str:
     return "\n" + text.replace("--", "- -") + "\n"
 
 
-def header_lines(mf: Model, source: str | None, held: Sequence[str],
-            unsafe: Sequence[str]) -> list[str]:
-    """The first lines of every export: origin, what is not an estimate, and dissipativity."""
+def header_lines(mf: Model, source: str | None, written: Sequence[Coefficient],
+                 safety: Safety) -> list[str]:
+    """The first lines of every export: origin and vehicle, dissipativity, and each written
+    coefficient's label (:func:`label`)."""
     where = f" from {source}" if source else ""
-    lines = [f"Exported by dampest_ros{where} (model version {mf.version}, "
+    owner = (f"vehicle {mf.identity.label()}" if mf.identity is not None else
+             "no vehicle identity in the model file")
+    lines = [f"Exported by dampest_ros{where} (model version {mf.version}, {owner}, "
              f"dampest convention {SIGN_CONVENTION}: +D(nu)nu on the left-hand side, FRD)."]
-    if unsafe:
-        lines += ["NON-DISSIPATIVE, exported on request (force): the model generates energy,",
-                  "a simulator built from it can diverge:", *(f"  {x}" for x in unsafe)]
+    found = safety.turns
+    if not found:
+        lines.append("Dissipative at every speed in this format's form (per DOF linear >= 0 "
+                     "and quadratic >= 0; couplings checked on nu directions).")
+    elif safety.changed:
+        lines += ["CONSTRAINED to the nearest dissipative model (clamp); as estimated:",
+                  *(f"  {t.text()};" for t in found),
+                  "  changed: " + ", ".join(f"{n} = 0 (was {num(v)})"
+                                            for n, v in safety.changed.items())]
     else:
-        lines.append("Dissipative: nu'D(nu)nu >= 0 on a grid over the "
-                     + ("flown speeds." if mf.flown is not None else
-                        "default speed box (the model file has no flown speeds)."))
-    if held:
-        lines += ["HELD AT PRIOR (not identified: the data did not determine them; the value",
-                  "written is the prior, not an estimate):", *(f"  {x}" for x in held)]
+        lines += [f"NOT DISSIPATIVE beyond |nu| = {found[0].speed:.3g}; as written:",
+                  *(f"  {t.text()};" for t in found),
+                  "  written as is on request (force): a simulator gains energy there."]
+    if written:
+        lines.append("Coefficients (dampest names and values; estimate = the data's, "
+                     "held at prior = not determined by the data):")
+        lines += [f"  {c.name} = {num(c.value)}: {label(mf, c.name, safety)}"
+                  for c in written]
     return lines
 
 
@@ -344,6 +414,112 @@ def neg(x: float) -> float:
     """−x without producing −0.0."""
     return 0.0 - x
 
+
+
+# --- dissipative everywhere ---------------------------------------------------------------------
+
+#: Unit directions the cubic part of the power is checked on (axes, pairs, seeded sphere).
+_N_DIRECTIONS = 4096
+
+
+@dataclass(frozen=True)
+class Turn:
+    """Where a written coefficient set stops being dissipative.
+
+    Attributes
+    ----------
+    name : str
+        The coefficient with the most negative share of νᵀD(ν)ν there.
+    speed : float
+        |ν| (m/s, rad/s mixed as in ν) beyond which the power is negative along ``direction``
+        (0: near rest, a negative linear part).
+    direction : ndarray, shape (6,)
+        Unit ν direction (FRD).
+    """
+
+    name: str
+    speed: float
+    direction: FloatArray
+
+    def text(self) -> str:
+        where = ", ".join(f"{DOF_NAMES[i]} {x:+.2f}" for i, x in enumerate(self.direction)
+                          if abs(x) > 0.005)
+        at = (f"beyond |nu| = {self.speed:.3g}" if self.speed > 0 else "near rest")
+        return f"{self.name}: the damping turns non-dissipative {at} along ({where})"
+
+
+def _directions() -> FloatArray:
+    """Unit ν directions, shape (n, 6): ±axes, ±pairs of axes, then seeded random ones."""
+    eye = np.eye(6)
+    pairs = [s * eye[i] + t * eye[j] for i in range(6) for j in range(i + 1, 6)
+             for s in (1, -1) for t in (1, -1)]
+    rand = np.random.default_rng(0).standard_normal((_N_DIRECTIONS, 6))
+    d = np.vstack([eye, -eye, np.array(pairs), rand])
+    return np.asarray(d / np.linalg.norm(d, axis=1, keepdims=True))
+
+
+def _shares(coefs: Sequence[Coefficient], d: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Per coefficient its share of the power along unit directions ``d`` (n, 6): the
+    ν-independent part (of |ν|², linear terms) and the part of |ν|³, each shape (n, c)."""
+    two = np.zeros((len(d), len(coefs)))
+    three = np.zeros((len(d), len(coefs)))
+    for m, c in enumerate(coefs):
+        base = c.value * d[:, c.row] * d[:, c.col]
+        if c.kind == "const":
+            two[:, m] = base
+        else:
+            three[:, m] = base * (np.abs(d[:, c.k]) if c.kind == "abs" else d[:, c.k])
+    return two, three
+
+
+def turns(coefs: Sequence[Coefficient]) -> list[Turn]:
+    """Where the damping force Σ c·α(ν)·ν_col on each row stops dissipating, at any speed:
+    one :class:`Turn` per coefficient blamed, the lowest speed first ([] when dissipative
+    everywhere).
+
+    The power is P(sd) = s² L(d) + s³ Q(d) along a unit direction d (L from the constant
+    coefficients, Q from those with α = |ν_k| or ν_k). It is ≥ 0 for every s > 0 iff
+    L(d) ≥ 0 and Q(d) ≥ 0; where Q(d) < 0 it turns at s = L(d)/−Q(d), where L(d) < 0 near
+    rest. Exact on the axes (the diagonal form: per DOF linear ≥ 0 and quadratic ≥ 0) and
+    on pairs of axes, checked on seeded directions elsewhere. The coefficient blamed in a
+    direction is the one with the most negative share of the part that is negative.
+    """
+    if not coefs:
+        return []
+    d = _directions()
+    two, three = _shares(coefs, d)
+    L, Q = two.sum(axis=1), three.sum(axis=1)
+    tol = 1e-12 * max(1.0, float(np.abs(two).max()), float(np.abs(three).max()))
+    bad = np.flatnonzero((L < -tol) | (Q < -tol))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed = np.where(L < -tol, 0.0, np.maximum(L, 0.0) / -np.minimum(Q, -tol))
+    found: dict[str, Turn] = {}
+    for n in bad[np.argsort(speed[bad], kind="stable")]:
+        name = coefs[int(np.argmin(two[n] if L[n] < -tol else three[n]))].name
+        found.setdefault(name, Turn(name, float(speed[n]), d[n]))
+    return list(found.values())
+
+
+def clamp(coefs: Sequence[Coefficient]) -> tuple[list[Coefficient], dict[str, float]]:
+    """The nearest dissipative set: the coefficient :func:`turns` blames first set to 0, until
+    none turns. For the diagonal form this is the projection onto linear ≥ 0 and quadratic
+    ≥ 0 per DOF; a cross coupling that makes the power negative is dropped.
+
+    Returns
+    -------
+    coefs : list of Coefficient
+        The clamped set (same order).
+    changed : dict of str to float
+        Name → the value it had.
+    """
+    out = list(coefs)
+    changed: dict[str, float] = {}
+    while found := turns(out):
+        for m, c in enumerate(out):
+            if c.name == found[0].name:
+                changed.setdefault(c.name, c.value)
+                out[m] = replace(c, value=0.0)
+    return out, changed
 
 
 # --- reading XML -------------------------------------------------------------------------------

@@ -15,7 +15,8 @@ from dampest_ros.io.export.uuv import export_uuv
 
 def export_model(mf: Model, fmt: str, vehicle: Vehicle | None = None, *,
                  link_name: str = "base_link", frame: str = "flu",
-                 source: str | None = None, force: bool = False) -> Exported:
+                 source: str | None = None, force: bool = False,
+                 clamp: bool = False) -> Exported:
     """Export a model in one of :data:`~dampest_ros.io.export.FORMATS`.
 
     Parameters
@@ -31,8 +32,10 @@ def export_model(mf: Model, fmt: str, vehicle: Vehicle | None = None, *,
         ``gz`` only; see :func:`~dampest_ros.io.export.gz.export_gz`.
     source : str, optional
         Where the model came from, for the header comment.
-    force : bool
-        Export a model that is not dissipative (the header says so).
+    force, clamp : bool
+        For coefficients the format would apply non-dissipatively at some speed: write them
+        as they are, labelled NOT DISSIPATIVE (``force``), or the nearest dissipative set,
+        labelled constrained (``clamp``); neither: refused.
 
     Returns
     -------
@@ -43,15 +46,17 @@ def export_model(mf: Model, fmt: str, vehicle: Vehicle | None = None, *,
     ValueError
         Unknown format or frame.
     NotDissipativeError
-        The model generates energy and ``force`` is False.
+        The written coefficients generate energy at some speed and neither ``force`` nor
+        ``clamp`` is set.
     """
     if fmt == "gz":
         return export_gz(mf, vehicle, link_name=link_name, frame=frame, source=source,
-                         force=force)
+                         force=force, clamp=clamp)
     if fmt == "urdf":
-        return export_urdf(mf, vehicle, source=source, force=force)
+        return export_urdf(mf, vehicle, source=source, force=force, clamp=clamp)
     if fmt == "uuv":
-        return export_uuv(mf, vehicle, link_name=link_name, source=source, force=force)
+        return export_uuv(mf, vehicle, link_name=link_name, source=source, force=force,
+                          clamp=clamp)
     raise ValueError(f"unknown export format {fmt!r}; use one of {FORMATS}")
 
 

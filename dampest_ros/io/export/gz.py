@@ -42,17 +42,19 @@ from dampest_ros.io.export.common import (
     Imported,
     added_mass_switches,
     build_imported,
-    checked,
     coefficients,
     export_added_mass,
     exported_result,
     header_lines,
+    held_at_prior,
     linear_name,
+    made_safe,
     merge,
     model_damping,
     neg,
     num,
     parse_xml,
+    policy_of,
     xml_bool,
     xml_comment,
     xml_float,
@@ -105,7 +107,8 @@ def _added_mass_in(frame: str, M_A: FloatArray) -> FloatArray:
 
 
 def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "base_link",
-              frame: str = "flu", source: str | None = None, force: bool = False) -> Exported:
+              frame: str = "flu", source: str | None = None, force: bool = False,
+              clamp: bool = False) -> Exported:
     """The gz-sim Hydrodynamics plugin element for a model.
 
     Parameters
@@ -119,8 +122,10 @@ def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "ba
         Frame of that link: ``flu`` (Gazebo/REP-103; coefficients are converted) or ``frd``.
     source : str, optional
         Where the model came from, for the header comment.
-    force : bool
-        Export a model that is not dissipative (the header says so).
+    force, clamp : bool
+        For coefficients that are not dissipative at every speed (gz-sim applies them at
+        every speed): write them as they are (``force``) or the nearest dissipative set
+        (``clamp``); the header says which.
 
     Returns
     -------
@@ -134,10 +139,10 @@ def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "ba
         The model generates energy and ``force`` is False.
     """
     frame = _check_frame(frame)
-    held, unsafe = checked(mf, force, source)
     model, theta, left_out = model_damping(mf)
     coefs, other = coefficients(model, theta) if model is not None else ([], [])
     left_out += other
+    coefs, safety = made_safe(coefs, policy_of(force, clamp), "gz", source)
     notes: list[str] = []
     damping = merge(((_gz_tag(c), c, -_gz_sign(c.row, c.col, _signed_k(c), frame) * c.value)
                       for c in coefs), notes)
@@ -172,7 +177,7 @@ def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "ba
         if frame == "flu" else
         ["Frame: coefficients are in the frame of link '" + link_name + "', taken as FRD "
          "(x forward, y right, z down), as dampest: no conversion."])
-    lines = [*header_lines(mf, source, held, unsafe),
+    lines = [*header_lines(mf, source, coefs, safety),
              "Target: gz-sim Hydrodynamics system (gz-sim >= 7, e.g. Harmonic with ROS 2 Jazzy).",
              "Signs: gz applies F_i = sum_j (<iJ> + sum_k <iJabsK>|nu_k| + <iJK> nu_k) nu_j",
              "(HydrodynamicsUtils.hh buildDampingMatrix, wrench = -D nu): SNAME derivatives,",
@@ -199,7 +204,8 @@ def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "ba
         ET.SubElement(plugin, tag).text = num(value)
     ET.indent(plugin, "  ")
     text = f"<!--{xml_comment(lines)}-->\n{ET.tostring(plugin, encoding='unicode')}\n"
-    return exported_result("gz", text, left_out, mass_notes + notes, held, unsafe)
+    return exported_result("gz", text, left_out, mass_notes + notes, held_at_prior(mf),
+                           safety)
 
 
 @dataclass

@@ -1,17 +1,17 @@
 """The URDF <hydrodynamics> block: export and import.
 
 The ``<hydrodynamics>`` block read by the Robotic Decision Making Lab ``hydrodynamics``
-library (used by ``auv_controllers`` and the ``blue`` BlueROV2 project),
-``examples/description/bluerov2.model.urdf``: attributes ``<added_mass Xdu= Ydv= … />``,
-``<linear_damping Xu= … />``, ``<quadratic_damping Xuu= … />`` plus ``<mass>``,
-``<inertia ixx= iyy= izz= />``, ``<weight>``, ``<buoyancy>``, ``<center_of_gravity>``,
-``<center_of_buoyancy>``. ``src/hydrodynamics.cpp``: M_A = −diag(Xdu …), D(ν) = −diag(Xu …)
-− diag(Xuu … ⊙ |ν|) on the left-hand side, so all coefficients are SNAME (negative);
-the restoring forces put the weight along +z, and ``auv_controllers`` works in
+library (used by ``auv_controllers`` and the ``blue`` BlueROV2 project), in its current nested
+layout: ``<inertial>`` (``<mass value=/>``, ``<inertia ixx= iyy= izz=/>``,
+``<center_of_gravity x= y= z=/>``, ``<added_mass Xdu= Ydv= … />``), ``<damping>``
+(``<linear Xu= … />``, ``<quadratic Xuu= … />``) and ``<hydrostatics>`` (``<weight value=/>``,
+``<buoyancy value=/>``, ``<center_of_buoyancy x= y= z=/>``). The flat layout of April 2025
+(``<linear_damping>``, ``<quadratic_damping>``, ``<added_mass>``, ``<mass>`` … directly in
+the block) is still read by the import. ``src/hydrodynamics.cpp``: M_A = −diag(Xdu …),
+D(ν) = −diag(Xu …) − diag(Xuu … ⊙ |ν|) on the left-hand side, so all coefficients are SNAME
+(negative); the restoring forces put the weight along +z, and ``auv_controllers`` works in
 ``base_link_fsd`` / ``odom_ned``: the block is FRD, as dampest. Diagonal terms only.
-The import also reads the nested layout of ``auv_controllers``' demos
-(``<inertial><added_mass/></inertial><damping><linear/><quadratic/></damping>``) and
-whitespace-separated text (6 or 36 numbers).
+The import also reads whitespace-separated text (6 or 36 numbers).
 """
 
 from __future__ import annotations
@@ -27,22 +27,23 @@ from dampest_ros.core.physics.damping import FloatArray
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, rigid_body_mass
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export.common import (
-    Coefficient,
     Exported,
     Imported,
     added_mass_switches,
     build_imported,
-    checked,
     coefficients,
     export_added_mass,
     exported_result,
     header_lines,
+    held_at_prior,
     linear_name,
+    made_safe,
     merge,
     model_damping,
     neg,
     num,
     parse_xml,
+    policy_of,
     switches_left_out,
     xml_comment,
     xml_float,
@@ -54,7 +55,8 @@ _URDF_QUADRATIC = ("Xuu", "Yvv", "Zww", "Kpp", "Mqq", "Nrr")
 
 
 def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
-                source: str | None = None, force: bool = False) -> Exported:
+                source: str | None = None, force: bool = False,
+                clamp: bool = False) -> Exported:
     """The ``<hydrodynamics>`` block (RDML ``hydrodynamics`` / ``auv_controllers`` / ``blue``).
 
     Parameters
@@ -65,8 +67,9 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
         ``<weight>``, ``<buoyancy>`` and the centres of gravity and buoyancy.
     source : str, optional
         Where the model came from, for the header comment.
-    force : bool
-        Export a model that is not dissipative (the header says so).
+    force, clamp : bool
+        For coefficients that are not dissipative at every speed: write them as they are
+        (``force``) or the nearest dissipative set (``clamp``); the header says which.
 
     Returns
     -------
@@ -78,21 +81,17 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
     NotDissipativeError
         The model generates energy and ``force`` is False.
     """
-    held, unsafe = checked(mf, force, source)
     model, theta, left_out = model_damping(mf)
     coefs, other = coefficients(model, theta) if model is not None else ([], [])
     left_out += other
+    written = [c for c in coefs if c.row == c.col and (
+        c.kind == "const" or (c.kind == "abs" and c.k == c.row))]
+    left_out += [f"{c.name} = {num(c.value)} (off-diagonal or cross coupling: the block holds "
+                 f"diagonal damping only)" for c in coefs if c not in written]
+    written, safety = made_safe(written, policy_of(force, clamp), "urdf", source)
     notes: list[str] = []
-    lin: list[tuple[str, Coefficient, float]] = []
-    quad: list[tuple[str, Coefficient, float]] = []
-    for c in coefs:
-        if c.kind == "const" and c.row == c.col:
-            lin.append((_URDF_LINEAR[c.row], c, -c.value))
-        elif c.kind == "abs" and c.row == c.col == c.k:
-            quad.append((_URDF_QUADRATIC[c.row], c, -c.value))
-        else:
-            left_out.append(f"{c.name} = {num(c.value)} (off-diagonal or cross coupling: "
-                            f"the block holds diagonal damping only)")
+    lin = [(_URDF_LINEAR[c.row], c, -c.value) for c in written if c.kind == "const"]
+    quad = [(_URDF_QUADRATIC[c.row], c, -c.value) for c in written if c.kind == "abs"]
     left_out += switches_left_out(added_mass_switches(mf, vehicle), "the block")
     lin_v, quad_v = merge(lin, notes), merge(quad, notes)
     for names, values, what in ((_URDF_LINEAR, lin_v, "linear"),
@@ -103,29 +102,18 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
     M_A, mass_notes = export_added_mass(mf, vehicle)
     block = ET.Element("hydrodynamics")
     if vehicle is not None and M_A is not None:
-        body = vehicle.body
-        ET.SubElement(block, "mass").text = num(body.mass)
-        J = body.inertia
-        inertia = {"ixx": J[0, 0], "iyy": J[1, 1], "izz": J[2, 2]}
-        inertia.update({k: J[a, b] for k, (a, b) in
-                        (("ixy", (0, 1)), ("ixz", (0, 2)), ("iyz", (1, 2))) if J[a, b] != 0})
-        ET.SubElement(block, "inertia", {k: num(v) for k, v in inertia.items()})
-        ET.SubElement(block, "added_mass",
-                      {n: num(-M_A[i, i]) for i, n in enumerate(_URDF_ADDED)})
-        off = [f"M_A[{FORCE_NAMES[i]},{DOF_NAMES[j]}] = {M_A[i, j]:.6g}"
-               for i in range(6) for j in range(6) if i != j and M_A[i, j] != 0]
-        left_out += [f"{x} (off-diagonal added mass: the block holds the diagonal only)"
-                     for x in off]
-    ET.SubElement(block, "linear_damping", {n: num(lin_v.get(n, 0.0)) for n in _URDF_LINEAR})
-    ET.SubElement(block, "quadratic_damping",
-                  {n: num(quad_v.get(n, 0.0)) for n in _URDF_QUADRATIC})
+        left_out += _inertial(ET.SubElement(block, "inertial"), vehicle, M_A)
+    damping = ET.SubElement(block, "damping")
+    ET.SubElement(damping, "linear", {n: num(lin_v.get(n, 0.0)) for n in _URDF_LINEAR})
+    ET.SubElement(damping, "quadratic", {n: num(quad_v.get(n, 0.0)) for n in _URDF_QUADRATIC})
     if vehicle is not None:
         body = vehicle.body
-        ET.SubElement(block, "weight").text = num(body.weight)
-        ET.SubElement(block, "buoyancy").text = num(body.buoyancy)
-        for tag, r in (("center_of_gravity", body.r_g), ("center_of_buoyancy", body.r_b)):
-            ET.SubElement(block, tag, {a: num(x) for a, x in zip("xyz", r, strict=True)})
-    lines = [*header_lines(mf, source, held, unsafe),
+        statics = ET.SubElement(block, "hydrostatics")
+        ET.SubElement(statics, "weight", {"value": num(body.weight)})
+        ET.SubElement(statics, "buoyancy", {"value": num(body.buoyancy)})
+        ET.SubElement(statics, "center_of_buoyancy",
+                      {a: num(x) for a, x in zip("xyz", body.r_b, strict=True)})
+    lines = [*header_lines(mf, source, written, safety),
              "Target: <hydrodynamics> block of the Robotic Decision Making Lab 'hydrodynamics'",
              "library (auv_controllers, blue): Fossen FRD body frame (base_link_fsd), SNAME",
              "signs: D(nu) = -diag(linear_damping) - diag(quadratic_damping)|nu| and",
@@ -136,7 +124,26 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
         lines += ["LEFT OUT (the block has no place for them):", *(f"  {x}" for x in left_out)]
     ET.indent(block, "  ")
     text = f"<!--{xml_comment(lines)}-->\n{ET.tostring(block, encoding='unicode')}\n"
-    return exported_result("urdf", text, left_out, mass_notes + notes, held, unsafe)
+    return exported_result("urdf", text, left_out, mass_notes + notes, held_at_prior(mf),
+                           safety)
+
+
+def _inertial(el: ET.Element, vehicle: Vehicle, M_A: FloatArray) -> list[str]:
+    """Fill ``<inertial>``: mass, inertia, centre of gravity and the diagonal added mass
+    (SNAME, negative); returns the off-diagonal M_A entries it cannot hold (left-out lines)."""
+    body = vehicle.body
+    ET.SubElement(el, "mass", {"value": num(body.mass)})
+    J = body.inertia
+    inertia = {"ixx": J[0, 0], "iyy": J[1, 1], "izz": J[2, 2]}
+    inertia.update({k: J[a, b] for k, (a, b) in
+                    (("ixy", (0, 1)), ("ixz", (0, 2)), ("iyz", (1, 2))) if J[a, b] != 0})
+    ET.SubElement(el, "inertia", {k: num(v) for k, v in inertia.items()})
+    ET.SubElement(el, "center_of_gravity",
+                  {a: num(x) for a, x in zip("xyz", body.r_g, strict=True)})
+    ET.SubElement(el, "added_mass", {n: num(-M_A[i, i]) for i, n in enumerate(_URDF_ADDED)})
+    return [f"M_A[{FORCE_NAMES[i]},{DOF_NAMES[j]}] = {M_A[i, j]:.6g} (off-diagonal added mass: "
+            "the block holds the diagonal only)"
+            for i in range(6) for j in range(6) if i != j and M_A[i, j] != 0]
 
 
 def _numbers(el: ET.Element, what: str) -> list[float]:

@@ -24,17 +24,18 @@ from dampest_ros.core.physics.damping import FloatArray
 from dampest_ros.core.physics.frames import body_twist
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export.common import (
-    Coefficient,
     Exported,
     added_mass_switches,
-    checked,
     coefficients,
     export_added_mass,
     exported_result,
     header_lines,
+    held_at_prior,
+    made_safe,
     merge,
     model_damping,
     num,
+    policy_of,
     switches_left_out,
     xml_comment,
 )
@@ -51,7 +52,8 @@ def _numbers(values: FloatArray) -> str:
 
 
 def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "base_link",
-               source: str | None = None, force: bool = False) -> Exported:
+               source: str | None = None, force: bool = False,
+               clamp: bool = False) -> Exported:
     """The UUV Simulator ``<plugin>`` block with the model as its HMFossen matrices (FRD).
 
     Parameters
@@ -64,8 +66,9 @@ def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "b
         ``name`` of the plugin's ``<link>`` (the vehicle's base link in its SDF/URDF).
     source : str, optional
         Where the model came from, for the header comment.
-    force : bool
-        Export a model that is not dissipative (the header says so).
+    force, clamp : bool
+        For coefficients that are not dissipative at every speed: write them as they are
+        (``force``) or the nearest dissipative set (``clamp``); the header says which.
 
     Returns
     -------
@@ -80,37 +83,29 @@ def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "b
     NotDissipativeError
         The model generates energy and ``force`` is False.
     """
-    held, unsafe = checked(mf, force, source)
     model, theta, left_out = model_damping(mf)
     coefs, other = coefficients(model, theta) if model is not None else ([], [])
     left_out += other
+    written = [c for c in coefs if c.kind == "const" or (c.kind == "lin" and c.k == 0)
+               or (c.kind == "abs" and c.row == c.col == c.k)]
+    left_out += [f"{c.name} = {num(c.value)} (UUV Simulator has quadratic damping on the "
+                 f"diagonal only (|nu_i| nu_i) and products with u only)"
+                 for c in coefs if c not in written]
+    written, safety = made_safe(written, policy_of(force, clamp), "uuv", source)
     notes: list[str] = []
-    lin: list[tuple[str, Coefficient, float]] = []
-    quad: list[tuple[str, Coefficient, float]] = []
-    fwd: list[tuple[str, Coefficient, float]] = []
-    for c in coefs:
-        key = f"[{c.row},{c.col}]"
-        # HMFossen's force is −D ν with D = −DLin − …: each entry is −(dampest coefficient)
-        if c.kind == "const":
-            lin.append((f"linear_damping{key}", c, -c.value))
-        elif c.kind == "abs" and c.row == c.col == c.k:
-            quad.append((f"quadratic_damping{key}", c, -c.value))
-        elif c.kind == "lin" and c.k == 0:
-            fwd.append((f"linear_damping_forward_speed{key}", c, -c.value))
-        else:
-            left_out.append(f"{c.name} = {num(c.value)} (UUV Simulator has quadratic damping "
-                            f"on the diagonal only (|nu_i| nu_i) and products with u only)")
-    left_out += switches_left_out(added_mass_switches(mf, vehicle), "UUV Simulator")
-    mats = {}
-    for key, items in (("linear_damping", lin), ("quadratic_damping", quad),
-                       ("linear_damping_forward_speed", fwd)):
-        A = np.zeros((6, 6))
+    # HMFossen's force is −D ν with D = −DLin − …: each entry is −(dampest coefficient)
+    tags = {"const": "linear_damping", "abs": "quadratic_damping",
+            "lin": "linear_damping_forward_speed"}
+    mats = {key: np.zeros((6, 6)) for key in tags.values()}
+    for kind, key in tags.items():
+        items = [(f"{key}[{c.row},{c.col}]", c, -c.value) for c in written if c.kind == kind]
         for k, v in merge(items, notes).items():
             i, j = (int(x) for x in k[len(key) + 1:-1].split(","))
-            A[i, j] = v
-        mats[key] = A
+            mats[key][i, j] = v
+    fwd = any(c.kind == "lin" for c in written)
+    left_out += switches_left_out(added_mass_switches(mf, vehicle), "UUV Simulator")
     M_A, mass_notes = export_added_mass(mf, vehicle)
-    lines = [*header_lines(mf, source, held, unsafe),
+    lines = [*header_lines(mf, source, written, safety),
              "Target: UUV Simulator underwater-object plugin (uuv_gazebo_ros_plugins), model",
              "HMFossen (uuv_gazebo_plugins HydrodynamicModel.cc). Matrices in the FRD body",
              "frame (the plugin converts Gazebo's FLU with ToNEDConvention), rows first:",
@@ -143,4 +138,5 @@ def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "b
     ET.indent(plugin, "  ")
     text = (f"<!--{xml_comment([x for x in lines if x])}-->\n"
             f"{ET.tostring(plugin, encoding='unicode')}\n")
-    return exported_result("uuv", text, left_out, mass_notes + notes, held, unsafe)
+    return exported_result("uuv", text, left_out, mass_notes + notes, held_at_prior(mf),
+                           safety)
