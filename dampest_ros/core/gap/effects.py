@@ -55,6 +55,9 @@ class Effect:
     #: ρ does not depend on the velocity: the effect is a change of the applied force τ − ρ
     #: (or of g), which a free run can replay
     applied_force = False
+    #: Indices of the unknowns that are magnitudes (0: the effect is absent), tested for
+    #: significance; a shape parameter (a memory rate) is not among them. None: all.
+    magnitudes: tuple[int, ...] | None = None
 
     @property
     def k(self) -> int:

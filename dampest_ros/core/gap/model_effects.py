@@ -221,6 +221,7 @@ class Memory(Effect):
 
     family = "memory"
     grid = (0.15, 0.3, 0.6, 1.2, 2.4, 4.8, 9.6)
+    magnitudes = (0,)  # c; λ only shapes the kernel
 
     def __init__(self, dof: int) -> None:
         self.dof = dof

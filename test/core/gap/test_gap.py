@@ -49,7 +49,14 @@ from dampest_ros.core.gap.data import GapData
 from dampest_ros.core.gap.effects import Buoyancy, Current
 from dampest_ros.core.gap.library import library
 from dampest_ros.core.gap.localise import concentration, localise
-from dampest_ros.core.gap.search import NO_FURTHER, GapResult, find_gap, rejection
+from dampest_ros.core.gap.model_effects import Memory
+from dampest_ros.core.gap.search import (
+    NO_FURTHER,
+    GapResult,
+    find_gap,
+    insignificance,
+    rejection,
+)
 from dampest_ros.core.gap.update import divergence_reason, updated_model
 from dampest_ros.core.identification.selection import DEFAULT_CROSS
 from dampest_ros.core.physics.damping import DampingModel
@@ -540,3 +547,18 @@ def test_the_attitude_measures_a_gyro_bias_and_not_a_modelling_error() -> None:
     b0, sd0 = attitude_gyro_bias(data)
     assert np.all(np.abs(b0) < 5 * sd0 + 2e-4)
     assert "not a gyro bias" in GyroBias().implausible(data, np.radians([0.0, 4.2, 0.0]))
+
+
+def test_an_effect_below_its_own_sigma_is_not_named() -> None:
+    """The Wald test of an effect's magnitudes against their covariance: a pool's 0.013 ±
+    0.006 m/s current is not significant (W 4.7 < 13.8, χ² 99.9 % of 2), a 0.25 ± 0.002 m/s
+    one is; a memory state is tested on its gain c alone (λ shapes the kernel)."""
+    cov = np.diag([0.006, 0.006]) ** 2
+    why = insignificance(Current(), np.array([0.013, 0.0]), cov, 1e-3)
+    assert why.startswith("below its own significance: ") and "Wald 4.69 ≤ 13.8" in why, why
+    assert insignificance(Current(), np.array([0.25, 0.1]), np.diag([2e-3, 2e-3]) ** 2,
+                          1e-3) == ""
+    memory = Memory(5)
+    strong_c = np.array([3.0, 0.4])
+    assert insignificance(memory, strong_c, np.diag([0.5, 5.0]) ** 2, 1e-3) == ""
+    assert "Wald" in insignificance(memory, strong_c, np.diag([1.5, 0.01]) ** 2, 1e-3)
