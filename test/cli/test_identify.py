@@ -296,7 +296,9 @@ def test_every_model_reader_refuses_a_non_finite_model(
 def test_identified_model_carries_its_flown_speeds_to_the_export(
         short_b: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """identify --out writes the per-DOF range of ν it was fitted on (model.flown_speeds);
-    export checks dissipativity over that envelope and says so in the file."""
+    export checks dissipativity at every speed (a simulator applies the coefficients beyond
+    the flown envelope): this short log's Y_v < 0 is refused by default and zeroed with
+    --clamp, which the file says."""
     out, sdf = tmp_path / "model.yaml", tmp_path / "hydro.sdf"
     csv = short_b / "samples.csv"
     assert main(["identify", str(csv), "--vehicle", "bluerov2_heavy", "--out", str(out)]) == 0
@@ -304,8 +306,11 @@ def test_identified_model_carries_its_flown_speeds_to_the_export(
 
     nu = np.stack([read_csv(csv)[c] for c in "uvwpqr"], axis=1)
     np.testing.assert_array_equal(load_model(out).flown, [nu.min(axis=0), nu.max(axis=0)])
-    assert main(["export", str(out), "--format", "gz", "--out", str(sdf)]) == 0
-    assert "Dissipative: nu'D(nu)nu >= 0 on a grid over the flown speeds." in sdf.read_text()
+    capsys.readouterr()
+    assert main(["export", str(out), "--format", "gz", "--out", str(sdf)]) == 2
+    assert "is not dissipative everywhere" in capsys.readouterr().err and not sdf.exists()
+    assert main(["export", str(out), "--format", "gz", "--out", str(sdf), "--clamp"]) == 0
+    assert "CONSTRAINED to the nearest dissipative model (clamp)" in sdf.read_text()
 
 
 @pytest.mark.parametrize(("argv", "option"), [

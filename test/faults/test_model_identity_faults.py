@@ -53,7 +53,7 @@ def test_export_refuses_another_vehicles_model(tmp_path: Path,
     assert err.count("\n") == 1, err
     assert "belongs to vehicle_damping 'torpedo_auv'" in err
     assert "not to the vehicle in use 'bluerov2_heavy'" in err
-    assert "they differ in rigid_body, added_mass, thrusters" in err
+    assert "they differ in rigid_body, added_mass)" in err  # thrusters do not decide
 
 
 def test_validate_and_gap_refuse_a_model_of_a_vehicle_of_the_same_name(tmp_path: Path
@@ -109,3 +109,20 @@ def test_save_refuses_to_replace_another_vehicles_or_an_arms_model(tmp_path: Pat
     arm = arm_identity("ur5", {"names": ["j1"]}, ["j1.m"])
     why = foreign_model(path, arm)
     assert why is not None and "it is a vehicle_damping model, not a arm one" in why
+
+
+def test_a_hull_model_holds_with_other_thrusters_and_switches(tmp_path: Path) -> None:
+    """Thrusters only turn telemetry into τ, and the added-mass switches travel with the
+    model: neither refuses a model of the same hull (a vehicle file without thrusters for a
+    log of τ; a MuJoCo-like plant without M_A ν̇)."""
+    from dataclasses import replace
+
+    from dampest_ros.core.physics.rigid_body import AddedMassTerms
+
+    heavy = load_vehicle("bluerov2_heavy")
+    path = save_model(tmp_path / "m.yaml", vehicle_model(heavy))
+    bare = replace(heavy, thrusters=None)
+    switched = replace(heavy, body=replace(heavy.body, added_mass_terms=AddedMassTerms(
+        inertial=False, coriolis=True, munk=False)))
+    for other in (bare, switched):
+        load_model_for(str(path), other)  # no refusal

@@ -302,8 +302,8 @@ def test_estimator_resumes_from_its_saved_model_with_its_version(context: Any,
     cases = [
         (save, {"terms": "linear"}, "its coefficients are not those of vehicle bluerov2_heavy "
          "with terms 'linear' (missing [], not estimated here ['X_uu', "),
-        (save, {"vehicle": "bluerov2_heavy_mujoco"}, "it was saved for vehicle "
-         "bluerov2_heavy, this node estimates bluerov2_heavy_mujoco"),
+        (save, {"vehicle": "bluerov2_heavy_mujoco"}, f"{save} belongs to vehicle_damping "
+         "'bluerov2_heavy' ("),
         (bad, {}, "model.theta: not finite: X_u = nan"),
     ]
     for path, params, reason in cases:

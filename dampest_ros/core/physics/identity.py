@@ -14,8 +14,12 @@ digits makes the hash the same for numbers that went through YAML, float32 or an
 last-digit arithmetic, and different for any physical change.
 
 Parts of a vehicle (:func:`vehicle_identity`): ``rigid_body`` (mass, inertia 3×3, r_g, r_b),
-``added_mass`` (M_A 6×6 and the switches inertial, coriolis, munk), ``thrusters`` (positions,
-directions, k_t, diameter, n_max, time_constant, deadzone; ``none`` without thrusters). An arm's
+``added_mass`` (M_A 6×6), ``thrusters`` (positions, directions, k_t, diameter, n_max,
+time_constant, deadzone; ``none`` without thrusters). The added-mass switches are not part of
+it: they say which added-mass effects a plant applies, and a model carries its own. A model
+belongs to a vehicle when its hull parts (rigid body, added mass) agree (:func:`mismatch`):
+thrusters only turn telemetry into τ, so a hull's model holds whatever propels it (a vehicle
+file without thrusters for logs of τ, new thrusters). An arm's
 (:func:`arm_identity`): ``joints`` (names, parents, joint frames, axes) and
 ``base_parameters`` (the names of the base parameters kept).
 """
@@ -29,12 +33,14 @@ from typing import Any
 
 import numpy as np
 
-from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, RigidBody
+from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.physics.thrusters import Thrusters
 
 #: ``kind`` of a vehicle's damping model and of an arm's base-parameter model.
 VEHICLE_KIND = "vehicle_damping"
 ARM_KIND = "arm"
+#: Parts of a vehicle's identity that do not decide whether a model belongs to it.
+NOT_HULL = ("thrusters",)
 #: What a file without ``model.identity`` was written before.
 BEFORE = "model files carried model.identity (dampest_ros 0.1.0 and earlier)"
 
@@ -116,14 +122,12 @@ class Identity:
 
 
 def vehicle_identity(name: str, body: RigidBody, thrusters: Thrusters | None) -> Identity:
-    """The identity of a vehicle: its name and the hashes of its rigid body, added mass with
-    its switches, and thrusters."""
-    terms = body.added_mass_terms or AddedMassTerms()
+    """The identity of a vehicle: its name and the hashes of its rigid body, added mass and
+    thrusters."""
     parts = {
         "rigid_body": digest({"mass": body.mass, "inertia": body.inertia, "r_g": body.r_g,
                               "r_b": body.r_b}),
-        "added_mass": digest({"M_A": body.added_mass, **{k: float(v) for k, v in
-                                                           terms.as_dict().items()}}),
+        "added_mass": digest({"M_A": body.added_mass}),
         "thrusters": "none" if thrusters is None else digest({
             "positions": thrusters.positions, "directions": thrusters.directions,
             "k_t": thrusters.k_t, "diameter": thrusters.diameter, "n_max": thrusters.n_max,
@@ -145,10 +149,13 @@ def mismatch(found: Identity | None, expected: Identity, source: str) -> str | N
     if found is None or found.hash == expected.hash:
         return None
     what = "arm" if expected.kind == ARM_KIND else "vehicle"
+    differ = [k for k in found.differs(expected) if k not in NOT_HULL]
     if found.kind != expected.kind:
         why = f"it is a {found.kind} model, not a {expected.kind} one"
+    elif not differ:
+        return None
     else:
-        why = f"they differ in {', '.join(found.differs(expected))}"
+        why = f"they differ in {', '.join(differ)}"
     return (f"{source} belongs to {found.kind} {found.label()}, not to the {what} in use "
             f"{expected.label()} ({why}): use the {what} the model was made for, or make a "
             f"model for {expected.name!r} (dampest identify / the node's ~/save to another "
