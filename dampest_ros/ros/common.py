@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import inspect
 import math
+import re
 import sys
 import threading
 import time
@@ -26,6 +27,7 @@ from rclpy.callback_groups import CallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
@@ -589,6 +591,35 @@ def watch_duplicates(node: Node, window: float = DUPLICATE_WINDOW) -> None:
     timer = node.create_timer(0.2, look, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
 
+#: How to write each kind of ROS argument, by the words of rcl's complaint about it (the
+#: first that matches).
+ROS_ARGUMENT_FIXES = (
+    ("trailing -p", "write -p NAME:=VALUE"),
+    ("trailing -r", "write -r FROM:=TO"),
+    ("trailing --params-file", "write --params-file FILE"),
+    ("parameter override", "write -p NAME:=VALUE with a YAML value, e.g. -p rate:=2.0, "
+     "-p reference:='[0.5, 0, 0, 0, 0, 0]', -p arm:=ur5"),
+    ("remap", "write -r FROM:=TO, e.g. -r joint_states:=/arm/joint_states or "
+     "-r __ns:=/vehicle"),
+    ("params file", "give an existing ROS 2 parameters file (/**: ros__parameters: NAME: "
+     "VALUE; every parameter with its default: config/{node}.params.yaml)"),
+    ("log level", "write --log-level LEVEL (debug, info, warn, error or fatal) or "
+     "--log-level NAME:=LEVEL"),
+)
+
+
+def ros_arguments_error(exc: Exception, node: str) -> str:
+    """One line for rcl's refusal of node ``node``'s ROS arguments
+    (``RCLInvalidROSArgsError``): the argument, what is wrong with it and how to write it,
+    without rcl's source locations and lexer details."""
+    text = re.sub(r",? at \S+\.c:\d+", "", str(exc)).replace("\n", " ")
+    text = re.sub(r"\. Error: (error not set|Expected lexeme .*)$", "", text.strip())
+    text = text.removeprefix("Failed to parse ROS arguments: ").rstrip(". ")
+    fix = next((f for words, f in ROS_ARGUMENT_FIXES if words in text),
+               "see the ROS 2 arguments: ros2 run --help")
+    return f"invalid ROS argument: {text}; {fix.format(node=node)}"
+
+
 def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
     """A console-script main(): ``--help`` lists the node's parameters; otherwise init, spin,
     stop on SIGINT, SIGTERM or external shutdown (status 0), destroy the node, shut down.
@@ -598,7 +629,9 @@ def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
     takes), a value rclpy refuses, or another node of the same fully qualified name in the
     graph within :data:`DUPLICATE_WINDOW` s of the start (:func:`watch_duplicates`). An
     error raised by a callback the shutdown interrupted (e.g. publishing on the context a
-    signal has just shut down) ends the node quietly too."""
+    signal has just shut down) ends the node quietly too. So does a ROS argument that rcl
+    cannot parse (``-p x:=``, a trailing ``-p``, ``-r a``, a missing or broken
+    ``--params-file``): :func:`ros_arguments_error` names it and how to write it."""
 
     def main(args: list[str] | None = None) -> None:
         argv = sys.argv if args is None else args
@@ -611,8 +644,13 @@ def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
                    "bad parameter, or another node of the same name and namespace\nalready "
                    "running, ends the node with one error line and exit status 2."
                    + _param_help(node_class))
-        parser.parse_args(remove_ros_args(argv)[1:])
-        rclpy.init(args=argv)
+        try:
+            parser.parse_args(remove_ros_args(argv)[1:])
+            rclpy.init(args=argv)
+        except rclpy_implementation.RCLInvalidROSArgsError as exc:
+            rclpy.logging.get_logger(name).error(
+                f"cannot start: {ros_arguments_error(exc, name)}")
+            raise SystemExit(2) from None
         node = None
         refused = False
         try:
