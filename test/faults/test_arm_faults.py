@@ -9,9 +9,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+from dampest_ros.cli.main import main
+from dampest_ros.core.arm.design import default_limits
 from dampest_ros.core.arm.ffs import random_trajectory
 from dampest_ros.core.arm.simulate import REALISTIC, ArmRun, simulate_arm
-from dampest_ros.io.arm import load_arm
+from dampest_ros.io.arm import load_arm, save_trajectory
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -72,3 +74,46 @@ def test_a_huge_finite_effort_is_rejected_and_counted_by_the_arm_estimator(
         assert clean.counts["used"] - int(values["count.used"]) == 150  # 3 s at 50 Hz
     finally:
         rclpy.try_shutdown(context=context)
+
+
+def refused(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    """The one stderr line of a dampest command that exits 2."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "Traceback" not in err and len(err.splitlines()) == 1, err
+    return err
+
+
+def test_arm_simulate_refuses_a_nan_trajectory(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """Was: a bag of NaN efforts written, exit 0."""
+    traj = random_trajectory(np.zeros(6), 2, 0.2, np.full(6, 0.5), np.random.default_rng(1))
+    traj.a[2, 1] = np.nan
+    path = tmp_path / "traj.yaml"
+    save_trajectory(path, traj, default_limits(load_arm("ur5").model), {"arm": "ur5"})
+    err = refused(["arm", "simulate", "--trajectory", str(path), "--duration", "1", "--out",
+                   str(tmp_path / "bag")], capsys)
+    assert err == (f"dampest arm: error: trajectory file {path}: a must be numbers (finite; "
+                   "base_frequency > 0); write the file again with 'dampest arm design'")
+    assert not (tmp_path / "bag").exists()
+
+
+def test_arm_simulate_refuses_a_run_that_diverges(tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """Was: a 1e6 kg payload wrote a bag of joints 6000 rad and 1e13 N m away, exit 0."""
+    err = refused(["arm", "simulate", "--random", "7", "--duration", "4", "--payload", "1e6",
+                   "2", "--out", str(tmp_path / "bag")], capsys)
+    assert err == ("dampest arm: error: the simulation diverged at t = 2.956 s: wrist_1_joint "
+                   "is 4.33 rad off its trajectory (the controller cannot follow it: a lighter "
+                   "payload or a slower trajectory)")
+    assert not (tmp_path / "bag").exists()
+
+
+def test_arm_simulate_refuses_a_payload_after_the_end(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """Was: accepted; the bag had no payload at all."""
+    err = refused(["arm", "simulate", "--random", "7", "--duration", "2", "--payload", "1",
+                   "50", "--out", str(tmp_path / "bag")], capsys)
+    assert err == ("dampest arm: error: payload time 50 s is not within the 2 s run; attach "
+                   "it between 0 and 2 s")
+    assert not (tmp_path / "bag").exists()
