@@ -161,7 +161,10 @@ class ReplayNode(ParamNode):
                 self._wait_for_acked()
         except Exception as exc:  # a shut-down context while publishing: stop quietly
             if not self._stop.is_set() and self.context.ok():
-                self.get_logger().error(f"playback failed: {exc}")
+                self.get_logger().error(
+                    f"playback of {self.p('bag')} failed after {self.published} messages: "
+                    f"{type(exc).__name__}: {exc}; if the bag is damaged, 'dampest reindex "
+                    f"{self.p('bag')}' rebuilds its index from the intact chunks")
         finally:
             self._done.set()
             if not self._stop.is_set():
