@@ -16,7 +16,8 @@ Rows = Callable[[argparse.Namespace, str], list[tuple[str, ...]]]
 
 #: The groups of rows, in the order they run (``--only`` picks some).
 GROUPS: dict[str, Rows] = {
-    "startup": startup.startup_rows, "simulate": offline.simulate_rows,
+    "startup": startup.startup_rows, "limits": offline.limits_rows,
+    "simulate": offline.simulate_rows,
     "identify": offline.identify_rows, "select": offline.select_rows, "pool": pool.pool_rows,
     "arm": arm.arm_rows, "live": online.live_rows, "estimator": online.estimator_rows,
     "recorder": recorder.recorder_rows, "arm_peers": arm.arm_peers_rows}

@@ -64,6 +64,26 @@ def quiet_identify(argv: list[str]) -> dict[str, float]:
     return {"seconds": time.perf_counter() - t0, "status": float(status)}
 
 
+def refuse_big_csv(path: str, gigabytes: str) -> dict[str, float]:
+    """``dampest identify`` of a sparse CSV of ``gigabytes`` GB (a header, one row, a hole):
+    seconds to its refusal and the exit status."""
+    with open(path, "w") as f:
+        f.write("time,u,v,w,p,q,r\n0,0,0,0,0,0,0\n")
+    os.truncate(path, int(float(gigabytes) * 1e9))
+    try:
+        return quiet_identify([path, "--vehicle", VEHICLE])
+    finally:
+        os.remove(path)
+
+
+def limits_rows(args: argparse.Namespace, tmp: str) -> list[tuple[str, ...]]:
+    """A CSV over the size limit, refused before it is read."""
+    big = child("offline.refuse_big_csv", f"{tmp}/big.csv", "2")
+    return [("dampest identify of a 2 GB (sparse) CSV: refused by size",
+             f"{big['seconds']:.2f} s", f"exit status {big['status']:.0f}", "< 2 s, < 300 MB",
+             f"{big['peak_mb']:.0f}")]
+
+
 def simulate_rows(args: argparse.Namespace, tmp: str) -> list[tuple[str, ...]]:
     """The simulator, native and MuJoCo, writing an MCAP bag."""
     sim = child("offline.simulate", f"{tmp}/sim", str(args.sim_seconds))

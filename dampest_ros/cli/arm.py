@@ -96,7 +96,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     i = sub.add_parser("identify", help=HELP["identify"], description=HELP["identify"] + (
         ".\n\nJittered stamps are resampled onto a uniform grid; a step over 1.75 sample\n"
         "periods is a gap, and each gap-free stretch is filtered on its own (the count\n"
-        "is printed)."),
+        "is printed). A stamp over 1.75 periods before the one recorded before it is a\n"
+        "clock jump: named (sample, stamp, seconds back), the record split there."),
                        epilog="example:\n" + EXAMPLES["identify"],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     i.add_argument("bag", metavar="BAG", help="rosbag2 bag with sensor_msgs/JointState")
@@ -252,7 +253,7 @@ def _identify(args: argparse.Namespace) -> int:
         torque_rmse,
     )
     from dampest_ros.core.arm.regressor import full_parameters
-    from dampest_ros.core.signals.resample import interpolate
+    from dampest_ros.core.signals.resample import increasing_runs, interpolate
     from dampest_ros.io.arm import load_arm, read_joint_bag
 
     cfg = IdentifyConfig(cutoff=args.cutoff, rate_out=args.rate_out, min_speed=args.min_speed)
@@ -304,9 +305,11 @@ def _identify(args: argparse.Namespace) -> int:
         shown: dict[str, np.ndarray] = {}
         for label, theta in (("WLS", res.wls.theta), ("consistent", res.consistent.theta),
                              ("OLS", res.ols.theta), ("nominal", base.of(nominal))):
-            # on the filtered grid, then at the measured samples' own (jittered) times
-            tau = interpolate(vdata.t[fv.index], fv.t,
-                              predict(arm.model, base, theta, fv.q, fv.qd, fv.qdd, vcfg))
+            # on the filtered grid, then at the measured samples' own (jittered) times, each
+            # run of the clock on its own
+            tau = predict(arm.model, base, theta, fv.q, fv.qd, fv.qdd, vcfg)
+            for run in increasing_runs(fv.t):
+                tau[run] = interpolate(vdata.t[fv.index[run]], fv.t[run], tau[run])
             shown[label] = tau
             rmse, moving = torque_rmse(measured, tau, fv.qd, cfg.min_speed)
             rows.extend((label, n, rmse[j], moving[j], rmse[j] / floor[j])

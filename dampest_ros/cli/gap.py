@@ -30,6 +30,8 @@ from dampest_ros.core.physics.identity import Identity
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.measurements import JointSeries
+from dampest_ros.core.signals.plausibility import unusable_samples
+from dampest_ros.core.signals.preprocess import DataError
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.io.bag import bag_summary, is_bag, read_bag
 from dampest_ros.io.remote import is_url, local_log
@@ -118,6 +120,9 @@ def run(args: argparse.Namespace) -> int:
     paths = expand_inputs(args.input)
     args.input = ", ".join(paths)
     samples, joints, logs = pooled_logs(paths, args)
+    reason = unusable_samples(samples)
+    if reason is not None:
+        raise DataError(f"{args.input}: {reason}")
     data = GapData(samples, model, mf.theta, body, vehicle.thrusters, joints,
                        cutoff=args.cutoff, split=args.split)
     seconds = len(samples) / samples.rate

@@ -34,8 +34,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    default="bag", help="publisher reliability (default: as recorded)")
     p.add_argument("--queue-depth", type=int, default=1000,
                    help="publisher queue in messages (default: 1000)")
-    p.add_argument("--wait-for-subscribers", type=int, default=0, metavar="N",
-                   help="start once every topic has N subscribers")
+    p.add_argument("--wait-for-subscribers", type=int, default=1, metavar="N",
+                   help="start once every played topic has N matched subscribers (default: "
+                        "1; 0: play at once, what is published before a subscriber matches "
+                        "reaches no one)")
+    p.add_argument("--wait-for-subscribers-timeout", type=float, default=10.0, metavar="S",
+                   help="wait at most S seconds for them, then warn and play (default: 10)")
     p.add_argument("--delay", type=float, default=0.0, metavar="S",
                    help="wait this long before playing (default: 0)")
     p.add_argument("--wait-for-acked", type=float, default=5.0, metavar="S",
@@ -51,7 +55,9 @@ def node_parameters(args: argparse.Namespace) -> dict[str, object]:
         "start_offset": float(args.start_offset), "loop": bool(args.loop),
         "clock": args.clock is not None, "reliability": args.reliability,
         "queue_depth": int(args.queue_depth),
-        "wait_for_subscribers": int(args.wait_for_subscribers), "delay": float(args.delay),
+        "wait_for_subscribers": int(args.wait_for_subscribers),
+        "wait_for_subscribers_timeout": float(args.wait_for_subscribers_timeout),
+        "delay": float(args.delay),
         "wait_for_acked": float(args.wait_for_acked)}
     if args.clock is not None:
         params["clock_rate"] = float(args.clock)

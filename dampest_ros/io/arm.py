@@ -275,6 +275,15 @@ def load_trajectory(path: str | Path, n: int) -> tuple[FourierTrajectory, Design
     if a.shape != b.shape or a.ndim != 2 or a.shape[0] != n or traj.q0.shape != (n,):
         raise ArmDataError(f"trajectory file {path}: coefficients of shape {a.shape} and q0 "
                            f"of {traj.q0.shape} do not fit an arm of {n} joints")
+    # limits may be ±inf (none), never NaN; the rest finite
+    bad = [k for k, v in {"q0": traj.q0, "a": a, "b": b}.items() if not np.all(np.isfinite(v))]
+    bad += [] if np.isfinite(traj.base_frequency) and traj.base_frequency > 0 else [
+        "base_frequency"]
+    bad += [f"limits.{k}" for k, v in vars(limits or {}).items() if np.any(np.isnan(v))]
+    if bad:
+        raise ArmDataError(f"trajectory file {path}: {', '.join(bad)} must be numbers (finite; "
+                           "base_frequency > 0); write the file again with 'dampest arm "
+                           "design'")
     return traj, limits
 
 

@@ -209,6 +209,15 @@ class _Bag:
                         "rebuilds metadata.yaml and recovers it up to its last complete chunk")
             raise BagError(f"cannot read bag {_files(self.path)}: {exc}{hint}") from exc
 
+    def _damaged(self, exc: Exception) -> BagError:
+        """The error for a failure while reading messages: a damaged storage file, named,
+        with the repair to try."""
+        repair = ("'rosbag reindex' (ROS 1) rebuilds its index" if self.ros1 else
+                  f"'dampest reindex {self.path}' rebuilds its index from the intact chunks "
+                  "and reports what is lost")
+        return BagError(f"cannot read bag {_files(self.path)}: a damaged storage file "
+                        f"({type(exc).__name__}: {exc}); {repair}")
+
     def __enter__(self) -> _Bag:
         return self
 
@@ -227,7 +236,7 @@ class _Bag:
                                                       stop=stop):
                 yield conn, data if to_cdr is None else to_cdr(data, conn.msgtype)
         except Exception as exc:
-            raise BagError(f"cannot read bag {_files(self.path)}: {exc}") from exc
+            raise self._damaged(exc) from exc
 
     def decode(self, topic: str, msgtype: str, raw: list[bytes | memoryview]) -> Series:
         try:

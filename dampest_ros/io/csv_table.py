@@ -17,12 +17,18 @@ file, and where it applies the line of the file (1 = the header) and the column.
 
 The unit found is named on stderr by the commands (for a single CSV when it is not seconds),
 so a wrong guess is seen.
+
+**Size.** A file is size-checked before anything of it is read: over :func:`max_bytes`
+(:data:`MAX_MB` MB, or ``DAMPEST_MAX_CSV_MB``) it is refused, naming its size, the limit and
+what to do, since reading a table takes several times its size in memory (a 2 GB file took
+8–16 GB). The header line is read up to :data:`MAX_HEADER` characters.
 """
 
 from __future__ import annotations
 
 import csv as _csv
 import gzip
+import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -35,6 +41,37 @@ from dampest_ros.core.signals.measurements import FloatArray
 
 class CsvError(ValueError):
     """A CSV log cannot be read as asked; the message names the file and where."""
+
+
+#: Largest CSV file read (MB, 10⁶ bytes) unless ``DAMPEST_MAX_CSV_MB`` says otherwise.
+MAX_MB = 1000.0
+#: Longest header line read (characters).
+MAX_HEADER = 1 << 16
+
+
+def max_bytes() -> int:
+    """The largest CSV file read, in bytes: ``DAMPEST_MAX_CSV_MB`` (MB) or :data:`MAX_MB`."""
+    given = os.environ.get("DAMPEST_MAX_CSV_MB", "")
+    try:
+        mb = float(given) if given.strip() else MAX_MB
+    except ValueError:
+        raise CsvError(f"DAMPEST_MAX_CSV_MB must be a number of MB, got {given!r}") from None
+    return int(mb * 1e6)
+
+
+def check_size(path: Path) -> None:
+    """CsvError when the file at ``path`` is larger than :func:`max_bytes` (a missing file
+    passes: its reader names it)."""
+    try:
+        size = path.stat().st_size
+    except OSError:
+        return
+    limit = max_bytes()
+    if size > limit:
+        raise CsvError(f"{path}: {size / 1e6:.0f} MB, over the {limit / 1e6:.0f} MB limit for "
+                       "a CSV log (reading takes several times its size in memory); split it "
+                       "into shorter logs, or convert it to a bag, or raise the limit with "
+                       "DAMPEST_MAX_CSV_MB=N if the memory is there")
 
 
 #: Time units: name → seconds per unit, largest first.
@@ -59,15 +96,24 @@ def read_head(path: Path) -> tuple[list[str], list[str] | None]:
     Raises
     ------
     CsvError
-        An unreadable or empty file.
+        An unreadable, empty or too large file (:func:`check_size`), or a first line over
+        :data:`MAX_HEADER` characters.
     """
+    check_size(path)
     try:
         with open_text(path) as f:
-            reader = _csv.reader(f)
-            header = next(reader, None)
-            first = next(reader, None)
-    except (OSError, EOFError, UnicodeDecodeError, _csv.Error) as exc:  # e.g. a corrupt .gz
+            lines = [f.readline(MAX_HEADER + 1), f.readline(MAX_HEADER + 1)]
+    except (OSError, EOFError, UnicodeDecodeError) as exc:  # e.g. a corrupt .gz
         raise CsvError(f"{path}: cannot read: {exc}") from None
+    if len(lines[0]) > MAX_HEADER:
+        raise CsvError(f"{path}: the first line is over {MAX_HEADER} characters: not a CSV "
+                       "header (a binary file, or one without line ends?)")
+    try:
+        rows = list(_csv.reader(line for line in lines if line))
+    except _csv.Error as exc:
+        raise CsvError(f"{path}: cannot read: {exc}") from None
+    header = rows[0] if rows else None
+    first = rows[1] if len(rows) > 1 else None
     if not header:
         raise CsvError(f"{path}: empty file, expected a header line")
     return [h.strip() for h in header], first
@@ -98,6 +144,7 @@ def numeric_columns(path: Path, header: Sequence[str], names: Sequence[str]
     index = [list(header).index(n) for n in names]
     if not index:
         return {}
+    check_size(path)
     try:
         with warnings.catch_warnings():  # a header-only file is a valid empty table
             warnings.filterwarnings("ignore", "loadtxt: input contained no data")

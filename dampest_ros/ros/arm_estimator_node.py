@@ -17,8 +17,10 @@ and publishes it on dampest/arm_model (std_msgs/String with the model file YAML,
 local) and on /diagnostics (diagnostic_msgs/DiagnosticArray: per joint innovation RMS, noise
 and excitation, covariance trace, lag, the change alarms with their time and joints, and every
 counter: count.received, used, rejected_joints (messages without the arm's joints),
-rejected_fields (position or effort missing), rejected_nonfinite, dropped_out_of_order,
-clock_jumps, gaps, filter_errors, resume_refused) and what resume did. A change alarm is
+rejected_fields (position or effort missing), rejected_nonfinite, rejected_implausible (an
+effort over 10 × the joint's effort limit, a position far outside its limits:
+dampest_ros.core.arm.online.implausible), dropped_out_of_order, clock_jumps, gaps,
+filter_errors, resume_refused) and what resume did. A change alarm is
 published on /diagnostics at once. Services: ~/reset (std_srvs/Trigger, back to the prior),
 ~/save (Trigger, atomic write of the model file to save_path), ~/freeze (std_srvs/SetBool:
 stop or resume updating). With resume (default) it starts from the model file at save_path
@@ -281,6 +283,7 @@ class ArmEstimatorNode(EstimatorParamNode):
         d = e.rls.diagnostics(condition=False)
         values: dict[str, Any] = {f"count.{k}": v for k, v in self.counts.items()}
         values["count.gaps"] = e.gaps
+        values["count.rejected_implausible"] = e.rejected_implausible
         values["count.resume_refused"] = self.resume_refused
         values["resume"] = self.resumed
         values["model.version"] = self.version

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import inspect
 import math
+import re
 import sys
 import threading
 import time
@@ -26,6 +27,7 @@ from rclpy.callback_groups import CallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
@@ -144,6 +146,31 @@ class Drain:
                     took = True
             if not took:
                 return
+
+
+class TransportLosses:
+    """Messages lost between a topic's publisher and a subscription (a reader queue that
+    overflowed, a best-effort sample the network dropped), counted from the gaps in the
+    publication sequence numbers of the messages taken (rmw message info; Fast DDS raises no
+    message-lost event for them).
+
+    A gap counts only while the subscription has one matched publisher (several interleave
+    their numbers); a number that goes back (a restarted publisher) starts the topic afresh.
+    """
+
+    def __init__(self) -> None:
+        self.count = 0
+        self._last: dict[str, int] = {}
+
+    def seen(self, sub: Subscription, info: dict[str, Any]) -> None:
+        """Note a message taken from ``sub`` with its message ``info``."""
+        seq = info.get("publication_sequence_number")
+        if seq is None:
+            return
+        last = self._last.get(sub.topic_name)
+        self._last[sub.topic_name] = int(seq)
+        if last is not None and seq > last + 1 and sub.get_publisher_count() == 1:
+            self.count += int(seq) - last - 1
 
 
 def to_time(t: float) -> Time:
@@ -633,6 +660,35 @@ def watch_duplicates(node: Node, window: float = DUPLICATE_WINDOW) -> None:
     timer = node.create_timer(0.2, look, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
 
+#: How to write each kind of ROS argument, by the words of rcl's complaint about it (the
+#: first that matches).
+ROS_ARGUMENT_FIXES = (
+    ("trailing -p", "write -p NAME:=VALUE"),
+    ("trailing -r", "write -r FROM:=TO"),
+    ("trailing --params-file", "write --params-file FILE"),
+    ("parameter override", "write -p NAME:=VALUE with a YAML value, e.g. -p rate:=2.0, "
+     "-p reference:='[0.5, 0, 0, 0, 0, 0]', -p arm:=ur5"),
+    ("remap", "write -r FROM:=TO, e.g. -r joint_states:=/arm/joint_states or "
+     "-r __ns:=/vehicle"),
+    ("params file", "give an existing ROS 2 parameters file (/**: ros__parameters: NAME: "
+     "VALUE; every parameter with its default: config/{node}.params.yaml)"),
+    ("log level", "write --log-level LEVEL (debug, info, warn, error or fatal) or "
+     "--log-level NAME:=LEVEL"),
+)
+
+
+def ros_arguments_error(exc: Exception, node: str) -> str:
+    """One line for rcl's refusal of node ``node``'s ROS arguments
+    (``RCLInvalidROSArgsError``): the argument, what is wrong with it and how to write it,
+    without rcl's source locations and lexer details."""
+    text = re.sub(r",? at \S+\.c:\d+", "", str(exc)).replace("\n", " ")
+    text = re.sub(r"\. Error: (error not set|Expected lexeme .*)$", "", text.strip())
+    text = text.removeprefix("Failed to parse ROS arguments: ").rstrip(". ")
+    fix = next((f for words, f in ROS_ARGUMENT_FIXES if words in text),
+               "see the ROS 2 arguments: ros2 run --help")
+    return f"invalid ROS argument: {text}; {fix.format(node=node)}"
+
+
 def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
     """A console-script main(): ``--help`` lists the node's parameters; otherwise init, spin,
     stop on SIGINT, SIGTERM or external shutdown (status 0), destroy the node, shut down.
@@ -642,7 +698,9 @@ def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
     takes), a value rclpy refuses, or another node of the same fully qualified name in the
     graph within :data:`DUPLICATE_WINDOW` s of the start (:func:`watch_duplicates`). An
     error raised by a callback the shutdown interrupted (e.g. publishing on the context a
-    signal has just shut down) ends the node quietly too."""
+    signal has just shut down) ends the node quietly too. So does a ROS argument that rcl
+    cannot parse (``-p x:=``, a trailing ``-p``, ``-r a``, a missing or broken
+    ``--params-file``): :func:`ros_arguments_error` names it and how to write it."""
 
     def main(args: list[str] | None = None) -> None:
         argv = sys.argv if args is None else args
@@ -655,8 +713,13 @@ def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
                    "bad parameter, or another node of the same name and namespace\nalready "
                    "running, ends the node with one error line and exit status 2."
                    + _param_help(node_class))
-        parser.parse_args(remove_ros_args(argv)[1:])
-        rclpy.init(args=argv)
+        try:
+            parser.parse_args(remove_ros_args(argv)[1:])
+            rclpy.init(args=argv)
+        except rclpy_implementation.RCLInvalidROSArgsError as exc:
+            rclpy.logging.get_logger(name).error(
+                f"cannot start: {ros_arguments_error(exc, name)}")
+            raise SystemExit(2) from None
         node = None
         refused = False
         files: list[Any] = []  # the --params-file files (io.strict_yaml.YamlDoc)

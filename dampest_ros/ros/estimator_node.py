@@ -9,7 +9,9 @@ outside; the layout of the model file, as model_server_node has it), publishes i
 (diagnostic_msgs/DiagnosticArray: excitation per DOF, condition number, covariance trace,
 innovation RMS, CUSUM change alarm, and every drop counter: count.* of the messages per
 topic, matched, unmatched, used, rejected_nonfinite, dropped_out_of_order, rejected_outliers,
-clock_jumps, resume_refused) at publish_rate.
+clock_jumps, lost_in_transport (messages that never reached the node: gaps in their
+publication sequence numbers, e.g. a reader queue that overflowed at 10x replay),
+resume_refused) at publish_rate.
 Services: ~/reset (std_srvs/Trigger, back to the model it started from), ~/save (Trigger,
 atomic write of the model file to save_path), ~/freeze (std_srvs/SetBool: stop or resume
 updating). With resume (default) it starts from the model file at save_path with its version
@@ -30,6 +32,7 @@ from geometry_msgs.msg import (
     TwistWithCovarianceStamped,
     WrenchStamped,
 )
+from rclpy.subscription import Subscription
 from std_msgs.msg import String
 
 from dampest_ros.core.identification.model import Model
@@ -54,6 +57,7 @@ from dampest_ros.ros.common import (
     Drain,
     EstimatorParamNode,
     Param,
+    TransportLosses,
     diagnostic_array,
     main_for,
     model_file_check,
@@ -121,10 +125,13 @@ class EstimatorNode(EstimatorParamNode):
         # half the matching window per callback, so that a stream taken ahead never leaves
         # partial samples to expire; the publish timer takes what is left.
         self._samples = Drain(max(1, int(0.5 * self.estimator.cfg.max_pending * self.p("rate"))))
+        #: messages lost before they reached the estimator (count.lost_in_transport)
+        self.losses = TransportLosses()
+        self._subs: dict[str, Subscription] = {}
         for name, kind, width in streams:
-            self.create_subscription(
+            self._subs[name] = self.create_subscription(
                 kind, f"dampest/{name}",
-                lambda data, n=name, w=width: self._on_sample(n, *stamped_floats(data, w)),
+                lambda data, info, n=name, w=width: self._on_raw(n, w, data, info),
                 RELIABLE_QOS, raw=True, drain=self._samples,
                 callback_group=None if name == "attitude" else self._samples.passive)
         self.start_services()
@@ -188,6 +195,10 @@ class EstimatorNode(EstimatorParamNode):
 
     # --- inputs --------------------------------------------------------------------------------
 
+    def _on_raw(self, stream: str, width: int, data: bytes, info: dict[str, Any]) -> None:
+        self.losses.seen(self._subs[stream], info)
+        self._on_sample(stream, *stamped_floats(data, width))
+
     def _on_sample(self, stream: str, ns: int, value: np.ndarray) -> None:
         if ns < self._last_stamp - 1_000_000_000:
             self.get_logger().warning(f"sample clock jumped back by "
@@ -218,6 +229,7 @@ class EstimatorNode(EstimatorParamNode):
         values = est.diagnostic_values()
         values["model.version"] = self.version
         values["count.clock_jumps"] = self.clock_jumps
+        values["count.lost_in_transport"] = self.losses.count
         values["count.resume_refused"] = self.resume_refused
         values["resume"] = self.resumed
         d = est.rls.diagnostics(condition=False)

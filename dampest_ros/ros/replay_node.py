@@ -5,8 +5,12 @@ time, the intervals divided by rate, from start_offset seconds into the bag; opt
 loops, publishes /clock with the bag time (for use_sim_time listeners), plays only some
 topics and renames them. Publishers use the QoS recorded in the bag (reliable only when every
 recorded publisher was; override with reliability) and keep queue_depth messages. A topic
-whose message type is not installed is skipped with a warning. Progress is logged every
-progress_period seconds; when the bag has been played (and loop is false) the node waits up to
+whose message type is not installed is skipped with a warning. Before playing it waits until
+every played topic has wait_for_subscribers subscribers (1 by default: a message published
+before a subscriber is matched reaches no one), at most wait_for_subscribers_timeout seconds,
+then warns naming the topics without and plays. Progress is logged every progress_period
+seconds, counting the messages published and those published while their topic had a matched
+subscriber; when the bag has been played (and loop is false) the node waits up to
 wait_for_acked seconds until reliable subscribers have acknowledged every message, then exits.
 """
 
@@ -69,8 +73,12 @@ class ReplayNode(ParamNode):
               choices=("bag", "reliable", "best_effort"), read_only=True),
         Param("queue_depth", 1000, "publisher queue (messages)", low=1, high=1_000_000,
               read_only=True),
-        Param("wait_for_subscribers", 0, "before playing, wait until every played topic has "
-              "this many subscribers", low=0, high=1000, read_only=True),
+        Param("wait_for_subscribers", 1, "before playing, wait until every played topic has "
+              "this many matched subscribers; 0: play at once", low=0, high=1000,
+              read_only=True),
+        Param("wait_for_subscribers_timeout", 10.0, "seconds to wait for them; then a warning "
+              "names the topics without and playback starts", low=0.0, high=3600.0,
+              read_only=True),
         Param("delay", 0.0, "seconds to wait before playing (after wait_for_subscribers)",
               low=0.0, high=3600.0, read_only=True),
         Param("wait_for_acked", 5.0, "after the last message, seconds to wait until reliable "
@@ -118,6 +126,7 @@ class ReplayNode(ParamNode):
                 Clock, "/clock", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                                             durability=DurabilityPolicy.VOLATILE))
         self.published = 0
+        self.heard = 0  # published while the topic had a matched subscriber
         self.bag_time = 0
         self._anchor: tuple[float, int] | None = None  # (wall time, bag time) of the pace
         self._stop = threading.Event()
@@ -152,7 +161,10 @@ class ReplayNode(ParamNode):
                 self._wait_for_acked()
         except Exception as exc:  # a shut-down context while publishing: stop quietly
             if not self._stop.is_set() and self.context.ok():
-                self.get_logger().error(f"playback failed: {exc}")
+                self.get_logger().error(
+                    f"playback of {self.p('bag')} failed after {self.published} messages: "
+                    f"{type(exc).__name__}: {exc}; if the bag is damaged, 'dampest reindex "
+                    f"{self.p('bag')}' rebuilds its index from the intact chunks")
         finally:
             self._done.set()
             if not self._stop.is_set():
@@ -160,9 +172,20 @@ class ReplayNode(ParamNode):
                 self.context.try_shutdown()  # ends spin(): the node has done its job
 
     def _wait_to_start(self) -> bool:
+        """Wait for the subscribers (at most wait_for_subscribers_timeout s, then warn) and
+        the delay; False when stopped."""
         need = int(self.p("wait_for_subscribers"))
         pubs = set(self.pubs.values())
+        deadline = time.monotonic() + float(self.p("wait_for_subscribers_timeout"))
         while need and any(p.get_subscription_count() < need for p in pubs):
+            if time.monotonic() >= deadline:
+                lacking = sorted(p.topic_name for p in pubs if p.get_subscription_count() < need)
+                self.get_logger().warning(
+                    f"fewer than {need} subscriber(s) after "
+                    f"{float(self.p('wait_for_subscribers_timeout')):g} s on {lacking}; "
+                    "playing anyway: what they publish now reaches no one (play only the "
+                    "others with topics, or wait longer with wait_for_subscribers_timeout)")
+                break
             if self._stop.wait(0.05):
                 return False
         return not self._stop.wait(float(self.p("delay")))
@@ -177,8 +200,10 @@ class ReplayNode(ParamNode):
                                                       start=start):
                 if not self._sleep_until(t):
                     return
-                self.pubs[conn.id].publish(bytes(data))
+                pub = self.pubs[conn.id]
+                pub.publish(bytes(data))
                 self.published += 1
+                self.heard += pub.get_subscription_count() > 0
                 self.bag_time = t
             if not self.p("loop"):
                 return
@@ -237,11 +262,14 @@ class ReplayNode(ParamNode):
         into = max(self.bag_time - self.reader.start_time, 0) * 1e-9
         length = max(self.reader.duration - 1, 0) * 1e-9
         pct = 100.0 * self.published / max(self.total, 1)
+        heard = 100.0 * self.heard / max(self.published, 1)
         what = "finished" if final else "playing"
         cpu = time.process_time() - self._cpu0
-        self.get_logger().info(f"{what}: {self.published}/{self.total} messages "
-                               f"({pct:.0f} %), bag time {into:.1f} of {length:.1f} s, "
-                               f"CPU {cpu:.1f} s")
+        log = self.get_logger().warning if final and self.heard < self.published else \
+            self.get_logger().info
+        log(f"{what}: published {self.published}/{self.total} messages ({pct:.1f} %), "
+            f"{self.heard} ({heard:.1f} %) while their topic had a subscriber, bag time "
+            f"{into:.1f} of {length:.1f} s, CPU {cpu:.1f} s")
 
     def destroy_node(self) -> None:
         """Stop playback, close the bag, destroy the node."""

@@ -174,7 +174,7 @@ def test_every_ranged_and_choice_parameter_is_rejected_at_runtime_with_its_reaso
                 tried += 1
         finally:
             node.destroy_node()
-    assert tried == 41  # every ranged or choice parameter of the seven nodes
+    assert tried == 42  # every ranged or choice parameter of the seven nodes
 
 
 # --- two nodes of one name -----------------------------------------------------------------
@@ -248,7 +248,8 @@ def test_estimator_publishes_every_drop_counter_on_absolute_diagnostics(
         assert counts == {"velocity": 104, "acceleration": 102, "wrench": 102,
                           "attitude": 102, "matched": 101, "unmatched": 1,
                           "rejected_nonfinite": 1, "used": 50, "dropped_out_of_order": 1,
-                          "rejected_outliers": 0, "clock_jumps": 1, "resume_refused": 0}
+                          "rejected_outliers": 0, "clock_jumps": 1, "resume_refused": 0,
+                          "lost_in_transport": 0}
         assert values["resume"] == "off"
     finally:
         est.destroy_node()

@@ -16,6 +16,10 @@ Real joint streams are not a perfect clock: jitter and gaps follow the one rule 
 :mod:`dampest_ros.core.signals.resample` (jittered stamps resampled onto a uniform grid with
 the stretch's mean step before filtering; a step over ``GAP_PERIODS`` periods is a gap, across
 which nothing is filtered: :func:`filter_stretches` filters each gap-free stretch on its own).
+A stamp more than ``GAP_PERIODS`` periods before the one recorded just before it is a clock
+jump (the source restarted or reset its clock): the record is split there, the samples after
+it form stretches of their own on their own clock, and the jump is named (where, how far
+back). Smaller steps back are reordering and are sorted.
 """
 
 from __future__ import annotations
@@ -37,7 +41,12 @@ from dampest_ros.core.arm.fit import (
 from dampest_ros.core.arm.model import ArmModel
 from dampest_ros.core.arm.regressor import regressor
 from dampest_ros.core.signals.preprocess import zero_phase, zero_phase_many
-from dampest_ros.core.signals.resample import GAP_PERIODS, on_grid, step_gaps
+from dampest_ros.core.signals.resample import (
+    GAP_PERIODS,
+    increasing_runs,
+    on_grid,
+    step_gaps,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -219,6 +228,9 @@ class Stretches:
         Their length (s).
     duplicates : int
         Samples dropped for repeating an earlier stamp.
+    clock_jumps : tuple of (int, float, float)
+        Per clock jump: the recorded sample it comes before (0-based), the stamp before it
+        (s) and how far it goes back (s).
     """
 
     gaps: int
@@ -226,24 +238,40 @@ class Stretches:
     skipped: int
     seconds_skipped: float
     duplicates: int
+    clock_jumps: tuple[tuple[int, float, float], ...] = ()
 
     def describe(self) -> str:
         """One line for a log or a report ('' when the record had no gap)."""
         if not self.gaps and not self.duplicates:
             return ""
+        jumps = "".join(f"; the clock jumps back {back:.6g} s at sample {k} (after t = "
+                        f"{t:.6g} s): split there" for k, t, back in self.clock_jumps)
         return (f"{self.gaps} gap{'s' * (self.gaps != 1)}: {self.used} gap-free stretches "
                 f"filtered, {self.skipped} too short ({self.seconds_skipped:.3g} s) left out"
                 + (f"; {self.duplicates} samples with a repeated stamp dropped"
-                   if self.duplicates else ""))
+                   if self.duplicates else "") + jumps)
+
+
+def clock_jumps(t: FloatArray) -> NDArray[np.int64]:
+    """Indices i of recorded samples whose stamp t[i] lies more than
+    :data:`GAP_PERIODS` periods (the median forward step) before t[i − 1]: the source's
+    clock jumped back."""
+    dt = np.diff(np.asarray(t, dtype=float))
+    forward = dt[dt > 0]
+    if not len(forward):
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(dt < -GAP_PERIODS * float(np.median(forward))) + 1
 
 
 def filter_stretches(t: FloatArray, position: FloatArray, effort: FloatArray,
                      config: IdentifyConfig) -> tuple[Filtered, Stretches]:
     """:func:`filter_joints` on each gap-free stretch of a record, the results joined.
 
-    The samples are put in stamp order first (a repeated stamp keeps its first sample).
-    ``index`` of the result counts rows of the input as given; ``noise`` is the stretches'
-    RMS noise weighted by their length.
+    The record is split at its clock jumps (:func:`clock_jumps`), each part put in stamp
+    order (a repeated stamp keeps its first sample) and split at its gaps. ``index`` of the
+    result counts rows of the input as given; ``noise`` is the stretches' RMS noise weighted
+    by their length. After a clock jump ``t`` of the result starts again from the earlier
+    stamps.
 
     Parameters
     ----------
@@ -262,14 +290,18 @@ def filter_stretches(t: FloatArray, position: FloatArray, effort: FloatArray,
     ValueError
         If no stretch is long enough, or the rates do not fit.
     """
-    t = np.asarray(t, dtype=float)
-    order = np.argsort(t, kind="stable")
-    first = np.concatenate([[True], np.diff(t[order]) > 0.0])
-    order = order[first]
+    t = recorded = np.asarray(t, dtype=float)
+    jumps = clock_jumps(t)
+    orders = []
+    for part in np.split(np.arange(len(t)), jumps):
+        order = part[np.argsort(t[part], kind="stable")]
+        orders.append(order[np.concatenate([[True], np.diff(t[order]) > 0.0])])
+    order = np.concatenate(orders)
+    duplicates = len(t) - len(order)
     t, position, effort = t[order], np.asarray(position)[order], np.asarray(effort)[order]
     _require_samples(t)
     dt = np.diff(t)
-    period = float(np.median(dt))
+    period = float(np.median(dt[dt > 0.0]))
     bounds = np.concatenate([[0], step_gaps(dt, period) + 1, [len(t)]])
     parts: list[Filtered] = []
     skipped = 0.0
@@ -281,7 +313,8 @@ def filter_stretches(t: FloatArray, position: FloatArray, effort: FloatArray,
             continue
         parts.append(Filtered(f.t, f.q, f.qd, f.qdd, f.tau, f.noise, order[f.index + a]))
     info = Stretches(len(bounds) - 2, len(parts), len(bounds) - 1 - len(parts), float(skipped),
-                     int(np.count_nonzero(~first)))
+                     duplicates, tuple((int(k), float(recorded[k - 1]),
+                                        float(recorded[k - 1] - recorded[k])) for k in jumps))
     if not parts:
         need = 4 * _edge(1.0 / period, config) * period
         raise ShortDataError(f"no gap-free stretch of joint data is over {need:.3g} s long, "
@@ -339,13 +372,17 @@ def usable_rows(t: FloatArray, qd: FloatArray, config: IdentifyConfig) -> NDArra
     """
     use = np.abs(qd) >= config.min_speed
     window = 2.0 / config.cutoff
-    for j in range(qd.shape[1]):  # per joint (n columns), vectorised over samples
-        flips = t[1:][np.signbit(qd[1:, j]) != np.signbit(qd[:-1, j])]
-        if len(flips):
-            i = np.clip(np.searchsorted(flips, t), 1, len(flips)) - 1
-            near = np.minimum(np.abs(t - flips[i]),
-                              np.abs(t - flips[np.minimum(i + 1, len(flips) - 1)]))
-            use[:, j] &= near >= window
+    # each run of increasing t on its own (after a clock jump t starts again)
+    for run in increasing_runs(t):
+        tr = t[run]
+        for j in range(qd.shape[1]):  # per joint (n columns), vectorised over samples
+            sign = np.signbit(qd[run, j])
+            flips = tr[1:][sign[1:] != sign[:-1]]
+            if len(flips):
+                i = np.clip(np.searchsorted(flips, tr), 1, len(flips)) - 1
+                near = np.minimum(np.abs(tr - flips[i]),
+                                  np.abs(tr - flips[np.minimum(i + 1, len(flips) - 1)]))
+                use[run, j] &= near >= window
     return use
 
 

@@ -11,6 +11,12 @@ friction does not follow the Coulomb model (:func:`dampest_ros.core.arm.identify
 Jittered stamps are resampled onto a uniform grid in each window (as offline); at a gap
 (:func:`dampest_ros.core.arm.identify.gaps`: lost messages, a pause) the samples before it
 whose window is not complete are dropped and the stream starts afresh after it.
+
+Samples no arm produces are rejected before the filter (:func:`implausible`) and counted
+(:attr:`ArmEstimator.rejected_implausible`), as the vehicle estimator's outlier gate rejects
+implausible raw samples before its low-pass: a 1e200 N m effort is finite, but through the
+zero-phase filter it would spread over seconds of rows and take θ to ~1e195 with NaN σ. A
+rejected sample is a lost message: a gap, after which the stream starts afresh.
 """
 
 from __future__ import annotations
@@ -30,6 +36,33 @@ from dampest_ros.core.physics.rigid_body import FORCE_NAMES
 from dampest_ros.core.signals.resample import gaps
 
 FloatArray = NDArray[np.float64]
+
+#: A sample is implausible when an effort exceeds this many times its joint's effort limit,
+#: or a position lies outside the joint's limits widened by this many times their range.
+IMPLAUSIBLE_FACTOR = 10.0
+
+
+def implausible(arm: ArmModel, position: FloatArray, effort: FloatArray) -> NDArray[np.bool_]:
+    """Which samples no arm of this model produces, shape (N,): an effort over
+    :data:`IMPLAUSIBLE_FACTOR` × the joint's effort limit, or a position outside its limits
+    widened by that many times their range (joints whose limits are not positive and finite
+    are not judged).
+
+    Parameters
+    ----------
+    arm : ArmModel
+    position, effort : ndarray, shape (N, n)
+        rad, N m.
+    """
+    q, tau = np.asarray(position, dtype=float), np.asarray(effort, dtype=float)
+    limit = np.where(np.isfinite(arm.effort_limit) & (arm.effort_limit > 0),
+                     IMPLAUSIBLE_FACTOR * arm.effort_limit, np.inf)
+    span = arm.upper - arm.lower
+    judged = np.isfinite(span) & (span > 0)
+    low = np.where(judged, arm.lower - IMPLAUSIBLE_FACTOR * span, -np.inf)
+    high = np.where(judged, arm.upper + IMPLAUSIBLE_FACTOR * span, np.inf)
+    bad = (np.abs(tau) > limit) | (q < low) | (q > high)
+    return np.asarray(bad.any(axis=1))
 
 
 @dataclass(frozen=True)
@@ -106,6 +139,7 @@ class ArmEstimator:
                                          np.asarray(std0, dtype=float) ** 2, rls)
         self.std0 = np.asarray(std0, dtype=float)
         self.gaps = 0  # gaps in the samples: the stream restarted after each
+        self.rejected_implausible = 0  # samples no arm produces (:func:`implausible`)
         self.clear()
         self.alarms: list[float] = []  # times of the change alarms (s)
         self.alarm_joints: list[list[str]] = []  # per alarm: e.g. ['elbow_joint gain+']
@@ -157,11 +191,14 @@ class ArmEstimator:
         Returns
         -------
         int
-            RLS updates made.
+            RLS updates made. Implausible samples are left out and counted in
+            :attr:`rejected_implausible`.
         """
-        self._t = np.concatenate([self._t, np.asarray(t, dtype=float)])
-        self._q = np.concatenate([self._q, np.asarray(position, dtype=float)])
-        self._tau = np.concatenate([self._tau, np.asarray(effort, dtype=float)])
+        keep = ~implausible(self.arm, position, effort)
+        self.rejected_implausible += int(np.count_nonzero(~keep))
+        self._t = np.concatenate([self._t, np.asarray(t, dtype=float)[keep]])
+        self._q = np.concatenate([self._q, np.asarray(position, dtype=float)[keep]])
+        self._tau = np.concatenate([self._tau, np.asarray(effort, dtype=float)[keep]])
         if len(self._t) < 2:
             return 0
         period = float(np.median(np.diff(self._t[-101:])))

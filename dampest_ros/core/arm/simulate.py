@@ -15,6 +15,9 @@ from dampest_ros.core.arm.model import ArmModel, JointDynamics
 
 FloatArray = NDArray[np.float64]
 
+#: rad: a joint this far off its trajectory (or a non-finite state) means the run diverged.
+DIVERGED = np.pi
+
 
 @dataclass(frozen=True)
 class ArmSensors:
@@ -101,7 +104,7 @@ def simulate_arm(mjcf_xml: str, arm: ArmModel, nominal: JointDynamics,
         Closed-loop natural frequency ω_n (rad/s): K_p = ω_n², K_d = 2 ω_n.
     payload : (float, float), optional
         (mass in kg, time in s): a point mass attached at the last link's origin at that
-        time (a tool picked up mid-run).
+        time (a tool picked up mid-run); the mass finite and > 0, the time within the run.
 
     Returns
     -------
@@ -110,7 +113,10 @@ def simulate_arm(mjcf_xml: str, arm: ArmModel, nominal: JointDynamics,
     Raises
     ------
     ValueError
-        If the sample period is not a whole number of MuJoCo steps.
+        If the sample period is not a whole number of MuJoCo steps, the payload is not a
+        positive mass within the run, or the run diverges: a non-finite state, or a joint
+        :data:`DIVERGED` rad off its trajectory (a trajectory or payload the controller
+        cannot follow).
     """
     import mujoco
     import pinocchio as pin  # type: ignore[import-untyped]
@@ -123,6 +129,8 @@ def simulate_arm(mjcf_xml: str, arm: ArmModel, nominal: JointDynamics,
     if every < 1 or abs(every * dt * rate - 1.0) > 1e-9:
         raise ValueError(f"sample rate {rate} Hz is not a whole number of MuJoCo steps "
                          f"of {dt} s; use {1.0 / dt:g} Hz divided by an integer")
+    if payload is not None:
+        _check_payload(payload, duration)
     pm, pd = arm.pinocchio()
     steps = round(duration / dt)
     t_all = np.arange(steps, dtype=float) * dt
@@ -150,6 +158,7 @@ def simulate_arm(mjcf_xml: str, arm: ArmModel, nominal: JointDynamics,
         data.ctrl[:] = tau
         mujoco.mj_step(model, data)
         if k % every == 0:
+            _check_tracking(t_all[k], q, v, tau, q_des[k], arm.names)
             out["q"][row], out["qd"][row], out["tau"][row] = q, v, tau
             out["qdd"][row] = data.qacc  # the acceleration of this step's state and torque
             row += 1
@@ -161,3 +170,29 @@ def simulate_arm(mjcf_xml: str, arm: ArmModel, nominal: JointDynamics,
               + rng.normal(size=out["tau"].shape) * np.asarray(sensors.torque_sigma, float))
     return ArmRun(t=t_all[keep], q=out["q"], qd=out["qd"], qdd=out["qdd"], tau=out["tau"],
                   position=position, velocity=velocity, effort=effort)
+
+
+def _check_payload(payload: tuple[float, float], duration: float) -> None:
+    """ValueError unless the payload is a finite positive mass attached within the run."""
+    mass, at = payload
+    if not (np.isfinite(mass) and mass > 0):
+        raise ValueError(f"payload mass must be finite and > 0 kg, got {mass:g}")
+    if not 0.0 <= at < duration:
+        raise ValueError(f"payload time {at:g} s is not within the {duration:g} s run; "
+                         f"attach it between 0 and {duration:g} s")
+
+
+def _check_tracking(t: float, q: FloatArray, v: FloatArray, tau: FloatArray,
+                    q_des: FloatArray, names: tuple[str, ...]) -> None:
+    """ValueError when the state at ``t`` is not finite or a joint is :data:`DIVERGED` rad
+    off its trajectory."""
+    state = np.concatenate([q, v, tau, q_des])
+    if not np.all(np.isfinite(state)):
+        raise ValueError(f"the simulation diverged at t = {t:.3f} s: the state or the "
+                         "trajectory is not finite (check the trajectory file's numbers)")
+    off = np.abs(q - q_des)
+    j = int(np.argmax(off))
+    if off[j] > DIVERGED:
+        raise ValueError(f"the simulation diverged at t = {t:.3f} s: {names[j]} is "
+                         f"{off[j]:.3g} rad off its trajectory (the controller cannot follow "
+                         "it: a lighter payload or a slower trajectory)")

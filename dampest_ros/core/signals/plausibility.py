@@ -19,6 +19,8 @@ field, and the likely cause:
 
 Nothing here changes data: the caller prints the lines (:func:`frame_notes`); the command
 line refuses a log with a frame mistake unless told the frames are right.
+:func:`unusable_samples` says why preprocessed samples cannot be compared with a model at all
+(non-finite values, velocities or forces that never change).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from dampest_ros.core.signals.measurements import (
     TwistSeries,
     WrenchSeries,
 )
+from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
 
@@ -219,3 +222,32 @@ def frame_notes(series: Mapping[str, Series], gravity: float) -> FrameNotes:
         yaw = yaw_rate_note(topic, s.stamp, R, s.angular_velocity)
         errors += [n for n in (gravity_line, tilt, yaw) if n]
     return FrameNotes(errors, warnings)
+
+
+#: Quantities of a sample, as :func:`unusable_samples` names them, with the largest magnitude
+#: any vehicle reaches (m/s and rad/s, m/s² and rad/s², N and N·m).
+_QUANTITIES = (("velocity ν", "nu", "u v w p q r", 1e3),
+               ("acceleration ν̇", "nu_dot", "u v w p q r", 1e5),
+               ("force τ", "tau", "X Y Z K M N", 1e12))
+
+
+def unusable_samples(samples: Samples) -> str | None:
+    """Why ``samples`` cannot be compared with a model (None: they can): a velocity,
+    acceleration or force that is not finite or beyond any vehicle's (the first named with
+    its time: e.g. a 1e308 cell), or velocities or forces constant over the whole log (an
+    all-zero log, columns never filled)."""
+    for what, field, axes, limit in _QUANTITIES:
+        values = getattr(samples, field)
+        bad = ~(np.abs(values) <= limit)
+        if bad.any():
+            k, j = np.argwhere(bad)[0]
+            return (f"{what} {axes.split()[j]} is {values[k, j]:.6g} at t = "
+                    f"{samples.t[k]:.6g} s ({int(bad.any(axis=1).sum())} samples not finite "
+                    f"or over {limit:g}): a damaged cell in the log? fix or drop those rows")
+    for what, field, _, _ in (_QUANTITIES[0], _QUANTITIES[2]):
+        values = getattr(samples, field)
+        if len(values) and np.all(np.ptp(values, axis=0) == 0.0):
+            return (f"{what} is constant over the whole log "
+                    f"({np.round(values[0], 6).tolist()}): nothing moved, or the columns or "
+                    "topics were never filled")
+    return None

@@ -56,6 +56,12 @@ def gaps(t: FloatArray, period: float | None = None) -> NDArray[np.int64]:
     return step_gaps(dt, period)
 
 
+def increasing_runs(t: FloatArray) -> list[NDArray[np.int64]]:
+    """The indices of ``t`` (shape (N,), s) split where it does not increase (a clock that
+    jumped back): each run increases."""
+    return np.split(np.arange(len(t)), np.flatnonzero(np.diff(t) <= 0.0) + 1)
+
+
 def interpolate(t_new: FloatArray, t: FloatArray, x: FloatArray) -> FloatArray:
     """Columns of ``x`` (shape (N, n), sampled at increasing ``t``, s) linearly interpolated
     at ``t_new`` (shape (M,)); shape (M, n)."""

@@ -1,0 +1,40 @@
+"""Messages that named nothing: a damaged MCAP chunk is named with its bag and the repair."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from dampest_ros.cli.main import main
+
+
+def damaged_copy(src: Path, dst: Path) -> Path:
+    """A copy of bag ``src`` whose middle chunk claims an uncompressed size of 2⁶⁴ − 1."""
+    dst.mkdir()
+    for f in src.iterdir():
+        (dst / f.name).write_bytes(f.read_bytes())
+    mcap = next(dst.glob("*.mcap"))
+    with mcap.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    chunk = summary.chunk_indexes[len(summary.chunk_indexes) // 2]
+    data = bytearray(mcap.read_bytes())
+    at = chunk.chunk_start_offset + 1 + 8 + 24  # opcode, length, start and end times
+    data[at:at + 8] = b"\xff" * 8
+    mcap.write_bytes(bytes(data))
+    return dst
+
+
+def test_a_damaged_chunk_names_the_bag_and_dampest_reindex(
+        sim_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Was: 'cannot read bag …: Chunk checksum mismatch.' (or 'Python int too large to
+    convert to C ssize_t'), without the way to recover what is intact."""
+    bag = damaged_copy(sim_bag, tmp_path / "damaged")
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f"a damaged storage file (ReaderError: Chunk checksum mismatch.); "
+                        f"'dampest reindex {bag}' rebuilds its index from the intact chunks "
+                        "and reports what is lost"), err
+    assert len(err.splitlines()) == 1
