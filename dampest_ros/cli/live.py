@@ -353,13 +353,28 @@ def _report(args: argparse.Namespace, out: Path, flight: Flight,
 
 def _time_callbacks(node: Any) -> dict[str, float]:
     """Accumulate the thread CPU time spent in a node's subscription callbacks."""
-    acc = {"cpu": 0.0}
-    for sub in node.subscriptions:
-        cb = sub.callback
+    import inspect
 
-        def timed(msg: Any, cb: Any = cb) -> None:
+    acc = {"cpu": 0.0}
+
+    def timed(cb: Any) -> Any:
+        # the same arity as the callback: rclpy passes the message info by the signature
+        def message(msg: Any) -> None:
             c = time.thread_time()
             cb(msg)
             acc["cpu"] += time.thread_time() - c
-        sub.callback = timed
+
+        def with_info(msg: Any, info: Any) -> None:
+            c = time.thread_time()
+            cb(msg, info)
+            acc["cpu"] += time.thread_time() - c
+
+        try:
+            inspect.signature(cb).bind(object())
+        except TypeError:
+            return with_info
+        return message
+
+    for sub in node.subscriptions:
+        sub.callback = timed(sub.callback)
     return acc
