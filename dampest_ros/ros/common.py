@@ -720,6 +720,9 @@ def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
             rclpy.logging.get_logger(name).error(
                 f"cannot start: {ros_arguments_error(exc, name)}")
             raise SystemExit(2) from None
+        except KeyboardInterrupt:  # SIGINT while starting: a clean stop, as once running
+            rclpy.try_shutdown()
+            return
         node = None
         refused = False
         files: list[Any] = []  # the --params-file files (io.strict_yaml.YamlDoc)

@@ -5,25 +5,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from dampest_ros.cli.main import main
-from dampest_ros.core.identification.model import Model
-from dampest_ros.io.yaml_io import load_vehicle, save_model
 
 
 @pytest.fixture(scope="module")
 def csv_log(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """20 s of the BlueROV2 Heavy as a CSV log, and its nominal damping as a model file."""
+    """20 s of the BlueROV2 Heavy as a CSV log, and its damping as a model file (the
+    simulator's truth, which carries the vehicle's identity)."""
     d = tmp_path_factory.mktemp("gap")
     assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B", "--duration",
                  "20", "--seed", "1", "--csv", str(d / "log.csv"), "--out", str(d / "bag")]) == 0
-    v = load_vehicle("bluerov2_heavy")
-    model = save_model(d / "nominal.yaml", Model(v.damping.parameter_names, v.theta,
-                                                 0.1 * np.abs(v.theta) + 0.01, v.body.M,
-                                                 damping=v.damping))
-    return d / "log.csv", model
+    return d / "log.csv", d / "bag" / "truth_model.yaml"
 
 
 def edited(src: Path, dst: Path, edit: str) -> Path:
