@@ -66,6 +66,10 @@ def test_replay_waits_for_a_subscriber_and_every_message_reaches_it(
     assert main(["replay", str(sim_bag), "--topics", "imu/data", "--rate", "30",
                  "--reliability", "reliable"]) == 0
     err = capfd.readouterr().err
+    # acknowledged is in the listener's reader queue; its thread may not have taken it yet
+    deadline = time.monotonic() + 10.0
+    while len(imu_listener) < total and time.monotonic() < deadline:
+        time.sleep(0.05)
     assert len(imu_listener) == total == 6001
     assert (f"finished: published {total}/{total} messages (100.0 %), {total} (100.0 %) while "
             "their topic had a subscriber") in err
