@@ -17,6 +17,7 @@ tau_X … tau_N       generalized force on the vehicle (thrusters)            N,
 rpm_<name>          optional: rotor speed of a thruster                     rev/min
 thrust_<name>       optional: thrust of a thruster                          N
 roll, pitch, yaw    optional: ZYX Euler angles of FRD in NED                rad
+qx, qy, qz, qw      optional, instead: unit quaternion of FRD in NED        —
 segment             optional: index of the gap-free stretch                 —
 ==================  ======================================================  ==========
 
@@ -80,7 +81,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.physics.frames import matrix_from_euler
+from dampest_ros.core.physics.frames import euler_from_matrix, matrix_from_euler, quat_to_matrix
 from dampest_ros.core.physics.thrusters import Thrusters
 from dampest_ros.core.signals.measurements import FloatArray
 from dampest_ros.core.signals.resample import GAP_PERIODS, resample_uniform
@@ -254,6 +255,11 @@ def load_column_map(path: str | Path) -> dict[str, str]:
 #: Optional columns that :func:`samples_to_columns` writes and :func:`samples_from_columns`
 #: reads: attitude (ZYX Euler angles of FRD in NED, rad) and the gap-free segment index.
 ATTITUDE_COLUMNS = ("roll", "pitch", "yaw")
+#: The attitude as a unit quaternion of FRD in NED (x, y, z, w), read when roll, pitch, yaw
+#: are absent.
+QUATERNION_COLUMNS = ("qx", "qy", "qz", "qw")
+#: Largest | |q| − 1 | of a quaternion row read as an attitude.
+QUATERNION_TOLERANCE = 0.01
 
 
 def _stack(columns: Mapping[str, FloatArray], names: Sequence[str]) -> FloatArray:
@@ -420,7 +426,8 @@ def uniform_clock(columns: Mapping[str, FloatArray], max_gap: float = 1.0
 def used_column(name: str) -> bool:
     """Whether :func:`read_log` reads a column (our name)."""
     return name in (*BASE_COLUMNS, *ACCELERATION_COLUMNS, *FORCE_COLUMNS,
-                    *SPECIFIC_FORCE_COLUMNS, *GYRO_COLUMNS, *ATTITUDE_COLUMNS, "segment") \
+                    *SPECIFIC_FORCE_COLUMNS, *GYRO_COLUMNS, *ATTITUDE_COLUMNS,
+                    *QUATERNION_COLUMNS, "segment") \
         or name.startswith(("thrust_", "rpm_"))
 
 
@@ -504,6 +511,7 @@ def interpret_columns(columns: Mapping[str, FloatArray], thrusters: Thrusters | 
     """
     out = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
     notes: list[str] = []
+    _attitude_from_quaternion(out, where, notes)
     nu = _stack(out, VELOCITY_COLUMNS)
     lin = _linear_acceleration(out, nu, gravity, declared, where, notes)
     ang = _angular_acceleration(out, nu, declared, where, max_gap, notes)
@@ -512,6 +520,32 @@ def interpret_columns(columns: Mapping[str, FloatArray], thrusters: Thrusters | 
                        (FORCE_COLUMNS, tau)):
         out.update({n: arr[:, i] for i, n in enumerate(names)})
     return out, notes
+
+
+def _attitude_from_quaternion(columns: dict[str, FloatArray], where: str,
+                              notes: list[str]) -> None:
+    """Add roll, pitch, yaw (rad) from ``qx, qy, qz, qw`` when the log has the quaternion
+    and not the angles (in place; a note says so).
+
+    Raises
+    ------
+    ValueError
+        A row whose quaternion is not of unit norm (within :data:`QUATERNION_TOLERANCE`):
+        the columns are something else, or another convention.
+    """
+    if any(c in columns for c in ATTITUDE_COLUMNS) or \
+            not all(c in columns for c in QUATERNION_COLUMNS):
+        return
+    xyzw = _stack(columns, QUATERNION_COLUMNS)
+    norm = np.linalg.norm(xyzw, axis=1)
+    bad = np.flatnonzero(~(np.abs(norm - 1.0) <= QUATERNION_TOLERANCE))
+    if bad.size:
+        raise ValueError(f"{where}: qx, qy, qz, qw of row {int(bad[0]) + 1} have norm "
+                         f"{norm[bad[0]]:.6g}, not 1: give unit quaternions of FRD in NED "
+                         "(x, y, z, w), or roll, pitch, yaw columns")
+    R = quat_to_matrix(xyzw[:, [3, 0, 1, 2]] / norm[:, None])  # [x, y, z, w] → [w, x, y, z]
+    columns.update(zip(ATTITUDE_COLUMNS, euler_from_matrix(R).T, strict=True))
+    notes.append(f"{where}: attitude from the quaternion columns qx, qy, qz, qw (FRD in NED)")
 
 
 def _down(columns: Mapping[str, FloatArray], n: int) -> FloatArray:

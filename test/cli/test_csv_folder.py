@@ -227,3 +227,34 @@ def test_single_csv_in_ms_with_uneven_time_is_resampled(
     ratio = np.abs(a.theta - b.theta) / a.theta_std
     # measured: max |Δθ|/σ = 1.17 (sampled at jittered times, interpolated back: twice)
     assert ratio.max() < 3.0, dict(zip(a.parameter_names, ratio.round(2), strict=True))
+
+
+def test_single_csv_with_quaternion_columns_identifies_as_with_euler_angles(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Attitude as qx, qy, qz, qw (FRD in NED) instead of roll, pitch, yaw: the same θ to
+    rounding, and a note saying where the attitude came from; a column that is not a unit
+    quaternion is refused by row."""
+    from dampest_ros.core.physics.frames import matrix_from_euler, matrix_to_quat
+
+    euler_csv = tmp_path / "euler.csv"
+    assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B", "--duration",
+                 "60", "--seed", "9", "--out", str(tmp_path / "sim"), "--csv",
+                 str(euler_csv)]) == 0
+    cols = dcsv.read_csv(euler_csv, required=("time",))
+    wxyz = matrix_to_quat(matrix_from_euler(np.stack([cols.pop(n) for n in
+                                                      ("roll", "pitch", "yaw")], axis=1)))
+    cols.update(zip(("qw", "qx", "qy", "qz"), wxyz.T, strict=True))
+    dcsv.write_csv(tmp_path / "quat.csv", cols)
+    capsys.readouterr()
+    models = []
+    for name in ("euler", "quat"):
+        assert main(["identify", str(tmp_path / f"{name}.csv"), "--vehicle", "bluerov2_heavy",
+                     "--out", str(tmp_path / f"{name}.yaml")]) == 0
+        models.append(load_model(tmp_path / f"{name}.yaml"))
+    assert "attitude from the quaternion columns qx, qy, qz, qw" in capsys.readouterr().err
+    np.testing.assert_allclose(models[1].theta, models[0].theta, rtol=1e-9, atol=1e-12)
+    cols["qw"] = cols["qw"] * 2.0
+    dcsv.write_csv(tmp_path / "bad.csv", cols)
+    assert main(["identify", str(tmp_path / "bad.csv"), "--vehicle", "bluerov2_heavy"]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()[-1:]
+    assert "qx, qy, qz, qw of row 1 have norm" in line and "not 1" in line, line

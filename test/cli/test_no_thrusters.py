@@ -233,3 +233,58 @@ def test_preprocess_node_takes_the_wrench_topic_without_thrusters(run: Path) -> 
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def test_a_commanded_wrench_that_leads_by_half_a_second_is_found_and_removed(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A vehicle that logs the wrench it commands (the thrust acts 0.5 s later): --delay auto
+    on the wrench topic finds 0.5 s with its σ, and the truth is back within 3σ of every
+    coefficient the truth has; a vehicle file without thrusters."""
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B", "--duration",
+                 "150", "--seed", "8", "--out", str(sim), "--effects", "{delay: 0.5}"]) == 0
+    rec = read_bag(sim)
+    joints = rec.pop("thrusters/state")
+    assert isinstance(joints, JointSeries) and HEAVY.thrusters is not None
+    tau_flu = frames.body_twist(thruster_wrench(joints, HEAVY.thrusters))
+    rec["wrench"] = WrenchSeries(joints.stamp, "base_link", tau_flu[:, :3], tau_flu[:, 3:])
+    rec.pop("truth/odom", None)
+    write_bag(tmp_path / "commanded", rec)
+    doc = yaml.safe_load(vehicle_path("bluerov2_heavy").read_text())
+    del doc["thrusters"]
+    (tmp_path / "bare.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    capsys.readouterr()
+    out = tmp_path / "model.yaml"
+    identify(tmp_path / "commanded", str(tmp_path / "bare.yaml"), out, "--wrench-topic",
+             "wrench", "--delay", "auto")
+    line = capsys.readouterr().err.split("after the thrust:")[1].splitlines()[0]
+    delay_ms, std_ms = (float(x) for x in line.split(" (")[0].replace("ms", "").split("±"))
+    assert abs(delay_ms - 500.0) <= 10.0 and 0.0 < std_ms < 2.0, line
+    est, truth = load_model(out), load_model(sim / "truth_model.yaml")
+    for name, value, sd, t in zip(est.parameter_names, est.theta, est.theta_std, truth.theta,
+                                  strict=True):
+        if t:
+            assert abs(value - t) <= 3.0 * sd, (name, value, sd, t)
+
+
+def test_the_commanded_wrench_lead_is_found_on_the_mujoco_torpedo(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The same on physics we did not write (MuJoCo's torpedo, 120 s, thrust acting 0.5 s
+    after the logged wrench): measured 503.3 ± 2.6 ms."""
+    sim = tmp_path / "sim"
+    torpedo = load_vehicle("torpedo_auv")
+    assert main(["simulate", "--backend", "mujoco", "--vehicle", "torpedo_auv", "--protocol",
+                 "B", "--duration", "120", "--seed", "3", "--out", str(sim), "--effects",
+                 "{delay: 0.5}"]) == 0
+    rec = read_bag(sim)
+    joints = rec.pop("thrusters/state")
+    assert isinstance(joints, JointSeries) and torpedo.thrusters is not None
+    tau_flu = frames.body_twist(thruster_wrench(joints, torpedo.thrusters))
+    rec["wrench"] = WrenchSeries(joints.stamp, "base_link", tau_flu[:, :3], tau_flu[:, 3:])
+    write_bag(tmp_path / "commanded", rec)
+    capsys.readouterr()
+    assert main(["identify", str(tmp_path / "commanded"), "--vehicle", "torpedo_auv",
+                 "--wrench-topic", "wrench", "--delay", "auto"]) == 0
+    line = capsys.readouterr().err.split("after the thrust:")[1].splitlines()[0]
+    delay_ms, std_ms = (float(x) for x in line.split(" (")[0].replace("ms", "").split("±"))
+    assert abs(delay_ms - 500.0) <= max(3.0 * std_ms, 10.0) and std_ms < 10.0, line

@@ -13,6 +13,8 @@ field, and the likely cause:
   orientation, Rᵀ e_z, and from the accelerometer, f / |f|, agree within 15°.
 - **yaw rate**: the gyro's rate about the world's up axis, (R ω)_z, follows the derivative of
   the orientation's heading ψ = atan2(R₂₁, R₁₁); slope below −0.5: one of them is FRD/NED.
+- **depth**: with a position (nav_msgs/Odometry) and a pressure sensor, z (ENU: up) falls
+  as the pressure grows; rising with it: NED z inside an ENU message.
 - **constant fields**: a field of a used topic that never changes over the log (all zeros:
   not filled). An IMU's all-zero gyro or accelerometer is not among them: the preprocessing
   replaces it and says so (:mod:`.sources`).
@@ -158,6 +160,38 @@ SUBSTITUTED_FIELDS: dict[type[Series], tuple[str, ...]] = {
 }
 
 
+#: Pressure spread (Pa, about 1 cm of water) below which depth and z are not compared.
+MIN_PRESSURE_SPREAD = 100.0
+
+
+def depth_note(pressure_topic: str, pressure: PressureSeries, odom_topic: str,
+               odom: OdometrySeries) -> str | None:
+    """The depth line when a position's z rises as the pressure grows, or None.
+
+    In ENU, z is up: deeper water (more pressure) means a lower z, so the two correlate
+    negatively; a correlation above +0.5 says the position is NED (down) in an ENU message.
+
+    Parameters
+    ----------
+    pressure_topic, odom_topic : str
+    pressure : PressureSeries
+        Absolute pressure (Pa).
+    odom : OdometrySeries
+        Position (m, ENU).
+    """
+    if len(pressure) < 10 or len(odom) < 10 or np.ptp(pressure.fluid_pressure) < (
+            MIN_PRESSURE_SPREAD) or np.any(np.diff(odom.stamp) <= 0):
+        return None
+    z = np.interp(pressure.stamp, odom.stamp, odom.position[:, 2])
+    if np.ptp(z) == 0:
+        return None
+    corr = float(np.corrcoef(pressure.fluid_pressure, z)[0, 1])
+    if not corr > 0.5:
+        return None
+    return (f"{odom_topic}: pose.position.z rises as the pressure on {pressure_topic} grows "
+            f"(correlation {corr:+.2f}, −1 expected): z is NED (down) inside an ENU message")
+
+
 def constant_notes(topic: str, series: Series) -> list[str]:
     """One line per used field (:data:`USED_FIELDS`) of ``series`` that does not change over
     the log, a vector field's columns named by index."""
@@ -221,6 +255,11 @@ def frame_notes(series: Mapping[str, Series], gravity: float) -> FrameNotes:
         tilt = None if gravity_line else tilt_note(topic, R, f, gravity)
         yaw = yaw_rate_note(topic, s.stamp, R, s.angular_velocity)
         errors += [n for n in (gravity_line, tilt, yaw) if n]
+    pressures = [(t, s) for t, s in series.items() if isinstance(s, PressureSeries)]
+    positions = [(t, s) for t, s in series.items() if isinstance(s, OdometrySeries)]
+    for (pt, p), (ot, o) in ((a, b) for a in pressures for b in positions):
+        line = depth_note(pt, p, ot, o)
+        errors += [line] if line else []
     return FrameNotes(errors, warnings)
 
 

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dampest_ros.core.signals.measurements import ImuSeries, Series
+from dampest_ros.core.signals.measurements import ImuSeries, OdometrySeries, Series
 from dampest_ros.core.signals.plausibility import FrameNotes, frame_notes
 from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.sensors import measure
@@ -90,3 +90,15 @@ def test_an_imu_without_gyro_or_accelerometer_gives_no_line(recording: dict[str,
     s = imu(recording)
     empty = replace(s, **{field: np.zeros_like(getattr(s, field))})
     assert frame_notes({"imu/data": empty}, G) == FrameNotes([], [])
+
+
+def test_a_ned_position_in_an_enu_message_is_named(recording: dict[str, Series]) -> None:
+    """z that rises with the pressure: NED inside ENU (the clean log's z falls with it)."""
+    odom, pressure = recording["truth/odom"], recording["pressure"]
+    assert isinstance(odom, OdometrySeries)
+    clean = frame_notes({"truth/odom": odom, "pressure": pressure}, G)
+    assert clean.errors == []
+    ned = replace(odom, position=odom.position * [1.0, 1.0, -1.0])
+    (line,) = frame_notes({"truth/odom": ned, "pressure": pressure}, G).errors
+    assert line.startswith("truth/odom: pose.position.z rises as the pressure on pressure grows")
+    assert "NED (down) inside an ENU message" in line
