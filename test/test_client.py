@@ -311,7 +311,8 @@ def test_bad_model_at_runtime_is_refused_and_the_client_keeps_the_last_good_one(
         # model_server_node: the bad file is rejected with the reason, the model stays
         result = server.set_parameters([Parameter("model_file", value=str(bad))])[0]
         assert not result.successful
-        assert result.reason.startswith("model_file: model.theta: not finite: X_u = nan")
+        assert result.reason.startswith(f"model_file: {bad}:")
+        assert ": model.theta: not finite: X_u = nan" in result.reason
         assert server.version == 4 and server.p("model_file") == str(good)
         # the faulty server publishes a NaN theta: the client keeps version 4 and says why
         theta = list(fake.get_parameter("model.theta").value)

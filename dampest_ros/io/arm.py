@@ -23,8 +23,9 @@ from dampest_ros.core.physics.identity import Identity
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.signals.measurements import JointSeries, Series
 from dampest_ros.io.bag import bag_summary, read_bag, write_bag
-from dampest_ros.io.schema import load_checked
-from dampest_ros.io.yaml_io import atomic_write
+from dampest_ros.io.schema import check, load_checked
+from dampest_ros.io.strict_yaml import InputError, load_yaml
+from dampest_ros.io.yaml_io import atomic_write, located, model_section
 
 FloatArray = NDArray[np.float64]
 
@@ -359,35 +360,43 @@ def load_arm_model(path: str | Path) -> ArmEstimate:
     Raises
     ------
     ArmDataError
-        If the file is missing, not an arm model file, or has non-finite or mismatched
-        entries (named).
+        ``<file>:<line>: model.<key>: <what>; <fix>``: the file is missing, not an arm model
+        file, violates the arm model schema (``dampest_ros/schemas/arm_model.schema.json``:
+        an unknown or misspelt key, a missing one, a wrong type), has lists of unequal
+        lengths or non-finite numbers.
     """
     try:
-        doc = yaml.safe_load(Path(path).read_text())
-        m = doc["/**"]["ros__parameters"]["model"]
+        doc = load_yaml(path)
+        where, m = model_section(doc)
         if m.get("kind") != ARM_MODEL_KIND:
-            raise KeyError(f"model.kind is {m.get('kind')!r}, not {ARM_MODEL_KIND!r}")
+            raise located(doc, where, ConfigError(
+                "model.kind", f"{m.get('kind')!r}, not {ARM_MODEL_KIND!r}: not an arm's model "
+                              "file; write one with 'dampest arm identify --out' or "
+                              "arm_estimator_node's ~/save"))
+        check(doc, "arm_model", skip=2)
         names = [str(x) for x in m["parameter_names"]]
-        theta = np.asarray(m["theta"], dtype=float)
-        std = np.asarray(m["theta_std"], dtype=float)
-        identified = np.asarray(m["identified"], dtype=bool)
-        identity = (Identity.from_dict(m["identity"], f" ({path})") if "identity" in m
-                    else None)
-        est = ArmEstimate(tuple(str(x) for x in m["joint_names"]), names, theta, std,
-                          identified, [str(x) for x in m["mapping"]], int(m["version"]),
-                          identity)
-    except ConfigError as exc:
-        raise ArmDataError(f"arm model file {path}: {exc}") from None
-    except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as exc:
-        raise ArmDataError(f"arm model file {path}: not readable as one ({type(exc).__name__}"
-                           f": {exc}); write one with 'dampest arm identify --out' or "
-                           "arm_estimator_node's ~/save") from None
-    for field_name in ("theta", "theta_std", "identified", "mapping"):
-        if len(getattr(est, field_name)) != len(names):
-            raise ArmDataError(f"arm model file {path}: model.{field_name} has "
-                               f"{len(getattr(est, field_name))} entries for {len(names)} "
-                               "parameter_names")
-    if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(std)) and np.all(std >= 0)):
-        raise ArmDataError(f"arm model file {path}: model.theta and model.theta_std must be "
-                           "finite (and the std >= 0)")
-    return est
+        for key in ("theta", "theta_std", "identified", "mapping"):
+            if len(m[key]) != len(names):
+                raise located(doc, where, ConfigError(
+                    f"model.{key}", f"has {len(m[key])} entries for {len(names)} "
+                                    "parameter_names; give one per parameter"))
+        theta, std = np.asarray(m["theta"], dtype=float), np.asarray(m["theta_std"], dtype=float)
+        bad = next((k for k, v in (("theta", theta), ("theta_std", std))
+                    if not np.all(np.isfinite(v))), "theta_std" if np.any(std < 0) else None)
+        if bad is not None:
+            raise located(doc, where, ConfigError(
+                f"model.{bad}", "must be finite (the std >= 0); correct the value or save the "
+                                "model again"))
+        try:
+            identity = Identity.from_dict(m["identity"]) if "identity" in m else None
+        except ConfigError as exc:
+            raise located(doc, where, exc) from None
+        return ArmEstimate(tuple(str(x) for x in m["joint_names"]), names, theta, std,
+                           np.asarray(m["identified"], dtype=bool),
+                           [str(x) for x in m["mapping"]], int(m["version"]), identity)
+    except InputError as exc:
+        raise ArmDataError(str(exc)) from None
+    except OSError as exc:
+        raise ArmDataError(f"arm model file {path}: cannot be read ({exc.strerror}); write one "
+                           "with 'dampest arm identify --out' or arm_estimator_node's ~/save"
+                           ) from None

@@ -8,6 +8,10 @@ reader checks it the same way: ``vehicle`` (``config/vehicles/*.yaml``), ``colum
 error into one line: an unknown key with the closest valid one (difflib), a missing key, a
 value of the wrong type or out of range with what the schema's ``description`` says is
 expected.
+
+A mapping that takes extra entries besides its own keys (the model files' ``model:``) says
+so with ``"x-refuseNearMisses": true``: an extra key spelt almost like one of its own
+(``theta_sdt``, ``identifed``) is refused as the typo it is, not kept as an extra entry.
 """
 
 from __future__ import annotations
@@ -23,8 +27,9 @@ from typing import Any
 
 import jsonschema
 from jsonschema.exceptions import ValidationError, best_match
+from jsonschema.validators import extend
 
-from dampest_ros.io.strict_yaml import YamlDoc, load_yaml
+from dampest_ros.io.strict_yaml import InputError, YamlDoc, key_text, load_yaml
 
 
 @cache
@@ -40,11 +45,33 @@ def schema_path(name: str) -> Path:
     return Path(str(resources.files("dampest_ros") / "schemas" / f"{name}.schema.json"))
 
 
-def nearest(word: str, choices: Sequence[str]) -> str | None:
-    """The valid word nearest ``word`` (difflib, case ignored), or None."""
+def nearest(word: str, choices: Sequence[str], cutoff: float = 0.6) -> str | None:
+    """The valid word nearest ``word`` (difflib, case ignored, at least ``cutoff`` alike),
+    or None."""
     lower = {str(c).lower(): str(c) for c in reversed(choices)}
-    near = difflib.get_close_matches(str(word).lower(), list(lower), n=1, cutoff=0.6)
+    near = difflib.get_close_matches(str(word).lower(), list(lower), n=1, cutoff=cutoff)
     return lower[near[0]] if near else None
+
+
+#: How alike an extra key must be to one of the mapping's own to be refused as its typo
+#: (``rmse``, an extra of every fit, is 0.67 alike ``terms``).
+_TYPO_CUTOFF = 0.8
+
+
+def _near_misses(validator: Any, enabled: bool, instance: Any, schema_: dict[str, Any]
+                 ) -> Any:
+    """The ``x-refuseNearMisses`` keyword: an error for each key that is not one of the
+    mapping's ``properties`` but spelt almost like one (its message: that one)."""
+    if not (enabled and validator.is_type(instance, "object")):
+        return
+    own = list(schema_.get("properties", {}))
+    for key in instance:
+        near = None if key in own else nearest(str(key), own, _TYPO_CUTOFF)
+        if near is not None:
+            yield ValidationError(near, path=[key])
+
+
+_Validator = extend(jsonschema.Draft202012Validator, {"x-refuseNearMisses": _near_misses})
 
 
 def closest(word: str, choices: Sequence[str]) -> str:
@@ -104,6 +131,9 @@ def _message(error: ValidationError, root: dict[str, Any], data: Any
              ) -> tuple[list[Any], str]:
     """(key path, reason and fix) for one jsonschema error of ``data`` against ``root``."""
     path = list(error.absolute_path)
+    if error.validator == "x-refuseNearMisses":
+        return path, (f"unknown key; did you mean {error.message}? rename it (an extra "
+                      "entry must not be spelt like one of the file's own keys)")
     if error.validator == "additionalProperties":
         found = _unknown_key(error)
         if found is not None:
@@ -123,19 +153,28 @@ def _message(error: ValidationError, root: dict[str, Any], data: Any
     return list(where.absolute_path), f"{got}; expected {expected}"
 
 
-def check(doc: YamlDoc, name: str) -> None:
+def check(doc: YamlDoc, name: str, skip: int = 0) -> None:
     """Check a parsed file against the shipped schema ``name``.
+
+    Parameters
+    ----------
+    doc : YamlDoc
+    name : str
+    skip : int
+        Leading keys of a path the message leaves out (2 for a parameters file's
+        ``<node>: ros__parameters:``, so that the key reads as the parameter's name).
 
     Raises
     ------
     InputError
         ``<file>:<line>: <key>: <what>; <fix>`` for the most relevant violation.
     """
-    validator = jsonschema.Draft202012Validator(schema(name))
-    error = best_match(validator.iter_errors(doc.data))
+    errors = list(_Validator(schema(name)).iter_errors(doc.data))
+    typos = [e for e in errors if e.validator == "x-refuseNearMisses"]
+    error = typos[0] if typos else best_match(errors)  # a typo explains a missing key
     if error is not None:
         path, reason = _message(error, schema(name), doc.data)
-        raise doc.error(path, reason)
+        raise InputError(doc.source, doc.line(path), key_text(path[skip:]), reason)
 
 
 def load_checked(path: str | Path, name: str) -> YamlDoc:

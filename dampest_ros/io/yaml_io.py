@@ -49,6 +49,11 @@ all identified, except those written by earlier ``dampest identify`` versions, w
 ``unidentified`` / ``unidentified_reason`` lists are read as ``held``. Every reader refuses a
 non-finite θ, M or σ of an identified coefficient
 (:func:`~dampest_ros.core.identification.identified.check_model_numbers`).
+
+Every reader (the file, its text, a node's ``model.*`` parameters) checks the model against
+``dampest_ros/schemas/model.schema.json`` first: an unknown key spelt like one of the model's
+own (``theta_sdt``), a missing key or a wrong type is refused as
+``<file>:<line>: model.<key>: <what>; <fix>``, as are lists of unequal lengths.
 """
 
 from __future__ import annotations
@@ -72,8 +77,8 @@ from dampest_ros.core.physics.identity import ARM_KIND, VEHICLE_KIND, Identity, 
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 from dampest_ros.core.signals.measurements import FloatArray
-from dampest_ros.io.schema import load_checked
-from dampest_ros.io.strict_yaml import YamlDoc, load_yaml, loads_yaml
+from dampest_ros.io.schema import check, load_checked
+from dampest_ros.io.strict_yaml import InputError, KeyPath, YamlDoc, load_yaml, loads_yaml
 
 SIGN_CONVENTION = "dissipative_positive"
 _REQUIRED = ("sign_convention", "parameter_names", "theta", "theta_std", "M", "version")
@@ -371,34 +376,6 @@ def model_parameters(model: Model) -> dict[str, Any]:
     return flat
 
 
-def model_from_parameters(values: Mapping[str, Any]) -> Model:
-    """:func:`load_model` for the ``model.*`` parameters of a node.
-
-    Parameters
-    ----------
-    values : mapping
-        Dotted parameter name → value (as :func:`model_parameters` gives them); at least
-        ``model.parameter_names``, ``theta``, ``theta_std``, ``M`` and ``version``.
-        ``model.sign_convention`` defaults to the one the parameter contract states;
-        without ``model.terms.*`` the structure is left to the caller (``damping`` None).
-
-    Returns
-    -------
-    Model
-    """
-    model: dict[str, Any] = {"sign_convention": SIGN_CONVENTION}
-    for name, value in values.items():
-        head, _, rest = name.partition(".")
-        if head != "model" or not rest:
-            continue
-        *path, leaf = rest.split(".")
-        node = model
-        for key in path:
-            node = node.setdefault(key, {})
-        node[leaf] = value
-    return _model_from_mapping(model, Path("<parameters>"))
-
-
 def _model_mapping(m: Model) -> dict[str, Any]:
     """The ``model`` mapping of the file."""
     model: dict[str, Any] = {
@@ -423,13 +400,22 @@ def _model_mapping(m: Model) -> dict[str, Any]:
     return model
 
 
-def _model_section(doc: Any, path: Path) -> dict[str, Any]:
-    """``<node>: ros__parameters: model`` of a parameters file (the first node that has it)."""
-    for node in (doc.values() if isinstance(doc, dict) else ()):
+def model_section(doc: YamlDoc) -> tuple[KeyPath, dict[str, Any]]:
+    """The key path and mapping of ``<node>: ros__parameters: model`` of a parameters file
+    (the first node that has it; a vehicle's or an arm's model file).
+
+    Raises
+    ------
+    InputError
+        The file has no such mapping.
+    """
+    for key, node in (doc.data.items() if isinstance(doc.data, dict) else ()):
         params = node.get("ros__parameters") if isinstance(node, dict) else None
         if isinstance(params, dict) and isinstance(params.get("model"), dict):
-            return params["model"]
-    raise ConfigError("model", f"no <node>: ros__parameters: model: mapping in {path}")
+            return (str(key), "ros__parameters", "model"), params["model"]
+    raise doc.error([], "no <node>: ros__parameters: model: mapping; a model file starts "
+                        "'/**: ros__parameters: model:' (dampest identify --out and the "
+                        "estimator's ~/save write one)")
 
 
 def load_model(path: str | Path) -> Model:
@@ -445,60 +431,133 @@ def load_model(path: str | Path) -> Model:
 
     Raises
     ------
-    ConfigError
-        Naming the missing or invalid ``model.*`` entry and the file.
+    InputError
+        A ConfigError naming the file, the line and the ``model.*`` entry with the fix: a
+        duplicate key, a violation of the model schema (``dampest_ros/schemas/
+        model.schema.json``: an unknown or misspelt key, a missing one, a wrong type), lists
+        of unequal lengths, non-finite numbers, an arm's model file.
+    OSError
+        The file cannot be read.
     """
-    path = Path(path)
-    return _model_from_doc(_read_yaml(path), path)
+    return _model_from_doc(load_yaml(path))
 
 
 def loads_model(text: str) -> Model:
     """:func:`load_model` for the text of a model file (e.g. a ``dampest/model`` message)."""
+    return _model_from_doc(loads_yaml(text, "<text>"))
+
+
+def _plain(value: Any) -> Any:
+    """A parameter value as YAML gives it: arrays (``array.array``, numpy) as lists."""
+    return value.tolist() if hasattr(value, "tolist") else value
+
+
+def model_from_parameters(values: Mapping[str, Any]) -> Model:
+    """:func:`load_model` for the ``model.*`` parameters of a node.
+
+    Parameters
+    ----------
+    values : mapping
+        Dotted parameter name → value (as :func:`model_parameters` gives them); at least
+        ``model.parameter_names``, ``theta``, ``theta_std``, ``M`` and ``version``.
+        ``model.sign_convention`` defaults to the one the parameter contract states;
+        without ``model.terms.*`` the structure is left to the caller (``damping`` None).
+
+    Returns
+    -------
+    Model
+
+    Raises
+    ------
+    InputError
+        As :func:`load_model`, the source named ``<parameters>``.
+    """
+    model: dict[str, Any] = {"sign_convention": SIGN_CONVENTION}
+    for name, value in values.items():
+        head, _, rest = name.partition(".")
+        if head != "model" or not rest:
+            continue
+        *path, leaf = rest.split(".")
+        node = model
+        for key in path:
+            node = node.setdefault(key, {})
+        node[leaf] = _plain(value)
+    return _model_from_doc(YamlDoc({"/**": {"ros__parameters": {"model": model}}},
+                                   "<parameters>"))
+
+
+def _model_from_doc(doc: YamlDoc) -> Model:
+    """The Model of a parsed parameters file, checked against the model schema."""
+    where, model = model_section(doc)
+    if model.get("kind") == _ARM_FILE_KIND:
+        raise located(doc, where, ConfigError(
+            "model.kind", f"{_ARM_FILE_KIND}: an arm's model file, not a vehicle's damping "
+                          "model; give the vehicle's model file (dampest identify --out, "
+                          "estimator ~/save)"))
+    check(doc, "model", skip=2)
     try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError("model", f"not valid YAML: {exc}") from None
-    return _model_from_doc(doc, Path("<text>"))
+        return _model_from_mapping(model)
+    except ConfigError as exc:
+        raise located(doc, where, exc) from None
 
 
-def _model_from_doc(doc: Any, path: Path) -> Model:
-    """The Model of a parsed parameters file."""
-    return _model_from_mapping(_model_section(doc, path), path)
+def located(doc: YamlDoc, where: KeyPath, exc: ConfigError) -> InputError:
+    """A check's error on ``model.<field>`` of the model mapping at ``where`` (as
+    :func:`model_section` gives it) with the file and the line of the entry."""
+    path = [*where[:2], *exc.field.split(".")]
+    return InputError(doc.source, doc.line(path), exc.field, exc.reason)
 
 
-def _model_from_mapping(model: Mapping[str, Any], path: Path) -> Model:
-    """The Model of a ``model`` mapping (checked; ``path`` names it in errors)."""
-    for key in _REQUIRED:
-        if key not in model:
-            raise ConfigError(f"model.{key}", f"missing in {path}")
-    if model["sign_convention"] != SIGN_CONVENTION:
-        raise ConfigError("model.sign_convention",
-                          f"{model['sign_convention']!r}, expected {SIGN_CONVENTION!r} ({path})")
+def _entry(model: Mapping[str, Any], key: str) -> Any:
+    """The entry of ``model`` at the dotted ``key`` (``terms.cross.rows``), or None."""
+    node: Any = model
+    for part in key.split("."):
+        node = node.get(part) if isinstance(node, Mapping) else None
+    return node
+
+
+def _same_length(model: Mapping[str, Any], keys: tuple[str, ...], n: int, what: str) -> None:
+    """Refuse a list of ``model`` (dotted key) whose length is not ``n``."""
+    for key in keys:
+        node = _entry(model, key)
+        if node is not None and len(node) != n:
+            raise ConfigError(f"model.{key}", f"has {len(node)} entries for {n} {what}; give "
+                                              f"one per entry of {what}")
+
+
+def _model_from_mapping(model: Mapping[str, Any]) -> Model:
+    """The Model of a ``model`` mapping that passed the model schema."""
     names = [str(n) for n in model["parameter_names"]]
+    _same_length(model, ("theta", "theta_std", "identified"), len(names), "parameter_names")
+    for first, others in (("terms.cross.rows", ("cols", "alphas", "names")),
+                          ("terms.freq.dofs", ("rates",)), ("held.names", ("reasons",))):
+        group = first.rpartition(".")[0]
+        found = _entry(model, first)
+        if found is not None:
+            _same_length(model, tuple(f"{group}.{k}" for k in others), len(found), first)
+    modes = _entry(model, "terms.residual.modes")
+    if modes is not None and len(modes) % 6:
+        raise ConfigError("model.terms.residual.modes", f"has {len(modes)} numbers; give 6 "
+                                                        "per mode (row-major)")
     arrays = {k: np.asarray(model[k], dtype=float) for k in ("theta", "theta_std", "M")}
-    for key, size in (("theta", len(names)), ("theta_std", len(names)), ("M", 36)):
-        if arrays[key].shape != (size,):
-            raise ConfigError(f"model.{key}", f"needs {size} numbers, got "
-                                              f"{arrays[key].shape} ({path})")
     damping = None
     if "terms" in model:
         damping, _ = damping_from_spec(_spec_from_params(model["terms"]))
         if damping.parameter_names != names:
             raise ConfigError("model.terms", f"the terms give parameters "
-                                             f"{damping.parameter_names}, not {names} ({path})")
-    M_A, terms = _added_mass_entries(model, path)
-    held = _held_entries(model, names, path)
-    identity = (Identity.from_dict(model["identity"], f" ({path})") if "identity" in model
-                else None)
-    check_model_numbers(names, arrays["theta"], arrays["theta_std"], arrays["M"], held,
-                        f" ({path})")
+                                             f"{damping.parameter_names}, not {names}; "
+                                             "make parameter_names and terms agree")
+    M_A, terms = _added_mass_entries(model)
+    held = _held_entries(model, names)
+    identity = Identity.from_dict(model["identity"]) if "identity" in model else None
+    check_model_numbers(names, arrays["theta"], arrays["theta_std"], arrays["M"], held)
     return Model(names, arrays["theta"], arrays["theta_std"], arrays["M"].reshape(6, 6),
                  int(model["version"]), damping,
                  {k: v for k, v in model.items() if k not in _RESERVED}, M_A=M_A,
                  added_mass_terms=terms, held=held, identity=identity)
 
 
-def _held_entries(model: Mapping[str, Any], names: list[str], path: Path) -> dict[str, str]:
+def _held_entries(model: Mapping[str, Any], names: list[str]) -> dict[str, str]:
     """The coefficients a model mapping marks as held at the prior, with the reason
     (``model.identified`` and ``model.held``; the ``unidentified`` lists of files written by
     earlier ``dampest identify`` versions; none without either)."""
@@ -510,49 +569,32 @@ def _held_entries(model: Mapping[str, Any], names: list[str], path: Path) -> dic
         if len(why) != len(old):
             why = ["not identified"] * len(old)
         return dict(zip(old, why, strict=True))
-    flags = model["identified"]
-    if not (isinstance(flags, list) and len(flags) == len(names)
-            and all(isinstance(f, bool) for f in flags)):
-        raise ConfigError("model.identified", f"needs {len(names)} booleans (true: the data "
-                                              f"determined the coefficient) ({path})")
-    given = model.get("held", {})
-    try:
-        reasons = dict(zip([str(n) for n in given.get("names", [])],
-                           [str(r) for r in given.get("reasons", [])], strict=True))
-    except (AttributeError, TypeError, ValueError):
-        raise ConfigError("model.held", f"must be names: [...] and reasons: [...] of one "
-                                        f"length ({path})") from None
+    given = model.get("held", {"names": [], "reasons": []})
+    reasons = dict(zip(given["names"], given["reasons"], strict=True))
     held = {n: reasons.get(n, "held at the prior (the file gives no reason)")
-            for n, ok in zip(names, flags, strict=True) if not ok}
+            for n, ok in zip(names, model["identified"], strict=True) if not ok}
     extra = sorted(set(reasons) - set(held))
     if extra:
         raise ConfigError("model.held", f"{extra} are identified (model.identified) or not "
-                                        f"parameters of the model ({path})")
+                                        "parameters of the model; delete them from held")
     return held
 
 
-def _added_mass_entries(model: Mapping[str, Any], path: Path
+def _added_mass_entries(model: Mapping[str, Any]
                         ) -> tuple[FloatArray | None, AddedMassTerms | None]:
     """``model.M_A`` (6, 6) and ``model.added_mass_terms`` of a model mapping (checked)."""
     M_A = None
     if "M_A" in model:
-        try:
-            M_A = np.asarray(model["M_A"], dtype=float)
-        except (TypeError, ValueError):
-            raise ConfigError("model.M_A", f"must be 36 numbers ({path})") from None
-        if M_A.shape != (36,) or not np.all(np.isfinite(M_A)):
-            raise ConfigError("model.M_A", f"needs 36 finite numbers, got shape {M_A.shape} "
-                                           f"({path})")
+        M_A = np.asarray(model["M_A"], dtype=float)
+        if not np.all(np.isfinite(M_A)):
+            raise ConfigError("model.M_A", "not finite; give 36 finite numbers")
         M_A = M_A.reshape(6, 6)
     terms = None
     if "added_mass_terms" in model:
-        try:
-            terms = AddedMassTerms.from_dict(model["added_mass_terms"])
-        except ConfigError as exc:
-            raise ConfigError(f"model.{exc.field}", f"{exc.reason} ({path})") from None
+        terms = AddedMassTerms.from_dict(model["added_mass_terms"])
         if not terms.all and M_A is None:
             raise ConfigError("model.M_A", f"missing: added_mass_terms {terms.as_dict()} turn "
-                                           f"effects off and need M_A to split M ({path})")
+                                           "effects off and need M_A to split M; add M_A")
     return M_A, terms
 
 
@@ -571,7 +613,7 @@ def foreign_model(path: str | Path, expected: Identity) -> str | None:
     if not path.exists():
         return None
     try:
-        model = _model_section(_read_yaml(path), path)
+        _, model = model_section(load_yaml(path))
         found = (Identity.from_dict(model["identity"], f" ({path})") if "identity" in model
                  else None)
     except (ConfigError, OSError) as exc:

@@ -9,7 +9,7 @@ import re
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, TypeVar
@@ -622,6 +622,48 @@ def diagnostic_array(node: Node, task: str, values: dict[str, Any], level: int =
     arr.header.stamp = stamp if stamp is not None else node.get_clock().now().to_msg()
     arr.status = [status]
     return arr
+
+
+class NonFiniteCounter:
+    """Messages a node refuses for a non-finite value, counted per topic and published on
+    ``/diagnostics`` once a second (wall clock) as ``count.<key>``; the first of each topic is
+    logged. A NaN let through would poison a controller's integrator or a simulation's state
+    for good.
+
+    Parameters
+    ----------
+    node : Node
+    task : str
+        The diagnostic status's task (``<node name>: <task>``).
+    keys : sequence of str
+        What is counted (``rejected_nonfinite_cmd_vel``, …).
+    """
+
+    def __init__(self, node: Node, task: str, keys: Sequence[str]) -> None:
+        self.node, self.task = node, task
+        self.counts = dict.fromkeys(keys, 0)
+        self.pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, RELIABLE_QOS)
+        self.timer = node.create_timer(1.0, self.publish,
+                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def finite(self, key: str, values: Iterable[float], topic: str) -> bool:
+        """True if every value is finite; else the message is counted under ``key``."""
+        numbers = [float(v) for v in values]
+        if all(math.isfinite(v) for v in numbers):
+            return True
+        self.counts[key] += 1
+        if self.counts[key] == 1:
+            self.node.get_logger().error(
+                f"{topic}: a message with a non-finite value {numbers} rejected (these are "
+                f"counted in /diagnostics count.{key}); fix its publisher")
+        return False
+
+    def publish(self) -> None:
+        """The counts on /diagnostics (WARN once any message was rejected)."""
+        bad = sum(self.counts.values())
+        self.pub.publish(diagnostic_array(
+            self.node, self.task, {f"count.{k}": v for k, v in self.counts.items()},
+            1 if bad else 0, f"{bad} messages with non-finite values rejected" if bad else "ok"))
 
 
 def _text(v: Any) -> str:

@@ -21,6 +21,7 @@ from dampest_ros.core.simulation.control import DEFAULT_BANDWIDTH, VelocityPI
 from dampest_ros.io.yaml_io import load_vehicle
 from dampest_ros.ros.common import (
     RELIABLE_QOS,
+    NonFiniteCounter,
     Param,
     ParamNode,
     main_for,
@@ -63,6 +64,8 @@ class ControllerNode(ParamNode):
         self.create_subscription(TwistWithCovarianceStamped, "dampest/velocity",
                                  self._on_velocity, RELIABLE_QOS)
         self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, RELIABLE_QOS)
+        self.rejected = NonFiniteCounter(self, "velocity control", [
+            "rejected_nonfinite_cmd_vel", "rejected_nonfinite_velocity"])
         self._t_prev: float | None = None
         self.commands = 0
 
@@ -88,13 +91,18 @@ class ControllerNode(ParamNode):
             self._build()
 
     def _on_cmd_vel(self, m: Twist) -> None:
-        self.ref = frames.body_twist(np.concatenate([xyz(m.linear), xyz(m.angular)]))
+        ref = np.concatenate([xyz(m.linear), xyz(m.angular)])
+        if self.rejected.finite("rejected_nonfinite_cmd_vel", ref, "cmd_vel"):
+            self.ref = frames.body_twist(ref)
 
     def _on_velocity(self, m: TwistWithCovarianceStamped) -> None:
+        flu = twist6(m)
+        if not self.rejected.finite("rejected_nonfinite_velocity", flu, "dampest/velocity"):
+            return
         t = seconds(m.header.stamp)
         dt = 0.02 if self._t_prev is None else min(max(t - self._t_prev, 1e-3), 0.2)
         self._t_prev = t
-        nu = frames.body_twist(twist6(m))  # FLU → FRD
+        nu = frames.body_twist(flu)  # FLU → FRD
         tau = self.pi(self.ref, nu, dt)
         out = wrench_msg(frames.body_twist(tau))  # FRD → FLU
         out.header.stamp = m.header.stamp

@@ -32,6 +32,7 @@ from dampest_ros.io.yaml_io import load_vehicle, read_mapping
 from dampest_ros.ros.common import (
     RELIABLE_QOS,
     SENSOR_QOS,
+    NonFiniteCounter,
     Param,
     ParamNode,
     main_for,
@@ -105,6 +106,7 @@ class SimNode(ParamNode):
         }
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", 10)
         self.create_subscription(WrenchStamped, "cmd_wrench", self._on_wrench, RELIABLE_QOS)
+        self.rejected = NonFiniteCounter(self, "simulation", ["rejected_nonfinite_cmd_wrench"])
         self.published = 0
         #: messages published per topic (since the node started)
         self.counts = dict.fromkeys(self.pub, 0)
@@ -153,8 +155,11 @@ class SimNode(ParamNode):
             self._start()
 
     def _on_wrench(self, msg: WrenchStamped) -> None:
+        wrench = wrench6(msg)
+        if not self.rejected.finite("rejected_nonfinite_cmd_wrench", wrench, "cmd_wrench"):
+            return
         # FLU → FRD through the core's frame conversion
-        self.live.command(frames.body_twist(wrench6(msg)), float(self.p("cmd_timeout")))
+        self.live.command(frames.body_twist(wrench), float(self.p("cmd_timeout")))
 
     def _tick(self) -> None:
         live = self.live
