@@ -52,6 +52,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.identification.model import Model
+from dampest_ros.core.physics.identity import Identity
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.io.yaml_io import load_model, model_from_parameters
 
@@ -96,15 +97,20 @@ class ModelClient:
     timeout : float
         Seconds the server may be missing from the graph before it counts as lost
         (:attr:`lost`; checked every ``min(timeout / 4, 0.5)`` s of wall-clock time).
+    vehicle : Identity, optional
+        The vehicle the caller controls: a model of another hull is refused (kept out,
+        recorded in :attr:`errors`, logged with both names), as a wrong feed-forward would
+        be worse than none.
     """
 
     def __init__(self, node: Any = None, server: str = "estimator_node", follow: bool = True,
                  on_update: Callable[[Model], None] | None = None,
-                 timeout: float = 5.0) -> None:
+                 timeout: float = 5.0, vehicle: Identity | None = None) -> None:
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout}")
         self.node = node
         self.server = server
+        self.vehicle = vehicle
         self.on_update = on_update
         self.timeout = float(timeout)
         self._received_at = math.nan     # time.monotonic() when the model in hand arrived
@@ -233,6 +239,8 @@ class ModelClient:
             m = model_from_parameters({n: parameter_value_to_python(v)
                                        for n, v in zip(names, values, strict=True)})
             self._stale = 0
+            if self.vehicle is not None:
+                m.belongs_to(self.vehicle, f"the model of {self.server}")
             self._set(_evaluable(m))
         except Exception as exc:  # a bad answer must not kill the caller's executor
             self._refuse(exc)

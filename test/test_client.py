@@ -397,3 +397,43 @@ def test_client_reports_the_age_of_its_model_and_a_lost_server(tmp_path: Path) -
         for n in (server, probe):
             n.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def test_a_client_for_one_vehicle_refuses_another_vehicles_model(tmp_path: Path) -> None:
+    """A controller of platform_a pointed at a server of the BlueROV2 Heavy's model: the
+    model is refused with both names (a wrong feed-forward is worse than none); a client of
+    the Heavy takes it."""
+    rclpy = pytest.importorskip("rclpy")
+    from rclpy.executors import SingleThreadedExecutor
+
+    from dampest_ros.ros.model_server_node import ModelServerNode
+
+    heavy = load_vehicle("bluerov2_heavy")
+    path = save_model(tmp_path / "heavy.yaml", Model(
+        heavy.damping.parameter_names, heavy.theta, 0.1 * np.abs(heavy.theta) + 0.01,
+        heavy.body.M, damping=heavy.damping, identity=heavy.identity))
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "77")
+    ns = f"/test_identity_{os.getpid()}"
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    ex = SingleThreadedExecutor(context=context)
+    try:
+        server = ModelServerNode(context=context, cli_args=[
+            "--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={path}"])
+        probe = rclpy.create_node("probe", namespace=ns, context=context)
+        for n in (server, probe):
+            ex.add_node(n)
+        other = ModelClient(probe, "model_server_node",
+                            vehicle=load_vehicle("platform_a").identity)
+        same = ModelClient(probe, "model_server_node", vehicle=heavy.identity)
+        end = time.monotonic() + 10.0
+        while not (same.available and other.errors) and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        assert same.available, same.errors
+        assert not other.available and other.errors, other.errors
+        assert "belongs to vehicle_damping 'bluerov2_heavy'" in other.errors[0]
+        assert "'platform_a'" in other.errors[0]
+    finally:
+        ex.shutdown()
+        rclpy.try_shutdown(context=context)

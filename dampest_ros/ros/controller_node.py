@@ -57,7 +57,8 @@ class ControllerNode(ParamNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.NODE_NAME, self.PARAMS, **kwargs)
         self.vehicle = load_vehicle(self.p("vehicle"))
-        self.client = ModelClient(self, self.p("model_node"), on_update=self._on_model)
+        self.client = ModelClient(self, self.p("model_node"), on_update=self._on_model,
+                                  vehicle=self.vehicle.identity)
         self._build()
         self.ref = frames.body_twist(np.array(self.p("reference"), dtype=float))
         self.pub = self.create_publisher(WrenchStamped, "cmd_wrench", RELIABLE_QOS)
@@ -87,6 +88,7 @@ class ControllerNode(ParamNode):
             self.ref = frames.body_twist(np.array(self.p("reference"), dtype=float))
         if "vehicle" in names:
             self.vehicle = load_vehicle(self.p("vehicle"))
+            self.client.vehicle = self.vehicle.identity
         if {"vehicle", "bandwidth"} & set(names):
             self._build()
 
