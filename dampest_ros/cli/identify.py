@@ -18,6 +18,7 @@ from dampest_ros.cli.inputs import (
     cut,
     load_samples,
     split_holdout,
+    structure_of,
     warn_unchecked,
 )
 from dampest_ros.cli.pool import (
@@ -39,7 +40,7 @@ from dampest_ros.core.identification.pool import (
 from dampest_ros.core.identification.selection import Selection, select_terms
 from dampest_ros.core.identification.validate import force_scores
 from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
-from dampest_ros.core.online.estimator import EstimatorConfig, restrict
+from dampest_ros.core.online.estimator import EstimatorConfig, nominal_of
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import OnlineConfig
 from dampest_ros.core.physics.damping import DampingModel
@@ -64,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     args.input = paths[0]
     if args.method == "rls":
         return run_rls(args, vehicle)
-    model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
+    model, nominal = structure_of(args, vehicle)
     substitutions: list[str] = []
     samples = cut(load_samples(args.input, vehicle, args, substitutions), args)
     held = None
@@ -73,9 +74,8 @@ def run(args: argparse.Namespace) -> int:
     if args.select:
         selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
         print(selection_table(selection))
-        values = dict(zip(model.parameter_names, nominal, strict=True))
+        nominal = nominal_of(selection.model, model, nominal)
         model = selection.model
-        nominal = np.array([values.get(n, 0.0) for n in model.parameter_names])
     spec = prior_spec(args, vehicle)
     prior = prior_of(model, nominal, spec)[0]
     identifier = DampingIdentifier(vehicle, method=args.method, cutoff=args.cutoff,
@@ -168,7 +168,7 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
     """Several logs: reduce each on Dask, fit them pooled, test the drift between them."""
     check_pooled_options(args)
     t0 = time.perf_counter()
-    model, nominal = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
+    model, nominal = structure_of(args, vehicle)
     prior, prior_std = prior_of(model, nominal, prior_spec(args, vehicle))
     with reduce_all(paths, args, prior, prior_std) as (logs, failed, map_logs):
         failed.update(inconsistent_logs(logs, args.keep_all))
@@ -255,8 +255,9 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     pre = OnlinePreprocessor(vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
                              OnlineConfig(rate=args.rate, max_dvl_gap=args.max_gap),
                              mounting=vehicle.mounting)
-    est = DampingIdentifier(vehicle, term_list(args.terms) or None,
-                            prior=prior_spec(args, vehicle)).online(
+    structure = structure_of(args, vehicle)[0] if args.structure else None
+    est = DampingIdentifier(vehicle, None if structure else term_list(args.terms) or None,
+                            prior=prior_spec(args, vehicle), structure=structure).online(
         EstimatorConfig(forgetting_factor=args.forgetting_factor, rate=args.rate,
                         cutoff=args.cutoff))
     stamps: list[float] = []

@@ -67,6 +67,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "lift, speed-magnitude u‖v‖ and p‖ω‖ terms in every force row, fluid "
                         "memory per DOF with its rate) by blocked cross-validation and BIC, "
                         "on top of the preset's terms, and fit the sparse model found")
+    p.add_argument("--structure", metavar="MODEL",
+                   help="identify the term structure of this model file instead of the "
+                        "preset's (e.g. one written by identify --select), with any method, "
+                        "rls included: the structure found offline, then tracked online")
     p.add_argument("--prior", metavar="MODEL",
                    help="model YAML whose theta/theta_std are the MAP prior (rls: the RLS "
                         "prior)")

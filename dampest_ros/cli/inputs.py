@@ -16,9 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from dampest_ros.cli.common import Progress, tau_topic, topic_roles
+from dampest_ros.cli.common import Progress, tau_topic, term_list, topic_roles
 from dampest_ros.core.identification.delay import profile_delay, shift_tau
 from dampest_ros.core.identification.model import Model
+from dampest_ros.core.online.estimator import nominal_of, restrict
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.physics.vehicle import Vehicle
@@ -241,6 +242,30 @@ def check_frames(source: BagSource, topics: dict[str, str], start: float, gravit
     if found.errors and not accept:
         raise DataError(f"{name}: {found.errors[0]}; fix the log's frames, or give "
                         "--accept-frames if they are right")
+
+
+def structure_of(args: argparse.Namespace, vehicle: Vehicle
+                 ) -> tuple[DampingModel, np.ndarray]:
+    """The terms to identify and their nominal θ: the model file's of ``--structure`` (the
+    vehicle's θ where it has the parameter, else 0), or the preset's (``--terms`` kinds).
+
+    Raises
+    ------
+    ConfigError
+        ``--structure`` with ``--terms`` or ``--select``, or a file without a term structure.
+    """
+    if not args.structure:
+        return restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
+    given = [o for o, used in (("--terms", args.terms), ("--select", args.select)) if used]
+    if given:
+        raise ConfigError("--structure", f"the terms come from {args.structure}; leave out "
+                                         f"{' and '.join(given)}")
+    mf = load_model(args.structure)
+    if mf.damping is None:
+        raise ConfigError("--structure", f"{args.structure} holds no term structure "
+                                         "(model.terms); give a model file written by "
+                                         "dampest identify or an estimator node")
+    return mf.damping, nominal_of(mf.damping, vehicle.damping, vehicle.theta)
 
 
 def cut(samples: Samples, args: argparse.Namespace) -> Samples:

@@ -24,12 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from dampest_ros.cli.common import table, term_list
-from dampest_ros.cli.inputs import cut, load_samples
+from dampest_ros.cli.common import table
+from dampest_ros.cli.inputs import cut, load_samples, structure_of
 from dampest_ros.cli.main import expected
 from dampest_ros.core.identification.batch import Fit, FitOptions
 from dampest_ros.core.identification.pool import Drift, LogStatistics, MapLogs, log_statistics
-from dampest_ros.core.online.estimator import restrict
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.io.remote import glob_url, is_url, local_log, local_name
@@ -111,7 +110,7 @@ def reduce_log(path: str, args: argparse.Namespace, prior: np.ndarray | None,
     """Preprocess one log (a path, or a URL copied here first) and reduce it (runs on a
     worker)."""
     vehicle = load_vehicle(args.vehicle)
-    model, _ = restrict(vehicle.damping, vehicle.theta, term_list(args.terms))
+    model, _ = structure_of(args, vehicle)
     with local_log(path) as local:
         samples = cut(load_samples(local, vehicle, args), args)
     options = FitOptions(method=args.method, cutoff=args.cutoff, speed_range=tuple(

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
 from dampest_ros.core.identification.regression import memory_states
 from dampest_ros.core.identification.validate import force_scores
-from dampest_ros.core.online.estimator import EstimatorConfig, OnlineEstimator, restrict
+from dampest_ros.core.online.estimator import EstimatorConfig, OnlineEstimator, nominal_of, restrict
 from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError
@@ -79,8 +79,9 @@ class DampingIdentifier:
         the default prior width in the RLS).
     structure : DampingModel, optional
         The term structure :meth:`fit` identifies instead of the vehicle's (e.g. what
-        :func:`~dampest_ros.core.identification.selection.select_terms` chose); parameters the
-        vehicle does not have start from 0. :meth:`partial_fit` identifies the vehicle's terms only.
+        :func:`~dampest_ros.core.identification.selection.select_terms` chose, or a model
+        file's), in :meth:`fit` and in :meth:`partial_fit`; parameters the vehicle does not
+        have start from 0.
     **fit_options
         Further :class:`~dampest_ros.core.identification.batch.FitOptions` fields (``ridge``,
         ``block``, ``max_vif``, ``dissipative``, …).
@@ -128,10 +129,8 @@ class DampingIdentifier:
         if self.structure is None:
             model, nominal = restrict(self.vehicle.damping, self.vehicle.theta, self.terms)
         else:
-            values = dict(zip(self.vehicle.damping.parameter_names, self.vehicle.theta,
-                              strict=True))
             model = self.structure
-            nominal = np.array([values.get(n, 0.0) for n in model.parameter_names])
+            nominal = nominal_of(model, self.vehicle.damping, self.vehicle.theta)
         options = FitOptions(method=self.method, cutoff=self.cutoff,
                              speed_range=tuple(speed_limits(self.vehicle,
                                                             tau_measured=samples.tau)),
@@ -161,13 +160,10 @@ class DampingIdentifier:
         keep_samples : bool
             Keep every sample used (:attr:`OnlineEstimator.samples_log`).
         """
-        if self.structure is not None:
-            raise ConfigError("structure", "the recursive estimator identifies the vehicle's "
-                                           "terms (the estimator node's); leave structure out")
         cfg = config or EstimatorConfig(forgetting_factor=self.forgetting_factor,
                                         cutoff=self.cutoff)
         self.estimator_ = OnlineEstimator(self.vehicle, self.terms, cfg, self.prior,
-                                          keep_samples=keep_samples)
+                                          keep_samples=keep_samples, structure=self.structure)
         self.fit_ = None
         return self.estimator_
 

@@ -78,6 +78,9 @@ class EstimatorNode(EstimatorParamNode):
         Param("vehicle", "bluerov2_heavy", "vehicle preset: M, restoring, nominal damping "
               "(term structure and prior mean)", check=vehicle_check),
         Param("terms", "", TERM_HELP),
+        Param("structure", "", "model YAML whose term structure is identified instead of the "
+              "vehicle's (e.g. one written by dampest identify --select); '': the vehicle's "
+              "terms (or those of terms)", check=model_file_check("structure")),
         Param("forgetting_factor", 0.999, "RLS forgetting factor λ (memory ≈ 1/(1−λ) samples)",
               low=0.9, high=1.0),
         Param("forgetting_mode", "exponential", "forget in all directions or only in the "
@@ -154,9 +157,10 @@ class EstimatorNode(EstimatorParamNode):
         if list(m.parameter_names) != list(e.names):
             missing = [n for n in e.names if n not in m.parameter_names]
             other = [n for n in m.parameter_names if n not in e.names]
-            return (f"its coefficients are not those of vehicle {e.vehicle.name} with terms "
-                    f"'{self.p('terms') or 'all'}' (missing {missing}, not estimated here "
-                    f"{other})")
+            terms = (f"the structure of {self.p('structure')}" if self.p("structure") else
+                     f"terms '{self.p('terms') or 'all'}'")
+            return (f"its coefficients are not those of vehicle {e.vehicle.name} with {terms} "
+                    f"(missing {missing}, not estimated here {other})")
         return None
 
     def _build(self, start: Model | None = None) -> None:
@@ -172,7 +176,10 @@ class EstimatorNode(EstimatorParamNode):
                               forgetting_mode=self.p("forgetting_mode"), rate=self.p("rate"),
                               cutoff=self.p("cutoff"), chunk=self.p("chunk"),
                               outlier_gate=self.p("outlier_gate"))
-        identifier = DampingIdentifier(load_vehicle(self.p("vehicle")), terms, prior=prior)
+        structure = load_model(self.p("structure")).damping if str(
+            self.p("structure")).strip() else None
+        identifier = DampingIdentifier(load_vehicle(self.p("vehicle")), terms, prior=prior,
+                                       structure=structure)
         self.estimator = identifier.online(cfg, keep_samples=self.keep_samples)
 
     def _model_values(self) -> dict[str, Any]:
@@ -182,6 +189,11 @@ class EstimatorNode(EstimatorParamNode):
 
     def check_parameter(self, name: str, value: Any) -> str | None:
         try:
+            if name == "structure" and str(value).strip() and str(self.p("terms")).strip():
+                return "give terms or structure, not both"
+            if name == "structure" and str(value).strip() and \
+                    load_model(str(value)).damping is None:
+                return f"structure: {value} holds no term structure (model.terms)"
             if name == "terms":
                 kinds = [t.strip() for t in str(value).split(",") if t.strip()]
                 from dampest_ros.core.online.estimator import restrict

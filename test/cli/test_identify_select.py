@@ -61,6 +61,35 @@ def test_select_finds_the_hidden_terms_by_their_library_names(
         est.theta[est.parameter_names.index("Z_uxw")] * nu[:, 0] * nu[:, 2], rtol=1e-12)
 
 
+def test_the_selected_structure_runs_online_within_3_sigma_of_batch(
+        hidden: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The structure --select found (a model file) given to --structure: the batch fit of
+    it, and the estimator node's RLS (λ = 1) on the bag's messages, agree within 3σ in every
+    coefficient; both have the selected terms, Z_uxw and N_rv among them. --structure with
+    --select or --terms is refused in one line."""
+    selected = tmp_path / "selected.yaml"
+    assert main(["identify", str(hidden), "--vehicle", "bluerov2_heavy", "--select",
+                 "--out", str(selected)]) == 0
+    models = {}
+    for method in ("wls", "rls"):
+        out = tmp_path / f"{method}.yaml"
+        assert main(["identify", str(hidden), "--vehicle", "bluerov2_heavy", "--method",
+                     method, "--structure", str(selected), "--out", str(out)]) == 0
+        models[method] = load_model(out)
+    batch, rls = models["wls"], models["rls"]
+    assert rls.parameter_names == batch.parameter_names == load_model(selected).parameter_names
+    assert {"Z_uxw", "N_rv"} <= set(rls.parameter_names)
+    sigma = np.hypot(rls.theta_std, batch.theta_std)
+    ratio = np.abs(rls.theta - batch.theta) / sigma
+    assert ratio.max() <= 3.0, dict(zip(rls.parameter_names, ratio.round(2), strict=True))
+    capsys.readouterr()
+    for extra in (["--select"], ["--terms", "linear"]):
+        assert main(["identify", str(hidden), "--vehicle", "bluerov2_heavy", "--structure",
+                     str(selected), *extra]) == 2
+        (line,) = capsys.readouterr().err.strip().splitlines()
+        assert f"--structure: the terms come from {selected}; leave out {extra[0]}" in line
+
+
 def test_no_misfit_on_data_the_preset_describes(tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     bag = tmp_path / "bag"

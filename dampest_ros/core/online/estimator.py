@@ -134,6 +134,13 @@ def restrict(model: DampingModel, theta: FloatArray, kinds: Sequence[str] | None
     return sub, sub.theta_from_dict({n: values[n] for n in sub.parameter_names})
 
 
+def nominal_of(structure: DampingModel, model: DampingModel, theta: FloatArray) -> FloatArray:
+    """θ of ``structure``'s parameters taken by name from ``model``'s θ, 0 for a parameter
+    ``model`` does not have (a selected term: nothing is known of it), shape (p,)."""
+    values = dict(zip(model.parameter_names, np.asarray(theta, dtype=float), strict=True))
+    return np.array([values.get(n, 0.0) for n in structure.parameter_names])
+
+
 def parameter_scale(model: DampingModel, nominal: FloatArray) -> FloatArray:
     """|nominal θ_j|, or the largest |θ| of the same term when that is 0 (then 1), (p,)."""
     s = np.abs(np.asarray(nominal, dtype=float)).copy()
@@ -159,15 +166,25 @@ class OnlineEstimator:
         name keep the default prior. A std of 0 or non-finite means the default.
     keep_samples : bool
         Keep every sample used in ``samples_log`` (to compare with the batch path).
+    structure : DampingModel, optional
+        The terms to identify instead of the vehicle's (e.g. a model file's, from a
+        structure search); the vehicle's θ is the prior of the parameters it shares, 0 of
+        the others.
     """
 
     def __init__(self, vehicle: Vehicle, terms: Sequence[str] | None = None,
                  config: EstimatorConfig | None = None,
                  prior: tuple[Sequence[str], FloatArray, FloatArray] | None = None,
-                 keep_samples: bool = False) -> None:
+                 keep_samples: bool = False, structure: DampingModel | None = None) -> None:
         self.vehicle = vehicle
         self.cfg = config or EstimatorConfig()
-        self.model, self.nominal = restrict(vehicle.damping, vehicle.theta, terms)
+        if structure is None:
+            self.model, self.nominal = restrict(vehicle.damping, vehicle.theta, terms)
+        elif terms:
+            raise ConfigError("terms", "give the term kinds or a structure, not both")
+        else:
+            self.model = structure
+            self.nominal = nominal_of(structure, vehicle.damping, vehicle.theta)
         self.body = vehicle.body
         self.M = vehicle.body.M
         self.names = self.model.parameter_names
