@@ -24,6 +24,15 @@ def hidden(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return bag
 
 
+@pytest.fixture(scope="module")
+def selected(hidden: Path) -> Path:
+    """The model file ``identify --select`` writes for the hidden-terms log."""
+    out = hidden.parent / "selected.yaml"
+    assert main(["identify", str(hidden), "--vehicle", "bluerov2_heavy", "--select",
+                 "--out", str(out)]) == 0
+    return out
+
+
 def test_default_identify_names_the_misfit_and_what_to_run(
         hidden: Path, capsys: pytest.CaptureFixture[str]) -> None:
     capsys.readouterr()
@@ -35,15 +44,11 @@ def test_default_identify_names_the_misfit_and_what_to_run(
 
 
 def test_select_finds_the_hidden_terms_by_their_library_names(
-        hidden: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        hidden: Path, selected: Path) -> None:
     """Exactly the two hidden terms are added, within 2 % (Z_uxw: bilinear, N_rv: cross-
     flow); the zero linear terms of the preset (Y_v, K_p, N_r) go; the others stay within
     2 % of the truth."""
-    out = hidden.parent / "selected.yaml"
-    capsys.readouterr()
-    assert main(["identify", str(hidden), "--vehicle", "bluerov2_heavy", "--select",
-                 "--out", str(out)]) == 0
-    est = load_model(out)
+    est = load_model(selected)
     truth = load_model(hidden / "truth_model.yaml")
     t = dict(zip(truth.parameter_names, truth.theta, strict=True))
     preset = ["X_u", "Y_v", "Z_w", "K_p", "M_q", "N_r", "X_uu", "Y_vv", "Z_ww", "K_pp", "M_qq",
@@ -62,14 +67,12 @@ def test_select_finds_the_hidden_terms_by_their_library_names(
 
 
 def test_the_selected_structure_runs_online_within_3_sigma_of_batch(
-        hidden: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        hidden: Path, selected: Path, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
     """The structure --select found (a model file) given to --structure: the batch fit of
     it, and the estimator node's RLS (λ = 1) on the bag's messages, agree within 3σ in every
     coefficient; both have the selected terms, Z_uxw and N_rv among them. --structure with
     --select or --terms is refused in one line."""
-    selected = tmp_path / "selected.yaml"
-    assert main(["identify", str(hidden), "--vehicle", "bluerov2_heavy", "--select",
-                 "--out", str(selected)]) == 0
     models = {}
     for method in ("wls", "rls"):
         out = tmp_path / f"{method}.yaml"
