@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
-from dampest_ros.cli.common import describe, table
+from dampest_ros.cli.common import check_outputs, describe, table
 
 if TYPE_CHECKING:
     import numpy as np
@@ -158,6 +158,7 @@ def _design(args: argparse.Namespace) -> int:
 
     if args.harmonics < 1 or not args.base_frequency > 0 or args.iterations < 0:
         raise ValueError("--harmonics must be >= 1, --base-frequency > 0, --iterations >= 0")
+    check_outputs(args, {"out": "trajectory.yaml"})
     if Path(args.out).exists():
         raise FileExistsError(f"{args.out} exists; choose a new --out")
     arm = load_arm(args.arm)
@@ -195,8 +196,12 @@ def _simulate(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists():
         raise FileExistsError(f"{out} exists; choose a new --out")
+    check_outputs(args, {}, ("out",))
     if not args.duration > 0:
         raise ValueError(f"--duration must be > 0, got {args.duration}")
+    if not 0 < args.rate <= 1000:
+        raise ValueError(f"--rate must be 1000 Hz divided by a whole number (1000, 500, "
+                         f"250, ...), got {args.rate:g}")
     arm = load_arm(args.arm)
     limits = _limits(args, arm.model)
     if args.trajectory:
@@ -256,6 +261,7 @@ def _identify(args: argparse.Namespace) -> int:
     from dampest_ros.core.signals.resample import increasing_runs, interpolate
     from dampest_ros.io.arm import load_arm, read_joint_bag
 
+    check_outputs(args, {"out": "arm_model.yaml"}, ("report",))
     cfg = IdentifyConfig(cutoff=args.cutoff, rate_out=args.rate_out, min_speed=args.min_speed)
     arm = load_arm(args.arm)
     names = arm.model.names

@@ -11,9 +11,11 @@ from __future__ import annotations
 import argparse
 import math
 import numbers
+import os
 import sys
 import textwrap
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -160,8 +162,9 @@ def add_cutoff_option(p: argparse.ArgumentParser, zero: str = "") -> None:
 def add_dask_options(p: argparse.ArgumentParser) -> None:
     """--workers, --scheduler: where several logs are read (Dask)."""
     p.add_argument("--workers", type=int, metavar="N",
-                   help="several logs: Dask worker processes of the local cluster (default: "
-                        "the CPU count, at most one per log)")
+                   help="several logs: Dask worker processes of the local cluster, at most "
+                        "one per log and one per CPU (more is capped to that, with a note: "
+                        "a worker reads one log at a time) (default: the CPU count)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="several logs: the address of a running Dask scheduler (e.g. "
                         "tcp://10.0.0.5:8786) instead of a local cluster; the workers must "
@@ -208,6 +211,70 @@ class Progress:
         if pct == 100:
             sys.stderr.write("\n")
         sys.stderr.flush()
+
+
+def check_outputs(args: argparse.Namespace, files: Mapping[str, str],
+                  dirs: Sequence[str] = ()) -> None:
+    """Refuse, before any work, an output option the command could not write at its end.
+
+    Parameters
+    ----------
+    args : Namespace
+        The parsed options; an option not given (None) is skipped.
+    files : mapping
+        Destination of a file option (``out``, ``drift_plot``) → an example file name for
+        the message (``model.yaml``): the path must not be a directory and its directory
+        must exist and be writable (nothing is created).
+    dirs : sequence of str
+        Destinations of directory options (``report``), created with their parents: the
+        path must not be a file, nor lie under one, and must be creatable.
+
+    Raises
+    ------
+    OSError
+        One line: the option, the path as given, what is wrong and the fix.
+    """
+    for dest, example in files.items():
+        if (given := getattr(args, dest, None)) is not None:
+            _check_file(str(given), "--" + dest.replace("_", "-"), example)
+    for dest in dirs:
+        if (given := getattr(args, dest, None)) is not None:
+            _check_dir(str(given), "--" + dest.replace("_", "-"))
+
+
+def _check_file(given: str, option: str, example: str) -> None:
+    """:func:`check_outputs` of one file option."""
+    path = Path(given)
+    if path.is_dir():
+        raise IsADirectoryError(f"{option} {given}: is a directory; give the file to write, "
+                                f"e.g. {option} {path / example}")
+    parent = path.parent
+    if not parent.exists():
+        raise FileNotFoundError(f"{option} {given}: the directory {parent} does not exist; "
+                                f"create it (mkdir -p {parent}) or give another path")
+    _check_writable(parent, given, option)
+
+
+def _check_dir(given: str, option: str) -> None:
+    """:func:`check_outputs` of one directory option (created later, parents too)."""
+    path = Path(given)
+    if path.exists() and not path.is_dir():
+        raise NotADirectoryError(f"{option} {given}: is a file; give a directory (created "
+                                 "if missing)")
+    existing = next((p for p in (path, *path.parents) if p.exists()), Path.cwd())
+    if existing != path:
+        _check_writable(existing, given, option)
+
+
+def _check_writable(directory: Path, given: str, option: str) -> None:
+    """Refuse ``given`` when ``directory``, where it is to be created, is a file or is not
+    writable."""
+    if not directory.is_dir():
+        raise NotADirectoryError(f"{option} {given}: {directory} is a file, not a directory; "
+                                 "give another path")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise PermissionError(f"{option} {given}: the directory {directory} is not "
+                              "writable; give another path")
 
 
 def add_window_options(p: argparse.ArgumentParser) -> None:

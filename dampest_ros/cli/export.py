@@ -20,7 +20,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from dampest_ros.cli.common import describe
+from dampest_ros.cli.common import check_outputs, describe
 from dampest_ros.io.export import FORMATS, FRAMES, IMPORT_FORMATS
 
 EXPORT_EXAMPLE = ("examples:\n"
@@ -88,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
     from dampest_ros.io.export.convert import export_model
     from dampest_ros.io.yaml_io import load_model, load_vehicle
 
+    check_outputs(args, {"out": "hydrodynamics.sdf"})
     model = load_model(args.model)
     vehicle = load_vehicle(args.vehicle) if args.vehicle else None
     if vehicle is not None:
@@ -127,6 +128,7 @@ def run_import(args: argparse.Namespace) -> int:
     from dampest_ros.io.export.convert import import_model
     from dampest_ros.io.yaml_io import load_vehicle, save_model
 
+    check_outputs(args, {"out": "model.yaml"})
     vehicle = load_vehicle(args.vehicle) if args.vehicle else None
     imp = import_model(Path(args.file), args.format, frame=args.frame,
                        link_name=args.link_name)

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from dampest_ros.cli.common import table
+from dampest_ros.cli.common import check_outputs, table
 from dampest_ros.cli.inputs import load_model_for, load_samples
 from dampest_ros.cli.pool import expand_inputs, map_logs_on_dask
 from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData
@@ -106,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
     The model file (``--out``) and the report (``--report``) are written whatever the free
     run does: a run that diverges or fails is explained in them and on the terminal."""
     t0 = time.perf_counter()
+    check_outputs(args, {"out": "model.yaml"}, ("report",))
     if args.max_steps < 0:
         raise ConfigError("--max-steps", f"must be ≥ 0, got {args.max_steps}")
     if not 0.2 <= args.split <= 0.9:

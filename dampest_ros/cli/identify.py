@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from dampest_ros.cli.common import DEFAULT_TOPICS, table, term_list
+from dampest_ros.cli.common import DEFAULT_TOPICS, check_outputs, table, term_list
 from dampest_ros.cli.inputs import (
     bag_topics,
     check_options,
@@ -58,6 +58,7 @@ from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model
 def run(args: argparse.Namespace) -> int:
     """Read, preprocess, fit, print the table, write the model."""
     t0 = time.perf_counter()
+    check_outputs(args, {"out": "model.yaml", "drift_plot": "drift.png"}, ("report",))
     vehicle = load_vehicle(args.vehicle)
     paths = expand_inputs(args.input)
     if len(paths) > 1 or is_url(paths[0]):  # a URL is fetched where a Dask worker reads it

@@ -142,6 +142,9 @@ def load_samples(path: str, vehicle: Vehicle, args: argparse.Namespace,
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p} does not exist")
+    if not args.max_gap >= 0:  # before the preprocessing's own check, which names no option
+        raise ConfigError("--max-gap", f"{args.max_gap:g} s: must be ≥ 0 (DVL gaps longer "
+                                       "than this split the data); the default is 1")
     if p.is_file() and is_csv(p):
         cmap = load_column_map(args.columns) if getattr(args, "columns", None) else None
         samples, notes = read_log(p, vehicle.thrusters, vehicle.body.gravity, cmap,

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.cli.common import table
+from dampest_ros.cli.common import check_outputs, table
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.online.estimator import EstimatorConfig, OnlineEstimator, parameter_scale
 from dampest_ros.core.physics.rigid_body import ConfigError
@@ -101,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
     from dampest_ros.io.yaml_io import load_vehicle, read_mapping
     from dampest_ros.report.convergence import band_coverage
 
+    check_outputs(args, {}, ("out",))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     vehicle = load_vehicle(args.vehicle)

@@ -149,7 +149,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:
         if args.debug or os.environ.get("DAMPEST_DEBUG", "0") not in ("", "0"):
             raise
-        what = (str(exc) if expected(exc) else
+        what = (str(exc) if expected(exc) and str(exc) else
                 f"unexpected {type(exc).__name__}: {exc} (dampest --debug "
                 f"{args.command} ... shows where)")
         print(f"dampest {args.command}: error: {what}", file=sys.stderr)

@@ -31,7 +31,7 @@ from dampest_ros.core.identification.batch import Fit, FitOptions
 from dampest_ros.core.identification.pool import Drift, LogStatistics, MapLogs, log_statistics
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.simulation.excitation import speed_limits
-from dampest_ros.io.remote import glob_url, is_url, local_log, local_name
+from dampest_ros.io.remote import glob_url, in_memory, is_url, local_log, local_name
 from dampest_ros.io.yaml_io import load_vehicle
 
 #: Characters that make an INPUT a glob pattern.
@@ -137,8 +137,9 @@ def need_dask() -> None:
                                           f"installed ({exc}); {POOL_HINT}") from exc
 
 
-def _client(args: argparse.Namespace, n_logs: int) -> Any:
-    """A Dask client: on --scheduler, or on a LocalCluster of --workers processes."""
+def _client(args: argparse.Namespace, paths: Sequence[str]) -> Any:
+    """A Dask client: on --scheduler, or on a LocalCluster of :func:`local_workers`
+    processes (threads of this process when a log is in memory: :func:`in_memory`)."""
     from dask.distributed import Client
     if args.workers is not None and args.workers < 1:
         raise ConfigError("--workers", f"{args.workers}: needs at least 1 worker")
@@ -149,11 +150,29 @@ def _client(args: argparse.Namespace, n_logs: int) -> Any:
             raise ConfigError("--scheduler", f"{args.scheduler}: no Dask scheduler answers "
                                              f"({exc}); start one or leave the option out "
                                              "for a local cluster") from exc
-    return Client(local_cluster(args.workers or min(os.cpu_count() or 1, n_logs)))
+    here = [p for p in paths if in_memory(p)]
+    if here:
+        print(f"note: {here[0]} is in memory, which worker processes do not share: the logs "
+              "are read by threads of this process", file=sys.stderr)
+    return Client(local_cluster(local_workers(args.workers, len(paths)), processes=not here))
 
 
-def local_cluster(workers: int) -> Any:
-    """A Dask LocalCluster of ``workers`` single-threaded processes, quiet, no dashboard.
+def local_workers(asked: int | None, n_logs: int) -> int:
+    """The local cluster's worker count: ``asked`` (--workers, default the CPU count), at
+    most one per log and one per CPU (each worker reads one log at a time, and workers beyond
+    the CPUs only compete for them and are slow to start); a cap of ``asked`` is noted on
+    stderr."""
+    cpus = os.cpu_count() or 1
+    workers = min(asked or cpus, n_logs, cpus)
+    if asked is not None and workers < asked:
+        print(f"note: --workers {asked} capped to {workers} (one per log and per CPU: "
+              f"{n_logs} logs, {cpus} CPUs)", file=sys.stderr)
+    return workers
+
+
+def local_cluster(workers: int, processes: bool = True) -> Any:
+    """A Dask LocalCluster of ``workers`` single-threaded processes (threads of this
+    process if not ``processes``), quiet, no dashboard.
 
     Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_ set, which also fixes glibc's
     mmap threshold: every array over 128 kB is then mapped and unmapped afresh, and the
@@ -163,7 +182,7 @@ def local_cluster(workers: int) -> Any:
     import dask
     from dask.distributed import LocalCluster
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
-        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=processes,
                             dashboard_address=None, silence_logs=logging.CRITICAL)
 
 
@@ -179,7 +198,7 @@ def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: arg
     """
     need_dask()
     from dask.distributed import as_completed
-    client = _client(args, len(paths))
+    client = _client(args, paths)
     done: dict[str, Any] = {}
     failed: dict[str, str] = {}
     try:
@@ -234,7 +253,10 @@ def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray
 
             def send() -> Any:
                 k, stats = todo.pop()
-                future = client.submit(fn, client.scatter(stats), k, pure=False)
+                # hash=False: a key of its own per pass; a content-hashed key is shared with
+                # the previous pass's scatter of the same log, released as that one is
+                # forgotten ("lost dependencies" with in-process workers)
+                future = client.submit(fn, client.scatter(stats, hash=False), k, pure=False)
                 log_of[future] = k
                 return future
 

@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from dampest_ros.cli.common import speed_table, table
+    from dampest_ros.cli.common import check_outputs, speed_table, table
     from dampest_ros.core.identification.model import Model
     from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
     from dampest_ros.core.simulation.effects import Effects, true_vehicle
@@ -76,6 +76,10 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists():
         raise FileExistsError(f"{out} exists; choose a new --out")
+    check_outputs(args, {"csv": "samples.csv"}, ("out",))
+    if not 0 < args.amplitude < np.inf:
+        raise ValueError(f"--amplitude: must be a finite scale > 0 of the protocol's "
+                         f"amplitudes, got {args.amplitude:g} (default 1)")
     vehicle = load_vehicle(args.vehicle)
     effects = Effects.from_dict(read_mapping(args.effects)) if args.effects else Effects()
     sensors = SensorConfig.from_dict(read_mapping(args.sensors)) if args.sensors \

@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from dampest_ros.cli.common import table
+    from dampest_ros.cli.common import check_outputs, table
     from dampest_ros.cli.inputs import cut, load_model_for, load_samples
     from dampest_ros.core.identification.validate import free_run_error, longest_segment, metrics
     from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
@@ -125,12 +125,14 @@ def run(args: argparse.Namespace) -> int:
     from dampest_ros.io.yaml_io import load_vehicle
 
     t0 = time.perf_counter()
+    check_outputs(args, {"out": "forces.csv"})
     vehicle = load_vehicle(args.vehicle)
     mf, model, body = load_model_for(args.model, vehicle)
     if not args.cutoff >= 0:
         raise ConfigError("--cutoff", f"must be ≥ 0 Hz, got {args.cutoff}")
-    if not args.free_run > 0:
-        raise ConfigError("--free-run", f"must be > 0 s, got {args.free_run}")
+    if not 0 < args.free_run < np.inf:
+        raise ConfigError("--free-run", f"must be a finite number of seconds > 0, got "
+                                        f"{args.free_run}")
     samples = cut(load_samples(args.input, vehicle, args), args)
     forces = model_forces(samples, model, body, mf.theta, args.cutoff)
     force = metrics(forces["target"], forces["damping"] + forces["memory"])

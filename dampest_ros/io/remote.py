@@ -17,11 +17,18 @@ from typing import Any
 from dampest_ros.core.physics.rigid_body import ConfigError
 
 FILE = "file://"
+#: fsspec's in-memory filesystem: its files live in one process only.
+MEMORY = "memory://"
 
 
 def is_url(name: str) -> bool:
     """Whether ``name`` is a URL of a scheme other than ``file://``."""
     return "://" in name and not name.startswith(FILE)
+
+
+def in_memory(name: str) -> bool:
+    """Whether ``name`` is a ``memory://`` URL (a file of this process only)."""
+    return name.startswith(MEMORY)
 
 
 def local_name(name: str) -> str:
@@ -73,7 +80,11 @@ def local_log(name: str) -> Iterator[str]:
     fs, path = _filesystem(name)
     path = path.rstrip("/")
     if not fs.exists(path):
-        raise FileNotFoundError(f"{name} does not exist")
+        shared = ("" if not in_memory(name) else
+                  " in this process (an in-memory filesystem is not shared with other "
+                  "processes, e.g. the Dask workers of a --scheduler: use a local path or a "
+                  "shared filesystem)")
+        raise FileNotFoundError(f"{name} does not exist{shared}")
     with tempfile.TemporaryDirectory(prefix="dampest_log_") as tmp:
         dest = Path(tmp) / (PurePosixPath(path).name or "log")
         if fs.isdir(path):

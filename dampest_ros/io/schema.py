@@ -187,6 +187,6 @@ def load_checked(path: str | Path, name: str) -> YamlDoc:
     OSError
         The file cannot be read.
     """
-    doc = load_yaml(path)
+    doc = load_yaml(path, f"a {name.replace('_', ' ')} YAML file")
     check(doc, name)
     return doc

@@ -134,14 +134,29 @@ def loads_yaml(text: str, source: str) -> YamlDoc:
         loader.dispose()
 
 
-def load_yaml(path: str | Path) -> YamlDoc:
+def load_yaml(path: str | Path, kind: str = "a YAML text file") -> YamlDoc:
     """:func:`loads_yaml` of a file.
+
+    Parameters
+    ----------
+    path : str or Path
+    kind : str
+        What the file should be, for the message refusing a directory or a binary file
+        (e.g. a bag given where a model file belongs).
 
     Raises
     ------
     InputError
-        See :func:`loads_yaml`.
+        See :func:`loads_yaml`; a directory, or a file that is not UTF-8 text.
     OSError
         The file cannot be read.
     """
-    return loads_yaml(Path(path).read_text(), str(path))
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except IsADirectoryError:
+        raise InputError(str(path), None, "", f"is a directory, not {kind}") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(str(path), None, "", f"not a text file (byte {exc.start} is not "
+                                              f"UTF-8: binary data, e.g. a bag or an "
+                                              f"archive); expected {kind}") from None
+    return loads_yaml(text, str(path))

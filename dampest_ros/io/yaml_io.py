@@ -85,9 +85,15 @@ _REQUIRED = ("sign_convention", "parameter_names", "theta", "theta_std", "M", "v
 _RESERVED = (*_REQUIRED, "terms", "M_A", "added_mass_terms", "identified", "held", "identity")
 
 
-def _read_yaml(path: Path) -> Any:
-    """A user's YAML file, duplicate keys refused (:mod:`dampest_ros.io.strict_yaml`)."""
-    return load_yaml(path).data
+#: What a model file is, for the message refusing another kind of file given as one.
+MODEL_KIND = ("a model file (the ROS 2 parameters YAML that dampest identify --out writes: "
+              "<node>: ros__parameters: model: ...)")
+
+
+def _read_yaml(path: Path, kind: str = "a YAML text file") -> Any:
+    """A user's YAML file, duplicate keys refused (:mod:`dampest_ros.io.strict_yaml`);
+    ``kind`` says what it should be when it is a directory or binary."""
+    return load_yaml(path, kind).data
 
 
 def read_mapping(source: str) -> dict[str, Any]:
@@ -304,7 +310,10 @@ _Dumper.add_representer(str, lambda d, s: d.represent_scalar(
 def atomic_write(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` atomically: a temporary file in the same directory
     (``.<name>.*.tmp``), synced, then renamed over ``path``."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise _cannot_write(path, exc) from None
     try:
         with os.fdopen(fd, "w") as f:
             os.fchmod(f.fileno(), 0o644)
@@ -312,9 +321,16 @@ def atomic_write(path: Path, text: str) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise _cannot_write(path, exc) from None
         raise
+
+
+def _cannot_write(path: Path, exc: OSError) -> OSError:
+    """``exc`` of an atomic write, naming ``path`` (not its temporary file)."""
+    return type(exc)(exc.errno, f"cannot write {path}: {exc.strerror}")
 
 
 def save_model(path: str | Path, model: Model) -> Path:
@@ -439,7 +455,7 @@ def load_model(path: str | Path) -> Model:
     OSError
         The file cannot be read.
     """
-    return _model_from_doc(load_yaml(path))
+    return _model_from_doc(load_yaml(path, MODEL_KIND))
 
 
 def loads_model(text: str) -> Model:
@@ -613,7 +629,7 @@ def foreign_model(path: str | Path, expected: Identity) -> str | None:
     if not path.exists():
         return None
     try:
-        _, model = model_section(load_yaml(path))
+        _, model = model_section(load_yaml(path, MODEL_KIND))
         found = (Identity.from_dict(model["identity"], f" ({path})") if "identity" in model
                  else None)
     except (ConfigError, OSError) as exc:

@@ -526,12 +526,17 @@ def clamp(coefs: Sequence[Coefficient]) -> tuple[list[Coefficient], dict[str, fl
 
 
 def parse_xml(source: str | Path) -> tuple[ET.Element, str]:
-    """The root element of an XML file or text, and a label for messages."""
+    """The root element of an XML file or text, and a label for messages (a binary file is
+    refused as XML that is not valid, naming the file)."""
+    text: str | bytes
     if isinstance(source, Path) or not str(source).lstrip().startswith("<"):
         path = Path(source)
+        if path.is_dir():
+            raise IsADirectoryError(f"{path} is a directory; give the SDF, URDF or XML file "
+                                    "that holds the hydrodynamics")
         if not path.is_file():
             raise FileNotFoundError(f"no file {path}")
-        text, label = path.read_text(), str(path)
+        text, label = path.read_bytes(), str(path)  # the parser decodes as the file says
     else:
         text, label = str(source), "XML text"
     try:
