@@ -232,6 +232,11 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     if unsupported:
         raise DataError(f"--method rls does not take {', '.join(unsupported)} (batch methods "
                         "only)")
+    if not 0.9 <= args.forgetting_factor <= 1.0:
+        raise ConfigError("--forgetting-factor", f"must be in [0.9, 1], got "
+                                                 f"{args.forgetting_factor:g} (1: every sample "
+                                                 "weighs the same; 0.999: a memory of about "
+                                                 "1000 samples)")
     path = Path(args.input)
     if not path.exists():
         raise FileNotFoundError(f"{path} does not exist")

@@ -168,6 +168,9 @@ def _bag_samples(p: Path, vehicle: Vehicle, args: argparse.Namespace,
     """Samples of a bag (rosbag2, ROS 1 or a CSV folder), after :func:`check_options`; the
     bag is read a window at a time as the preprocessing needs it, so memory stays flat with
     its length."""
+    if getattr(args, "columns", None):
+        raise ConfigError("--columns", f"renames the columns of a CSV log; {p} is a bag "
+                                       "(give its topics with --imu-topic, --dvl-topic, …)")
     topics = bag_topics(p, vehicle, args)
     cfg = PreprocessConfig(max_gap=args.max_gap)
     with BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),

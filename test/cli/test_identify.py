@@ -197,7 +197,8 @@ def test_rls_forgetting_factor_and_unsupported_inputs(
     capsys.readouterr()
     for argv, needle in (([str(short_b / "samples.csv")], "rosbag2"),
                          ([str(bag), "--select"], "--select"),
-                         ([str(bag), "--forgetting-factor", "1.5"], "forgetting_factor")):
+                         ([str(bag), "--forgetting-factor", "1.5"],
+                          "--forgetting-factor: must be in [0.9, 1], got 1.5")):
         assert main(["identify", *argv, "--vehicle", "bluerov2_heavy", "--method",
                      "rls"]) == 2
         assert needle in capsys.readouterr().err

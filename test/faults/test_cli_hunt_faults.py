@@ -101,3 +101,27 @@ def test_an_error_without_a_message_is_named(monkeypatch: pytest.MonkeyPatch,
     capsys.readouterr()
     assert main(["inspect", "x"]) == 2
     assert "error: unexpected TimeoutError" in capsys.readouterr().err
+
+
+def test_columns_given_for_a_bag_is_refused(sim_bag: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """Was: --columns, which renames a CSV's columns, ignored without a word for a bag."""
+    line = one_line(capsys, ["identify", str(sim_bag), "--vehicle", "bluerov2_heavy",
+                             "--columns", "map.yaml"], "--columns: renames the columns of a CSV "
+                                                       "log;", "is a bag")
+    assert "--imu-topic" in line
+
+
+def test_output_cut_short_by_the_reader_ends_quietly(sim_bag: Path) -> None:
+    """Was: 'dampest inspect BAG | head -1' ended with 'error: [Errno 32] Broken pipe',
+    exit 2. Now quiet, status 141 (128 + SIGPIPE) as shells expect."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "dampest_ros.cli.main", "inspect",
+                             str(sim_bag)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # the reader goes away before the first line (head -0)
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) in (0, 141), err
+    assert "Broken pipe" not in err and "error" not in err, err
