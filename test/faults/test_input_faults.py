@@ -128,7 +128,8 @@ def test_misspelt_params_file_key_ends_the_node(tmp_path: Path) -> None:
     assert lines[0].endswith(
         f"cannot start: {path}:{line_of(path, 'forgeting_factor')}: forgeting_factor: unknown "
         "parameter of estimator_node; did you mean forgetting_factor? (its parameters: "
-        "vehicle, terms, forgetting_factor, forgetting_mode, publish_rate, rate, cutoff, "
+        "vehicle, terms, structure, forgetting_factor, forgetting_mode, publish_rate, rate, "
+        "cutoff, "
         "chunk, outlier_gate, prior, save_path, resume; `estimator_node --help` describes "
         "them)")
 
