@@ -239,8 +239,8 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
                         f"directory or ROS 1 .bag file); {path} is not one (a CSV holds "
                         "samples, not messages)")
     summary = bag_summary(path)
-    check_options(args, args.rate, summary.duration, resample=True)
     topics = bag_topics(path, vehicle, args)
+    check_options(args, args.rate, summary.duration, resample=True)
     types = {t.lstrip("/"): i.msgtype for t, i in summary.topics.items()}
     for role in ("imu", "dvl"):
         found = types.get(topics[role], "")
