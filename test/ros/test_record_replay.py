@@ -343,6 +343,10 @@ def test_replay_skips_unknown_types_and_filters_topics(ros: Ros, tmp_path: Path)
     text = log.read_text()
     assert "skipping /odd" in text and "nonexistent_msgs/msg/Thing" in text
     assert "0/0 messages" in text
+    proc = node_process("replay_node", {"bag": str(src), "exclude_topics": "[odd, imu/data]",
+                                        "wait_for_subscribers": "0"}, log)
+    assert proc.wait(timeout=60) == 0, log.read_text()
+    assert "playing 0 messages on 0 topics" in log.read_text()  # neither /odd nor /imu/data
 
 
 def test_replay_sqlite3_with_offset_remap_clock_and_loop(ros: Ros, tmp_path: Path,
