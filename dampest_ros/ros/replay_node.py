@@ -172,8 +172,10 @@ class ReplayNode(ParamNode):
         finally:
             self._done.set()
             if not self._stop.is_set():
-                self._log_progress(final=True)
-                self.context.try_shutdown()  # ends spin(): the node has done its job
+                try:
+                    self._log_progress(final=True)
+                finally:
+                    self.context.try_shutdown()  # ends spin(): the node has done its job
 
     def _wait_to_start(self) -> bool:
         """Wait for the subscribers (at most wait_for_subscribers_timeout s, then warn) and
@@ -269,11 +271,14 @@ class ReplayNode(ParamNode):
         heard = 100.0 * self.heard / max(self.published, 1)
         what = "finished" if final else "playing"
         cpu = time.process_time() - self._cpu0
-        log = self.get_logger().warning if final and self.heard < self.published else \
-            self.get_logger().info
-        log(f"{what}: published {self.published}/{self.total} messages ({pct:.1f} %), "
-            f"{self.heard} ({heard:.1f} %) while their topic had a subscriber, bag time "
-            f"{into:.1f} of {length:.1f} s, CPU {cpu:.1f} s")
+        text = (f"{what}: published {self.published}/{self.total} messages ({pct:.1f} %), "
+                f"{self.heard} ({heard:.1f} %) while their topic had a subscriber, bag time "
+                f"{into:.1f} of {length:.1f} s, CPU {cpu:.1f} s")
+        # one call site per severity: rclpy refuses a second severity at the same line
+        if final and self.heard < self.published:
+            self.get_logger().warning(text)
+        else:
+            self.get_logger().info(text)
 
     def destroy_node(self) -> None:
         """Stop playback, close the bag, destroy the node."""
