@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from dampest_ros.cli.common import DEFAULT_TOPICS, table, term_list
+from dampest_ros.cli.common import DEFAULT_TOPICS, Elapsed, table, term_list
 from dampest_ros.cli.inputs import (
     bag_topics,
     check_options,
@@ -71,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     if args.holdout is not None:
         samples, held = split_holdout(samples, args.holdout)
     if args.select:
-        selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
+        with Elapsed("selecting the damping terms"):
+            selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
         print(selection_table(selection))
         values = dict(zip(model.parameter_names, nominal, strict=True))
         model = selection.model
@@ -367,7 +368,8 @@ def misfit_check(samples: Samples, model: DampingModel, body: RigidBody,
     than ``ratio`` times the library's is a misfit, and the line says what to run.
     """
     try:
-        sel = select_terms(samples, model, body, cutoff=args.cutoff, memory_dofs=())
+        with Elapsed("checking the preset's terms against the term library"):
+            sel = select_terms(samples, model, body, cutoff=args.cutoff, memory_dofs=())
     except ConfigError:
         return ""  # a structure the library search does not take (a residual term)
     before, after = sel.cv_r2
