@@ -6,6 +6,7 @@ import dataclasses
 import re
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -79,6 +80,15 @@ def test_every_axis_of_the_report_has_a_unit(
     coef = next(f for f in figures if "Coefficients" in f.texts[0].get_text())
     labels = {ax.get_title(): ax.get_ylabel() for ax in coef.axes if ax.get_visible()}
     assert labels["X_u"] == "(N·s/m)" and labels["N_rr"] == "(N·m·s²/rad²)"
+    # measured vs model over a residual panel in the same unit, each with a legend, and
+    # no offset text (×10ⁿ, +c) that would sit on the panel above
+    for title, unit in (("Damping force", "N"), ("Free-run", "m/s")):
+        fig = next(f for f in figures if f.texts[0].get_text().startswith(title))
+        assert len(fig.axes) == 12 and all(ax.get_legend() is not None for ax in fig.axes)
+        residuals = [ax for ax in fig.axes if ax.get_ylabel().startswith("resid.")]
+        assert len(residuals) == 6 and residuals[0].get_ylabel() == f"resid. ({unit})"
+        fig.canvas.draw()
+        assert all(ax.yaxis.get_offset_text().get_text() == "" for ax in fig.axes)
     # the PSD axis spans at most PSD_DECADES (8) decades below the force's peak, not 20,
     # and reaches down to the residual
     spectrum = next(f for f in figures if "PSD" in f.texts[0].get_text())
@@ -119,3 +129,36 @@ def test_convergence_report_axes_and_tracking_rms_per_unit(
     text = index.read_text(encoding="utf-8")
     assert "RMS error (m/s; u, w)" in text and "RMS error (rad/s; r)" in text
     assert "<td>0.01</td><td>0.1</td>" in text
+
+
+@pytest.mark.parametrize(("start", "xs"), [([0.0, 600.0, 1500.0], [0.0, 600.0, 1500.0]),
+                                           ([5.0, 5.0, 7.0], [0.0, 1.0, 2.0])])
+def test_drift_plot_puts_each_log_at_its_own_x_with_a_legend(
+        tmp_path: Path, start: list[float], xs: list[float]) -> None:
+    """Start times as x; the log index when two logs start together (simulated logs all
+    start at 0); one colour and legend entry per log, and the pooled line."""
+    from types import SimpleNamespace
+
+    from dampest_ros.cli.pool import plot_drift
+
+    rng = np.random.default_rng(0)
+    d = SimpleNamespace(names=["X_u", "X_uu"], logs=["a", "b", "c"], start=np.array(start),
+                        theta=rng.normal(size=(3, 2)), std=np.full((3, 2), 0.1),
+                        moved=[False, True])
+    shown: list[Figure] = []
+    orig = Figure.savefig
+
+    def keep(fig: Figure, *args: Any, **kwargs: Any) -> None:
+        shown.append(fig)
+        orig(fig, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Figure, "savefig", keep)
+        plot_drift(tmp_path / "drift.png", d, SimpleNamespace(theta=np.zeros(2)),  # type: ignore[arg-type]
+                   {"X_u": "N·s/m", "X_uu": "N·s²/m²"})
+    assert (tmp_path / "drift.png").read_bytes()[:8] == PNG_MAGIC
+    (fig,) = shown
+    ax = fig.axes[0]
+    assert [float(c.get_children()[0].get_xdata()[0]) for c in ax.containers] == xs
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["pooled", "a", "b", "c"]
+    assert fig.axes[1].get_title() == "X_uu (changed)"

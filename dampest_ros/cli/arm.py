@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
-from dampest_ros.cli.common import check_outputs, describe, table
+from dampest_ros.cli.common import Elapsed, check_outputs, describe, table
 
 if TYPE_CHECKING:
     import numpy as np
@@ -165,9 +165,12 @@ def _design(args: argparse.Namespace) -> int:
     limits = _limits(args, arm.model)
     base = base_parameters(arm.model)
     t0 = time.perf_counter()
-    d = design_excitation(arm.model, base, full_parameters(arm.model, arm.dynamics), limits,
-                          harmonics=args.harmonics, base_frequency=args.base_frequency,
-                          seed=args.seed, iterations=args.iterations)
+    with Elapsed(f"designing the excitation of {args.arm} ({args.iterations} iterations "
+                 "at most)"):
+        d = design_excitation(arm.model, base, full_parameters(arm.model, arm.dynamics),
+                              limits, harmonics=args.harmonics,
+                              base_frequency=args.base_frequency, seed=args.seed,
+                              iterations=args.iterations)
     save_trajectory(args.out, d.trajectory, limits, {
         "arm": str(args.arm), "cond": d.cond, "cond_start": d.cond_start,
         "cond_random_median": d.cond_random})

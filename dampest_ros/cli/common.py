@@ -14,6 +14,8 @@ import numbers
 import os
 import sys
 import textwrap
+import threading
+import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -192,18 +194,22 @@ def add_preprocess_options(p: argparse.ArgumentParser) -> None:
                         "as it is, with the findings as warnings")
 
 
-class Progress:
-    """A one-line progress bar on stderr for long inputs (silent below ``minimum`` items)."""
+#: Seconds a step runs before its progress line appears (a quicker one prints none).
+PROGRESS_AFTER = 5.0
 
-    def __init__(self, label: str, minimum: int = 200_000) -> None:
-        self.label, self.minimum, self.shown = label, minimum, -1
+
+class Progress:
+    """A one-line progress bar on stderr for a long loop: silent for its first ``after``
+    seconds (from its creation), then redrawn at each whole percent; the line ends at 100 %."""
+
+    def __init__(self, label: str, after: float = PROGRESS_AFTER) -> None:
+        self.label, self.shown = label, -1
+        self.start_at = time.monotonic() + after
 
     def __call__(self, done: int, total: int) -> None:
         """Redraw at each whole percent; finish the line at 100 %."""
-        if total < self.minimum:
-            return
         pct = min(100, 100 * done // max(total, 1))
-        if pct == self.shown:
+        if pct == self.shown or (self.shown < 0 and time.monotonic() < self.start_at):
             return
         self.shown = pct
         bar = "#" * (pct // 4) + "." * (25 - pct // 4)
@@ -275,6 +281,41 @@ def _check_writable(directory: Path, given: str, option: str) -> None:
     if not os.access(directory, os.W_OK | os.X_OK):
         raise PermissionError(f"{option} {given}: the directory {directory} is not "
                               "writable; give another path")
+
+
+class Elapsed:
+    """A progress line on stderr for a step without a loop to count: silent for its first
+    ``after`` seconds, then ``label: N s`` redrawn every second by a thread of its own, ended
+    with the total time. Use as a context manager around the step."""
+
+    def __init__(self, label: str, after: float = PROGRESS_AFTER) -> None:
+        self.label, self.after = label, after
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._draw, name="progress", daemon=True)
+        self._t0 = 0.0
+        self.shown = False
+
+    def __enter__(self) -> Elapsed:
+        self._t0 = time.monotonic()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        if self.shown:
+            sys.stderr.write(f"\r{self.label}: done in {time.monotonic() - self._t0:.0f} s\n")
+            sys.stderr.flush()
+
+    def _draw(self) -> None:
+        if self._stop.wait(self.after):
+            return
+        while True:
+            self.shown = True
+            sys.stderr.write(f"\r{self.label}: {time.monotonic() - self._t0:.0f} s")
+            sys.stderr.flush()
+            if self._stop.wait(1.0):
+                return
 
 
 def add_window_options(p: argparse.ArgumentParser) -> None:

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from dampest_ros.cli.common import DEFAULT_TOPICS, check_outputs, table, term_list
+from dampest_ros.cli.common import DEFAULT_TOPICS, Elapsed, check_outputs, table, term_list
 from dampest_ros.cli.inputs import (
     bag_topics,
     check_options,
@@ -73,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
     if args.holdout is not None:
         samples, held = split_holdout(samples, args.holdout)
     if args.select:
-        selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
+        with Elapsed("selecting the damping terms"):
+            selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
         print(selection_table(selection))
         nominal = nominal_of(selection.model, model, nominal)
         model = selection.model
@@ -245,8 +246,8 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
                         f"directory or ROS 1 .bag file); {path} is not one (a CSV holds "
                         "samples, not messages)")
     summary = bag_summary(path)
-    check_options(args, args.rate, summary.duration, resample=True)
     topics = bag_topics(path, vehicle, args)
+    check_options(args, args.rate, summary.duration, resample=True)
     types = {t.lstrip("/"): i.msgtype for t, i in summary.topics.items()}
     for role in ("imu", "dvl"):
         found = types.get(topics[role], "")
@@ -374,7 +375,8 @@ def misfit_check(samples: Samples, model: DampingModel, body: RigidBody,
     than ``ratio`` times the library's is a misfit, and the line says what to run.
     """
     try:
-        sel = select_terms(samples, model, body, cutoff=args.cutoff, memory_dofs=())
+        with Elapsed("checking the preset's terms against the term library"):
+            sel = select_terms(samples, model, body, cutoff=args.cutoff, memory_dofs=())
     except ConfigError:
         return ""  # a structure the library search does not take (a residual term)
     before, after = sel.cv_r2

@@ -26,7 +26,13 @@ from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.plausibility import frame_notes
 from dampest_ros.core.signals.preprocess import DataError, PreprocessConfig, preprocess
 from dampest_ros.core.signals.samples import Samples
-from dampest_ros.io.bag import BagSource, MissingTopicError, check_role_types, is_bag
+from dampest_ros.io.bag import (
+    BagSource,
+    MissingTopicError,
+    bag_summary,
+    check_role_types,
+    is_bag,
+)
 from dampest_ros.io.csv import is_csv, load_column_map, read_log
 from dampest_ros.io.csv_folder import folder_notes, is_csv_folder, resolve_topic
 from dampest_ros.io.yaml_io import load_model
@@ -34,9 +40,13 @@ from dampest_ros.io.yaml_io import load_model
 
 def bag_topics(path: Path, vehicle: Vehicle, args: argparse.Namespace) -> dict[str, str]:
     """:func:`topic_roles` of a bag (or CSV folder: its topics that the options name),
-    after checking that τ can be had: without
-    ``--wrench-topic`` it comes from thruster telemetry, which needs the vehicle's thrusters
-    (ConfigError naming both ways)."""
+    after checking that it holds messages (DataError: an empty recording) and that τ can be
+    had: without ``--wrench-topic`` it comes from thruster telemetry, which needs the
+    vehicle's thrusters (ConfigError naming both ways)."""
+    if not bag_summary(path).message_count:
+        raise DataError(f"{path} holds no message: was anything published while it was "
+                        "recorded, on the recorder's ROS_DOMAIN_ID? (dampest inspect "
+                        f"{path} lists its topics)")
     topics = topic_roles(args)
     if is_csv_folder(path):  # a topic option may name a file of the folder
         topics = {role: resolve_topic(path, t) for role, t in topics.items()}
@@ -125,7 +135,7 @@ def check_options(args: argparse.Namespace, rate: float, span: float, *,
     except ValueError:
         raise ConfigError("--delay", f"must be a number of seconds or 'auto', got "
                                      f"{args.delay!r}") from None
-    if not (math.isfinite(delay) and 0 <= delay < span):
+    if not (math.isfinite(delay) and (delay == 0 or 0 < delay < span)):  # 0: no shift
         raise ConfigError("--delay", f"{delay:g} s: must be ≥ 0 and shorter than the log "
                                      f"({span:.1f} s); typical thrust delays are 0-0.5 s, or "
                                      "give 'auto'")
@@ -173,7 +183,7 @@ def _bag_samples(p: Path, vehicle: Vehicle, args: argparse.Namespace,
                                        "(give its topics with --imu-topic, --dvl-topic, …)")
     topics = bag_topics(p, vehicle, args)
     cfg = PreprocessConfig(max_gap=args.max_gap)
-    with BagSource(p, progress=Progress(f"processing {p.name} (s of log)", minimum=600),
+    with BagSource(p, progress=Progress(f"processing {p.name} (s of log)"),
                    together=[topics["imu"], tau_topic(topics)]) as rec:
         given = check_options(args, args.rate, rec.summary.duration, resample=True,
                               min_rate=2 * cfg.cutoff)

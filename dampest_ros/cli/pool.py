@@ -299,26 +299,35 @@ def log_table(d: Drift) -> str:
 
 
 def plot_drift(path: Path, d: Drift, pooled: Fit, units: dict[str, str]) -> None:
-    """Each coefficient's per-log estimate ± 2σ against the log's start time, with the
-    pooled estimate; changed coefficients titled as such (PNG)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """Each coefficient's per-log estimate ± 2σ, each log at its own x (its start time after
+    the first log's, or its index when two logs start at the same time) and colour, named in
+    the legend, with the pooled estimate; changed coefficients titled as such (PNG)."""
+    import numpy as np
+    from matplotlib.figure import Figure
+
     p = len(d.names)
     cols = min(p, 4)
     rows = -(-p // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.4 * rows), squeeze=False)
-    t = d.start - d.start[0]
+    fig = Figure(figsize=(3.2 * cols, 2.4 * rows + 0.3 * (len(d.logs) // 4 + 1)))
+    axes = fig.subplots(rows, cols, squeeze=False)
+    by_start = len(np.unique(d.start)) == len(d.start)
+    x = d.start - d.start[0] if by_start else np.arange(len(d.logs), dtype=float)
     for j, ax in enumerate(axes.flat):
         if j >= p:
             ax.set_visible(False)
             continue
-        ax.errorbar(t, d.theta[:, j], yerr=2 * d.std[:, j], fmt="o", ms=3, capsize=2)
-        ax.axhline(pooled.theta[j], color="k", lw=0.8, ls="--")
+        for b, log in enumerate(d.logs):
+            ax.errorbar(x[b], d.theta[b, j], yerr=2 * d.std[b, j], fmt="o", ms=3, capsize=2,
+                        color=f"C{b % 10}", label=log)
+        ax.axhline(pooled.theta[j], color="k", lw=0.8, ls="--", label="pooled")
         ax.set_title(d.names[j] + (" (changed)" if d.moved[j] else ""), fontsize=9)
-        ax.set_xlabel("log start − first log start (s)", fontsize=7)
+        ax.set_xlabel("log start − first log start (s)" if by_start else "log", fontsize=7)
+        if not by_start:
+            ax.set_xticks(x)
         ax.set_ylabel(f"{d.names[j]} ({units.get(d.names[j], 'SI')})", fontsize=7)
+        ax.ticklabel_format(axis="y", style="plain", useOffset=False)
         ax.tick_params(labelsize=7)
-    fig.tight_layout()
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncols=min(len(labels), 4), fontsize=7)
+    fig.tight_layout(rect=(0, 0.3 * (len(d.logs) // 4 + 1) / fig.get_figheight(), 1, 1))
     fig.savefig(path, dpi=90)
-    plt.close(fig)

@@ -1,8 +1,10 @@
 """dampest record: record topics to a rosbag2 MCAP bag (runs the recorder node here).
 
-Stops on Ctrl-C or SIGTERM, which close the bag; a bag whose recording was killed is
-recovered with dampest reindex. A full disk stops the recording with the bag closed and
-every message received kept (exit status 1).
+Options as ros2 bag record's where they mean the same. Stops on Ctrl-C or SIGTERM, which
+close the bag; a bag whose recording was killed is recovered with dampest reindex. A full
+disk stops the recording with the bag closed and every message received kept (exit status
+1). When no message has arrived after 5 s a warning says so: start the pipeline (or the
+vehicle) first, on the same ROS_DOMAIN_ID.
 """
 
 from __future__ import annotations
@@ -13,8 +15,10 @@ from pathlib import Path
 
 from dampest_ros.cli.common import describe
 
-EXAMPLE = ("examples:\n  dampest record -o trial1\n"
-           "  dampest record -o trial1 --all --max-bag-duration 600\n"
+EXAMPLE = ("examples:\n  dampest record -o trial1                # the dampest topics, Ctrl-C "
+           "to stop\n"
+           "  dampest record -o trial1 --all -x '^/truth/' --max-bag-duration 600\n"
+           "  dampest record -o trial1 --compression zstd\n"
            "  dampest record -o t imu/data dvl/twist --namespace /vehicle")
 
 
@@ -31,6 +35,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-a", "--all", action="store_true",
                    help="record every topic found in the graph (not /rosout, "
                         "/parameter_events)")
+    p.add_argument("-x", "--exclude-regex", default="", metavar="REGEX",
+                   help="never record the topics this regular expression matches (anywhere "
+                        "in the resolved name, e.g. '^/truth/'); with topics or --all")
     p.add_argument("--max-bag-size", type=int, default=0, metavar="BYTES",
                    help="split into a new file after this many bytes (default: 0, never)")
     p.add_argument("--max-bag-duration", type=float, default=0.0, metavar="S",
@@ -41,7 +48,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="flush a chunk at least this often (until then its messages are in "
                         "the file's journal: a killed recording loses none) (default: 0.2)")
     p.add_argument("--compression", choices=("none", "zstd", "lz4"), default="none",
-                   help="chunk compression (default: none)")
+                   help="MCAP chunk compression, which every MCAP reader undoes (as ros2 bag "
+                        "record's --storage-preset-profile zstd_fast) (default: none)")
+    p.add_argument("--compression-mode", choices=("none", "file", "message"), default="none",
+                   help="rosbag2's own compression of whole files or single messages: not "
+                        "written (it would give up the journal that keeps a killed "
+                        "recording); only 'none' is accepted, use --compression")
+    p.add_argument("--compression-format", choices=("zstd",), default="",
+                   help="format of --compression-mode (not written: use --compression zstd)")
     p.add_argument("--namespace", default="", metavar="NS",
                    help="namespace the relative topic names are resolved in")
     p.add_argument("--node-name", default="", metavar="NAME",
@@ -54,7 +68,8 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
     """The node's --ros-args for the options (string values JSON-quoted for YAML)."""
     params: dict[str, object] = {"max_bag_size": args.max_bag_size,
                                  "max_bag_duration": float(args.max_bag_duration),
-                                 "compression": args.compression}
+                                 "compression": args.compression,
+                                 "exclude_regex": args.exclude_regex}
     if args.output:
         params["output"] = str(args.output)
     if args.all:
@@ -81,6 +96,11 @@ def run(args: argparse.Namespace) -> int:
     """Record until interrupted."""
     if args.all and args.topics:
         raise ValueError("give topics or --all, not both")
+    if args.compression_mode != "none" or args.compression_format:
+        raise ValueError("--compression-mode/--compression-format: rosbag2's file and message "
+                         "compression is not written (it would give up the journal that keeps "
+                         "a killed recording); --compression zstd compresses the MCAP chunks, "
+                         "which every MCAP reader undoes")
     if args.output and Path(args.output).exists():
         raise FileExistsError(f"{args.output} exists; dampest record never overwrites a bag")
     from dampest_ros.ros import recorder_node  # rclpy only for this command

@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from dampest_ros.cli.common import check_outputs, speed_table, table
+    from dampest_ros.cli.common import Elapsed, check_outputs, speed_table, table
     from dampest_ros.core.identification.model import Model
     from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
     from dampest_ros.core.simulation.effects import Effects, true_vehicle
@@ -85,13 +85,14 @@ def run(args: argparse.Namespace) -> int:
     sensors = SensorConfig.from_dict(read_mapping(args.sensors)) if args.sensors \
         else SensorConfig()
     t0 = time.perf_counter()
-    excitation = protocol(args.protocol, vehicle, args.duration, seed=args.seed,
-                          amplitude=args.amplitude)
-    traj = run_sim(vehicle, excitation, effects, dt=args.dt, backend=args.backend)
-    bias = SensorBias(effects.gyro_bias, effects.accel_bias, effects.dvl_bias)
-    rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, sensors, bias, seed=args.seed,
-                  mounting=vehicle.mounting)
-    write_bag(out, rec, storage=args.storage)
+    with Elapsed(f"simulating {args.duration:g} s of {vehicle.name}, protocol {args.protocol}"):
+        excitation = protocol(args.protocol, vehicle, args.duration, seed=args.seed,
+                              amplitude=args.amplitude)
+        traj = run_sim(vehicle, excitation, effects, dt=args.dt, backend=args.backend)
+        bias = SensorBias(effects.gyro_bias, effects.accel_bias, effects.dvl_bias)
+        rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, sensors, bias,
+                      seed=args.seed, mounting=vehicle.mounting)
+        write_bag(out, rec, storage=args.storage)
     if args.backend == "native":
         truth = true_vehicle(vehicle, effects)
         save_model(out / "truth_model.yaml", Model(

@@ -127,28 +127,42 @@ def save_figure(fig: Figure, path: Path, bottom: float = 0.08, wspace: float = 0
 
 
 def _measured_vs_model(t: FloatArray, measured: FloatArray, model: FloatArray,
-                       labels: tuple[str, str], ylabels: list[str], title: str,
-                       path: Path) -> str:
-    """Six panels (one per DOF, surge…heave left, roll…yaw right): a measured signal and
-    its model's, shapes (N, 6), against time t (s)."""
-    fig = Figure(figsize=(11, 7.5))
-    axes = fig.subplots(3, 2, sharex=True).T.ravel()
-    for i, ax in enumerate(axes):
+                       labels: tuple[str, str], names: Sequence[str], units: Sequence[str],
+                       title: str, path: Path) -> str:
+    """Six DOFs (surge…heave left, roll…yaw right), each a panel of a measured signal and
+    its model's, shapes (N, 6), against time t (s), over a panel of the residual measured −
+    model in the same unit. Tick labels are plain numbers: matplotlib's offset text
+    (×10ⁿ, +c) would sit on the panel above."""
+    fig = Figure(figsize=(11, 9.5))
+    grid_spec = fig.add_gridspec(6, 2, height_ratios=[3, 1.2] * 3)
+    first = fig.add_subplot(grid_spec[0, 0])
+    for i in range(6):
+        row, col = 2 * (i % 3), i // 3
+        ax = first if i == 0 else fig.add_subplot(grid_spec[row, col], sharex=first)
+        res = fig.add_subplot(grid_spec[row + 1, col], sharex=first)
         ax.plot(t, measured[:, i], lw=1.0, color="0.2", label=labels[0])
         ax.plot(t, model[:, i], lw=1.0, color="tab:red", alpha=0.85, label=labels[1])
-        ax.set_ylabel(ylabels[i])
-        ax.grid(alpha=0.3)
-    axes[2].set_xlabel("time (s)")
-    axes[5].set_xlabel("time (s)")
-    axes[0].legend(loc="upper right", fontsize=8)
+        ax.set_ylabel(f"{names[i]} ({units[i]})")
+        ax.legend(loc="upper right", fontsize=7, ncols=2, framealpha=0.7)
+        ax.tick_params(labelbottom=False)
+        res.plot(t, measured[:, i] - model[:, i], lw=0.8, color="tab:blue",
+                 label=f"{labels[0]} − {labels[1]}")
+        res.axhline(0.0, color="0.5", lw=0.6)
+        res.set_ylabel(f"resid. ({units[i]})", fontsize=8)
+        res.legend(loc="upper right", fontsize=7, framealpha=0.7)
+        res.tick_params(labelbottom=row == 4)
+        for a in (ax, res):
+            a.ticklabel_format(axis="y", style="plain", useOffset=False)
+            a.grid(alpha=0.3)
+        if row == 4:
+            res.set_xlabel("time (s)")
     fig.suptitle(title)
-    return save_figure(fig, path)
+    return save_figure(fig, path, bottom=0.06, hspace=0.15, wspace=0.25)
 
 
 def force_figure(t: FloatArray, y: FloatArray, y_hat: FloatArray, path: Path) -> str:
     return _measured_vs_model(
-        t, y, y_hat, ("measured y", "predicted Φθ"),
-        [f"{FORCE_NAMES[i]} ({FORCE_UNITS[i]})" for i in range(6)],
+        t, y, y_hat, ("measured y", "model Φθ"), FORCE_NAMES, FORCE_UNITS,
         "Damping force: measured y = τ − Mν̇ − C(ν)ν − g(η) vs model Φ(ν)θ", path)
 
 
@@ -266,8 +280,7 @@ def coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray,
 
 def free_run_figure(t: FloatArray, nu: FloatArray, sim: FloatArray, path: Path) -> str:
     return _measured_vs_model(
-        t, nu, sim, ("measured ν", "free run"),
-        [f"{DOF_NAMES[i]} ({VEL_UNITS[i]})" for i in range(6)],
+        t, nu, sim, ("measured ν", "free run"), DOF_NAMES, VEL_UNITS,
         "Free-run simulation driven by the measured τ and attitude vs measured ν", path)
 
 

@@ -10,7 +10,10 @@ the node clock, i.e. simulation time, under use_sim_time) through
 dampest_ros.io.recorder.BagRecorder. The QoS each publisher offers is stored in the bag
 metadata. Chunks reach the disk every chunk_size bytes or flush_period seconds (checked
 every flush_period / 4); each message of the chunk in progress is also appended at once to
-the file's journal, so a killed recorder loses no message it had received. SIGINT/SIGTERM
+the file's journal, so a killed recorder loses no message it had received. Topics that
+exclude_regex matches are never recorded. When no message has arrived silence_warning seconds
+after the start, a warning says so (the usual cause: the pipeline is not running, or runs on
+another ROS_DOMAIN_ID). SIGINT/SIGTERM
 take what is still queued and close the bag (summary, metadata.yaml). A killed recording is
 recovered with 'dampest reindex BAG'. While recording, the bag holds a lock that reindex and
 another recorder respect. A full disk stops the recording: the bag is closed with every
@@ -20,6 +23,7 @@ count and the node exits with status 1.
 
 from __future__ import annotations
 
+import re
 import sys
 import threading
 import time
@@ -60,6 +64,14 @@ def _output_ok(value: Any) -> str | None:
     return None
 
 
+def _regex_ok(value: Any) -> str | None:
+    try:
+        re.compile(str(value))
+    except re.error as exc:
+        return f"not a regular expression: {exc}"
+    return None
+
+
 def _topics_ok(value: Any) -> str | None:
     names = [t for t in value if t]
     if not names:
@@ -82,6 +94,9 @@ class RecorderNode(ParamNode):
               check=_topics_ok, read_only=True),
         Param("exclude", ["/rosout", "/parameter_events"], "topics never recorded by 'all'",
               read_only=True),
+        Param("exclude_regex", "", "topics whose resolved name this regular expression "
+              "matches (anywhere in the name) are never recorded; empty: none",
+              check=_regex_ok, read_only=True),
         Param("max_bag_size", 0, "start a new storage file after this many bytes; 0: never",
               low=0, high=2**62, read_only=True),
         Param("max_bag_duration", 0.0, "start a new storage file after this many seconds of "
@@ -100,6 +115,9 @@ class RecorderNode(ParamNode):
               low=0.05, high=60.0),
         Param("status_period", 10.0, "seconds between status lines in the log; 0: none",
               low=0.0, high=3600.0),
+        Param("silence_warning", 5.0, "seconds after the start at which a warning is logged "
+              "if no message has arrived on any topic; 0: none", low=0.0, high=3600.0,
+              read_only=True),
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -119,6 +137,8 @@ class RecorderNode(ParamNode):
         self.all_topics = wanted == ["all"]
         self.wanted = [] if self.all_topics else [self.resolve_topic_name(t) for t in wanted]
         self.exclude = {self.resolve_topic_name(t) for t in self.p("exclude") if t}
+        self.exclude_regex = re.compile(str(self.p("exclude_regex"))) \
+            if self.p("exclude_regex") else None
         self.subs: dict[str, Subscription] = {}
         self.lost: dict[str, int] = {}
         self.single: dict[int, bool] = {}      # connection → exactly one publisher
@@ -144,6 +164,10 @@ class RecorderNode(ParamNode):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._early_end = time.monotonic() + EARLY_WINDOW
         self.early_timer = self.create_timer(EARLY_LOOK, self._discover_early, clock=steady)
+        self.silence_timer = None
+        if self.p("silence_warning") > 0:
+            self.silence_timer = self.create_timer(float(self.p("silence_warning")),
+                                                   self._warn_if_silent, clock=steady)
         self.status_timer = None
         if self.p("status_period") > 0:
             self.status_timer = self.create_timer(float(self.p("status_period")), self._status)
@@ -158,10 +182,27 @@ class RecorderNode(ParamNode):
             self.status_timer.timer_period_ns = int(max(self.p("status_period"), 0.05) * 1e9)
 
     def _candidates(self) -> list[str]:
-        if not self.all_topics:
-            return [t for t in self.wanted if t not in self.subs]
-        return [name for name, _ in self.get_topic_names_and_types()
-                if name not in self.subs and name not in self.exclude]
+        if self.all_topics:
+            names = [name for name, _ in self.get_topic_names_and_types()
+                     if name not in self.exclude]
+        else:
+            names = self.wanted
+        return [t for t in names if t not in self.subs
+                and not (self.exclude_regex and self.exclude_regex.search(t))]
+
+    def _warn_if_silent(self) -> None:
+        """Once, silence_warning s after the start: warn if no message has arrived."""
+        assert self.silence_timer is not None
+        self.silence_timer.cancel()
+        with self._lock:
+            if any(t.count for t in self.recorder.topics):
+                return
+        what = (f"any of the {len(self.wanted)} topics" if not self.all_topics
+                else f"any of the {len(self.subs)} topics found" if self.subs else "any topic")
+        self.get_logger().warning(
+            f"no message on {what} after {float(self.p('silence_warning')):g} s "
+            f"({len(self.subs)} with a publisher): is the pipeline running, on this "
+            f"ROS_DOMAIN_ID ({self.context.get_domain_id()})?")
 
     def _discover_early(self) -> None:
         """Look at the graph often while the node is young and topics are missing."""

@@ -3,8 +3,9 @@
 Publishes every message's serialized bytes unchanged (bit-identical to the bag) at its log
 time, the intervals divided by rate, from start_offset seconds into the bag; optionally
 loops, publishes /clock with the bag time (for use_sim_time listeners), plays only some
-topics and renames them. Publishers use the QoS recorded in the bag (reliable only when every
-recorded publisher was; override with reliability) and keep queue_depth messages. A topic
+topics (or all but exclude_topics) and renames them. Publishers use the QoS recorded in the
+bag (reliable only when every recorded publisher was; override with reliability) and keep
+queue_depth messages. A topic
 whose message type is not installed is skipped with a warning. Before playing it waits until
 every played topic has wait_for_subscribers subscribers (1 by default: a message published
 before a subscriber is matched reaches no one), at most wait_for_subscribers_timeout seconds,
@@ -61,13 +62,15 @@ class ReplayNode(ParamNode):
               high=1000.0),
         Param("topics", [""], "bag topics to play (with or without the leading /); [''] "
               "or empty names: all", read_only=True),
+        Param("exclude_topics", [""], "bag topics not to play (with or without the leading "
+              "/); applied after topics", read_only=True),
         Param("remap", [""], "renamed topics, 'from:=to' per entry (bag name := published "
               "name)", check=_remap_ok, read_only=True),
         Param("start_offset", 0.0, "seconds after the first message of the bag to start at",
               low=0.0, high=1e9),
         Param("loop", False, "play again from start_offset after the end"),
         Param("clock", False, "publish /clock with the bag time"),
-        Param("clock_rate", 100.0, "/clock messages per wall-clock second", low=1.0,
+        Param("clock_rate", 40.0, "/clock messages per wall-clock second", low=1.0,
               high=10000.0),
         Param("reliability", "bag", "publisher reliability: as recorded, or forced",
               choices=("bag", "reliable", "best_effort"), read_only=True),
@@ -93,6 +96,7 @@ class ReplayNode(ParamNode):
         self.reader = Reader(Path(str(self.p("bag"))))
         self.reader.open()
         wanted = {"/" + t.lstrip("/") for t in self.p("topics") if t}
+        excluded = {"/" + t.lstrip("/") for t in self.p("exclude_topics") if t}
         remap = dict(("/" + a.strip().lstrip("/"), b.strip())
                      for a, b in (r.split(":=", 1) for r in self.p("remap") if r))
         depth = int(self.p("queue_depth"))
@@ -101,7 +105,7 @@ class ReplayNode(ParamNode):
         self.skipped: list[str] = []
         by_topic: dict[str, Publisher] = {}
         for conn in self.reader.connections:
-            if wanted and conn.topic not in wanted:
+            if (wanted and conn.topic not in wanted) or conn.topic in excluded:
                 continue
             try:
                 cls = import_message_type(conn.msgtype)
@@ -168,8 +172,10 @@ class ReplayNode(ParamNode):
         finally:
             self._done.set()
             if not self._stop.is_set():
-                self._log_progress(final=True)
-                self.context.try_shutdown()  # ends spin(): the node has done its job
+                try:
+                    self._log_progress(final=True)
+                finally:
+                    self.context.try_shutdown()  # ends spin(): the node has done its job
 
     def _wait_to_start(self) -> bool:
         """Wait for the subscribers (at most wait_for_subscribers_timeout s, then warn) and
@@ -265,11 +271,14 @@ class ReplayNode(ParamNode):
         heard = 100.0 * self.heard / max(self.published, 1)
         what = "finished" if final else "playing"
         cpu = time.process_time() - self._cpu0
-        log = self.get_logger().warning if final and self.heard < self.published else \
-            self.get_logger().info
-        log(f"{what}: published {self.published}/{self.total} messages ({pct:.1f} %), "
-            f"{self.heard} ({heard:.1f} %) while their topic had a subscriber, bag time "
-            f"{into:.1f} of {length:.1f} s, CPU {cpu:.1f} s")
+        text = (f"{what}: published {self.published}/{self.total} messages ({pct:.1f} %), "
+                f"{self.heard} ({heard:.1f} %) while their topic had a subscriber, bag time "
+                f"{into:.1f} of {length:.1f} s, CPU {cpu:.1f} s")
+        # one call site per severity: rclpy refuses a second severity at the same line
+        if final and self.heard < self.published:
+            self.get_logger().warning(text)
+        else:
+            self.get_logger().info(text)
 
     def destroy_node(self) -> None:
         """Stop playback, close the bag, destroy the node."""

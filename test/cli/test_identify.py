@@ -339,6 +339,27 @@ def test_absurd_options_are_refused_with_one_line(
     assert err.startswith(f"dampest identify: error: {option}") and err.count("\n") == 1, err
 
 
+@pytest.mark.parametrize("method", ["wls", "rls"])
+def test_an_empty_recording_is_refused_as_empty_not_for_its_delay(
+        tmp_path: Path, method: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """A bag recorded while nothing was published (0 messages, 0 s): one line saying so,
+    not a complaint about the --delay nobody gave."""
+    from dampest_ros.io.recorder import BagRecorder
+
+    bag = tmp_path / "trial1"
+    recorder = BagRecorder(bag)
+    recorder.open()
+    recorder.close()
+    capsys.readouterr()
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy", "--method", method,
+                 "--out", str(tmp_path / "model.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"dampest identify: error: {bag} holds no message: was anything "
+                   "published while it was recorded, on the recorder's ROS_DOMAIN_ID? "
+                   f"(dampest inspect {bag} lists its topics)\n")
+    assert not (tmp_path / "model.yaml").exists()
+
+
 def test_option_checks_are_shared_by_csv_validate_and_gap(
         short_b: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """One check for every command that reads a log: a CSV's own rate sets the Nyquist

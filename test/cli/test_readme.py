@@ -3,7 +3,8 @@
 Every ``dampest`` command of the README's ``sh`` blocks must parse, and read only files that
 are in the repository or that a command before it writes (no placeholders). The set-up
 block's sample-bag commands run here; all practical ones (not those that run until stopped,
-or the ROS 2 nodes of a full install) run in order in the slow test.
+or the ROS 2 nodes of a full install) run in order in a slow test, and the record/replay
+block, whose commands run until stopped, in another.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import os
 import re
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -19,6 +21,7 @@ from pathlib import Path
 import pytest
 
 from dampest_ros.cli.main import COMMANDS, build_parser
+from dampest_ros.io.bag import bag_summary
 
 REPO = Path(__file__).resolve().parents[2]
 #: First words of commands of a colcon workspace or a full ROS 2 install, not of the
@@ -32,19 +35,28 @@ READS = ("input", "bag", "model", "file", "prior", "truth", "columns")
 WRITES = ("out", "output", "csv", "report")
 
 
-def readme_commands() -> list[list[str]]:
-    """The commands of the README's ``sh`` blocks in order, as argv lists (continuation
-    lines joined, comments dropped, ``a && b`` split)."""
+def sh_blocks() -> list[list[list[str]]]:
+    """The README's ``sh`` blocks in order, each as its commands' argv lists (continuation
+    lines joined, comments dropped, ``a && b`` split; a command run in the background keeps
+    its trailing ``&``)."""
     text = (REPO / "README.md").read_text(encoding="utf-8")
-    commands: list[list[str]] = []
+    blocks: list[list[list[str]]] = []
     for block in re.findall(r"^```sh\n(.*?)^```", text, re.S | re.M):
+        commands: list[list[str]] = []
         for line in block.replace("\\\n", " ").splitlines():
             words = shlex.split(line, comments=True)
             while words:
                 cut = words.index("&&") if "&&" in words else len(words)
                 commands.append(words[:cut])
                 words = words[cut + 1:]
-    return commands
+        blocks.append(commands)
+    return blocks
+
+
+def readme_commands() -> list[list[str]]:
+    """The commands of the README's ``sh`` blocks in order, as argv lists without a trailing
+    ``&``."""
+    return [c[:-1] if c[-1] == "&" else c for block in sh_blocks() for c in block]
 
 
 def pip_commands() -> list[list[str]]:
@@ -104,14 +116,25 @@ def _sandbox(tmp_path: Path) -> Path:
     return tmp_path
 
 
-def _run(argv: list[str], cwd: Path) -> None:
+def _command(argv: list[str]) -> list[str]:
+    """``argv`` of a README ``dampest`` command as this interpreter's dampest."""
     exe = Path(sys.executable).parent / "dampest"
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "dampest_ros.cli.main"]
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
-    proc = subprocess.run([*cmd, *argv[1:]], cwd=cwd, env=env, capture_output=True,
+    return [*cmd, *argv[1:]]
+
+
+#: The environment the README's commands run in (the ROS ones on the test's own domain).
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg", "ROS_DOMAIN_ID": "87",
+       "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+
+
+def _run(argv: list[str], cwd: Path) -> str:
+    """Run a README command to its end (exit status 0); its stderr."""
+    proc = subprocess.run(_command(argv), cwd=cwd, env=ENV, capture_output=True,
                           text=True, timeout=900)
     assert proc.returncode == 0, f"{shlex.join(argv)}:\n{proc.stdout[-2000:]}" \
                                  f"\n{proc.stderr[-2000:]}"
+    return proc.stderr
 
 
 def test_the_sample_bag_commands_of_the_set_up_run(tmp_path: Path) -> None:
@@ -145,3 +168,32 @@ def test_every_practical_readme_command_runs_in_order(tmp_path: Path) -> None:
         ran += 1
     assert ran >= 10
     assert (cwd / "gap_report" / "index.html").is_file()
+
+
+@pytest.mark.slow
+def test_the_record_replay_block_runs_in_order(tmp_path: Path) -> None:
+    """The record/replay block as a user runs it (about a minute): the commands with ``&``
+    in the background, ``record`` until they have ended (then Ctrl-C), the others in
+    order; the bag holds the pipeline's messages, without the no-message warning, and the
+    offline RLS on it writes a model."""
+    block = next(b for b in sh_blocks() if any(c[:2] == ["dampest", "record"] for c in b))
+    cwd = _sandbox(tmp_path)
+    background: list[subprocess.Popen[str]] = []
+    for argv in block:
+        if argv[-1] == "&":
+            background.append(subprocess.Popen(_command(argv[:-1]), cwd=cwd, env=ENV,
+                                               stdout=subprocess.DEVNULL, text=True))
+        elif argv[1] == "record":
+            log = tmp_path / "record.log"
+            with log.open("w") as out:
+                recorder = subprocess.Popen(_command(argv), cwd=cwd, env=ENV, stdout=out,
+                                            stderr=subprocess.STDOUT, text=True)
+            assert all(p.wait(timeout=300) == 0 for p in background)
+            recorder.send_signal(signal.SIGINT)
+            assert recorder.wait(timeout=60) == 0, log.read_text()
+            assert "no message" not in log.read_text(), log.read_text()
+        else:
+            _run(argv, cwd)
+    counts = bag_summary(cwd / "bags" / "trial1").topics
+    assert all(counts[t].count > 100 for t in ("/imu/data", "/dvl/twist", "/thrusters/state"))
+    assert (cwd / "rls_model.yaml").is_file()

@@ -174,7 +174,7 @@ def test_every_ranged_and_choice_parameter_is_rejected_at_runtime_with_its_reaso
                 tried += 1
         finally:
             node.destroy_node()
-    assert tried == 42  # every ranged or choice parameter of the seven nodes
+    assert tried == 43  # every ranged or choice parameter of the seven nodes
 
 
 # --- two nodes of one name -----------------------------------------------------------------

@@ -343,6 +343,25 @@ def test_replay_skips_unknown_types_and_filters_topics(ros: Ros, tmp_path: Path)
     text = log.read_text()
     assert "skipping /odd" in text and "nonexistent_msgs/msg/Thing" in text
     assert "0/0 messages" in text
+    proc = node_process("replay_node", {"bag": str(src), "exclude_topics": "[odd, imu/data]",
+                                        "wait_for_subscribers": "0"}, log)
+    assert proc.wait(timeout=60) == 0, log.read_text()
+    assert "playing 0 messages on 0 topics" in log.read_text()  # neither /odd nor /imu/data
+
+
+def test_replay_heard_by_no_one_warns_and_ends(ros: Ros, tmp_path: Path, make_imu: Any
+                                              ) -> None:
+    """No subscriber: the final line is a warning (the progress lines before it are info)
+    and the node still ends by itself."""
+    path = bag.write_bag(tmp_path / "b", {"imu/data": make_imu})
+    log = tmp_path / "replay.log"
+    proc = node_process("replay_node", {"bag": str(path), "rate": "4.0",
+                                        "wait_for_subscribers": "0",
+                                        "progress_period": "0.1"}, log)
+    assert proc.wait(timeout=60) == 0, log.read_text()
+    text = log.read_text()
+    assert "]: playing: published" in text, text
+    assert "[WARN]" in text and "finished: published 400/400 messages" in text, text
 
 
 def test_replay_sqlite3_with_offset_remap_clock_and_loop(ros: Ros, tmp_path: Path,

@@ -155,3 +155,66 @@ def test_write_refused_in_the_take_thread_ends_the_node_with_status_1(
         ex.shutdown()
         rec.destroy_node()
         src.destroy_node()
+
+
+class Warnings:
+    """A logger stand-in that keeps the warnings."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def warning(self, text: str) -> None:
+        self.lines.append(text)
+
+    def info(self, text: str) -> None:
+        """Info lines are not kept."""
+
+
+def test_silence_after_the_start_is_warned_with_the_domain(
+        ctx: Any, tmp_path: Path, spin_until: Callable[..., bool],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Nothing published: after silence_warning seconds one warning names the topics and the
+    ROS_DOMAIN_ID the recorder listens on; it does not repeat."""
+    rec = recorder(ctx, tmp_path / "bag", topics=["imu/data", "dvl/twist"],
+                   silence_warning=0.3)
+    log = Warnings()
+    monkeypatch.setattr(rec, "get_logger", lambda: log)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(rec)
+    try:
+        spin_until(ex, lambda: False, 1.0)
+    finally:
+        ex.shutdown()
+        rec.destroy_node()
+    assert log.lines == ["no message on any of the 2 topics after 0.3 s (0 with a publisher): "
+                         f"is the pipeline running, on this ROS_DOMAIN_ID ({DOMAIN})?"]
+
+
+def test_exclude_regex_keeps_topics_out_and_a_recording_is_not_warned(
+        ctx: Any, tmp_path: Path, spin_until: Callable[..., bool],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """-x '^/truth/' with every topic: truth/odom is published but not recorded, imu/data
+    is; messages within silence_warning: no warning."""
+    rec = recorder(ctx, tmp_path / "bag", topics=["all"], exclude_regex="^/truth/",
+                   silence_warning=3.0)
+    log = Warnings()
+    monkeypatch.setattr(rec, "get_logger", lambda: log)
+    src = rclpy.create_node("recorder_test_exclude", context=ctx)
+    imu = src.create_publisher(Imu, "imu/data", SENSOR_QOS)
+    odom = src.create_publisher(Odometry, "truth/odom", RELIABLE_QOS)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(rec)
+    try:
+        assert spin_until(ex, lambda: imu.get_subscription_count() == 1, 2.5)
+        imu.publish(Imu())
+        odom.publish(Odometry())
+        assert wait_until(lambda: rec.recorder.message_count == 1, 5.0)
+        spin_until(ex, lambda: False, 3.5)
+        assert odom.get_subscription_count() == 0 and "/truth/odom" not in rec.subs
+    finally:
+        ex.shutdown()
+        rec.destroy_node()
+        src.destroy_node()
+    assert {t: s.count for t, s in bag.bag_summary(tmp_path / "bag").topics.items()} \
+        == {"/imu/data": 1}
+    assert log.lines == []
