@@ -14,7 +14,7 @@ import yaml
 from dampest_ros.cli.main import main
 from dampest_ros.core.online.estimator import CORRELATION_SECONDS, EstimatorConfig, OnlineEstimator
 from dampest_ros.core.physics import frames
-from dampest_ros.core.physics.vehicle import measured_wrench_scale
+from dampest_ros.core.physics.vehicle import Vehicle, measured_wrench_scale
 from dampest_ros.core.signals.measurements import JointSeries, WrenchSeries
 from dampest_ros.core.signals.preprocess import thruster_wrench
 from dampest_ros.io.bag import read_bag, write_bag
@@ -31,19 +31,23 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B", "--duration",
                  "150", "--seed", "5", "--out", str(root / "sim"),
                  "--csv", str(root / "sim.csv")]) == 0
-    rec = read_bag(root / "sim")
-    joints = rec.pop("thrusters/state")
-    assert isinstance(joints, JointSeries)
-    assert HEAVY.thrusters is not None
-    # the body wrench the thrusters gave (FRD), as a vehicle would log it: FLU, same stamps
-    tau_flu = frames.body_twist(thruster_wrench(joints, HEAVY.thrusters))
-    rec["wrench"] = WrenchSeries(joints.stamp, "base_link", tau_flu[:, :3], tau_flu[:, 3:])
-    rec.pop("truth/odom", None)
-    write_bag(root / "wrench_bag", rec)
+    wrench_bag(root / "sim", root / "wrench_bag", HEAVY)
     doc = yaml.safe_load(vehicle_path("bluerov2_heavy").read_text())
     del doc["thrusters"]
     (root / "bare.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
     return root
+
+
+def wrench_bag(src: Path, dst: Path, vehicle: Vehicle) -> Path:
+    """Bag ``src`` with τ on a WrenchStamped ``wrench`` topic instead of thrusters/state:
+    the body wrench the thrusters gave (FRD), as a vehicle would log it (FLU, same stamps)."""
+    rec = read_bag(src)
+    joints = rec.pop("thrusters/state")
+    assert isinstance(joints, JointSeries) and vehicle.thrusters is not None
+    tau_flu = frames.body_twist(thruster_wrench(joints, vehicle.thrusters))
+    rec["wrench"] = WrenchSeries(joints.stamp, "base_link", tau_flu[:, :3], tau_flu[:, 3:])
+    rec.pop("truth/odom", None)
+    return write_bag(dst, rec)
 
 
 def identify(src: Path, vehicle: str, out: Path, *extra: str) -> np.ndarray:
@@ -243,13 +247,7 @@ def test_a_commanded_wrench_that_leads_by_half_a_second_is_found_and_removed(
     sim = tmp_path / "sim"
     assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B", "--duration",
                  "150", "--seed", "8", "--out", str(sim), "--effects", "{delay: 0.5}"]) == 0
-    rec = read_bag(sim)
-    joints = rec.pop("thrusters/state")
-    assert isinstance(joints, JointSeries) and HEAVY.thrusters is not None
-    tau_flu = frames.body_twist(thruster_wrench(joints, HEAVY.thrusters))
-    rec["wrench"] = WrenchSeries(joints.stamp, "base_link", tau_flu[:, :3], tau_flu[:, 3:])
-    rec.pop("truth/odom", None)
-    write_bag(tmp_path / "commanded", rec)
+    wrench_bag(sim, tmp_path / "commanded", HEAVY)
     doc = yaml.safe_load(vehicle_path("bluerov2_heavy").read_text())
     del doc["thrusters"]
     (tmp_path / "bare.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
@@ -276,12 +274,7 @@ def test_the_commanded_wrench_lead_is_found_on_the_mujoco_torpedo(
     assert main(["simulate", "--backend", "mujoco", "--vehicle", "torpedo_auv", "--protocol",
                  "B", "--duration", "120", "--seed", "3", "--out", str(sim), "--effects",
                  "{delay: 0.5}"]) == 0
-    rec = read_bag(sim)
-    joints = rec.pop("thrusters/state")
-    assert isinstance(joints, JointSeries) and torpedo.thrusters is not None
-    tau_flu = frames.body_twist(thruster_wrench(joints, torpedo.thrusters))
-    rec["wrench"] = WrenchSeries(joints.stamp, "base_link", tau_flu[:, :3], tau_flu[:, 3:])
-    write_bag(tmp_path / "commanded", rec)
+    wrench_bag(sim, tmp_path / "commanded", torpedo)
     capsys.readouterr()
     assert main(["identify", str(tmp_path / "commanded"), "--vehicle", "torpedo_auv",
                  "--wrench-topic", "wrench", "--delay", "auto"]) == 0
