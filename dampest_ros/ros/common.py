@@ -334,6 +334,10 @@ class ParamNode(Node):
     parameter it does not declare (a misspelt key of a params file) is refused with
     :class:`UnknownParameterError`, except under :attr:`OVERRIDE_PREFIXES`."""
 
+    #: The process's exit status once the node has run (:func:`main_for`): a node whose job
+    #: failed part-way (a replay cut short by a damaged bag) sets it, 0 otherwise.
+    exit_status = 0
+
     #: Overrides under these prefixes are parameters the node declares later (``model.``).
     OVERRIDE_PREFIXES: tuple[str, ...] = ()
 
@@ -767,14 +771,16 @@ def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
             return
         node = None
         refused = False
+        status = 0  # a node's own exit_status once it has run (e.g. a replay cut short)
         files: list[Any] = []  # the --params-file files (io.strict_yaml.YamlDoc)
         try:
             files = params_files(argv)
             node = node_class()
             watch_duplicates(node)
             rclpy.spin(node)
+            status = int(getattr(node, "exit_status", 0))  # ParamNode.exit_status
         except (KeyboardInterrupt, ExternalShutdownException):
-            pass
+            status = int(getattr(node, "exit_status", 0))
         except (ValueError, ParameterException, DuplicateNodeError) as exc:
             if node is not None and not isinstance(exc, DuplicateNodeError):
                 raise
@@ -791,6 +797,8 @@ def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
             rclpy.try_shutdown()
         if refused:
             raise SystemExit(2)
+        if status:
+            raise SystemExit(status)
 
     return main
 

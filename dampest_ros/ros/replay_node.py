@@ -165,6 +165,7 @@ class ReplayNode(ParamNode):
                 self._wait_for_acked()
         except Exception as exc:  # a shut-down context while publishing: stop quietly
             if not self._stop.is_set() and self.context.ok():
+                self.exit_status = 1  # the bag was not played whole: say so in the status
                 self.get_logger().error(
                     f"playback of {self.p('bag')} failed after {self.published} messages: "
                     f"{type(exc).__name__}: {exc}; if the bag is damaged, 'dampest reindex "
