@@ -43,7 +43,8 @@ def bag_topics(path: Path, vehicle: Vehicle, args: argparse.Namespace) -> dict[s
     after checking that it holds messages (DataError: an empty recording) and that τ can be
     had: without ``--wrench-topic`` it comes from thruster telemetry, which needs the
     vehicle's thrusters (ConfigError naming both ways)."""
-    if not bag_summary(path).message_count:
+    summary = bag_summary(path)
+    if not summary.message_count:
         raise DataError(f"{path} holds no message: was anything published while it was "
                         "recorded, on the recorder's ROS_DOMAIN_ID? (dampest inspect "
                         f"{path} lists its topics)")
@@ -54,7 +55,7 @@ def bag_topics(path: Path, vehicle: Vehicle, args: argparse.Namespace) -> dict[s
         vehicle.need_thrusters(f"τ from the thruster telemetry of {path.name} "
                                f"({topics['thrusters']})",
                                "give --wrench-topic TOPIC (a body wrench in the bag)")
-    check_role_types(path, topics)
+    check_role_types(summary, topics)
     return topics
 
 

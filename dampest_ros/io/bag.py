@@ -476,12 +476,13 @@ def role_type_errors(summary: BagSummary, roles: Mapping[str, str]) -> list[str]
     return errors
 
 
-def check_role_types(path: str | Path, roles: Mapping[str, str]) -> None:
+def check_role_types(summary: BagSummary, roles: Mapping[str, str]) -> None:
     """Refuse a bag whose topics for identification's roles carry other message types.
 
     Parameters
     ----------
-    path : str or Path
+    summary : BagSummary
+        The bag's (:func:`bag_summary`; the caller has read it).
     roles : mapping of str to str
         Role → topic (see :func:`role_type_errors`).
 
@@ -490,9 +491,9 @@ def check_role_types(path: str | Path, roles: Mapping[str, str]) -> None:
     TopicTypeError
         With every mismatch of :func:`role_type_errors`, in one line naming the bag.
     """
-    errors = role_type_errors(bag_summary(path), roles)
+    errors = role_type_errors(summary, roles)
     if errors:
-        raise TopicTypeError(f"bag {path}: {'; '.join(errors)}")
+        raise TopicTypeError(f"bag {summary.path}: {'; '.join(errors)}")
 
 
 class BagSource:
