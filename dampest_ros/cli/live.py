@@ -354,27 +354,17 @@ def _report(args: argparse.Namespace, out: Path, flight: Flight,
 
 def _time_callbacks(node: Any) -> dict[str, float]:
     """Accumulate the thread CPU time spent in a node's subscription callbacks."""
-    import inspect
+    from dampest_ros.ros.common import same_arity
 
     acc = {"cpu": 0.0}
 
     def timed(cb: Any) -> Any:
-        # the same arity as the callback: rclpy passes the message info by the signature
-        def message(msg: Any) -> None:
+        def run(*args: Any) -> None:
             c = time.thread_time()
-            cb(msg)
+            cb(*args)
             acc["cpu"] += time.thread_time() - c
 
-        def with_info(msg: Any, info: Any) -> None:
-            c = time.thread_time()
-            cb(msg, info)
-            acc["cpu"] += time.thread_time() - c
-
-        try:
-            inspect.signature(cb).bind(object())
-        except TypeError:
-            return with_info
-        return message
+        return same_arity(cb, run)
 
     for sub in node.subscriptions:
         sub.callback = timed(sub.callback)

@@ -85,6 +85,31 @@ class TakenElsewhere(CallbackGroup):
         pass
 
 
+def takes_info(callback: Callable[..., Any]) -> bool:
+    """Whether rclpy gives a subscription ``callback`` the message info too: it decides by
+    the signature (one argument: the message; two: the message and its info)."""
+    try:
+        inspect.signature(callback).bind(object())
+    except TypeError:
+        return True
+    return False
+
+
+def same_arity(callback: Callable[..., Any], run: Callable[..., None]) -> Callable[..., None]:
+    """A subscription callback that takes what ``callback`` takes (:func:`takes_info`) and
+    passes it to ``run``: for wrapping a callback without changing what rclpy hands it."""
+    if takes_info(callback):
+        def with_info(msg: Any, info: Any) -> None:
+            run(msg, info)
+
+        return with_info
+
+    def message_only(msg: Any) -> None:
+        run(msg)
+
+    return message_only
+
+
 class Drain:
     """Subscriptions whose callbacks, after the message the executor gave them, also take
     the messages already queued on every subscription of the group: one from each in turn,
@@ -111,27 +136,16 @@ class Drain:
         """Make ``sub`` a member: its callback (taking the message, or the message and its
         info, as rclpy decides by the signature) is wrapped."""
         callback = sub.callback
-        deliver: Callable[[tuple[Any, Any]], None]
-        try:
-            inspect.signature(callback).bind(object())
-        except TypeError:  # (message, info)
-            def deliver(taken: tuple[Any, Any]) -> None:
-                callback(*taken)
+        info = takes_info(callback)
 
-            def with_info(msg: Any, info: Any) -> None:
-                callback(msg, info)
-                self.take()
+        def deliver(taken: tuple[Any, Any]) -> None:
+            callback(*(taken if info else taken[:1]))
 
-            sub.callback = with_info
-        else:
-            def deliver(taken: tuple[Any, Any]) -> None:
-                callback(taken[0])
+        def run(*args: Any) -> None:
+            callback(*args)
+            self.take()
 
-            def message_only(msg: Any) -> None:
-                callback(msg)
-                self.take()
-
-            sub.callback = message_only
+        sub.callback = same_arity(callback, run)
         self._members.append((sub, deliver))
 
     def take(self) -> None:
