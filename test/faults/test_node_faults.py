@@ -378,7 +378,8 @@ def test_every_node_stops_cleanly_on_sigint_and_sigterm_while_busy(
                 p.kill()
     texts = {n: f.read_text() for n, f in logs.items()}
     assert codes == dict.fromkeys(procs, 0), texts
-    assert not [n for n, t in texts.items() if "Traceback" in t or "Error" in t], texts
+    bad = {n: t for n, t in texts.items() if "Traceback" in t or "Error" in t}
+    assert not bad, bad  # each offending node's whole output
     assert "closed " in texts["recorder_node"]  # the bag was closed, not left for reindex
 
 
