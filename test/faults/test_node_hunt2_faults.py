@@ -2,11 +2,13 @@
 no sensor sends is rejected, counted on /diagnostics and logged once while the node runs on;
 a setting that cannot work is refused at start in one line with exit status 2.
 
-In-process nodes on ROS_DOMAIN_ID 33 (localhost only); node processes on 34."""
+In-process nodes on ROS_DOMAIN_ID 33 (localhost only)."""
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -14,11 +16,15 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 from geometry_msgs.msg import TwistWithCovarianceStamped  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
 from sensor_msgs.msg import FluidPressure, Imu, JointState  # noqa: E402
 
+from dampest_ros.io.bag import offered_qos  # noqa: E402
+from dampest_ros.io.recorder import BagRecorder  # noqa: E402
 from dampest_ros.io.yaml_io import load_vehicle  # noqa: E402
 from dampest_ros.ros.preprocess_node import PreprocessNode  # noqa: E402
+from dampest_ros.ros.replay_node import ReplayNode  # noqa: E402
 
 THRUSTERS = load_vehicle("bluerov2_heavy").thrusters.names
 
@@ -146,3 +152,63 @@ def test_preprocess_rejects_a_message_stamped_0_without_a_reset(
     c = counts(preprocess)
     assert preprocess.published - before == 350
     assert (c["rejected_unstamped"], c["clock_resets"]) == ("1", "0")
+
+
+@pytest.fixture
+def imu_bag(tmp_path: Path) -> Path:
+    """A bag of 11 IMU messages over 1 s (log times 1 to 2 s) and a topic without messages."""
+    path = tmp_path / "imu"
+    with BagRecorder(path) as rec:
+        conn = rec.add_connection("/imu/data", "sensor_msgs/msg/Imu", offered_qos("/imu/data"))
+        rec.add_connection("/pressure", "sensor_msgs/msg/FluidPressure",
+                           offered_qos("/pressure"))
+        for k in range(11):
+            t = 1.0 + k / 10
+            rec.write(conn, round(t * 1e9), imu(t))
+    return path
+
+
+def replay_refusal(context: Any, bag: Path, **params: Any) -> str:
+    """The one line with which replay_node refuses to start with ``params``."""
+    overrides = [Parameter("bag", value=str(bag)), *(Parameter(k, value=v)
+                                                     for k, v in params.items())]
+    with pytest.raises(ValueError) as refused:
+        ReplayNode(context=context, parameter_overrides=overrides)
+    assert "\n" not in str(refused.value)
+    return str(refused.value)
+
+
+@pytest.mark.parametrize(("option", "value"), [
+    ("topics", ["imu/dta"]), ("exclude_topics", ["imu/dta"]), ("remap", ["imu/dta:=x"])])
+def test_replay_refuses_a_topic_the_bag_does_not_have(context: Any, imu_bag: Path,
+                                                      option: str, value: list[str]) -> None:
+    """Was: topics: a warning, 0 messages played, status 0; exclude_topics and remap: the
+    misspelt name silently ignored (everything played, nothing renamed)."""
+    text = replay_refusal(context, imu_bag, **{option: value})
+    assert f"{option}: /imu/dta not in the bag; did you mean /imu/data?" in text
+
+
+def test_replay_refuses_a_start_offset_past_the_end(context: Any, imu_bag: Path) -> None:
+    """Was: 'finished: published 0/11 messages', status 0 (with loop: a core spun for good)."""
+    text = replay_refusal(context, imu_bag, start_offset=5.0)
+    assert "start_offset 5 s is past the end of the bag (1.000 s" in text
+
+
+def test_replay_refuses_a_remap_to_an_invalid_name(context: Any, imu_bag: Path) -> None:
+    """Was: rclpy's InvalidTopicNameException, a traceback and status 1."""
+    text = replay_refusal(context, imu_bag, remap=["imu/data:=imu data"])
+    assert text.startswith("remap: 'imu data' is not a valid topic name")
+
+
+def test_replay_loop_over_no_message_ends(context: Any, imu_bag: Path) -> None:
+    """Was: loop over a topic without messages re-read the bag forever at 100 % of a core."""
+    node = ReplayNode(context=context, parameter_overrides=[
+        Parameter("bag", value=str(imu_bag)), Parameter("topics", value=["pressure"]),
+        Parameter("loop", value=True), Parameter("wait_for_subscribers", value=0)])
+    try:
+        playing = threading.Thread(target=node._play, daemon=True)
+        playing.start()
+        playing.join(timeout=5.0)
+        assert not playing.is_alive() and node.published == 0
+    finally:
+        node.destroy_node()
