@@ -24,6 +24,7 @@ from dampest_ros.io.bag import offered_qos  # noqa: E402
 from dampest_ros.io.recorder import BagRecorder  # noqa: E402
 from dampest_ros.io.yaml_io import load_vehicle  # noqa: E402
 from dampest_ros.ros.preprocess_node import PreprocessNode  # noqa: E402
+from dampest_ros.ros.recorder_node import RecorderNode  # noqa: E402
 from dampest_ros.ros.replay_node import ReplayNode  # noqa: E402
 
 THRUSTERS = load_vehicle("bluerov2_heavy").thrusters.names
@@ -210,5 +211,26 @@ def test_replay_loop_over_no_message_ends(context: Any, imu_bag: Path) -> None:
         playing.start()
         playing.join(timeout=5.0)
         assert not playing.is_alive() and node.published == 0
+    finally:
+        node.destroy_node()
+
+
+def test_recorder_names_a_wanted_topic_nobody_publishes_and_the_closest(
+        context: Any, tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """Was: topics [imu/dta] while imu/data ran recorded nothing, and no warning came (the
+    silence warning only when no topic at all delivered)."""
+    node = RecorderNode(context=context, parameter_overrides=[
+        Parameter("output", value=str(tmp_path / "bag")),
+        Parameter("topics", value=["imu/dta", "pressure"])])
+    try:
+        node.create_publisher(Imu, "imu/data", 10)
+        node.create_publisher(FluidPressure, "pressure", 10)
+        node._discover()
+        assert node.silence_timer is not None
+        node._warn_if_silent()
+        err = capfd.readouterr().err
+        assert "no publisher of /imu/dta after 5 s (nothing recorded from it); did you mean " \
+               "/imu/data?" in err
+        assert "/pressure after" not in err
     finally:
         node.destroy_node()
