@@ -11,7 +11,9 @@ dropouts); diagnostics with the message counts, rejections and resets once per s
 The DVL may send geometry_msgs/TwistStamped instead (parameter dvl_type, read at start).
 Sensor mounting (lever arms, rotations) and the expected frame_ids come from the vehicle
 file's sensors: section; messages with another header.frame_id are counted
-(frame_id_mismatch in the diagnostics) and warned about once per topic.
+(frame_id_mismatch in the diagnostics) and warned about once per topic. Messages refused
+(non-finite or implausible values, malformed thruster states, header.stamp 0) are counted
+in the diagnostics (rejected_*) and the first of each kind is logged; the node runs on.
 The work is done by dampest_ros.core.online.preprocessor.OnlinePreprocessor (the same class
 replays bags).
 The sensor messages reach it in stamp order whatever the order of their arrival
@@ -55,6 +57,10 @@ from dampest_ros.ros.common import (
     vehicle_check,
 )
 from dampest_ros.ros.convert import header_frame_id, stamped_floats
+
+#: The diagnostics counts that raise the status to WARN.
+PROBLEMS = ("rejected_nonfinite", "rejected_implausible", "rejected_malformed",
+            "rejected_unstamped", "rejected_stale", "clock_resets")
 
 
 class SampleMessages:
@@ -155,6 +161,7 @@ class PreprocessNode(ParamNode):
         self.create_timer(1.0, self._publish_diagnostics)
         self.create_timer(0.5, self._flush_if_idle)
         self.published = 0
+        self.unstamped = 0  # messages with header.stamp 0, rejected
         self._received = self._received_at_check = 0
 
     def _build(self) -> None:
@@ -204,8 +211,18 @@ class PreprocessNode(ParamNode):
         self._feed("wrench", ns, (v[0:3], v[3:6]))
 
     def _feed(self, role: str, stamp: int, args: tuple[Any, ...]) -> None:
-        """Through the stamp-order stage to the preprocessor method of the role."""
+        """Through the stamp-order stage to the preprocessor method of the role. A message
+        stamped 0 once stamps past clock_jump have come (a header never set; a simulator
+        starts at 0) is rejected before it, as it would be a clock jump that resets the
+        state (a restarted clock's next message still is one)."""
         self._received += 1
+        if stamp == 0 and self.order.newest > self.p("clock_jump"):
+            self.unstamped += 1
+            if self.unstamped == 1:
+                self.get_logger().error(
+                    f"{role}: a message with header.stamp 0 rejected (counted as "
+                    "rejected_unstamped, reported once); its publisher must stamp it")
+            return
         self._process(self.order.push(role, seconds(stamp), args))
 
     def _process(self, released: list[tuple[str, float, Any]]) -> None:
@@ -237,10 +254,11 @@ class PreprocessNode(ParamNode):
     def _publish_diagnostics(self) -> None:
         c: dict[str, float] = dict(self.pre.counts)
         c["published"] = self.published
+        c["rejected_unstamped"] = self.unstamped
         c["late"] = self.order.counts["late"]
         c["max_lag_s"] = self.order.max_lag
         c["derivative_lag_s"] = self.pre.derivative_lag
-        problems = c["rejected_nonfinite"] + c["rejected_stale"] + c["clock_resets"]
+        problems = sum(int(c[k]) for k in PROBLEMS)
         self.pub_diag.publish(diagnostic_array(
             self, "preprocessing", c, level=1 if problems else 0,
             message=f"{problems} rejected or reset" if problems else "ok"))

@@ -11,18 +11,20 @@ dampest_ros.io.recorder.BagRecorder. The QoS each publisher offers is stored in 
 metadata. Chunks reach the disk every chunk_size bytes or flush_period seconds (checked
 every flush_period / 4); each message of the chunk in progress is also appended at once to
 the file's journal, so a killed recorder loses no message it had received. Topics that
-exclude_regex matches are never recorded. When no message has arrived silence_warning seconds
-after the start, a warning says so (the usual cause: the pipeline is not running, or runs on
-another ROS_DOMAIN_ID). SIGINT/SIGTERM
-take what is still queued and close the bag (summary, metadata.yaml). A killed recording is
-recovered with 'dampest reindex BAG'. While recording, the bag holds a lock that reindex and
-another recorder respect. A full disk stops the recording: the bag is closed with every
-message received (from the space the recorder keeps in reserve), an error line gives the
-count and the node exits with status 1.
+exclude_regex matches are never recorded. silence_warning seconds after the start, a
+warning names each wanted topic that no one publishes while others are, and the closest
+topic that someone publishes (a typo); when no message has arrived by then, a warning says
+so (the usual cause: the pipeline is not running, or runs on another ROS_DOMAIN_ID).
+SIGINT/SIGTERM take what is still queued and close the bag (summary, metadata.yaml). A
+killed recording is recovered with 'dampest reindex BAG'. While recording, the bag holds a
+lock that reindex and another recorder respect. A full disk stops the recording: the bag
+is closed with every message received (from the space the recorder keeps in reserve), an
+error line gives the count and the node exits with status 1.
 """
 
 from __future__ import annotations
 
+import difflib
 import re
 import sys
 import threading
@@ -191,9 +193,12 @@ class RecorderNode(ParamNode):
                 and not (self.exclude_regex and self.exclude_regex.search(t))]
 
     def _warn_if_silent(self) -> None:
-        """Once, silence_warning s after the start: warn if no message has arrived."""
+        """Once, silence_warning s after the start: warn about the wanted topics that no one
+        publishes (the closest topic of the graph suggested: a typo records nothing), and if
+        no message has arrived."""
         assert self.silence_timer is not None
         self.silence_timer.cancel()
+        self._warn_unpublished()
         with self._lock:
             if any(t.count for t in self.recorder.topics):
                 return
@@ -203,6 +208,21 @@ class RecorderNode(ParamNode):
             f"no message on {what} after {float(self.p('silence_warning')):g} s "
             f"({len(self.subs)} with a publisher): is the pipeline running, on this "
             f"ROS_DOMAIN_ID ({self.context.get_domain_id()})?")
+
+    def _warn_unpublished(self) -> None:
+        """Warn about each wanted topic without a publisher, naming the closest topic that
+        has one (none of them with one: the silence warning says it all)."""
+        if not self.subs:
+            return
+        graph = [name for name, _ in self.get_topic_names_and_types()]
+        for topic in self.wanted:
+            if topic in self.subs or topic in self.skipped:
+                continue
+            close = difflib.get_close_matches(topic, graph, n=1)
+            hint = f"; did you mean {close[0]}?" if close else ""
+            self.get_logger().warning(
+                f"topics: no publisher of {topic} after "
+                f"{float(self.p('silence_warning')):g} s (nothing recorded from it){hint}")
 
     def _discover_early(self) -> None:
         """Look at the graph often while the node is young and topics are missing."""

@@ -13,10 +13,14 @@ then warns naming the topics without and plays. Progress is logged every progres
 seconds, counting the messages published and those published while their topic had a matched
 subscriber; when the bag has been played (and loop is false) the node waits up to
 wait_for_acked seconds until reliable subscribers have acknowledged every message, then exits.
+A name in topics, exclude_topics or remap that is not a topic of the bag (the closest is
+suggested), a remap to an invalid topic name and a start_offset past the last message are
+refused at start (one line, status 2); a loop that finds no message to play ends.
 """
 
 from __future__ import annotations
 
+import difflib
 import threading
 import time
 from pathlib import Path
@@ -24,6 +28,7 @@ from typing import Any
 
 from builtin_interfaces.msg import Time
 from rclpy.duration import Duration
+from rclpy.exceptions import InvalidTopicNameException
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.rosbag2 import Reader
@@ -49,6 +54,28 @@ def _bag_ok(value: Any) -> str | None:
 def _remap_ok(value: Any) -> str | None:
     bad = [r for r in value if r and (":=" not in r or not all(r.split(":=", 1)))]
     return f"remap entries must read 'from:=to', got {bad}" if bad else None
+
+
+def _not_in_bag(option: str, names: Any, bag: list[str]) -> str | None:
+    """Why the topics of ``option`` that ``bag`` (its topic names) lacks are refused (a
+    typo would otherwise play, exclude or rename nothing), naming the closest; None when
+    every name is in the bag."""
+    missing = [n for n in names if n not in bag]
+    if not missing:
+        return None
+    close = difflib.get_close_matches(missing[0], bag, n=1)
+    hint = f"did you mean {close[0]}? " if close else ""
+    return (f"{option}: {', '.join(missing)} not in the bag; {hint}its topics: "
+            f"{', '.join(sorted(bag))}")
+
+
+def _past_the_end(offset: float, reader: Reader) -> str | None:
+    """Why a start_offset (s) at or past the last message of the bag is refused, or None."""
+    length = max(reader.duration - 1, 0) / 1e9
+    if reader.message_count and offset > length:
+        return (f"start_offset {offset:g} s is past the end of the bag ({length:.3f} s from its "
+                f"first to its last message); give a smaller start_offset")
+    return None
 
 
 class ReplayNode(ParamNode):
@@ -99,6 +126,14 @@ class ReplayNode(ParamNode):
         excluded = {"/" + t.lstrip("/") for t in self.p("exclude_topics") if t}
         remap = dict(("/" + a.strip().lstrip("/"), b.strip())
                      for a, b in (r.split(":=", 1) for r in self.p("remap") if r))
+        in_bag = [c.topic for c in self.reader.connections]
+        reason = (_not_in_bag("topics", wanted, in_bag)
+                  or _not_in_bag("exclude_topics", excluded, in_bag)
+                  or _not_in_bag("remap", remap, in_bag)
+                  or _past_the_end(float(self.p("start_offset")), self.reader))
+        if reason is not None:  # a refusal at start: one line, status 2 (main_for)
+            self.reader.close()
+            raise ValueError(f"{self.p('bag')}: {reason}")
         depth = int(self.p("queue_depth"))
         forced = {"bag": "auto"}.get(str(self.p("reliability")), str(self.p("reliability")))
         self.pubs: dict[int, Publisher] = {}
@@ -117,11 +152,8 @@ class ReplayNode(ParamNode):
             if name not in by_topic:
                 offered = getattr(conn.ext, "offered_qos_profiles", [])  # rosbag2 bags
                 qos = compatible_qos(offered, depth, forced)
-                by_topic[name] = self.create_publisher(cls, name, qos)
+                by_topic[name] = self._publisher(cls, name, qos)
             self.pubs[conn.id] = by_topic[name]
-        missing = sorted(wanted - {c.topic for c in self.reader.connections})
-        if missing:
-            self.get_logger().warning(f"topics not in the bag: {missing}")
         self.connections = [c for c in self.reader.connections if c.id in self.pubs]
         self.total = sum(int(c.msgcount) for c in self.connections)
         self.clock_pub = None
@@ -145,6 +177,16 @@ class ReplayNode(ParamNode):
         # started from the executor, so that its end (which shuts the context down) always
         # finds spin() running
         self._starter = self.create_timer(0.0, self._start_playback)
+
+    def _publisher(self, cls: Any, name: str, qos: QoSProfile) -> Publisher:
+        """A publisher of ``name``; a name ROS refuses (a remap target) is a ValueError."""
+        try:
+            return self.create_publisher(cls, name, qos)
+        except InvalidTopicNameException as exc:
+            self.reader.close()
+            detail = str(exc).splitlines()[0].removeprefix("Invalid topic name: ").rstrip(":")
+            raise ValueError(f"remap: {name!r} is not a valid topic name ({detail}); write "
+                             "'from:=to' with to made of letters, digits, _ and /") from None
 
     def _start_playback(self) -> None:
         self._starter.cancel()
@@ -203,16 +245,23 @@ class ReplayNode(ParamNode):
         start = self.reader.start_time + round(float(self.p("start_offset")) * 1e9)
         while not self._stop.is_set():
             self._anchor = None
+            played = 0
             for conn, t, data in self.reader.messages(connections=self.connections,
                                                       start=start):
                 if not self._sleep_until(t):
                     return
                 pub = self.pubs[conn.id]
                 pub.publish(bytes(data))
+                played += 1
                 self.published += 1
                 self.heard += pub.get_subscription_count() > 0
                 self.bag_time = t
             if not self.p("loop"):
+                return
+            if not played:  # looping over nothing would spin a core until stopped
+                self.get_logger().warning(
+                    f"loop: no message of the played topics after start_offset "
+                    f"{float(self.p('start_offset')):g} s in {self.p('bag')}; playback ends")
                 return
 
     def _wait_for_acked(self) -> None:

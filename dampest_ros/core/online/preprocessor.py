@@ -38,7 +38,10 @@ fields with the same stamp t_k: τ interpolated between window centres, and ν, 
 the same window [t_k − w/2, t_k + w/2] (the boxcar that the thrust telemetry has), so all
 three see the same filter, as in the offline preprocessing.
 
-Rejected and counted: non-finite messages, messages out of order within a topic, stale
+Rejected and counted: non-finite messages, implausible ones (finite numbers no sensor
+reports: :data:`PLAUSIBLE`; one such value would throw the velocity filter off for seconds),
+malformed thruster states (efforts not one per name, names not the vehicle's thrusters; the
+first of each kind and role reported in ``events``), messages out of order within a topic, stale
 messages (DVL, pressure and thruster messages older than ``stale_after`` behind the inertial
 filter, which the IMU drives), DVL outliers. Messages of other topics that run ahead of the
 IMU (a subscriber drains its topics one message at a time each, so under load the slow
@@ -84,6 +87,13 @@ from dampest_ros.core.signals.measurements import (
 from dampest_ros.core.signals.preprocess import DataError, body_wrench
 
 FloatArray = NDArray[np.float64]
+
+#: Largest magnitudes a sensor message may carry: specific force (m/s², 100 g), angular rate
+#: (rad/s), DVL velocity (m/s), absolute pressure (Pa, 20 000 m of sea water). A larger
+#: finite value is a corrupt message or a publisher's unit error, rejected and counted as
+#: ``rejected_implausible``.
+PLAUSIBLE = {"specific force": 1000.0, "angular rate": 100.0, "velocity": 50.0,
+             "pressure": 2e8}
 
 
 class _History:
@@ -210,7 +220,8 @@ class OnlinePreprocessor:
     """
 
     _COUNTS = ("imu", "dvl", "pressure", "thrusters", "wrench", "rejected_nonfinite",
-               "rejected_out_of_order", "rejected_stale", "dvl_outliers", "clock_resets",
+               "rejected_implausible", "rejected_malformed", "rejected_out_of_order",
+               "rejected_stale", "dvl_outliers", "clock_resets",
                "imu_gaps", "samples", "samples_unusable", "samples_skipped",
                "frame_id_mismatch")
 
@@ -227,6 +238,8 @@ class OnlinePreprocessor:
         self.events: deque[str] = deque(maxlen=50)
         self._thr_order: list[int] | None = None
         self._thr_names: tuple[str, ...] = ()
+        #: role → the kinds of rejection already reported in ``events``
+        self._reported: dict[str, set[str]] = {}
         self.reset()
 
     # --- state --------------------------------------------------------------------------
@@ -340,6 +353,30 @@ class OnlinePreprocessor:
             self.events.append(frame_id_note(role, 1, frame_id, expected) + " (counted as "
                                "frame_id_mismatch, reported once)")
 
+    def _reject(self, kind: str, role: str, why: str) -> list[OnlineSample]:
+        """Count a refused message of ``role`` under ``rejected_<kind>``; the first of each
+        kind and role goes to ``events`` with ``why``. Returns no samples."""
+        key = f"rejected_{kind}"
+        self.counts[key] += 1
+        reported = self._reported.setdefault(role, set())
+        if kind not in reported:
+            reported.add(kind)
+            self.events.append(f"{role}: message rejected, {why} (counted as {key}, reported "
+                               "once); fix its publisher")
+        return []
+
+    def _implausible(self, role: str, **values: Any) -> str | None:
+        """Why a finite message of ``role`` is implausible (a value beyond :data:`PLAUSIBLE`),
+        or None."""
+        for what, v in values.items():
+            x = np.asarray(v, dtype=float)
+            name = what.replace("_", " ")
+            if name == "pressure" and not 0.0 <= float(x) <= PLAUSIBLE[name]:
+                return f"pressure {float(x):g} Pa outside [0, {PLAUSIBLE[name]:g}]"
+            if name != "pressure" and float(np.max(np.abs(x))) > PLAUSIBLE[name]:
+                return f"{name} {x.tolist()} beyond ±{PLAUSIBLE[name]:g} (SI units)"
+        return None
+
     # --- messages ---------------------------------------------------------------------------
 
     def imu(self, t: float, orientation: FloatArray, angular_velocity: FloatArray,
@@ -351,8 +388,11 @@ class OnlinePreprocessor:
         self._frame("imu", frame_id)
         if not _finite(t, orientation, angular_velocity, linear_acceleration) or \
                 float(np.linalg.norm(orientation)) < 1e-9:
-            self.counts["rejected_nonfinite"] += 1
-            return []
+            return self._reject("nonfinite", "imu", "a non-finite value or a zero quaternion")
+        why = self._implausible("imu", specific_force=linear_acceleration,
+                                angular_rate=angular_velocity)
+        if why is not None:
+            return self._reject("implausible", "imu", why)
         if not self._admit("imu", t):
             return []
         q = np.asarray(orientation, dtype=float)
@@ -421,8 +461,10 @@ class OnlinePreprocessor:
         self.counts["dvl"] += 1
         self._frame("dvl", frame_id)
         if not _finite(t, linear):
-            self.counts["rejected_nonfinite"] += 1
-            return []
+            return self._reject("nonfinite", "dvl", f"a non-finite velocity {list(linear)}")
+        why = self._implausible("dvl", velocity=linear)
+        if why is not None:
+            return self._reject("implausible", "dvl", why)
         if not self._admit("dvl", t):
             return []
         # in the DVL's axes (FRD); to the body origin in _dvl_update, with ω at t
@@ -484,8 +526,11 @@ class OnlinePreprocessor:
         self.counts["pressure"] += 1
         self._frame("pressure", frame_id)
         if not _finite(t, fluid_pressure):
-            self.counts["rejected_nonfinite"] += 1
-            return []
+            return self._reject("nonfinite", "pressure", f"a non-finite pressure "
+                                f"{fluid_pressure}")
+        why = self._implausible("pressure", pressure=fluid_pressure)
+        if why is not None:
+            return self._reject("implausible", "pressure", why)
         if not self._admit("pressure", t):
             return []
         depth = (float(fluid_pressure) - self.cfg.atmospheric_pressure) / (self.rho * self.gravity)
@@ -497,14 +542,21 @@ class OnlinePreprocessor:
         """sensor_msgs/JointState: thrust per named thruster (N), mean over the period."""
         self.counts["thrusters"] += 1
         effort = np.asarray(effort, dtype=float).reshape(1, -1)
-        if not _finite(t, effort) or effort.shape[1] != len(names):
-            self.counts["rejected_nonfinite"] += 1
-            return []
-        if not self._admit("thrusters", t):
-            return []
+        if effort.shape[1] != len(names):
+            return self._reject("malformed", "thrusters", f"{effort.shape[1]} efforts for "
+                                f"{len(names)} names (one thrust in N per thruster)")
+        if not _finite(t, effort):
+            return self._reject("nonfinite", "thrusters", f"a non-finite effort "
+                                f"{effort[0].tolist()}")
         joints = JointSeries(np.array([t]), names=tuple(names), effort=effort,
                              velocity=np.zeros_like(effort))
-        return self._tau(t, body_wrench(joints, self.thr)[0])
+        try:
+            tau = body_wrench(joints, self.thr)[0]
+        except DataError as exc:  # names that are not the vehicle's thrusters
+            return self._reject("malformed", "thrusters", str(exc))
+        if not self._admit("thrusters", t):
+            return []
+        return self._tau(t, tau)
 
     def wrench(self, t: float, force: FloatArray, torque: FloatArray) -> list[OnlineSample]:
         """geometry_msgs/WrenchStamped: the body wrench τ (N, N·m, FLU), mean over the
@@ -513,8 +565,8 @@ class OnlinePreprocessor:
         f = np.asarray(force, dtype=float).reshape(1, 3)
         m = np.asarray(torque, dtype=float).reshape(1, 3)
         if not _finite(t, f, m):
-            self.counts["rejected_nonfinite"] += 1
-            return []
+            return self._reject("nonfinite", "wrench", f"a non-finite wrench "
+                                f"{f[0].tolist() + m[0].tolist()}")
         if not self._admit("wrench", t):
             return []
         return self._tau(t, body_wrench(WrenchSeries(np.array([t]), force=f, torque=m),

@@ -85,6 +85,11 @@ class StampOrder:
         self._newest = -math.inf
         self._released = (-math.inf, -1)  # key (stamp, rank) of the last release
 
+    @property
+    def newest(self) -> float:
+        """The newest stamp (s) seen since the start or the last clock jump (−∞: none)."""
+        return self._newest
+
     def __len__(self) -> int:
         """Messages held."""
         return len(self._heap)
