@@ -253,6 +253,8 @@ def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float], p
         os.environ.setdefault("ROS_DOMAIN_ID", "77")
     import rclpy
 
+    from dampest_ros.ros.common import signals_held
+
     context = rclpy.Context()
     rclpy.init(context=context)
     pipe = build_pipeline(args, prior, path, context)
@@ -282,30 +284,31 @@ def _fly(args: argparse.Namespace, vehicle_name: str, truth: dict[str, float], p
             ex.spin_once(timeout_sec=0.05)
     except KeyboardInterrupt:
         print("\ninterrupted: saving what was identified so far")
-    wall, cpu = time.monotonic() - t0, time.process_time() - c0
-    e.process(force=True)
-    history.add(e.last_sample_t, e.theta, e.theta_std)
-    est.version += 1
-    saved = save_model(path, e.to_model(est.version))
-    used = max(e.counts["used"], 1)
-    lost = pre.pre.counts
-    lines = [
-        f"\n{sim.live.t:.0f} s simulated in {wall:.1f} s: {sim.live.t / wall:.2f}x real time "
-        f"({cpu:.1f} s CPU); {sim.published} sensor messages, {pre.published} samples, "
-        f"{e.counts['used']} used by the RLS",
-        f"estimator callbacks: {cpu_est['cpu'] / used * 1e6:.0f} µs CPU per sample "
-        f"(4 messages; rclpy's own wait and dispatch come on top: make bench compares the "
-        f"node with a bare subscriber)",
-        f"preprocessing: {lost['imu']} IMU, {lost['thrusters']} thruster messages; "
-        f"{lost['imu_gaps']} IMU gaps, {lost['rejected_stale']} stale, "
-        f"{lost['clock_resets']} clock resets"]
-    if ctrl is not None:
-        lines.append(f"controller: {ctrl.commands} commands, model version "
-                     f"{ctrl.client.version}")
-    flight = Flight(e, history, sim.live.t, wall, saved, "\n".join(lines),
-                    ctrl.p("bandwidth") if ctrl is not None else DEFAULT_BANDWIDTH)
-    pipe.close()
-    rclpy.try_shutdown(context=context)
+    with signals_held("dampest live"):  # a second Ctrl-C must not cut the save short
+        wall, cpu = time.monotonic() - t0, time.process_time() - c0
+        e.process(force=True)
+        history.add(e.last_sample_t, e.theta, e.theta_std)
+        est.version += 1
+        saved = save_model(path, e.to_model(est.version))
+        used = max(e.counts["used"], 1)
+        lost = pre.pre.counts
+        lines = [
+            f"\n{sim.live.t:.0f} s simulated in {wall:.1f} s: {sim.live.t / wall:.2f}x real time "
+            f"({cpu:.1f} s CPU); {sim.published} sensor messages, {pre.published} samples, "
+            f"{e.counts['used']} used by the RLS",
+            f"estimator callbacks: {cpu_est['cpu'] / used * 1e6:.0f} µs CPU per sample "
+            f"(4 messages; rclpy's own wait and dispatch come on top: make bench compares the "
+            f"node with a bare subscriber)",
+            f"preprocessing: {lost['imu']} IMU, {lost['thrusters']} thruster messages; "
+            f"{lost['imu_gaps']} IMU gaps, {lost['rejected_stale']} stale, "
+            f"{lost['clock_resets']} clock resets"]
+        if ctrl is not None:
+            lines.append(f"controller: {ctrl.commands} commands, model version "
+                         f"{ctrl.client.version}")
+        flight = Flight(e, history, sim.live.t, wall, saved, "\n".join(lines),
+                        ctrl.p("bandwidth") if ctrl is not None else DEFAULT_BANDWIDTH)
+        pipe.close()
+        rclpy.try_shutdown(context=context)
     return flight
 
 

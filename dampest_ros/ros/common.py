@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import inspect
 import math
 import re
+import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, TypeVar
@@ -806,15 +808,45 @@ def main_for(node_class: Callable[[], Node], doc: str) -> NodeMain:
             if rclpy.ok():  # not a shutdown: a real failure, shown in full
                 raise
         finally:
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
+            with signals_held(name):
+                if node is not None:
+                    node.destroy_node()
+                rclpy.try_shutdown()
         if refused:
             raise SystemExit(2)
         if status:
             raise SystemExit(status)
 
     return main
+
+
+@contextlib.contextmanager
+def signals_held(name: str) -> Iterator[None]:
+    """Shield a node's closing from further SIGINT/SIGTERM.
+
+    A second Ctrl-C (or a launch system's repeated SIGTERM) while a node closes would raise
+    KeyboardInterrupt in the middle of its close: a bag without its summary or metadata.yaml,
+    and a traceback. While the block runs such a signal is only reported once on stderr; the
+    previous handlers come back afterwards (outside the main thread, which alone can set
+    handlers, the block runs unshielded). SIGKILL still ends the process."""
+    told = False
+
+    def hold(signum: int, _frame: Any) -> None:
+        nonlocal told
+        if not told:
+            told = True
+            print(f"[WARN] [{name}]: {signal.Signals(signum).name} while closing: finishing the "
+                  "close first (SIGKILL aborts it)", file=sys.stderr, flush=True)
+
+    if threading.current_thread() is not threading.main_thread():  # handlers live there only
+        yield
+        return
+    previous = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 def _param_help(node_class: Any) -> str:

@@ -3,8 +3,9 @@
 A node's module imports numpy, scipy and rclpy, which takes up to seconds on a loaded machine.
 The entry imports it here, with SIGTERM turned into KeyboardInterrupt meanwhile, so that a
 Ctrl-C or SIGTERM that arrives while the node is still starting ends it quietly with status 0,
-as one during spin does (:func:`dampest_ros.ros.common.main_for`). This module imports nothing
-heavy itself.
+as one during spin does (:func:`dampest_ros.ros.common.main_for`); one that arrives after the
+node has closed (further signals are held while it closes) ends it with status 0 too. This
+module imports nothing heavy itself.
 """
 
 from __future__ import annotations
@@ -22,14 +23,20 @@ def _interrupt(signum: int, frame: FrameType | None) -> None:
 
 def run(module: str) -> None:
     """Import ``dampest_ros.ros.<module>`` and call its ``main()``; interrupted while
-    importing: exit 0."""
+    importing or after the node has closed: exit 0."""
     previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         main = importlib.import_module(f"dampest_ros.ros.{module}").main
     except KeyboardInterrupt:
         sys.exit(0)
     signal.signal(signal.SIGTERM, previous)
-    main()
+    try:
+        main()
+    except KeyboardInterrupt:  # a Ctrl-C after the node had closed (held while it closed)
+        sys.exit(0)
+    finally:  # the node has ended: what is left is the interpreter's exit
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, signal.SIG_IGN)
 
 
 sim_node = partial(run, "sim_node")

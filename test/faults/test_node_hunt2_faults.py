@@ -234,3 +234,43 @@ def test_recorder_names_a_wanted_topic_nobody_publishes_and_the_closest(
         assert "/pressure after" not in err
     finally:
         node.destroy_node()
+
+
+def test_recorder_closes_its_bag_through_a_train_of_signals(tmp_path: Path) -> None:
+    """Ctrl-C pressed again and again (or a launch system's repeated SIGTERM) from the moment
+    the recorder records until it has exited: the close finishes (metadata.yaml written), at
+    most one warning, no traceback, status 0. Before, a second SIGINT raised KeyboardInterrupt
+    inside the close (3 runs of 3)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "bag"
+    env = dict(os.environ, ROS_DOMAIN_ID="34", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    proc = subprocess.Popen(  # the console script's entry, as ros2 run starts it
+        [sys.executable, "-c", "from dampest_ros.ros.entry import recorder_node; recorder_node()",
+         "--ros-args", "-p", f"output:={out}"], env=env, stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")))
+    reader.start()
+    try:
+        deadline = time.monotonic() + 30.0
+        while not any("recording" in line for line in lines) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        while proc.poll() is None and time.monotonic() < deadline:
+            proc.send_signal(signal.SIGINT)
+            time.sleep(0.002)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        reader.join()
+    text = "".join(lines)
+    assert proc.returncode == 0, text
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text, text
+    assert (out / "metadata.yaml").exists()
+    assert text.count("while closing: finishing the close first") <= 1, text
