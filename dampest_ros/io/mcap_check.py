@@ -155,27 +155,28 @@ def _parse(storage: McapReader, chunk: ChunkInfo, cmap: dict[int, Connection],
     order."""
     raw = _records(storage, chunk)
     view, pos, size = memoryview(raw), 0, len(raw)
-    counts: Counter[int] = Counter()
+    first, last, offset = chunk.message_start_time, chunk.message_end_time, chunk.chunk_start_offset
+    u64, message, head = _U64.unpack_from, _MESSAGE.unpack_from, _MESSAGE.size
+    counts: dict[int, int] = {}
     out: list[_Msg] = []
     while pos < size:
         if pos + 9 > size:
             raise DamagedChunkError(_name(storage), chunk, f"a record cut short at byte {pos}")
-        op, (length,) = raw[pos], _U64.unpack_from(raw, pos + 1)
+        op, (length,) = raw[pos], u64(raw, pos + 1)
         body, pos = pos + 9, pos + 9 + length
-        if op not in _IN_CHUNK or pos > size or (op == _OP_MESSAGE and length < _MESSAGE.size):
-            raise DamagedChunkError(_name(storage), chunk, f"a damaged record at byte {body - 9} "
-                               f"(opcode {op:#04x}, length {length})")
+        if op not in _IN_CHUNK or pos > size or (op == _OP_MESSAGE and length < head):
+            raise DamagedChunkError(_name(storage), chunk, f"a damaged record at byte "
+                                    f"{body - 9} (opcode {op:#04x}, length {length})")
         if op != _OP_MESSAGE:
             continue
-        cid, _, log_time, _ = _MESSAGE.unpack_from(raw, body)
-        if not chunk.message_start_time <= log_time <= chunk.message_end_time:
-            raise DamagedChunkError(_name(storage), chunk, f"a message at byte {body - 9} logged "
-                               "outside the chunk's time range")
-        counts[cid] += 1
+        cid, _, log_time, _ = message(raw, body)
+        if not first <= log_time <= last:
+            raise DamagedChunkError(_name(storage), chunk, f"a message at byte {body - 9} "
+                                    "logged outside the chunk's time range")
+        counts[cid] = counts.get(cid, 0) + 1
         if cid in cmap and start <= log_time < stop:
-            out.append(_Msg(log_time, chunk.chunk_start_offset, cmap[cid],
-                            bytes(view[body + _MESSAGE.size:pos])))
-    if dict(counts) != {k: v for k, v in chunk.channel_count.items() if v}:
+            out.append(_Msg(log_time, offset, cmap[cid], bytes(view[body + head:pos])))
+    if counts != {k: v for k, v in chunk.channel_count.items() if v}:
         raise DamagedChunkError(_name(storage), chunk, f"it holds {sum(counts.values())} messages, "
                            f"its message indexes {sum(chunk.channel_count.values())}")
     out.sort(key=lambda m: m.log_time)
