@@ -2,9 +2,10 @@
 
 Every chunk is checked. A storage file without a summary (the recording was killed) or with
 damaged chunks is read up to its last readable record, damaged chunks skipped and counted, and
-rewritten; the damaged original is kept as <file>.damaged. A bag still being recorded is
-refused. Exit status 1 when bytes or messages could not be read (the counts are printed), 0
-when everything was.
+rewritten; the damaged original is kept as <file>.damaged. Every file is then read back as
+identify reads it (every chunk checked, every message deserialised). A bag still being
+recorded is refused. Exit status 1 when bytes or messages could not be read or a file does not
+read back whole (the counts are printed), 0 when everything was.
 """
 
 from __future__ import annotations
@@ -38,4 +39,7 @@ def run(args: argparse.Namespace) -> int:
                 rows))
     print(f"wrote {report.path / 'metadata.yaml'}: {report.messages} messages; unreadable: "
           f"{report.lost_messages} messages counted by the indexes, {report.lost_bytes} bytes")
-    return 1 if report.lost_bytes or report.lost_messages else 0
+    for f in report.files:
+        if f.unverified:
+            print(f"{f.name} does not read back whole after reindex: {f.unverified}")
+    return 1 if report.lost_bytes or report.lost_messages or not report.verified else 0

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import shutil
 import warnings
+from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import suppress
 from dataclasses import dataclass, fields
@@ -34,9 +35,10 @@ from rosbags.interfaces import (
 )
 from rosbags.rosbag1 import Reader as Ros1Reader
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.rosbag2.storage_mcap import McapReader
 
 from dampest_ros.core.signals.measurements import TOPIC_TYPES, Series
-from dampest_ros.io import cdr
+from dampest_ros.io import cdr, mcap_check
 from dampest_ros.io.bag_metadata import make_qos
 
 #: Topics published with the sensor-data QoS (best effort, volatile, depth 5).
@@ -207,7 +209,39 @@ class _Bag:
             elif self.path.is_dir() and any(self.path.glob("*.mcap")):
                 hint = (f"; if its recording was interrupted, 'dampest reindex {self.path}' "
                         "rebuilds metadata.yaml and recovers it up to its last complete chunk")
-            raise BagError(f"cannot read bag {_files(self.path)}: {exc}{hint}") from exc
+            raise BagError(f"cannot read bag {_files(self.path)}: "
+                           f"{exc or type(exc).__name__}{hint}") from exc
+        self.checked = self._checked_storages()
+
+    def _checked_storages(self) -> list[McapReader]:
+        """The bag's MCAP files when all have chunk indexes (then read through
+        :mod:`dampest_ros.io.mcap_check`), their indexes checked and their counts compared
+        with ``metadata.yaml``'s; empty for other bags (read by rosbags alone)."""
+        inner: Any = getattr(self.reader, "storage", None)  # a directory's or a file's
+        storages = [inner] if isinstance(inner, McapReader) else getattr(inner, "storages", [])
+        if (not storages or inner.metadata.compression_mode == "message"
+                or not all(isinstance(s, McapReader) and s.chunks for s in storages)):
+            return []
+        try:
+            for storage in storages:
+                mcap_check.check_index(storage)
+        except mcap_check.DamagedFileError as exc:
+            self.reader.close()
+            raise self._damaged(exc) from None
+        stored: Counter[str] = Counter()
+        for storage in storages:
+            assert storage.statistics is not None
+            for c in storage.connections:
+                stored[c.topic] += storage.statistics.channel_message_counts.get(c.id, 0)
+        listed = {t: int(i.msgcount) for t, i in self.reader.topics.items()}
+        if listed != {t: stored.get(t, 0) for t in listed}:
+            self.reader.close()
+            wrong = ", ".join(f"{t} {n} (the storage holds {stored.get(t, 0)})"
+                              for t, n in sorted(listed.items()) if n != stored.get(t, 0))
+            raise BagError(f"cannot read bag {_files(self.path)}: metadata.yaml counts other "
+                           f"messages than its storage files: {wrong}; 'dampest reindex "
+                           f"{self.path}' rebuilds metadata.yaml from the storage files")
+        return list(storages)
 
     def _damaged(self, exc: Exception) -> BagError:
         """The error for a failure while reading messages: a damaged storage file, named,
@@ -215,8 +249,10 @@ class _Bag:
         repair = ("'rosbag reindex' (ROS 1) rebuilds its index" if self.ros1 else
                   f"'dampest reindex {self.path}' rebuilds its index from the intact chunks "
                   "and reports what is lost")
+        what = (str(exc) if isinstance(exc, mcap_check.DamagedFileError)
+                else f"{type(exc).__name__}: {exc}")
         return BagError(f"cannot read bag {_files(self.path)}: a damaged storage file "
-                        f"({type(exc).__name__}: {exc}); {repair}")
+                        f"({what}); {repair}")
 
     def __enter__(self) -> _Bag:
         return self
@@ -225,23 +261,47 @@ class _Bag:
         self.reader.close()
 
     def messages(self, conns: Sequence[Connection], start: int | None = None,
-                 stop: int | None = None) -> Iterator[tuple[Connection, bytes | memoryview]]:
+                 stop: int | None = None
+                 ) -> Iterator[tuple[Connection, int, bytes | memoryview]]:
+        """Connection, log time (ns) and CDR of the messages of ``conns`` in [start, stop)."""
         if not conns:  # rosbags reads every topic for an empty selection
             return
         # a ROS 1 message to CDR by rosbags (the ROS 2 Jazzy definitions; std_msgs/Header
         # loses its seq): the CDR codec then decodes both generations alike
         to_cdr = cdr.typestore().ros1_to_cdr if self.ros1 else None
+        source = (self._checked_messages(conns, start, stop) if self.checked else
+                  self.reader.messages(connections=conns, start=start, stop=stop))
         try:
-            for conn, _, data in self.reader.messages(connections=conns, start=start,
-                                                      stop=stop):
-                yield conn, data if to_cdr is None else to_cdr(data, conn.msgtype)
+            for conn, t, data in source:
+                yield conn, t, data if to_cdr is None else to_cdr(data, conn.msgtype)
         except Exception as exc:
             raise self._damaged(exc) from exc
 
-    def decode(self, topic: str, msgtype: str, raw: list[bytes | memoryview]) -> Series:
+    def _checked_messages(self, conns: Sequence[Connection], start: int | None,
+                          stop: int | None) -> Iterator[tuple[Connection, int, bytes]]:
+        """:meth:`messages` of an MCAP bag, file by file, each chunk checked as it is read."""
+        for storage in self.checked:
+            ours = {x.id: c for x in storage.connections for c in conns
+                    if (x.topic, x.msgtype) == (c.topic, c.msgtype)}
+            theirs = [x for x in storage.connections if x.id in ours]
+            for x, t, data in mcap_check.messages(storage, theirs, start, stop):
+                yield ours[x.id], t, data
+
+    def decode(self, topic: str, msgtype: str, raw: list[bytes | memoryview],
+               log_ns: list[int]) -> Series:
+        """The series of ``raw`` (messages of ``topic`` logged at ``log_ns``); messages that
+        do not deserialise are damaged bytes, named with their log times and the repair."""
         try:
             return cdr.decode(msgtype, raw)
         except Exception as exc:
+            bad = [(t, err) for t, m in zip(log_ns, raw, strict=True)
+                   if (err := cdr.undecodable(msgtype, m))]
+            if bad:
+                raise self._damaged(mcap_check.DamagedFileError(
+                    f"{len(bad)} of {len(raw)} messages of {topic} logged from "
+                    f"{log_ns[0] / 1e9:.3f} s to {log_ns[-1] / 1e9:.3f} s do not deserialise "
+                    f"as {msgtype}, the first at log time {bad[0][0] / 1e9:.3f} s: "
+                    f"{bad[0][1]}")) from exc
             raise BagError(f"cannot decode {topic} ({msgtype}) in bag {_files(self.path)}: "
                            f"{exc}") from exc
 
@@ -348,6 +408,7 @@ def _read(bag: _Bag, topics: Sequence[str] | None,
             raise TypeError(f"topic {name} has type {typ}, which has no series class; "
                             f"readable types: {sorted(cdr.SERIES_CLASSES)}")
     raw: dict[str, list[bytes | memoryview]] = {name: [] for name in key}
+    log_ns: dict[str, list[int]] = {name: [] for name in key}
     window = start is not None or stop is not None
     parts = {name: _Assembler(0 if window else int(info[name].msgcount or 0))
              for name in key}
@@ -356,19 +417,21 @@ def _read(bag: _Bag, topics: Sequence[str] | None,
     done = 0
     ns = (None if start is None else round(start * 1e9),
           None if stop is None else round(stop * 1e9))
-    for conn, data in bag.messages(conns, *ns):
-        buf = raw[conn.topic]
+    for conn, t, data in bag.messages(conns, *ns):
+        buf, times = raw[conn.topic], log_ns[conn.topic]
         buf.append(data)
+        times.append(t)
         if len(buf) == READ_CHUNK:
-            parts[conn.topic].add(bag.decode(conn.topic, msgtype[conn.topic], buf))
+            parts[conn.topic].add(bag.decode(conn.topic, msgtype[conn.topic], buf, times))
             buf.clear()
+            times.clear()
             done += READ_CHUNK
             if progress is not None:
                 progress(done, total)
     out: dict[str, Series] = {}
     for name, buf in raw.items():
         if buf or parts[name].first is None:
-            parts[name].add(bag.decode(name, msgtype[name], buf))
+            parts[name].add(bag.decode(name, msgtype[name], buf, log_ns[name]))
         series = parts[name].result()
         if not window and info[name].msgcount and len(series) != info[name].msgcount:
             raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "

@@ -486,6 +486,16 @@ def decode(msgtype: str, messages: Sequence[bytes | memoryview]) -> Series:
                                          for m in messages])
 
 
+def undecodable(msgtype: str, message: bytes | memoryview) -> str:
+    """Why one serialized message does not deserialise as ``msgtype`` (rosbags' CDR
+    deserialiser, the ROS 2 Jazzy definitions); empty when it does."""
+    try:
+        typestore().deserialize_cdr(message, msgtype)
+    except Exception as exc:  # any failure of damaged bytes: said, not raised
+        return f"{type(exc).__name__}: {exc}"
+    return ""
+
+
 @cache
 def typestore() -> Any:
     """The rosbags typestore of ROS 2 Jazzy message definitions (built once)."""

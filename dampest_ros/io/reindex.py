@@ -27,11 +27,13 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from rosbags.rosbag2.metadata import parse_qos
 
+from dampest_ros.io import cdr
 from dampest_ros.io.bag_metadata import (
     FileRecord,
     TopicRecord,
     write_metadata,
 )
+from dampest_ros.io.mcap_check import verify_file
 from dampest_ros.io.recorder import (
     DEFAULT_CHUNK_SIZE,
     JOURNAL_HEADER,
@@ -56,6 +58,7 @@ class FileReport:
     lost_messages: int = 0
     error: str = ""
     journal: int = 0  # messages of the chunk in progress, recovered from the journal
+    unverified: str = ""  # why the file as indexed does not read back whole (empty: it does)
 
 
 @dataclass
@@ -75,6 +78,11 @@ class ReindexReport:
     def lost_bytes(self) -> int:
         """Bytes of the storage files that could not be read."""
         return sum(f.lost_bytes for f in self.files)
+
+    @property
+    def verified(self) -> bool:
+        """Every file as indexed reads back whole (every chunk and message checked)."""
+        return not any(f.unverified for f in self.files)
 
     @property
     def lost_messages(self) -> int:
@@ -108,13 +116,15 @@ class _Scan:
     damaged_bytes: int = 0      # bytes of chunks skipped as damaged
     damaged_messages: int = 0   # messages in them, by their message indexes
     untyped: int = 0            # messages of a channel whose record was lost
+    undecodable: int = 0        # messages whose bytes do not deserialise as their type
     chunks: int = 0             # chunk records met (intact or not)
     journal: int = 0            # messages taken from the journal
 
     @property
     def damaged(self) -> bool:
         """Some bytes of the file could not be read."""
-        return bool(self.error or self.damaged_bytes or self.untyped or not self.complete)
+        return bool(self.error or self.damaged_bytes or self.untyped or self.undecodable
+                    or not self.complete)
 
 
 def _chunk_records(chunk: Chunk, scan: _Scan) -> list[Any] | None:
@@ -222,6 +232,14 @@ def _recover(path: Path, chunk_size: int, known: _Scan) -> tuple[_Scan, _Tally]:
     return scan, tally
 
 
+def _undecodable(scan: _Scan, m: Message) -> bool:
+    """Whether message ``m`` of a known channel is of a type the ROS 2 Jazzy definitions
+    know and does not deserialise as it."""
+    schema = scan.schemas.get(scan.channels[m.channel_id].schema_id)
+    msgtype = schema.name if schema is not None else ""
+    return msgtype in cdr.typestore().fielddefs and bool(cdr.undecodable(msgtype, m.data))
+
+
 def _copy_readable(path: Path, tmp: Path, chunk_size: int, scan: _Scan, tally: _Tally
                    ) -> Any:
     """Write the readable messages of ``path`` to ``tmp``; the writer, or None when no
@@ -250,6 +268,9 @@ def _copy_readable(path: Path, tmp: Path, chunk_size: int, scan: _Scan, tally: _
         for m in itertools.chain(_records(path, scan), _journal_records(path, scan)):
             if m.channel_id not in scan.channels:
                 scan.untyped += 1  # a message whose channel record was lost cannot be typed
+                continue
+            if _undecodable(scan, m):
+                scan.undecodable += 1
                 continue
             cid = channel(m.channel_id)
             assert writer is not None
@@ -295,17 +316,36 @@ def _index(mcap_path: Path, chunk_size: int) -> tuple[_Scan, _Tally, FileReport]
         check = _Scan(schemas=dict(known.schemas), channels=dict(known.channels))
         for _ in _records(mcap_path, check):
             pass
-        if not check.damaged:
+        if not check.damaged and not verify_file(mcap_path)[1]:  # read as io.bag reads it
             return known, counted, FileReport(mcap_path.name, sum(counted.counts.values()),
                                               complete=True)
     scan, tally = _recover(mcap_path, chunk_size, known)
     readable = sum(tally.counts.values())
-    lost = max(scan.damaged_messages + scan.untyped, sum(counted.counts.values()) - readable)
+    lost = max(scan.damaged_messages + scan.untyped + scan.undecodable,
+               sum(counted.counts.values()) - readable)
     # a cut-off last chunk whose messages the journal held loses no message
     tail = 0 if scan.complete or scan.journal else size - scan.end
+    error = scan.error or (f"{scan.undecodable} messages that do not deserialise"
+                           if scan.undecodable else "")
     return scan, tally, FileReport(mcap_path.name, readable, complete=False, recovered=True,
                                    lost_bytes=scan.damaged_bytes + tail, lost_messages=lost,
-                                   error=scan.error, journal=scan.journal)
+                                   error=error, journal=scan.journal,
+                                   unverified=_read_back(mcap_path, scan, tally))
+
+
+def _read_back(mcap_path: Path, scan: _Scan, tally: _Tally) -> str:
+    """Why the rewritten file does not read back whole with the counts indexed (empty when
+    it does)."""
+    if not scan.channels:  # nothing readable: the file is left out of the metadata
+        return ""
+    counts, why = verify_file(mcap_path)
+    indexed = {ch.topic: 0 for ch in scan.channels.values()}
+    for cid, n in tally.counts.items():
+        indexed[scan.channels[cid].topic] += n
+    if why or {t: counts.get(t, 0) for t in indexed} != indexed:
+        return (f"{sum(counts.values())} of its {sum(indexed.values())} messages read back"
+                f"{': ' + why if why else ''}")
+    return ""
 
 
 def reindex(path: str | Path, *, chunk_size: int = DEFAULT_CHUNK_SIZE) -> ReindexReport:

@@ -3,12 +3,18 @@ exit 2."""
 
 from __future__ import annotations
 
+import shutil
+import struct
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+import yaml
+from mcap.reader import make_reader
+from mcap.records import ChunkIndex
 
 from dampest_ros.cli.main import main
+from dampest_ros.io.bag import read_bag
 from dampest_ros.io.recorder import BagRecorder
 
 IMU, DVL = "sensor_msgs/msg/Imu", "geometry_msgs/msg/TwistWithCovarianceStamped"
@@ -117,3 +123,148 @@ def test_replay_rate_out_of_range(rate: str, sim_bag: Path,
               else "must be in [0.01, 1000.0]")
     assert error_line(capsys) == (
         f"dampest replay: error: --rate: rate {reason}, got {float(rate)!r}")
+
+
+def damaged(src: Path, dst: Path) -> tuple[Path, bytearray, ChunkIndex]:
+    """A copy of bag ``src`` at ``dst``: its storage file, that file's bytes (to damage, then
+    write back) and the index of its middle chunk."""
+    shutil.copytree(src, dst)
+    (mcap,) = dst.glob("*.mcap")
+    with mcap.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    return mcap, bytearray(mcap.read_bytes()), summary.chunk_indexes[
+        len(summary.chunk_indexes) // 2]
+
+
+def first_message(data: bytearray, chunk: ChunkIndex) -> tuple[int, int]:
+    """File offset of the first message record of an uncompressed chunk, and its offset
+    among the chunk's records."""
+    records = chunk.chunk_start_offset + 9 + 8 + 8 + 8 + 4 + 4 + 8  # no compression name
+    pos = records
+    while data[pos] != 0x05:
+        pos += 9 + struct.unpack_from("<Q", data, pos + 1)[0]
+    return pos, pos - records
+
+
+def reindexed(bag: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, str, int]:
+    """dampest reindex BAG: its exit status, its last line, and the messages read_bag then
+    reads from the bag."""
+    status = main(["reindex", str(bag)])
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    return status, last, sum(len(s) for s in read_bag(bag).values())
+
+
+def reindex_hint(bag: Path) -> str:
+    return (f"'dampest reindex {bag}' rebuilds its index from the intact chunks and reports "
+            "what is lost")
+
+
+@pytest.mark.parametrize("command", [["identify"], ["identify", "--method", "rls"],
+                                     ["gap", "--model", "MODEL"]])
+def test_a_flipped_record_in_an_unchecked_chunk_ends_the_command(
+        command: list[str], sim_bag: Path, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """rosbags writes chunk CRC 0 (not checked): a message record whose opcode was flipped
+    was skipped, and identify wrote a model from a bag missing it (exit 0)."""
+    bag = tmp_path / "flipped"
+    mcap, data, chunk = damaged(sim_bag, bag)
+    at, inside = first_message(data, chunk)
+    length = struct.unpack_from("<Q", data, at + 1)[0]
+    data[at] = 0x07
+    mcap.write_bytes(data)
+    argv = [a.replace("MODEL", str(sim_bag / "truth_model.yaml")) for a in command]
+    assert main([argv[0], str(bag), "--vehicle", "bluerov2_heavy", *argv[1:]]) == 2
+    assert error_line(capsys) == (
+        f"dampest {argv[0]}: error: cannot read bag {bag} (metadata.yaml, sim.mcap, "
+        f"truth_model.yaml): a damaged storage file (sim.mcap, chunk at byte "
+        f"{chunk.chunk_start_offset} (log time {chunk.message_start_time / 1e9:.3f} s, 2637 "
+        f"messages unreadable): a damaged record at byte {inside} (opcode 0x07, length "
+        f"{length})); {reindex_hint(bag)}")
+    # reindex drops the one unreadable message and says so
+    assert reindexed(bag, capsys) == (1, (
+        f"wrote {bag / 'metadata.yaml'}: 9844 messages; unreadable: 1 messages counted by the "
+        "indexes, 0 bytes"), 9844)
+
+
+def test_a_message_that_does_not_deserialise_is_named_and_dropped_by_reindex(
+        sim_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """CDR garbage (an encapsulation kind of 7) in a chunk without CRC: identify said only
+    'cannot decode', and reindex called the bag complete (exit 0) although reading it still
+    failed."""
+    bag = tmp_path / "garbage"
+    mcap, data, chunk = damaged(sim_bag, bag)
+    at, _ = first_message(data, chunk)
+    data[at + 9 + 22 + 1] = 7
+    mcap.write_bytes(data)
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy"]) == 2
+    line = error_line(capsys)
+    assert ("a damaged storage file (1 of 5000 messages of /imu/data logged from 0.000 s to "
+            "24.995 s do not deserialise as sensor_msgs/msg/Imu, the first at log time "
+            f"{chunk.message_start_time / 1e9:.3f} s: SerdeError: ") in line
+    assert line.endswith(reindex_hint(bag))
+    assert reindexed(bag, capsys) == (1, (
+        f"wrote {bag / 'metadata.yaml'}: 9844 messages; unreadable: 1 messages counted by the "
+        "indexes, 0 bytes"), 9844)
+
+
+def damage_summary(data: bytearray, chunk: ChunkIndex, kind: str) -> None:
+    """Shift the chunk index of ``chunk`` by 10 s, or count 5 messages fewer for the first
+    channel in the statistics."""
+    (pos,) = struct.unpack_from("<Q", data, len(data) - 8 - 4 - 8 - 8)  # summary start
+    while True:
+        op, length = data[pos], struct.unpack_from("<Q", data, pos + 1)[0]
+        body = pos + 9
+        if kind == "chunk index" and op == 0x08 and struct.unpack_from(
+                "<Q", data, body + 16)[0] == chunk.chunk_start_offset:
+            struct.pack_into("<QQ", data, body, chunk.message_start_time + 10**10,
+                             chunk.message_end_time + 10**10)
+            return
+        if kind == "statistics" and op == 0x0B:
+            cid, count = struct.unpack_from("<HQ", data, body + 46)
+            struct.pack_into("<HQ", data, body + 46, cid, count - 5)
+            return
+        pos = body + length
+
+
+@pytest.mark.parametrize("kind", ["chunk index", "statistics"])
+def test_a_damaged_summary_is_refused_and_reindex_repairs_it(
+        kind: str, sim_bag: Path, tmp_path: Path, rebag: Callable[..., Path],
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Our recorder's bag (chunk CRCs) with a damaged summary: identify used what the index
+    showed (exit 0), and reindex called the file complete (exit 0) while read_bag still
+    failed."""
+    bag = tmp_path / "summary"
+    mcap, data, chunk = damaged(rebag(sim_bag, tmp_path / "recorded"), bag)
+    damage_summary(data, chunk, kind)
+    mcap.write_bytes(data)
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy"]) == 2
+    line = error_line(capsys)
+    assert line.startswith(f"dampest identify: error: cannot read bag {bag} (metadata.yaml, "
+                           f"{mcap.name}): a damaged storage file ({mcap.name}")
+    assert line.endswith(reindex_hint(bag))
+    what = ("the chunk record and its index disagree" if kind == "chunk index" else
+            "its summary is inconsistent: its 15 chunk indexes (its statistics 15) count "
+            "/truth/odom 1501 (its statistics 1496)")
+    assert what in line
+    assert reindexed(bag, capsys) == (0, (
+        f"wrote {bag / 'metadata.yaml'}: 9845 messages; unreadable: 0 messages counted by the "
+        "indexes, 0 bytes"), 9845)
+
+
+def test_metadata_counts_that_disagree_with_the_storage(
+        sim_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A metadata.yaml counting 7 messages fewer: identify did not notice."""
+    bag = tmp_path / "counts"
+    shutil.copytree(sim_bag, bag)
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())
+    topics = info["rosbag2_bagfile_information"]["topics_with_message_count"]
+    topics[0]["message_count"] -= 7
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(info))
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy"]) == 2
+    assert error_line(capsys) == (
+        f"dampest identify: error: cannot read bag {bag} (metadata.yaml, sim.mcap, "
+        "truth_model.yaml): metadata.yaml counts other messages than its storage files: "
+        f"/truth/odom 1494 (the storage holds 1501); 'dampest reindex {bag}' rebuilds "
+        "metadata.yaml from the storage files")
+    assert reindexed(bag, capsys)[::2] == (0, 9845)

@@ -11,7 +11,7 @@ from dampest_ros.cli.main import main
 
 
 def damaged_copy(src: Path, dst: Path) -> Path:
-    """A copy of bag ``src`` whose middle chunk claims an uncompressed size of 2⁶⁴ − 1."""
+    """A copy of bag ``src`` whose middle chunk's CRC no longer matches its records."""
     dst.mkdir()
     for f in src.iterdir():
         (dst / f.name).write_bytes(f.read_bytes())
@@ -21,8 +21,8 @@ def damaged_copy(src: Path, dst: Path) -> Path:
     assert summary is not None
     chunk = summary.chunk_indexes[len(summary.chunk_indexes) // 2]
     data = bytearray(mcap.read_bytes())
-    at = chunk.chunk_start_offset + 1 + 8 + 24  # opcode, length, start and end times
-    data[at:at + 8] = b"\xff" * 8
+    at = chunk.chunk_start_offset + 1 + 8 + 24  # opcode, length, times, uncompressed size
+    data[at:at + 4] = b"\xff" * 4
     mcap.write_bytes(bytes(data))
     return dst
 
@@ -34,7 +34,8 @@ def test_a_damaged_chunk_names_the_bag_and_dampest_reindex(
     bag = damaged_copy(sim_bag, tmp_path / "damaged")
     assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.endswith(f"a damaged storage file (ReaderError: Chunk checksum mismatch.); "
+    assert err.endswith("(log time 16.020 s, 2637 messages unreadable): ReaderError: Chunk "
+                        f"checksum mismatch.); "
                         f"'dampest reindex {bag}' rebuilds its index from the intact chunks "
                         "and reports what is lost"), err
     assert len(err.splitlines()) == 1
