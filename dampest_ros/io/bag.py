@@ -189,7 +189,7 @@ def is_bag(path: str | Path) -> bool:
     return p.is_dir() or (p.is_file() and is_ros1_bag(p))
 
 
-class _Bag:
+class Bag:
     """A rosbags Reader of either generation (:func:`is_ros1_bag` chooses) whose failures
     become :class:`BagError` naming the files; messages come out as CDR."""
 
@@ -254,7 +254,7 @@ class _Bag:
         return BagError(f"cannot read bag {_files(self.path)}: a damaged storage file "
                         f"({what}); {repair}")
 
-    def __enter__(self) -> _Bag:
+    def __enter__(self) -> Bag:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -383,11 +383,11 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
     from dampest_ros.io import csv_folder  # a folder of per-topic CSV files reads like a bag
     if csv_folder.is_csv_folder(path):
         return csv_folder.read_csv_folder(path, topics, start, stop)
-    with _Bag(path) as bag:
+    with Bag(path) as bag:
         return _read(bag, topics, progress, start, stop)
 
 
-def _read(bag: _Bag, topics: Sequence[str] | None,
+def _read(bag: Bag, topics: Sequence[str] | None,
           progress: Callable[[int, int], None] | None, start: float | None,
           stop: float | None) -> dict[str, Series]:
     """:func:`read_bag` on a bag already open."""
@@ -489,11 +489,11 @@ def bag_summary(path: str | Path) -> BagSummary:
     from dampest_ros.io import csv_folder  # a folder of per-topic CSV files reads like a bag
     if csv_folder.is_csv_folder(path):
         return csv_folder.folder_summary(path)
-    with _Bag(path) as bag:
+    with Bag(path) as bag:
         return _summary(bag)
 
 
-def _summary(bag: _Bag) -> BagSummary:
+def _summary(bag: Bag) -> BagSummary:
     """:func:`bag_summary` of a bag already open."""
     r = bag.reader
     topics = {t: TopicSummary(t, str(i.msgtype), i.msgcount) for t, i in r.topics.items()}
@@ -584,11 +584,11 @@ class BagSource:
         from dampest_ros.io import csv_folder  # a folder of per-topic CSV files reads like a bag
 
         self.path = Path(path)
-        self._bag: _Bag | None = None
+        self._bag: Bag | None = None
         if csv_folder.is_csv_folder(self.path):  # parsed once, cached by csv_folder
             self.summary = csv_folder.folder_summary(self.path)
         else:
-            self._bag = _Bag(self.path)
+            self._bag = Bag(self.path)
             self.summary = _summary(self._bag)
         self.progress = progress
         self.together = [_relative(t) for t in together]

@@ -34,7 +34,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
 
-from dampest_ros.io.bag import BagError, bag_summary
+from dampest_ros.io.bag import Bag, BagError, bag_summary, is_ros1_bag
 from dampest_ros.ros.bag_interop import compatible_qos, import_message_type
 from dampest_ros.ros.common import Param, ParamNode, main_for
 
@@ -48,6 +48,9 @@ def _bag_ok(value: Any) -> str | None:
         bag_summary(str(value))  # a truncated bag: the reason and the reindex hint
     except BagError as exc:
         return str(exc)
+    if is_ros1_bag(Path(str(value))):
+        return (f"bag {value} is a ROS 1 bag: replay plays rosbag2 bags; dampest identify "
+                "reads it as it is, or convert it first with rosbags-convert --src BAG --dst DIR")
     return None
 
 
@@ -120,8 +123,9 @@ class ReplayNode(ParamNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.NODE_NAME, self.PARAMS, **kwargs)
-        self.reader = Reader(Path(str(self.p("bag"))))
-        self.reader.open()
+        self.bag = Bag(Path(str(self.p("bag"))))  # read as identify reads it: chunks checked
+        assert isinstance(self.bag.reader, Reader)  # a ROS 1 bag is refused by _bag_ok
+        self.reader: Reader = self.bag.reader
         wanted = {"/" + t.lstrip("/") for t in self.p("topics") if t}
         excluded = {"/" + t.lstrip("/") for t in self.p("exclude_topics") if t}
         remap = dict(("/" + a.strip().lstrip("/"), b.strip())
@@ -208,10 +212,11 @@ class ReplayNode(ParamNode):
         except Exception as exc:  # a shut-down context while publishing: stop quietly
             if not self._stop.is_set() and self.context.ok():
                 self.exit_status = 1  # the bag was not played whole: say so in the status
+                why = (str(exc) if isinstance(exc, BagError) else  # names the repair
+                       f"{type(exc).__name__}: {exc}; if the bag is damaged, 'dampest reindex "
+                       f"{self.p('bag')}' rebuilds its index from the intact chunks")
                 self.get_logger().error(
-                    f"playback of {self.p('bag')} failed after {self.published} messages: "
-                    f"{type(exc).__name__}: {exc}; if the bag is damaged, 'dampest reindex "
-                    f"{self.p('bag')}' rebuilds its index from the intact chunks")
+                    f"playback of {self.p('bag')} failed after {self.published} messages: {why}")
         finally:
             self._done.set()
             if not self._stop.is_set():
@@ -246,8 +251,7 @@ class ReplayNode(ParamNode):
         while not self._stop.is_set():
             self._anchor = None
             played = 0
-            for conn, t, data in self.reader.messages(connections=self.connections,
-                                                      start=start):
+            for conn, t, data in self.bag.messages(self.connections, start=start):
                 if not self._sleep_until(t):
                     return
                 pub = self.pubs[conn.id]

@@ -187,6 +187,42 @@ def test_a_flipped_record_in_an_unchecked_chunk_ends_the_command(
         "indexes, 0 bytes"), 9844)
 
 
+def test_replay_stops_at_a_flipped_record_in_an_unchecked_chunk(
+        sim_bag: Path, tmp_path: Path) -> None:
+    """Was: replay_node read through rosbags alone, which skips a record of an unknown opcode
+    in a chunk without CRC: the bag played "whole" without the message, exit 0."""
+    import os
+    import subprocess
+    import sys
+
+    bag = tmp_path / "flipped"
+    mcap, data, chunk = damaged(sim_bag, bag)
+    at, inside = first_message(data, chunk)
+    data[at] = 0x07
+    mcap.write_bytes(data)
+    env = {**os.environ, "ROS_DOMAIN_ID": "92", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    run = subprocess.run([sys.executable, "-m", "dampest_ros.cli.main", "replay", str(bag),
+                          "--rate", "50", "--wait-for-subscribers", "0"], env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 1, run.stderr
+    assert (f"a damaged record at byte {inside} (opcode 0x07" in run.stderr
+            and reindex_hint(bag) in run.stderr), run.stderr
+    assert "Traceback" not in run.stderr
+
+
+def test_replay_of_a_ros1_bag_says_how_to_play_it(tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """Was: a traceback from rosbags' rosbag2 reader (the node's error handling re-raised it)."""
+    from rosbags.rosbag1 import Writer as Ros1Writer
+
+    path = tmp_path / "run.bag"
+    with Ros1Writer(path) as w:
+        w.add_connection("/imu/data", IMU)
+    assert main(["replay", str(path)]) == 2
+    line = error_line(capsys)
+    assert "is a ROS 1 bag: replay plays rosbag2 bags" in line, line
+
+
 def test_a_message_that_does_not_deserialise_is_named_and_dropped_by_reindex(
         sim_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """CDR garbage (an encapsulation kind of 7) in a chunk without CRC: identify said only
