@@ -9,7 +9,7 @@ import sys
 from dampest_ros.threads import VARIABLES
 
 _PROBE = ("import os, dampest_ros.cli, numpy as np, scipy.linalg; "
-          "a = np.random.default_rng(0).random((400, 400)); a @ a; scipy.linalg.qr(a); "
+          "a = np.random.default_rng(0).random((60, 60)); a @ a; scipy.linalg.qr(a); "
           "print(os.environ['OPENBLAS_NUM_THREADS'], os.environ['OMP_NUM_THREADS'], "
           "len(os.listdir('/proc/self/task')))")
 
