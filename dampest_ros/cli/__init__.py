@@ -1,7 +1,6 @@
 """The ``dampest`` command line (one module per sub-command)."""
 
-import os
+from dampest_ros.threads import one_blas_thread
 
-# One BLAS thread, set before numpy is first imported (as in dampest_ros.ros): the small
-# matrices of the recursive and chunked solvers run slower with BLAS threads.
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# before numpy is first imported: the vehicle and the arm commands alike
+one_blas_thread()

@@ -37,13 +37,14 @@ HELP = {
 
 def _arm_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--arm", default="ur5", metavar="NAME|URDF",
-                   help="arm preset (ur5, shipped) or a URDF path with its MJCF beside it "
-                        "(same stem, .xml) (default: ur5)")
+                   help="arm preset (ur5, shipped) or a URDF path (revolute and continuous "
+                        "joints) with its MJCF beside it (same stem, .xml) (default: ur5)")
 
 
 def _limit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--span", type=float, default=1.0, metavar="RAD",
-                   help="position range: +-SPAN around q0 (default: 1.0)")
+                   help="position range: +-SPAN around the middle of each joint's own "
+                        "limits, within them; a continuous joint: around 0 (default: 1.0)")
     p.add_argument("--velocity", type=float, default=1.0, metavar="RAD/S",
                    help="|joint velocity| limit (default: 1.0; never above the URDF's)")
     p.add_argument("--acceleration", type=float, default=4.0, metavar="RAD/S2",

@@ -8,6 +8,13 @@ columns into r independent and p − r dependent ones; with R = [[R11, R12], [0,
     Y_dep = Y_ind β,  β = R11⁻¹ R12,   so   Y π = Y_ind (π_ind + β π_dep) = Y_b π_b
 
 (Gautier 1991). The base regressor is Y_b = Y[:, ind]; π_b = π_ind + β π_dep.
+
+Rounding. Both decisions are relative, with one tolerance ``tol``: a column whose norm is
+below tol × the largest column norm is structurally zero (a URDF joint frame turned by
+rpy = π/2 leaves cos(π/2) = 6e-17 where the algebra has 0: norms of 1e-32 or 1e-14 against
+O(10)) and is set to zero *before* the columns are scaled to unit norm, which would otherwise
+make rounding a direction as large as any other and count it as a base parameter; the rank
+is the number of pivots |R_kk| above tol × |R_00|.
 """
 
 from __future__ import annotations
@@ -90,7 +97,9 @@ def base_parameters(arm: ArmModel, samples: int = 400, seed: int = 0,
         Random states stacked.
     seed : int
     tol : float
-        A pivot |R_kk| below tol · |R_00| ends the independent set.
+        Relative tolerance: a column whose norm is at most tol × the largest column norm is
+        structurally zero (rounding only); a pivot |R_kk| at most tol × |R_00| ends the
+        independent set.
 
     Returns
     -------
@@ -101,10 +110,13 @@ def base_parameters(arm: ArmModel, samples: int = 400, seed: int = 0,
     qd = rng.normal(size=(samples, arm.n))
     qdd = rng.normal(size=(samples, arm.n))
     W = regressor(arm, q, qd, qdd).reshape(samples * arm.n, -1)
-    # scale columns to unit norm so the pivoting ranks directions, not units
+    # columns of rounding only are zero; the others scaled to unit norm so the pivoting
+    # ranks directions, not units
     norm = np.linalg.norm(W, axis=0)
-    norm[norm == 0] = 1.0
-    _, R, perm = scipy.linalg.qr(W / norm, mode="economic", pivoting=True)
+    live = norm > tol * norm.max()
+    norm[~live] = 1.0
+    _, R, perm = scipy.linalg.qr(np.where(live, W / norm, 0.0), mode="economic",
+                                 pivoting=True)
     diag = np.abs(np.diag(R))
     r = int(np.sum(diag > tol * diag[0]))
     ind, dep = perm[:r], perm[r:]

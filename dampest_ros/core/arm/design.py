@@ -22,19 +22,21 @@ __all__ = ["Design", "DesignLimits", "default_limits", "design_excitation", "reg
            "within_limits"]
 
 
-def default_limits(arm: ArmModel, center: FloatArray | None = None, span: float = 1.0,
-                   velocity: float = 1.0, acceleration: float = 4.0) -> DesignLimits:
-    """Design limits of an arm: ±span around ``center`` (within the URDF's range), at most
-    ``velocity`` and ``acceleration`` per joint (and the URDF's velocity limit), the URDF's
-    effort limits.
+def default_limits(arm: ArmModel, span: float = 1.0, velocity: float = 1.0,
+                   acceleration: float = 4.0) -> DesignLimits:
+    """Design limits of an arm: per joint ±span around the middle of its own position range,
+    within that range; at most ``velocity`` and ``acceleration`` (and the URDF's velocity
+    limit); the URDF's effort limits.
+
+    A joint limited to [0, 3] rad with span 1 ranges over [0.5, 2.5], one limited to ±2π over
+    ±1; a joint without limits (URDF ``continuous``) over ±span around 0, and one with a
+    single finite limit over span either side of the point of zero nearest within its range.
 
     Parameters
     ----------
     arm : ArmModel
-    center : ndarray, shape (n,), optional
-        Middle of the position range (rad); zero by default.
     span : float
-        Half-width of the position range (rad).
+        Half-width of the position range (rad); the default amplitude of a continuous joint.
     velocity, acceleration : float
         rad/s, rad/s².
 
@@ -42,8 +44,12 @@ def default_limits(arm: ArmModel, center: FloatArray | None = None, span: float 
     -------
     DesignLimits
     """
-    c = np.zeros(arm.n) if center is None else np.asarray(center, dtype=float)
-    return DesignLimits(np.maximum(c - span, arm.lower), np.minimum(c + span, arm.upper),
+    bounded = np.isfinite(arm.lower) & np.isfinite(arm.upper)
+    middle = np.where(bounded, 0.5 * (np.where(bounded, arm.lower, 0.0)
+                                      + np.where(bounded, arm.upper, 0.0)),
+                      np.clip(0.0, arm.lower, arm.upper))
+    return DesignLimits(np.maximum(middle - span, arm.lower),
+                        np.minimum(middle + span, arm.upper),
                         np.minimum(velocity, arm.velocity_limit), np.full(arm.n, acceleration),
                         arm.effort_limit.copy())
 

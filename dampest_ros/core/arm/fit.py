@@ -16,11 +16,16 @@ every link has m > 0 and J ≻ 0 with a margin; armature, viscous and Coulomb te
 It minimises the same weighted squared residual (scipy's bounded trust-region least squares,
 analytic Jacobian), and among the full parameter sets with the same base parameters picks the
 one nearest the nominal (weight ``prior_weight``, tiny): the nominal never sets a base
-parameter.
+parameter. Near a link's bound the solver creeps (its own tolerances are met after thousands
+of evaluations, if ever), so it also stops, converged, once the last ``SETTLE_WINDOW``
+iterations lowered the objective by less than ``SETTLE_RTOL`` of itself and moved no base
+parameter by more than ``SETTLE_SIGMA`` of its standard deviation: what more evaluations
+would change is below what the data resolve.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,6 +35,13 @@ from numpy.typing import NDArray
 from dampest_ros.core.arm.base import BaseParameters
 
 FloatArray = NDArray[np.float64]
+
+#: Iterations over which the physically consistent fit's progress is judged.
+SETTLE_WINDOW = 50
+#: Relative decrease of its objective over the window below which it has settled.
+SETTLE_RTOL = 3e-3
+#: Largest move of a base parameter over the window, in its standard deviations.
+SETTLE_SIGMA = 0.02
 
 
 @dataclass
@@ -265,8 +277,8 @@ class ConsistentFit:
         Weighted residual sum of squares above the unconstrained fit's, in units of the
         unconstrained fit's per-row variance (0 when the constraint does not bind).
     converged : bool
-        The solver met its tolerances; False: it stopped at its evaluation limit, the
-        parameters are physical but their cost may still fall.
+        The solver met its tolerances, or settled (module docstring); False: it stopped at
+        its evaluation limit, the parameters are physical but their cost may still fall.
     evaluations : int
         Residual evaluations the solver used.
     """
@@ -280,13 +292,38 @@ class ConsistentFit:
     @property
     def status(self) -> str:
         """One line: converged, or where the solver stopped."""
-        return ("converged" if self.converged else
+        return (f"converged after {self.evaluations} evaluations" if self.converged else
                 f"NOT converged: stopped after {self.evaluations} evaluations, physical but "
                 "its cost may still fall")
 
 
+class _Settled:
+    """A least-squares callback that stops the solver once it has settled: over the last
+    ``SETTLE_WINDOW`` iterations the objective fell by at most ``SETTLE_RTOL`` of itself and
+    no base parameter moved by more than ``SETTLE_SIGMA`` standard deviations."""
+
+    def __init__(self, theta_of: Callable[[FloatArray], FloatArray], std: FloatArray) -> None:
+        self.theta_of = theta_of
+        self.std = np.maximum(std, 1e-300)
+        self.history: list[tuple[float, FloatArray]] = []
+        self.settled = False
+
+    def __call__(self, intermediate_result: scipy.optimize.OptimizeResult) -> None:
+        """Record an iteration; raise StopIteration once settled."""
+        self.history.append((float(intermediate_result.cost),
+                             self.theta_of(intermediate_result.x)))
+        if len(self.history) <= SETTLE_WINDOW:
+            return
+        (f0, t0), (f1, t1) = self.history[-SETTLE_WINDOW - 1], self.history[-1]
+        if (f0 - f1 <= SETTLE_RTOL * f1
+                and np.max(np.abs(t1 - t0) / self.std) <= SETTLE_SIGMA):
+            self.settled = True
+            raise StopIteration
+
+
 def fit_consistent(normals: JointNormals, base: BaseParameters, fit: BaseFit,
-                   nominal: FloatArray, prior_weight: float = 1e-5) -> ConsistentFit:
+                   nominal: FloatArray, prior_weight: float = 1e-5,
+                   max_evaluations: int = 2000) -> ConsistentFit:
     """Physically consistent least squares (log-Cholesky links, bounded joint terms).
 
     Parameters
@@ -300,6 +337,8 @@ def fit_consistent(normals: JointNormals, base: BaseParameters, fit: BaseFit,
         must be physical.
     prior_weight : float
         Weight of ‖π − π_nominal‖ (scaled per parameter) against the data's cost.
+    max_evaluations : int
+        Residual evaluations after which the solver stops unconverged.
 
     Returns
     -------
@@ -352,11 +391,14 @@ def fit_consistent(normals: JointNormals, base: BaseParameters, fit: BaseFit,
     for j in range(n):
         lo[10 * j + diag] = x0[10 * j + diag] + np.log(1e-5)
     x0 = np.maximum(x0, np.where(np.isfinite(lo), lo + 1e-9, -np.inf))
+    settle = _Settled(lambda x: base.of(unpack(x)[0]), fit.std)
     sol = scipy.optimize.least_squares(residual, x0, jac=jacobian, bounds=(lo, np.inf),
-                                       xtol=1e-8, ftol=1e-8, gtol=1e-8, max_nfev=400)
+                                       xtol=1e-8, ftol=1e-8, gtol=1e-8,
+                                       max_nfev=max_evaluations, callback=settle)
     full, _ = unpack(sol.x)
     theta = base.of(full)
     d = theta - fit.theta
     per_row = float(np.sum(fit.weights * fit.sigma ** 2) / n)
     return ConsistentFit(full, theta, float(d @ A @ d) / max(per_row, 1e-300),
-                         converged=bool(sol.status > 0), evaluations=int(sol.nfev))
+                         converged=bool(sol.status > 0 or settle.settled),
+                         evaluations=int(sol.nfev))

@@ -5,11 +5,16 @@ and the MJCF written from the same numbers.
 The inertial parameters of link j are Pinocchio's ten "dynamic parameters" in the frame of
 joint j: π_j = [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] (kg, kg m,
 kg m²), the inertia taken about the joint frame's origin (not the centre of mass).
+
+A URDF ``continuous`` joint is a revolute joint without position limits (lower and upper
+±inf here). Pinocchio reads it as a unit-circle joint of two coordinates (cos q, sin q); the
+model keeps one coordinate per joint by reading it as ``revolute`` (:func:`revolute_urdf`).
 """
 
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from typing import Any
 
@@ -47,7 +52,7 @@ class ArmModel:
     inertial : ndarray, shape (n, 10)
         Nominal inertial parameters per link (see the module docstring).
     lower, upper : ndarray, shape (n,)
-        Position limits (rad).
+        Position limits (rad); ±inf for a continuous joint.
     velocity_limit : ndarray, shape (n,)
         |q̇| limits (rad/s).
     effort_limit : ndarray, shape (n,)
@@ -55,7 +60,8 @@ class ArmModel:
     gravity : ndarray, shape (3,)
         Gravity in the base frame (m/s²).
     urdf : str
-        The URDF text the model was read from (Pinocchio reference computations use it).
+        The URDF text the model was read from, continuous joints written as revolute ones
+        (:func:`revolute_urdf`; Pinocchio's dynamics use it, one coordinate per joint).
     """
 
     names: tuple[str, ...]
@@ -105,8 +111,48 @@ class JointDynamics:
     frictionloss: FloatArray
 
 
+def revolute_urdf(urdf: str) -> tuple[str, frozenset[str]]:
+    """URDF text with its continuous joints written as revolute ones, and their names.
+
+    The limit element of such a joint carries no position limits (urdfdom reads [0, 0];
+    :func:`arm_from_urdf` takes ±inf) and keeps its effort and velocity; one is added if the
+    joint had none. A URDF without continuous joints is returned unchanged.
+
+    Parameters
+    ----------
+    urdf : str
+        URDF XML.
+
+    Returns
+    -------
+    urdf : str
+    continuous : frozenset of str
+        Names of the joints rewritten.
+
+    Raises
+    ------
+    ValueError
+        If the text is not XML.
+    """
+    try:
+        root = ET.fromstring(urdf)
+    except ET.ParseError as exc:
+        raise ValueError(f"URDF does not parse: {exc}") from None
+    joints = [j for j in root.iter("joint") if j.get("type") == "continuous"]
+    if not joints:
+        return urdf, frozenset()
+    for joint in joints:
+        joint.set("type", "revolute")
+        limit = joint.find("limit")
+        if limit is None:
+            limit = ET.SubElement(joint, "limit", effort="0", velocity="0")
+        limit.attrib.pop("lower", None)
+        limit.attrib.pop("upper", None)
+    return ET.tostring(root, encoding="unicode"), frozenset(str(j.get("name")) for j in joints)
+
+
 def arm_from_urdf(urdf: str) -> ArmModel:
-    """Read an arm of revolute joints from URDF text with Pinocchio.
+    """Read an arm of revolute (and continuous) joints from URDF text with Pinocchio.
 
     Parameters
     ----------
@@ -116,14 +162,18 @@ def arm_from_urdf(urdf: str) -> ArmModel:
     Returns
     -------
     ArmModel
+        Velocity and effort limits as the URDF gives them (inf where a continuous joint has
+        none); a continuous joint's position limits ±inf.
 
     Raises
     ------
     ValueError
-        If the URDF does not parse or has a joint other than a revolute one.
+        If the URDF does not parse or has a joint other than a revolute or continuous one.
     """
+    text, continuous = revolute_urdf(urdf)
     try:
-        model = pin.buildModelFromXML(urdf)
+        model = pin.buildModelFromXML(text)
+        given = pin.buildModelFromXML(urdf) if continuous else model
     except Exception as exc:  # Pinocchio raises bare RuntimeErrors on bad XML
         raise ValueError(f"URDF does not parse: {exc}") from None
     n = model.njoints - 1
@@ -136,23 +186,25 @@ def arm_from_urdf(urdf: str) -> ArmModel:
         elif kind == "JointModelRevoluteUnaligned":
             axes.append(tuple(np.asarray(joint.extract().axis, dtype=float)))
         else:
-            raise ValueError(f"joint {model.names[i]} is a {kind}; only revolute joints "
-                             "are supported")
+            raise ValueError(f"joint {model.names[i]} is a {kind}; only revolute and "
+                             "continuous joints are supported")
+    names = tuple(str(model.names[i]) for i in range(1, n + 1))
+    free = np.array([name in continuous for name in names])
     place = [model.jointPlacements[i] for i in range(1, n + 1)]
     return ArmModel(
-        names=tuple(str(model.names[i]) for i in range(1, n + 1)),
+        names=names,
         parents=np.array([model.parents[i] - 1 for i in range(1, n + 1)], dtype=np.int64),
         rotation=np.array([p.rotation for p in place], dtype=float),
         translation=np.array([p.translation for p in place], dtype=float),
         axis=np.array(axes, dtype=float),
         inertial=np.array([model.inertias[i].toDynamicParameters() for i in range(1, n + 1)],
                           dtype=float),
-        lower=np.array(model.lowerPositionLimit, dtype=float),
-        upper=np.array(model.upperPositionLimit, dtype=float),
-        velocity_limit=np.array(model.velocityLimit, dtype=float),
-        effort_limit=np.array(model.effortLimit, dtype=float),
+        lower=np.where(free, -np.inf, np.asarray(model.lowerPositionLimit, dtype=float)),
+        upper=np.where(free, np.inf, np.asarray(model.upperPositionLimit, dtype=float)),
+        velocity_limit=np.array(given.velocityLimit, dtype=float),
+        effort_limit=np.array(given.effortLimit, dtype=float),
         gravity=np.array(model.gravity.linear, dtype=float),
-        urdf=urdf,
+        urdf=text,
     )
 
 

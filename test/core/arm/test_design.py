@@ -3,6 +3,9 @@ random FFS coefficients held to the same limits."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -54,3 +57,20 @@ def test_designed_excitation_is_5x_better_conditioned(ur5) -> None:  # type: ign
     d = design_excitation(arm.model, base, nominal, limits, iterations=40, baseline=16)
     _check(arm, d, limits, nominal)
     assert d.cond_random / d.cond >= 5.0
+
+
+def test_default_limits_are_each_joints_own_range() -> None:
+    arm = load_arm(str(Path(__file__).parents[2] / "data" / "z1like.urdf")).model
+    limits = default_limits(arm, span=1.0)
+    # joint 2 is limited to [0, 2.967], joint 3 to [-2.88, 0]: centred in them, not at 0
+    assert limits.lower[1:3] == pytest.approx([0.4835, -2.44])
+    assert limits.upper[1:3] == pytest.approx([2.4835, -0.44])
+    # a range narrower than 2 span is the range; the UR5's ±2π gives ±span
+    assert default_limits(arm, span=2.0).lower[4] == -1.344
+    assert np.array_equal(default_limits(load_arm("ur5").model, span=0.7).upper, [0.7] * 6)
+    # no limits (continuous): ±span around 0; one finite limit: from the point nearest 0
+    free = replace(arm, lower=np.array([-np.inf, 0.5, -np.inf, -1.0, -1.0, -1.0]),
+                   upper=np.array([np.inf, np.inf, -0.2, 1.0, 1.0, 1.0]))
+    limits = default_limits(free, span=1.0)
+    assert limits.lower[:3].tolist() == [-1.0, 0.5, -1.2]
+    assert limits.upper[:3].tolist() == [1.0, 1.5, -0.2]

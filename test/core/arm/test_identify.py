@@ -3,9 +3,12 @@ realistic data, physically consistent always."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+from dampest_ros.core.arm import fit as fit_module
 from dampest_ros.core.arm.base import base_parameters
 from dampest_ros.core.arm.ffs import random_trajectory
 from dampest_ros.core.arm.fit import (
@@ -16,12 +19,14 @@ from dampest_ros.core.arm.fit import (
 )
 from dampest_ros.core.arm.identify import (
     IdentifyConfig,
+    accumulate,
     filter_joints,
     filter_stretches,
     identify_arm,
     predict,
     torque_rmse,
 )
+from dampest_ros.core.arm.model import mjcf
 from dampest_ros.core.arm.regressor import full_parameters, regressor
 from dampest_ros.core.arm.simulate import REALISTIC, simulate_arm
 from dampest_ros.core.signals.resample import interpolate
@@ -72,7 +77,7 @@ def test_noise_free_data_give_the_truth(ur5) -> None:  # type: ignore[no-untyped
     pc = fit_consistent(normals, base, fit_base(normals, base), nominal)
     assert np.linalg.norm(pc.theta - truth) <= 1e-6 * np.linalg.norm(truth)
     assert pseudo_inertia_eigenvalues(pc.full[:60]).min() > 0
-    assert pc.converged and pc.status == "converged"
+    assert pc.converged and pc.status.startswith("converged after ")
 
 
 @pytest.fixture(scope="module")
@@ -178,3 +183,58 @@ def test_filtering_in_windows_equals_one_pass() -> None:
         assert np.abs(getattr(one, name) - getattr(win, name)).max() < tol, name
     assert np.allclose(one.noise, win.noise, rtol=1e-12)
     assert one.noise == pytest.approx([1.0, 1.0], rel=0.02)  # the white noise's own sigma
+
+
+def test_an_arm_without_a_preset_identifies_within_sigma() -> None:
+    """A Z1-like arm of our own (test/data/z1like.*: pitch joints written as rpy-turned z
+    axes, so structurally zero columns hold rounding) failed with a singular information
+    matrix: rounding was counted as base parameters. Now its 58 base parameters come out
+    within a few σ of MuJoCo's truth and validate at the noise floor."""
+    arm = load_arm(str(Path(__file__).parents[2] / "data" / "z1like.urdf"))
+    m = arm.model
+    assert mjcf(m, arm.dynamics, name="z1like") == arm.mjcf
+    base = base_parameters(m)
+    q0 = 0.5 * (m.lower + m.upper)  # joints 2 and 3 range over [0, 2.97] and [-2.88, 0]
+    traj = random_trajectory(q0, 5, 0.1, np.full(6, 1.5), np.random.default_rng(3))
+    run = simulate_arm(arm.mjcf, m, arm.dynamics, traj, 40.0, 1000.0, REALISTIC, seed=1)
+    cfg = IdentifyConfig()
+    nominal = full_parameters(m, arm.dynamics)
+    nominal[:60] *= 1.2
+    res = identify_arm(m, base, filter_joints(run.t, run.position, run.effort, cfg), nominal,
+                       cfg)
+    truth = base.of(full_parameters(m, arm.dynamics, REALISTIC.torque_offset))
+    z = np.abs(res.wls.theta - truth) / res.wls.std
+    assert np.median(z) < 1.5 and z.max() < 4.0  # measured: 1.01 and 2.23
+    fc = res.wls.theta[[_joint(base, f"{j}.Fc") for j in m.names]]
+    assert fc == pytest.approx(arm.dynamics.frictionloss, rel=0.05)  # measured: ≤ 2.4 %
+    val = random_trajectory(q0, 4, 0.125, np.full(6, 1.2), np.random.default_rng(4))
+    vrun = simulate_arm(arm.mjcf, m, arm.dynamics, val, 16.0, 1000.0, REALISTIC, seed=2)
+    fv = filter_joints(vrun.t, vrun.position, vrun.effort, IdentifyConfig(rate_out=1000.0))
+    floor = np.std(vrun.effort - vrun.tau, axis=0)
+    for theta in (res.wls.theta, res.consistent.theta):
+        tau = predict(m, base, theta, fv.q, fv.qd, fv.qdd, cfg)
+        assert np.all(torque_rmse(vrun.effort[fv.index], tau, fv.qd, cfg.min_speed)[0]
+                      <= 1.02 * floor)  # measured: 0.998-1.001
+
+
+def test_consistent_fit_settles_instead_of_running_out(
+        ur5, realistic, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """The consistent fit crept near a link's bound and always reported "NOT converged"
+    at 400 evaluations; now it stops once 50 iterations change nothing the data resolve,
+    and says so. Capped below that, it still says it was not."""
+    arm, base = ur5
+    run, _ = realistic
+    cfg = IdentifyConfig()
+    normals = accumulate(arm.model, filter_joints(run.t, run.position, run.effort, cfg), cfg)
+    wls = fit_base(normals, base)
+    nominal = full_parameters(arm.model, arm.dynamics)
+    pc = fit_consistent(normals, base, wls, nominal)
+    assert pc.converged and pc.evaluations < 2000
+    assert pc.status == f"converged after {pc.evaluations} evaluations"
+    short = fit_consistent(normals, base, wls, nominal, max_evaluations=20)
+    assert not short.converged and short.status.startswith("NOT converged: stopped after 2")
+    # what the settled fit leaves is below the data's resolution: without the criterion,
+    # 250 more evaluations move no base parameter by a tenth of its sigma
+    monkeypatch.setattr(fit_module, "SETTLE_WINDOW", 10 ** 9)
+    longer = fit_consistent(normals, base, wls, nominal, max_evaluations=pc.evaluations + 250)
+    assert np.max(np.abs(longer.theta - pc.theta) / wls.std) < 0.1

@@ -3,11 +3,14 @@ three regressors (vectorised, Pinocchio's analytic one, MuJoCo's mj_inverse) agr
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import mujoco
 import numpy as np
 import pinocchio as pin
 import pytest
 
+from dampest_ros.core.arm.ffs import random_trajectory
 from dampest_ros.core.arm.mjinverse import inverse_dynamics, numerical_regressor
 from dampest_ros.core.arm.model import mjcf
 from dampest_ros.core.arm.regressor import (
@@ -16,6 +19,7 @@ from dampest_ros.core.arm.regressor import (
     regressor,
     rigid_regressor,
 )
+from dampest_ros.core.arm.simulate import simulate_arm
 from dampest_ros.io.arm import ArmDataError, arm_presets, load_arm
 
 
@@ -72,3 +76,44 @@ def test_bad_arm_is_refused(tmp_path) -> None:  # type: ignore[no-untyped-def]
     urdf.write_text("<robot name='x'/>")
     with pytest.raises(ArmDataError, match="no MJCF"):
         load_arm(urdf)
+
+
+Z1LIKE = Path(__file__).parents[2] / "data" / "z1like.urdf"
+
+
+def _continuous(tmp_path: Path) -> Path:
+    """The Z1-like arm with joint 1 continuous without a limit element and joint 6
+    continuous with one that still names a range (ignored), its MJCF beside it."""
+    text = Z1LIKE.read_text()
+    text = text.replace('<joint name="joint1" type="revolute">',
+                        '<joint name="joint1" type="continuous">').replace(
+        '<limit lower="-2.618" upper="2.618" effort="30.0" velocity="3.1415"/>', "")
+    text = text.replace('<joint name="joint6" type="revolute">',
+                        '<joint name="joint6" type="continuous">')
+    path = tmp_path / "cont.urdf"
+    path.write_text(text)
+    path.with_suffix(".xml").write_text(Z1LIKE.with_suffix(".xml").read_text())
+    return path
+
+
+def test_continuous_joints_are_revolute_without_limits(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    revolute = load_arm(str(Z1LIKE)).model
+    arm = load_arm(str(_continuous(tmp_path)))
+    m = arm.model
+    assert m.names == revolute.names
+    assert np.isneginf(m.lower[[0, 5]]).all() and np.isposinf(m.upper[[0, 5]]).all()
+    assert np.array_equal(m.lower[1:5], revolute.lower[1:5])
+    assert m.velocity_limit[0] == np.inf and m.effort_limit[0] == np.inf  # none given
+    assert m.velocity_limit[5] == 3.1415 and m.effort_limit[5] == 30.0
+    for name in ("rotation", "translation", "axis", "inertial"):
+        assert np.array_equal(getattr(m, name), getattr(revolute, name)), name
+    # Pinocchio's model of it has one coordinate per joint, and the same dynamics
+    pm, _ = m.pinocchio()
+    assert (pm.nq, pm.nv) == (6, 6)
+    q, qd, qdd = _states(20, 3)
+    assert np.abs(pinocchio_regressor(m, q, qd, qdd)
+                  - regressor(m, q, qd, qdd)[..., :60]).max() < 1e-10
+    # and MuJoCo runs it
+    traj = random_trajectory(np.zeros(6), 2, 1.0, np.full(6, 1.0), np.random.default_rng(1))
+    run = simulate_arm(arm.mjcf, m, arm.dynamics, traj, 0.5)
+    assert np.abs(run.q - traj.evaluate(run.t)[0]).max() < 1e-3
