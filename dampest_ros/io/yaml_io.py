@@ -404,7 +404,7 @@ def _model_mapping(m: Model) -> dict[str, Any]:
     if m.M_A is not None:
         model["M_A"] = m.M_A.reshape(36).tolist()
     if m.added_mass_terms is not None:
-        model["added_mass_terms"] = m.added_mass_terms.as_dict()
+        model["added_mass_terms"] = m.added_mass_terms.as_parameters()
     if m.damping is not None:
         model["terms"] = _terms_params(damping_spec(m.damping, m.theta))
     if m.identity is not None:
