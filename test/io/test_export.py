@@ -570,8 +570,8 @@ def test_gz_maps_the_added_mass_switches_and_reads_them_back(
         tmp_path: Path, heavy: Vehicle, switches: dict[str, bool], flags: dict[str, str],
         munk_left_out: bool) -> None:
     """inertial → <disable_added_mass>, coriolis → <disable_coriolis>; Munk moments or other
-    single entries of C_A cannot be dropped in gz-sim (listed as left out); M_A comes from model.M_A without a
-    vehicle; the import gives the switches and M_A back."""
+    single entries of C_A cannot be dropped in gz-sim (listed as left out); M_A comes from
+    model.M_A without a vehicle; the import gives the switches and M_A back."""
     mf = load_model(switched_file(tmp_path, heavy, **switches))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ExportWarning)
