@@ -4,8 +4,8 @@ Fetches ``model.*`` (docs/architecture.md §3) from a node (``estimator_node``,
 ``model_server_node``) with the standard ``list_parameters`` and ``get_parameters`` services,
 follows ``/parameter_events`` to refresh when ``model.version`` changes, and evaluates D(ν),
 the damping force D(ν)ν, its standard deviation and C(ν)ν (FRD body frame, SI units), the
-latter with the plant's added-mass switches (``model.added_mass_terms``, ``model.M_A``) when
-the server has them.
+latter with the plant's added-mass switches and zeroed C_A entries (``model.added_mass_terms``,
+``model.M_A``) when the server has them.
 Without ROS, :meth:`ModelClient.from_yaml` reads a model file. rclpy is imported only by the
 ROS methods.
 

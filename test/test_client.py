@@ -174,22 +174,28 @@ def test_model_server_and_estimator_parameters_give_the_same_model(tmp_path: Pat
         check_client(clients[0], v.damping, 2.0 * v.theta, np.ones(12), v.body.M)
 
 
-def test_added_mass_switches_reach_the_client_from_file_and_parameters(tmp_path: Path) -> None:
-    """A plant without Munk moments and without M_A ν̇: the client's C(ν)ν and feed-forward
-    equal the core RigidBody's to 1e-12 from the YAML file, from a model_server_node (by file
-    and by --params-file) and from an estimator_node on that vehicle (model.M_A and
-    model.added_mass_terms.* served as parameters)."""
+@pytest.mark.parametrize("zero", [None, [["X", "q"], ["X", "r"], ["Z", "q"], ["Y", "r"]]])
+def test_added_mass_switches_reach_the_client_from_file_and_parameters(
+        tmp_path: Path, zero: list[list[str]] | None) -> None:
+    """A plant without Munk moments and without M_A ν̇ (and, second case, without the C_A
+    entries X←q, X←r, Z←q, Y←r): the client's C(ν)ν and feed-forward equal the core
+    RigidBody's to 1e-12 from the YAML file, from a model_server_node (by file and by
+    --params-file) and from an estimator_node on that vehicle (model.M_A and
+    model.added_mass_terms.* served as parameters, the entries as a 36-int coriolis_mask)."""
     import yaml
 
     from dampest_ros.core.physics.rigid_body import AddedMassTerms
 
-    switches = {"inertial": False, "coriolis": True, "munk": False}
+    switches: dict[str, Any] = {"inertial": False, "coriolis": True, "munk": False}
+    if zero is not None:
+        switches["coriolis_zero"] = zero
     doc = yaml.safe_load(vehicle_path("bluerov2_heavy").read_text())
     doc["vehicle"]["added_mass_terms"] = switches
     vehicle_file = tmp_path / "vehicle.yaml"
     vehicle_file.write_text(yaml.safe_dump(doc, sort_keys=False))
     v = load_vehicle(vehicle_file)
-    assert v.body.added_mass_terms == AddedMassTerms(**switches)
+    terms = AddedMassTerms.from_dict(switches)
+    assert v.body.added_mass_terms == terms
     path = save_model(tmp_path / "model.yaml", Model(v.damping.parameter_names, v.theta,
                                                      np.ones(v.theta.size), v.body.M,
                                                      damping=v.damping, M_A=v.body.added_mass,
@@ -211,7 +217,9 @@ def test_added_mass_switches_reach_the_client_from_file_and_parameters(tmp_path:
             assert server._served["model.added_mass_terms.munk"] is False
             assert server._served["model.added_mass_terms.inertial"] is False
             assert len(server._served["model.M_A"]) == 36
-            assert c.model.added_mass_terms == AddedMassTerms(**switches)
+            mask = server._served.get("model.added_mass_terms.coriolis_mask")
+            assert mask == (None if zero is None else terms.mask.astype(int).ravel().tolist())
+            assert c.model.added_mass_terms == terms
             check(c)
 
 

@@ -202,7 +202,8 @@ def final_magnitudes(data: GapData, result: GapResult) -> list[str]:
                 f"{n} {after[n]:.4g} (added)" for n in names)
         if "terms" in u:
             text += "; written as added_mass_terms " + ", ".join(
-                f"{k}: {str(v).lower()}" for k, v in u["terms"].items())
+                f"{k}: {str(v).lower()}" for k, v in u["terms"].items()
+                if k != "coriolis_zero")
         lines.append(text)
     return lines
 

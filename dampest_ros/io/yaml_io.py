@@ -39,7 +39,9 @@ positive when dissipative (force on the left-hand side is +D(ν)ν).
 ``M_A`` and ``added_mass_terms`` say which effects of the added mass act on the plant the
 model describes (:class:`~dampest_ros.core.physics.rigid_body.AddedMassTerms`: ``inertial`` M_A ν̇,
 ``coriolis`` C_A(ν)ν, ``munk`` its Munk moments); the switches are a namespace of three
-booleans, so ``model.added_mass_terms.coriolis`` is a ROS parameter. Files without them (older
+booleans, so ``model.added_mass_terms.coriolis`` is a ROS parameter. When single entries of
+C_A(ν) are zeroed beyond the switches, ``coriolis_mask`` (36 integers 0/1, row-major, 1 = the
+entry acts) carries them (docs/architecture.md §1). Files without them (older
 ones) mean all effects act, and C(ν)ν is that of M as a whole.
 
 ``identified`` says per coefficient whether the data determined it; one that is ``false``
@@ -404,7 +406,7 @@ def _model_mapping(m: Model) -> dict[str, Any]:
     if m.M_A is not None:
         model["M_A"] = m.M_A.reshape(36).tolist()
     if m.added_mass_terms is not None:
-        model["added_mass_terms"] = m.added_mass_terms.as_dict()
+        model["added_mass_terms"] = m.added_mass_terms.as_parameters()
     if m.damping is not None:
         model["terms"] = _terms_params(damping_spec(m.damping, m.theta))
     if m.identity is not None:

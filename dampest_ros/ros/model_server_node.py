@@ -5,7 +5,8 @@ is a ROS 2 parameters file: --ros-args --params-file model.yaml). Its parameters
 of the file: model.parameter_names, theta, theta_std, M, version, sign_convention, the
 term structure model.terms.* (so that dampest_ros.client evaluates cross, added-mass and
 residual terms too) and, when the file has them, model.M_A and the added-mass switches
-model.added_mass_terms.{inertial,coriolis,munk}, and model.identified (per coefficient:
+model.added_mass_terms.{inertial,coriolis,munk} (and coriolis_mask, 36 ints, when single
+entries of C_A are zeroed), and model.identified (per coefficient:
 did the data determine it) with model.held.{names,reasons} for those that hold their prior.
 Publishes it on dampest/model (std_msgs/String with the YAML, transient local). Setting
 model_file loads another file (validated first: a file no reader takes, e.g. a non-finite

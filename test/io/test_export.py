@@ -541,7 +541,7 @@ def test_cli_import_urdf_without_rigid_body_needs_a_vehicle(tmp_path: Path) -> N
 # --- added-mass switches ----------------------------------------------------------------------
 
 
-def switched_file(tmp_path: Path, heavy: Vehicle, **switches: bool) -> Path:
+def switched_file(tmp_path: Path, heavy: Vehicle, **switches: Any) -> Path:
     """The heavy's model with model.M_A and the given added-mass switches."""
     from dampest_ros.core.physics.rigid_body import AddedMassTerms
     return save_model(tmp_path / "switched.yaml", Model(heavy.damping.parameter_names, heavy.theta,
@@ -563,13 +563,15 @@ def plugin_flags(text: str) -> dict[str, str]:
      {"disable_added_mass": "true", "disable_coriolis": "true"}, False),
     ({"inertial": True, "coriolis": True, "munk": False}, {}, True),
     ({"inertial": True, "coriolis": True, "munk": True}, {}, False),
+    ({"inertial": True, "coriolis": True, "munk": True, "coriolis_zero": ((0, 4), (2, 4))}, {},
+     True),
 ])
 def test_gz_maps_the_added_mass_switches_and_reads_them_back(
         tmp_path: Path, heavy: Vehicle, switches: dict[str, bool], flags: dict[str, str],
         munk_left_out: bool) -> None:
-    """inertial → <disable_added_mass>, coriolis → <disable_coriolis>; Munk moments alone
-    cannot be dropped in gz-sim (listed as left out); M_A comes from model.M_A without a
-    vehicle; the import gives the switches and M_A back."""
+    """inertial → <disable_added_mass>, coriolis → <disable_coriolis>; Munk moments or other
+    single entries of C_A cannot be dropped in gz-sim (listed as left out); M_A comes from
+    model.M_A without a vehicle; the import gives the switches and M_A back."""
     mf = load_model(switched_file(tmp_path, heavy, **switches))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ExportWarning)
@@ -577,7 +579,7 @@ def test_gz_maps_the_added_mass_switches_and_reads_them_back(
     assert plugin_flags(ex.text) == flags
     assert any("model.M_A" in n for n in ex.notes)
     assert ET.fromstring(ex.text).findtext("xDotU") == "-6.36"
-    assert any("cannot drop the Munk moments" in x for x in ex.left_out) == munk_left_out
+    assert any("cannot zero entries" in x for x in ex.left_out) == munk_left_out
     assert not [x for x in ex.left_out if "off-diagonal M_A" in x]   # the heavy's is diagonal
     back = import_gz(ex.text)
     assert back.added_mass_terms == load_terms(inertial=switches["inertial"],
@@ -601,6 +603,11 @@ def test_formats_without_switches_list_them_as_left_out(tmp_path: Path, heavy: V
     (line,) = [x for x in ex.left_out if x.startswith("added_mass_terms")]
     assert "no inertial effect" in line and "has no switches" in line
     assert "LEFT OUT" in ex.text and "added_mass_terms" in ex.text
+    # a partial mask is named entry by entry, never dropped silently
+    part = load_model(switched_file(tmp_path, heavy, coriolis_zero=((0, 4), (2, 4))))
+    with pytest.warns(ExportWarning, match="added_mass_terms"):
+        (line,) = [x for x in export_model(part, fmt, heavy).left_out if "added_mass" in x]
+    assert "no C_A entries (X, q) (Z, q) effect" in line
     # all switches on: nothing to say
     on = load_model(switched_file(tmp_path, heavy, inertial=True, coriolis=True, munk=True))
     assert not [x for x in export_model(on, fmt, heavy).left_out if "added_mass_terms" in x]

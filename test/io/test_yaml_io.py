@@ -337,3 +337,55 @@ def test_every_reader_refuses_non_finite_numbers(tmp_path: Path, entry: str, ind
     with pytest.raises(ConfigError, match=match):  # nor the Model every writer takes
         Model(good.parameter_names, bad["theta"], bad["theta_std"], bad["M"],
               damping=good.damping, held=held)
+
+
+def test_c_a_entry_mask_round_trips_as_a_ros_integer_array(tmp_path: Path) -> None:
+    """Zeroed entries beyond the switches are written as model.added_mass_terms.coriolis_mask
+    (36 ints, 1 = acts) and come back equal from the file and from the parameters."""
+    from dampest_ros.core.physics.rigid_body import AddedMassTerms
+
+    model, theta = damping_from_spec({"linear": {"X_u": 13.7, "N_r": 0.5}})
+    v = yaml_io.load_vehicle("bluerov2_heavy")
+    terms = AddedMassTerms(munk=False, coriolis_zero=((0, 4), (0, 5), (2, 4), (1, 5)))
+    path = yaml_io.save_model(tmp_path / "m.yaml", Model(model.parameter_names, theta, theta,
+                                                         v.body.M, damping=model,
+                                                         M_A=v.body.added_mass,
+                                                         added_mass_terms=terms))
+    doc = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]["model"]
+    mask = doc["added_mass_terms"]["coriolis_mask"]
+    assert len(mask) == 36 and sum(mask) == 26
+    assert mask[4] == mask[5] == mask[6 + 5] == mask[12 + 4] == mask[18 + 1] == 0
+    assert yaml_io.load_model(path).added_mass_terms == terms
+    params = yaml_io.model_parameters(yaml_io.load_model(path))
+    assert params["model.added_mass_terms.coriolis_mask"] == mask
+    assert yaml_io.model_from_parameters(params).added_mass_terms == terms
+
+
+def _vehicle_with(tmp_path: Path, terms_line: str) -> Path:
+    """The bluerov2_heavy preset with an added_mass_terms line under added_mass."""
+    text = yaml_io.vehicle_path("bluerov2_heavy").read_text()
+    anchor = next(line for line in text.splitlines() if line.strip().startswith("added_mass:"))
+    path = tmp_path / "vehicle.yaml"
+    path.write_text(text.replace(anchor, f"{anchor}\n  added_mass_terms: {terms_line}"))
+    return path
+
+
+def test_vehicle_file_states_zeroed_c_a_entries_by_name_or_index(tmp_path: Path) -> None:
+    by_name = yaml_io.load_vehicle(_vehicle_with(
+        tmp_path, "{munk: false, coriolis_zero: [[X, q], [X, r], [Z, q], [Y, r]]}"))
+    by_index = yaml_io.load_vehicle(_vehicle_with(
+        tmp_path, "{munk: false, coriolis_zero: [[0, 4], [0, 5], [2, 4], [1, 5]]}"))
+    assert by_name.body.added_mass_terms == by_index.body.added_mass_terms
+    assert len(by_name.body.added_mass_terms.zeroed) == 10
+
+
+@pytest.mark.parametrize(("line", "match"), [
+    ("{coriolis_zero: [[X, Q]]}", r"vehicle\.yaml:\d+: .*coriolis_zero"),
+    ("{coriolis_zero: [[X, u]]}", r"vehicle\.yaml:\d+: .*\(X, u\) = \[0, 0\] is zero in C_A"),
+    ("{coriolis_zero: [X, q]}", r"vehicle\.yaml:\d+: .*coriolis_zero"),
+])
+def test_vehicle_file_typo_in_zeroed_entries_is_one_line_naming_the_place(
+        tmp_path: Path, line: str, match: str) -> None:
+    with pytest.raises(ConfigError, match=match) as info:
+        yaml_io.load_vehicle(_vehicle_with(tmp_path, line))
+    assert "\n" not in str(info.value)

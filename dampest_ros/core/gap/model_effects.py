@@ -3,6 +3,7 @@ linear or quadratic damping coefficient, a cross-coupling term and fluid memory.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -30,15 +31,14 @@ def _form_terms(terms: AddedMassTerms, form: str) -> AddedMassTerms:
     """The added-mass switches of a candidate's ``form`` on a vehicle with ``terms``.
 
     ``acting``: the vehicle's; ``inertial``: M_A ν̇ only; ``coriolis``: C_A(ν)ν only, with
-    the vehicle's Munk switch when its Coriolis term acts, else with the Munk moments (the
-    whole C_A, as gz-sim applies it).
+    the vehicle's zeroed entries (Munk, ``coriolis_zero``) when its Coriolis term acts, else
+    the whole C_A (as gz-sim applies it).
     """
     if form == "acting":
         return terms
     if form == "inertial":
         return AddedMassTerms(inertial=True, coriolis=False, munk=False)
-    return AddedMassTerms(inertial=False, coriolis=True,
-                          munk=terms.munk or not terms.coriolis)
+    return replace(terms, inertial=False) if terms.coriolis else AddedMassTerms(inertial=False)
 
 
 def _added_mass_force(M_A: FloatArray, terms: AddedMassTerms, ch: Chunk) -> FloatArray:
@@ -106,9 +106,10 @@ class AddedMassScale(LinearEffect):
         terms = data.body.added_mass_terms
         factor = float(getattr(terms, self.form)) + float(p[0])
         on = factor >= 0.5
-        switch = {self.form: on}
+        switch: dict[str, Any] = {self.form: on}
         if self.form == "coriolis":
             switch["munk"] = on and (terms.munk or not terms.coriolis)
+            switch["coriolis_zero"] = terms.coriolis_zero if on else ()
         return {"terms": switch, "extra": {f"added_mass_{self.form}_factor": factor}}
 
 

@@ -4,7 +4,7 @@ free-run velocity error of both (:func:`free_run_errors`)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -90,7 +90,7 @@ def updated_model(data: GapData, effects: Sequence[tuple[Effect, FloatArray]]) -
     values = dict(zip(data.model.parameter_names, data.theta.tolist(), strict=True))
     terms: dict[str, DampingTerm] = {t.kind: t for t in data.model.terms}
     M = data.body.M.copy()
-    switches = data.body.added_mass_terms.as_dict()
+    switches = asdict(data.body.added_mass_terms)
     extra: dict[str, Any] = {}
     freq: dict[tuple[int, float], float] = {}
     old = terms.get("freq")

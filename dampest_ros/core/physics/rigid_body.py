@@ -138,60 +138,192 @@ def coriolis_force(M: FloatArray, nu: FloatArray) -> FloatArray:
     return out
 
 
+#: The entries (row, column) of Fossen's C_A(ν) (2011, eq. 6.49) that are not identically
+#: zero: the off-diagonal entries of its blocks −S(a1) (rows X, Y, Z ← columns p, q, r and
+#: rows K, M, N ← columns u, v, w) and −S(a2) (K, M, N ← p, q, r), a = M_A ν; 18 entries.
+CA_ENTRIES: frozenset[tuple[int, int]] = frozenset(
+    (i, j) for i in range(6) for j in range(6) if (i >= 3 or j >= 3) and i % 3 != j % 3)
+
+#: The entries of C_A(ν) that carry the Munk moment: rows K, M, N ← columns u, v, w, i.e.
+#: (K,v) (K,w) (M,u) (M,w) (N,u) (N,v) = (3,1) (3,2) (4,0) (4,2) (5,0) (5,1). Their force is
+#: v × (A11 v + A12 ω): exactly the Munk moment v × (A11 v) when A12 = 0 (a body with three
+#: planes of symmetry); with A12 ≠ 0 they carry v × (A12 ω) too.
+MUNK_ENTRIES: frozenset[tuple[int, int]] = frozenset(
+    (i, j) for (i, j) in CA_ENTRIES if i >= 3 and j < 3)
+
+
+def entry_name(entry: tuple[int, int]) -> str:
+    """``(0, 4)`` → ``"(X, q)"``: the force row and the velocity column of a C_A entry."""
+    return f"({FORCE_NAMES[entry[0]]}, {DOF_NAMES[entry[1]]})"
+
+
 @dataclass(frozen=True)
 class AddedMassTerms:
     """Which effects of the added mass M_A act on the vehicle (all by default).
 
     Real plants differ here: gz-sim has ``disable_added_mass`` and ``disable_coriolis``,
-    MuJoCo's fluid model applies the velocity terms of added mass but not M_A ν̇, and many
-    AUV models drop the Munk moments.
+    MuJoCo's fluid model applies the velocity terms of added mass but not M_A ν̇, many AUV
+    models drop the Munk moments and some zero single entries of C_A(ν).
+
+    The Coriolis part is one representation, the set of zeroed entries of the 6×6 C_A(ν)
+    (:attr:`zeroed`, :data:`CA_ENTRIES`); ``coriolis`` and ``munk`` are shorthands for all of
+    them and for :data:`MUNK_ENTRIES`. The fields are kept canonical: ``coriolis_zero`` holds
+    only the zeroed entries the shorthands do not say, so equal masks compare equal.
 
     Attributes
     ----------
     inertial : bool
         M_A ν̇ acts (the added mass resists acceleration).
     coriolis : bool
-        C_A(ν)ν acts (Fossen 2011, eq. 6.49), Munk moments included unless ``munk`` is off.
+        C_A(ν)ν acts (Fossen 2011, eq. 6.49), in the entries not zeroed otherwise.
     munk : bool
-        The Munk-moment part of C_A(ν)ν, v × (M_A11 v), acts; needs ``coriolis``.
+        The Munk entries of C_A(ν) (:data:`MUNK_ENTRIES`) act; needs ``coriolis``.
+    coriolis_zero : tuple of (int, int)
+        Further zeroed entries (row = force index 0–5 X…N, column = velocity index 0–5
+        u…r), each one of :data:`CA_ENTRIES`.
     """
 
     inertial: bool = True
     coriolis: bool = True
     munk: bool = True
+    coriolis_zero: tuple[tuple[int, int], ...] = ()
 
     def __post_init__(self) -> None:
         if self.munk and not self.coriolis:
             raise ConfigError("added_mass_terms", "munk: true needs coriolis: true (the Munk "
                               "moments are entries of C_A); set munk: false")
+        listed = frozenset((int(i), int(j)) for i, j in self.coriolis_zero)
+        if listed and not self.coriolis:
+            raise ConfigError("added_mass_terms.coriolis_zero", "coriolis: false already "
+                              "zeroes every entry of C_A; drop coriolis_zero or coriolis")
+        if listed - CA_ENTRIES:
+            e = min(listed - CA_ENTRIES)
+            raise ConfigError("added_mass_terms.coriolis_zero",
+                              f"entry {entry_name(e)} = {list(e)} is zero in C_A(ν) whatever "
+                              f"M_A; nonzero entries of row {FORCE_NAMES[e[0]]}: "
+                              + ", ".join(DOF_NAMES[j] for i, j in sorted(CA_ENTRIES)
+                                          if i == e[0]))
+        zeroed = listed | (frozenset() if self.munk else MUNK_ENTRIES)
+        zeroed |= frozenset() if self.coriolis else CA_ENTRIES
+        munk = not MUNK_ENTRIES <= zeroed
+        coriolis = zeroed != CA_ENTRIES
+        object.__setattr__(self, "coriolis", coriolis)
+        object.__setattr__(self, "munk", munk)
+        extra = zeroed - (frozenset() if munk else MUNK_ENTRIES) if coriolis else frozenset()
+        object.__setattr__(self, "coriolis_zero", tuple(sorted(extra)))
+
+    @property
+    def zeroed(self) -> frozenset[tuple[int, int]]:
+        """Every zeroed entry of C_A(ν), shorthands included (the one representation)."""
+        if not self.coriolis:
+            return CA_ENTRIES
+        return frozenset(self.coriolis_zero) | (frozenset() if self.munk else MUNK_ENTRIES)
+
+    @property
+    def mask(self) -> FloatArray:
+        """C_A(ν)'s acting entries, shape (6, 6): 0 where zeroed, 1 elsewhere (the plant
+        applies mask ⊙ C_A(ν))."""
+        out = np.ones((6, 6))
+        for e in self.zeroed:
+            out[e] = 0.0
+        return out
 
     @classmethod
     def from_dict(cls, d: Any) -> AddedMassTerms:
-        """From ``{inertial: true, coriolis: true, munk: true}`` (missing keys: true)."""
+        """From ``{inertial, coriolis, munk: bool, coriolis_zero: [[X, q], …],
+        coriolis_mask: [36 × 0/1]}`` (missing switches: true; see :func:`_parse_entries`)."""
         if not isinstance(d, dict):
             raise ConfigError("added_mass_terms", f"must be a mapping, got {d!r}")
-        unknown = set(d) - {"inertial", "coriolis", "munk"}
+        unknown = set(d) - {"inertial", "coriolis", "munk", "coriolis_zero", "coriolis_mask"}
         if unknown:
             raise ConfigError("added_mass_terms", f"unknown key(s) {sorted(unknown)}; known: "
-                              "inertial, coriolis, munk")
-        for k, v in d.items():
+                              "inertial, coriolis, munk, coriolis_zero, coriolis_mask")
+        switches = {k: v for k, v in d.items() if k in ("inertial", "coriolis", "munk")}
+        for k, v in switches.items():
             if not isinstance(v, bool):
                 raise ConfigError(f"added_mass_terms.{k}", f"must be true or false, got {v!r}")
-        return cls(**d)
+        zero = _parse_entries(d.get("coriolis_zero", []))
+        if "coriolis_mask" in d:
+            zero |= _parse_mask(d["coriolis_mask"])
+        return cls(**switches, coriolis_zero=tuple(sorted(zero)))
 
-    def as_dict(self) -> dict[str, bool]:
-        """``{inertial, coriolis, munk}``."""
-        return {"inertial": self.inertial, "coriolis": self.coriolis, "munk": self.munk}
+    def as_dict(self) -> dict[str, Any]:
+        """``{inertial, coriolis, munk}``, with ``coriolis_zero: [[X, q], …]`` (names) when
+        entries beyond the shorthands are zeroed."""
+        out: dict[str, Any] = {"inertial": self.inertial, "coriolis": self.coriolis,
+                               "munk": self.munk}
+        if self.coriolis_zero:
+            out["coriolis_zero"] = [[FORCE_NAMES[i], DOF_NAMES[j]]
+                                    for i, j in self.coriolis_zero]
+        return out
+
+    def as_parameters(self) -> dict[str, Any]:
+        """The model file's form (ROS parameter values): :meth:`as_dict` with
+        ``coriolis_zero`` replaced by ``coriolis_mask``, 36 ints row-major, 1 = the entry of
+        C_A(ν) acts (a controller applies mask ⊙ C_A(ν))."""
+        out = self.as_dict()
+        if out.pop("coriolis_zero", None) is not None:
+            out["coriolis_mask"] = self.mask.astype(int).reshape(36).tolist()
+        return out
 
     @property
     def all(self) -> bool:
         """Every effect acts (Fossen's full model)."""
-        return self.inertial and self.coriolis and self.munk
+        return self.inertial and not self.zeroed
+
+    def off_text(self) -> str:
+        """What does not act, for messages: e.g. ``"munk, C_A entries (X, q) (Z, q)"``."""
+        off = [k for k in ("inertial", "coriolis", "munk") if not getattr(self, k)]
+        if self.coriolis_zero:
+            off.append("C_A entries " + " ".join(entry_name(e) for e in self.coriolis_zero))
+        return ", ".join(off)
+
+
+def _parse_entries(v: Any) -> set[tuple[int, int]]:
+    """``coriolis_zero``: a list of [row, column] pairs; a row is a force name X Y Z K M N or
+    its index 0–5, a column a velocity name u v w p q r or its index 0–5."""
+    key = "added_mass_terms.coriolis_zero"
+    if not isinstance(v, list):
+        raise ConfigError(key, f"must be a list of [row, column] pairs like [[X, q], [Z, q]], "
+                               f"got {v!r}")
+    out: set[tuple[int, int]] = set()
+    for k, pair in enumerate(v):
+        if not (isinstance(pair, list) and len(pair) == 2):
+            raise ConfigError(f"{key}[{k}]", f"must be a [row, column] pair like [X, q] or "
+                                              f"[0, 4], got {pair!r}")
+        entry = (_axis(f"{key}[{k}]", pair[0], FORCE_NAMES, "row"),
+                 _axis(f"{key}[{k}]", pair[1], DOF_NAMES, "column"))
+        if entry in out:
+            raise ConfigError(f"{key}[{k}]", f"{entry_name(entry)} is listed twice")
+        out.add(entry)
+    return out
+
+
+def _axis(key: str, v: Any, names: tuple[str, ...], what: str) -> int:
+    """A row or column of C_A given as a name of ``names`` or its index 0–5."""
+    if isinstance(v, str) and v in names:
+        return names.index(v)
+    if isinstance(v, int) and not isinstance(v, bool) and 0 <= v < 6:
+        return v
+    raise ConfigError(key, f"{what} {v!r} is neither one of {' '.join(names)} nor an index "
+                           "0-5")
+
+
+def _parse_mask(v: Any) -> set[tuple[int, int]]:
+    """``coriolis_mask``: 36 numbers 0 or 1, row-major; the zeroed entries of C_A it names."""
+    key = "added_mass_terms.coriolis_mask"
+    ok = isinstance(v, list) and len(v) == 36 and all(
+        not isinstance(x, bool) and isinstance(x, int) and x in (0, 1) for x in v)
+    if not ok:
+        got = f"{len(v)} items" if isinstance(v, list) and len(v) != 36 else repr(v)
+        raise ConfigError(key, "must be 36 integers 0 or 1, row-major (1: the entry of "
+                               f"C_A(ν) acts), got {got}")
+    return {e for e in CA_ENTRIES if v[6 * e[0] + e[1]] == 0}
 
 
 def added_coriolis_force(M_A: FloatArray, terms: AddedMassTerms,
                          nu_r: FloatArray) -> FloatArray:
-    """The acting part of C_A(ν_r)ν_r under the switches ``coriolis`` and ``munk``.
+    """The acting part of C_A(ν_r)ν_r: the entries of C_A not in ``terms.zeroed``.
 
     Parameters
     ----------
@@ -204,14 +336,17 @@ def added_coriolis_force(M_A: FloatArray, terms: AddedMassTerms,
     Returns
     -------
     ndarray, shape (..., 6)
-        C_A(ν_r)ν_r, without its Munk moments when ``munk`` is off, zero when ``coriolis``
-        is off (left-hand side, N and N·m).
+        (mask ⊙ C_A(ν_r)) ν_r (left-hand side, N and N·m): zero when ``coriolis`` is off.
     """
     if not terms.coriolis:
         return np.zeros(np.shape(nu_r))
-    out = coriolis_force(M_A, nu_r)
-    # without Munk moments: C_A(ν)ν − [0, v × (M_A11 v)]
-    return out if terms.munk else out - munk_moment(M_A, nu_r)
+    if not terms.coriolis_zero and (terms.munk or not np.any(M_A[:3, 3:])):
+        out = coriolis_force(M_A, nu_r)
+        # A12 = 0: the Munk entries' force is exactly v × (A11 v)
+        return out if terms.munk else out - munk_moment(M_A, nu_r)
+    nu_r = np.asarray(nu_r, dtype=float)
+    C = coriolis_matrix(M_A, nu_r) * terms.mask
+    return np.asarray(np.einsum("...ij,...j->...i", C, nu_r))
 
 
 def split_coriolis_force(M: FloatArray, M_A: FloatArray | None, terms: AddedMassTerms | None,
@@ -374,7 +509,7 @@ class RigidBody:
         terms = AddedMassTerms.from_dict(d.get("added_mass_terms", {}))
         added = _diag_or_full("added_mass", d.get("added_mass", [0.0] * 6), 6)
         if "added_mass_terms" in d and not np.any(added):
-            acting = [k for k, v in terms.as_dict().items() if v]
+            acting = [k for k in ("inertial", "coriolis", "munk") if getattr(terms, k)]
             if acting:
                 raise ConfigError("added_mass_terms", f"{', '.join(acting)} set true but "
                                   "added_mass is zero or missing; give added_mass or set them "

@@ -265,9 +265,9 @@ def switches_left_out(terms: AddedMassTerms, fmt: str) -> list[str]:
     """The left-out line for switches a format without any cannot hold ([] when all on)."""
     if terms.all:
         return []
-    off = ", ".join(k for k, v in terms.as_dict().items() if not v)
-    return [f"added_mass_terms {terms.as_dict()} (the plant applies no {off} effect of the "
-            f"added mass; {fmt} has no switches and applies M_A nudot and C_A(nu)nu whole)"]
+    return [f"added_mass_terms {terms.as_dict()} (the plant applies no {terms.off_text()} "
+            f"effect of the added mass; {fmt} has no switches and applies M_A nudot and "
+            "C_A(nu)nu whole)"]
 
 
 def merge(items: Iterable[tuple[str, Coefficient, float]],

@@ -152,10 +152,10 @@ def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "ba
     M_A, mass_notes = export_added_mass(mf, vehicle)
     terms = added_mass_switches(mf, vehicle)
     switches = {"disable_added_mass": not terms.inertial, "disable_coriolis": not terms.coriolis}
-    if terms.coriolis and not terms.munk:
-        left_out.append(f"added_mass_terms {terms.as_dict()}: gz-sim cannot drop the Munk "
-                        "moments alone (its C_A(nu)nu holds them); written with the Coriolis "
-                        "term on, Munk moments included")
+    if terms.coriolis and terms.zeroed:
+        left_out.append(f"added_mass_terms {terms.as_dict()}: gz-sim cannot zero entries of "
+                        f"its C_A(nu) alone (here: {terms.off_text()}); written with the "
+                        "Coriolis term on, all its entries included")
     if M_A is not None and terms.coriolis and np.any(M_A[~np.eye(6, dtype=bool)]):
         left_out.append("the off-diagonal M_A entries in C_A(nu)nu: gz-sim builds its Coriolis "
                         "term from the diagonal of M_A only (HydrodynamicsUtils.hh "

@@ -12,10 +12,15 @@ import yaml
 
 from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.physics.rigid_body import (
+    CA_ENTRIES,
+    MUNK_ENTRIES,
+    AddedMassTerms,
     ConfigError,
     RigidBody,
+    added_coriolis_force,
     coriolis_force,
     coriolis_matrix,
+    munk_moment,
     rigid_body_mass,
     skew,
 )
@@ -314,7 +319,7 @@ def test_non_positive_or_non_numbers_rejected(value: Any) -> None:
 
 # --- added-mass switches -------------------------------------------------------------------
 
-def _body(terms: dict[str, bool] | None = None) -> RigidBody:
+def _body(terms: dict[str, Any] | None = None) -> RigidBody:
     d: dict[str, object] = {"mass": 30.0, "inertia": [1.0, 1.2, 1.5], "volume": 0.03,
                             "rho": 1000.0,
                             "added_mass": [5.0, 12.0, 14.0, 0.2, 0.9, 0.8]}
@@ -344,10 +349,99 @@ def test_added_mass_switches_select_the_acting_terms() -> None:
     assert np.allclose(none.coriolis_force(nu), coriolis_force(none.M_RB, nu))
 
 
+#: the entries a slender-AUV simulator zeroes beside the Munk moments: X←q, X←r, Z←q, Y←r
+SLENDER = [["X", "q"], ["X", "r"], ["Z", "q"], ["Y", "r"]]
+
+
+def _coupled_added_mass() -> np.ndarray:
+    """A torpedo-like M_A with A12 ≠ 0 (Y_ṙ, Z_q̇ couplings), symmetric PSD."""
+    M_A = np.diag([1.0, 34.0, 34.0, 0.15, 4.9, 4.9])
+    M_A[1, 5] = M_A[5, 1] = -1.76
+    M_A[2, 4] = M_A[4, 2] = 1.76
+    return M_A
+
+
+def test_c_a_entries_are_the_nonzero_entries_of_fossens_c_a() -> None:
+    """CA_ENTRIES is exactly where C_A(ν) of a full random M_A is nonzero; the Munk entries
+    (K,v) (K,w) (M,u) (M,w) (N,u) (N,v) carry v × (A11 v) when A12 = 0."""
+    rng = np.random.default_rng(3)
+    L = rng.normal(size=(6, 6))
+    C = coriolis_matrix(L @ L.T, rng.normal(size=6))
+    assert {(int(i), int(j)) for i, j in zip(*np.nonzero(C), strict=True)} == CA_ENTRIES
+    assert len(CA_ENTRIES) == 18
+    assert MUNK_ENTRIES == {(3, 1), (3, 2), (4, 0), (4, 2), (5, 0), (5, 1)}
+    M_A = np.diag([5.0, 12.0, 14.0, 0.2, 0.9, 0.8])
+    nu = rng.normal(size=(20, 6))
+    only_munk = AddedMassTerms(coriolis_zero=tuple(sorted(CA_ENTRIES - MUNK_ENTRIES)))
+    np.testing.assert_allclose(added_coriolis_force(M_A, only_munk, nu), munk_moment(M_A, nu),
+                               rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("A12", [False, True])
+def test_zeroed_entries_remove_exactly_those_entries_of_c_a(A12: bool) -> None:
+    """The acting C_A(ν)ν is (mask ⊙ C_A(ν)) ν entry by entry, with or without A12."""
+    rng = np.random.default_rng(7)
+    M_A = _coupled_added_mass() if A12 else np.diag([1.0, 34.0, 34.0, 0.15, 4.9, 4.9])
+    nu = rng.normal(0.0, 0.5, (50, 6))
+    terms = AddedMassTerms.from_dict({"munk": False, "coriolis_zero": SLENDER})
+    C = coriolis_matrix(M_A, nu)
+    want = np.einsum("nij,nj->ni", C, nu)
+    for i, j in [(0, 4), (0, 5), (2, 4), (1, 5), *MUNK_ENTRIES]:
+        want[:, i] -= C[:, i, j] * nu[:, j]
+    np.testing.assert_allclose(added_coriolis_force(M_A, terms, nu), want, rtol=0, atol=1e-12)
+    # the X force left is X←p only, which is identically zero: X = 0 for every ν
+    assert np.abs(added_coriolis_force(M_A, terms, nu)[:, 0]).max() == 0.0
+    assert np.abs(want[:, 0] - coriolis_force(M_A, nu)[:, 0]).max() > 1.0
+
+
+def test_switches_are_shorthands_of_the_entry_mask() -> None:
+    """Names and indices give the same set; munk: false = the six Munk entries; all 18 =
+    coriolis: false; the canonical fields keep equal masks equal and as_dict round-trips."""
+    by_name = AddedMassTerms.from_dict({"coriolis_zero": SLENDER})
+    by_index = AddedMassTerms.from_dict({"coriolis_zero": [[0, 4], [0, 5], [2, 4], [1, 5]]})
+    assert by_name == by_index and by_name.coriolis_zero == ((0, 4), (0, 5), (1, 5), (2, 4))
+    munk = AddedMassTerms.from_dict({"coriolis_zero": [[i, j] for i, j in MUNK_ENTRIES]})
+    assert munk == AddedMassTerms(munk=False) and munk.coriolis_zero == ()
+    none = AddedMassTerms.from_dict({"coriolis_zero": [[i, j] for i, j in CA_ENTRIES]})
+    assert none == AddedMassTerms(coriolis=False, munk=False)
+    both = AddedMassTerms.from_dict({"munk": False, "coriolis_zero": SLENDER})
+    assert AddedMassTerms.from_dict(both.as_dict()) == both
+    assert AddedMassTerms.from_dict(both.as_parameters()) == both
+    assert both.as_dict()["coriolis_zero"] == [["X", "q"], ["X", "r"], ["Y", "r"], ["Z", "q"]]
+    assert int(both.mask.sum()) == 36 - 10 and both.zeroed == MUNK_ENTRIES | {
+        (0, 4), (0, 5), (2, 4), (1, 5)}
+    # switches only: the same three keys as before, no mask
+    assert AddedMassTerms(munk=False).as_parameters() == {"inertial": True, "coriolis": True,
+                                                          "munk": False}
+
+
+@pytest.mark.parametrize("terms", [AddedMassTerms(), AddedMassTerms(munk=False),
+                                   AddedMassTerms(inertial=False),
+                                   AddedMassTerms(coriolis=False, munk=False)])
+def test_switch_only_terms_give_the_old_numbers_bit_for_bit(terms: AddedMassTerms) -> None:
+    """Files with switches only: C_A(ν)ν − v × (A11 v) as before (A12 = 0), not one bit off."""
+    nu = np.random.default_rng(5).normal(size=(40, 6))
+    M_A = np.diag([5.0, 12.0, 14.0, 0.2, 0.9, 0.8])
+    old = (np.zeros_like(nu) if not terms.coriolis else coriolis_force(M_A, nu)
+           - (0.0 if terms.munk else munk_moment(M_A, nu)))
+    assert np.array_equal(added_coriolis_force(M_A, terms, nu), old)
+
+
 @pytest.mark.parametrize(("terms", "match"), [
     ({"coriolis": False}, "munk: true needs coriolis"),
     ({"inertial": "yes"}, "added_mass_terms.inertial: must be true or false"),
     ({"lift": True}, "unknown key"),
+    ({"coriolis_zero": [["X", "u"]]}, r"entry \(X, u\) = \[0, 0\] is zero in C_A.*row X: q, r"),
+    ({"coriolis_zero": [["X", "Q"]]}, r"coriolis_zero\[0\]: column 'Q' is neither one of u v"),
+    ({"coriolis_zero": [[6, 0]]}, r"row 6 is neither one of X Y Z K M N nor an index"),
+    ({"coriolis_zero": [[True, 4]]}, r"row True is neither"),
+    ({"coriolis_zero": [["X", "q"], [0, 4]]}, r"coriolis_zero\[1\]: \(X, q\) is listed twice"),
+    ({"coriolis_zero": ["Xq"]}, r"coriolis_zero\[0\]: must be a \[row, column\] pair"),
+    ({"coriolis_zero": "X q"}, "must be a list of"),
+    ({"coriolis": False, "munk": False, "coriolis_zero": [["X", "q"]]},
+     "coriolis: false already zeroes every entry"),
+    ({"coriolis_mask": [1] * 35}, "must be 36 integers 0 or 1.*got 35 items"),
+    ({"coriolis_mask": [2] * 36}, "must be 36 integers 0 or 1"),
 ])
 def test_contradictory_switches_are_refused(terms: dict[str, object], match: str) -> None:
     with pytest.raises(ConfigError, match=match):
