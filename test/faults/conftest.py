@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
+from typing import Any
 
 import pytest
 from rosbags.rosbag2 import Reader
@@ -55,3 +56,16 @@ def rebag() -> Callable[..., Path]:
 def string_cdr() -> Callable[[str], bytes]:
     """:func:`std_string`."""
     return std_string
+
+
+@pytest.fixture
+def context(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> Iterator[Any]:
+    """An rclpy context of its own on the test module's ``DOMAIN`` (localhost only), so
+    that suites of in-process nodes never hear each other."""
+    rclpy = pytest.importorskip("rclpy")
+    monkeypatch.setenv("ROS_DOMAIN_ID", request.module.DOMAIN)
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)

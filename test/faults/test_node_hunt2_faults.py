@@ -28,17 +28,7 @@ from dampest_ros.ros.recorder_node import RecorderNode  # noqa: E402
 from dampest_ros.ros.replay_node import ReplayNode  # noqa: E402
 
 THRUSTERS = load_vehicle("bluerov2_heavy").thrusters.names
-
-
-@pytest.fixture
-def context(monkeypatch: pytest.MonkeyPatch) -> Iterator[Any]:
-    """An rclpy context of its own on this module's domain."""
-    monkeypatch.setenv("ROS_DOMAIN_ID", "33")
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
+DOMAIN = "33"  # this module's ROS domain (the context fixture)
 
 
 def _stamped(m: Any, t: float, frame: str = "") -> Any:

@@ -6,7 +6,6 @@ In-process nodes on ROS_DOMAIN_ID 83 (localhost only)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -21,16 +20,7 @@ from dampest_ros.ros.common import ParamNode  # noqa: E402
 from dampest_ros.ros.controller_node import ControllerNode  # noqa: E402
 from dampest_ros.ros.sim_node import SimNode  # noqa: E402
 
-
-@pytest.fixture
-def context(monkeypatch: pytest.MonkeyPatch) -> Iterator[Any]:
-    """An rclpy context of its own on this module's domain."""
-    monkeypatch.setenv("ROS_DOMAIN_ID", "83")
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
+DOMAIN = "83"  # this module's ROS domain (the context fixture)
 
 
 def diagnostics(node: ParamNode) -> dict[str, str]:
