@@ -15,6 +15,11 @@ prior). An update whose numbers are not finite (θ, M, the σ of an identified c
 refused: the client keeps the last good model and says why (:attr:`ModelClient.errors`, the
 node's log).
 
+:meth:`ModelClient.wait` that times out says why: the node named is on the graph but declares no
+``model.*`` parameters (what it publishes, and where a model comes from), or no node of that
+name is there (the nodes that do declare ``model.*``, closest name first, and the
+``ROS_DOMAIN_ID`` looked on).
+
 :attr:`ModelClient.age` is the time since the model in hand arrived. A server gone from the
 graph (its parameter services) for ``timeout`` seconds is lost: :attr:`ModelClient.lost` is
 true, :attr:`ModelClient.available` false (the last model is kept and still evaluated), a
@@ -40,7 +45,9 @@ Example::
 
 from __future__ import annotations
 
+import difflib
 import math
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -76,6 +83,12 @@ def _evaluable(m: Model) -> Model:
 
 #: Lists repeated in a row when a get answers nothing because the names changed meanwhile.
 STALE_RETRIES = 3
+#: Seconds :meth:`ModelClient.wait` spends, after a timeout, asking the nodes of the graph
+#: which of them declare ``model.*``.
+PROBE_TIME = 2.0
+#: Where a model comes from, for messages.
+SERVERS = ("model_server_node (serves a saved model file) or estimator_node (identifies the "
+           "model live)")
 
 class ModelUnavailableError(RuntimeError):
     """No model yet (the server has not answered, or its model is invalid)."""
@@ -206,6 +219,8 @@ class ModelClient:
         try:
             names = list(future.result().result.names)
             missing = sorted(set(MODEL_PARAMETERS) - set(names))
+            if not names:
+                raise ModelUnavailableError(self._not_a_server())
             if missing:
                 raise ModelUnavailableError(f"{self.server} has no {', '.join(missing)}")
         except Exception as exc:  # a bad answer must not kill the caller's executor
@@ -292,11 +307,84 @@ class ModelClient:
             self.on_update(model)
 
     def wait(self, timeout: float = 10.0) -> Model:
-        """Block until a model is available (the node must be spun elsewhere)."""
+        """Block until a model is available (the node must be spun elsewhere).
+
+        Raises
+        ------
+        ModelUnavailableError
+            None within ``timeout`` s, saying why: the last refusal (e.g. the node declares
+            no ``model.*``), else whether a node of that name is on the graph at all
+            (:meth:`_why`).
+        """
         if not self._got.wait(timeout):
-            raise ModelUnavailableError(f"no model from {self.server} within {timeout} s"
-                                   + (f" ({self.errors[-1]})" if self.errors else ""))
+            raise ModelUnavailableError(f"no model from {self.server} within {timeout:g} s: "
+                                        f"{self._why()}")
         return self.model
+
+    def _why(self) -> str:
+        """Why there is no model: the last refusal, else whether the server is on the graph."""
+        if self.errors:
+            return self.errors[-1]
+        if self.node is None:
+            return "this client reads a YAML file; it has no ROS node"
+        if self._full_name not in self._graph():
+            return self._not_on_graph()
+        return f"{self._full_name} is on the graph but has not answered list_parameters"
+
+    def _graph(self) -> list[str]:
+        """Fully qualified names of the nodes on the graph, this client's own node aside."""
+        own = self.node.get_fully_qualified_name()
+        names = (f"{ns.rstrip('/')}/{n}" for n, ns in self.node.get_node_names_and_namespaces())
+        return sorted({n for n in names if n != own})
+
+    def _not_a_server(self) -> str:
+        """The server answered with no ``model.*`` parameter: what it is and where to look."""
+        ns, _, name = self._full_name.rpartition("/")
+        try:
+            topics = sorted(t for t, _ in self.node.get_publisher_names_and_types_by_node(
+                name, ns or "/") if not t.startswith(("/rosout", "/parameter_events")))
+        except Exception:  # the node left the graph meanwhile
+            topics = []
+        shown = (f"; it publishes {', '.join(topics[:6])}" + (" …" if len(topics) > 6 else "")
+                 if topics else "")
+        return (f"{self._full_name} declares no model.* parameters: it is not a model "
+                f"server{shown}. Point the client at {SERVERS}")
+
+    def _not_on_graph(self) -> str:
+        """No node of the server's name: the nodes that declare ``model.*``, closest name
+        first (asked within :data:`PROBE_TIME` s), and the domain looked on."""
+        servers = self._model_servers(self._graph(), PROBE_TIME)
+        target = self._full_name.rsplit("/", 1)[-1]
+        servers.sort(key=lambda n: -difflib.SequenceMatcher(
+            None, target, n.rsplit("/", 1)[-1]).ratio())
+        domain = os.environ.get("ROS_DOMAIN_ID") or "0 (unset)"
+        seen = (f"nodes with model.* parameters: {', '.join(servers)}" if servers else
+                f"no node here declares model.* parameters (start {SERVERS})")
+        return (f"no node {self._full_name} on the graph of ROS_DOMAIN_ID {domain}; {seen}. "
+                "A server on another ROS_DOMAIN_ID (or beyond "
+                "ROS_AUTOMATIC_DISCOVERY_RANGE) is not seen")
+
+    def _model_servers(self, nodes: list[str], budget: float) -> list[str]:
+        """The ``nodes`` that answer list_parameters with ``model.*`` names within ``budget``
+        seconds (the caller's node must be spun elsewhere)."""
+        from rcl_interfaces.srv import ListParameters
+        end = time.monotonic() + budget
+        clients = {n: self.node.create_client(ListParameters, f"{n}/list_parameters")
+                   for n in nodes}
+        futures: dict[str, Any] = {}
+        try:
+            while time.monotonic() < end and not (
+                    len(futures) == len(clients) and all(f.done() for f in futures.values())):
+                for n, c in clients.items():
+                    if n not in futures and c.service_is_ready():
+                        futures[n] = c.call_async(ListParameters.Request(prefixes=["model"],
+                                                                         depth=0))
+                time.sleep(0.05)
+            return [n for n, f in futures.items() if f.done() and f.result() is not None
+                    and f.result().result.names]
+        finally:
+            for c in clients.values():
+                self.node.destroy_client(c)
 
     # --- evaluation ----------------------------------------------------------------------
 

@@ -445,3 +445,78 @@ def test_a_client_for_one_vehicle_refuses_another_vehicles_model(tmp_path: Path)
     finally:
         ex.shutdown()
         rclpy.try_shutdown(context=context)
+
+
+@contextlib.contextmanager
+def spun_in_background(tag: str, model_file: Path) -> Iterator[tuple[Any, Any, str]]:
+    """In a namespace of their own: a model_server_node on ``model_file``, a second one named
+    ``params_server``, a node named ``sim_node`` that publishes imu/data and dvl/twist but
+    declares no model, and a probe node; an executor spins them in a background thread, as
+    a controller's would. Yields (rclpy, the probe, the namespace)."""
+    rclpy = pytest.importorskip("rclpy")
+    import threading
+
+    from geometry_msgs.msg import TwistWithCovarianceStamped
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_msgs.msg import Imu
+
+    from dampest_ros.ros.model_server_node import ModelServerNode
+
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "77")
+    ns = f"/test_{tag}_{os.getpid()}"
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    ex = SingleThreadedExecutor(context=context)
+    sim = rclpy.create_node("sim_node", namespace=ns, context=context)
+    sim.create_publisher(Imu, "imu/data", 10)
+    sim.create_publisher(TwistWithCovarianceStamped, "dvl/twist", 10)
+    nodes = [sim, rclpy.create_node("probe", namespace=ns, context=context),
+             *(ModelServerNode(context=context, cli_args=[
+                 "--ros-args", "-r", f"__ns:={ns}", "-r", f"__node:={name}",
+                 "-p", f"model_file:={model_file}"])
+               for name in ("params_server", "model_server_node"))]
+    for n in nodes:
+        ex.add_node(n)
+    thread = threading.Thread(target=ex.spin, daemon=True)
+    thread.start()
+    try:
+        yield rclpy, nodes[1], ns
+    finally:
+        ex.shutdown()
+        thread.join(timeout=5.0)
+        for n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_a_client_pointed_at_the_wrong_node_says_what_is_wrong(tmp_path: Path) -> None:
+    """A client of a node that is not a model server, or of a name no node has, said only
+    'no model within 3 s'. It names the node that declares no model.* (and what it
+    publishes), or lists the nodes that do, closest name first, with the domain looked on."""
+    from dampest_ros.client import ModelUnavailableError
+
+    path = tmp_path / "model.yaml"
+    model_and_file(path)
+    with spun_in_background("wrong", path) as (_, probe, ns):
+        sim_client = ModelClient(probe, "sim_node")
+        with pytest.raises(ModelUnavailableError) as sim:
+            sim_client.wait(3.0)
+        assert str(sim.value) == (
+            f"no model from sim_node within 3 s: ModelUnavailableError: {ns}/sim_node "
+            f"declares no model.* parameters: it is not a model server; it publishes "
+            f"{ns}/dvl/twist, {ns}/imu/data. Point the client at model_server_node (serves a "
+            f"saved model file) or estimator_node (identifies the model live)")
+        t0 = time.monotonic()
+        with pytest.raises(ModelUnavailableError) as typo:
+            ModelClient(probe, "model_servr_node").wait(3.0)
+        took = time.monotonic() - t0
+        domain = os.environ["ROS_DOMAIN_ID"]
+        assert str(typo.value).startswith(
+            f"no model from model_servr_node within 3 s: no node {ns}/model_servr_node on the "
+            f"graph of ROS_DOMAIN_ID {domain}; nodes with model.* parameters: "
+            f"{ns}/model_server_node, {ns}/params_server")
+        assert "sim_node," not in str(typo.value) and "another ROS_DOMAIN_ID" in str(typo.value)
+        assert 3.0 <= took < 3.0 + 2.5       # the wait, then at most PROBE_TIME of asking
+        # the right name still works from the same probe
+        assert ModelClient(probe, "model_server_node").wait(10.0).version == 4

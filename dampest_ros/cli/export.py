@@ -3,7 +3,8 @@
 export writes a model file as gz-sim Hydrodynamics plugin tags (gz), a URDF <hydrodynamics>
 block (urdf) or the UUV Simulator hydrodynamic plugin block of an SDF (uuv), converting signs
 (SNAME, negative when dissipative) and, for gz, the frame (FRD to the link's FLU). import
-reads gz or urdf back into a model file. The conventions and where they come from:
+reads any of the three back into a model file (the format the file holds, or --format),
+through the same conversions in reverse. The conventions and where they come from:
 dampest_ros/io/export/.
 
 export refuses coefficients that the target would apply non-dissipatively at some speed
@@ -28,8 +29,10 @@ EXPORT_EXAMPLE = ("examples:\n"
                   "--out hydrodynamics.sdf\n"
                   "  dampest export model.yaml --format uuv --vehicle bluerov2_heavy "
                   "--out uuv_hydrodynamics.sdf")
-IMPORT_EXAMPLE = ("example:\n  dampest import hydrodynamics.sdf --format gz --vehicle "
-                  "bluerov2_heavy --out model.yaml")
+IMPORT_EXAMPLE = ("examples:\n  dampest import hydrodynamics.sdf --vehicle bluerov2_heavy "
+                  "--out model.yaml\n"
+                  "  dampest import uuv_hydrodynamics.sdf --format uuv --link-name "
+                  "rexrov/base_link --vehicle bluerov2_heavy --out model.yaml")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -65,8 +68,10 @@ def add_import_arguments(q: argparse.ArgumentParser) -> None:
     describe(q, __doc__, IMPORT_EXAMPLE)
     q.add_argument("file", metavar="FILE",
                    help="SDF/URDF/XML file holding the plugin or the block")
-    q.add_argument("--format", required=True, choices=IMPORT_FORMATS,
-                   help="gz: a Hydrodynamics plugin; urdf: a <hydrodynamics> block")
+    q.add_argument("--format", choices=IMPORT_FORMATS,
+                   help="gz: a Hydrodynamics plugin; urdf: a <hydrodynamics> block; uuv: a "
+                        "UUV Simulator <hydrodynamic_model> (default: the one the file "
+                        "holds)")
     q.add_argument("--out", required=True, metavar="MODEL",
                    help="model file to write (YAML)")
     q.add_argument("--vehicle", metavar="NAME|YAML",
@@ -74,7 +79,8 @@ def add_import_arguments(q: argparse.ArgumentParser) -> None:
                         "when the file has no mass and inertia) and the added mass when the "
                         "file has none")
     q.add_argument("--link-name", metavar="LINK",
-                   help="gz: which plugin to read when there are several")
+                   help="gz: which plugin, uuv: which <link> to read when there are "
+                        "several")
     q.add_argument("--frame", choices=FRAMES, default="flu",
                    help="gz: frame of the plugin's link, flu (default) or frd")
 
@@ -125,13 +131,13 @@ def run_import(args: argparse.Namespace) -> int:
 
     from dampest_ros.core.identification.model import Model
     from dampest_ros.io.export.common import imported_mass_parts
-    from dampest_ros.io.export.convert import import_model
+    from dampest_ros.io.export.convert import detect_format, import_model
     from dampest_ros.io.yaml_io import load_vehicle, save_model
 
     check_outputs(args, {"out": "model.yaml"})
     vehicle = load_vehicle(args.vehicle) if args.vehicle else None
-    imp = import_model(Path(args.file), args.format, frame=args.frame,
-                       link_name=args.link_name)
+    fmt = args.format or detect_format(Path(args.file))
+    imp = import_model(Path(args.file), fmt, frame=args.frame, link_name=args.link_name)
     M_RB, M_A, mass_notes = imported_mass_parts(imp, vehicle)
     terms = imp.added_mass_terms
     if vehicle is not None and imp.added_mass is None and (terms is None or terms.all):
@@ -139,11 +145,11 @@ def run_import(args: argparse.Namespace) -> int:
     damping = imp.damping()
     save_model(args.out, Model(
         imp.names, imp.theta, np.zeros(len(imp.names)), M_RB + M_A, damping=damping,
-        extra={"source": f"dampest import {args.file} ({args.format})",
+        extra={"source": f"dampest import {args.file} ({fmt})",
                "import_notes": "; ".join([*imp.notes, *mass_notes])},
         M_A=M_A, added_mass_terms=terms,
         identity=vehicle.identity if vehicle is not None else None))
-    print(f"wrote {args.out}: {len(imp.names)} parameters from {args.file} ({args.format}); "
+    print(f"wrote {args.out}: {len(imp.names)} parameters from {args.file} ({fmt}); "
           + "; ".join(mass_notes))
     for note in imp.notes:
         print(f"note: {note}", file=sys.stderr)

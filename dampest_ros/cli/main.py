@@ -42,7 +42,7 @@ COMMANDS: dict[str, Command] = {
                        "dampest_ros.cli.inspect:add_arguments", "dampest_ros.cli.inspect:run"),
     "export": Command("write a model as gz-sim, URDF or UUV Simulator hydrodynamics",
                       "dampest_ros.cli.export:add_arguments", "dampest_ros.cli.export:run"),
-    "import": Command("read gz-sim or URDF hydrodynamics into a model file",
+    "import": Command("read gz-sim, URDF or UUV Simulator hydrodynamics into a model file",
                       "dampest_ros.cli.export:add_import_arguments",
                       "dampest_ros.cli.export:run_import"),
     "record": Command("record topics to an MCAP bag (recorder_node)",

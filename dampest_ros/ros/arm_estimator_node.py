@@ -20,7 +20,8 @@ counter: count.received, used, rejected_joints (messages without the arm's joint
 rejected_fields (position or effort missing), rejected_nonfinite, rejected_implausible (an
 effort over 10 × the joint's effort limit, a position far outside its limits:
 dampest_ros.core.arm.online.implausible), dropped_out_of_order, clock_jumps, gaps,
-filter_errors, resume_refused) and what resume did. A change alarm is
+filter_errors, resume_refused: the node's life totals, kept when a parameter change rebuilds
+the estimator or ~/reset restarts it) and what resume did. A change alarm is
 published on /diagnostics at once. Services: ~/reset (std_srvs/Trigger, back to the prior),
 ~/save (Trigger, atomic write of the model file to save_path), ~/freeze (std_srvs/SetBool:
 stop or resume updating). With resume (default) it starts from the model file at save_path
@@ -135,7 +136,6 @@ class ArmEstimatorNode(EstimatorParamNode):
         self.create_subscription(JointState, "joint_states", self._on_joint_state, SENSOR_QOS)
         self.start_services()
         self._used_at_publish = -1
-        self._alarms_reported = 0
         self.last_error = ""
 
     def _build(self, start: ArmEstimate | None = None) -> None:
@@ -168,6 +168,7 @@ class ArmEstimatorNode(EstimatorParamNode):
         self._q: list[np.ndarray] = []
         self._tau: list[np.ndarray] = []
         self._last = -np.inf
+        self._alarms_reported = 0  # the alarms of this estimator published so far
 
     def owner(self) -> Identity:
         return arm_model_identity(str(self.p("arm")), self.arm.model, self._kept)
@@ -282,8 +283,7 @@ class ArmEstimatorNode(EstimatorParamNode):
         e = self.estimator
         d = e.rls.diagnostics(condition=False)
         values: dict[str, Any] = {f"count.{k}": v for k, v in self.counts.items()}
-        values["count.gaps"] = e.gaps
-        values["count.rejected_implausible"] = e.rejected_implausible
+        values.update(self.life_counts(self._estimator_counts()))
         values["count.resume_refused"] = self.resume_refused
         values["resume"] = self.resumed
         values["model.version"] = self.version
@@ -312,6 +312,10 @@ class ArmEstimatorNode(EstimatorParamNode):
                 self.names[j] for j in np.flatnonzero(~d.excited))
         self.pub_diag.publish(diagnostic_array(self, "arm estimation", values, level,
                                                message))
+
+    def _estimator_counts(self) -> dict[str, int]:
+        e = self.estimator
+        return {"count.gaps": e.gaps, "count.rejected_implausible": e.rejected_implausible}
 
     def _reset(self) -> None:
         self._t, self._q, self._tau = [], [], []

@@ -521,10 +521,19 @@ class EstimatorParamNode(ModelParamNode):
     publish_rate to the timer, and restarts the estimator from the prior on any other change
     but save_path. A subclass gives :meth:`_build`, :meth:`_publish`, :meth:`_reset` and
     :meth:`_save`, and holds ``version``.
+
+    The ``count.*`` on /diagnostics are the node's life totals: what a rebuild or ~/reset
+    zeroes in the estimator (:meth:`_estimator_counts`) is kept in :attr:`zeroed` and added
+    back by :meth:`life_counts`.
     """
 
     estimator: Any
     version: int
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        #: per count.* key, what restarts of the estimator zeroed (added back on /diagnostics)
+        self.zeroed: dict[str, int] = {}
+        super().__init__(*args, **kwargs)
     #: what happened to the model file at save_path at start (diagnostics ``resume``)
     resumed: str = "off"
     #: saved model files refused at start (another estimator's, unreadable)
@@ -576,6 +585,25 @@ class EstimatorParamNode(ModelParamNode):
         """Write the model file at save_path; its path."""
         raise NotImplementedError
 
+    def _estimator_counts(self) -> dict[str, int]:
+        """The ``count.*`` values the estimator keeps itself (those a restart zeroes)."""
+        raise NotImplementedError
+
+    def _restart(self, how: Callable[[], None]) -> None:
+        """Run ``how`` (a rebuild or a reset) keeping in :attr:`zeroed` every estimator count
+        it lowered: counters only grow, so a lower value is one the restart zeroed."""
+        before = self._estimator_counts()
+        how()
+        after = self._estimator_counts()
+        for key, value in before.items():
+            if after.get(key, 0) < value:
+                self.zeroed[key] = self.zeroed.get(key, 0) + value - after.get(key, 0)
+
+    def life_counts(self, values: dict[str, Any]) -> dict[str, Any]:
+        """``values`` with each ``count.*`` the estimator keeps raised by what restarts
+        zeroed: the node's life totals."""
+        return {k: v + self.zeroed[k] if k in self.zeroed else v for k, v in values.items()}
+
     def start_services(self) -> None:
         """~/reset, ~/save, ~/freeze and the publish timer (once the estimator exists)."""
         self.create_service(Trigger, "~/reset", self._srv_reset)
@@ -592,13 +620,13 @@ class EstimatorParamNode(ModelParamNode):
             self._timer.cancel()
             self._timer = self.create_timer(1.0 / self.p("publish_rate"), self._publish)
         if set(names) - {"publish_rate", "save_path"}:
-            self._build()
+            self._restart(self._build)
             self.get_logger().info(f"estimator restarted from the prior ({', '.join(names)} "
                                    "changed)")
             self._publish(force=True)
 
     def _srv_reset(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
-        self._reset()
+        self._restart(self._reset)
         self._publish(force=True)
         res.success, res.message = True, f"reset to the prior (model version {self.version})"
         return res

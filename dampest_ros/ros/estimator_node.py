@@ -11,7 +11,8 @@ innovation RMS, CUSUM change alarm, and every drop counter: count.* of the messa
 topic, matched, unmatched, used, rejected_nonfinite, dropped_out_of_order, rejected_outliers,
 clock_jumps, lost_in_transport (messages that never reached the node: gaps in their
 publication sequence numbers, e.g. a reader queue that overflowed at 10x replay),
-resume_refused) at publish_rate.
+resume_refused: the node's life totals, kept when a parameter change rebuilds the estimator
+or ~/reset restarts it) at publish_rate.
 Services: ~/reset (std_srvs/Trigger, back to the model it started from), ~/save (Trigger,
 atomic write of the model file to save_path), ~/freeze (std_srvs/SetBool: stop or resume
 updating). With resume (default) it starts from the model file at save_path with its version
@@ -238,7 +239,7 @@ class EstimatorNode(EstimatorParamNode):
             self.version += 1
             self.serve_model(self._model_values())
             self.pub_model.publish(String(data=model_text(est.to_model(self.version))))
-        values = est.diagnostic_values()
+        values = self.life_counts(est.diagnostic_values())
         values["model.version"] = self.version
         values["count.clock_jumps"] = self.clock_jumps
         values["count.lost_in_transport"] = self.losses.count
@@ -252,6 +253,10 @@ class EstimatorNode(EstimatorParamNode):
             level, message = 1, f"not excited: {', '.join(d.unexcited)}"
         self.pub_diag.publish(diagnostic_array(self, "damping estimation", values, level,
                                                message))
+
+    def _estimator_counts(self) -> dict[str, int]:
+        return {k: v for k, v in self.estimator.diagnostic_values().items()
+                if k.startswith("count.")}
 
     def _reset(self) -> None:
         self.estimator.reset()

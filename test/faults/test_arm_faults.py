@@ -159,3 +159,35 @@ def test_a_clock_jump_back_in_an_arm_bag_is_named_and_split_there(
             "clock jumps back 4.996 s at sample 3750 (after t = 14.996 s): split there") in out
     z = (theta["jumped"].theta - theta["clean"].theta) / theta["clean"].theta_std
     assert np.max(np.abs(z)) < 1.0
+
+
+def test_arm_estimator_counts_are_life_totals_across_a_rebuild_and_a_reset(
+        ur5_run: ArmRun, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Was: count.gaps and count.rejected_implausible (kept by the estimator) went back to 0
+    when a parameter change rebuilt the estimator, so a rejected message vanished from
+    /diagnostics. The counts are the node's life totals, as the vehicle estimator_node's:
+    a rebuild or ~/reset restarts the estimate, not the counts."""
+    from std_srvs.srv import Trigger
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", "93")
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    spiked = ur5_run.effort.copy()
+    spiked[np.searchsorted(ur5_run.t, 12.0), 2] = 1e200
+    try:
+        node = ArmEstimatorNode(context=context, parameter_overrides=[
+            Parameter("save_path", value=str(tmp_path / "arm.yaml")),
+            Parameter("resume", value=False)])
+        first = stream(node, ur5_run, spiked)
+        assert first["count.rejected_implausible"] == "1" and first["count.gaps"] == "1"
+        assert node.set_parameters([Parameter("cutoff", value=4.0)])[0].successful
+        assert node.estimator.gaps == 0          # a new estimator: its own counts start at 0
+        node._srv_reset(Trigger.Request(), Trigger.Response())
+        later = ur5_run.t + ur5_run.t[-1] + 1.0   # the stream goes on after the changes
+        again = stream(node, replace(ur5_run, t=later), spiked)
+        assert again["count.rejected_implausible"] == "2" and again["count.gaps"] == "2"
+        assert int(again["count.received"]) == 2 * len(ur5_run.t)
+        assert int(again["count.used"]) > int(first["count.used"])
+    finally:
+        rclpy.try_shutdown(context=context)

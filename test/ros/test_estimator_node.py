@@ -193,3 +193,38 @@ def test_services_save_freeze_reset(pipeline: dict[str, Any]) -> None:
                Trigger.Request())
     assert res.success
     np.testing.assert_allclose(est.estimator.theta, est.estimator.prior_theta)
+
+
+def test_counts_are_life_totals_across_a_rebuild_and_a_reset(tmp_path: Path) -> None:
+    """The count.* the estimator keeps (messages per topic, rejected_nonfinite, ...) went
+    back to 0 when a parameter change rebuilt it, and count.rejected_outliers on ~/reset:
+    a rejected message vanished from /diagnostics. They are the node's life totals."""
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "77")
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = EstimatorNode(context=context, parameter_overrides=[
+            Parameter("save_path", value=str(tmp_path / "model.yaml")),
+            Parameter("resume", value=False)])
+        sent: list[Any] = []
+        node.pub_diag.publish = sent.append  # type: ignore[method-assign,assignment]
+
+        def counts() -> dict[str, str]:
+            node._publish()
+            return {kv.key: kv.value for kv in sent[-1].status[0].values
+                    if kv.key.startswith("count.")}
+
+        node._on_sample("velocity", 1_000_000_000, np.full(6, np.nan))
+        node._on_sample("wrench", 1_000_000_000, np.ones(6))
+        before = counts()
+        assert before["count.rejected_nonfinite"] == "1" and before["count.wrench"] == "1"
+        assert node.set_parameters([Parameter("cutoff", value=3.0)])[0].successful
+        assert node.estimator.counts["rejected_nonfinite"] == 0   # a new estimator
+        node._srv_reset(Trigger.Request(), Trigger.Response())
+        node._on_sample("wrench", 2_000_000_000, np.ones(6))
+        after = counts()
+        assert after["count.rejected_nonfinite"] == "1" and after["count.wrench"] == "2"
+        assert after["count.velocity"] == "1"
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -36,6 +36,6 @@ does not load numpy.
 #: Export targets.
 FORMATS = ("gz", "urdf", "uuv")
 #: Formats :func:`~.convert.import_model` reads.
-IMPORT_FORMATS = ("gz", "urdf")
+IMPORT_FORMATS = ("gz", "urdf", "uuv")
 #: Body frames of a gz link: ``flu`` (REP-103, Gazebo's default) or ``frd``.
 FRAMES = ("flu", "frd")

@@ -576,6 +576,68 @@ def linear_name(i: int, j: int) -> str:
     return f"{FORCE_NAMES[i]}_{DOF_NAMES[j]}"
 
 
+@dataclass
+class CoefficientTables:
+    """The coefficients read from a simulator file, in FRD and dampest signs (dissipative
+    > 0), indices 0..5 = force X..N (i) and velocity u..r (j, k).
+
+    Attributes
+    ----------
+    lin : dict (i, j) → float
+        Coefficient of ν_j in force i (gz ``<iJ>``, UUV ``linear_damping``).
+    quad : dict i → float
+        Coefficient of ν_i |ν_i| (gz ``<iIabsI>``, UUV diagonal ``quadratic_damping``).
+    abs_cross : dict (i, j, k) → float
+        Other coefficients of ν_j |ν_k| (gz ``<iJabsK>``).
+    lin_cross : dict (i, j, k) → float
+        Coefficients of ν_j ν_k (gz ``<iJK>``, UUV ``linear_damping_forward_speed`` with
+        k = 0).
+    link_mass : ndarray, shape (6, 6)
+        M_A (positive) in the file's link frame (kg, kg·m, kg·m²); meaningful when
+        ``has_added``.
+    has_added : bool
+        Whether the file gives any added mass.
+    disabled : dict of str to bool
+        gz ``<disable_added_mass>`` and ``<disable_coriolis>``, where given.
+    notes : list of str
+        What was ignored or interpreted.
+    """
+
+    lin: dict[tuple[int, int], float] = field(default_factory=dict)
+    quad: dict[int, float] = field(default_factory=dict)
+    abs_cross: dict[tuple[int, int, int], float] = field(default_factory=dict)
+    lin_cross: dict[tuple[int, int, int], float] = field(default_factory=dict)
+    link_mass: FloatArray = field(default_factory=lambda: np.zeros((6, 6)))
+    has_added: bool = False
+    disabled: dict[str, bool] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def damping_spec(tags: CoefficientTables) -> tuple[dict[str, float], dict[str, float],
+                                           list[dict[str, Any]]]:
+    """The ``linear``, ``quadratic`` and ``cross`` sections of a damping spec for the
+    coefficients of ``tags``: diagonal linear terms first, then the off-diagonal ones; cross
+    terms named ``Y_vr`` (``Y_vr_lin`` for a signed ν_k when an |ν_k| term has that name)."""
+    lin = tags.lin
+    lin_spec = {linear_name(i, i): lin[(i, i)] for i in range(6) if (i, i) in lin}
+    lin_spec.update({linear_name(i, j): v for (i, j), v in sorted(lin.items()) if i != j})
+    quad_spec = {f"{FORCE_NAMES[i]}_{DOF_NAMES[i]}{DOF_NAMES[i]}": tags.quad[i]
+                 for i in range(6) if i in tags.quad}
+    taken = set(lin_spec) | set(quad_spec)
+    cross: list[dict[str, Any]] = []
+    for (i, j, k), v in sorted(tags.abs_cross.items()):
+        name = f"{FORCE_NAMES[i]}_{DOF_NAMES[j]}{DOF_NAMES[k]}"
+        taken.add(name)
+        cross.append({"row": FORCE_NAMES[i], "col": DOF_NAMES[j],
+                      "alpha": f"|{DOF_NAMES[k]}|", "name": name, "value": v})
+    for (i, j, k), v in sorted(tags.lin_cross.items()):
+        name = f"{FORCE_NAMES[i]}_{DOF_NAMES[j]}{DOF_NAMES[k]}"
+        name = f"{name}_lin" if name in taken else name
+        cross.append({"row": FORCE_NAMES[i], "col": DOF_NAMES[j], "alpha": DOF_NAMES[k],
+                      "name": name, "value": v})
+    return lin_spec, quad_spec, cross
+
+
 def xml_bool(text: str | None, what: str) -> bool:
     """An SDF boolean (true/false/1/0, any case)."""
     value = (text or "").strip().lower()

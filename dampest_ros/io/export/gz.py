@@ -24,9 +24,8 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -38,16 +37,17 @@ from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export import FRAMES
 from dampest_ros.io.export.common import (
     Coefficient,
+    CoefficientTables,
     Exported,
     Imported,
     added_mass_switches,
     build_imported,
     coefficients,
+    damping_spec,
     export_added_mass,
     exported_result,
     header_lines,
     held_at_prior,
-    linear_name,
     made_safe,
     merge,
     model_damping,
@@ -208,39 +208,10 @@ def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "ba
                            safety)
 
 
-@dataclass
-class _GzTags:
-    """The coefficient tags of one Hydrodynamics plugin, in FRD and dampest signs (dissipative
-    > 0), indices 0..5 = force X..N (i) and velocity u..r (j, k).
-
-    Attributes
-    ----------
-    lin : dict (i, j) → float
-        ``<iJ>``: coefficient of ν_j in force i.
-    quad : dict i → float
-        ``<iIabsI>``: coefficient of ν_i |ν_i|.
-    abs_cross : dict (i, j, k) → float
-        Other ``<iJabsK>``: coefficient of ν_j |ν_k|.
-    lin_cross : dict (i, j, k) → float
-        ``<iJK>``: coefficient of ν_j ν_k.
-    link_mass : ndarray, shape (6, 6)
-        −``<iDotJ>`` in the link frame (kg, kg·m, kg·m²); meaningful when ``has_added``.
-    has_added : bool
-        Whether the plugin has any ``<iDotJ>``.
-    disabled : dict of str to bool
-        ``<disable_added_mass>`` and ``<disable_coriolis>``, where given.
-    notes : list of str
-        What was ignored or interpreted.
-    """
-
-    lin: dict[tuple[int, int], float] = field(default_factory=dict)
-    quad: dict[int, float] = field(default_factory=dict)
-    abs_cross: dict[tuple[int, int, int], float] = field(default_factory=dict)
-    lin_cross: dict[tuple[int, int, int], float] = field(default_factory=dict)
-    link_mass: FloatArray = field(default_factory=lambda: np.zeros((6, 6)))
-    has_added: bool = False
-    disabled: dict[str, bool] = field(default_factory=dict)
-    notes: list[str] = field(default_factory=list)
+def is_gz_plugin(el: ET.Element) -> bool:
+    """Whether an element is a gz-sim Hydrodynamics ``<plugin>`` (by name or file name)."""
+    return el.tag == "plugin" and (el.get("name", "").endswith("systems::Hydrodynamics")
+                                   or "hydrodynamics-system" in el.get("filename", ""))
 
 
 def _gz_plugin(root: ET.Element, label: str, link_name: str | None) -> ET.Element:
@@ -251,9 +222,7 @@ def _gz_plugin(root: ET.Element, label: str, link_name: str | None) -> ET.Elemen
     ConfigError
         None, or several without ``link_name``.
     """
-    plugins = [e for e in root.iter("plugin")
-               if e.get("name", "").endswith("systems::Hydrodynamics")
-               or "hydrodynamics-system" in e.get("filename", "")]
+    plugins = [e for e in root.iter("plugin") if is_gz_plugin(e)]
     if link_name is not None:
         plugins = [p for p in plugins if (p.findtext("link_name") or "").strip() == link_name]
     if not plugins:
@@ -267,7 +236,7 @@ def _gz_plugin(root: ET.Element, label: str, link_name: str | None) -> ET.Elemen
     return plugins[0]
 
 
-def _read_gz_tags(plugin: ET.Element, frame: str) -> _GzTags:
+def _read_gz_tags(plugin: ET.Element, frame: str) -> CoefficientTables:
     """The switches and coefficients of a plugin, converted from the link ``frame`` and the
     gz signs (SNAME, negative when dissipative) to FRD and dampest signs; other tags are noted
     as ignored (but those of :data:`_GZ_OTHER`).
@@ -277,7 +246,7 @@ def _read_gz_tags(plugin: ET.Element, frame: str) -> _GzTags:
     ConfigError
         A non-numeric coefficient or a switch that is not a boolean.
     """
-    tags = _GzTags()
+    tags = CoefficientTables()
     F, V = _GZ_FORCE, _GZ_VEL
     for el in plugin:
         if not isinstance(el.tag, str):
@@ -320,31 +289,6 @@ def _read_gz_tags(plugin: ET.Element, frame: str) -> _GzTags:
     return tags
 
 
-def _damping_spec(tags: _GzTags) -> tuple[dict[str, float], dict[str, float],
-                                           list[dict[str, Any]]]:
-    """The ``linear``, ``quadratic`` and ``cross`` sections of a damping spec for the
-    coefficients of ``tags``: diagonal linear terms first, then the off-diagonal ones; cross
-    terms named ``Y_vr`` (``Y_vr_lin`` for a signed ν_k when an |ν_k| term has that name)."""
-    lin = tags.lin
-    lin_spec = {linear_name(i, i): lin[(i, i)] for i in range(6) if (i, i) in lin}
-    lin_spec.update({linear_name(i, j): v for (i, j), v in sorted(lin.items()) if i != j})
-    quad_spec = {f"{FORCE_NAMES[i]}_{DOF_NAMES[i]}{DOF_NAMES[i]}": tags.quad[i]
-                 for i in range(6) if i in tags.quad}
-    taken = set(lin_spec) | set(quad_spec)
-    cross: list[dict[str, Any]] = []
-    for (i, j, k), v in sorted(tags.abs_cross.items()):
-        name = f"{FORCE_NAMES[i]}_{DOF_NAMES[j]}{DOF_NAMES[k]}"
-        taken.add(name)
-        cross.append({"row": FORCE_NAMES[i], "col": DOF_NAMES[j],
-                      "alpha": f"|{DOF_NAMES[k]}|", "name": name, "value": v})
-    for (i, j, k), v in sorted(tags.lin_cross.items()):
-        name = f"{FORCE_NAMES[i]}_{DOF_NAMES[j]}{DOF_NAMES[k]}"
-        name = f"{name}_lin" if name in taken else name
-        cross.append({"row": FORCE_NAMES[i], "col": DOF_NAMES[j], "alpha": DOF_NAMES[k],
-                      "name": name, "value": v})
-    return lin_spec, quad_spec, cross
-
-
 def _added_mass_terms(disabled: dict[str, bool]) -> AddedMassTerms:
     """The added-mass switches of a plugin. gz-sim's defaults (no tag): both effects act; its
     C_A(ν)ν holds the Munk moments."""
@@ -383,7 +327,7 @@ def import_gz(source: str | Path, *, frame: str = "flu",
     root, label = parse_xml(source)
     plugin = _gz_plugin(root, label, link_name)
     tags = _read_gz_tags(plugin, frame)
-    lin_spec, quad_spec, cross = _damping_spec(tags)
+    lin_spec, quad_spec, cross = damping_spec(tags)
     added = _added_mass_in(frame, tags.link_mass) if tags.has_added else None
     notes = [*tags.notes, f"Read from link '{(plugin.findtext('link_name') or '').strip()}' as "
                           f"{frame.upper()}."]

@@ -103,6 +103,9 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
     block = ET.Element("hydrodynamics")
     if vehicle is not None and M_A is not None:
         left_out += _inertial(ET.SubElement(block, "inertial"), vehicle, M_A)
+    elif M_A is not None:
+        left_out.append("the added mass model.M_A (the block's <inertial> holds it beside the "
+                        "vehicle's mass and inertia: pass the vehicle)")
     damping = ET.SubElement(block, "damping")
     ET.SubElement(damping, "linear", {n: num(lin_v.get(n, 0.0)) for n in _URDF_LINEAR})
     ET.SubElement(damping, "quadratic", {n: num(quad_v.get(n, 0.0)) for n in _URDF_QUADRATIC})

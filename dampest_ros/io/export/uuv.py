@@ -16,17 +16,23 @@ takes ``<volume>`` (m³) and ``<center_of_buoyancy>`` (m, in the link frame, FLU
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.damping import FloatArray
-from dampest_ros.core.physics.frames import body_twist
+from dampest_ros.core.physics.frames import body_vec
+from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.io.export.common import (
+    CoefficientTables,
     Exported,
+    Imported,
     added_mass_switches,
+    build_imported,
     coefficients,
+    damping_spec,
     export_added_mass,
     exported_result,
     header_lines,
@@ -34,14 +40,33 @@ from dampest_ros.io.export.common import (
     made_safe,
     merge,
     model_damping,
+    neg,
     num,
+    parse_xml,
     policy_of,
     switches_left_out,
     xml_comment,
+    xml_float,
 )
 
 #: The plugin of uuv_gazebo_ros_plugins that holds the hydrodynamic models (ROS variant).
 PLUGIN = {"name": "uuv_plugin", "filename": "libuuv_underwater_object_ros_plugin.so"}
+#: The HMFossen matrices and how many numbers HydrodynamicModel.cc accepts for each (6: the
+#: diagonal).
+MATRICES = {"added_mass": (36,), "linear_damping": (6, 36),
+            "linear_damping_forward_speed": (6, 36), "quadratic_damping": (6, 36)}
+
+
+def to_hmfossen(value: float) -> float:
+    """A dampest coefficient (dissipative > 0) as the HMFossen matrix entry (dissipative < 0),
+    and back: −value, its own inverse (HMFossen's force is −D ν with D = −DLin − …)."""
+    return neg(value)
+
+
+def link_point(r: FloatArray) -> FloatArray:
+    """A point of the body, shape (3,) (m), between dampest's FRD and the link's FLU frame:
+    (x, −y, −z), its own inverse."""
+    return body_vec(r)
 
 
 def _numbers(values: FloatArray) -> str:
@@ -93,12 +118,12 @@ def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "b
                  for c in coefs if c not in written]
     written, safety = made_safe(written, policy_of(force, clamp), "uuv", source)
     notes: list[str] = []
-    # HMFossen's force is −D ν with D = −DLin − …: each entry is −(dampest coefficient)
     tags = {"const": "linear_damping", "abs": "quadratic_damping",
             "lin": "linear_damping_forward_speed"}
     mats = {key: np.zeros((6, 6)) for key in tags.values()}
     for kind, key in tags.items():
-        items = [(f"{key}[{c.row},{c.col}]", c, -c.value) for c in written if c.kind == kind]
+        items = [(f"{key}[{c.row},{c.col}]", c, to_hmfossen(c.value)) for c in written
+                 if c.kind == kind]
         for k, v in merge(items, notes).items():
             i, j = (int(x) for x in k[len(key) + 1:-1].split(","))
             mats[key][i, j] = v
@@ -122,9 +147,8 @@ def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "b
     link = ET.SubElement(plugin, "link", {"name": link_name})
     if vehicle is not None:
         ET.SubElement(link, "volume").text = num(vehicle.body.volume)
-        # r_b FRD → the link's FLU frame: (x, −y, −z)
-        r_b = body_twist(np.r_[vehicle.body.r_b, np.zeros(3)])[:3]
-        ET.SubElement(link, "center_of_buoyancy").text = " ".join(num(x) for x in r_b)
+        ET.SubElement(link, "center_of_buoyancy").text = " ".join(
+            num(x) for x in link_point(vehicle.body.r_b))
     hm = ET.SubElement(link, "hydrodynamic_model")
     ET.SubElement(hm, "type").text = "fossen"
     if M_A is not None:
@@ -140,3 +164,138 @@ def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "b
             f"{ET.tostring(plugin, encoding='unicode')}\n")
     return exported_result("uuv", text, left_out, mass_notes + notes, held_at_prior(mf),
                            safety)
+
+
+def _uuv_link(root: ET.Element, label: str, link_name: str | None
+              ) -> tuple[ET.Element, ET.Element, ET.Element]:
+    """The plugin, the one ``<link>`` with a ``<hydrodynamic_model>`` under ``root`` (the
+    link named ``link_name`` when given) and that model.
+
+    Raises
+    ------
+    ConfigError
+        None, or several without ``link_name``.
+    """
+    found = [(parent, link, hm) for parent in root.iter() for link in parent.findall("link")
+             if (hm := link.find("hydrodynamic_model")) is not None]
+    if link_name is not None:
+        found = [x for x in found if x[1].get("name") == link_name]
+    if not found:
+        raise ConfigError(label, "no UUV Simulator <hydrodynamic_model> (in a <link> of the "
+                                 "underwater-object <plugin>)"
+                                 + (f" for link {link_name!r}" if link_name else ""))
+    if len(found) > 1:
+        names = [link.get("name") for _, link, _ in found]
+        raise ConfigError(label, f"{len(found)} links with a <hydrodynamic_model> ({names}); "
+                                 f"choose one with --link-name")
+    return found[0]
+
+
+def _matrix(hm: ET.Element, tag: str) -> FloatArray | None:
+    """A HMFossen matrix, shape (6, 6), from its 36 numbers (rows first) or the 6 of its
+    diagonal; None when the tag is absent.
+
+    Raises
+    ------
+    ConfigError
+        A value that is not a number, or a count HMFossen does not accept.
+    """
+    el = hm.find(tag)
+    if el is None:
+        return None
+    values = [xml_float(x, f"<{tag}>") for x in (el.text or "").split()]
+    if len(values) not in MATRICES[tag]:
+        counts = " or ".join(str(n) for n in MATRICES[tag])
+        raise ConfigError(f"<{tag}>", f"needs {counts} numbers (HMFossen), got {len(values)}")
+    return np.diag(values) if len(values) == 6 else np.array(values).reshape(6, 6)
+
+
+def _read_hmfossen(hm: ET.Element) -> CoefficientTables:
+    """The matrices of a ``<hydrodynamic_model>`` of type fossen in dampest signs (FRD, as
+    HMFossen): diagonal linear terms always, off-diagonal and forward-speed entries where not
+    zero, the diagonal of the quadratic damping; other tags noted as ignored."""
+    tables = CoefficientTables()
+    DLin = _matrix(hm, "linear_damping")
+    DFwd = _matrix(hm, "linear_damping_forward_speed")
+    DNon = _matrix(hm, "quadratic_damping")
+    M_A = _matrix(hm, "added_mass")
+    for i in range(6):
+        for j in range(6):
+            if DLin is not None and (i == j or DLin[i, j] != 0):
+                tables.lin[(i, j)] = to_hmfossen(DLin[i, j])
+            if DFwd is not None and DFwd[i, j] != 0:
+                tables.lin_cross[(i, j, 0)] = to_hmfossen(DFwd[i, j])
+        if DNon is not None:
+            tables.quad[i] = to_hmfossen(DNon[i, i])
+    if DNon is not None and np.any(DNon[~np.eye(6, dtype=bool)]):
+        tables.notes.append("off-diagonal <quadratic_damping> entries ignored (HMFossen uses "
+                            "the diagonal only, |nu_i| nu_i).")
+    if M_A is not None:
+        tables.link_mass, tables.has_added = M_A, True
+    tables.notes += [f"<{el.tag}> {(el.text or '').strip()} ignored (HMFossen reads type and "
+                     f"the matrices from the SDF; its scaling and offset parameters are set "
+                     f"at run time)."
+                     for el in hm if el.tag != "type" and el.tag not in MATRICES]
+    return tables
+
+
+def _vehicle_notes(plugin: ET.Element, link: ET.Element) -> list[str]:
+    """What the block says about the vehicle (volume, centre of buoyancy in FRD, density),
+    which a model file does not hold."""
+    out = []
+    volume, cob = link.find("volume"), link.find("center_of_buoyancy")
+    density = plugin.find("fluid_density")
+    if volume is not None:
+        out.append(f"volume {num(xml_float(volume.text, '<volume>'))} m^3")
+    if cob is not None:
+        r = [xml_float(x, "<center_of_buoyancy>") for x in (cob.text or "").split()]
+        if len(r) != 3:
+            raise ConfigError("<center_of_buoyancy>", f"needs 3 numbers (x y z in the link "
+                                                      f"frame, m), got {len(r)}")
+        r_b = ", ".join(num(x) for x in link_point(np.array(r)))
+        out.append(f"centre of buoyancy r_b = [{r_b}] m (FRD)")
+    if density is not None:
+        out.append(f"fluid density {num(xml_float(density.text, '<fluid_density>'))} kg/m^3")
+    if not out:
+        return []
+    return [f"{', '.join(out)}: the vehicle's, not part of a model file (set them in the "
+            f"vehicle YAML)."]
+
+
+def import_uuv(source: str | Path, *, link_name: str | None = None) -> Imported:
+    """Read UUV Simulator's HMFossen model back into dampest conventions.
+
+    Parameters
+    ----------
+    source : str or Path
+        A file (SDF, URDF with ``<gazebo>`` blocks, or the bare ``<plugin>``) or XML text.
+    link_name : str, optional
+        Which ``<link name=…>`` to read when the file has several with a model.
+
+    Returns
+    -------
+    Imported
+        ``linear_damping`` gives linear terms (diagonal ``X_u``, off-diagonal ``Y_r``),
+        the diagonal of ``quadratic_damping`` quadratic ``X_uu``,
+        ``linear_damping_forward_speed`` cross terms with α = u (``Z_wu``; ``X_uu_lin`` when
+        the name is taken), ``added_mass`` the added mass (FRD, positive).
+
+    Raises
+    ------
+    ConfigError
+        No ``<hydrodynamic_model>``, several without ``link_name``, a type other than
+        ``fossen``, a value that is not a number or a count HMFossen does not accept.
+    """
+    root, label = parse_xml(source)
+    plugin, link, hm = _uuv_link(root, label, link_name)
+    kind = (hm.findtext("type") or "").strip()
+    if kind != "fossen":
+        raise ConfigError(f"{label}: <hydrodynamic_model> of link {link.get('name')!r}",
+                          f"type {kind!r}: only type fossen holds coefficients (sphere, "
+                          f"cylinder and spheroid are computed from the geometry)")
+    tables = _read_hmfossen(hm)
+    lin_spec, quad_spec, cross = damping_spec(tables)
+    added = tables.link_mass if tables.has_added else None
+    notes = [*tables.notes, *_vehicle_notes(plugin, link),
+             f"Read from link '{link.get('name')}' (HMFossen, FRD)."]
+    return build_imported("uuv", lin_spec, quad_spec, cross, added, None, notes)
