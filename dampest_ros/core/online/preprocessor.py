@@ -89,11 +89,12 @@ from dampest_ros.core.signals.preprocess import DataError, body_wrench
 FloatArray = NDArray[np.float64]
 
 #: Largest magnitudes a sensor message may carry: specific force (m/s², 100 g), angular rate
-#: (rad/s), DVL velocity (m/s), absolute pressure (Pa, 20 000 m of sea water). A larger
-#: finite value is a corrupt message or a publisher's unit error, rejected and counted as
-#: ``rejected_implausible``.
+#: (rad/s), DVL velocity (m/s), absolute pressure (Pa, 20 000 m of sea water), a thrust or
+#: wrench force (N) and torque (N·m) (1e6: a hundred times a work-class ROV's thrusters). A
+#: larger finite value is a corrupt message or a publisher's unit error, rejected and counted
+#: as ``rejected_implausible``.
 PLAUSIBLE = {"specific force": 1000.0, "angular rate": 100.0, "velocity": 50.0,
-             "pressure": 2e8}
+             "pressure": 2e8, "thrust": 1e6, "force": 1e6, "torque": 1e6}
 
 
 class _History:
@@ -548,6 +549,8 @@ class OnlinePreprocessor:
         if not _finite(t, effort):
             return self._reject("nonfinite", "thrusters", f"a non-finite effort "
                                 f"{effort[0].tolist()}")
+        if why := self._implausible("thrusters", thrust=effort[0]):
+            return self._reject("implausible", "thrusters", why)
         joints = JointSeries(np.array([t]), names=tuple(names), effort=effort,
                              velocity=np.zeros_like(effort))
         try:
@@ -567,6 +570,8 @@ class OnlinePreprocessor:
         if not _finite(t, f, m):
             return self._reject("nonfinite", "wrench", f"a non-finite wrench "
                                 f"{f[0].tolist() + m[0].tolist()}")
+        if why := self._implausible("wrench", force=f[0], torque=m[0]):
+            return self._reject("implausible", "wrench", why)
         if not self._admit("wrench", t):
             return []
         return self._tau(t, body_wrench(WrenchSeries(np.array([t]), force=f, torque=m),

@@ -490,3 +490,21 @@ def test_the_published_estimate_is_dissipative_and_says_what_the_constraint_hold
     raw.process(force=True)
     np.testing.assert_array_equal(raw.theta, est.rls.theta)
     assert raw.constrained == {}
+
+
+@pytest.mark.parametrize("message", ["thrusters", "wrench"])
+def test_an_implausible_thrust_or_wrench_is_rejected_and_counted(vehicle: Vehicle,
+                                                                  message: str) -> None:
+    """Was: only non-finite τ was refused; a thrust of 1e100 N (a publisher's unit or
+    encoding error) went into the regression target."""
+    pre = preprocessor(vehicle)
+    names = vehicle.thrusters.names
+    if message == "thrusters":
+        out = pre.thrusters(1.0, names, np.r_[1e100, np.zeros(len(names) - 1)])
+    else:
+        out = pre.wrench(1.0, np.array([0.0, 0.0, 1e100]), np.zeros(3))
+    assert out == [] and pre.counts["rejected_implausible"] == 1
+    assert pre.counts["rejected_nonfinite"] == 0
+    assert "beyond ±1e+06 (SI units)" in pre.events[-1], pre.events
+    ok = pre.thrusters(1.05, names, np.full(len(names), 40.0))  # a real one passes
+    assert pre.counts["rejected_implausible"] == 1 and ok == []  # (held: no IMU yet)
