@@ -321,6 +321,31 @@ def validate(p: Param, value: Any) -> str | None:
     return None
 
 
+def check_options(specs: Sequence[Param], params: dict[str, Any],
+                  options: dict[str, str]) -> None:
+    """Check a command's node parameters against the node's ``specs`` before the node starts.
+
+    Parameters
+    ----------
+    specs : sequence of Param
+        The node's declared parameters.
+    params : dict
+        Parameter name → value, from the command's options.
+    options : dict
+        Parameter name → the option that sets it (default ``--name-with-dashes``).
+
+    Raises
+    ------
+    ValueError
+        ``OPTION: reason`` for the first value a spec refuses.
+    """
+    for spec in specs:
+        reason = validate(spec, params[spec.name]) if spec.name in params else None
+        if reason is not None:
+            option = options.get(spec.name, "--" + spec.name.replace("_", "-"))
+            raise ValueError(f"{option}: {reason}")
+
+
 def model_file_check(name: str) -> Callable[[Any], str | None]:
     """A :class:`Param` check for a parameter holding a model file path: '' passes, else the
     reason :func:`~dampest_ros.io.yaml_io.load_model` refuses the file (missing, not a model,
