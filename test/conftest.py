@@ -15,6 +15,8 @@ from typing import Any
 import pytest
 from matplotlib.figure import Figure
 
+#: The checkout the tests run from.
+REPO = Path(__file__).resolve().parents[1]
 #: A unit in brackets or parentheses, e.g. (N), (N·s/m), [m/s], (N²/Hz), (unitless).
 UNIT = re.compile(r"[(\[][^()\[\]]*[A-Za-z²][^()\[\]]*[)\]]")
 
@@ -69,6 +71,15 @@ class Children:
 
     def __init__(self) -> None:
         self.procs: list[subprocess.Popen[Any]] = []
+
+    @staticmethod
+    def ros_env(domain: str) -> dict[str, str]:
+        """The environment of a child on ROS_DOMAIN_ID ``domain``, localhost only, with one
+        BLAS thread, unbuffered output, and this checkout first on PYTHONPATH."""
+        env = dict(os.environ, ROS_DOMAIN_ID=domain, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                   OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1")
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH")) if p)
+        return env
 
     def start(self, argv: Sequence[str], log: Path | None = None, **kwargs: Any
               ) -> subprocess.Popen[Any]:

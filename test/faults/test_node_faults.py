@@ -37,7 +37,6 @@ from dampest_ros.ros.recorder_node import RecorderNode  # noqa: E402
 from dampest_ros.ros.replay_node import ReplayNode  # noqa: E402
 from dampest_ros.ros.sim_node import SimNode  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[2]
 DOMAIN = "81"
 NODES: dict[str, type[ParamNode]] = {
     c.NODE_NAME: c for c in (SimNode, PreprocessNode, EstimatorNode, ControllerNode,
@@ -74,19 +73,12 @@ def needed(name: str, tmp_path: Path, sim_bag: Path, model_file: Path) -> dict[s
     return need.get(name, {})
 
 
-def env() -> dict[str, str]:
-    e = dict(os.environ, ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-             OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1")
-    e["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), e.get("PYTHONPATH")) if p)
-    return e
-
-
 def start(children: Any, name: str, params: dict[str, Any], log: Path, *extra: str
           ) -> subprocess.Popen[bytes]:
     """A node process of the ``children`` fixture (its output in ``log``)."""
     args = [a for k, v in params.items() for a in ("-p", f"{k}:={v}")]
     return children.start([sys.executable, "-m", f"dampest_ros.ros.{name}", "--ros-args",
-                           *args, *extra], log=log, env=env())
+                           *args, *extra], log=log, env=children.ros_env(DOMAIN))
 
 
 # --- bad parameters ----------------------------------------------------------------------------

@@ -5,7 +5,6 @@ Runs on its own ROS_DOMAIN_ID, localhost only (docs/architecture.md §6)."""
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -23,7 +22,6 @@ rclpy = pytest.importorskip("rclpy")
 
 from mcap.reader import make_reader  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import (  # noqa: E402
     HistoryPolicy,
     QoSProfile,
@@ -37,18 +35,9 @@ from sensor_msgs.msg import Imu, JointState  # noqa: E402
 from dampest_ros.core.signals.measurements import ImuSeries  # noqa: E402
 from dampest_ros.io import bag  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[2]
 DOMAIN = "88"
 IMU_HZ, JOINT_HZ = 200, 50
 CLI = "import sys; from dampest_ros.cli.main import main; sys.exit(main(sys.argv[1:]))"
-
-
-def env() -> dict[str, str]:
-    e = dict(os.environ)
-    e.update(ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-             OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1",
-             PYTHONPATH=os.pathsep.join(p for p in (str(REPO), e.get("PYTHONPATH")) if p))
-    return e
 
 
 def node_process(children: Any, module: str, params: dict[str, str], log: Path,
@@ -58,38 +47,33 @@ def node_process(children: Any, module: str, params: dict[str, str], log: Path,
     if name:
         args += ["-r", f"__node:={name}"]
     return children.start([sys.executable, "-m", f"dampest_ros.ros.{module}", "--ros-args",
-                           *args], log=log, env=env())
+                           *args], log=log, env=children.ros_env(DOMAIN))
 
 
 def cli(children: Any, *argv: str) -> subprocess.CompletedProcess[str]:
     """``dampest ARGV`` run to its end as one of ``children``."""
-    return children.run([sys.executable, "-c", CLI, *argv], env=env(), capture_output=True,
-                        text=True, timeout=120)
+    return children.run([sys.executable, "-c", CLI, *argv], env=children.ros_env(DOMAIN),
+                        capture_output=True, text=True, timeout=120)
 
 
 class Ros:
-    """An rclpy context of its own on the test domain, spun in a background thread."""
+    """A node of its own on the test domain (the ``domain_node`` fixture's), spun in a
+    background thread."""
 
-    def __init__(self) -> None:
-        os.environ.update(ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("record_replay_test", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+    def __init__(self, base: Any) -> None:
+        self.base = base
+        self.node = base.node
         self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
 
     def _spin(self) -> None:
         try:
-            self.executor.spin()
+            self.base.executor.spin()
         except Exception:  # shutdown while waiting
             pass
 
     def close(self) -> None:
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
+        self.base.close()
         self.thread.join(timeout=5.0)
 
 
@@ -106,8 +90,8 @@ def make_imu() -> Any:
 
 
 @pytest.fixture(scope="module")
-def ros() -> Iterator[Ros]:
-    r = Ros()
+def ros(domain_node: Any) -> Iterator[Ros]:
+    r = Ros(domain_node(DOMAIN, "record_replay_test"))
     yield r
     r.close()
 
@@ -417,7 +401,8 @@ def test_dampest_record_stops_cleanly_on_sigterm(ros: Ros, tmp_path: Path, child
         proc = children.start([sys.executable, "-c", CLI, "record", "-o", str(out),
                                "imu/data", "thrusters/state", "--max-bag-duration", "1.0",
                                "--node-name", "recorder_sigterm"],
-                              env=env(), stdout=f, stderr=subprocess.STDOUT)
+                              env=children.ros_env(DOMAIN), stdout=f,
+                              stderr=subprocess.STDOUT)
     pubs = Publishers(ros)
     try:
         pubs.wait_for_subscriber("recorder_sigterm")

@@ -11,7 +11,6 @@ GetParameters (dampest_ros.client.ModelClient) and the counts on /diagnostics.
 
 from __future__ import annotations
 
-import os
 import re
 import sys
 import time
@@ -25,7 +24,6 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 
 from dampest_ros.cli.main import main  # noqa: E402
 from dampest_ros.client import ModelClient  # noqa: E402
@@ -45,25 +43,13 @@ CLI = "import sys; from dampest_ros.cli.main import main; sys.exit(main(sys.argv
 TOLERANCE = 1e-6
 
 
-def env() -> dict[str, str]:
-    e = dict(os.environ)
-    e.update(ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-             OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1",
-             PYTHONPATH=os.pathsep.join(p for p in (str(REPO), e.get("PYTHONPATH")) if p))
-    return e
-
-
 class Listener:
-    """A node of this process on the test domain: model.* of estimator_node and the last
-    /diagnostics values of each status."""
+    """A node of this process on the test domain (``base``, a ``domain_node``): model.* of
+    estimator_node and the last /diagnostics values of each status."""
 
-    def __init__(self) -> None:
-        os.environ.update(ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("replay_processes_test", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+    def __init__(self, base: Any) -> None:
+        self.base = base
+        self.node, self.executor = base.node, base.executor
         self.client = ModelClient(self.node, "estimator_node")
         self.status: dict[str, dict[str, str]] = {}
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 100)
@@ -85,12 +71,10 @@ class Listener:
 
     def close(self) -> None:
         self.client.close()
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
+        self.base.close()
 
 
-def replay(children: Any, tmp: Path) -> dict[str, Any]:
+def replay(children: Any, domain_node: Any, tmp: Path) -> dict[str, Any]:
     """One replay of :data:`BAG` through fresh nodes: model.*, counts and logs.
 
     The replay waits a second after its publishers have matched the preprocessor: the
@@ -104,13 +88,14 @@ def replay(children: Any, tmp: Path) -> dict[str, Any]:
                                 "resume:=false", "-p", f"save_path:={tmp / 'model.yaml'}"]}
     for name, args in nodes.items():
         children.start([sys.executable, "-m", f"dampest_ros.ros.{name}", "--ros-args", *args],
-                       log=tmp / f"{name}.log", env=env())
-    ros = Listener()
+                       log=tmp / f"{name}.log", env=children.ros_env(DOMAIN))
+    ros = Listener(domain_node(DOMAIN, "replay_processes_test"))
     try:
         play = children.run([sys.executable, "-c", CLI, "replay", str(BAG), "--clock",
                              "--rate", str(RATE), "--topics", *ROLES,
                              "--wait-for-subscribers-timeout", "60", "--delay", "1"],
-                            timeout=180, env=env(), capture_output=True, text=True)
+                            timeout=180, env=children.ros_env(DOMAIN), capture_output=True,
+                            text=True)
         def logs() -> dict[str, str]:
             return {n: (tmp / f"{n}.log").read_text() for n in nodes}
 
@@ -147,13 +132,13 @@ def distance(theta: Any, ref: Any, std: Any) -> tuple[float, float]:
 
 
 @pytest.mark.slow
-def test_two_replays_through_processes_equal_offline_rls(children: Any, tmp_path: Path
-                                                         ) -> None:
+def test_two_replays_through_processes_equal_offline_rls(children: Any, domain_node: Any,
+                                                         tmp_path: Path) -> None:
     out = tmp_path / "offline.yaml"
     assert main(["identify", str(BAG), "--vehicle", "bluerov2_heavy", "--method", "rls",
                  "--forgetting-factor", "1", "--out", str(out)]) == 0
     offline = load_model(out)
-    runs = [replay(children, tmp_path / f"run{k}") for k in (1, 2)]
+    runs = [replay(children, domain_node, tmp_path / f"run{k}") for k in (1, 2)]
     in_bag = {t.lstrip("/"): s.count for t, s in bag_summary(BAG).topics.items()}
     for run in runs:
         # every sensor message played was heard, every sample published was matched, and
