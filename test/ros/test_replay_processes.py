@@ -96,6 +96,7 @@ def replay(children: Any, domain_node: Any, tmp: Path) -> dict[str, Any]:
                              "--wait-for-subscribers-timeout", "60", "--delay", "1"],
                             timeout=180, env=children.ros_env(DOMAIN), capture_output=True,
                             text=True)
+
         def logs() -> dict[str, str]:
             return {n: (tmp / f"{n}.log").read_text() for n in nodes}
 
