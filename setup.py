@@ -3,6 +3,7 @@
 import os
 
 from setuptools import find_packages, setup
+from setuptools.command.install_scripts import install_scripts
 
 PACKAGE_NAME = "dampest_ros"
 #: Optional: several logs pooled on Dask, logs named by URL (no rosdep key: pip only).
@@ -21,6 +22,27 @@ NODE_SCRIPTS: dict[str, str] = {
     "recorder_node": "dampest_ros.ros.entry:recorder_node",
     "replay_node": "dampest_ros.ros.entry:replay_node",
 }
+
+
+#: Console scripts also installed to <prefix>/bin, which sourcing a colcon install puts on
+#: PATH (lib/dampest_ros, where setup.cfg puts every console script, is for ros2 run only).
+PATH_SCRIPTS = ("dampest",)
+
+
+class InstallScripts(install_scripts):
+    """install_scripts, then a copy of each generated console script of PATH_SCRIPTS in
+    bin/ next to share/ (the same file: one entry point). A wheel (pip) generates no console
+    script here, so pip installs are unchanged."""
+
+    def run(self):
+        super().run()
+        bindir = os.path.join(self.get_finalized_command("install").install_data, "bin")
+        for path in list(self.outfiles):
+            if os.path.basename(path) in PATH_SCRIPTS:
+                self.mkpath(bindir)
+                target = os.path.join(bindir, os.path.basename(path))
+                self.copy_file(path, target)
+                self.outfiles.append(target)
 
 
 def config_data_files(root="config"):
@@ -71,6 +93,7 @@ setup(
     maintainer_email="dampest@example.com",
     description="Identification of underwater-vehicle hydrodynamic damping for ROS 2",
     license="Apache-2.0",
+    cmdclass={"install_scripts": InstallScripts},
     entry_points={
         "console_scripts": [
             "dampest = dampest_ros.cli.main:main",

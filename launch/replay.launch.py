@@ -10,7 +10,10 @@ wall-clock second), vehicle (the preset or vehicle YAML of the pipeline), topics
 topics played; by default the sensor topics only, so that a bag recorded with `dampest record`
 does not replay its dampest/* outputs into the running preprocess and estimator nodes; add
 wrench for a vehicle that logs its body wrench). The topics are played under their recorded
-names (the replay_node parameter remap renames them).
+names (the replay_node parameter remap renames them). delay (seconds, 1 by default) is waited
+after replay_node's publishers have matched the nodes' subscriptions and before it plays: the
+sensor topics are best effort, and a subscriber's side of the match can come later than the
+publisher's (the first 0.3 s of playback were lost so in one of five runs without it).
 
     ros2 launch dampest_ros replay.launch.py bag:=my_bag topics:="[imu/data, dvl/twist, wrench]"
 """
@@ -39,12 +42,15 @@ def generate_launch_description() -> LaunchDescription:
                               description="vehicle preset name or YAML path"),
         DeclareLaunchArgument("topics", default_value=SENSOR_TOPICS,
                               description="bag topics to play (YAML list)"),
+        DeclareLaunchArgument("delay", default_value="1.0",
+                              description="seconds between the subscribers' match and play"),
         Node(package="dampest_ros", executable="replay_node", name="replay_node",
              output="screen",
              parameters=[os.path.join(CONFIG, "replay_node.params.yaml"),
                          {"bag": LaunchConfiguration("bag"),
                           "rate": LaunchConfiguration("rate"), "clock": True,
-                          "topics": LaunchConfiguration("topics")}]),
+                          "topics": LaunchConfiguration("topics"),
+                          "delay": LaunchConfiguration("delay")}]),
         Node(package="dampest_ros", executable="preprocess_node", name="preprocess_node",
              output="screen",
              parameters=[os.path.join(CONFIG, "preprocess_node.params.yaml"), common]),

@@ -1,15 +1,22 @@
-"""Fixtures shared by the tests: the figures a report saves, and the check that every axis
-of them carries a unit."""
+"""Fixtures shared by the tests: the figures a report saves, the check that every axis
+of them carries a unit, and the child processes a test starts (killed, whole process group,
+when the test ends however it ends)."""
 
 from __future__ import annotations
 
+import os
 import re
-from collections.abc import Callable
+import signal
+import subprocess
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 import pytest
 from matplotlib.figure import Figure
 
+#: The checkout the tests run from.
+REPO = Path(__file__).resolve().parents[1]
 #: A unit in brackets or parentheses, e.g. (N), (N·s/m), [m/s], (N²/Hz), (unitless).
 UNIT = re.compile(r"[(\[][^()\[\]]*[A-Za-z²][^()\[\]]*[)\]]")
 
@@ -53,3 +60,101 @@ def label_problems(figures: list[Figure]) -> list[str]:
 def axis_unit_problems() -> Callable[[list[Figure]], list[str]]:
     """:func:`label_problems`, for tests that check figures."""
     return label_problems
+
+
+class Children:
+    """The child processes of a test (nodes, ``dampest`` commands), each started in a session
+    of its own, so that its whole process group can be killed: :meth:`close` (called by the
+    fixtures at the end of the test or module, failed or not) kills every group still there.
+    A SIGINT lost on a loaded machine then leaves no orphan node publishing into later tests.
+    """
+
+    def __init__(self) -> None:
+        self.procs: list[subprocess.Popen[Any]] = []
+
+    @staticmethod
+    def ros_env(domain: str) -> dict[str, str]:
+        """The environment of a child on ROS_DOMAIN_ID ``domain``, localhost only, with one
+        BLAS thread, unbuffered output, and this checkout first on PYTHONPATH."""
+        env = dict(os.environ, ROS_DOMAIN_ID=domain, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                   OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1")
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH")) if p)
+        return env
+
+    def start(self, argv: Sequence[str], log: Path | None = None, **kwargs: Any
+              ) -> subprocess.Popen[Any]:
+        """``subprocess.Popen(argv, **kwargs)`` in a new session; ``log``: stdout and stderr
+        to that file."""
+        if log is not None:
+            with log.open("wb") as out:
+                return self.start(argv, stdout=out, stderr=subprocess.STDOUT, **kwargs)
+        proc = subprocess.Popen(list(argv), start_new_session=True, **kwargs)
+        self.procs.append(proc)
+        return proc
+
+    def run(self, argv: Sequence[str], timeout: float, **kwargs: Any
+            ) -> subprocess.CompletedProcess[Any]:
+        """As ``subprocess.run(argv, timeout=timeout, **kwargs)`` (``capture_output`` and
+        ``input`` included), the child's group killed on timeout (TimeoutExpired raised)."""
+        if kwargs.pop("capture_output", False):
+            kwargs.update(stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        data = kwargs.pop("input", None)
+        if data is not None:
+            kwargs["stdin"] = subprocess.PIPE
+        proc = self.start(argv, **kwargs)
+        try:
+            out, err = proc.communicate(data, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.kill(proc)
+            proc.communicate()
+            raise
+        return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+    def stop(self, proc: subprocess.Popen[Any], sig: int | None = signal.SIGINT,
+             timeout: float = 30.0) -> int:
+        """Send ``sig`` to ``proc`` (None: no signal, it was sent already) and wait at most
+        ``timeout`` s for its exit status (its group killed, and TimeoutExpired raised, when
+        it does not exit)."""
+        if proc.poll() is None and sig is not None:
+            proc.send_signal(sig)
+        try:
+            return proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.kill(proc)
+            raise
+
+    @staticmethod
+    def kill(proc: subprocess.Popen[Any]) -> None:
+        """SIGKILL to the process group of ``proc`` (its session), then reap it."""
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):  # the group is gone already
+            pass
+        proc.wait()
+
+    def close(self) -> None:
+        """Kill every child's process group (a child that exited may have left its own
+        children behind)."""
+        for proc in self.procs:
+            self.kill(proc)
+        self.procs.clear()
+
+
+@pytest.fixture
+def children() -> Iterator[Children]:
+    """:class:`Children` of one test."""
+    kids = Children()
+    try:
+        yield kids
+    finally:
+        kids.close()
+
+
+@pytest.fixture(scope="module")
+def module_children() -> Iterator[Children]:
+    """:class:`Children` shared by the tests of a module (for module-scoped fixtures)."""
+    kids = Children()
+    try:
+        yield kids
+    finally:
+        kids.close()

@@ -233,11 +233,11 @@ def nan_file(path: Path, good: Path) -> Path:
     return path
 
 
-def test_model_server_refuses_a_non_finite_model_at_start(tmp_path: Path) -> None:
+def test_model_server_refuses_a_non_finite_model_at_start(tmp_path: Path, children: Any
+                                                          ) -> None:
     """A NaN in a model file's theta was served by model_server_node. At start, by
     model_file or by --params-file, the node logs one error naming the entry and exits with
     status 2, no traceback."""
-    import subprocess
     import sys
 
     pytest.importorskip("rclpy")
@@ -246,9 +246,9 @@ def test_model_server_refuses_a_non_finite_model_at_start(tmp_path: Path) -> Non
     bad = nan_file(tmp_path / "bad.yaml", good)
     env = dict(os.environ, ROS_DOMAIN_ID="78", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     for args in (["-p", f"model_file:={bad}"], ["--params-file", str(bad)]):
-        proc = subprocess.run([sys.executable, "-m", "dampest_ros.ros.model_server_node",
-                               "--ros-args", *args], capture_output=True, text=True,
-                              timeout=60, env=env)
+        proc = children.run([sys.executable, "-m", "dampest_ros.ros.model_server_node",
+                             "--ros-args", *args], capture_output=True, text=True,
+                            timeout=60, env=env)
         out = proc.stdout + proc.stderr
         assert proc.returncode == 2, out
         assert "Traceback" not in out and "cannot start" in out, out

@@ -1,4 +1,5 @@
-"""colcon builds the package; every console script lands in lib/dampest_ros and answers --help."""
+"""colcon builds the package; every console script lands in lib/dampest_ros and answers --help,
+and `dampest` is on PATH after sourcing the install (bin/)."""
 
 import ast
 import configparser
@@ -8,6 +9,7 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -53,7 +55,7 @@ def find_colcon() -> Path:
 
 
 @pytest.fixture(scope="module")
-def install(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def install(tmp_path_factory: pytest.TempPathFactory, module_children: Any) -> Path:
     ws = tmp_path_factory.mktemp("ws")
     src = ws / "src" / PACKAGE
     src.mkdir(parents=True)
@@ -68,7 +70,7 @@ def install(tmp_path_factory: pytest.TempPathFactory) -> Path:
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
     env["COLCON_HOME"] = str(ws / "colcon_home")
     env["COLCON_LOG_PATH"] = str(ws / "log")
-    proc = subprocess.run(
+    proc = module_children.run(
         [
             str(find_colcon()),
             "build",
@@ -90,7 +92,7 @@ def install(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.parametrize("script", ["dampest", *node_scripts()])
-def test_script_installed_and_runs(install: Path, script: str) -> None:
+def test_script_installed_and_runs(install: Path, script: str, children: Any) -> None:
     exe = install / "lib" / PACKAGE / script
     assert exe.is_file(), f"{exe} missing"
     site = next(install.glob("lib/python3*/site-packages"))
@@ -106,11 +108,28 @@ def test_script_installed_and_runs(install: Path, script: str) -> None:
     env["AMENT_PREFIX_PATH"] = os.pathsep.join(
         p for p in (str(install), env.get("AMENT_PREFIX_PATH")) if p
     )
-    proc = subprocess.run(
+    proc = children.run(
         [str(exe), "--help"], cwd=install, env=env, capture_output=True, text=True, timeout=120
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "usage" in proc.stdout.lower(), proc.stdout
+
+
+def test_dampest_is_on_path_after_sourcing_the_install(install: Path, children: Any) -> None:
+    """``. install/setup.sh`` puts install/dampest_ros/bin first on PATH: ``dampest`` is the
+    install's (the same console script as lib/dampest_ros/dampest), not a venv's."""
+    exe = install / "bin" / "dampest"
+    assert exe.is_file() and exe.read_bytes() == (install / "lib" / PACKAGE / "dampest"
+                                                  ).read_bytes()
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), "/usr/bin", "/bin"])
+    proc = children.run(
+        ["sh", "-c", '. "$1/setup.sh" && command -v dampest && dampest --help', "sh",
+         str(install.parent)], env=env, capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    where, usage = proc.stdout.split("\n", 1)
+    assert Path(where) == exe and usage.startswith("usage: dampest"), proc.stdout
 
 
 def test_share_files_installed(install: Path) -> None:

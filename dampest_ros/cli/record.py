@@ -18,6 +18,7 @@ from dampest_ros.cli.common import describe
 EXAMPLE = ("examples:\n  dampest record -o trial1                # the dampest topics, Ctrl-C "
            "to stop\n"
            "  dampest record -o trial1 --all -x '^/truth/' --max-bag-duration 600\n"
+           "  dampest record -o trial1 -e '^/(imu|dvl)/' pressure   # a regex and a topic\n"
            "  dampest record -o trial1 --compression zstd\n"
            "  dampest record -o t imu/data dvl/twist --namespace /vehicle")
 
@@ -35,6 +36,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-a", "--all", action="store_true",
                    help="record every topic found in the graph (not /rosout, "
                         "/parameter_events)")
+    p.add_argument("-e", "--regex", default="", metavar="REGEX",
+                   help="also record the topics this regular expression matches (anywhere "
+                        "in the resolved name, e.g. '^/vehicle/'), as they appear; alone: "
+                        "only those")
+    p.add_argument("-s", "--storage", default="mcap", metavar="ID",
+                   help="storage identifier: only mcap is written (default: mcap)")
     p.add_argument("-x", "--exclude-regex", default="", metavar="REGEX",
                    help="never record the topics this regular expression matches (anywhere "
                         "in the resolved name, e.g. '^/truth/'); with topics or --all")
@@ -64,26 +71,31 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="log times from /clock instead of the system clock")
 
 
-def ros_arguments(args: argparse.Namespace) -> list[str]:
-    """The node's --ros-args for the options (string values JSON-quoted for YAML)."""
+def node_parameters(args: argparse.Namespace) -> dict[str, object]:
+    """The recorder node's parameters for the options."""
     params: dict[str, object] = {"max_bag_size": args.max_bag_size,
                                  "max_bag_duration": float(args.max_bag_duration),
                                  "compression": args.compression,
-                                 "exclude_regex": args.exclude_regex}
+                                 "exclude_regex": args.exclude_regex, "regex": args.regex}
     if args.output:
         params["output"] = str(args.output)
     if args.all:
         params["topics"] = ["all"]
-    elif args.topics:
-        params["topics"] = list(args.topics)
+    elif args.topics or args.regex:
+        params["topics"] = list(args.topics) or [""]
     if args.chunk_size is not None:
         params["chunk_size"] = args.chunk_size
     if args.flush_period is not None:
         params["flush_period"] = float(args.flush_period)
     if args.use_sim_time:
         params["use_sim_time"] = True
+    return params
+
+
+def ros_arguments(args: argparse.Namespace) -> list[str]:
+    """The node's --ros-args for the options (string values JSON-quoted for YAML)."""
     out = ["--ros-args"]
-    for name, value in params.items():
+    for name, value in node_parameters(args).items():
         out += ["-p", f"{name}:={json.dumps(value)}"]
     if args.namespace:
         out += ["-r", f"__ns:={args.namespace}"]
@@ -94,8 +106,12 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Record until interrupted."""
-    if args.all and args.topics:
-        raise ValueError("give topics or --all, not both")
+    if args.all and (args.topics or args.regex):
+        raise ValueError("give topics (or -e/--regex) or --all, not both")
+    if args.storage != "mcap":
+        raise ValueError(f"-s/--storage {args.storage}: dampest record writes MCAP only (a "
+                         "killed recording is recovered from the MCAP chunk journal; dampest "
+                         "replay and ros2 bag play read it); drop -s, or give -s mcap")
     if args.compression_mode != "none" or args.compression_format:
         raise ValueError("--compression-mode/--compression-format: rosbag2's file and message "
                          "compression is not written (it would give up the journal that keeps "
@@ -104,6 +120,10 @@ def run(args: argparse.Namespace) -> int:
     if args.output and Path(args.output).exists():
         raise FileExistsError(f"{args.output} exists; dampest record never overwrites a bag")
     from dampest_ros.ros import recorder_node  # rclpy only for this command
+    from dampest_ros.ros.common import check_options
 
+    check_options(recorder_node.RecorderNode.PARAMS, node_parameters(args),
+                  {"regex": "-e/--regex", "exclude_regex": "-x/--exclude-regex",
+                   "topics": "TOPIC", "output": "-o/--output"})
     recorder_node.main(["dampest record", *ros_arguments(args)])
     return 0

@@ -15,8 +15,12 @@ from dampest_ros.cli.common import describe
 EXAMPLE = ("examples:\n  dampest replay trial1 --rate 10\n"
            "  dampest replay trial1 --clock --topics imu/data dvl/twist   # /clock at 40 Hz\n"
            "  dampest replay trial1 --exclude-topics dampest/model diagnostics\n"
+           "  dampest replay trial1.db3 -s sqlite3              # the storage is detected "
+           "without -s\n"
            "  dampest replay trial1 --remap /imu/data:=/vehicle/imu/data "
            "--wait-for-all-acked 20000")
+#: The storages replay reads (rosbags' rosbag2 reader).
+STORAGES = ("mcap", "sqlite3")
 #: ``--wait-for-all-acked`` 0 (wait until every message is acknowledged) as the node's
 #: ``wait_for_acked``: its upper limit, seconds.
 ACKED_UNLIMITED = 3600.0
@@ -26,6 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of dampest replay."""
     describe(p, __doc__, EXAMPLE)
     p.add_argument("bag", help="rosbag2 directory (MCAP or SQLite3) or .mcap/.db3 file")
+    p.add_argument("-s", "--storage", choices=STORAGES, default=None,
+                   help="storage of the bag (default: detected); the bag is checked against "
+                        "it")
     p.add_argument("-r", "--rate", type=float, default=1.0,
                    help="playback speed factor (default: 1, real time)")
     p.add_argument("--topics", nargs="+", default=[], metavar="TOPIC",
@@ -91,6 +98,24 @@ def acked_seconds(ms: int) -> float:
     return 0.0 if ms < 0 else ACKED_UNLIMITED if ms == 0 else ms / 1000
 
 
+def check_storage(args: argparse.Namespace) -> None:
+    """With ``-s/--storage``: the bag must be of that storage.
+
+    Raises
+    ------
+    ValueError
+        The bag's storage is another (both named, and that -s can be dropped).
+    """
+    if args.storage is None:
+        return
+    from dampest_ros.io.bag import bag_summary
+
+    found = bag_summary(str(args.bag)).storage
+    if found != args.storage:
+        raise ValueError(f"-s/--storage {args.storage}: {args.bag} is stored as {found}; give -s "
+                         f"{found}, or drop -s (the storage is detected)")
+
+
 def ros_arguments(args: argparse.Namespace) -> list[str]:
     """The node's --ros-args for the options."""
     out = ["--ros-args"]
@@ -103,14 +128,11 @@ def run(args: argparse.Namespace) -> int:
     """Check the options against the node's parameter specs (a bag that cannot be read, a
     rate out of range: ValueError naming the option), then play the bag."""
     from dampest_ros.ros import replay_node  # rclpy only for this command
-    from dampest_ros.ros.common import validate
+    from dampest_ros.ros.common import check_options
 
-    params = node_parameters(args)
-    options = {"bag": "BAG", "clock_rate": "--clock", "wait_for_acked": "--wait-for-all-acked"}
-    for spec in replay_node.ReplayNode.PARAMS:
-        reason = validate(spec, params[spec.name]) if spec.name in params else None
-        if reason is not None:
-            option = options.get(spec.name, "--" + spec.name.replace("_", "-"))
-            raise ValueError(f"{option}: {reason}")
+    check_options(replay_node.ReplayNode.PARAMS, node_parameters(args),
+                  {"bag": "BAG", "clock_rate": "--clock",
+                   "wait_for_acked": "--wait-for-all-acked"})
+    check_storage(args)
     replay_node.main(["dampest replay", *ros_arguments(args)])
     return 0

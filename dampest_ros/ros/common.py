@@ -189,6 +189,46 @@ class TransportLosses:
             self.count += int(seq) - last - 1
 
 
+#: Wall-clock seconds without a message after which a node's input counts as quiet.
+QUIET_PERIOD = 0.5
+
+
+class QuietFlush:
+    """Calls ``flush()`` once a node's input has gone quiet: messages arrived
+    (:meth:`arrived`) since the last flush and none in the last ``period`` seconds.
+
+    The timer runs on the steady (wall) clock, not on the node's: with use_sim_time the
+    node's clock stops with /clock, as at the end of a replayed bag, and what the node held
+    back (a stamp-order window, samples not yet in a publication) would never be delivered.
+    While messages keep coming, it never fires.
+
+    Parameters
+    ----------
+    node : Node
+    flush : callable
+        What to do once quiet (called from the executor).
+    period : float
+        Seconds (wall clock) between looks; quiet means nothing arrived during one.
+    """
+
+    def __init__(self, node: Node, flush: Callable[[], None],
+                 period: float = QUIET_PERIOD) -> None:
+        self.flush = flush
+        self._arrived = self._at_look = self._at_flush = 0
+        self.timer = node.create_timer(period, self._look,
+                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def arrived(self) -> None:
+        """Note a message."""
+        self._arrived += 1
+
+    def _look(self) -> None:
+        if self._arrived == self._at_look != self._at_flush:
+            self._at_flush = self._arrived
+            self.flush()
+        self._at_look = self._arrived
+
+
 def to_time(t: float) -> Time:
     """builtin_interfaces/Time from seconds (rounded to the nanosecond)."""
     from dampest_ros.core.signals.samples import wire_stamp  # (numpy: not at a node's start)
@@ -281,6 +321,31 @@ def validate(p: Param, value: Any) -> str | None:
     if p.check is not None:
         return p.check(value)
     return None
+
+
+def check_options(specs: Sequence[Param], params: dict[str, Any],
+                  options: dict[str, str]) -> None:
+    """Check a command's node parameters against the node's ``specs`` before the node starts.
+
+    Parameters
+    ----------
+    specs : sequence of Param
+        The node's declared parameters.
+    params : dict
+        Parameter name → value, from the command's options.
+    options : dict
+        Parameter name → the option that sets it (default ``--name-with-dashes``).
+
+    Raises
+    ------
+    ValueError
+        ``OPTION: reason`` for the first value a spec refuses.
+    """
+    for spec in specs:
+        reason = validate(spec, params[spec.name]) if spec.name in params else None
+        if reason is not None:
+            option = options.get(spec.name, "--" + spec.name.replace("_", "-"))
+            raise ValueError(f"{option}: {reason}")
 
 
 def model_file_check(name: str) -> Callable[[Any], str | None]:

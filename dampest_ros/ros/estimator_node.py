@@ -12,7 +12,9 @@ topic, matched, unmatched, used, rejected_nonfinite, dropped_out_of_order, rejec
 clock_jumps, lost_in_transport (messages that never reached the node: gaps in their
 publication sequence numbers, e.g. a reader queue that overflowed at 10x replay),
 resume_refused: the node's life totals, kept when a parameter change rebuilds the estimator
-or ~/reset restarts it) at publish_rate.
+or ~/reset restarts it) at publish_rate, and once more when its input has gone quiet (no
+sample for half a second of wall-clock time) after samples that are not in a publication
+yet: the end of a replayed bag, whose /clock stops with it, reaches model.* whole.
 Services: ~/reset (std_srvs/Trigger, back to the model it started from), ~/save (Trigger,
 atomic write of the model file to save_path), ~/freeze (std_srvs/SetBool: stop or resume
 updating). With resume (default) it starts from the model file at save_path with its version
@@ -58,6 +60,7 @@ from dampest_ros.ros.common import (
     Drain,
     EstimatorParamNode,
     Param,
+    QuietFlush,
     TransportLosses,
     diagnostic_array,
     main_for,
@@ -139,6 +142,7 @@ class EstimatorNode(EstimatorParamNode):
                 RELIABLE_QOS, raw=True, drain=self._samples,
                 callback_group=None if name == "attitude" else self._samples.passive)
         self.start_services()
+        self.quiet = QuietFlush(self, self._publish)
         self._used_at_publish = -1
         self._last_stamp = -1
 
@@ -210,6 +214,7 @@ class EstimatorNode(EstimatorParamNode):
 
     def _on_raw(self, stream: str, width: int, data: bytes, info: dict[str, Any]) -> None:
         self.losses.seen(self._subs[stream], info)
+        self.quiet.arrived()
         self._on_sample(stream, *stamped_floats(data, width))
 
     def _on_sample(self, stream: str, ns: int, value: np.ndarray) -> None:

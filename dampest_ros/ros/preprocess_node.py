@@ -7,7 +7,8 @@ dampest/velocity (TwistWithCovarianceStamped), dampest/acceleration
 (AccelWithCovarianceStamped), dampest/wrench (WrenchStamped) and dampest/attitude
 (QuaternionStamped, base_link FLU → odom ENU, for the restoring forces) with identical header
 stamps at a fixed rate, body frame FLU (base_link), only for usable samples (not during DVL
-dropouts); diagnostics with the message counts, rejections and resets once per second.
+dropouts); diagnostics with the message counts, rejections and resets once per second (wall
+clock).
 The DVL may send geometry_msgs/TwistStamped instead (parameter dvl_type, read at start).
 Sensor mounting (lever arms, rotations) and the expected frame_ids come from the vehicle
 file's sensors: section; messages with another header.frame_id are counted
@@ -18,7 +19,8 @@ The work is done by dampest_ros.core.online.preprocessor.OnlinePreprocessor (the
 replays bags).
 The sensor messages reach it in stamp order whatever the order of their arrival
 (dampest_ros.core.signals.reorder.StampOrder, up to reorder_latency of stamp time; what is held is
-released when no message has come for half a second), so that live data, a replayed bag and
+released when no message has come for half a second of wall-clock time, also when use_sim_time
+and /clock has stopped at the end of a replayed bag), so that live data, a replayed bag and
 'dampest identify --method rls' give the same samples.
 """
 
@@ -35,6 +37,7 @@ from geometry_msgs.msg import (
     TwistWithCovarianceStamped,
     WrenchStamped,
 )
+from rclpy.clock import Clock, ClockType
 from sensor_msgs.msg import FluidPressure, Imu, JointState
 
 from dampest_ros.core.online.estimator import attitude_quaternion
@@ -49,6 +52,7 @@ from dampest_ros.ros.common import (
     SENSOR_QOS,
     Param,
     ParamNode,
+    QuietFlush,
     diagnostic_array,
     main_for,
     seconds,
@@ -158,11 +162,12 @@ class PreprocessNode(ParamNode):
         else:
             self.create_subscription(JointState, "thrusters/state", self._on_thrusters,
                                      SENSOR_QOS)
-        self.create_timer(1.0, self._publish_diagnostics)
-        self.create_timer(0.5, self._flush_if_idle)
+        # wall clock: with use_sim_time the node clock stops with /clock (a replay's end)
+        self.create_timer(1.0, self._publish_diagnostics,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.quiet = QuietFlush(self, self._flush)
         self.published = 0
         self.unstamped = 0  # messages with header.stamp 0, rejected
-        self._received = self._received_at_check = 0
 
     def _build(self) -> None:
         v = load_vehicle(self.p("vehicle"))
@@ -215,7 +220,7 @@ class PreprocessNode(ParamNode):
         stamped 0 once stamps past clock_jump have come (a header never set; a simulator
         starts at 0) is rejected before it, as it would be a clock jump that resets the
         state (a restarted clock's next message still is one)."""
-        self._received += 1
+        self.quiet.arrived()
         if stamp == 0 and self.order.newest > self.p("clock_jump"):
             self.unstamped += 1
             if self.unstamped == 1:
@@ -231,11 +236,10 @@ class PreprocessNode(ParamNode):
             samples += getattr(self.pre, role)(t, *args)
         self._publish(samples)
 
-    def _flush_if_idle(self) -> None:
-        """No sensor message since the last look: process what the stamp order holds."""
-        if self._received == self._received_at_check and len(self.order):
+    def _flush(self) -> None:
+        """The input has gone quiet: process what the stamp order holds."""
+        if len(self.order):
             self._process(self.order.flush())
-        self._received_at_check = self._received
 
     def _publish(self, samples: list[OnlineSample]) -> None:
         frame = self.p("frame_id") if samples else ""

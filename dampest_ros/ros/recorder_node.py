@@ -10,7 +10,8 @@ the node clock, i.e. simulation time, under use_sim_time) through
 dampest_ros.io.recorder.BagRecorder. The QoS each publisher offers is stored in the bag
 metadata. Chunks reach the disk every chunk_size bytes or flush_period seconds (checked
 every flush_period / 4); each message of the chunk in progress is also appended at once to
-the file's journal, so a killed recorder loses no message it had received. Topics that
+the file's journal, so a killed recorder loses no message it had received. Besides the
+topics named, those regex matches are recorded as they appear in the graph; topics that
 exclude_regex matches are never recorded. silence_warning seconds after the start, a
 warning names each wanted topic that no one publishes while others are, and the closest
 topic that someone publishes (a typo); when no message has arrived by then, a warning says
@@ -76,8 +77,6 @@ def _regex_ok(value: Any) -> str | None:
 
 def _topics_ok(value: Any) -> str | None:
     names = [t for t in value if t]
-    if not names:
-        return "topics must name at least one topic, or be ['all']"
     if "all" in names and len(names) > 1:
         return "topics: 'all' records every topic and takes no other name"
     return None
@@ -94,6 +93,9 @@ class RecorderNode(ParamNode):
         Param("topics", DEFAULT_TOPICS, "topics to record (relative names are resolved in "
               "the node namespace); ['all']: every topic found in the graph",
               check=_topics_ok, read_only=True),
+        Param("regex", "", "also record every topic whose resolved name this regular "
+              "expression matches (anywhere in the name; not those of exclude); empty: none",
+              check=_regex_ok, read_only=True),
         Param("exclude", ["/rosout", "/parameter_events"], "topics never recorded by 'all'",
               read_only=True),
         Param("exclude_regex", "", "topics whose resolved name this regular expression "
@@ -136,6 +138,10 @@ class RecorderNode(ParamNode):
         except (OSError, RecorderError) as exc:  # a refusal at start: one line, status 2
             raise ValueError(f"output {output}: {exc}") from None
         wanted = [t for t in self.p("topics") if t]
+        self.regex = re.compile(str(self.p("regex"))) if self.p("regex") else None
+        if not wanted and self.regex is None:
+            raise ValueError("topics must name at least one topic, or be ['all'], or regex "
+                             "select them")
         self.all_topics = wanted == ["all"]
         self.wanted = [] if self.all_topics else [self.resolve_topic_name(t) for t in wanted]
         self.exclude = {self.resolve_topic_name(t) for t in self.p("exclude") if t}
@@ -173,7 +179,9 @@ class RecorderNode(ParamNode):
         self.status_timer = None
         if self.p("status_period") > 0:
             self.status_timer = self.create_timer(float(self.p("status_period")), self._status)
-        what = "every topic" if self.all_topics else ", ".join(self.wanted)
+        what = "every topic" if self.all_topics else ", ".join(
+            [*self.wanted, *([f"the topics matching {self.regex.pattern!r}"]
+                             if self.regex is not None else [])])
         self.get_logger().info(f"recording {what} to {self.recorder.path}")
 
     def on_parameters(self, names: list[str]) -> None:
@@ -184,11 +192,12 @@ class RecorderNode(ParamNode):
             self.status_timer.timer_period_ns = int(max(self.p("status_period"), 0.05) * 1e9)
 
     def _candidates(self) -> list[str]:
-        if self.all_topics:
-            names = [name for name, _ in self.get_topic_names_and_types()
+        names = list(self.wanted)
+        if self.all_topics or self.regex is not None:
+            graph = [name for name, _ in self.get_topic_names_and_types()
                      if name not in self.exclude]
-        else:
-            names = self.wanted
+            names += [t for t in graph if self.all_topics or (
+                self.regex is not None and self.regex.search(t) and t not in names)]
         return [t for t in names if t not in self.subs
                 and not (self.exclude_regex and self.exclude_regex.search(t))]
 
@@ -203,6 +212,7 @@ class RecorderNode(ParamNode):
             if any(t.count for t in self.recorder.topics):
                 return
         what = (f"any of the {len(self.wanted)} topics" if not self.all_topics
+                and self.regex is None
                 else f"any of the {len(self.subs)} topics found" if self.subs else "any topic")
         self.get_logger().warning(
             f"no message on {what} after {float(self.p('silence_warning')):g} s "
@@ -227,7 +237,7 @@ class RecorderNode(ParamNode):
     def _discover_early(self) -> None:
         """Look at the graph often while the node is young and topics are missing."""
         self._discover()
-        if time.monotonic() > self._early_end or (not self.all_topics
+        if time.monotonic() > self._early_end or (not self.all_topics and self.regex is None
                                                   and not self._candidates()):
             self.early_timer.cancel()
 

@@ -2,7 +2,8 @@
 
 Publishes every message's serialized bytes unchanged (bit-identical to the bag) at its log
 time, the intervals divided by rate, from start_offset seconds into the bag; optionally
-loops, publishes /clock with the bag time (for use_sim_time listeners), plays only some
+loops, publishes /clock with the bag time (for use_sim_time listeners; at the end, once
+with the time of the last message played), plays only some
 topics (or all but exclude_topics) and renames them. Publishers use the QoS recorded in the
 bag (reliable only when every recorded publisher was; override with reliability) and keep
 queue_depth messages. A topic
@@ -208,6 +209,7 @@ class ReplayNode(ParamNode):
         try:
             if self._wait_to_start():
                 self._play()
+                self._publish_last_clock()
                 self._wait_for_acked()
         except Exception as exc:  # a shut-down context while publishing: stop quietly
             if not self._stop.is_set() and self.context.ok():
@@ -307,10 +309,18 @@ class ReplayNode(ParamNode):
     def _publish_clock(self, now: float, bag_now: int, next_t: int) -> None:
         if now - self._last_clock >= 1.0 / float(self.p("clock_rate")):
             self._last_clock = now
-            assert self.clock_pub is not None
-            ns = min(bag_now, next_t)
-            self.clock_pub.publish(Clock(clock=Time(sec=ns // 1_000_000_000,
-                                                    nanosec=ns % 1_000_000_000)))
+            self._send_clock(min(bag_now, next_t))
+
+    def _publish_last_clock(self) -> None:
+        """/clock at the last message played: a listener's clock reaches the end of what it
+        was given (while playing, /clock trails the messages by up to 1 / clock_rate)."""
+        if self.clock_pub is not None and self.published and not self._stop.is_set():
+            self._send_clock(self.bag_time)
+
+    def _send_clock(self, ns: int) -> None:
+        assert self.clock_pub is not None
+        self.clock_pub.publish(Clock(clock=Time(sec=ns // 1_000_000_000,
+                                                nanosec=ns % 1_000_000_000)))
 
     def _maybe_progress(self, now: float) -> None:
         period = float(self.p("progress_period"))

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -89,7 +90,8 @@ def test_demo_40s_converges_from_a_wrong_prior(tmp_path: Path,
     assert "RMS error (m/s; u, w)" in page and "RMS error (rad/s; r)" in page
 
 
-def test_live_stopped_with_sigterm_saves_the_run_like_ctrl_c(tmp_path: Path) -> None:
+def test_live_stopped_with_sigterm_saves_the_run_like_ctrl_c(tmp_path: Path, children: Any
+                                                               ) -> None:
     """SIGTERM (what systemd, docker and launch send) ends dampest live as Ctrl-C does: the
     model identified so far is written and the exit status is 0 (it was 143, nothing kept)."""
     import os
@@ -100,18 +102,15 @@ def test_live_stopped_with_sigterm_saves_the_run_like_ctrl_c(tmp_path: Path) -> 
 
     out = tmp_path / "run"
     env = {**os.environ, "ROS_DOMAIN_ID": "94", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    proc = subprocess.Popen([sys.executable, "-m", "dampest_ros.cli.main", "live",
-                             "--duration", "600", "--out", str(out)], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        deadline = time.monotonic() + 60.0
-        while not (out / "prior.yaml").exists() and time.monotonic() < deadline:
-            time.sleep(0.2)
-        time.sleep(3.0)  # some samples in
-        proc.send_signal(signal.SIGTERM)
-        text, _ = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
+    proc = children.start([sys.executable, "-m", "dampest_ros.cli.main", "live",
+                           "--duration", "600", "--out", str(out)], env=env,
+                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    deadline = time.monotonic() + 60.0
+    while not (out / "prior.yaml").exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(3.0)  # some samples in
+    proc.send_signal(signal.SIGTERM)
+    text, _ = proc.communicate(timeout=60)
     assert proc.returncode == 0, text
     assert "interrupted: saving what was identified so far" in text
     model = load_model(out / "model.yaml")

@@ -17,6 +17,7 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -128,27 +129,27 @@ ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg", "ROS_DOMA
        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
 
 
-def _run(argv: list[str], cwd: Path) -> str:
-    """Run a README command to its end (exit status 0); its stderr."""
-    proc = subprocess.run(_command(argv), cwd=cwd, env=ENV, capture_output=True,
-                          text=True, timeout=900)
+def _run(children: Any, argv: list[str], cwd: Path) -> str:
+    """Run a README command to its end (exit status 0) as one of ``children``; its stderr."""
+    proc = children.run(_command(argv), cwd=cwd, env=ENV, capture_output=True, text=True,
+                        timeout=900)
     assert proc.returncode == 0, f"{shlex.join(argv)}:\n{proc.stdout[-2000:]}" \
                                  f"\n{proc.stderr[-2000:]}"
     return proc.stderr
 
 
-def test_the_sample_bag_commands_of_the_set_up_run(tmp_path: Path) -> None:
+def test_the_sample_bag_commands_of_the_set_up_run(tmp_path: Path, children: Any) -> None:
     cwd = _sandbox(tmp_path)
     sample = [c for c in pip_commands() if (c[0] == "dampest" and "bags/sample" in c)
               or c[:3] == ["dampest", "export", "model.yaml"]][:3]
     assert [c[1] for c in sample] == ["inspect", "identify", "export"]
     for argv in sample:
-        _run(argv, cwd)
+        _run(children, argv, cwd)
     assert (cwd / "model.yaml").is_file() and (cwd / "hydrodynamics.sdf").is_file()
 
 
 @pytest.mark.slow
-def test_every_practical_readme_command_runs_in_order(tmp_path: Path) -> None:
+def test_every_practical_readme_command_runs_in_order(tmp_path: Path, children: Any) -> None:
     """All of them, minutes: the simulations, identify with its report, validate, export and
     import, gap on a hidden current and buoyancy offset."""
     cwd = _sandbox(tmp_path)
@@ -164,14 +165,14 @@ def test_every_practical_readme_command_runs_in_order(tmp_path: Path) -> None:
             continue
         if (cwd / str(getattr(args, "out", "") or "-")).exists() and argv[1] == "simulate":
             continue  # the same bag twice in the README (set-up and section)
-        _run(argv, cwd)
+        _run(children, argv, cwd)
         ran += 1
     assert ran >= 10
     assert (cwd / "gap_report" / "index.html").is_file()
 
 
 @pytest.mark.slow
-def test_the_record_replay_block_runs_in_order(tmp_path: Path) -> None:
+def test_the_record_replay_block_runs_in_order(tmp_path: Path, children: Any) -> None:
     """The record/replay block as a user runs it (about a minute): the commands with ``&``
     in the background, ``record`` until they have ended (then Ctrl-C), the others in
     order; the bag holds the pipeline's messages, without the no-message warning, and the
@@ -181,19 +182,16 @@ def test_the_record_replay_block_runs_in_order(tmp_path: Path) -> None:
     background: list[subprocess.Popen[str]] = []
     for argv in block:
         if argv[-1] == "&":
-            background.append(subprocess.Popen(_command(argv[:-1]), cwd=cwd, env=ENV,
-                                               stdout=subprocess.DEVNULL, text=True))
+            background.append(children.start(_command(argv[:-1]), cwd=cwd, env=ENV,
+                                             stdout=subprocess.DEVNULL, text=True))
         elif argv[1] == "record":
             log = tmp_path / "record.log"
-            with log.open("w") as out:
-                recorder = subprocess.Popen(_command(argv), cwd=cwd, env=ENV, stdout=out,
-                                            stderr=subprocess.STDOUT, text=True)
+            recorder = children.start(_command(argv), log=log, cwd=cwd, env=ENV)
             assert all(p.wait(timeout=300) == 0 for p in background)
-            recorder.send_signal(signal.SIGINT)
-            assert recorder.wait(timeout=60) == 0, log.read_text()
+            assert children.stop(recorder, signal.SIGINT, 60) == 0, log.read_text()
             assert "no message" not in log.read_text(), log.read_text()
         else:
-            _run(argv, cwd)
+            _run(children, argv, cwd)
     counts = bag_summary(cwd / "bags" / "trial1").topics
     assert all(counts[t].count > 100 for t in ("/imu/data", "/dvl/twist", "/thrusters/state"))
     assert (cwd / "rls_model.yaml").is_file()

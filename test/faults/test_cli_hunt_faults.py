@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -112,14 +113,14 @@ def test_columns_given_for_a_bag_is_refused(sim_bag: Path,
     assert "--imu-topic" in line
 
 
-def test_output_cut_short_by_the_reader_ends_quietly(sim_bag: Path) -> None:
+def test_output_cut_short_by_the_reader_ends_quietly(sim_bag: Path, children: Any) -> None:
     """Was: 'dampest inspect BAG | head -1' ended with 'error: [Errno 32] Broken pipe',
     exit 2. Now quiet, status 141 (128 + SIGPIPE) as shells expect."""
     import subprocess
     import sys
 
-    proc = subprocess.Popen([sys.executable, "-m", "dampest_ros.cli.main", "inspect",
-                             str(sim_bag)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = children.start([sys.executable, "-m", "dampest_ros.cli.main", "inspect",
+                           str(sim_bag)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     assert proc.stdout is not None and proc.stderr is not None
     proc.stdout.close()  # the reader goes away before the first line (head -0)
     err = proc.stderr.read().decode()

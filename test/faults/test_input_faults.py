@@ -8,9 +8,9 @@ Node processes run on ROS_DOMAIN_ID 81 (localhost only)."""
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -113,15 +113,15 @@ def test_misspelt_column_map_entry_is_refused(tmp_path: Path) -> None:
     assert str(err.value) == f'{path}:3: columns.Fx: got "tau_x"; did you mean tau_X?'
 
 
-def test_misspelt_params_file_key_ends_the_node(tmp_path: Path) -> None:
+def test_misspelt_params_file_key_ends_the_node(tmp_path: Path, children: Any) -> None:
     """``forgeting_factor:`` was ignored: the node ran on the default 0.999."""
     text = (REPO / "config" / "estimator_node.params.yaml").read_text()
     path = tmp_path / "estimator.yaml"
     path.write_text(text.replace("    forgetting_factor: 0.999", "    forgeting_factor: 0.99"))
     env = {**os.environ, "ROS_DOMAIN_ID": "81", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    run = subprocess.run([sys.executable, "-c", "from dampest_ros.ros.entry import "
-                          "estimator_node; estimator_node()", "--ros-args", "--params-file",
-                          str(path)], capture_output=True, text=True, timeout=120, env=env)
+    run = children.run([sys.executable, "-c", "from dampest_ros.ros.entry import "
+                        "estimator_node; estimator_node()", "--ros-args", "--params-file",
+                        str(path)], capture_output=True, text=True, timeout=120, env=env)
     assert run.returncode == 2, run.stderr
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in run.stderr

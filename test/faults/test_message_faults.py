@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 from mcap.reader import make_reader
@@ -42,18 +43,17 @@ def test_a_damaged_chunk_names_the_bag_and_dampest_reindex(
 
 
 def test_a_replay_cut_short_by_a_damaged_chunk_ends_with_status_1(
-        sim_bag: Path, tmp_path: Path) -> None:
+        sim_bag: Path, tmp_path: Path, children: Any) -> None:
     """Was: the playback stopped at the damaged chunk with an error line, and dampest replay
     exited 0 as if the bag had been played whole."""
     import os
-    import subprocess
     import sys
 
     bag = damaged_copy(sim_bag, tmp_path / "damaged")
     env = {**os.environ, "ROS_DOMAIN_ID": "92", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    run = subprocess.run([sys.executable, "-m", "dampest_ros.cli.main", "replay", str(bag),
-                          "--rate", "50", "--wait-for-subscribers", "0"], env=env,
-                         capture_output=True, text=True, timeout=120)
+    run = children.run([sys.executable, "-m", "dampest_ros.cli.main", "replay", str(bag),
+                        "--rate", "50", "--wait-for-subscribers", "0"], env=env,
+                       capture_output=True, text=True, timeout=120)
     assert run.returncode == 1, run.stderr
     assert f"'dampest reindex {bag}' rebuilds its index" in run.stderr
     assert "Traceback" not in run.stderr

@@ -36,7 +36,6 @@ from dampest_ros.ros.recorder_node import RecorderNode  # noqa: E402
 from dampest_ros.ros.replay_node import ReplayNode  # noqa: E402
 from dampest_ros.ros.sim_node import SimNode  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[2]
 DOMAIN = "81"
 NODES: dict[str, type[ParamNode]] = {
     c.NODE_NAME: c for c in (SimNode, PreprocessNode, EstimatorNode, ControllerNode,
@@ -64,20 +63,12 @@ def needed(name: str, tmp_path: Path, sim_bag: Path, model_file: Path) -> dict[s
     return need.get(name, {})
 
 
-def env() -> dict[str, str]:
-    e = dict(os.environ, ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-             OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1")
-    e["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), e.get("PYTHONPATH")) if p)
-    return e
-
-
-def start(name: str, params: dict[str, Any], log: Path, *extra: str) -> subprocess.Popen[bytes]:
-    """A node process (its output in ``log``)."""
+def start(children: Any, name: str, params: dict[str, Any], log: Path, *extra: str
+          ) -> subprocess.Popen[bytes]:
+    """A node process of the ``children`` fixture (its output in ``log``)."""
     args = [a for k, v in params.items() for a in ("-p", f"{k}:={v}")]
-    with log.open("wb") as out:
-        return subprocess.Popen([sys.executable, "-m", f"dampest_ros.ros.{name}", "--ros-args",
-                                 *args, *extra], env=env(), stdout=out,
-                                stderr=subprocess.STDOUT)
+    return children.start([sys.executable, "-m", f"dampest_ros.ros.{name}", "--ros-args",
+                           *args, *extra], log=log, env=children.ros_env(DOMAIN))
 
 
 # --- bad parameters ----------------------------------------------------------------------------
@@ -122,9 +113,9 @@ def test_bad_parameter_at_start_is_one_logged_line_and_status_2(
     assert m is not None and m.group(1).startswith(reason), lines[0]
 
 
-def test_bad_parameter_at_start_exits_2_as_a_process(tmp_path: Path) -> None:
+def test_bad_parameter_at_start_exits_2_as_a_process(tmp_path: Path, children: Any) -> None:
     """The same as the installed executable runs: exit status 2, one line, no traceback."""
-    proc = start("estimator_node", {"forgetting_factor": "1.5"}, tmp_path / "log")
+    proc = start(children, "estimator_node", {"forgetting_factor": "1.5"}, tmp_path / "log")
     assert proc.wait(timeout=60) == 2
     out = (tmp_path / "log").read_text()
     assert "Traceback" not in out and len(out.strip().splitlines()) == 1, out
@@ -170,13 +161,14 @@ def test_every_ranged_and_choice_parameter_is_rejected_at_runtime_with_its_reaso
 # --- two nodes of one name -----------------------------------------------------------------
 
 
-def test_a_second_node_of_the_same_name_is_refused(tmp_path: Path) -> None:
+def test_a_second_node_of_the_same_name_is_refused(tmp_path: Path, children: Any) -> None:
     """Was: no warning; a client alternated between two estimators' models. The one that
     starts second logs one line and exits 2; the first runs on and stops cleanly."""
-    first = start("controller_node", {}, tmp_path / "first.log", "-r", "__ns:=/dup81")
+    first = start(children, "controller_node", {}, tmp_path / "first.log", "-r", "__ns:=/dup81")
     try:
         time.sleep(3.0)
-        second = start("controller_node", {}, tmp_path / "second.log", "-r", "__ns:=/dup81")
+        second = start(children, "controller_node", {}, tmp_path / "second.log", "-r",
+                       "__ns:=/dup81")
         assert second.wait(timeout=60) == 2
         out = (tmp_path / "second.log").read_text().strip()
         assert out.endswith(
@@ -186,8 +178,7 @@ def test_a_second_node_of_the_same_name_is_refused(tmp_path: Path) -> None:
             "__ns:=/NAMESPACE"), out
         assert len(out.splitlines()) == 1 and first.poll() is None
     finally:
-        first.send_signal(signal.SIGINT)
-        assert first.wait(timeout=30) == 0
+        assert children.stop(first) == 0
     assert "Traceback" not in (tmp_path / "first.log").read_text()
 
 
@@ -338,7 +329,8 @@ INT_FIRST = ("sim_node", "estimator_node", "recorder_node", "model_server_node")
 @pytest.mark.parametrize("swapped", [False, pytest.param(True, marks=pytest.mark.slow)],
                          ids=["int-first", "term-first"])
 def test_every_node_stops_cleanly_on_sigint_and_sigterm_while_busy(
-        swapped: bool, tmp_path: Path, sim_bag: Path, model_file: Path) -> None:
+        swapped: bool, tmp_path: Path, sim_bag: Path, model_file: Path, children: Any
+) -> None:
     """Was: 'RCLError: publisher's context is invalid', status 1 (sim_node,
     preprocess_node). The seven nodes run together (sim at 20x real time, replay at 5x); four
     get SIGINT, three SIGTERM at once (the other way round in the slow case), and each ends
@@ -351,21 +343,16 @@ def test_every_node_stops_cleanly_on_sigint_and_sigterm_while_busy(
         "recorder_node": {"output": str(tmp_path / "bag"), "topics": "[all]"},
         "replay_node": {"bag": str(sim_bag), "rate": "5.0", "loop": "true",
                         "remap": "['/truth/odom:=/replayed']"}}
-    procs = {n: start(n, p, tmp_path / f"{n}.log", "-r", f"__ns:={ns}")
+    procs = {n: start(children, n, p, tmp_path / f"{n}.log", "-r", f"__ns:={ns}")
              for n, p in params.items()}
     logs = {n: tmp_path / f"{n}.log" for n in procs}
-    try:
-        end = time.monotonic() + 60.0  # busy: the estimator has published a model
-        while time.monotonic() < end and "protocol" not in logs["sim_node"].read_text():
-            time.sleep(0.2)
-        time.sleep(2.0)
-        for n, p in procs.items():
-            p.send_signal(signal.SIGINT if (n in INT_FIRST) != swapped else signal.SIGTERM)
-        codes = {n: p.wait(timeout=60) for n, p in procs.items()}
-    finally:
-        for p in procs.values():
-            if p.poll() is None:
-                p.kill()
+    end = time.monotonic() + 60.0  # busy: the estimator has published a model
+    while time.monotonic() < end and "protocol" not in logs["sim_node"].read_text():
+        time.sleep(0.2)
+    time.sleep(2.0)
+    for n, p in procs.items():
+        p.send_signal(signal.SIGINT if (n in INT_FIRST) != swapped else signal.SIGTERM)
+    codes = {n: children.stop(p, sig=None, timeout=60) for n, p in procs.items()}
     texts = {n: f.read_text() for n, f in logs.items()}
     assert codes == dict.fromkeys(procs, 0), texts
     bad = {n: t for n, t in texts.items() if "Traceback" in t or "Error" in t}
@@ -428,12 +415,13 @@ def test_sim_node_holds_no_growing_container(context: Any) -> None:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_a_signal_while_a_node_is_still_starting_ends_it_quietly(sig: int) -> None:
+def test_a_signal_while_a_node_is_still_starting_ends_it_quietly(sig: int, children: Any
+                                                                  ) -> None:
     """Was: a Ctrl-C 0.3 s after the start, while the node still imported scipy, ended it with
     a KeyboardInterrupt traceback and status −2 (the console-script entry now catches it)."""
     code = "from dampest_ros.ros.entry import sim_node; sim_node()"
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = children.start([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                          stderr=subprocess.PIPE, text=True)
     time.sleep(0.3)
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)

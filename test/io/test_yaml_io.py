@@ -5,7 +5,6 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
@@ -120,7 +119,7 @@ def test_model_file_round_trip(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(importlib.util.find_spec("rclpy") is None, reason="needs rclpy")
-def test_model_file_is_a_ros_parameters_file(tmp_path: Path) -> None:
+def test_model_file_is_a_ros_parameters_file(tmp_path: Path, children: Any) -> None:
     """rcl's own YAML parser (as for --params-file) reads every entry with the right type."""
     model, theta = damping_from_spec(FULL_SPEC)
     from dampest_ros.core.physics.rigid_body import AddedMassTerms
@@ -142,8 +141,8 @@ def test_model_file_is_a_ros_parameters_file(tmp_path: Path) -> None:
         "n.destroy_node(); rclpy.shutdown()\n")
     env = dict(os.environ, ROS_DOMAIN_ID="93", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                PYTHONPATH=str(Path(__file__).resolve().parents[2]))
-    proc = subprocess.run([sys.executable, "-c", probe, str(path)], capture_output=True,
-                          text=True, timeout=120, env=env)
+    proc = children.run([sys.executable, "-c", probe, str(path)], capture_output=True,
+                        text=True, timeout=120, env=env)
     assert proc.returncode == 0, proc.stderr
     params = json.loads(proc.stdout.strip().splitlines()[-1])
     types = {k: v[0] for k, v in params.items()}

@@ -12,6 +12,7 @@ import re
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -176,16 +177,16 @@ def test_payload_step_on_joint_states_is_alarmed_and_tracked(
         rclpy.try_shutdown(context=context)
 
 
-def test_a_bad_parameter_at_start_is_one_line_and_exit_2(tmp_path: Path) -> None:
-    import subprocess
+def test_a_bad_parameter_at_start_is_one_line_and_exit_2(tmp_path: Path, children: Any
+                                                        ) -> None:
     import sys
 
     env = {**os.environ, "ROS_DOMAIN_ID": "92", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     for args, says in ((["-p", "arm:=nope"], "neither a preset"),
                        (["-p", "cutoff:=40.0"], "rate_out/2"),
                        (["-p", f"prior:={tmp_path / 'missing.yaml'}"], "prior:")):
-        p = subprocess.run([sys.executable, "-c", "from dampest_ros.ros.entry import "
-                            "arm_estimator_node; arm_estimator_node()", "--ros-args", *args],
-                           capture_output=True, text=True, env=env, timeout=60)
+        p = children.run([sys.executable, "-c", "from dampest_ros.ros.entry import "
+                          "arm_estimator_node; arm_estimator_node()", "--ros-args", *args],
+                         capture_output=True, text=True, env=env, timeout=60)
         assert p.returncode == 2, p.stderr
         assert "Traceback" not in p.stderr and says in p.stderr, p.stderr

@@ -206,7 +206,7 @@ def test_pipeline_identifies_by_default_and_replay_plays_sensors_only(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """The default pipeline starts no controller (the simulated vehicle would follow its
     zero reference instead of the excitation); replay plays the sensor topics, not a
-    recording's dampest/* outputs into the running nodes."""
+    recording's dampest/* outputs into the running nodes, a second after the match."""
     pipeline = launch_description(REPO / "launch" / "pipeline.launch.py", REPO, monkeypatch)
     args = {e.args[0]: e.kwargs for e in pipeline
             if type(e).__name__ == "DeclareLaunchArgument"}
@@ -217,3 +217,6 @@ def test_pipeline_identifies_by_default_and_replay_plays_sensors_only(
     assert topics == ["imu/data", "dvl/twist", "pressure", "thrusters/state"]
     (player,) = [e for e in replay if e.kwargs.get("executable") == "replay_node"]
     assert player.kwargs["parameters"][1]["topics"].args[0] == "topics"
+    # a second between the publishers' match and play: best effort loses nothing at the start
+    assert args["delay"]["default_value"] == "1.0"
+    assert player.kwargs["parameters"][1]["delay"].args[0] == "delay"

@@ -12,6 +12,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -30,8 +31,9 @@ SIM_SECONDS = 60.0
 RATE = 3.0
 
 
-def colcon_install(ws: Path) -> Path:
-    """colcon build of this package in a temporary workspace; returns install/dampest_ros."""
+def colcon_install(ws: Path, children: Any) -> Path:
+    """colcon build of this package in a temporary workspace (as one of ``children``);
+    returns install/dampest_ros."""
     colcon = Path(sys.executable).parent / "colcon"
     if not colcon.exists():
         found = shutil.which("colcon")
@@ -49,15 +51,16 @@ def colcon_install(ws: Path) -> Path:
             shutil.copy2(path, src / name)
     env = dict(os.environ, COLCON_HOME=str(ws / "colcon_home"), COLCON_LOG_PATH=str(ws / "log"))
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
-    proc = subprocess.run([str(colcon), "build", "--base-paths", "src"], cwd=ws, env=env,
-                          capture_output=True, text=True, timeout=600)
+    proc = children.run([str(colcon), "build", "--base-paths", "src"], cwd=ws, env=env,
+                        capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return ws / "install" / "dampest_ros"
 
 
 @pytest.fixture(scope="module")
-def processes(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, object]]:
-    install = colcon_install(tmp_path_factory.mktemp("ws"))
+def processes(tmp_path_factory: pytest.TempPathFactory, module_children: Any
+              ) -> Iterator[dict[str, object]]:
+    install = colcon_install(tmp_path_factory.mktemp("ws"), module_children)
     site = next(install.glob("lib/python3*/site-packages"))
     env = dict(os.environ, ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1")
@@ -73,9 +76,8 @@ def processes(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, ob
     }
     procs = {}
     for name, args in reversed(cmds.items()):  # consumers first, the simulator last
-        out = (logs / f"{name}.log").open("w")
-        procs[name] = subprocess.Popen([str(exe / name), "--ros-args", *args], env=env,
-                                       stdout=out, stderr=subprocess.STDOUT)
+        procs[name] = module_children.start([str(exe / name), "--ros-args", *args],
+                                            log=logs / f"{name}.log", env=env)
         time.sleep(0.5 if name != "sim_node" else 0.0)
     os.environ["ROS_DOMAIN_ID"] = DOMAIN
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -90,7 +92,7 @@ def processes(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, ob
         try:
             p.wait(timeout=10)
         except subprocess.TimeoutExpired:
-            p.kill()
+            module_children.kill(p)
     rclpy.try_shutdown(context=context)
 
 

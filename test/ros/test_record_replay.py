@@ -5,7 +5,6 @@ Runs on its own ROS_DOMAIN_ID, localhost only (docs/architecture.md §6)."""
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -23,7 +22,6 @@ rclpy = pytest.importorskip("rclpy")
 
 from mcap.reader import make_reader  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import (  # noqa: E402
     HistoryPolicy,
     QoSProfile,
@@ -37,59 +35,45 @@ from sensor_msgs.msg import Imu, JointState  # noqa: E402
 from dampest_ros.core.signals.measurements import ImuSeries  # noqa: E402
 from dampest_ros.io import bag  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[2]
 DOMAIN = "88"
 IMU_HZ, JOINT_HZ = 200, 50
 CLI = "import sys; from dampest_ros.cli.main import main; sys.exit(main(sys.argv[1:]))"
 
 
-def env() -> dict[str, str]:
-    e = dict(os.environ)
-    e.update(ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-             OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1",
-             PYTHONPATH=os.pathsep.join(p for p in (str(REPO), e.get("PYTHONPATH")) if p))
-    return e
-
-
-def node_process(module: str, params: dict[str, str], log: Path, name: str = ""
-                 ) -> subprocess.Popen[bytes]:
+def node_process(children: Any, module: str, params: dict[str, str], log: Path,
+                 name: str = "") -> subprocess.Popen[bytes]:
+    """A node process of the ``children`` fixture (its output in ``log``)."""
     args = [a for k, v in params.items() for a in ("-p", f"{k}:={v}")]
     if name:
         args += ["-r", f"__node:={name}"]
-    with log.open("wb") as out:
-        return subprocess.Popen([sys.executable, "-m", f"dampest_ros.ros.{module}",
-                                 "--ros-args", *args], env=env(), stdout=out,
-                                stderr=subprocess.STDOUT)
+    return children.start([sys.executable, "-m", f"dampest_ros.ros.{module}", "--ros-args",
+                           *args], log=log, env=children.ros_env(DOMAIN))
 
 
-def cli(*argv: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-c", CLI, *argv], env=env(), capture_output=True,
-                          text=True, timeout=120)
+def cli(children: Any, *argv: str) -> subprocess.CompletedProcess[str]:
+    """``dampest ARGV`` run to its end as one of ``children``."""
+    return children.run([sys.executable, "-c", CLI, *argv], env=children.ros_env(DOMAIN),
+                        capture_output=True, text=True, timeout=120)
 
 
 class Ros:
-    """An rclpy context of its own on the test domain, spun in a background thread."""
+    """A node of its own on the test domain (the ``domain_node`` fixture's), spun in a
+    background thread."""
 
-    def __init__(self) -> None:
-        os.environ.update(ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("record_replay_test", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+    def __init__(self, base: Any) -> None:
+        self.base = base
+        self.node = base.node
         self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
 
     def _spin(self) -> None:
         try:
-            self.executor.spin()
+            self.base.executor.spin()
         except Exception:  # shutdown while waiting
             pass
 
     def close(self) -> None:
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
+        self.base.close()
         self.thread.join(timeout=5.0)
 
 
@@ -106,8 +90,8 @@ def make_imu() -> Any:
 
 
 @pytest.fixture(scope="module")
-def ros() -> Iterator[Ros]:
-    r = Ros()
+def ros(domain_node: Any) -> Iterator[Ros]:
+    r = Ros(domain_node(DOMAIN, "record_replay_test"))
     yield r
     r.close()
 
@@ -180,12 +164,15 @@ def closing_line(log: Path) -> str:
 
 
 @pytest.fixture(scope="module")
-def recorded(ros: Ros, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, int]]:
+def recorded(ros: Ros, tmp_path_factory: pytest.TempPathFactory, module_children: Any
+             ) -> tuple[Path, dict[str, int]]:
     """12 s recorded by recorder_node (default QoS handling), stopped with SIGINT."""
     tmp = tmp_path_factory.mktemp("record")
     out = tmp / "bag"
-    proc = node_process("recorder_node", {"output": str(out), "status_period": "0.0",
-                                          "topics": "[imu/data, thrusters/state]"},
+    children = module_children
+    proc = node_process(children, "recorder_node",
+                        {"output": str(out), "status_period": "0.0",
+                         "topics": "[imu/data, thrusters/state]"},
                         tmp / "recorder.log", "recorder_sigint")
     pubs = Publishers(ros)
     try:
@@ -193,8 +180,7 @@ def recorded(ros: Ros, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, 
         pubs.run(12.0)
         time.sleep(0.5)  # the last messages reach the recorder
     finally:
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=30) == 0, (tmp / "recorder.log").read_text()
+        assert children.stop(proc) == 0, (tmp / "recorder.log").read_text()
         pubs.destroy()
     line = closing_line(tmp / "recorder.log")
     print(line)
@@ -202,8 +188,8 @@ def recorded(ros: Ros, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, 
     return out, dict(pubs.sent)
 
 
-def test_sigint_bag_holds_every_published_message(recorded: tuple[Path, dict[str, int]]
-                                                  ) -> None:
+def test_sigint_bag_holds_every_published_message(recorded: tuple[Path, dict[str, int]],
+                                                  children: Any) -> None:
     path, sent = recorded
     assert sent == {"/imu/data": 12 * IMU_HZ, "/thrusters/state": 12 * JOINT_HZ}
     summary = bag.bag_summary(path)
@@ -220,15 +206,15 @@ def test_sigint_bag_holds_every_published_message(recorded: tuple[Path, dict[str
             (qos,) = conn.ext.offered_qos_profiles
             assert qos.reliability.name == "BEST_EFFORT"
             assert qos.durability.name == "VOLATILE"
-    again = cli("record", "-o", str(path), "imu/data")
+    again = cli(children, "record", "-o", str(path), "imu/data")
     assert again.returncode != 0 and "never overwrites" in again.stderr
 
 
-def test_sigkill_bag_recovered_by_reindex(ros: Ros, tmp_path: Path) -> None:
+def test_sigkill_bag_recovered_by_reindex(ros: Ros, tmp_path: Path, children: Any) -> None:
     """Killed mid-recording ('all' topics, 16 KiB chunks): after 'dampest reindex' the bag
     reads back and holds every message published up to its last complete chunk."""
     out = tmp_path / "bag"
-    proc = node_process("recorder_node", {"output": str(out), "topics": "[all]",
+    proc = node_process(children, "recorder_node", {"output": str(out), "topics": "[all]",
                                           "chunk_size": "16384", "flush_period": "0.5",
                                           "discovery_period": "0.1"},
                         tmp_path / "recorder.log", "recorder_sigkill")
@@ -245,14 +231,12 @@ def test_sigkill_bag_recovered_by_reindex(ros: Ros, tmp_path: Path) -> None:
         stop.set()
         worker.join()
     finally:
-        if proc.poll() is None:
-            proc.kill()
         pubs.destroy()
     assert not (out / "metadata.yaml").exists()
     with pytest.raises(bag.BagError, match="dampest reindex"):
         bag.read_bag(out)
 
-    done = cli("reindex", str(out))
+    done = cli(children, "reindex", str(out))
     # exit 1 when the kill cut a chunk write (its bytes are printed as unreadable), else 0
     cut = not done.stdout.rstrip().endswith("counted by the indexes, 0 bytes")
     assert done.returncode == int(cut), done.stdout + done.stderr
@@ -276,7 +260,7 @@ def test_sigkill_bag_recovered_by_reindex(ros: Ros, tmp_path: Path) -> None:
 
 
 def test_replay_rate_10_keeps_timing_and_bytes(ros: Ros, recorded: tuple[Path, dict[str, int]],
-                                               tmp_path: Path) -> None:
+                                               tmp_path: Path, children: Any) -> None:
     path, sent = recorded
     with Reader(path) as reader:
         expected = [(c.topic, t, bytes(d)) for c, t, d in reader.messages()]
@@ -294,7 +278,7 @@ def test_replay_rate_10_keeps_timing_and_bytes(ros: Ros, recorded: tuple[Path, d
     subs = [ros.node.create_subscription(cls, topic, receiver("/" + topic), qos, raw=True)
             for cls, topic in ((Imu, "imu/data"), (JointState, "thrusters/state"))]
     log = tmp_path / "replay.log"
-    proc = node_process("replay_node", {"bag": str(path), "rate": "10.0",
+    proc = node_process(children, "replay_node", {"bag": str(path), "rate": "10.0",
                                         "reliability": "reliable",
                                         "wait_for_subscribers": "1", "delay": "0.5"}, log)
     try:
@@ -303,8 +287,6 @@ def test_replay_rate_10_keeps_timing_and_bytes(ros: Ros, recorded: tuple[Path, d
         while len(got) < len(expected) and time.monotonic() < end:
             time.sleep(0.05)
     finally:
-        if proc.poll() is None:
-            proc.kill()
         for s in subs:
             ros.node.destroy_subscription(s)
     assert "skipping" not in log.read_text()
@@ -331,7 +313,8 @@ def test_replay_rate_10_keeps_timing_and_bytes(ros: Ros, recorded: tuple[Path, d
     assert 0.9 * wanted <= span <= 2.0 * wanted, (span, wanted)
 
 
-def test_replay_skips_unknown_types_and_filters_topics(ros: Ros, tmp_path: Path) -> None:
+def test_replay_skips_unknown_types_and_filters_topics(ros: Ros, tmp_path: Path,
+                                                       children: Any) -> None:
     from dampest_ros.io.recorder import BagRecorder
 
     src = tmp_path / "src"
@@ -341,24 +324,25 @@ def test_replay_skips_unknown_types_and_filters_topics(ros: Ros, tmp_path: Path)
         rec.add_connection("/imu/data", "sensor_msgs/msg/Imu")
         rec.write(unknown, 1, b"\x00\x01\x00\x00\x01\x00\x00\x00")
     log = tmp_path / "replay.log"
-    proc = node_process("replay_node", {"bag": str(src), "topics": "[odd]"}, log)
+    proc = node_process(children, "replay_node", {"bag": str(src), "topics": "[odd]"}, log)
     assert proc.wait(timeout=60) == 0, log.read_text()
     text = log.read_text()
     assert "skipping /odd" in text and "nonexistent_msgs/msg/Thing" in text
     assert "0/0 messages" in text
-    proc = node_process("replay_node", {"bag": str(src), "exclude_topics": "[odd, imu/data]",
-                                        "wait_for_subscribers": "0"}, log)
+    proc = node_process(children, "replay_node",
+                        {"bag": str(src), "exclude_topics": "[odd, imu/data]",
+                         "wait_for_subscribers": "0"}, log)
     assert proc.wait(timeout=60) == 0, log.read_text()
     assert "playing 0 messages on 0 topics" in log.read_text()  # neither /odd nor /imu/data
 
 
-def test_replay_heard_by_no_one_warns_and_ends(ros: Ros, tmp_path: Path, make_imu: Any
-                                              ) -> None:
+def test_replay_heard_by_no_one_warns_and_ends(ros: Ros, tmp_path: Path, make_imu: Any,
+                                              children: Any) -> None:
     """No subscriber: the final line is a warning (the progress lines before it are info)
     and the node still ends by itself."""
     path = bag.write_bag(tmp_path / "b", {"imu/data": make_imu})
     log = tmp_path / "replay.log"
-    proc = node_process("replay_node", {"bag": str(path), "rate": "4.0",
+    proc = node_process(children, "replay_node", {"bag": str(path), "rate": "4.0",
                                         "wait_for_subscribers": "0",
                                         "progress_period": "0.1"}, log)
     assert proc.wait(timeout=60) == 0, log.read_text()
@@ -368,7 +352,8 @@ def test_replay_heard_by_no_one_warns_and_ends(ros: Ros, tmp_path: Path, make_im
 
 
 def test_replay_sqlite3_with_offset_remap_clock_and_loop(ros: Ros, tmp_path: Path,
-                                                         make_imu: Any) -> None:
+                                                         make_imu: Any, children: Any
+                                                         ) -> None:
     """A SQLite3 bag of 2 s of IMU at 200 Hz, played from 1 s on at rate 5, renamed, with
     /clock, looping: the second half of the bag again and again, byte for byte."""
     from rosgraph_msgs.msg import Clock
@@ -388,7 +373,7 @@ def test_replay_sqlite3_with_offset_remap_clock_and_loop(ros: Ros, tmp_path: Pat
                 Clock, "/clock", lambda m: clock.append(m.clock.sec * 10**9 + m.clock.nanosec),
                 10)]
     log = tmp_path / "replay.log"
-    proc = node_process("replay_node", {
+    proc = node_process(children, "replay_node", {
         "bag": str(path), "rate": "5.0", "start_offset": "1.0", "loop": "true",
         "remap": "['/imu/data:=/replayed/imu']", "clock": "true", "clock_rate": "200.0",
         "reliability": "reliable", "wait_for_subscribers": "1", "delay": "0.3"}, log)
@@ -399,8 +384,6 @@ def test_replay_sqlite3_with_offset_remap_clock_and_loop(ros: Ros, tmp_path: Pat
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=20) == 0, log.read_text()
     finally:
-        if proc.poll() is None:
-            proc.kill()
         for s in subs:
             ros.node.destroy_subscription(s)
     assert got[:2 * len(tail)] == tail + tail, log.read_text()
@@ -410,22 +393,23 @@ def test_replay_sqlite3_with_offset_remap_clock_and_loop(ros: Ros, tmp_path: Pat
     assert np.sum(np.diff(bag_clock) < 0) >= 1  # it jumped back at the loop
 
 
-def test_dampest_record_stops_cleanly_on_sigterm(ros: Ros, tmp_path: Path) -> None:
+def test_dampest_record_stops_cleanly_on_sigterm(ros: Ros, tmp_path: Path, children: Any
+                                                 ) -> None:
     out = tmp_path / "bag"
     log = tmp_path / "record.log"
     with log.open("wb") as f:
-        proc = subprocess.Popen([sys.executable, "-c", CLI, "record", "-o", str(out),
-                                 "imu/data", "thrusters/state", "--max-bag-duration", "1.0",
-                                 "--node-name", "recorder_sigterm"],
-                                env=env(), stdout=f, stderr=subprocess.STDOUT)
+        proc = children.start([sys.executable, "-c", CLI, "record", "-o", str(out),
+                               "imu/data", "thrusters/state", "--max-bag-duration", "1.0",
+                               "--node-name", "recorder_sigterm"],
+                              env=children.ros_env(DOMAIN), stdout=f,
+                              stderr=subprocess.STDOUT)
     pubs = Publishers(ros)
     try:
         pubs.wait_for_subscriber("recorder_sigterm")
         pubs.run(3.0)
         time.sleep(0.5)
     finally:
-        proc.send_signal(signal.SIGTERM)
-        assert proc.wait(timeout=30) == 0, log.read_text()
+        assert children.stop(proc, signal.SIGTERM) == 0, log.read_text()
         pubs.destroy()
     assert {t: s.count for t, s in bag.bag_summary(out).topics.items()} == pubs.sent
     assert sequence_numbers(out) == {t: list(range(n)) for t, n in pubs.sent.items()}

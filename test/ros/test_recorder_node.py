@@ -218,3 +218,34 @@ def test_exclude_regex_keeps_topics_out_and_a_recording_is_not_warned(
     assert {t: s.count for t, s in bag.bag_summary(tmp_path / "bag").topics.items()} \
         == {"/imu/data": 1}
     assert log.lines == []
+
+
+def test_regex_records_the_topics_it_matches_and_only_those(
+        ctx: Any, tmp_path: Path, spin_until: Callable[..., bool]) -> None:
+    """regex '^/imu/' without topics (dampest record -e '^/imu/'): imu/data, published, is
+    recorded as soon as it appears; truth/odom, published too, is not."""
+    rec = recorder(ctx, tmp_path / "bag", topics=[""], regex="^/imu/")
+    src = rclpy.create_node("recorder_test_regex", context=ctx)
+    odom = src.create_publisher(Odometry, "truth/odom", RELIABLE_QOS)
+    imu = src.create_publisher(Imu, "imu/data", SENSOR_QOS)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(rec)
+    try:
+        assert spin_until(ex, lambda: imu.get_subscription_count() == 1, 2.5)
+        for _ in range(3):
+            imu.publish(Imu())
+            odom.publish(Odometry())
+        assert wait_until(lambda: rec.recorder.message_count == 3, 5.0)
+        assert odom.get_subscription_count() == 0 and list(rec.subs) == ["/imu/data"]
+    finally:
+        ex.shutdown()
+        rec.destroy_node()
+        src.destroy_node()
+    assert {t: s.count for t, s in bag.bag_summary(tmp_path / "bag").topics.items()} \
+        == {"/imu/data": 3}
+
+
+def test_no_topic_and_no_regex_is_refused_at_start(ctx: Any, tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"topics must name at least one topic, or be "
+                                         r"\['all'\], or regex select them"):
+        recorder(ctx, tmp_path / "bag", topics=[""])
