@@ -577,6 +577,39 @@ class _HasVersion(Protocol):
 Versioned = TypeVar("Versioned", bound=_HasVersion)
 
 
+class LifeCounts:
+    """A node's counters as life totals across restarts of what keeps them.
+
+    A rebuild (a parameter change) or a reset makes a new core object whose counters start at
+    0; the node's /diagnostics must not lose what was counted before. :meth:`restart` runs the
+    restart and keeps what it zeroed; calling the object raises each counter by that.
+
+    Parameters
+    ----------
+    current : callable
+        The counters as the core object keeps them now (name to count).
+    """
+
+    def __init__(self, current: Callable[[], dict[str, int]]) -> None:
+        self.current = current
+        #: per counter, what restarts zeroed
+        self.zeroed: dict[str, int] = {}
+
+    def restart(self, how: Callable[[], None]) -> None:
+        """Run ``how`` (a rebuild or a reset) keeping every counter it lowered: counters
+        only grow, so a lower value is one the restart zeroed."""
+        before = self.current()
+        how()
+        after = self.current()
+        for key, value in before.items():
+            if after.get(key, 0) < value:
+                self.zeroed[key] = self.zeroed.get(key, 0) + value - after.get(key, 0)
+
+    def __call__(self, values: dict[str, Any]) -> dict[str, Any]:
+        """``values`` with each counter raised by what restarts zeroed."""
+        return {k: v + self.zeroed[k] if k in self.zeroed else v for k, v in values.items()}
+
+
 class EstimatorParamNode(ModelParamNode):
     """A :class:`ModelParamNode` around a recursive estimator (``self.estimator``, whose
     ``rls`` forgets and can be frozen): what the vehicle and the arm estimator nodes share.
@@ -588,16 +621,16 @@ class EstimatorParamNode(ModelParamNode):
     :meth:`_save`, and holds ``version``.
 
     The ``count.*`` on /diagnostics are the node's life totals: what a rebuild or ~/reset
-    zeroes in the estimator (:meth:`_estimator_counts`) is kept in :attr:`zeroed` and added
-    back by :meth:`life_counts`.
+    zeroes in the estimator (:meth:`_estimator_counts`) is kept and added back by
+    :attr:`life_counts` (:class:`LifeCounts`).
     """
 
     estimator: Any
     version: int
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
-        #: per count.* key, what restarts of the estimator zeroed (added back on /diagnostics)
-        self.zeroed: dict[str, int] = {}
+        #: the estimator's counts as the node's life totals (rebuilds and ~/reset included)
+        self.life_counts = LifeCounts(self._estimator_counts)
         super().__init__(*args, **kwargs)
     #: what happened to the model file at save_path at start (diagnostics ``resume``)
     resumed: str = "off"
@@ -654,21 +687,6 @@ class EstimatorParamNode(ModelParamNode):
         """The ``count.*`` values the estimator keeps itself (those a restart zeroes)."""
         raise NotImplementedError
 
-    def _restart(self, how: Callable[[], None]) -> None:
-        """Run ``how`` (a rebuild or a reset) keeping in :attr:`zeroed` every estimator count
-        it lowered: counters only grow, so a lower value is one the restart zeroed."""
-        before = self._estimator_counts()
-        how()
-        after = self._estimator_counts()
-        for key, value in before.items():
-            if after.get(key, 0) < value:
-                self.zeroed[key] = self.zeroed.get(key, 0) + value - after.get(key, 0)
-
-    def life_counts(self, values: dict[str, Any]) -> dict[str, Any]:
-        """``values`` with each ``count.*`` the estimator keeps raised by what restarts
-        zeroed: the node's life totals."""
-        return {k: v + self.zeroed[k] if k in self.zeroed else v for k, v in values.items()}
-
     def start_services(self) -> None:
         """~/reset, ~/save, ~/freeze and the publish timer (once the estimator exists)."""
         self.create_service(Trigger, "~/reset", self._srv_reset)
@@ -685,13 +703,13 @@ class EstimatorParamNode(ModelParamNode):
             self._timer.cancel()
             self._timer = self.create_timer(1.0 / self.p("publish_rate"), self._publish)
         if set(names) - {"publish_rate", "save_path"}:
-            self._restart(self._build)
+            self.life_counts.restart(self._build)
             self.get_logger().info(f"estimator restarted from the prior ({', '.join(names)} "
                                    "changed)")
             self._publish(force=True)
 
     def _srv_reset(self, _: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
-        self._restart(self._reset)
+        self.life_counts.restart(self._reset)
         self._publish(force=True)
         res.success, res.message = True, f"reset to the prior (model version {self.version})"
         return res

@@ -50,6 +50,7 @@ from dampest_ros.ros.common import (
     DIAGNOSTICS_TOPIC,
     RELIABLE_QOS,
     SENSOR_QOS,
+    LifeCounts,
     Param,
     ParamNode,
     QuietFlush,
@@ -144,6 +145,7 @@ class PreprocessNode(ParamNode):
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC,
                                              RELIABLE_QOS)
         self.messages = SampleMessages()
+        self.life_counts = LifeCounts(self._counts)  # kept across rebuilds
         self._build()
         # raw: stamps and values read from the CDR bytes (the joint names need rclpy's)
         self.create_subscription(Imu, "imu/data", self._on_imu, SENSOR_QOS, raw=True)
@@ -183,9 +185,14 @@ class PreprocessNode(ParamNode):
         self.order = StampOrder(topic_roles(wrench), self.p("reorder_latency"),
                                 self.p("clock_jump"))
 
+    def _counts(self) -> dict[str, int]:
+        """The counters the preprocessor and the stamp order keep (a rebuild zeroes them)."""
+        return {**self.pre.counts, "late": self.order.counts["late"]}
+
     def on_parameters(self, names: list[str]) -> None:
         if set(names) - {"frame_id"}:
-            self._build()
+            self._flush()  # what the stamp order holds goes through the settings it came under
+            self.life_counts.restart(self._build)
             self.get_logger().info(f"preprocessing restarted ({', '.join(names)} changed)")
 
     # --- subscriptions: convert, call core, publish -------------------------------------------
@@ -237,7 +244,8 @@ class PreprocessNode(ParamNode):
         self._publish(samples)
 
     def _flush(self) -> None:
-        """The input has gone quiet: process what the stamp order holds."""
+        """Process what the stamp order holds (the input has gone quiet, or a rebuild is
+        due)."""
         if len(self.order):
             self._process(self.order.flush())
 
@@ -256,10 +264,9 @@ class PreprocessNode(ParamNode):
             self.get_logger().warning(self.pre.events.popleft())
 
     def _publish_diagnostics(self) -> None:
-        c: dict[str, float] = dict(self.pre.counts)
+        c: dict[str, float] = dict(self.life_counts(self._counts()))  # life totals
         c["published"] = self.published
         c["rejected_unstamped"] = self.unstamped
-        c["late"] = self.order.counts["late"]
         c["max_lag_s"] = self.order.max_lag
         c["derivative_lag_s"] = self.pre.derivative_lag
         problems = sum(int(c[k]) for k in PROBLEMS)

@@ -264,3 +264,17 @@ def test_recorder_closes_its_bag_through_a_train_of_signals(tmp_path: Path) -> N
     assert "Traceback" not in text and "KeyboardInterrupt" not in text, text
     assert (out / "metadata.yaml").exists()
     assert text.count("while closing: finishing the close first") <= 1, text
+
+
+def test_preprocess_rebuild_keeps_its_counts_and_the_messages_it_held(
+        preprocess: PreprocessNode) -> None:
+    """Was: a parameter change rebuilt the preprocessor and the stamp order with their counts
+    at 0 (a rejection vanished from /diagnostics) and dropped the messages the stamp order
+    still held (up to reorder_latency of every sensor)."""
+    preprocess._on_thrusters(thrusters(103.001, effort=[1.0]))  # held by the stamp order
+    preprocess.set_parameters([Parameter("settle", value=2.0)])
+    c = counts(preprocess)
+    assert c["rejected_malformed"] == "1"
+    assert (c["imu"], c["dvl"], c["pressure"], c["thrusters"]) == ("600", "30", "60", "61")
+    fly(preprocess, 103.0, 1.0)
+    assert counts(preprocess)["imu"] == "800"
