@@ -8,7 +8,10 @@ dampest/velocity (TwistWithCovarianceStamped), dampest/acceleration
 (QuaternionStamped, base_link FLU → odom ENU, for the restoring forces) with identical header
 stamps at a fixed rate, body frame FLU (base_link), only for usable samples (not during DVL
 dropouts); diagnostics with the message counts, rejections and resets once per second (wall
-clock).
+clock), WARN with what is wrong when a rejection or reset was counted or when one sensor has
+sent nothing for 5 s while the others arrive (a wrong topic name, a sensor down). The counts
+are the node's life totals: a parameter change that rebuilds the preprocessing keeps them,
+and first passes on what the stamp order holds.
 The DVL may send geometry_msgs/TwistStamped instead (parameter dvl_type, read at start).
 Sensor mounting (lever arms, rotations) and the expected frame_ids come from the vehicle
 file's sensors: section; messages with another header.frame_id are counted
@@ -66,6 +69,10 @@ from dampest_ros.ros.convert import header_frame_id, stamped_floats
 #: The diagnostics counts that raise the status to WARN.
 PROBLEMS = ("rejected_nonfinite", "rejected_implausible", "rejected_malformed",
             "rejected_unstamped", "rejected_stale", "clock_resets")
+
+#: Seconds (diagnostics periods) a sensor may stay silent while the others arrive before the
+#: status says so (WARN): without it no sample is usable, which the counts alone do not say.
+SILENT_AFTER = 5
 
 
 class SampleMessages:
@@ -170,6 +177,9 @@ class PreprocessNode(ParamNode):
         self.quiet = QuietFlush(self, self._flush)
         self.published = 0
         self.unstamped = 0  # messages with header.stamp 0, rejected
+        self._arrived: dict[str, int] = {}  # per role, messages arrived
+        self._heard: dict[str, int] = {}  # per role, the arrivals at the last diagnostics
+        self._silent: dict[str, int] = {}  # per role, periods without a message
 
     def _build(self) -> None:
         v = load_vehicle(self.p("vehicle"))
@@ -228,6 +238,7 @@ class PreprocessNode(ParamNode):
         starts at 0) is rejected before it, as it would be a clock jump that resets the
         state (a restarted clock's next message still is one)."""
         self.quiet.arrived()
+        self._arrived[role] = self._arrived.get(role, 0) + 1
         if stamp == 0 and self.order.newest > self.p("clock_jump"):
             self.unstamped += 1
             if self.unstamped == 1:
@@ -270,9 +281,23 @@ class PreprocessNode(ParamNode):
         c["max_lag_s"] = self.order.max_lag
         c["derivative_lag_s"] = self.pre.derivative_lag
         problems = sum(int(c[k]) for k in PROBLEMS)
+        said = [f"{problems} rejected or reset"] if problems else []
+        said += [f"no {role} message for {n} s while the others arrive"
+                 for role, n in self._silences().items() if n >= SILENT_AFTER]
         self.pub_diag.publish(diagnostic_array(
-            self, "preprocessing", c, level=1 if problems else 0,
-            message=f"{problems} rejected or reset" if problems else "ok"))
+            self, "preprocessing", c, level=1 if said else 0,
+            message="; ".join(said) if said else "ok"))
+
+    def _silences(self) -> dict[str, int]:
+        """Per sensor role, for how many diagnostics periods no message of it has arrived
+        while others have (0 when one arrived or nothing arrived at all)."""
+        roles = topic_roles(bool(str(self.p("wrench_topic")).strip()))  # the expected ones
+        now = {r: self._arrived.get(r, 0) for r in roles}
+        before, self._heard = self._heard, now
+        grew = {r: n > before.get(r, 0) for r, n in now.items()}
+        self._silent = {r: 0 if grew[r] or not any(grew.values()) else
+                        self._silent.get(r, 0) + 1 for r in now}
+        return self._silent
 
 
 main = main_for(PreprocessNode, __doc__ or "")

@@ -69,14 +69,14 @@ def thrusters(t: float, names: list[str] | None = None,
     return m
 
 
-def fly(node: PreprocessNode, t0: float, seconds: float) -> float:
+def fly(node: PreprocessNode, t0: float, seconds: float, with_dvl: bool = True) -> float:
     """Feed ``seconds`` of a 200 Hz IMU, 10 Hz DVL, 20 Hz pressure and thrusters from stamp
     ``t0``; returns the last stamp."""
     k0 = round(t0 * 200)
     for k in range(k0 + 1, k0 + 1 + round(seconds * 200)):
         t = k / 200
         node._on_imu(imu(t))
-        if k % 20 == 0:
+        if k % 20 == 0 and with_dvl:
             node._on_dvl(dvl(t))
         if k % 10 == 0:
             node._on_thrusters(thrusters(t))
@@ -84,12 +84,17 @@ def fly(node: PreprocessNode, t0: float, seconds: float) -> float:
     return k0 / 200 + seconds
 
 
-def counts(node: PreprocessNode) -> dict[str, str]:
-    """The key/values of the node's next diagnostics."""
+def status(node: PreprocessNode) -> Any:
+    """The node's next diagnostics status (diagnostic_msgs/DiagnosticStatus)."""
     sent: list[Any] = []
     node.pub_diag.publish = sent.append  # type: ignore[method-assign]
     node._publish_diagnostics()
-    return {kv.key: kv.value for kv in sent[-1].status[0].values}
+    return sent[-1].status[0]
+
+
+def counts(node: PreprocessNode) -> dict[str, str]:
+    """The key/values of the node's next diagnostics."""
+    return {kv.key: kv.value for kv in status(node).values}
 
 
 @pytest.fixture
@@ -278,3 +283,19 @@ def test_preprocess_rebuild_keeps_its_counts_and_the_messages_it_held(
     assert (c["imu"], c["dvl"], c["pressure"], c["thrusters"]) == ("600", "30", "60", "61")
     fly(preprocess, 103.0, 1.0)
     assert counts(preprocess)["imu"] == "800"
+
+
+def test_preprocess_says_when_one_sensor_has_gone_silent(preprocess: PreprocessNode) -> None:
+    """Was: with the DVL silent the status stayed 'ok' (no sample usable, nothing said)."""
+    assert status(preprocess).message == "ok"
+    t = 103.0
+    messages = []
+    for _ in range(6):  # 6 diagnostics periods (1 s each) without the DVL
+        t = fly(preprocess, t, 1.0, with_dvl=False)
+        s = status(preprocess)
+        messages.append((int.from_bytes(s.level, "little"), s.message))
+    assert messages[3] == (0, "ok")
+    assert messages[4:] == [(1, "no dvl message for 5 s while the others arrive"),
+                            (1, "no dvl message for 6 s while the others arrive")]
+    fly(preprocess, t, 1.0)  # back
+    assert status(preprocess).message == "ok"
