@@ -276,9 +276,11 @@ def from_window_means(t: FloatArray, stamps: FloatArray, means: FloatArray) -> F
     ndarray, shape (n, k)
     """
     steps = np.diff(stamps).reshape((-1,) + (1,) * (means.ndim - 1))
-    integral = np.concatenate([np.zeros((1,) + means.shape[1:]),
+    integral = np.concatenate([np.zeros((1, *means.shape[1:])),
                                np.cumsum(steps * means[1:], axis=0)])
-    return np.asarray(make_interp_spline(stamps, integral, k=min(5, len(stamps) - 1), axis=0)(t, 1), dtype=float)
+    # quintic (fewer messages: the highest degree they allow)
+    spline = make_interp_spline(stamps, integral, k=min(5, len(stamps) - 1), axis=0)
+    return np.asarray(spline(t, 1), dtype=float)
 
 
 def fuse_velocity(t: FloatArray, R: FloatArray, f: FloatArray, t_dvl: FloatArray,
