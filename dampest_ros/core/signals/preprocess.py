@@ -17,7 +17,8 @@ Pipeline, all vectorised over whole segments:
 3. On a common grid at ``rate`` Hz per segment: attitude, gyro and specific force from the
    IMU, thrust through the allocation matrix into τ, or τ straight from a body-wrench topic
    (geometry_msgs/WrenchStamped, FLU), optionally shifted by a known delay. A wrench message,
-   like thruster telemetry, is taken as the mean over its message period before its stamp.
+   like thruster telemetry, is taken as the mean over its message period before its stamp,
+   and τ is the signal with these means (:func:`from_window_means`), not their interpolation.
 4. Linear velocity by a zero-phase complementary filter in the non-rotating NED frame: the
    DVL below ``crossover`` Hz and the integrated IMU acceleration R f + g above it
    (Butterworth pairs with |H_lp|² + |H_hp|² = 1, so the fusion is exact where both agree),
@@ -25,9 +26,8 @@ Pipeline, all vectorised over whole segments:
    accelerometer: the velocity alone (a cubic spline through its samples), ν̇ by
    differentiating it like ω, and no DVL outlier test; without a gyro: ω from the
    zero-phase derivative of the attitude's quaternion.
-5. The same light zero-phase low-pass (``cutoff``) on ν, ν̇ and τ; ν and ν̇ also get the
-   moving average that window-averaged thrust telemetry has, so all three see the same
-   filter. Segment ends are trimmed of filter transients.
+5. The same light zero-phase low-pass (``cutoff``) on ν, ν̇ and τ, so all three see the
+   same filter. Segment ends are trimmed of filter transients.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import fft as sp_fft
 from scipy import integrate
-from scipy.interpolate import CubicSpline
+from scipy.interpolate import CubicSpline, make_interp_spline
 
 from dampest_ros.core.physics import frames
 from dampest_ros.core.physics.mounting import (
@@ -169,7 +169,7 @@ def _clean(s: Series, *cols: FloatArray) -> NDArray[np.bool_]:
 
 
 def zero_phase(x: FloatArray, rate: float, cutoff: float, derivative: bool = False,
-               window: float = 0.0, order: int = 4) -> FloatArray:
+               order: int = 4) -> FloatArray:
     """Zero-phase Butterworth-magnitude low-pass, optionally differentiated, along axis 0.
 
     Applies H(f) = 1 / (1 + (f/f_c)^{2·order}) (the gain of a Butterworth filter run forwards
@@ -188,21 +188,18 @@ def zero_phase(x: FloatArray, rate: float, cutoff: float, derivative: bool = Fal
         −6 dB frequency f_c (Hz).
     derivative : bool
         Return the filtered time derivative (units of x per second).
-    window : float
-        Also apply a centred moving average of this length (s): H · sinc(f w). Used to give
-        every signal the averaging that window-averaged telemetry (thrust) already has.
     order : int
 
     Returns
     -------
     ndarray, shape like x
     """
-    (y,) = zero_phase_many(x, rate, cutoff, (derivative,), window, order)
+    (y,) = zero_phase_many(x, rate, cutoff, (derivative,), order)
     return y
 
 
 def zero_phase_many(x: FloatArray, rate: float, cutoff: float, derivatives: tuple[bool, ...],
-                    window: float = 0.0, order: int = 4) -> list[FloatArray]:
+                    order: int = 4) -> list[FloatArray]:
     """:func:`zero_phase` of x once per entry of ``derivatives`` (False: the filtered signal,
     True: its derivative) from one forward transform of x; each equals what
     :func:`zero_phase` gives.
@@ -210,7 +207,7 @@ def zero_phase_many(x: FloatArray, rate: float, cutoff: float, derivatives: tupl
     Parameters
     ----------
     x : ndarray, shape (N, ...)
-    rate, cutoff, window, order
+    rate, cutoff, order
         As :func:`zero_phase`.
     derivatives : tuple of bool
 
@@ -231,7 +228,7 @@ def zero_phase_many(x: FloatArray, rate: float, cutoff: float, derivatives: tupl
     ext = np.concatenate([x, right, bridge, left], axis=0)
     f = np.fft.rfftfreq(size, d=1.0 / rate)
     # H(f) = 1 / (1 + (f/f_c)^{2 order})
-    H = 1.0 / (1.0 + (f / cutoff) ** (2 * order)) * np.sinc(f * window)
+    H = 1.0 / (1.0 + (f / cutoff) ** (2 * order))
     shape = (len(f),) + (1,) * (x.ndim - 1)
     X = sp_fft.rfft(ext, axis=0)
     out = []
@@ -250,6 +247,40 @@ def _interp(t: FloatArray, tp: FloatArray, x: FloatArray) -> FloatArray:
     for j in range(x2.shape[1]):
         out[:, j] = np.interp(t, tp, x2[:, j])
     return out.reshape((len(t), *x.shape[1:]))
+
+
+def from_window_means(t: FloatArray, stamps: FloatArray, means: FloatArray) -> FloatArray:
+    """The signal at ``t`` whose mean over each message period (s_{k−1}, s_k] is the message
+    (histopolation): the derivative of the quintic spline through its running integral
+    F(s_k) = Σ_{j≤k} (s_j − s_{j−1}) x̄_j.
+
+    Window-averaged telemetry (thrust: the mean over the message period before its stamp)
+    interpolated linearly between window centres is low-passed twice, by the window and by
+    the interpolation: a sinusoid keeps 97.3 % at 0.75 Hz, 89.4 % at 1.5 Hz, 73.0 % at 2.5 Hz
+    of 10 Hz telemetry. Where ν does not see the same loss, a lightly damped mode's damping
+    comes out low by it (K_p of a 0.75 Hz roll mode 5 % low, 30 σ), and giving ν the same
+    filter cannot help the terms nonlinear in ν. This reconstruction keeps 100.0 %, 99.996 %
+    and 99.86 % there, with no phase shift.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Times (s) to evaluate at.
+    stamps : ndarray, shape (M,)
+        Message stamps (s), increasing; the first message only starts the integral.
+    means : ndarray, shape (M, k)
+        Each message's mean over the period since the previous stamp.
+
+    Returns
+    -------
+    ndarray, shape (n, k)
+    """
+    steps = np.diff(stamps).reshape((-1,) + (1,) * (means.ndim - 1))
+    integral = np.concatenate([np.zeros((1, *means.shape[1:])),
+                               np.cumsum(steps * means[1:], axis=0)])
+    # quintic (fewer messages: the highest degree they allow)
+    spline = make_interp_spline(stamps, integral, k=min(5, len(stamps) - 1), axis=0)
+    return np.asarray(spline(t, 1), dtype=float)
 
 
 def fuse_velocity(t: FloatArray, R: FloatArray, f: FloatArray, t_dvl: FloatArray,
@@ -756,10 +787,11 @@ def _stretch(inputs: _Inputs, t: FloatArray, core: slice, tally: _Tally
         tally.outliers += outliers
     else:  # no accelerometer: the velocity alone, differentiated with ω in _filtered_motion
         v = CubicSpline(td, vd, axis=0)(tf)
-    nu, nu_dot = _filtered_motion(v, v_dot, om, rate_f, cfg.cutoff, inputs.window)
-    # τ telemetry is the mean over the message period before its stamp
-    tau = zero_phase(_interp(t - cfg.delay, thr.stamp - inputs.window / 2,
-                             body_wrench(thr, inputs.vehicle.thrusters)), cfg.rate, cfg.cutoff)
+    nu, nu_dot = _filtered_motion(v, v_dot, om, rate_f, cfg.cutoff)
+    # τ telemetry is the mean over the message period before its stamp: τ itself, at t
+    tau = zero_phase(from_window_means(t - cfg.delay, thr.stamp,
+                                       body_wrench(thr, inputs.vehicle.thrusters)),
+                     cfg.rate, cfg.cutoff)
     depth = _depth(inputs.pressure, mount.pressure, t, R[::ratio], cfg.atmospheric_pressure,
                    inputs.vehicle.body.rho, inputs.vehicle.body.gravity)
     return nu[::ratio], nu_dot[::ratio], R[::ratio], tau, depth
@@ -933,10 +965,9 @@ def _fuse_without_outliers(tf: FloatArray, R: FloatArray, f: FloatArray, omega: 
 
 
 def _filtered_motion(v: FloatArray, v_dot: FloatArray | None, omega: FloatArray, rate: float,
-                     cutoff: float, window: float) -> tuple[FloatArray, FloatArray]:
-    """ν and ν̇ through the light zero-phase low-pass and the moving average that the
-    window-averaged thrust telemetry already has; ω̇ (and v̇ when not given: no
-    accelerometer) by differentiating on this (fine) grid, where it is accurate.
+                     cutoff: float) -> tuple[FloatArray, FloatArray]:
+    """ν and ν̇ through the light zero-phase low-pass that τ also gets; ω̇ (and v̇ when not
+    given: no accelerometer) by differentiating on this (fine) grid, where it is accurate.
 
     Parameters
     ----------
@@ -948,8 +979,6 @@ def _filtered_motion(v: FloatArray, v_dot: FloatArray | None, omega: FloatArray,
         Their sample rate (Hz).
     cutoff : float
         Hz.
-    window : float
-        Moving-average length (s).
 
     Returns
     -------
@@ -957,11 +986,11 @@ def _filtered_motion(v: FloatArray, v_dot: FloatArray | None, omega: FloatArray,
     """
     if v_dot is None:
         nu, nu_dot = zero_phase_many(np.concatenate([v, omega], axis=1), rate, cutoff,
-                                     (False, True), window=window)
+                                     (False, True))
         return nu, nu_dot
-    nu = zero_phase(np.concatenate([v, omega], axis=1), rate, cutoff, window=window)
-    nu_dot = np.concatenate([zero_phase(v_dot, rate, cutoff, window=window),
-                             zero_phase(omega, rate, cutoff, derivative=True, window=window)],
+    nu = zero_phase(np.concatenate([v, omega], axis=1), rate, cutoff)
+    nu_dot = np.concatenate([zero_phase(v_dot, rate, cutoff),
+                             zero_phase(omega, rate, cutoff, derivative=True)],
                             axis=1)
     return nu, nu_dot
 

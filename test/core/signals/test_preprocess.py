@@ -7,11 +7,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from dampest_ros.core.identifier import DampingIdentifier
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.measurements import ImuSeries, OdometrySeries, Series, TwistSeries
 from dampest_ros.core.signals.preprocess import (
     DataError,
     PreprocessConfig,
+    from_window_means,
     preprocess,
     segments_from_gaps,
     zero_phase,
@@ -41,9 +43,9 @@ def test_noise_free_velocity_and_acceleration_match_the_truth(vehicle: Vehicle,
                                                               traj: Trajectory) -> None:
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, QUIET, seed=4)
     s = preprocess(rec, vehicle)
-    # the truth filtered the way the preprocessing filters (light low-pass + telemetry window)
-    nu = zero_phase(traj.nu, 50.0, 10.0, window=0.02)
-    nu_dot = zero_phase(traj.nu, 50.0, 10.0, derivative=True, window=0.02)
+    # the truth filtered the way the preprocessing filters (the light low-pass)
+    nu = zero_phase(traj.nu, 50.0, 10.0)
+    nu_dot = zero_phase(traj.nu, 50.0, 10.0, derivative=True)
     i = np.searchsorted(traj.t, s.t - 1e-9)
     # grid phase-locked to the thrust windows: half a step after the trajectory's instants
     frac = (s.t - traj.t[i - 1]) / traj.dt
@@ -161,3 +163,54 @@ def test_missing_signals_are_substituted_and_said(vehicle: Vehicle, traj: Trajec
         err = np.sqrt(np.mean(zero_phase(getattr(s, name) - getattr(clean, name), 50.0,
                                          2.0) ** 2, axis=0))
         assert np.all(err < 0.01 * np.std(getattr(clean, name), axis=0)), (name, err)
+
+
+def _sine_gain(t: np.ndarray, y: np.ndarray, f: float) -> complex:
+    """The complex amplitude of y (shape (n,)) at f Hz relative to sin(2πft), by least squares."""
+    a, b = np.linalg.lstsq(np.c_[np.sin(2 * np.pi * f * t), np.cos(2 * np.pi * f * t)], y,
+                           rcond=None)[0]
+    return complex(a, b)
+
+
+def test_window_means_give_back_the_signal_without_loss_or_phase() -> None:
+    """10 Hz telemetry of sin(2πft), each message the mean over the period before its stamp:
+    the histopolation keeps the sinusoid within 1e-4 (0.75, 1.5 Hz), with no phase; linear
+    interpolation between the window centres, what the preprocessing did before, kept
+    97.3 % and 89.4 %. Each message stays the mean of the result over its period."""
+    rate = 10.0
+    stamps = np.arange(0.0, 60.0, 1.0 / rate)
+    t = np.arange(10.0, 50.0, 1e-3)
+    for f, old in ((0.75, 0.9726), (1.5, 0.8942)):
+        w = 2 * np.pi * f
+        means = (np.cos(w * (stamps - 1.0 / rate)) - np.cos(w * stamps)) * rate / w
+        gain = _sine_gain(t, from_window_means(t, stamps, means[:, None])[:, 0], f)
+        assert abs(gain - 1.0) < 1e-4, gain
+        linear = _sine_gain(t, np.interp(t, stamps - 0.5 / rate, means), f)
+        assert abs(linear) == pytest.approx(old, abs=1e-4)
+    # histopolation: the mean over each message period is the message (trapezoid, 1 ms steps)
+    x = np.random.default_rng(3).normal(size=(len(stamps), 2))
+    fine = np.linspace(stamps[100], stamps[101], 101)
+    np.testing.assert_allclose(np.trapezoid(from_window_means(fine, stamps, x), fine, axis=0)
+                               * rate, x[101], atol=1e-4)
+
+
+def test_lightly_damped_roll_from_slow_thrust_telemetry_is_unbiased() -> None:
+    """torpedo_auv's roll mode (0.75 Hz, damping ratio 0.2) with purely linear roll damping
+    K_p = 0.5885, flown with protocol B and 10 Hz thruster telemetry, noise-free sensors,
+    bag route: K_p within 2σ and 0.3 % of the truth (0.5887 ± 0.0008, M_q 1.999 ± 0.014).
+    With τ interpolated linearly between window centres: K_p 0.5803 ± 0.0016 (5 σ low),
+    M_q 2.556 ± 0.086 (6.5 σ high)."""
+    vehicle = load_vehicle("torpedo_auv")
+    names = vehicle.damping.parameter_names
+    theta = vehicle.theta.copy()
+    theta[names.index("K_p")], theta[names.index("K_pp")] = 0.5885, 0.0
+    vehicle = replace(vehicle, theta=theta)
+    traj = run(vehicle, make_excitation("B", vehicle, 150.0, seed=1))
+    rec = measure(traj, vehicle.body.rho, vehicle.body.gravity,
+                  replace(QUIET, thruster_rate=10.0), seed=1)
+    fit = DampingIdentifier(vehicle).fit(preprocess(rec, vehicle)).fit_
+    assert fit is not None
+    for name, truth in (("K_p", 0.5885), ("M_q", 2.0)):
+        i = names.index(name)
+        assert abs(fit.theta[i] - truth) < 2 * fit.std[i], (name, fit.theta[i], fit.std[i])
+    assert fit.theta[names.index("K_p")] == pytest.approx(0.5885, rel=3e-3)
