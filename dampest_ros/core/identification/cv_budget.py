@@ -7,9 +7,9 @@ whose impulse response is shorter than the guard, carries nothing of a held-out 
 folds that predict it. Each fold is predicted by the least-squares fit on the others
 (:func:`fold_errors`). Along a path of nested models (the terms in the order a search added
 them), the chosen size is the smallest whose held-out error exceeds the best's by no more than
-one standard error of the paired per-fold difference (:func:`one_se_size`; Hastie,
+one standard error of the best's (:func:`one_se_size`; Hastie,
 Tibshirani & Friedman 2009, §7.10): a term stays only when its gain is larger than the
-fold-to-fold scatter of that gain, and the path's order (the search's and the library's,
+uncertainty of the held-out error itself, and the path's order (the search's and the library's,
 simplest and physically named first) decides among sizes the data cannot tell apart.
 """
 
@@ -28,14 +28,16 @@ GUARD_PERIODS = 2.0
 
 
 def guarded_folds(n: int, folds: int, guard: int) -> NDArray[np.int64]:
-    """The contiguous time fold (0..folds−1) of each of n samples, −1 within ``guard`` samples
-    of a boundary between two folds, shape (n,)."""
+    """The contiguous time fold (0..folds−1) of each of n samples, −1 for the ``guard``
+    samples on each side of a boundary between two folds, shape (n,)."""
     k = np.arange(n)
     fold = np.minimum((k * folds) // max(n, 1), folds - 1)
     if guard > 0 and folds > 1:
         # boundary b sits at the first sample of fold b: ⌈b n / F⌉
         edges = -((-np.arange(1, folds) * n) // folds)
-        near = np.abs(k[:, None] - edges[None, :]).min(axis=1) < guard
+        d = k[:, None] - edges[None, :]
+        # the last ``guard`` samples before a boundary and the first ``guard`` after it
+        near = ((d >= -guard) & (d < guard)).any(axis=1)
         fold = np.where(near, -1, fold)
     return fold.astype(np.int64)
 
@@ -88,15 +90,12 @@ def one_se_size(errors: FloatArray) -> int:
     Returns
     -------
     int
-        The number of added terms k: the smallest with Σ_f (e_kf − e_bf) ≤ √F · s_k, b the
-        model of least held-out RSS and s_k the standard deviation over folds of e_kf − e_bf.
+        The number of added terms k: the smallest with Σ_f e_kf ≤ Σ_f e_bf + √F · s_b, b the
+        model of least held-out RSS and s_b the standard deviation of its e_bf over folds.
     """
     total = errors.sum(axis=1)
     best = int(np.argmin(total))
     F = errors.shape[1]
-    for k in range(best + 1):
-        diff = errors[k] - errors[best]
-        se = np.sqrt(F) * float(np.std(diff, ddof=1)) if F > 1 else 0.0
-        if float(diff.sum()) <= se:
-            return k
-    return best
+    # standard error of Σ_f e_bf: √F times the scatter of one fold's error
+    se = np.sqrt(F) * float(np.std(errors[best], ddof=1)) if F > 1 else 0.0
+    return int(np.flatnonzero(total <= total[best] + se)[0])
