@@ -14,8 +14,11 @@ same data leaves. The number of terms added is the data's (blocked cross-validat
 contiguous time folds with a guard of two filter periods at each boundary, BIC, and the
 one-standard-error rule, simplest and physically named terms first); the misfit lines, the
 added terms per DOF and, in the model file, which terms are the preset's (preset_terms) and
-which selection added (selected_terms) are printed and written. --no-select keeps the preset's
-terms alone; --select searches every DOF, memory included.
+which selection added (selected_terms) are printed and written. Why by default: on physics the
+preset does not describe (MuJoCo's fluid model) its terms alone leave held-out force R² of
+0.54-0.97 where the added terms reach 0.99-1.00, and on data it describes nothing is added.
+--no-select keeps the preset's terms alone; --select searches every DOF, memory included, and
+may drop preset terms. Pooled logs and --method rls fit the preset's terms (or --structure).
 
 INPUT is a bag (a rosbag2 directory, MCAP or SQLite3, or a ROS 1 .bag file) with IMU, DVL,
 pressure and thruster (or body wrench) topics, or a CSV log.

@@ -19,8 +19,11 @@ force row) and fluid-memory states, on top of a base model whose terms are alway
    largest blocked cross-validated gain (held-out RSS of its row over the folds, each fold
    predicted from the others), provided it also lowers BIC by more than ``min_improvement``,
    removes at least ``min_err`` of its row's residual, and is not (to ``tol``) a combination
-   of the columns already in its row; until no candidate qualifies or the model has
-   ``max_terms`` parameters.
+   of the columns already in its row; until no candidate qualifies (or the model has
+   ``max_terms`` parameters, when a budget is given).
+5. Without a budget, each row keeps the added terms up to the one-standard-error size of its
+   cross-validation curve along the order they entered (:mod:`.cv_budget`); the folds are
+   apart by a guard of two periods of the cutoff, so the low-pass leaks nothing across.
 
 BIC = n_eff Σ_i log(RSS_i / N) + k log n_eff, with n_eff = 2 · cutoff · T the number of
 independent samples in the low-passed regression. Each row's least squares is separate (a
