@@ -77,6 +77,10 @@ def run(args: argparse.Namespace) -> int:
         with Elapsed("selecting the damping terms"):
             selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
         print(selection_table(selection))
+        print("terms per DOF: the preset's that stay, and those selection added:")
+        print(added_table([n for n in selection.model.parameter_names
+                           if n in model.parameter_names], selection.added(model),
+                          *selection.cv_r2))
         model = selection.model
     else:
         model = default_selection(samples, model, vehicle.body, args)
@@ -400,25 +404,26 @@ def default_selection(samples: Samples, model: DampingModel, body: RigidBody,
               f"--structure) identify adds the library terms: dampest identify {args.input} "
               f"--vehicle {args.vehicle}")
         return model
-    print(added_table(model, {i: added[i] for i in bad}, before, after))
+    print("terms added by selection in the DOFs that misfit (blocked cross-validation, BIC "
+          "and the one-standard-error rule; --no-select: the preset's terms alone):")
+    print(added_table(model.parameter_names, {i: added[i] for i in bad}, before, after))
     return sel.only_in(model, bad)
 
 
-def added_table(preset: DampingModel, added: dict[int, list[str]], before: np.ndarray,
+def added_table(kept: list[str], added: dict[int, list[str]], before: np.ndarray,
                 after: np.ndarray) -> str:
-    """Per DOF: the number of the preset's terms, the terms selection added in the DOFs of
-    ``added`` (row → names), and the held-out R² (5 contiguous time folds) with the preset's
-    terms (``before``) and with the added ones (``after``), both shape (6,)."""
+    """Per DOF: the number of the preset's terms in the model (``kept``, names), the terms
+    selection added in the DOFs of ``added`` (row → names), and the held-out R² (5 contiguous
+    time folds) with the preset's terms (``before``) and with the added ones (``after``), both
+    shape (6,)."""
     rows = []
     for i in range(6):
         new = added.get(i, [])
-        rows.append((FORCE_NAMES[i], sum(force_dof(n) == i for n in preset.parameter_names),
-                     len(new), ", ".join(new) or "-", f"{before[i]:.4f}",
+        rows.append((FORCE_NAMES[i], sum(force_dof(n) == i for n in kept), len(new),
+                     ", ".join(new) or "-", f"{before[i]:.4f}",
                      f"{after[i]:.4f}" if i in added else ""))
-    return ("terms added by selection in the DOFs that misfit (blocked cross-validation, "
-            "BIC and the one-standard-error rule; --no-select: the preset's terms alone):\n"
-            + table(("dof", "preset", "added", "added terms", "held-out R² preset",
-                     "with added"), rows))
+    return table(("dof", "preset", "added", "added terms", "held-out R² preset", "with added"),
+                 rows)
 
 
 def term_origin(preset: DampingModel, model: DampingModel) -> dict[str, list[str]]:
