@@ -72,12 +72,19 @@ def run(args: argparse.Namespace) -> int:
     held = None
     if args.holdout is not None:
         samples, held = split_holdout(samples, args.holdout)
+    preset = model
     if args.select:
         with Elapsed("selecting the damping terms"):
             selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
         print(selection_table(selection))
-        nominal = nominal_of(selection.model, model, nominal)
+        print("terms per DOF: the preset's that stay, and those selection added:")
+        print(added_table([n for n in selection.model.parameter_names
+                           if n in model.parameter_names], selection.added(model),
+                          *selection.cv_r2))
         model = selection.model
+    else:
+        model = default_selection(samples, model, vehicle.body, args)
+    nominal = nominal_of(model, preset, nominal)
     spec = prior_spec(args, vehicle)
     prior = prior_of(model, nominal, spec)[0]
     identifier = DampingIdentifier(vehicle, method=args.method, cutoff=args.cutoff,
@@ -102,8 +109,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"identified combination: {combination}")
     for name, why in result.constrained.items():
         print(f"constrained: {name}: {why}")
-    if not args.select:
-        print(misfit_check(samples, model, vehicle.body, args), end="")
     if held is not None and scores is not None:
         print()
         print(heldout_text(held, scores))
@@ -112,7 +117,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         write_model(Path(args.out), result, model, vehicle, source=str(args.input),
                     heldout=scores, flown=samples.nu,
-                    more={"substitutions": substitutions} if substitutions else None)
+                    more={**term_origin(preset, model),
+                          **({"substitutions": substitutions} if substitutions else {})})
         print(f"wrote {args.out}")
     if args.report:
         truth = None
@@ -365,31 +371,68 @@ def selection_table(selection: Selection) -> str:
             + "\n")
 
 
-def misfit_check(samples: Samples, model: DampingModel, body: RigidBody,
-                 args: argparse.Namespace, ratio: float = 3.0, floor: float = 0.999) -> str:
-    """Per DOF, a warning when the preset's structure misses what the data hold.
+def default_selection(samples: Samples, model: DampingModel, body: RigidBody,
+                      args: argparse.Namespace, ratio: float = 3.0, floor: float = 0.999
+                      ) -> DampingModel:
+    """The preset's terms, and where they misfit the data, the library terms the data select.
 
-    The library search (:func:`select_terms`, without memory) gives the held-out residual a
-    sparse model reaches on the same data: our estimate of the noise floor. A DOF whose
-    held-out R² with the preset's terms is below ``floor`` while its unexplained share is more
-    than ``ratio`` times the library's is a misfit, and the line says what to run.
+    The library search (:func:`select_terms` on top of the preset's terms, all kept, without
+    memory) gives the held-out residual a sparse model reaches on the same data: our estimate
+    of the noise floor. A DOF whose held-out R² with the preset's terms is below ``floor``
+    while its unexplained share is more than ``ratio`` times the library's is a misfit: one
+    line each, and unless ``--no-select`` (or ``--structure``) the terms the search added in
+    those DOFs join the preset's (printed per DOF). Without a misfit the model is the preset's.
     """
     try:
         with Elapsed("checking the preset's terms against the term library"):
-            sel = select_terms(samples, model, body, cutoff=args.cutoff, memory_dofs=())
+            sel = select_terms(samples, model, body, cutoff=args.cutoff, memory_dofs=(),
+                               keep_base=True)
     except ConfigError:
-        return ""  # a structure the library search does not take (a residual term)
+        return model  # a structure the library search does not take (a residual term)
     before, after = sel.cv_r2
     bad = [i for i in range(6) if before[i] < floor
            and 1.0 - before[i] > ratio * max(1.0 - after[i], 1e-12)]
     if not bad:
-        return ""
-    return "".join(
-        f"misfit: {FORCE_NAMES[i]}: held-out R² {before[i]:.3f} with the preset's terms, "
-        f"{after[i]:.3f} with {sel.model.n_params} library terms: the residual is "
-        f"{(1.0 - before[i]) / max(1.0 - after[i], 1e-12):.0f}× what the data allow\n"
-        for i in bad) + (f"the preset's damping structure misses physics in these data; run "
-                         f"dampest identify {args.input} --vehicle {args.vehicle} --select\n")
+        return model
+    added = sel.added(model)
+    for i in bad:
+        print(f"misfit: {FORCE_NAMES[i]}: held-out R² {before[i]:.3f} with the preset's terms, "
+              f"{after[i]:.3f} with {len(added[i])} library terms added: the residual is "
+              f"{(1.0 - before[i]) / max(1.0 - after[i], 1e-12):.0f}× what the data allow")
+    if args.no_select or args.structure:
+        print("the damping structure misses physics in these data; without --no-select (or "
+              f"--structure) identify adds the library terms: dampest identify {args.input} "
+              f"--vehicle {args.vehicle}")
+        return model
+    print("terms added by selection in the DOFs that misfit (blocked cross-validation, BIC "
+          "and the one-standard-error rule; --no-select: the preset's terms alone):")
+    print(added_table(model.parameter_names, {i: added[i] for i in bad}, before, after))
+    return sel.only_in(model, bad)
+
+
+def added_table(kept: list[str], added: dict[int, list[str]], before: np.ndarray,
+                after: np.ndarray) -> str:
+    """Per DOF: the number of the preset's terms in the model (``kept``, names), the terms
+    selection added in the DOFs of ``added`` (row → names), and the held-out R² (5 contiguous
+    time folds) with the preset's terms (``before``) and with the added ones (``after``), both
+    shape (6,)."""
+    rows = []
+    for i in range(6):
+        new = added.get(i, [])
+        rows.append((FORCE_NAMES[i], sum(force_dof(n) == i for n in kept), len(new),
+                     ", ".join(new) or "-", f"{before[i]:.4f}",
+                     f"{after[i]:.4f}" if i in added else ""))
+    return table(("dof", "preset", "added", "added terms", "held-out R² preset", "with added"),
+                 rows)
+
+
+def term_origin(preset: DampingModel, model: DampingModel) -> dict[str, list[str]]:
+    """For the model file: the parameters of ``model`` from the preset (``preset_terms``) and
+    those the term selection added (``selected_terms``), ``["none"]`` for an empty list."""
+    names = model.parameter_names
+    ours = [n for n in names if n in preset.parameter_names]
+    return {"preset_terms": ours or ["none"],
+            "selected_terms": [n for n in names if n not in ours] or ["none"]}
 
 
 def force_dof(name: str) -> int:

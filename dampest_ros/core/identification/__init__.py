@@ -3,7 +3,8 @@
 The regression form F = Φ(ν)θ, parallel-filtered (:mod:`.regression`), the batch fit with
 prior, constraints and held coefficients (:mod:`.batch`, :mod:`.quadratic`,
 :mod:`.covariance`), dissipativity νᵀD(ν)ν ≥ 0 (:mod:`.dissipative`), the structure search
-(:mod:`.selection`, :mod:`.memory_rates`, :mod:`.frequency`), the τ delay (:mod:`.delay`),
+(:mod:`.selection`, its cross-validation budget :mod:`.cv_budget`, :mod:`.memory_rates`,
+:mod:`.frequency`), the τ delay (:mod:`.delay`),
 pooled logs (:mod:`.pool`), held-out and free-run validation (:mod:`.validate`), and the
 identified model every tool passes around (:mod:`.model`, :mod:`.identified`).
 

@@ -19,8 +19,11 @@ force row) and fluid-memory states, on top of a base model whose terms are alway
    largest blocked cross-validated gain (held-out RSS of its row over the folds, each fold
    predicted from the others), provided it also lowers BIC by more than ``min_improvement``,
    removes at least ``min_err`` of its row's residual, and is not (to ``tol``) a combination
-   of the columns already in its row; until no candidate qualifies or the model has
-   ``max_terms`` parameters.
+   of the columns already in its row; until no candidate qualifies (or the model has
+   ``max_terms`` parameters, when a budget is given).
+5. Without a budget, each row keeps the added terms up to the one-standard-error size of its
+   cross-validation curve along the order they entered (:mod:`.cv_budget`); the folds are
+   apart by a guard of two periods of the cutoff, so the low-pass leaks nothing across.
 
 BIC = n_eff Σ_i log(RSS_i / N) + k log n_eff, with n_eff = 2 · cutoff · T the number of
 independent samples in the low-passed regression. Each row's least squares is separate (a
@@ -30,6 +33,7 @@ weights, nor on the prior's magnitudes, which it never sees.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
@@ -37,12 +41,17 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from dampest_ros.core.identification.cv_budget import (
+    GUARD_PERIODS,
+    fold_errors,
+    guarded_folds,
+    one_se_size,
+)
 from dampest_ros.core.identification.memory_rates import MemoryEvidence, memory_evidence
 from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import (
     NormalEquations,
     accumulate,
-    fold_index,
     information_criteria,
     iter_regression,
     total_sum_of_squares,
@@ -111,6 +120,27 @@ class Selection:
     dropped: dict[str, str] = field(default_factory=dict)
     tss: FloatArray = field(default_factory=lambda: np.ones(6))
     memory: list[MemoryEvidence] = field(default_factory=list)
+
+    def added(self, base: DampingModel) -> dict[int, list[str]]:
+        """The parameters the search added to ``base``, per force row 0..5 (X..N), in the order
+        of the model (memory gains in the row of their DOF)."""
+        out: dict[int, list[str]] = {i: [] for i in range(6)}
+        for t in self.model.terms:
+            if t.kind == "freq":
+                for d, name in zip(t.state_dofs, t.parameter_names, strict=True):
+                    if name not in base.parameter_names:
+                        out[int(d)].append(name)
+                continue
+            for b in t.bases:
+                if b.name not in base.parameter_names and not b.more:
+                    out[_single_entry(b)[0]].append(b.name)
+        return out
+
+    def only_in(self, base: DampingModel, rows: Sequence[int]) -> DampingModel:
+        """The selected model without the static terms it added outside ``rows`` (force rows
+        0..5): what the search found where the base misfits, and the rest as selected."""
+        added = self.added(base)
+        return _without(self.model, [n for i in range(6) if i not in rows for n in added[i]])
 
     @property
     def cv_r2(self) -> tuple[FloatArray, FloatArray]:
@@ -217,7 +247,6 @@ def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
     Sx = np.asarray(S, dtype=np.int64)
     G, bv = A.sum(0), b.sum(0)
     _, coef, gain, ok = _trials(G, bv, Sx, C, tol)
-    cv_S = np.zeros(())
     cv_C = np.zeros(len(C))
     for f in range(len(c)):
         th_S, th_c, _, okf = _trials(G - A[f], bv - b[f], Sx, C, tol)
@@ -228,23 +257,16 @@ def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
         cv_C += (c[f] - 2.0 * (bf[Sx] @ th_S + bf[C] * th_c) + quad_S
                  + 2.0 * th_c * cross + th_c ** 2 * np.diag(Af)[C])
         cv_C[~okf] = np.inf
-        if len(Sx):
-            d = 1.0 / np.sqrt(np.maximum(np.diag(G - A[f])[Sx], 1e-300))
-            Gss = (G - A[f])[np.ix_(Sx, Sx)] * np.outer(d, d)
-            beta = np.linalg.lstsq(Gss, (bv - b[f])[Sx] * d, rcond=1e-13)[0] * d
-            cv_S = cv_S + c[f] - 2.0 * bf[Sx] @ beta + beta @ Af[np.ix_(Sx, Sx)] @ beta
-        else:
-            cv_S = cv_S + c[f]
-    return cv_S, np.where(ok, cv_C, np.inf), gain, coef
+    return fold_errors(A, b, c, Sx).sum(), np.where(ok, cv_C, np.inf), gain, coef
 
 
 def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
                  cross: Sequence[dict[str, str]] | None = None,
                  families: Sequence[str] = FAMILIES,
                  memory_dofs: Sequence[int] = (0, 1, 2, 5), cutoff: float = 2.0,
-                 folds: int = 5, max_terms: int = 25, min_improvement: float = 10.0,
+                 folds: int = 5, max_terms: int | None = None, min_improvement: float = 10.0,
                  min_err: float = 0.1, tol: float = 1e-8, strict_base: bool = True,
-                 rounds: int = 10, exchange: float = 2.0
+                 rounds: int = 10, exchange: float = 2.0, keep_base: bool = False
                  ) -> Selection:
     """Forward selection of library terms and memory states on top of ``base``.
 
@@ -264,9 +286,12 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     cutoff : float
         Parallel low-pass of the regression (Hz).
     folds : int
-        Contiguous time blocks of the cross-validation.
-    max_terms : int
-        Largest number of parameters of the selected model (base included).
+        Contiguous time blocks of the cross-validation, apart by a guard of
+        :data:`cv_budget.GUARD_PERIODS` periods of ``cutoff``.
+    max_terms : int, optional
+        Largest number of parameters of the selected model (base included); None: no cap,
+        the number of searched terms in each row is the one-standard-error size of its
+        cross-validation curve (:func:`cv_budget.one_se_size`).
     min_improvement : float
         BIC decrease needed to add a candidate (10: "very strong" on the Kass–Raftery scale).
     min_err : float
@@ -284,6 +309,8 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     exchange : float
         At ``max_terms``, the term whose removal costs least held-out R² is exchanged for the
         best candidate when that gains ``exchange`` times as much.
+    keep_base : bool
+        Keep every term of ``base`` whatever the data say (the search only adds).
 
     Returns
     -------
@@ -299,7 +326,7 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         "cross": cross, "families": families, "memory_dofs": memory_dofs, "cutoff": cutoff,
         "folds": folds, "max_terms": max_terms, "min_improvement": min_improvement,
         "min_err": min_err, "tol": tol, "strict_base": strict_base, "rounds": rounds,
-        "exchange": exchange}
+        "exchange": exchange, "keep_base": keep_base}
     shared = [t for t in base.terms if any(b.more for b in t.bases)]
     if not shared:
         return _search(samples, base, body, (), **options)
@@ -327,8 +354,8 @@ _Column = tuple[int, int, str]
 def _search(samples: Samples, base: DampingModel, body: RigidBody,
             shared: Sequence[DampingTerm], cross: Sequence[dict[str, str]] | None,
             families: Sequence[str], memory_dofs: Sequence[int], cutoff: float, folds: int,
-            max_terms: int, min_improvement: float, min_err: float, tol: float,
-            strict_base: bool, rounds: int, exchange: float) -> Selection:
+            max_terms: int | None, min_improvement: float, min_err: float, tol: float,
+            strict_base: bool, rounds: int, exchange: float, keep_base: bool) -> Selection:
     """The stepwise search of :func:`select_terms` on top of the single-row terms ``base``;
     the ``shared`` terms count in the budget and join the selected model."""
     base_names = base.parameter_names
@@ -349,9 +376,12 @@ def _search(samples: Samples, base: DampingModel, body: RigidBody,
     search = _Stepwise(ne, m, [*base_cols, *base_mem], [*usable, *cand_mem], zero,
                        base.n_params + sum(t.n_params for t in shared),
                        min(float(len(samples)), 2.0 * cutoff * duration),
-                       _Rules(max_terms, min_improvement, min_err, tol, strict_base, exchange),
+                       _Rules(math.inf if max_terms is None else max_terms, min_improvement,
+                              min_err, tol, strict_base, exchange, keep_base),
                        "base: " + "+".join([*base.kinds, *(t.kind for t in shared)]))
     search.run(rounds)
+    if max_terms is None:
+        search.one_se()
     final = search.chosen_names()
     base = _without(base, [n for n in base_names if n not in final])
     spec_of = {sp.label: sp for _, _, sp in cand}
@@ -537,12 +567,13 @@ class _Rules:
     """The test a term passes to enter the model and to stay in it, and the budget (the
     parameters of :func:`select_terms` of the same names)."""
 
-    max_terms: int
+    max_terms: float
     min_improvement: float
     min_err: float
     tol: float
     strict_base: bool
     exchange: float
+    keep_base: bool
 
     def qualifies(self, dbic: _Real, gain: _Real, rss_without: _Real, cv_with: _Real,
                   cv_without: _Real, passive: NDArray[np.bool_] | bool) -> NDArray[np.bool_]:
@@ -603,7 +634,8 @@ class _Stepwise:
         self.name_of = {(r, f): nm for r, f, nm in [*base_cols, *usable]}
         # the base's memory states, and its columns the data leave at zero (the fit flags them
         # 'no excitation' rather than the selection hiding them)
-        self.keep_always = {(r, f) for r, f, _ in base_cols if f >= m or zero[f]}
+        self.keep_always = {(r, f) for r, f, _ in base_cols
+                            if f >= m or zero[f] or rules.keep_base}
         self.from_base = {(r, f) for r, f, _ in base_cols}
         tss = total_sum_of_squares(ne)
         self.rss = np.array([tss[i] - _fit_row(ne, i, self.chosen[i]) for i in range(6)])
@@ -621,6 +653,21 @@ class _Stepwise:
             added = self._forward()
             if not self._backward() and not added:
                 break
+
+    def one_se(self) -> None:
+        """In each row, take out the searched terms beyond the one-standard-error size of the
+        cross-validation curve along the order they entered (:func:`cv_budget.one_se_size`),
+        the last first."""
+        ne = self.ne
+        for i in range(6):
+            added = [f for f in self.chosen[i] if (i, f) not in self.from_base]
+            if not added:
+                continue
+            kept = [f for f in self.chosen[i] if (i, f) in self.from_base]
+            errors = np.array([fold_errors(ne.A[:, i], ne.b[:, i], ne.c[:, i],
+                                           kept + added[:k]) for k in range(len(added) + 1)])
+            for f in reversed(added[one_se_size(errors):]):
+                self._remove(self._removal(i, f))
 
     def chosen_names(self) -> set[str]:
         """Names of the parameters in the model now."""
@@ -724,15 +771,22 @@ class _Stepwise:
         an exchange; whether the model changed. A removed term does not come back (no
         cycling)."""
         removed = False
+        # a removal changes only its own row's statistics: the others' removals stay valid
+        by_row = {i: self._row_removals(i) for i in range(6)}
         while True:
-            removals = [self._removal(i, col) for i in range(6) for col in self.chosen[i]
-                        if (i, col) not in self.keep_always]
-            weak = [r for r in removals if r.weak]
+            weak = [r for rs in by_row.values() for r in rs if r.weak]
             if not weak:
                 break
-            self._remove(max(weak, key=lambda r: r.dbic))
+            worst = max(weak, key=lambda r: r.dbic)
+            self._remove(worst)
+            by_row[worst.row] = self._row_removals(worst.row)
             removed = True
-        return self._exchange(removals) or removed
+        return self._exchange([r for rs in by_row.values() for r in rs]) or removed
+
+    def _row_removals(self, i: int) -> list[_Removal]:
+        """:meth:`_removal` of each term of row ``i`` that may go."""
+        return [self._removal(i, col) for col in self.chosen[i]
+                if (i, col) not in self.keep_always]
 
     def _exchange(self, removals: Sequence[_Removal]) -> bool:
         """At the budget, exchange the term whose removal costs least held-out R² for the best
@@ -808,7 +862,9 @@ def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],
             g[:, 0, m:] = z
         return g
 
-    fold_of = fold_index(len(samples), folds)
+    # no sample within the low-pass's reach of a fold boundary counts (cv_budget)
+    guard = round(GUARD_PERIODS * samples.rate / cutoff) if cutoff > 0 else 0
+    fold_of = guarded_folds(len(samples), folds, guard)
     G = np.zeros((folds, p, p))
     Gy = np.zeros((folds, p, 6))
     c = np.zeros((folds, 6))
@@ -817,7 +873,7 @@ def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],
                                        decimate=True, regressor=features):
         F = F3[:, 0, :]
         fo = fold_of[rows]
-        for f in np.unique(fo):
+        for f in np.unique(fo[fo >= 0]):
             k = fo == f
             # GᵀG, Gᵀy, yᵀy per fold
             G[f] += F[k].T @ F[k]

@@ -234,6 +234,8 @@ class DampingModel:
                   if t.kind != "freq" for k, b in enumerate(t.bases) for B, alpha in b.atoms]
         self._static_idx = np.array([k for k, _, _ in static], dtype=np.int64)
         self._Bs = np.stack([B for _, B, _ in static]) if static else np.zeros((0, 6, 6))
+        # B_j as one (6, 6·atoms) matrix: ν B_flat[b, a·atoms + j] = (B_j ν)_a as one product
+        self._B_flat = self._Bs.transpose(2, 1, 0).reshape(6, -1)
         self._bank = AlphaBank([alpha for _, _, alpha in static])
         self._static_params = np.unique(self._static_idx)
         # atom → parameter sum (None: one atom per parameter, the common case)
@@ -324,7 +326,7 @@ class DampingModel:
         Phi = np.empty((N, 6, self.n_params))
         if len(self._static_idx):
             # column j: α_j(ν) B_j ν (summed over the parameter's atoms)
-            Bnu = np.einsum("jab,nb->naj", self._Bs, nu) * self._bank(nu)[:, None, :]
+            Bnu = (nu @ self._B_flat).reshape(N, 6, -1) * self._bank(nu)[:, None, :]
             if self._atom_sum is None:
                 Phi[:, :, self._static_idx] = Bnu
             else:

@@ -1,0 +1,101 @@
+"""How many terms the data support: blocked cross-validation in time and the one-standard-error
+rule on its curve.
+
+The data are cut into F contiguous time folds; the samples within ``guard`` of a boundary
+between folds belong to none (:func:`guarded_folds`), so that the low-pass of the regression,
+whose impulse response is shorter than the guard, carries nothing of a held-out fold into the
+folds that predict it. Each fold is predicted by the least-squares fit on the others
+(:func:`fold_errors`). Along a path of nested models (the terms in the order a search added
+them), the chosen size is the smallest whose held-out error exceeds the best's by no more than
+one standard error of the best's (:func:`one_se_size`; Hastie,
+Tibshirani & Friedman 2009, §7.10): a term stays only when its gain is larger than the
+uncertainty of the held-out error itself, and the path's order (the search's and the library's,
+simplest and physically named first) decides among sizes the data cannot tell apart.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: Guard between folds in periods of the regression's low-pass cutoff: at 2 / f_c the
+#: zero-phase filter's impulse response is below 1e-4 of its peak (its tail energy below 1e-8).
+GUARD_PERIODS = 2.0
+
+
+def guarded_folds(n: int, folds: int, guard: int) -> NDArray[np.int64]:
+    """The contiguous time fold (0..folds−1) of each of n samples, −1 for the ``guard``
+    samples on each side of a boundary between two folds, shape (n,)."""
+    k = np.arange(n)
+    fold = np.minimum((k * folds) // max(n, 1), folds - 1)
+    if guard > 0 and folds > 1:
+        # boundary b sits at the first sample of fold b: ⌈b n / F⌉
+        edges = -((-np.arange(1, folds) * n) // folds)
+        d = k[:, None] - edges[None, :]
+        # the last ``guard`` samples before a boundary and the first ``guard`` after it
+        near = ((d >= -guard) & (d < guard)).any(axis=1)
+        fold = np.where(near, -1, fold)
+    return fold.astype(np.int64)
+
+
+def _fit(G: FloatArray, bv: FloatArray) -> FloatArray:
+    """Least squares θ = G⁻¹ b of column-scaled normal equations (minimum norm if singular)."""
+    d = 1.0 / np.sqrt(np.maximum(np.diag(G), 1e-300))
+    return np.asarray(np.linalg.lstsq(G * np.outer(d, d), bv * d, rcond=1e-13)[0] * d)
+
+
+def fold_errors(A: FloatArray, b: FloatArray, c: FloatArray, cols: Sequence[int] | NDArray[np.int64]
+                ) -> FloatArray:
+    """Held-out residual sum of squares of each fold, predicted from the other folds' fit.
+
+    Parameters
+    ----------
+    A : ndarray, shape (F, m, m)
+    b : ndarray, shape (F, m)
+    c : ndarray, shape (F,)
+        Per-fold normal equations of one force row (ΦᵀΦ, Φᵀy, yᵀy).
+    cols : sequence of int
+        The columns of the model.
+
+    Returns
+    -------
+    ndarray, shape (F,)
+        ‖y_f − Φ_f θ_{−f}‖² (N² or N²m²).
+    """
+    S = np.asarray(cols, dtype=np.int64)
+    out = np.array(c, dtype=float)
+    if not len(S):
+        return out
+    G, bv = A.sum(0)[np.ix_(S, S)], b.sum(0)[S]
+    for f in range(len(c)):
+        Af, bf = A[f][np.ix_(S, S)], b[f][S]
+        theta = _fit(G - Af, bv - bf)
+        # ‖y − Φθ‖² on fold f = c − 2 bᵀθ + θᵀAθ
+        out[f] = c[f] - 2.0 * bf @ theta + theta @ Af @ theta
+    return out
+
+
+def one_se_size(errors: FloatArray) -> int:
+    """The smallest model of a nested path within one standard error of the best.
+
+    Parameters
+    ----------
+    errors : ndarray, shape (K + 1, F)
+        Held-out RSS per fold of the path's models with 0..K added terms.
+
+    Returns
+    -------
+    int
+        The number of added terms k: the smallest with Σ_f e_kf ≤ Σ_f e_bf + √F · s_b, b the
+        model of least held-out RSS and s_b the standard deviation of its e_bf over folds.
+    """
+    total = errors.sum(axis=1)
+    best = int(np.argmin(total))
+    F = errors.shape[1]
+    # standard error of Σ_f e_bf: √F times the scatter of one fold's error
+    se = np.sqrt(F) * float(np.std(errors[best], ddof=1)) if F > 1 else 0.0
+    return int(np.flatnonzero(total <= total[best] + se)[0])
