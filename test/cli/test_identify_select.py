@@ -129,7 +129,8 @@ def test_the_selected_structure_runs_online_within_3_sigma_of_batch(
         assert f"--structure: the terms come from {selected}; leave out {extra[0]}" in line
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=pytest.mark.slow),
+                                  pytest.param(3, marks=pytest.mark.slow)])
 def test_no_misfit_and_nothing_added_on_data_the_preset_describes(
         seed: int, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Our native plant with the preset's own terms and noiseless sensors: no misfit line,
