@@ -1,9 +1,9 @@
-"""colcon builds the package; every console script lands in lib/dampest_ros and answers --help."""
+"""colcon builds the package (the session's colcon_install, test/conftest.py); every console
+script lands in lib/dampest_ros and answers --help."""
 
 import ast
 import configparser
 import os
-import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -13,17 +13,6 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = "dampest_ros"
-# What a user's workspace holds after cloning (pyproject.toml included: colcon must ignore it).
-PACKAGE_FILES = [
-    "package.xml",
-    "setup.py",
-    "setup.cfg",
-    "pyproject.toml",
-    "resource",
-    PACKAGE,
-    "config",
-    "launch",
-]
 
 
 def node_scripts() -> dict[str, str]:
@@ -42,58 +31,11 @@ def node_scripts() -> dict[str, str]:
     raise AssertionError("setup.py defines no NODE_SCRIPTS literal")
 
 
-def find_colcon() -> Path:
-    colcon = Path(sys.executable).parent / "colcon"
-    if colcon.exists():
-        return colcon
-    found = shutil.which("colcon")
-    if found is None:
-        pytest.skip("colcon not installed")
-    return Path(found)
-
-
-@pytest.fixture(scope="module")
-def install(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    ws = tmp_path_factory.mktemp("ws")
-    src = ws / "src" / PACKAGE
-    src.mkdir(parents=True)
-    for name in PACKAGE_FILES:
-        path = REPO / name
-        if path.is_dir():
-            ignore = shutil.ignore_patterns("__pycache__", "*.egg-info")
-            shutil.copytree(path, src / name, ignore=ignore)
-        else:
-            shutil.copy2(path, src / name)
-    env = dict(os.environ)
-    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
-    env["COLCON_HOME"] = str(ws / "colcon_home")
-    env["COLCON_LOG_PATH"] = str(ws / "log")
-    proc = subprocess.run(
-        [
-            str(find_colcon()),
-            "build",
-            "--base-paths",
-            "src",
-            "--build-base",
-            "build",
-            "--install-base",
-            "install",
-        ],
-        cwd=ws,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return ws / "install" / PACKAGE
-
-
 @pytest.mark.parametrize("script", ["dampest", *node_scripts()])
-def test_script_installed_and_runs(install: Path, script: str) -> None:
-    exe = install / "lib" / PACKAGE / script
+def test_script_installed_and_runs(colcon_install: Path, script: str) -> None:
+    exe = colcon_install / "lib" / PACKAGE / script
     assert exe.is_file(), f"{exe} missing"
-    site = next(install.glob("lib/python3*/site-packages"))
+    site = next(colcon_install.glob("lib/python3*/site-packages"))
     # The entry point's module must be in the install space itself (not only in a venv's
     # editable install): catches packages that find_packages() missed.
     entry_points = configparser.ConfigParser(delimiters=("=",))
@@ -104,19 +46,20 @@ def test_script_installed_and_runs(install: Path, script: str) -> None:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(site), env.get("PYTHONPATH")) if p)
     env["AMENT_PREFIX_PATH"] = os.pathsep.join(
-        p for p in (str(install), env.get("AMENT_PREFIX_PATH")) if p
+        p for p in (str(colcon_install), env.get("AMENT_PREFIX_PATH")) if p
     )
     proc = subprocess.run(
-        [str(exe), "--help"], cwd=install, env=env, capture_output=True, text=True, timeout=120
+        [str(exe), "--help"], cwd=colcon_install, env=env, capture_output=True, text=True,
+        timeout=120,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "usage" in proc.stdout.lower(), proc.stdout
 
 
-def test_share_files_installed(install: Path) -> None:
-    share = install / "share" / PACKAGE
+def test_share_files_installed(colcon_install: Path) -> None:
+    share = colcon_install / "share" / PACKAGE
     assert (share / "package.xml").is_file()
-    index = install / "share" / "ament_index" / "resource_index" / "packages" / PACKAGE
+    index = colcon_install / "share" / "ament_index" / "resource_index" / "packages" / PACKAGE
     assert index.is_file()
     vehicles = sorted((REPO / "config" / "vehicles").glob("*.yaml"))
     assert vehicles, "no vehicle presets in config/vehicles"
