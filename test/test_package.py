@@ -31,11 +31,43 @@ def node_scripts() -> dict[str, str]:
     raise AssertionError("setup.py defines no NODE_SCRIPTS literal")
 
 
-@pytest.mark.parametrize("script", ["dampest", *node_scripts()])
-def test_script_installed_and_runs(colcon_install: Path, script: str) -> None:
+SCRIPTS = ["dampest", *node_scripts()]
+
+
+def install_site(install: Path) -> Path:
+    return next(install.glob("lib/python3*/site-packages"))
+
+
+@pytest.fixture(scope="module")
+def helps(colcon_install: Path, tmp_path_factory: pytest.TempPathFactory
+          ) -> dict[str, tuple[int, str, str]]:
+    """``<script> --help`` of every installed console script, started all at once (each is
+    mostly the import of rclpy and the package, so together they take a fraction of their
+    sum): script → (exit status, stdout, stderr)."""
+    out = tmp_path_factory.mktemp("help")
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(
+        p for p in (str(install_site(colcon_install)), env.get("PYTHONPATH")) if p)
+    env["AMENT_PREFIX_PATH"] = os.pathsep.join(
+        p for p in (str(colcon_install), env.get("AMENT_PREFIX_PATH")) if p
+    )
+    procs = {}
+    for script in SCRIPTS:
+        exe = colcon_install / "lib" / PACKAGE / script
+        if exe.is_file():
+            with (out / f"{script}.out").open("w") as o, (out / f"{script}.err").open("w") as e:
+                procs[script] = subprocess.Popen([str(exe), "--help"], cwd=colcon_install,
+                                                 env=env, stdout=o, stderr=e, text=True)
+    return {script: (p.wait(timeout=120), (out / f"{script}.out").read_text(),
+                     (out / f"{script}.err").read_text()) for script, p in procs.items()}
+
+
+@pytest.mark.parametrize("script", SCRIPTS)
+def test_script_installed_and_runs(colcon_install: Path, helps: dict[str, tuple[int, str, str]],
+                                   script: str) -> None:
     exe = colcon_install / "lib" / PACKAGE / script
     assert exe.is_file(), f"{exe} missing"
-    site = next(colcon_install.glob("lib/python3*/site-packages"))
+    site = install_site(colcon_install)
     # The entry point's module must be in the install space itself (not only in a venv's
     # editable install): catches packages that find_packages() missed.
     entry_points = configparser.ConfigParser(delimiters=("=",))
@@ -43,17 +75,9 @@ def test_script_installed_and_runs(colcon_install: Path, script: str) -> None:
     entry_points.read(next(site.glob(f"{PACKAGE}-*.egg-info")) / "entry_points.txt")
     module = entry_points["console_scripts"][script].split(":")[0]
     assert (site / (module.replace(".", "/") + ".py")).is_file(), f"{module} not installed"
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(site), env.get("PYTHONPATH")) if p)
-    env["AMENT_PREFIX_PATH"] = os.pathsep.join(
-        p for p in (str(colcon_install), env.get("AMENT_PREFIX_PATH")) if p
-    )
-    proc = subprocess.run(
-        [str(exe), "--help"], cwd=colcon_install, env=env, capture_output=True, text=True,
-        timeout=120,
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert "usage" in proc.stdout.lower(), proc.stdout
+    status, stdout, stderr = helps[script]
+    assert status == 0, stdout + stderr
+    assert "usage" in stdout.lower(), stdout
 
 
 def test_share_files_installed(colcon_install: Path) -> None:
