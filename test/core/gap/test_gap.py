@@ -226,8 +226,10 @@ def believed(case: Case) -> tuple[np.ndarray, RigidBody]:
     return theta, RigidBody(b.mass, b.inertia, b.r_g, b.r_b, b.volume, am, b.rho, b.gravity)
 
 
-@lru_cache(maxsize=2)
+@lru_cache(maxsize=len(FAST))
 def analyse_named(name: str, seed: int) -> tuple[GapData, GapResult]:
+    """The analysis of a named case, kept for the FAST cases' later checks (the current's
+    speed and direction reuse its 600 s analysis)."""
     return analyse(CASES[name], seed)
 
 
