@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import signal
 import subprocess
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -17,6 +19,11 @@ from matplotlib.figure import Figure
 
 #: The checkout the tests run from.
 REPO = Path(__file__).resolve().parents[1]
+PACKAGE = "dampest_ros"
+# What a user's workspace holds after cloning (pyproject.toml included: colcon must ignore it).
+PACKAGE_FILES = ["package.xml", "setup.py", "setup.cfg", "pyproject.toml", "resource", PACKAGE,
+                 "config", "launch"]
+
 #: A unit in brackets or parentheses, e.g. (N), (N·s/m), [m/s], (N²/Hz), (unitless).
 UNIT = re.compile(r"[(\[][^()\[\]]*[A-Za-z²][^()\[\]]*[)\]]")
 
@@ -158,3 +165,42 @@ def module_children() -> Iterator[Children]:
         yield kids
     finally:
         kids.close()
+
+
+def find_colcon() -> Path:
+    """The venv's colcon, else the one on PATH; the test is skipped without one."""
+    colcon = Path(sys.executable).parent / "colcon"
+    if colcon.exists():
+        return colcon
+    found = shutil.which("colcon")
+    if found is None:
+        pytest.skip("colcon not installed")
+    return Path(found)
+
+
+@pytest.fixture(scope="session")
+def colcon_install(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``colcon build`` of the package files of a clone in a temporary workspace, once per
+    session (the packaging test and the multiprocess nodes only read it); returns
+    install/dampest_ros."""
+    ws = tmp_path_factory.mktemp("ws")
+    src = ws / "src" / PACKAGE
+    src.mkdir(parents=True)
+    for name in PACKAGE_FILES:
+        path = REPO / name
+        if path.is_dir():
+            shutil.copytree(path, src / name,
+                            ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+        else:
+            shutil.copy2(path, src / name)
+    env = dict(os.environ, COLCON_HOME=str(ws / "colcon_home"), COLCON_LOG_PATH=str(ws / "log"))
+    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
+    kids = Children()
+    try:
+        proc = kids.run([str(find_colcon()), "build", "--base-paths", "src", "--build-base",
+                         "build", "--install-base", "install"], cwd=ws, env=env,
+                        capture_output=True, text=True, timeout=600)
+    finally:
+        kids.close()
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return ws / "install" / PACKAGE

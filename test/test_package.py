@@ -1,10 +1,10 @@
-"""colcon builds the package; every console script lands in lib/dampest_ros and answers --help,
-and `dampest` is on PATH after sourcing the install (bin/)."""
+"""colcon builds the package (the session's colcon_install, test/conftest.py); every console
+script lands in lib/dampest_ros and answers --help, and `dampest` is on PATH after sourcing
+the install (bin/)."""
 
 import ast
 import configparser
 import os
-import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -15,17 +15,6 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = "dampest_ros"
-# What a user's workspace holds after cloning (pyproject.toml included: colcon must ignore it).
-PACKAGE_FILES = [
-    "package.xml",
-    "setup.py",
-    "setup.cfg",
-    "pyproject.toml",
-    "resource",
-    PACKAGE,
-    "config",
-    "launch",
-]
 
 
 def node_scripts() -> dict[str, str]:
@@ -44,58 +33,44 @@ def node_scripts() -> dict[str, str]:
     raise AssertionError("setup.py defines no NODE_SCRIPTS literal")
 
 
-def find_colcon() -> Path:
-    colcon = Path(sys.executable).parent / "colcon"
-    if colcon.exists():
-        return colcon
-    found = shutil.which("colcon")
-    if found is None:
-        pytest.skip("colcon not installed")
-    return Path(found)
+SCRIPTS = ["dampest", *node_scripts()]
+
+
+def install_site(install: Path) -> Path:
+    return next(install.glob("lib/python3*/site-packages"))
 
 
 @pytest.fixture(scope="module")
-def install(tmp_path_factory: pytest.TempPathFactory, module_children: Any) -> Path:
-    ws = tmp_path_factory.mktemp("ws")
-    src = ws / "src" / PACKAGE
-    src.mkdir(parents=True)
-    for name in PACKAGE_FILES:
-        path = REPO / name
-        if path.is_dir():
-            ignore = shutil.ignore_patterns("__pycache__", "*.egg-info")
-            shutil.copytree(path, src / name, ignore=ignore)
-        else:
-            shutil.copy2(path, src / name)
+def helps(colcon_install: Path, tmp_path_factory: pytest.TempPathFactory,
+          module_children: Any) -> dict[str, tuple[int, str, str]]:
+    """``<script> --help`` of every installed console script, started all at once (each is
+    mostly the import of rclpy and the package, so together they take a fraction of their
+    sum): script → (exit status, stdout, stderr)."""
+    out = tmp_path_factory.mktemp("help")
     env = dict(os.environ)
-    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
-    env["COLCON_HOME"] = str(ws / "colcon_home")
-    env["COLCON_LOG_PATH"] = str(ws / "log")
-    proc = module_children.run(
-        [
-            str(find_colcon()),
-            "build",
-            "--base-paths",
-            "src",
-            "--build-base",
-            "build",
-            "--install-base",
-            "install",
-        ],
-        cwd=ws,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
+    env["PYTHONPATH"] = os.pathsep.join(
+        p for p in (str(install_site(colcon_install)), env.get("PYTHONPATH")) if p)
+    env["AMENT_PREFIX_PATH"] = os.pathsep.join(
+        p for p in (str(colcon_install), env.get("AMENT_PREFIX_PATH")) if p
     )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return ws / "install" / PACKAGE
+    procs = {}
+    for script in SCRIPTS:
+        exe = colcon_install / "lib" / PACKAGE / script
+        if exe.is_file():
+            with (out / f"{script}.out").open("w") as o, (out / f"{script}.err").open("w") as e:
+                procs[script] = module_children.start([str(exe), "--help"],
+                                                      cwd=colcon_install, env=env, stdout=o,
+                                                      stderr=e, text=True)
+    return {script: (p.wait(timeout=120), (out / f"{script}.out").read_text(),
+                     (out / f"{script}.err").read_text()) for script, p in procs.items()}
 
 
-@pytest.mark.parametrize("script", ["dampest", *node_scripts()])
-def test_script_installed_and_runs(install: Path, script: str, children: Any) -> None:
-    exe = install / "lib" / PACKAGE / script
+@pytest.mark.parametrize("script", SCRIPTS)
+def test_script_installed_and_runs(colcon_install: Path, helps: dict[str, tuple[int, str, str]],
+                                   script: str) -> None:
+    exe = colcon_install / "lib" / PACKAGE / script
     assert exe.is_file(), f"{exe} missing"
-    site = next(install.glob("lib/python3*/site-packages"))
+    site = install_site(colcon_install)
     # The entry point's module must be in the install space itself (not only in a venv's
     # editable install): catches packages that find_packages() missed.
     entry_points = configparser.ConfigParser(delimiters=("=",))
@@ -103,39 +78,33 @@ def test_script_installed_and_runs(install: Path, script: str, children: Any) ->
     entry_points.read(next(site.glob(f"{PACKAGE}-*.egg-info")) / "entry_points.txt")
     module = entry_points["console_scripts"][script].split(":")[0]
     assert (site / (module.replace(".", "/") + ".py")).is_file(), f"{module} not installed"
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(site), env.get("PYTHONPATH")) if p)
-    env["AMENT_PREFIX_PATH"] = os.pathsep.join(
-        p for p in (str(install), env.get("AMENT_PREFIX_PATH")) if p
-    )
-    proc = children.run(
-        [str(exe), "--help"], cwd=install, env=env, capture_output=True, text=True, timeout=120
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert "usage" in proc.stdout.lower(), proc.stdout
+    status, stdout, stderr = helps[script]
+    assert status == 0, stdout + stderr
+    assert "usage" in stdout.lower(), stdout
 
 
-def test_dampest_is_on_path_after_sourcing_the_install(install: Path, children: Any) -> None:
+def test_dampest_is_on_path_after_sourcing_the_install(colcon_install: Path,
+                                                      children: Any) -> None:
     """``. install/setup.sh`` puts install/dampest_ros/bin first on PATH: ``dampest`` is the
     install's (the same console script as lib/dampest_ros/dampest), not a venv's."""
-    exe = install / "bin" / "dampest"
-    assert exe.is_file() and exe.read_bytes() == (install / "lib" / PACKAGE / "dampest"
+    exe = colcon_install / "bin" / "dampest"
+    assert exe.is_file() and exe.read_bytes() == (colcon_install / "lib" / PACKAGE / "dampest"
                                                   ).read_bytes()
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), "/usr/bin", "/bin"])
     proc = children.run(
         ["sh", "-c", '. "$1/setup.sh" && command -v dampest && dampest --help', "sh",
-         str(install.parent)], env=env, capture_output=True, text=True, timeout=120
+         str(colcon_install.parent)], env=env, capture_output=True, text=True, timeout=120
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     where, usage = proc.stdout.split("\n", 1)
     assert Path(where) == exe and usage.startswith("usage: dampest"), proc.stdout
 
 
-def test_share_files_installed(install: Path) -> None:
-    share = install / "share" / PACKAGE
+def test_share_files_installed(colcon_install: Path) -> None:
+    share = colcon_install / "share" / PACKAGE
     assert (share / "package.xml").is_file()
-    index = install / "share" / "ament_index" / "resource_index" / "packages" / PACKAGE
+    index = colcon_install / "share" / "ament_index" / "resource_index" / "packages" / PACKAGE
     assert index.is_file()
     vehicles = sorted((REPO / "config" / "vehicles").glob("*.yaml"))
     assert vehicles, "no vehicle presets in config/vehicles"

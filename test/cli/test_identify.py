@@ -27,11 +27,18 @@ def protocol_b(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return simulate_b(tmp_path_factory.mktemp("b600"), 600, 1)
 
 
-def test_bluerov2_protocol_b_within_2_percent_and_truth_in_interval(protocol_b: Path) -> None:
+@pytest.fixture(scope="module")
+def from_bag(protocol_b: Path) -> Path:
+    """The model identified from the bag (the vehicle given as a file)."""
     out = protocol_b / "model.yaml"
     assert main(["identify", str(protocol_b / "bag"), "--vehicle",
                  "config/vehicles/bluerov2_heavy.yaml", "--out", str(out)]) == 0
-    est, truth = load_model(out), load_model(protocol_b / "bag" / "truth_model.yaml")
+    return out
+
+
+def test_bluerov2_protocol_b_within_2_percent_and_truth_in_interval(protocol_b: Path,
+                                                                    from_bag: Path) -> None:
+    est, truth = load_model(from_bag), load_model(protocol_b / "bag" / "truth_model.yaml")
     assert est.parameter_names == truth.parameter_names
     assert est.held == {} and est.identified.all()
     lo, hi = np.array(est.extra["ci95_low"]), np.array(est.extra["ci95_high"])
@@ -42,13 +49,11 @@ def test_bluerov2_protocol_b_within_2_percent_and_truth_in_interval(protocol_b: 
         assert a <= t <= b, (name, t, a, b)
 
 
-def test_csv_path_gives_the_same_theta(protocol_b: Path) -> None:
-    a, b = protocol_b / "from_bag.yaml", protocol_b / "from_csv.yaml"
-    assert main(["identify", str(protocol_b / "bag"), "--vehicle", "bluerov2_heavy",
-                 "--out", str(a)]) == 0
+def test_csv_path_gives_the_same_theta(protocol_b: Path, from_bag: Path) -> None:
+    b = protocol_b / "from_csv.yaml"
     assert main(["identify", str(protocol_b / "samples.csv"), "--vehicle", "bluerov2_heavy",
                  "--out", str(b)]) == 0
-    ta, tb = load_model(a).theta, load_model(b).theta
+    ta, tb = load_model(from_bag).theta, load_model(b).theta
     np.testing.assert_allclose(tb, ta, rtol=1e-9, atol=1e-12)
 
 

@@ -1,14 +1,13 @@
 """sim_node, preprocess_node and estimator_node as separate processes (the colcon-installed
-executables) over DDS; this test process is the client: it reads model.* with GetParameters
-(dampest_ros.client) and sets an invalid forgetting factor."""
+executables of the session's colcon_install, test/conftest.py) over DDS; this test process is
+the client: it reads model.* with GetParameters (dampest_ros.client) and sets an invalid
+forgetting factor."""
 
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -25,47 +24,19 @@ from rclpy.parameter import Parameter  # noqa: E402
 from dampest_ros.client import ModelClient  # noqa: E402
 from dampest_ros.io.yaml_io import load_vehicle  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[2]
 DOMAIN = "78"
 SIM_SECONDS = 60.0
 RATE = 3.0
 
 
-def colcon_install(ws: Path, children: Any) -> Path:
-    """colcon build of this package in a temporary workspace (as one of ``children``);
-    returns install/dampest_ros."""
-    colcon = Path(sys.executable).parent / "colcon"
-    if not colcon.exists():
-        found = shutil.which("colcon")
-        if found is None:
-            pytest.skip("colcon not installed")
-        colcon = Path(found)
-    src = ws / "src" / "dampest_ros"
-    src.mkdir(parents=True)
-    for name in ("package.xml", "setup.py", "setup.cfg", "pyproject.toml", "resource",
-                 "dampest_ros", "config", "launch"):
-        path = REPO / name
-        if path.is_dir():
-            shutil.copytree(path, src / name, ignore=shutil.ignore_patterns("__pycache__"))
-        else:
-            shutil.copy2(path, src / name)
-    env = dict(os.environ, COLCON_HOME=str(ws / "colcon_home"), COLCON_LOG_PATH=str(ws / "log"))
-    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
-    proc = children.run([str(colcon), "build", "--base-paths", "src"], cwd=ws, env=env,
-                        capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return ws / "install" / "dampest_ros"
-
-
 @pytest.fixture(scope="module")
-def processes(tmp_path_factory: pytest.TempPathFactory, module_children: Any
-              ) -> Iterator[dict[str, object]]:
-    install = colcon_install(tmp_path_factory.mktemp("ws"), module_children)
-    site = next(install.glob("lib/python3*/site-packages"))
+def processes(colcon_install: Path, tmp_path_factory: pytest.TempPathFactory,
+              module_children: Any) -> Iterator[dict[str, object]]:
+    site = next(colcon_install.glob("lib/python3*/site-packages"))
     env = dict(os.environ, ROS_DOMAIN_ID=DOMAIN, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1")
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(site), env.get("PYTHONPATH")) if p)
-    exe = install / "lib" / "dampest_ros"
+    exe = colcon_install / "lib" / "dampest_ros"
     logs = tmp_path_factory.mktemp("logs")
     cmds = {
         "sim_node": ["-p", f"rate_factor:={RATE}", "-p", f"duration:={SIM_SECONDS:.0f}",

@@ -37,6 +37,8 @@ from dampest_ros.io import bag  # noqa: E402
 
 DOMAIN = "88"
 IMU_HZ, JOINT_HZ = 200, 50
+#: seconds published to the recorder stopped with SIGINT (its bag is replayed at 10x)
+RECORDED = 8
 CLI = "import sys; from dampest_ros.cli.main import main; sys.exit(main(sys.argv[1:]))"
 
 
@@ -166,7 +168,7 @@ def closing_line(log: Path) -> str:
 @pytest.fixture(scope="module")
 def recorded(ros: Ros, tmp_path_factory: pytest.TempPathFactory, module_children: Any
              ) -> tuple[Path, dict[str, int]]:
-    """12 s recorded by recorder_node (default QoS handling), stopped with SIGINT."""
+    """RECORDED s recorded by recorder_node (default QoS handling), stopped with SIGINT."""
     tmp = tmp_path_factory.mktemp("record")
     out = tmp / "bag"
     children = module_children
@@ -177,7 +179,7 @@ def recorded(ros: Ros, tmp_path_factory: pytest.TempPathFactory, module_children
     pubs = Publishers(ros)
     try:
         pubs.wait_for_subscriber("recorder_sigint")
-        pubs.run(12.0)
+        pubs.run(RECORDED)
         time.sleep(0.5)  # the last messages reach the recorder
     finally:
         assert children.stop(proc) == 0, (tmp / "recorder.log").read_text()
@@ -191,7 +193,7 @@ def recorded(ros: Ros, tmp_path_factory: pytest.TempPathFactory, module_children
 def test_sigint_bag_holds_every_published_message(recorded: tuple[Path, dict[str, int]],
                                                   children: Any) -> None:
     path, sent = recorded
-    assert sent == {"/imu/data": 12 * IMU_HZ, "/thrusters/state": 12 * JOINT_HZ}
+    assert sent == {"/imu/data": RECORDED * IMU_HZ, "/thrusters/state": RECORDED * JOINT_HZ}
     summary = bag.bag_summary(path)
     assert {t: s.count for t, s in summary.topics.items()} == sent
     # every message, in publishing order, and readable by mcap + mcap_ros2
@@ -199,7 +201,7 @@ def test_sigint_bag_holds_every_published_message(recorded: tuple[Path, dict[str
     imu = bag.read_bag(path)["imu/data"]
     assert isinstance(imu, ImuSeries)
     np.testing.assert_array_equal(imu.angular_velocity[:, 0], np.arange(sent["/imu/data"]))
-    assert summary.duration == pytest.approx(12.0, abs=0.5)
+    assert summary.duration == pytest.approx(RECORDED, abs=0.5)
     with Reader(path) as reader:  # the publishers' offered QoS, as discovered
         for conn in reader.connections:
             assert isinstance(conn.ext, ConnectionExtRosbag2)

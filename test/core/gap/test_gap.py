@@ -1,6 +1,7 @@
 """Sim-to-real gap workflow on simulator data with hidden effects.
 
-Every case flies protocol B for 600 s with the BlueROV2 Heavy preset, default (realistic)
+Every case flies protocol B for 600 s (300 s in the fast hidden-effect checks) with the
+BlueROV2 Heavy preset, default (realistic)
 sensor noise (``SensorConfig()``: gyro 0.002 rad/s white + 1e-5 rad/s/√s bias walk, DVL
 5 mm/s at 8 Hz with dropouts, accelerometer 0.02 m/s², …), and is analysed against the
 nominal preset (the model without the effect), fitted on the first 70 % of the time and
@@ -72,7 +73,11 @@ from dampest_ros.core.simulation.sensors import SensorBias, SensorConfig, measur
 from dampest_ros.core.simulation.simulate import run
 from dampest_ros.io.yaml_io import load_vehicle
 
-DURATION = 600.0
+#: seconds of protocol B: every case, and the fast hidden-effect checks (seed 1; on seeds 2 and
+#: 3 too, every named magnitude within 1 % and the residual at most 0.24 of its size, against
+#: the 20 % and 0.5 asked; the clean check stays at 600 s, where the best candidate's held-out
+#: gain is 0.004 against 0.019 on 300 s, 0.02 asked)
+DURATION, FAST_DURATION = 600.0, 300.0
 VEHICLE = "bluerov2_heavy"
 
 
@@ -81,8 +86,8 @@ def vehicle() -> Vehicle:
     return load_vehicle(VEHICLE)
 
 
-def _simulate(effects: dict[str, Any], seed: int, plant: dict[str, bool] | None = None
-              ) -> tuple[Samples, JointSeries]:
+def _simulate(effects: dict[str, Any], seed: int, duration: float,
+              plant: dict[str, bool] | None = None) -> tuple[Samples, JointSeries]:
     """Protocol B with hidden ``effects`` (and the plant's added-mass switches ``plant``,
     e.g. ``{'inertial': False}``): what the vehicle logs, preprocessed."""
     v = vehicle()
@@ -90,7 +95,7 @@ def _simulate(effects: dict[str, Any], seed: int, plant: dict[str, bool] | None 
         terms = AddedMassTerms(**{**v.body.added_mass_terms.as_dict(), **plant})
         v = replace(v, body=replace(v.body, added_mass_terms=terms))
     e = Effects.from_dict(effects)
-    traj = run(v, make_excitation("B", v, DURATION, seed=seed), e)
+    traj = run(v, make_excitation("B", v, duration, seed=seed), e)
     rec = measure(traj, v.body.rho, v.body.gravity, SensorConfig(),
                   SensorBias(e.gyro_bias, e.accel_bias, e.dvl_bias), seed=seed)
     samples = preprocess(rec, v, PreprocessConfig())
@@ -99,14 +104,15 @@ def _simulate(effects: dict[str, Any], seed: int, plant: dict[str, bool] | None 
     return samples, joints
 
 
-@lru_cache(maxsize=3)
-def clean(seed: int) -> tuple[Samples, JointSeries]:
-    return _simulate({}, seed)
+@lru_cache(maxsize=4)  # seeds 1-3, and seed 1 of the fast checks
+def clean(seed: int, duration: float = DURATION) -> tuple[Samples, JointSeries]:
+    return _simulate({}, seed, duration)
 
 
 @lru_cache(maxsize=2)
-def hidden(effects_json: str, seed: int, plant_json: str = "{}") -> tuple[Samples, JointSeries]:
-    return _simulate(json.loads(effects_json), seed, json.loads(plant_json))
+def hidden(effects_json: str, seed: int, plant_json: str = "{}", duration: float = DURATION
+           ) -> tuple[Samples, JointSeries]:
+    return _simulate(json.loads(effects_json), seed, duration, json.loads(plant_json))
 
 
 @dataclass
@@ -226,15 +232,18 @@ def believed(case: Case) -> tuple[np.ndarray, RigidBody]:
     return theta, RigidBody(b.mass, b.inertia, b.r_g, b.r_b, b.volume, am, b.rho, b.gravity)
 
 
-@lru_cache(maxsize=2)
-def analyse_named(name: str, seed: int) -> tuple[GapData, GapResult]:
-    return analyse(CASES[name], seed)
+@lru_cache(maxsize=len(FAST))
+def analyse_named(name: str, seed: int, duration: float = DURATION
+                  ) -> tuple[GapData, GapResult]:
+    """The analysis of a named case, kept for the FAST cases' later checks (the current's
+    speed and direction reuse its analysis)."""
+    return analyse(CASES[name], seed, duration)
 
 
-def analyse(case: Case, seed: int) -> tuple[GapData, GapResult]:
+def analyse(case: Case, seed: int, duration: float = DURATION) -> tuple[GapData, GapResult]:
     v = vehicle()
-    samples, joints = (hidden(json.dumps(case.effects), seed, json.dumps(case.plant))
-                       if case.effects or case.plant else clean(seed))
+    samples, joints = (hidden(json.dumps(case.effects), seed, json.dumps(case.plant), duration)
+                       if case.effects or case.plant else clean(seed, duration))
     theta, body = believed(case)
     data = GapData(samples, v.damping, theta, body, v.thrusters, joints)
     return data, find_gap(data)
@@ -248,9 +257,9 @@ def floor(seed: int) -> np.ndarray:
     return np.sqrt(np.mean(data.r0[data.test] ** 2, axis=0))
 
 
-def check_hidden(name: str, seed: int) -> None:
+def check_hidden(name: str, seed: int, duration: float = DURATION) -> None:
     case = CASES[name]
-    _, result = analyse_named(name, seed)
+    _, result = analyse_named(name, seed, duration)
     assert result.named, f"{name}: nothing named"
     assert result.named[0] == case.key, (name, result.named)
     step = result.steps[0]
@@ -282,11 +291,11 @@ def test_clean_data_names_nothing() -> None:
 
 @pytest.mark.parametrize("name", FAST)
 def test_hidden_effect_is_named_first(name: str) -> None:
-    check_hidden(name, 1)
+    check_hidden(name, 1, FAST_DURATION)
 
 
 def test_current_speed_and_direction() -> None:
-    _, result = analyse_named("current", 1)
+    _, result = analyse_named("current", 1, FAST_DURATION)
     e, p = result.effects[0]
     m = e.magnitude(p)
     assert m["speed"] == pytest.approx(np.hypot(0.12, 0.08), rel=0.05)
