@@ -53,3 +53,30 @@ def label_problems(figures: list[Figure]) -> list[str]:
 def axis_unit_problems() -> Callable[[list[Figure]], list[str]]:
     """:func:`label_problems`, for tests that check figures."""
     return label_problems
+
+
+#: Outside arms of the pinned example-robot-data wheel (requirements/lock.txt): URDF path
+#: under its robots folder, and the gripper joints held fixed.
+OUTSIDE_ARMS = {
+    "ur10": ("ur_description/urdf/ur10_robot.urdf", ()),
+    "kinova": ("kinova_description/robots/kinova.urdf", ()),
+    "z1": ("z1_description/urdf/z1.urdf", ("jointGripper",)),
+    "panda": ("panda_description/urdf/panda.urdf",
+              ("panda_finger_joint1", "panda_finger_joint2")),
+    "xarm7": ("xarm_description/urdf/xarm7.urdf", ()),
+}
+
+
+@pytest.fixture(scope="session")
+def outside_arm() -> Callable[[str], tuple[str, tuple[str, ...]]]:
+    """The URDF path of an example-robot-data arm and the joints to lock, by short name."""
+    from importlib.metadata import distribution
+
+    robots = distribution("example-robot-data").locate_file(
+        "cmeel.prefix/share/example-robot-data/robots")
+
+    def find(name: str) -> tuple[str, tuple[str, ...]]:
+        path, lock = OUTSIDE_ARMS[name]
+        return str(robots / path), lock  # type: ignore[operator]
+
+    return find

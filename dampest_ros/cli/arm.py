@@ -38,7 +38,9 @@ HELP = {
 def _arm_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--arm", default="ur5", metavar="NAME|URDF",
                    help="arm preset (ur5, shipped) or a URDF path (revolute and continuous "
-                        "joints) with its MJCF beside it (same stem, .xml) (default: ur5)")
+                        "joints); an MJCF beside it (same stem, .xml) is the simulated arm, "
+                        "without one it is written from the URDF (its <dynamics damping "
+                        "friction>, no armature) (default: ur5)")
 
 
 def _limit_options(p: argparse.ArgumentParser) -> None:

@@ -92,7 +92,8 @@ class ArmEstimatorNode(EstimatorParamNode):
 
     NODE_NAME = "arm_estimator_node"
     PARAMS = (
-        Param("arm", "ur5", "arm preset or URDF path (its MJCF beside it): joint names, "
+        Param("arm", "ur5", "arm preset or URDF path (an MJCF beside it, or written from "
+              "the URDF): joint names, "
               "kinematics and the nominal parameters (the prior mean)", check=_arm_check),
         Param("cutoff", 10.0, "zero-phase low-pass of q and torque in Hz (at most "
               "rate_out/2)", low=0.5, high=200.0),

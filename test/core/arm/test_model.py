@@ -74,7 +74,8 @@ def test_bad_arm_is_refused(tmp_path) -> None:  # type: ignore[no-untyped-def]
         load_arm("ur6")
     urdf = tmp_path / "a.urdf"
     urdf.write_text("<robot name='x'/>")
-    with pytest.raises(ArmDataError, match="no MJCF"):
+    # without an MJCF beside it the URDF alone is read (and refused here for what it is)
+    with pytest.raises(ArmDataError, match=r"a\.urdf: URDF does not parse"):
         load_arm(urdf)
 
 
