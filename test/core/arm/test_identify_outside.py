@@ -89,10 +89,12 @@ def acceptance(name: str, urdf: str, lock: tuple[str, ...]) -> dict[str, float]:
     return out
 
 
+#: The Z1 misses the median bound on this noise draw, and it is the draw: the noise-free
+#: run's error is 0.04 sigma (median), and over noise seeds 1-8 on the same trajectory the
+#: RMS z is 1.04 (0.78-1.44; medians 0.45-1.12, above 1 for seeds 1 and 8).
 Z1_SIGMA = pytest.mark.xfail(strict=True, reason=(
-    "z1: median 1.04 sigma (max 2.88) on 60 s; the noise-free run's bias is 0.04 sigma "
-    "(median), so the estimate is unbiased and its sigma optimistic: the five arms' medians "
-    "0.59-1.04 against 0.67 for an exact sigma"))
+    "z1, noise seed 1: median 1.04 sigma (max 2.88); sigma is calibrated over seeds 1-8 "
+    "(RMS z 1.04), two of eight draws have a median above 1"))
 
 
 @pytest.mark.slow
