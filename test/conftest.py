@@ -7,8 +7,14 @@ import re
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 import pytest
 from matplotlib.figure import Figure
+
+from dampest_ros.core.arm.design import default_limits, within_limits
+from dampest_ros.core.arm.ffs import FourierTrajectory, random_trajectory
+from dampest_ros.core.arm.model import ArmModel, JointDynamics
+from dampest_ros.core.arm.simulate import ArmSensors
 
 #: A unit in brackets or parentheses, e.g. (N), (N·s/m), [m/s], (N²/Hz), (unitless).
 UNIT = re.compile(r"[(\[][^()\[\]]*[A-Za-z²][^()\[\]]*[)\]]")
@@ -80,3 +86,39 @@ def outside_arm() -> Callable[[str], tuple[str, tuple[str, ...]]]:
         return str(robots / path), lock  # type: ignore[operator]
 
     return find
+
+
+class OutsideSim:
+    """One rule for every outside arm: its simulated joint terms, sensors and trajectories."""
+
+    @staticmethod
+    def joint_terms(arm: ArmModel) -> JointDynamics:
+        """Armature, viscous and Coulomb friction in proportion to each joint's effort limit
+        (the UR5 preset's shoulder: 0.25 kg m², 2 N m s/rad, 3 N m of 150 N m)."""
+        e = arm.effort_limit
+        return JointDynamics(armature=0.0015 * e, damping=0.015 * e, frictionloss=0.02 * e)
+
+    @staticmethod
+    def sensors(arm: ArmModel) -> ArmSensors:
+        """20-bit encoders, torque noise 0.27 % and offsets ±0.2 % of the effort limit (the
+        REALISTIC UR5 preset: 0.4 N m of 150)."""
+        e = arm.effort_limit
+        sign = np.where(np.arange(arm.n) % 2 == 0, 1.0, -1.0)
+        return ArmSensors(2 ** 20, 0.0027 * e, 0.002 * e * sign)
+
+    @staticmethod
+    def trajectory(arm: ArmModel, nominal: np.ndarray, harmonics: int, frequency: float,
+                   seed: int) -> FourierTrajectory:
+        """Random FFS coefficients within the default design limits of the arm's own
+        joints."""
+        lim = default_limits(arm)
+        q0 = 0.5 * (lim.lower + lim.upper)
+        traj = random_trajectory(q0, harmonics, frequency, lim.velocity,
+                                 np.random.default_rng(seed))
+        return within_limits(arm, traj, lim, nominal)
+
+
+@pytest.fixture(scope="session")
+def outside() -> type[OutsideSim]:
+    """The joint terms, sensors and trajectories of the outside-arm tests."""
+    return OutsideSim

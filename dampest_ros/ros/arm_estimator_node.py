@@ -6,8 +6,9 @@ order: they are matched by name). The samples are filtered as offline (zero-phas
 cutoff, q̇ and q̈ of the filtered q, decimation to rate_out) in windows that reach 10 / cutoff s
 past the samples they emit, so the estimate lags the data by that margin plus hop. The work is
 done by dampest_ros.core.arm.online.ArmEstimator: the vehicle estimator's RLS (forgetting,
-per-joint noise weights, CUSUM change alarm with a covariance reset on an alarm) on the base
-regressor with friction columns.
+per-joint noise weights unless adapt_weights is false, CUSUM change alarm with a covariance
+reset on an alarm) on the base regressor with friction columns, from the prior of
+dampest_ros.core.arm.online.prior_std (or a model file).
 
 Holds the estimate as the parameters model.kind (arm_base_parameters), model.arm,
 model.joint_names, model.parameter_names (each base parameter named by the full parameter it
@@ -40,9 +41,8 @@ from std_msgs.msg import String
 from dampest_ros.core.arm.base import base_parameters
 from dampest_ros.core.arm.identify import IdentifyConfig
 from dampest_ros.core.arm.model import arm_model_identity
-from dampest_ros.core.arm.online import ArmEstimate, ArmEstimator
+from dampest_ros.core.arm.online import ArmEstimate, ArmEstimator, default_rls, prior_std
 from dampest_ros.core.arm.regressor import full_parameters
-from dampest_ros.core.online.rls.least_squares import RLSConfig
 from dampest_ros.core.physics.identity import Identity, mismatch, unchecked
 from dampest_ros.io.arm import (
     ArmDataError,
@@ -106,10 +106,12 @@ class ArmEstimatorNode(EstimatorParamNode):
         Param("hop", 1.0, "s of samples filtered per pass (the estimate lags by 10/cutoff + "
               "hop s)", low=0.05, high=10.0),
         Param("prior", "", "arm model YAML (this node's ~/save) whose theta/theta_std are the "
-              "prior ('': the arm's nominal parameters, σ = prior_std_factor·|θ| + 0.01)",
-              check=_prior_check),
+              "prior ('': the arm's nominal parameters, σ = prior_std_factor·|θ| + what "
+              "moves a joint's torque by 10 % of its effort limit)", check=_prior_check),
         Param("prior_std_factor", 1.0, "prior σ of the nominal parameters relative to their "
-              "magnitude", low=1e-6, high=1e6),
+              "magnitude (added to the torque-scaled part)", low=1e-6, high=1e6),
+        Param("adapt_weights", True, "weight each joint's rows by its estimated noise "
+              "variance (false: equal weights)"),
         Param("publish_rate", 1.0, "model and diagnostics publications per second (node "
               "clock)", low=0.01, high=100.0),
         Param("save_path", "dampest_arm_model.yaml", "where ~/save writes the model YAML",
@@ -148,7 +150,7 @@ class ArmEstimatorNode(EstimatorParamNode):
         self.arm = load_arm(self.p("arm"))
         base = base_parameters(self.arm.model)
         theta0 = base.of(full_parameters(self.arm.model, self.arm.dynamics))
-        std0 = self.p("prior_std_factor") * np.abs(theta0) + 0.01
+        std0 = prior_std(self.arm.model, base, theta0, self.p("prior_std_factor"))
         self._kept = [base.names[i] for i in base.independent]
         if start is None and str(self.p("prior")).strip():
             start = load_arm_model(self.p("prior"))
@@ -159,8 +161,8 @@ class ArmEstimatorNode(EstimatorParamNode):
             theta0, std0 = start.theta, np.maximum(start.theta_std, 1e-12)
         cfg = IdentifyConfig(cutoff=self.p("cutoff"), rate_out=self.p("rate_out"),
                              min_speed=self.p("min_speed"))
-        rls = RLSConfig(forgetting_factor=self.p("forgetting_factor"), adapt_weights=True,
-                        noise_var=(0.01,) * 6, trace_max=10.0 * base.size)
+        rls = default_rls(self.arm.model, base, theta0, self.p("forgetting_factor"),
+                          self.p("adapt_weights"))
         self.estimator = ArmEstimator(self.arm.model, base, theta0, std0, cfg, rls,
                                       hop=self.p("hop"), identity=self.owner())
         self.names = tuple(self.arm.model.names)

@@ -93,6 +93,30 @@ class BaseParameters:
         return [self.names[d] for d, u in zip(self.dependent, used, strict=True) if not u]
 
 
+def random_states(n: int, samples: int, seed: int
+                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Random joint states of no particular trajectory: positions uniform within ±π,
+    velocities and accelerations standard normal.
+
+    Parameters
+    ----------
+    n : int
+        Joints.
+    samples : int
+    seed : int
+
+    Returns
+    -------
+    q, qd, qdd : ndarray, shape (samples, n)
+        rad, rad/s, rad/s².
+    """
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-np.pi, np.pi, (samples, n))
+    qd = rng.normal(size=(samples, n))
+    qdd = rng.normal(size=(samples, n))
+    return q, qd, qdd
+
+
 def base_parameters(arm: ArmModel, samples: int = 400, seed: int = 0,
                     tol: float = 1e-5) -> BaseParameters:
     """Base parameters of an arm's full regressor (rigid body and joint columns), from
@@ -114,11 +138,7 @@ def base_parameters(arm: ArmModel, samples: int = 400, seed: int = 0,
     -------
     BaseParameters
     """
-    rng = np.random.default_rng(seed)
-    q = rng.uniform(-np.pi, np.pi, (samples, arm.n))
-    qd = rng.normal(size=(samples, arm.n))
-    qdd = rng.normal(size=(samples, arm.n))
-    W = regressor(arm, q, qd, qdd).reshape(samples * arm.n, -1)
+    W = regressor(arm, *random_states(arm.n, samples, seed)).reshape(samples * arm.n, -1)
     # columns of rounding only are zero; the others scaled to unit norm so the pivoting
     # ranks directions, not units
     norm = np.linalg.norm(W, axis=0)

@@ -6,12 +6,12 @@ The base parameters come out within their σ of MuJoCo's truth, the joint fricti
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
 from dampest_ros.core.arm.base import base_parameters
-from dampest_ros.core.arm.design import default_limits, within_limits
-from dampest_ros.core.arm.ffs import random_trajectory
 from dampest_ros.core.arm.identify import (
     IdentifyConfig,
     filter_joints,
@@ -19,47 +19,23 @@ from dampest_ros.core.arm.identify import (
     predict,
     torque_rmse,
 )
-from dampest_ros.core.arm.model import ArmModel, JointDynamics, mjcf
+from dampest_ros.core.arm.model import mjcf
 from dampest_ros.core.arm.regressor import full_parameters
-from dampest_ros.core.arm.simulate import ArmSensors, simulate_arm
+from dampest_ros.core.arm.simulate import simulate_arm
 from dampest_ros.io.arm import load_arm
 
 
-def joint_terms(arm: ArmModel) -> JointDynamics:
-    """Armature, viscous and Coulomb friction in proportion to each joint's effort limit (the
-    UR5 preset's shoulder: 0.25 kg m², 2 N m s/rad, 3 N m of 150 N m)."""
-    e = arm.effort_limit
-    return JointDynamics(armature=0.0015 * e, damping=0.015 * e, frictionloss=0.02 * e)
-
-
-def sensors(arm: ArmModel) -> ArmSensors:
-    """20-bit encoders, torque noise 0.27 % and offsets ±0.2 % of the effort limit (the
-    REALISTIC UR5 preset: 0.4 N m of 150)."""
-    e = arm.effort_limit
-    sign = np.where(np.arange(arm.n) % 2 == 0, 1.0, -1.0)
-    return ArmSensors(2 ** 20, 0.0027 * e, 0.002 * e * sign)
-
-
-def _trajectory(arm: ArmModel, nominal: np.ndarray, harmonics: int, frequency: float,
-                seed: int):  # type: ignore[no-untyped-def]
-    """Random FFS coefficients within the default design limits of the arm's own joints."""
-    lim = default_limits(arm)
-    q0 = 0.5 * (lim.lower + lim.upper)
-    traj = random_trajectory(q0, harmonics, frequency, lim.velocity,
-                             np.random.default_rng(seed))
-    return within_limits(arm, traj, lim, nominal)
-
-
-def acceptance(name: str, urdf: str, lock: tuple[str, ...]) -> dict[str, float]:
+def acceptance(name: str, urdf: str, lock: tuple[str, ...], outside: Any
+               ) -> dict[str, float]:
     """Identify an outside arm from 60 s of simulated data and validate on 16 s of another
     trajectory; the numbers the acceptance bounds."""
     m = load_arm(urdf, lock=lock).model
-    dyn, sens = joint_terms(m), sensors(m)
+    dyn, sens = outside.joint_terms(m), outside.sensors(m)
     xml = mjcf(m, dyn, name=name)
     nominal = full_parameters(m, dyn)
-    run = simulate_arm(xml, m, dyn, _trajectory(m, nominal, 5, 0.1, 3), 60.0, 1000.0, sens,
+    run = simulate_arm(xml, m, dyn, outside.trajectory(m, nominal, 5, 0.1, 3), 60.0, 1000.0, sens,
                        seed=1)
-    vrun = simulate_arm(xml, m, dyn, _trajectory(m, nominal, 4, 0.125, 4), 16.0, 1000.0,
+    vrun = simulate_arm(xml, m, dyn, outside.trajectory(m, nominal, 4, 0.125, 4), 16.0, 1000.0,
                         sens, seed=2)
     base = base_parameters(m)
     cfg = IdentifyConfig()
@@ -100,8 +76,8 @@ Z1_SIGMA = pytest.mark.xfail(strict=True, reason=(
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["ur10", "kinova", pytest.param("z1", marks=Z1_SIGMA),
                                   "panda", "xarm7"])
-def test_outside_arm_identifies(name: str, outside_arm) -> None:  # type: ignore[no-untyped-def]
-    got = acceptance(name, *outside_arm(name))
+def test_outside_arm_identifies(name: str, outside_arm, outside) -> None:  # type: ignore[no-untyped-def]
+    got = acceptance(name, *outside_arm(name), outside)
     assert got["z_median"] <= 1.0 and got["z_max"] <= 3.0
     assert got["Fv"] <= 0.03 and got["Fc"] <= 0.03
     assert got["rmse"] <= 1.2
