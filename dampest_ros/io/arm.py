@@ -72,6 +72,26 @@ def arm_presets() -> list[str]:
     return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".urdf"))
 
 
+def arm_files(name_or_path: str | Path) -> tuple[str, str | None]:
+    """The URDF text of an arm preset or URDF path, and the MJCF beside it (None if none).
+
+    Raises
+    ------
+    ArmDataError
+        If it is neither a preset nor an existing .urdf file.
+    """
+    text = str(name_or_path)
+    if text in arm_presets():
+        root = resources.files("dampest_ros") / "data" / "arm"
+        return (root / f"{text}.urdf").read_text(), (root / f"{text}.xml").read_text()
+    path = Path(text)
+    if path.suffix != ".urdf" or not path.is_file():
+        raise ArmDataError(f"arm {text!r} is neither a preset ({', '.join(arm_presets())}) "
+                           "nor an existing .urdf file")
+    mj = path.with_suffix(".xml")
+    return path.read_text(), mj.read_text() if mj.is_file() else None
+
+
 def load_arm(name_or_path: str | Path, lock: tuple[str, ...] = ()) -> ArmDescription:
     """Load an arm: a preset name (``ur5``) or a URDF path. An MJCF beside the URDF (same
     stem, ``.xml``) is the simulated arm; without one, the MJCF is written from the URDF
@@ -93,18 +113,7 @@ def load_arm(name_or_path: str | Path, lock: tuple[str, ...] = ()) -> ArmDescrip
     import mujoco
 
     text = str(name_or_path)
-    xml: str | None = None
-    if text in arm_presets():
-        root = resources.files("dampest_ros") / "data" / "arm"
-        urdf, xml = (root / f"{text}.urdf").read_text(), (root / f"{text}.xml").read_text()
-    else:
-        path = Path(text)
-        if path.suffix != ".urdf" or not path.is_file():
-            raise ArmDataError(f"arm {text!r} is neither a preset ({', '.join(arm_presets())}) "
-                               "nor an existing .urdf file")
-        urdf = path.read_text()
-        mj = path.with_suffix(".xml")
-        xml = mj.read_text() if mj.is_file() else None
+    urdf, xml = arm_files(text)
     if lock and xml is not None:
         raise ArmDataError(f"arm {text}: cannot lock {', '.join(lock)} in its MJCF file; "
                            "give a URDF without an MJCF beside it (the MJCF is then written "
