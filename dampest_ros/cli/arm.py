@@ -117,6 +117,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     i.add_argument("--min-speed", type=float, default=0.1, metavar="RAD/S",
                    help="rows of a joint slower than this are not used: dry friction is "
                         "undefined at rest (default: 0.1)")
+    i.add_argument("--coulomb-width", type=float, default=0.0, metavar="RAD/S",
+                   help="dry friction as Fc tanh(qd / W), smooth through a reversal, instead "
+                        "of Fc sign(qd) (default: 0, the sign); the model file records it")
     i.add_argument("--mapping", action="store_true",
                    help="print how each base parameter combines the full parameters")
     i.add_argument("--out", metavar="YAML",
@@ -268,7 +271,11 @@ def _identify(args: argparse.Namespace) -> int:
     from dampest_ros.io.arm import load_arm, read_joint_bag
 
     check_outputs(args, {"out": "arm_model.yaml"}, ("report",))
-    cfg = IdentifyConfig(cutoff=args.cutoff, rate_out=args.rate_out, min_speed=args.min_speed)
+    if not (np.isfinite(args.coulomb_width) and args.coulomb_width >= 0):
+        raise ValueError(f"--coulomb-width {args.coulomb_width:g}: give a width >= 0 rad/s "
+                         "(0: Fc sign(qd))")
+    cfg = IdentifyConfig(cutoff=args.cutoff, rate_out=args.rate_out, min_speed=args.min_speed,
+                         coulomb_width=args.coulomb_width)
     arm = load_arm(args.arm)
     names = arm.model.names
     t0 = time.perf_counter()
@@ -362,7 +369,8 @@ def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
         "consistent_status": res.consistent.status,
         "consistent_full": {"names": list(base.names),
                             "values": [float(x) for x in res.consistent.full]},
-        "noise_estimate": [float(x) for x in res.noise]})
+        "noise_estimate": [float(x) for x in res.noise],
+        "coulomb_width": float(args.coulomb_width)})
 
 
 def _write_report(out_dir: str, args: argparse.Namespace, base: Any, res: Any,

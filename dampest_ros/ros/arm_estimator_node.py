@@ -101,6 +101,9 @@ class ArmEstimatorNode(EstimatorParamNode):
               "each, in Hz (at most the JointState rate)", low=1.0, high=1000.0),
         Param("min_speed", 0.1, "a joint's rows slower than this (rad/s) are not used: dry "
               "friction is undefined at rest", low=0.0, high=10.0),
+        Param("coulomb_width", 0.0, "dry friction as Fc·tanh(q̇/width) with this width in "
+              "rad/s (0: Fc·sign(q̇)); the one the prior was identified with", low=0.0,
+              high=10.0),
         Param("forgetting_factor", 0.9995, "RLS forgetting factor λ (memory ≈ 1/(1−λ) "
               "samples at rate_out)", low=0.9, high=1.0),
         Param("hop", 1.0, "s of samples filtered per pass (the estimate lags by 10/cutoff + "
@@ -160,7 +163,8 @@ class ArmEstimatorNode(EstimatorParamNode):
         if start is not None:
             theta0, std0 = start.theta, np.maximum(start.theta_std, 1e-12)
         cfg = IdentifyConfig(cutoff=self.p("cutoff"), rate_out=self.p("rate_out"),
-                             min_speed=self.p("min_speed"))
+                             min_speed=self.p("min_speed"),
+                             coulomb_width=self.p("coulomb_width"))
         rls = default_rls(self.arm.model, base, theta0, self.p("forgetting_factor"),
                           self.p("adapt_weights"))
         self.estimator = ArmEstimator(self.arm.model, base, theta0, std0, cfg, rls,
