@@ -188,6 +188,22 @@ def fixed_joints(urdf: str, names: tuple[str, ...]) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
+def _require_ranges(urdf: str) -> None:
+    """ValueError naming the first revolute joint whose <limit> lacks lower or upper: URDF
+    reads a missing one as 0, so such a joint has no range to move in (the text parses: the
+    caller has checked)."""
+    for joint in ET.fromstring(urdf).iter("joint"):
+        limit = joint.find("limit")
+        if joint.get("type") != "revolute" or limit is None:
+            continue
+        missing = [k for k in ("lower", "upper") if limit.get(k) is None]
+        if missing:
+            raise ValueError(
+                f"joint {joint.get('name')}: its <limit> has no {' or '.join(missing)}, which "
+                "URDF reads as 0 (a range of [0, 0]: the joint cannot move); give its range "
+                "in radians, or make it continuous if it has none")
+
+
 def arm_from_urdf(urdf: str) -> ArmModel:
     """Read an arm of revolute (and continuous) joints from URDF text with Pinocchio.
 
@@ -205,9 +221,11 @@ def arm_from_urdf(urdf: str) -> ArmModel:
     Raises
     ------
     ValueError
-        If the URDF does not parse or has a joint other than a revolute or continuous one.
+        If the URDF does not parse, has a joint other than a revolute or continuous one, or
+        a revolute joint whose <limit> lacks lower or upper (URDF: 0).
     """
     text, continuous = revolute_urdf(urdf)
+    _require_ranges(urdf)
     try:
         model = pin.buildModelFromXML(text)
         given = pin.buildModelFromXML(urdf) if continuous else model
