@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from dampest_ros.core.arm.design import default_limits, within_limits
 from dampest_ros.core.arm.ffs import FourierTrajectory, random_trajectory
 from dampest_ros.core.arm.model import ArmModel, JointDynamics
-from dampest_ros.core.arm.simulate import ArmSensors
+from dampest_ros.core.arm.simulate import ArmSensors, scaled_sensors
 
 #: A unit in brackets or parentheses, e.g. (N), (N·s/m), [m/s], (N²/Hz), (unitless).
 UNIT = re.compile(r"[(\[][^()\[\]]*[A-Za-z²][^()\[\]]*[)\]]")
@@ -100,11 +100,8 @@ class OutsideSim:
 
     @staticmethod
     def sensors(arm: ArmModel) -> ArmSensors:
-        """20-bit encoders, torque noise 0.27 % and offsets ±0.2 % of the effort limit (the
-        REALISTIC UR5 preset: 0.4 N m of 150)."""
-        e = arm.effort_limit
-        sign = np.where(np.arange(arm.n) % 2 == 0, 1.0, -1.0)
-        return ArmSensors(2 ** 20, 0.0027 * e, 0.002 * e * sign)
+        """20-bit encoders, torque noise 0.27 % and offsets ±0.2 % of the effort limit."""
+        return scaled_sensors(arm)
 
     @staticmethod
     def trajectory(arm: ArmModel, nominal: np.ndarray, harmonics: int, frequency: float,

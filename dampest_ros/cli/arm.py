@@ -87,9 +87,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="simulated seconds (default: 60)")
     s.add_argument("--rate", type=float, default=1000.0, metavar="HZ",
                    help="JointState rate, 1000 divided by an integer (default: 1000)")
-    s.add_argument("--noise", choices=("realistic", "none"), default="realistic",
+    s.add_argument("--noise", choices=("realistic", "scaled", "none"), default="realistic",
                    help="sensors: 20-bit encoders and torque noise 0.4/0.4/0.3/0.1/0.1/0.1 "
-                        "N m with offsets (realistic, default) or exact (none)")
+                        "N m with offsets (realistic, default: a UR5's six joints), the same "
+                        "relative to each joint's effort limit (scaled: 0.27 %%, offsets "
+                        "0.2 %%; any arm) or exact (none)")
     s.add_argument("--payload", type=float, nargs=2, metavar=("KG", "AT_S"),
                    help="attach a point mass of KG at the last link's origin at AT_S seconds")
     s.add_argument("--seed", type=int, default=1, help="seed of the sensor noise (default: 1)")
@@ -199,7 +201,12 @@ def _simulate(args: argparse.Namespace) -> int:
     from dampest_ros.core.arm.design import regressor_cond, within_limits
     from dampest_ros.core.arm.ffs import random_trajectory
     from dampest_ros.core.arm.regressor import full_parameters, regressor
-    from dampest_ros.core.arm.simulate import REALISTIC, ArmSensors, simulate_arm
+    from dampest_ros.core.arm.simulate import (
+        REALISTIC,
+        ArmSensors,
+        scaled_sensors,
+        simulate_arm,
+    )
     from dampest_ros.io.arm import joint_series, load_arm, load_trajectory, write_joint_bag
 
     out = Path(args.out)
@@ -229,7 +236,12 @@ def _simulate(args: argparse.Namespace) -> int:
     if bad:
         raise ValueError(f"trajectory {args.trajectory or 'random'} violates its limits: "
                          + "; ".join(bad))
-    sensors = REALISTIC if args.noise == "realistic" else ArmSensors()
+    if args.noise == "realistic" and arm.model.n != np.size(REALISTIC.torque_sigma):
+        raise ValueError(f"--noise realistic is a UR5's sensors (6 joints); {args.arm} has "
+                         f"{arm.model.n}: use --noise scaled (the same relative to each "
+                         "joint's effort limit) or none")
+    sensors = {"realistic": REALISTIC, "scaled": scaled_sensors(arm.model),
+               "none": ArmSensors()}[args.noise]
     payload = None if args.payload is None else (float(args.payload[0]),
                                                  float(args.payload[1]))
     t0 = time.perf_counter()

@@ -89,3 +89,23 @@ def test_coulomb_width_is_an_option_and_recorded(tmp_path: Path,
     assert main(["arm", "identify", str(bag), "--coulomb-width", "-1"]) == 2
     assert capsys.readouterr().err.strip() == (
         "dampest arm: error: --coulomb-width -1: give a width >= 0 rad/s (0: Fc sign(qd))")
+
+
+def test_an_outside_urdf_simulates_with_sensors_scaled_to_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], outside_arm) -> None:  # type: ignore[no-untyped-def]
+    """The xArm7 (7 joints, a URDF alone): --noise realistic, the UR5's six sensors, ended
+    in "operands could not be broadcast"; now it is refused in one line that names the
+    choice, and --noise scaled simulates it with noise 0.27 % of each effort limit."""
+    path, _ = outside_arm("xarm7")
+    capsys.readouterr()
+    assert main(["arm", "simulate", "--arm", path, "--random", "3", "--duration", "2",
+                 "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "has 7: use --noise scaled" in err[0], err
+    assert main(["arm", "simulate", "--arm", path, "--random", "3", "--duration", "2",
+                 "--noise", "scaled", "--out", str(tmp_path / "b")]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines()
+            if line.startswith("joint")]
+    # joint, |q - q0|, |qd|, |tau|, noise, offset: the xArm7's limits 50/50/30/30/30/20/20 N m
+    assert [float(r[4]) for r in rows] == pytest.approx(
+        [0.135, 0.135, 0.081, 0.081, 0.081, 0.054, 0.054])
