@@ -4,6 +4,8 @@ both files import to the base parameters that were exported. Through the command
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -15,7 +17,13 @@ from dampest_ros.core.arm.model import arm_model_identity, joint_dynamics
 from dampest_ros.core.arm.online import ArmEstimate
 from dampest_ros.core.arm.regressor import full_parameters
 from dampest_ros.core.arm.simulate import REALISTIC, simulate_arm
-from dampest_ros.io.arm import arm_files, load_arm, load_arm_model, save_arm_model
+from dampest_ros.io.arm import (
+    ArmDataError,
+    arm_files,
+    load_arm,
+    load_arm_model,
+    save_arm_model,
+)
 from dampest_ros.io.export.arm import (
     consistent_full,
     export_mjcf,
@@ -121,3 +129,43 @@ def test_the_command_line_exports_and_imports_an_arm(identified, tmp_path, capsy
                    "urdf, not gz",
                    "dampest import: error: --format mjcf reads an arm: give the arm with "
                    "--arm"]
+
+
+def test_a_negative_friction_estimate_is_not_exported_as_it_is(identified, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """An arm whose URDF states no friction identifies its Fc near 0, and WLS can put it
+    below (the UR10 from example-robot-data: wrist_1_joint.Fc = -0.0065 N m). A simulator
+    would apply it as a push: the consistent fit's value (kept > 0) is written instead and
+    said so; a file without a consistent fit is refused in one line."""
+    desc, _, path, res = identified
+    est = load_arm_model(path)
+    k = est.parameter_names.index("elbow_joint.Fc")
+    theta = est.theta.copy()
+    theta[k] = -0.0065
+    negative = replace(est, theta=theta)
+    exp = exported_arm(desc, negative, consistent_full(path, desc.model))
+    assert exp.dynamics.frictionloss[2] == res.consistent.full[60 + 4 * 2 + 2] > 0
+    assert "elbow_joint.Fc: the estimate -0.0065 < 0 is not dissipative; the consistent " \
+           "fit's value" in exp.notes
+    with pytest.raises(ArmDataError, match=r"^elbow_joint\.Fc = -0\.0065 < 0 is not "
+                                           r"dissipative, and the model file has no"):
+        exported_arm(desc, negative, None)
+
+
+def test_a_gripper_arm_round_trips_through_its_urdf(outside_arm, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The Z1 of example-robot-data, its gripper joint locked: the exported URDF keeps the
+    gripper (a revolute joint) and link06's own inertial (it carries gripperStator, fixed:
+    the data determine their sum), and reads back with the gripper held fixed again."""
+    path, lock = outside_arm("z1")
+    desc = load_arm(path, lock=lock)
+    exp = exported_arm(desc, imported_estimate(desc.model, desc.dynamics, desc), None)
+    text = export_urdf(exp, arm_files(path)[0], "z1 nominal")
+    assert "link link06: inertial left as is; the data determine its sum with " \
+           "gripperStator (fixed to it)" in text
+    assert '<joint name="jointGripper" type="revolute">' in text
+    (tmp_path / "z1.urdf").write_text(text)
+    arm, dyn = import_arm(tmp_path / "z1.urdf", "urdf", desc)
+    assert arm.names == desc.model.names
+    assert np.abs(arm.inertial - desc.model.inertial).max() < 1e-15
+    assert np.array_equal(dyn.frictionloss, exp.dynamics.frictionloss)
+    # the nominal friction through base parameters and back: to rounding
+    assert np.allclose(dyn.frictionloss, desc.dynamics.frictionloss, rtol=1e-12, atol=0.0)

@@ -178,7 +178,7 @@ def fixed_joints(urdf: str, names: tuple[str, ...]) -> str:
         root = ET.fromstring(urdf)
     except ET.ParseError as exc:
         raise ValueError(f"URDF does not parse: {exc}") from None
-    joints = {str(j.get("name")): j for j in root.iter("joint")}
+    joints = {str(j.get("name")): j for j in root.findall("joint")}
     missing = [n for n in names if n not in joints]
     if missing:
         raise ValueError(f"no joint {', '.join(missing)} to lock; the URDF's joints are "

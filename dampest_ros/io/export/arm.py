@@ -5,10 +5,11 @@ and the bodies' ``<inertial>``) and URDF (``<dynamics damping friction>`` and th
 What is written, per quantity:
 
 - A joint term (armature Ia, viscous Fv, Coulomb Fc) that is a base parameter on its own is
-  the model file's estimate (``model.theta``). One that the data determine only in a
-  combination (the armature of a joint whose rotor turns with the link's inertia about the
-  same axis) is the consistent fit's split of it, or, for a file without one (the online
-  node's), the arm's nominal value; the file says which in a comment.
+  the model file's estimate (``model.theta``), unless it is negative (not dissipative: the
+  consistent fit's value then, and without one the export is refused). One that the data
+  determine only in a combination (the armature of a joint whose rotor turns with the link's
+  inertia about the same axis) is the consistent fit's split of it, or, for a file without
+  one (the online node's), the arm's nominal value; the file says which in a comment.
 - Link inertias are the physically consistent fit's (``model.consistent_full``, written by
   ``dampest arm identify --out``): one physical set that reproduces every base parameter.
   Each base parameter that combines several links' parameters is named in a comment (the data
@@ -35,6 +36,7 @@ from dampest_ros.core.arm.model import (
     JointDynamics,
     arm_from_urdf,
     arm_model_identity,
+    fixed_joints,
     joint_dynamics,
     mjcf,
     urdf_dynamics,
@@ -110,6 +112,35 @@ def _terms(line: str) -> list[str]:
             and "." in t]
 
 
+#: A joint term less than this below 0 is a zero's rounding (from folding base parameters).
+_ROUNDING = 1e-12
+
+
+def _joint_term(name: str, estimate: float | None, split: float | None, nominal: float
+                ) -> tuple[float, str | None]:
+    """A joint term's exported value and why it is not the data's own (None: it is): the
+    estimate when the data determine it alone and it is not negative; else the consistent
+    fit's split; else (determined only in a combination) the nominal value.
+
+    Raises
+    ------
+    ArmDataError
+        If the estimate is negative (not dissipative) and there is no consistent fit.
+    """
+    if estimate is not None and estimate >= -_ROUNDING:
+        return max(estimate, 0.0), None
+    if estimate is not None and split is None:
+        raise ArmDataError(f"{name} = {estimate:.6g} < 0 is not dissipative, and the model "
+                           "file has no consistent fit to take instead; export the file "
+                           "'dampest arm identify --out' writes")
+    if split is not None:
+        why = ("determined only in a combination" if estimate is None else
+               f"the estimate {estimate:.6g} < 0 is not dissipative")
+        return split, f"{name}: {why}; the consistent fit's value"
+    return nominal, (f"{name}: determined only in a combination; the arm's nominal value "
+                     "(the model file has no consistent fit)")
+
+
 def exported_arm(desc: ArmDescription, est: ArmEstimate, full: FloatArray | None
                  ) -> ExportedArm:
     """The arm and joint terms to export from a model file's estimate (module docstring).
@@ -137,17 +168,11 @@ def exported_arm(desc: ArmDescription, est: ArmEstimate, full: FloatArray | None
     for j, joint in enumerate(arm.names):
         for k, (term, field) in enumerate(_TERMS):
             name = f"{joint}.{term}"
-            if name in alone:
-                values[field].append(float(alone[name]))
-                continue
-            if split is not None:
-                values[field].append(float(split[j, k]))
-                notes.append(f"{name}: determined only in a combination; the consistent "
-                             "fit's split of it")
-            else:
-                values[field].append(float(getattr(desc.dynamics, field)[j]))
-                notes.append(f"{name}: determined only in a combination; the arm's nominal "
-                             "value (the model file has no consistent fit)")
+            value, note = _joint_term(name, alone.get(name),
+                                      None if split is None else float(split[j, k]),
+                                      float(getattr(desc.dynamics, field)[j]))
+            values[field].append(value)
+            notes.extend([note] if note else [])
     dyn = JointDynamics(**{field: np.array(v) for field, v in values.items()})
     notes.append("torque offsets (off): the sensor's, not the arm's; not exported")
     if full is None:
@@ -196,11 +221,11 @@ def _inertial_element(pi: FloatArray) -> ET.Element:
 
 def _fixed_with_mass(root: ET.Element, link: str) -> list[str]:
     """Links hanging from ``link`` through fixed joints that have an <inertial>."""
-    links = {str(el.get("name")): el for el in root.iter("link")}
+    links = {str(el.get("name")): el for el in root.findall("link")}
     out, todo = [], [link]
     while todo:
         parent = todo.pop()
-        for j in root.iter("joint"):
+        for j in root.findall("joint"):
             p, c = j.find("parent"), j.find("child")
             if (j.get("type") == "fixed" and p is not None and c is not None
                     and p.get("link") == parent):
@@ -216,8 +241,8 @@ def export_urdf(exp: ExportedArm, urdf: str, source: str) -> str:
     exported <inertial> of every link that alone makes up its joint's body (module
     docstring); notes and the armature as comments."""
     root = ET.fromstring(urdf)
-    joints = {str(j.get("name")): j for j in root.iter("joint")}
-    links = {str(el.get("name")): el for el in root.iter("link")}
+    joints = {str(j.get("name")): j for j in root.findall("joint")}
+    links = {str(el.get("name")): el for el in root.findall("link")}
     notes = list(exp.notes)
     for j, name in enumerate(exp.arm.names):
         joint = joints[name]
@@ -248,7 +273,7 @@ def export_urdf(exp: ExportedArm, urdf: str, source: str) -> str:
 def import_arm(path: str | Path, fmt: str, desc: ArmDescription
                ) -> tuple[ArmModel, JointDynamics]:
     """Read an arm's joint terms and link inertias back from an MJCF or URDF (its joints
-    named as ``desc``'s).
+    named as ``desc``'s; a URDF's other joints, a gripper's, held fixed at 0).
 
     Raises
     ------
@@ -267,8 +292,11 @@ def import_arm(path: str | Path, fmt: str, desc: ArmDescription
             inertial = np.array([body_parameters(mj, b) for b in bodies])
             return (replace(desc.model, inertial=inertial),
                     joint_dynamics(mj, desc.model.names))
-        arm = arm_from_urdf(text)
-    except ValueError as exc:
+        moving = [str(j.get("name")) for j in ET.fromstring(text).findall("joint")
+                  if j.get("type") not in ("fixed", "floating", "planar")]
+        arm = arm_from_urdf(fixed_joints(text, tuple(
+            name for name in moving if name not in desc.model.names)))
+    except (ValueError, ET.ParseError) as exc:
         raise ArmDataError(f"{path}: {exc}") from None
     if arm.names != desc.model.names:
         raise ArmDataError(f"{path}: joints {list(arm.names)}, not the arm's "
