@@ -86,3 +86,11 @@ def test_a_urdf_alone_loads_with_the_mjcf_written_from_it(outside_arm) -> None: 
         load_arm(path, lock=("nothere",))
     with pytest.raises(ArmDataError, match="cannot lock wrist_3_joint in its MJCF file"):
         load_arm("ur5", lock=("wrist_3_joint",))
+
+
+def test_locking_a_joint_that_a_transmission_names_holds_the_joint(outside_arm) -> None:  # type: ignore[no-untyped-def]
+    """The Kinova URDF names each joint again in a <transmission>; the lock found that
+    element (the last of the name) and held nothing. Now the robot's own joint is fixed."""
+    path, _ = outside_arm("kinova")
+    arm = load_arm(path, lock=("j2s6s200_joint_6",)).model
+    assert arm.n == 5 and "j2s6s200_joint_6" not in arm.names
