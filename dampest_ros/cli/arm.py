@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
-from dampest_ros.cli.common import Elapsed, check_outputs, describe, table
+from dampest_ros.cli.common import Elapsed, check_outputs, describe, joint_list, table
 
 if TYPE_CHECKING:
     import numpy as np
@@ -36,6 +36,9 @@ HELP = {
 
 
 def _arm_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--lock", default="", metavar="JOINT[,JOINT]",
+                   help="joints held fixed at 0 (a gripper's), for a URDF without an MJCF "
+                        "beside it; identify --out records them")
     p.add_argument("--arm", default="ur5", metavar="NAME|URDF",
                    help="arm preset (ur5, shipped) or a URDF path (revolute and continuous "
                         "joints); an MJCF beside it (same stem, .xml) is the simulated arm, "
@@ -169,7 +172,7 @@ def _design(args: argparse.Namespace) -> int:
     check_outputs(args, {"out": "trajectory.yaml"})
     if Path(args.out).exists():
         raise FileExistsError(f"{args.out} exists; choose a new --out")
-    arm = load_arm(args.arm)
+    arm = load_arm(args.arm, lock=joint_list(args.lock))
     limits = _limits(args, arm.model)
     base = base_parameters(arm.model)
     t0 = time.perf_counter()
@@ -218,7 +221,7 @@ def _simulate(args: argparse.Namespace) -> int:
     if not 0 < args.rate <= 1000:
         raise ValueError(f"--rate must be 1000 Hz divided by a whole number (1000, 500, "
                          f"250, ...), got {args.rate:g}")
-    arm = load_arm(args.arm)
+    arm = load_arm(args.arm, lock=joint_list(args.lock))
     limits = _limits(args, arm.model)
     if args.trajectory:
         traj, held = load_trajectory(args.trajectory, arm.model.n)
@@ -288,7 +291,7 @@ def _identify(args: argparse.Namespace) -> int:
                          "(0: Fc sign(qd))")
     cfg = IdentifyConfig(cutoff=args.cutoff, rate_out=args.rate_out, min_speed=args.min_speed,
                          coulomb_width=args.coulomb_width)
-    arm = load_arm(args.arm)
+    arm = load_arm(args.arm, lock=joint_list(args.lock))
     names = arm.model.names
     t0 = time.perf_counter()
     data, _ = read_joint_bag(args.bag, names, args.topic)
@@ -382,7 +385,8 @@ def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
         "consistent_full": {"names": list(base.names),
                             "values": [float(x) for x in res.consistent.full]},
         "noise_estimate": [float(x) for x in res.noise],
-        "coulomb_width": float(args.coulomb_width)})
+        "coulomb_width": float(args.coulomb_width),
+        **({"lock": list(joint_list(args.lock))} if joint_list(args.lock) else {})})
 
 
 def _write_report(out_dir: str, args: argparse.Namespace, base: Any, res: Any,

@@ -76,6 +76,8 @@ def add_import_arguments(q: argparse.ArgumentParser) -> None:
     q.add_argument("--arm", metavar="NAME|URDF",
                    help="read an arm (its joints named as this preset's or URDF's) into an "
                         "arm model file")
+    q.add_argument("--lock", default="", metavar="JOINT[,JOINT]",
+                   help="with --arm: its joints held fixed at 0 (as identify --lock)")
     q.add_argument("--out", required=True, metavar="MODEL",
                    help="model file to write (YAML)")
     q.add_argument("--vehicle", metavar="NAME|YAML",
@@ -102,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     check_outputs(args, {"out": "hydrodynamics.sdf"})
     arm = arm_of_model_file(args.model)
     if arm is not None:
-        return export_arm.run(args, arm)
+        return export_arm.run(args, *arm)
     if args.format == "mjcf" or args.arm:
         raise ValueError(f"{args.model} is not an arm model file: --format mjcf and --arm "
                          "export an arm's (dampest arm identify --out)")

@@ -9,9 +9,9 @@ import sys
 from pathlib import Path
 
 
-def run(args: argparse.Namespace, arm_name: str) -> int:
-    """Write the arm model file ``args.model`` (of ``arm_name``, or ``--arm``) as MJCF or
-    URDF."""
+def run(args: argparse.Namespace, arm_name: str, lock: tuple[str, ...]) -> int:
+    """Write the arm model file ``args.model`` (of ``arm_name``, or ``--arm``, its joints
+    ``lock`` held fixed) as MJCF or URDF."""
     from dampest_ros.io.arm import arm_files, load_arm, load_arm_model
     from dampest_ros.io.export.arm import (
         consistent_full,
@@ -24,7 +24,7 @@ def run(args: argparse.Namespace, arm_name: str) -> int:
         raise ValueError(f"{args.model} is an arm model file: --format mjcf or urdf, not "
                          f"{args.format}")
     name = args.arm or arm_name
-    desc = load_arm(name)
+    desc = load_arm(name, lock=lock)
     est = load_arm_model(args.model)
     if est.joint_names != desc.model.names:
         raise ValueError(f"{args.model} holds the joints {list(est.joint_names)}, not those "
@@ -45,16 +45,19 @@ def run(args: argparse.Namespace, arm_name: str) -> int:
 def run_import(args: argparse.Namespace) -> int:
     """Read an arm's MJCF or URDF into an arm model file (its base parameters, σ 0, nothing
     marked identified: a description, not a measurement)."""
+    from dampest_ros.cli.common import joint_list
     from dampest_ros.io.arm import load_arm, save_arm_model
     from dampest_ros.io.export.arm import import_arm, imported_estimate
 
     if args.format not in ("mjcf", "urdf"):
         raise ValueError(f"--arm reads an arm: --format mjcf or urdf, not {args.format}")
-    desc = load_arm(args.arm)
+    lock = joint_list(args.lock)
+    desc = load_arm(args.arm, lock=lock)
     arm, dyn = import_arm(args.file, args.format, desc)
     est = imported_estimate(arm, dyn, desc)
     save_arm_model(args.out, est, str(args.arm),
-                   {"source": f"dampest import {args.file} ({args.format})"})
+                   {"source": f"dampest import {args.file} ({args.format})",
+                    **({"lock": list(lock)} if lock else {})})
     print(f"wrote {args.out}: {len(est.theta)} base parameters of {args.arm} from {args.file} "
           f"({args.format})")
     return 0

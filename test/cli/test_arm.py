@@ -109,3 +109,27 @@ def test_an_outside_urdf_simulates_with_sensors_scaled_to_it(
     # joint, |q - q0|, |qd|, |tau|, noise, offset: the xArm7's limits 50/50/30/30/30/20/20 N m
     assert [float(r[4]) for r in rows] == pytest.approx(
         [0.135, 0.135, 0.081, 0.081, 0.081, 0.054, 0.054])
+
+
+def test_a_gripper_arm_from_the_command_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                             outside_arm) -> None:  # type: ignore[no-untyped-def]
+    """The Z1 of example-robot-data with its gripper joint locked (--lock): simulated,
+    identified (the model file records the lock), exported to MJCF and imported back, all
+    from the command line, with the six arm joints."""
+    import mujoco
+    import yaml as yaml_
+
+    path, lock = outside_arm("z1")
+    bag, model, xml = tmp_path / "z1", tmp_path / "z1.yaml", tmp_path / "z1.xml"
+    arm = ["--arm", path, "--lock", ",".join(lock)]
+    assert main(["arm", "simulate", *arm, "--random", "3", "--duration", "20", "--noise",
+                 "scaled", "--out", str(bag)]) == 0
+    assert main(["arm", "identify", str(bag), *arm, "--out", str(model)]) == 0
+    doc = yaml_.safe_load(model.read_text())["/**"]["ros__parameters"]["model"]
+    assert doc["lock"] == ["jointGripper"] and len(doc["joint_names"]) == 6
+    assert main(["export", str(model), "--format", "mjcf", "--out", str(xml)]) == 0
+    assert mujoco.MjModel.from_xml_string(xml.read_text()).nv == 6
+    assert main(["import", str(xml), "--format", "mjcf", *arm, "--out",
+                 str(tmp_path / "back.yaml")]) == 0
+    assert load_arm_model(tmp_path / "back.yaml").joint_names == tuple(doc["joint_names"])
+    capsys.readouterr()

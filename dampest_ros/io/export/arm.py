@@ -73,14 +73,17 @@ class ExportedArm:
     notes: list[str]
 
 
-def arm_of_model_file(path: str | Path) -> str | None:
-    """The arm (``model.arm``) of an arm model file; None for any other file (a vehicle's
-    model file, or one that does not read: its own reader says why)."""
+def arm_of_model_file(path: str | Path) -> tuple[str, tuple[str, ...]] | None:
+    """The arm (``model.arm``) of an arm model file and the joints it was identified with
+    locked (``model.lock``, none if absent); None for any other file (a vehicle's model
+    file, or one that does not read: its own reader says why)."""
     try:
         _, m = model_section(load_yaml(path))
     except (InputError, OSError):
         return None
-    return str(m.get("arm")) if m.get("kind") == ARM_MODEL_KIND else None
+    if m.get("kind") != ARM_MODEL_KIND:
+        return None
+    return str(m.get("arm")), tuple(str(j) for j in m.get("lock", []))
 
 
 def consistent_full(path: str | Path, arm: ArmModel) -> FloatArray | None:
