@@ -14,8 +14,14 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from matplotlib.figure import Figure
+
+from dampest_ros.core.arm.design import default_limits, within_limits
+from dampest_ros.core.arm.ffs import FourierTrajectory, random_trajectory
+from dampest_ros.core.arm.model import ArmModel, JointDynamics
+from dampest_ros.core.arm.simulate import ArmSensors, scaled_sensors
 
 #: The checkout the tests run from.
 REPO = Path(__file__).resolve().parents[1]
@@ -204,3 +210,63 @@ def colcon_install(tmp_path_factory: pytest.TempPathFactory) -> Path:
         kids.close()
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return ws / "install" / PACKAGE
+
+
+#: Outside arms of the pinned example-robot-data wheel (requirements/lock.txt): URDF path
+#: under its robots folder, and the gripper joints held fixed.
+OUTSIDE_ARMS = {
+    "ur10": ("ur_description/urdf/ur10_robot.urdf", ()),
+    "kinova": ("kinova_description/robots/kinova.urdf", ()),
+    "z1": ("z1_description/urdf/z1.urdf", ("jointGripper",)),
+    "panda": ("panda_description/urdf/panda.urdf",
+              ("panda_finger_joint1", "panda_finger_joint2")),
+    "xarm7": ("xarm_description/urdf/xarm7.urdf", ()),
+}
+
+
+@pytest.fixture(scope="session")
+def outside_arm() -> Callable[[str], tuple[str, tuple[str, ...]]]:
+    """The URDF path of an example-robot-data arm and the joints to lock, by short name."""
+    from importlib.metadata import distribution
+
+    robots = distribution("example-robot-data").locate_file(
+        "cmeel.prefix/share/example-robot-data/robots")
+
+    def find(name: str) -> tuple[str, tuple[str, ...]]:
+        path, lock = OUTSIDE_ARMS[name]
+        return str(robots / path), lock  # type: ignore[operator]
+
+    return find
+
+
+class OutsideSim:
+    """One rule for every outside arm: its simulated joint terms, sensors and trajectories."""
+
+    @staticmethod
+    def joint_terms(arm: ArmModel) -> JointDynamics:
+        """Armature, viscous and Coulomb friction in proportion to each joint's effort limit
+        (the UR5 preset's shoulder: 0.25 kg m², 2 N m s/rad, 3 N m of 150 N m)."""
+        e = arm.effort_limit
+        return JointDynamics(armature=0.0015 * e, damping=0.015 * e, frictionloss=0.02 * e)
+
+    @staticmethod
+    def sensors(arm: ArmModel) -> ArmSensors:
+        """20-bit encoders, torque noise 0.27 % and offsets ±0.2 % of the effort limit."""
+        return scaled_sensors(arm)
+
+    @staticmethod
+    def trajectory(arm: ArmModel, nominal: np.ndarray, harmonics: int, frequency: float,
+                   seed: int) -> FourierTrajectory:
+        """Random FFS coefficients within the default design limits of the arm's own
+        joints."""
+        lim = default_limits(arm)
+        q0 = 0.5 * (lim.lower + lim.upper)
+        traj = random_trajectory(q0, harmonics, frequency, lim.velocity,
+                                 np.random.default_rng(seed))
+        return within_limits(arm, traj, lim, nominal)
+
+
+@pytest.fixture(scope="session")
+def outside() -> type[OutsideSim]:
+    """The joint terms, sensors and trajectories of the outside-arm tests."""
+    return OutsideSim

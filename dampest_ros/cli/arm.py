@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
-from dampest_ros.cli.common import Elapsed, check_outputs, describe, table
+from dampest_ros.cli.common import Elapsed, check_outputs, describe, joint_list, table
 
 if TYPE_CHECKING:
     import numpy as np
@@ -36,9 +36,14 @@ HELP = {
 
 
 def _arm_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--lock", default="", metavar="JOINT[,JOINT]",
+                   help="joints held fixed at 0 (a gripper's), for a URDF without an MJCF "
+                        "beside it; identify --out records them")
     p.add_argument("--arm", default="ur5", metavar="NAME|URDF",
                    help="arm preset (ur5, shipped) or a URDF path (revolute and continuous "
-                        "joints) with its MJCF beside it (same stem, .xml) (default: ur5)")
+                        "joints); an MJCF beside it (same stem, .xml) is the simulated arm, "
+                        "without one it is written from the URDF (its <dynamics damping "
+                        "friction>, no armature) (default: ur5)")
 
 
 def _limit_options(p: argparse.ArgumentParser) -> None:
@@ -85,9 +90,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="simulated seconds (default: 60)")
     s.add_argument("--rate", type=float, default=1000.0, metavar="HZ",
                    help="JointState rate, 1000 divided by an integer (default: 1000)")
-    s.add_argument("--noise", choices=("realistic", "none"), default="realistic",
+    s.add_argument("--noise", choices=("realistic", "scaled", "none"), default="realistic",
                    help="sensors: 20-bit encoders and torque noise 0.4/0.4/0.3/0.1/0.1/0.1 "
-                        "N m with offsets (realistic, default) or exact (none)")
+                        "N m with offsets (realistic, default: a UR5's six joints), the same "
+                        "relative to each joint's effort limit (scaled: 0.27 %%, offsets "
+                        "0.2 %%; any arm) or exact (none)")
     s.add_argument("--payload", type=float, nargs=2, metavar=("KG", "AT_S"),
                    help="attach a point mass of KG at the last link's origin at AT_S seconds")
     s.add_argument("--seed", type=int, default=1, help="seed of the sensor noise (default: 1)")
@@ -115,6 +122,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     i.add_argument("--min-speed", type=float, default=0.1, metavar="RAD/S",
                    help="rows of a joint slower than this are not used: dry friction is "
                         "undefined at rest (default: 0.1)")
+    i.add_argument("--coulomb-width", type=float, default=0.0, metavar="RAD/S",
+                   help="dry friction as Fc tanh(qd / W), smooth through a reversal, instead "
+                        "of Fc sign(qd) (default: 0, the sign); the model file records it")
     i.add_argument("--mapping", action="store_true",
                    help="print how each base parameter combines the full parameters")
     i.add_argument("--out", metavar="YAML",
@@ -162,7 +172,7 @@ def _design(args: argparse.Namespace) -> int:
     check_outputs(args, {"out": "trajectory.yaml"})
     if Path(args.out).exists():
         raise FileExistsError(f"{args.out} exists; choose a new --out")
-    arm = load_arm(args.arm)
+    arm = load_arm(args.arm, lock=joint_list(args.lock))
     limits = _limits(args, arm.model)
     base = base_parameters(arm.model)
     t0 = time.perf_counter()
@@ -194,7 +204,12 @@ def _simulate(args: argparse.Namespace) -> int:
     from dampest_ros.core.arm.design import regressor_cond, within_limits
     from dampest_ros.core.arm.ffs import random_trajectory
     from dampest_ros.core.arm.regressor import full_parameters, regressor
-    from dampest_ros.core.arm.simulate import REALISTIC, ArmSensors, simulate_arm
+    from dampest_ros.core.arm.simulate import (
+        REALISTIC,
+        ArmSensors,
+        scaled_sensors,
+        simulate_arm,
+    )
     from dampest_ros.io.arm import joint_series, load_arm, load_trajectory, write_joint_bag
 
     out = Path(args.out)
@@ -206,7 +221,7 @@ def _simulate(args: argparse.Namespace) -> int:
     if not 0 < args.rate <= 1000:
         raise ValueError(f"--rate must be 1000 Hz divided by a whole number (1000, 500, "
                          f"250, ...), got {args.rate:g}")
-    arm = load_arm(args.arm)
+    arm = load_arm(args.arm, lock=joint_list(args.lock))
     limits = _limits(args, arm.model)
     if args.trajectory:
         traj, held = load_trajectory(args.trajectory, arm.model.n)
@@ -224,7 +239,12 @@ def _simulate(args: argparse.Namespace) -> int:
     if bad:
         raise ValueError(f"trajectory {args.trajectory or 'random'} violates its limits: "
                          + "; ".join(bad))
-    sensors = REALISTIC if args.noise == "realistic" else ArmSensors()
+    if args.noise == "realistic" and arm.model.n != np.size(REALISTIC.torque_sigma):
+        raise ValueError(f"--noise realistic is a UR5's sensors (6 joints); {args.arm} has "
+                         f"{arm.model.n}: use --noise scaled (the same relative to each "
+                         "joint's effort limit) or none")
+    sensors = {"realistic": REALISTIC, "scaled": scaled_sensors(arm.model),
+               "none": ArmSensors()}[args.noise]
     payload = None if args.payload is None else (float(args.payload[0]),
                                                  float(args.payload[1]))
     t0 = time.perf_counter()
@@ -266,8 +286,12 @@ def _identify(args: argparse.Namespace) -> int:
     from dampest_ros.io.arm import load_arm, read_joint_bag
 
     check_outputs(args, {"out": "arm_model.yaml"}, ("report",))
-    cfg = IdentifyConfig(cutoff=args.cutoff, rate_out=args.rate_out, min_speed=args.min_speed)
-    arm = load_arm(args.arm)
+    if not (np.isfinite(args.coulomb_width) and args.coulomb_width >= 0):
+        raise ValueError(f"--coulomb-width {args.coulomb_width:g}: give a width >= 0 rad/s "
+                         "(0: Fc sign(qd))")
+    cfg = IdentifyConfig(cutoff=args.cutoff, rate_out=args.rate_out, min_speed=args.min_speed,
+                         coulomb_width=args.coulomb_width)
+    arm = load_arm(args.arm, lock=joint_list(args.lock))
     names = arm.model.names
     t0 = time.perf_counter()
     data, _ = read_joint_bag(args.bag, names, args.topic)
@@ -360,7 +384,9 @@ def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
         "consistent_status": res.consistent.status,
         "consistent_full": {"names": list(base.names),
                             "values": [float(x) for x in res.consistent.full]},
-        "noise_estimate": [float(x) for x in res.noise]})
+        "noise_estimate": [float(x) for x in res.noise],
+        "coulomb_width": float(args.coulomb_width),
+        **({"lock": list(joint_list(args.lock))} if joint_list(args.lock) else {})})
 
 
 def _write_report(out_dir: str, args: argparse.Namespace, base: Any, res: Any,

@@ -28,11 +28,13 @@ EXPORT_EXAMPLE = ("examples:\n"
                   "  dampest export model.yaml --format gz --vehicle bluerov2_heavy "
                   "--out hydrodynamics.sdf\n"
                   "  dampest export model.yaml --format uuv --vehicle bluerov2_heavy "
-                  "--out uuv_hydrodynamics.sdf")
+                  "--out uuv_hydrodynamics.sdf\n"
+                  "  dampest export arm_params.yaml --format mjcf --out arm.xml")
 IMPORT_EXAMPLE = ("examples:\n  dampest import hydrodynamics.sdf --vehicle bluerov2_heavy "
                   "--out model.yaml\n"
                   "  dampest import uuv_hydrodynamics.sdf --format uuv --link-name "
-                  "rexrov/base_link --vehicle bluerov2_heavy --out model.yaml")
+                  "rexrov/base_link --vehicle bluerov2_heavy --out model.yaml\n"
+                  "  dampest import arm.xml --format mjcf --arm ur5 --out arm_model.yaml")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -40,9 +42,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     describe(p, __doc__, EXPORT_EXAMPLE)
     p.add_argument("model", metavar="MODEL",
                    help="model file (ROS 2 parameters YAML written by dampest)")
-    p.add_argument("--format", required=True, choices=FORMATS,
+    p.add_argument("--format", required=True, choices=(*FORMATS, "mjcf"),
                    help="gz: Hydrodynamics plugin tags; urdf: <hydrodynamics> block; "
-                        "uuv: UUV Simulator <plugin> with its <hydrodynamic_model> (SDF)")
+                        "uuv: UUV Simulator <plugin> with its <hydrodynamic_model> (SDF); "
+                        "an arm's model file: mjcf or urdf (joint terms, link inertias)")
+    p.add_argument("--arm", metavar="NAME|URDF",
+                   help="an arm's model file: the arm it belongs to (default: its model.arm)")
     p.add_argument("--out", metavar="FILE", help="file to write (default: standard output)")
     p.add_argument("--vehicle", metavar="NAME|YAML",
                    help="vehicle preset name or YAML path; its rigid body gives the added "
@@ -68,10 +73,16 @@ def add_import_arguments(q: argparse.ArgumentParser) -> None:
     describe(q, __doc__, IMPORT_EXAMPLE)
     q.add_argument("file", metavar="FILE",
                    help="SDF/URDF/XML file holding the plugin or the block")
-    q.add_argument("--format", choices=IMPORT_FORMATS,
+    q.add_argument("--format", choices=(*IMPORT_FORMATS, "mjcf"),
                    help="gz: a Hydrodynamics plugin; urdf: a <hydrodynamics> block; uuv: a "
                         "UUV Simulator <hydrodynamic_model> (default: the one the file "
-                        "holds)")
+                        "holds); with --arm: mjcf or urdf, an arm's joint terms and link "
+                        "inertias")
+    q.add_argument("--arm", metavar="NAME|URDF",
+                   help="read an arm (its joints named as this preset's or URDF's) into an "
+                        "arm model file")
+    q.add_argument("--lock", default="", metavar="JOINT[,JOINT]",
+                   help="with --arm: its joints held fixed at 0 (as identify --lock)")
     q.add_argument("--out", required=True, metavar="MODEL",
                    help="model file to write (YAML)")
     q.add_argument("--vehicle", metavar="NAME|YAML",
@@ -89,12 +100,20 @@ def run(args: argparse.Namespace) -> int:
     """Write the model in the format asked for; the warnings on stderr."""
     import warnings
 
+    from dampest_ros.cli import export_arm
     from dampest_ros.cli.inputs import warn_unchecked
+    from dampest_ros.io.export.arm import arm_of_model_file
     from dampest_ros.io.export.common import ExportWarning
     from dampest_ros.io.export.convert import export_model
     from dampest_ros.io.yaml_io import load_model, load_vehicle
 
     check_outputs(args, {"out": "hydrodynamics.sdf"})
+    arm = arm_of_model_file(args.model)
+    if arm is not None:
+        return export_arm.run(args, *arm)
+    if args.format == "mjcf" or args.arm:
+        raise ValueError(f"{args.model} is not an arm model file: --format mjcf and --arm "
+                         "export an arm's (dampest arm identify --out)")
     model = load_model(args.model)
     vehicle = load_vehicle(args.vehicle) if args.vehicle else None
     if vehicle is not None:
@@ -129,12 +148,17 @@ def run_import(args: argparse.Namespace) -> int:
     """Read the file's hydrodynamics into a model file."""
     import numpy as np
 
+    from dampest_ros.cli import export_arm
     from dampest_ros.core.identification.model import Model
     from dampest_ros.io.export.common import imported_mass_parts
     from dampest_ros.io.export.convert import detect_format, import_model
     from dampest_ros.io.yaml_io import load_vehicle, save_model
 
     check_outputs(args, {"out": "model.yaml"})
+    if args.arm:
+        return export_arm.run_import(args)
+    if args.format == "mjcf":
+        raise ValueError("--format mjcf reads an arm: give the arm with --arm")
     vehicle = load_vehicle(args.vehicle) if args.vehicle else None
     fmt = args.format or detect_format(Path(args.file))
     imp = import_model(Path(args.file), fmt, frame=args.frame, link_name=args.link_name)

@@ -1,5 +1,6 @@
 """Arm descriptions and arm joint data on disk: the shipped arm presets (URDF for Pinocchio
-and the MJCF written from it, ``dampest_ros/data/arm/``), ``sensor_msgs/JointState`` bags of
+and the MJCF written from it, ``dampest_ros/data/arm/``) and any URDF (its MJCF beside it or
+written from it), ``sensor_msgs/JointState`` bags of
 an arm's joints (position, velocity, effort) with the simulation's truth beside them, FFS
 trajectory files, and the online estimate's model file.
 """
@@ -17,7 +18,15 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.arm.design import DesignLimits
 from dampest_ros.core.arm.ffs import FourierTrajectory
-from dampest_ros.core.arm.model import ArmModel, JointDynamics, arm_from_urdf, joint_dynamics
+from dampest_ros.core.arm.model import (
+    ArmModel,
+    JointDynamics,
+    arm_from_urdf,
+    fixed_joints,
+    joint_dynamics,
+    mjcf,
+    urdf_dynamics,
+)
 from dampest_ros.core.arm.online import ArmEstimate
 from dampest_ros.core.physics.identity import Identity
 from dampest_ros.core.physics.rigid_body import ConfigError
@@ -63,34 +72,59 @@ def arm_presets() -> list[str]:
     return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".urdf"))
 
 
-def load_arm(name_or_path: str | Path) -> ArmDescription:
-    """Load an arm: a preset name (``ur5``) or a URDF path with its MJCF beside it
-    (``arm.urdf`` and ``arm.xml``).
+def arm_files(name_or_path: str | Path) -> tuple[str, str | None]:
+    """The URDF text of an arm preset or URDF path, and the MJCF beside it (None if none).
 
     Raises
     ------
     ArmDataError
-        If the preset or a file is missing, or a file does not describe a revolute arm.
+        If it is neither a preset nor an existing .urdf file.
+    """
+    text = str(name_or_path)
+    if text in arm_presets():
+        root = resources.files("dampest_ros") / "data" / "arm"
+        return (root / f"{text}.urdf").read_text(), (root / f"{text}.xml").read_text()
+    path = Path(text)
+    if path.suffix != ".urdf" or not path.is_file():
+        raise ArmDataError(f"arm {text!r} is neither a preset ({', '.join(arm_presets())}) "
+                           "nor an existing .urdf file")
+    mj = path.with_suffix(".xml")
+    return path.read_text(), mj.read_text() if mj.is_file() else None
+
+
+def load_arm(name_or_path: str | Path, lock: tuple[str, ...] = ()) -> ArmDescription:
+    """Load an arm: a preset name (``ur5``) or a URDF path. An MJCF beside the URDF (same
+    stem, ``.xml``) is the simulated arm; without one, the MJCF is written from the URDF
+    (:func:`~dampest_ros.core.arm.model.mjcf`) with the joint dynamics the URDF states
+    (``<dynamics damping friction>``, no armature: :func:`urdf_dynamics`).
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+    lock : tuple of str
+        Joints held fixed at 0 (a gripper's); the URDF's MJCF is then always written from it.
+
+    Raises
+    ------
+    ArmDataError
+        If the preset or a file is missing, a file does not describe a revolute arm, or
+        joints are locked in an arm whose MJCF is a file.
     """
     import mujoco
 
     text = str(name_or_path)
-    if text in arm_presets():
-        root = resources.files("dampest_ros") / "data" / "arm"
-        urdf, xml = (root / f"{text}.urdf").read_text(), (root / f"{text}.xml").read_text()
-    else:
-        path = Path(text)
-        mj = path.with_suffix(".xml")
-        if path.suffix != ".urdf" or not path.is_file():
-            raise ArmDataError(f"arm {text!r} is neither a preset ({', '.join(arm_presets())}) "
-                               "nor an existing .urdf file")
-        if not mj.is_file():
-            raise ArmDataError(f"arm {path}: no MJCF {mj} beside the URDF; MuJoCo needs it "
-                               "(same joints, with armature, damping and frictionloss)")
-        urdf, xml = path.read_text(), mj.read_text()
+    urdf, xml = arm_files(text)
+    if lock and xml is not None:
+        raise ArmDataError(f"arm {text}: cannot lock {', '.join(lock)} in its MJCF file; "
+                           "give a URDF without an MJCF beside it (the MJCF is then written "
+                           "from the URDF)")
     try:
-        model = arm_from_urdf(urdf)
-        dyn = joint_dynamics(mujoco.MjModel.from_xml_string(xml), model.names)
+        model = arm_from_urdf(fixed_joints(urdf, lock))
+        if xml is None:
+            dyn = urdf_dynamics(model)
+            xml = mjcf(model, dyn, name=Path(text).stem)
+        else:
+            dyn = joint_dynamics(mujoco.MjModel.from_xml_string(xml), model.names)
     except ValueError as exc:
         raise ArmDataError(f"arm {text}: {exc}") from None
     return ArmDescription(model, xml, dyn, text)

@@ -6,8 +6,9 @@ order: they are matched by name). The samples are filtered as offline (zero-phas
 cutoff, q̇ and q̈ of the filtered q, decimation to rate_out) in windows that reach 10 / cutoff s
 past the samples they emit, so the estimate lags the data by that margin plus hop. The work is
 done by dampest_ros.core.arm.online.ArmEstimator: the vehicle estimator's RLS (forgetting,
-per-joint noise weights, CUSUM change alarm with a covariance reset on an alarm) on the base
-regressor with friction columns.
+per-joint noise weights unless adapt_weights is false, CUSUM change alarm with a covariance
+reset on an alarm) on the base regressor with friction columns, from the prior of
+dampest_ros.core.arm.online.prior_std (or a model file).
 
 Holds the estimate as the parameters model.kind (arm_base_parameters), model.arm,
 model.joint_names, model.parameter_names (each base parameter named by the full parameter it
@@ -41,9 +42,8 @@ from std_msgs.msg import String
 from dampest_ros.core.arm.base import base_parameters
 from dampest_ros.core.arm.identify import IdentifyConfig
 from dampest_ros.core.arm.model import arm_model_identity
-from dampest_ros.core.arm.online import ArmEstimate, ArmEstimator
+from dampest_ros.core.arm.online import ArmEstimate, ArmEstimator, default_rls, prior_std
 from dampest_ros.core.arm.regressor import full_parameters
-from dampest_ros.core.online.rls.least_squares import RLSConfig
 from dampest_ros.core.physics.identity import Identity, mismatch, unchecked
 from dampest_ros.io.arm import (
     ArmDataError,
@@ -93,7 +93,8 @@ class ArmEstimatorNode(EstimatorParamNode):
 
     NODE_NAME = "arm_estimator_node"
     PARAMS = (
-        Param("arm", "ur5", "arm preset or URDF path (its MJCF beside it): joint names, "
+        Param("arm", "ur5", "arm preset or URDF path (an MJCF beside it, or written from "
+              "the URDF): joint names, "
               "kinematics and the nominal parameters (the prior mean)", check=_arm_check),
         Param("cutoff", 10.0, "zero-phase low-pass of q and torque in Hz (at most "
               "rate_out/2)", low=0.5, high=200.0),
@@ -101,15 +102,20 @@ class ArmEstimatorNode(EstimatorParamNode):
               "each, in Hz (at most the JointState rate)", low=1.0, high=1000.0),
         Param("min_speed", 0.1, "a joint's rows slower than this (rad/s) are not used: dry "
               "friction is undefined at rest", low=0.0, high=10.0),
+        Param("coulomb_width", 0.0, "dry friction as Fc·tanh(q̇/width) with this width in "
+              "rad/s (0: Fc·sign(q̇)); the one the prior was identified with", low=0.0,
+              high=10.0),
         Param("forgetting_factor", 0.9995, "RLS forgetting factor λ (memory ≈ 1/(1−λ) "
               "samples at rate_out)", low=0.9, high=1.0),
         Param("hop", 1.0, "s of samples filtered per pass (the estimate lags by 10/cutoff + "
               "hop s)", low=0.05, high=10.0),
         Param("prior", "", "arm model YAML (this node's ~/save) whose theta/theta_std are the "
-              "prior ('': the arm's nominal parameters, σ = prior_std_factor·|θ| + 0.01)",
-              check=_prior_check),
+              "prior ('': the arm's nominal parameters, σ = prior_std_factor·|θ| + what "
+              "moves a joint's torque by 10 % of its effort limit)", check=_prior_check),
         Param("prior_std_factor", 1.0, "prior σ of the nominal parameters relative to their "
-              "magnitude", low=1e-6, high=1e6),
+              "magnitude (added to the torque-scaled part)", low=1e-6, high=1e6),
+        Param("adapt_weights", True, "weight each joint's rows by its estimated noise "
+              "variance (false: equal weights)"),
         Param("publish_rate", 1.0, "model and diagnostics publications per second (node "
               "clock)", low=0.01, high=100.0),
         Param("save_path", "dampest_arm_model.yaml", "where ~/save writes the model YAML",
@@ -147,7 +153,7 @@ class ArmEstimatorNode(EstimatorParamNode):
         self.arm = load_arm(self.p("arm"))
         base = base_parameters(self.arm.model)
         theta0 = base.of(full_parameters(self.arm.model, self.arm.dynamics))
-        std0 = self.p("prior_std_factor") * np.abs(theta0) + 0.01
+        std0 = prior_std(self.arm.model, base, theta0, self.p("prior_std_factor"))
         self._kept = [base.names[i] for i in base.independent]
         if start is None and str(self.p("prior")).strip():
             start = load_arm_model(self.p("prior"))
@@ -157,9 +163,10 @@ class ArmEstimatorNode(EstimatorParamNode):
         if start is not None:
             theta0, std0 = start.theta, np.maximum(start.theta_std, 1e-12)
         cfg = IdentifyConfig(cutoff=self.p("cutoff"), rate_out=self.p("rate_out"),
-                             min_speed=self.p("min_speed"))
-        rls = RLSConfig(forgetting_factor=self.p("forgetting_factor"), adapt_weights=True,
-                        noise_var=(0.01,) * 6, trace_max=10.0 * base.size)
+                             min_speed=self.p("min_speed"),
+                             coulomb_width=self.p("coulomb_width"))
+        rls = default_rls(self.arm.model, base, theta0, self.p("forgetting_factor"),
+                          self.p("adapt_weights"))
         self.estimator = ArmEstimator(self.arm.model, base, theta0, std0, cfg, rls,
                                       hop=self.p("hop"), identity=self.owner())
         self.names = tuple(self.arm.model.names)

@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.signals.measurements import JointSeries, WrenchSeries
-from dampest_ros.io.arm import ArmDataError, joint_series, read_joint_bag, write_joint_bag
+from dampest_ros.io.arm import (
+    ArmDataError,
+    joint_series,
+    load_arm,
+    read_joint_bag,
+    write_joint_bag,
+)
 from dampest_ros.io.bag import read_bag, write_bag
 
 NAMES = ("j1", "j2", "j3")
@@ -54,3 +60,37 @@ def test_refusals(tmp_path) -> None:  # type: ignore[no-untyped-def]
     write_bag(tmp_path / "np", {"joint_states": s})
     with pytest.raises(ArmDataError, match="carry no position"):
         read_joint_bag(tmp_path / "np", NAMES)
+
+
+def test_a_urdf_alone_loads_with_the_mjcf_written_from_it(outside_arm) -> None:  # type: ignore[no-untyped-def]
+    """A URDF without an MJCF beside it was refused; now MuJoCo's model is written from it,
+    with the joint terms the URDF states (the Z1's <dynamics damping friction>, armature 0),
+    and a gripper joint can be held fixed."""
+    import mujoco
+
+    from dampest_ros.core.arm.model import joint_dynamics
+
+    path, lock = outside_arm("z1")
+    assert load_arm(path).model.names[-1] == "jointGripper"  # a seventh revolute joint
+    arm = load_arm(path, lock=lock)
+    assert arm.model.n == 6 and arm.model.names[-1] == "joint6"
+    assert arm.dynamics.damping.tolist() == [1.0, 2.0, 1.0, 1.0, 1.0, 1.0]
+    assert arm.dynamics.frictionloss.tolist() == [1.0, 2.0, 1.0, 1.0, 1.0, 1.0]
+    assert arm.dynamics.armature.tolist() == [0.0] * 6
+    mj = mujoco.MjModel.from_xml_string(arm.mjcf)
+    assert mj.nv == 6
+    got = joint_dynamics(mj, arm.model.names)
+    assert np.array_equal(got.damping, arm.dynamics.damping)
+    assert np.array_equal(got.frictionloss, arm.dynamics.frictionloss)
+    with pytest.raises(ArmDataError, match="no joint nothere to lock; the URDF's joints are"):
+        load_arm(path, lock=("nothere",))
+    with pytest.raises(ArmDataError, match="cannot lock wrist_3_joint in its MJCF file"):
+        load_arm("ur5", lock=("wrist_3_joint",))
+
+
+def test_locking_a_joint_that_a_transmission_names_holds_the_joint(outside_arm) -> None:  # type: ignore[no-untyped-def]
+    """The Kinova URDF names each joint again in a <transmission>; the lock found that
+    element (the last of the name) and held nothing. Now the robot's own joint is fixed."""
+    path, _ = outside_arm("kinova")
+    arm = load_arm(path, lock=("j2s6s200_joint_6",)).model
+    assert arm.n == 5 and "j2s6s200_joint_6" not in arm.names

@@ -151,6 +151,59 @@ def revolute_urdf(urdf: str) -> tuple[str, frozenset[str]]:
     return ET.tostring(root, encoding="unicode"), frozenset(str(j.get("name")) for j in joints)
 
 
+def fixed_joints(urdf: str, names: tuple[str, ...]) -> str:
+    """URDF text with the named joints written as fixed ones, held at position 0 (a
+    gripper's fingers, to identify the arm without them; their links' inertias join the
+    link they hang from).
+
+    Parameters
+    ----------
+    urdf : str
+        URDF XML.
+    names : tuple of str
+        Joints to hold; none returns the text unchanged.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    ValueError
+        If the text is not XML or a name is not a joint of it (names the ones it has).
+    """
+    if not names:
+        return urdf
+    try:
+        root = ET.fromstring(urdf)
+    except ET.ParseError as exc:
+        raise ValueError(f"URDF does not parse: {exc}") from None
+    joints = {str(j.get("name")): j for j in root.findall("joint")}
+    missing = [n for n in names if n not in joints]
+    if missing:
+        raise ValueError(f"no joint {', '.join(missing)} to lock; the URDF's joints are "
+                         f"{', '.join(joints)}")
+    for name in names:
+        joints[name].set("type", "fixed")
+    return ET.tostring(root, encoding="unicode")
+
+
+def _require_ranges(urdf: str) -> None:
+    """ValueError naming the first revolute joint whose <limit> lacks lower or upper: URDF
+    reads a missing one as 0, so such a joint has no range to move in (the text parses: the
+    caller has checked)."""
+    for joint in ET.fromstring(urdf).iter("joint"):
+        limit = joint.find("limit")
+        if joint.get("type") != "revolute" or limit is None:
+            continue
+        missing = [k for k in ("lower", "upper") if limit.get(k) is None]
+        if missing:
+            raise ValueError(
+                f"joint {joint.get('name')}: its <limit> has no {' or '.join(missing)}, which "
+                "URDF reads as 0 (a range of [0, 0]: the joint cannot move); give its range "
+                "in radians, or make it continuous if it has none")
+
+
 def arm_from_urdf(urdf: str) -> ArmModel:
     """Read an arm of revolute (and continuous) joints from URDF text with Pinocchio.
 
@@ -168,9 +221,11 @@ def arm_from_urdf(urdf: str) -> ArmModel:
     Raises
     ------
     ValueError
-        If the URDF does not parse or has a joint other than a revolute or continuous one.
+        If the URDF does not parse, has a joint other than a revolute or continuous one, or
+        a revolute joint whose <limit> lacks lower or upper (URDF: 0).
     """
     text, continuous = revolute_urdf(urdf)
+    _require_ranges(urdf)
     try:
         model = pin.buildModelFromXML(text)
         given = pin.buildModelFromXML(urdf) if continuous else model
@@ -187,7 +242,8 @@ def arm_from_urdf(urdf: str) -> ArmModel:
             axes.append(tuple(np.asarray(joint.extract().axis, dtype=float)))
         else:
             raise ValueError(f"joint {model.names[i]} is a {kind}; only revolute and "
-                             "continuous joints are supported")
+                             "continuous joints are supported: lock it (held at 0) to "
+                             "identify the others")
     names = tuple(str(model.names[i]) for i in range(1, n + 1))
     free = np.array([name in continuous for name in names])
     place = [model.jointPlacements[i] for i in range(1, n + 1)]
@@ -206,6 +262,24 @@ def arm_from_urdf(urdf: str) -> ArmModel:
         gravity=np.array(model.gravity.linear, dtype=float),
         urdf=text,
     )
+
+
+def urdf_dynamics(arm: ArmModel) -> JointDynamics:
+    """The joint dynamics a URDF states: ``<dynamics damping friction>`` per joint (0 where
+    it gives none) and no armature (URDF has no element for it).
+
+    Parameters
+    ----------
+    arm : ArmModel
+
+    Returns
+    -------
+    JointDynamics
+    """
+    model = pin.buildModelFromXML(arm.urdf)
+    return JointDynamics(armature=np.asarray(model.armature, dtype=np.float64),
+                         damping=np.asarray(model.damping, dtype=np.float64),
+                         frictionloss=np.asarray(model.friction, dtype=np.float64))
 
 
 def _quat(R: FloatArray) -> FloatArray:

@@ -55,3 +55,21 @@ def test_ur5_base_is_unchanged() -> None:
         44, 45, 47, 48, 49, 51, 53, 54, 55, 56, 57, 58, 60, 61, 62, 63, 64, 65, 66, 67, 68, 69,
         70, 71, 72, 73, 74, 75, 76, 77, 78, 79, 80, 81, 82, 83]
     assert np.abs(base.beta).sum() == pytest.approx(28.400043278970635, rel=1e-12)
+
+
+def test_a_right_angle_written_to_five_digits_is_not_a_base_parameter(outside_arm) -> None:  # type: ignore[no-untyped-def]
+    """The xArm7's URDF turns its axes by rpy = 1.5708, 3.7e-6 rad off π/2: a combination the
+    algebra folds had a pivot of 5e-6 and was counted (70 base parameters), and its
+    information matrix was singular. Now it has the 69 of the Panda, whose URDF writes π/2
+    to full precision, and the fold leaves a torque error of that relative size."""
+    path, lock = outside_arm("xarm7")
+    arm = load_arm(path, lock=lock).model
+    base = base_parameters(arm)
+    assert base.size == 69
+    W = regressor(arm, *_states(arm, 5)).reshape(-1, 14 * arm.n)
+    pi = full_parameters(arm, load_arm(path).dynamics, np.arange(1.0, 8.0))
+    err = np.abs(base.columns(W) @ base.of(pi) - W @ pi).max() / np.abs(W @ pi).max()
+    assert 1e-8 < err < 1e-5
+    assert base_parameters(arm, tol=1e-8).size == 70  # the rounding-only tolerance of before
+    panda_path, panda_lock = outside_arm("panda")
+    assert base_parameters(load_arm(panda_path, lock=panda_lock).model).size == 69

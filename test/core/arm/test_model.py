@@ -74,7 +74,8 @@ def test_bad_arm_is_refused(tmp_path) -> None:  # type: ignore[no-untyped-def]
         load_arm("ur6")
     urdf = tmp_path / "a.urdf"
     urdf.write_text("<robot name='x'/>")
-    with pytest.raises(ArmDataError, match="no MJCF"):
+    # without an MJCF beside it the URDF alone is read (and refused here for what it is)
+    with pytest.raises(ArmDataError, match=r"a\.urdf: URDF does not parse"):
         load_arm(urdf)
 
 
@@ -117,3 +118,27 @@ def test_continuous_joints_are_revolute_without_limits(tmp_path) -> None:  # typ
     traj = random_trajectory(np.zeros(6), 2, 1.0, np.full(6, 1.0), np.random.default_rng(1))
     run = simulate_arm(arm.mjcf, m, arm.dynamics, traj, 0.5)
     assert np.abs(run.q - traj.evaluate(run.t)[0]).max() < 1e-3
+
+
+def test_a_revolute_joint_without_its_range_is_refused(tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]
+                                                       ) -> None:
+    """A revolute joint whose <limit> lacks lower/upper was read as [0, 0] (URDF's default),
+    a joint that cannot move, and the design ranged it over nothing. Now it is refused in one
+    line that names it; a continuous joint (no range by definition) is still taken."""
+    from dampest_ros.cli.main import main
+
+    text = Z1LIKE.read_text().replace(
+        '<limit lower="0.0" upper="2.967" effort="60.0" velocity="3.1415"/>',
+        '<limit upper="2.967" effort="60.0" velocity="3.1415"/>')
+    path = tmp_path / "nolower.urdf"
+    path.write_text(text)
+    with pytest.raises(ArmDataError, match=r"joint joint2: its <limit> has no lower, which "
+                                           r"URDF reads as 0 \(a range of \[0, 0\]"):
+        load_arm(path)
+    capsys.readouterr()
+    assert main(["arm", "design", "--arm", str(path), "--out", str(tmp_path / "t.yaml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].endswith("give its range in radians, or make it "
+                                             "continuous if it has none"), err
+    assert load_arm(_continuous(tmp_path)).model.n == 6
