@@ -11,8 +11,10 @@ fully qualified (``/imu/data``) and returned relative (``imu/data``), as in
 :data:`dampest_ros.core.signals.measurements.TOPIC_TYPES`.
 
 Messages are serialized and deserialized with the fixed-layout numpy codec of
-:mod:`dampest_ros.io.cdr`; the only per-message Python work is the rosbags read or write call
-(and, for a ROS 1 bag, rosbags' conversion of the message to CDR).
+:mod:`dampest_ros.io.cdr`. An indexed MCAP bag is read without per-message Python work: each
+chunk's records are found, checked and copied out with numpy (:mod:`dampest_ros.io.mcap_check`);
+other bags cost the rosbags read call per message (and, for a ROS 1 bag, rosbags' conversion
+of the message to CDR); writing costs the rosbags write call per message.
 """
 
 from __future__ import annotations
@@ -277,25 +279,48 @@ class Bag:
         except Exception as exc:
             raise self._damaged(exc) from exc
 
-    def _checked_messages(self, conns: Sequence[Connection], start: int | None,
-                          stop: int | None) -> Iterator[tuple[Connection, int, bytes]]:
-        """:meth:`messages` of an MCAP bag, file by file, each chunk checked as it is read."""
+    def batches(self, conns: Sequence[Connection], start: int | None = None,
+                stop: int | None = None
+                ) -> Iterator[tuple[Connection, NDArray[np.int64], cdr.Messages]]:
+        """:meth:`messages` a batch at a time: connection, log times (ns) and CDR of
+        consecutive messages of one connection; an indexed MCAP bag's chunk by chunk, with
+        numpy, other bags' :data:`READ_CHUNK` messages of a connection at a time."""
+        if not self.checked:
+            yield from _grouped(self.messages(conns, start, stop))
+            return
+        try:
+            for storage, ours, theirs in self._per_file(conns):
+                for group in mcap_check.batches(storage, theirs, start, stop):
+                    for b in group:
+                        yield ours[b.connection.id], b.log_time, b.data
+        except Exception as exc:
+            raise self._damaged(exc) from exc
+
+    def _per_file(self, conns: Sequence[Connection]
+                  ) -> Iterator[tuple[McapReader, dict[int, Connection], list[Connection]]]:
+        """The checked MCAP files, each with its connection ids → the one of ``conns`` of
+        the same topic and type, and those connections of its own."""
         for storage in self.checked:
             ours = {x.id: c for x in storage.connections for c in conns
                     if (x.topic, x.msgtype) == (c.topic, c.msgtype)}
-            theirs = [x for x in storage.connections if x.id in ours]
+            yield storage, ours, [x for x in storage.connections if x.id in ours]
+
+    def _checked_messages(self, conns: Sequence[Connection], start: int | None,
+                          stop: int | None) -> Iterator[tuple[Connection, int, bytes]]:
+        """:meth:`messages` of an MCAP bag, file by file, each chunk checked as it is read."""
+        for storage, ours, theirs in self._per_file(conns):
             for x, t, data in mcap_check.messages(storage, theirs, start, stop):
                 yield ours[x.id], t, data
 
-    def decode(self, topic: str, msgtype: str, raw: list[bytes | memoryview],
-               log_ns: list[int]) -> Series:
+    def decode(self, topic: str, msgtype: str, raw: cdr.Messages,
+               log_ns: NDArray[np.int64]) -> Series:
         """The series of ``raw`` (messages of ``topic`` logged at ``log_ns``); messages that
         do not deserialise are damaged bytes, named with their log times and the repair."""
         try:
             return cdr.decode(msgtype, raw)
         except Exception as exc:
-            bad = [(t, err) for t, m in zip(log_ns, raw, strict=True)
-                   if (err := cdr.undecodable(msgtype, m))]
+            bad = [(t, err) for t, m in zip(log_ns.tolist(), raw, strict=True)
+                   if (err := cdr.undecodable(msgtype, bytes(m)))]
             if bad:
                 raise self._damaged(mcap_check.DamagedFileError(
                     f"{len(bad)} of {len(raw)} messages of {topic} logged from "
@@ -304,6 +329,23 @@ class Bag:
                     f"{bad[0][1]}")) from exc
             raise BagError(f"cannot decode {topic} ({msgtype}) in bag {_files(self.path)}: "
                            f"{exc}") from exc
+
+
+def _grouped(messages: Iterable[tuple[Connection, int, bytes | memoryview]]
+             ) -> Iterator[tuple[Connection, NDArray[np.int64], list[bytes | memoryview]]]:
+    """Messages gathered per connection, :data:`READ_CHUNK` at a time (the rest at the end):
+    connection, log times (ns) and messages."""
+    held: dict[int, tuple[Connection, list[int], list[bytes | memoryview]]] = {}
+    for conn, t, data in messages:
+        _, times, raw = held.setdefault(conn.id, (conn, [], []))
+        times.append(t)
+        raw.append(data)
+        if len(raw) == READ_CHUNK:
+            yield conn, np.array(times, np.int64), raw
+            held[conn.id] = (conn, [], [])
+    for conn, times, raw in held.values():
+        if raw:
+            yield conn, np.array(times, np.int64), raw
 
 
 class _Assembler:
@@ -387,6 +429,51 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
         return _read(bag, topics, progress, start, stop)
 
 
+class _Topic:
+    """The batches of one topic, decoded :data:`READ_CHUNK` messages at a time (the last
+    ones at the end) into an :class:`_Assembler`.
+
+    Parameters
+    ----------
+    bag : Bag
+    topic, msgtype : str
+    count : int
+        Messages announced (0: unknown).
+    """
+
+    def __init__(self, bag: Bag, topic: str, msgtype: str, count: int) -> None:
+        self.bag, self.topic, self.msgtype = bag, topic, msgtype
+        self.parts = _Assembler(count)
+        self.raw: list[cdr.Messages] = []
+        self.log_ns: list[NDArray[np.int64]] = []
+        self.held = 0
+
+    def add(self, log_ns: NDArray[np.int64], raw: cdr.Messages) -> int:
+        """Take a batch (log times in ns, messages); the number of messages decoded."""
+        self.raw.append(raw)
+        self.log_ns.append(log_ns)
+        self.held += len(log_ns)
+        return self._decode(self.held - self.held % READ_CHUNK) if self.held >= READ_CHUNK else 0
+
+    def _decode(self, k: int) -> int:
+        """Decode the first ``k`` messages held, :data:`READ_CHUNK` at a time."""
+        if not k:
+            return 0
+        raw, log_ns = cdr.join(self.raw), np.concatenate(self.log_ns)
+        for i in range(0, k, READ_CHUNK):
+            self.parts.add(self.bag.decode(self.topic, self.msgtype, raw[i:i + READ_CHUNK],
+                                           log_ns[i:i + READ_CHUNK]))
+        self.raw, self.log_ns, self.held = [raw[k:]], [log_ns[k:]], len(log_ns) - k
+        return k
+
+    def result(self) -> Series:
+        """The whole series (the messages still held decoded)."""
+        self._decode(self.held)
+        if self.parts.first is None:  # no message
+            self.parts.add(cdr.decode(self.msgtype, []))
+        return self.parts.result()
+
+
 def _read(bag: Bag, topics: Sequence[str] | None,
           progress: Callable[[int, int], None] | None, start: float | None,
           stop: float | None) -> dict[str, Series]:
@@ -407,31 +494,21 @@ def _read(bag: Bag, topics: Sequence[str] | None,
         if typ not in cdr.SERIES_CLASSES:
             raise TypeError(f"topic {name} has type {typ}, which has no series class; "
                             f"readable types: {sorted(cdr.SERIES_CLASSES)}")
-    raw: dict[str, list[bytes | memoryview]] = {name: [] for name in key}
-    log_ns: dict[str, list[int]] = {name: [] for name in key}
     window = start is not None or stop is not None
-    parts = {name: _Assembler(0 if window else int(info[name].msgcount or 0))
-             for name in key}
+    parts = {name: _Topic(bag, name, msgtype[name],
+                          0 if window else int(info[name].msgcount or 0)) for name in key}
     conns = [c for name in key for c in info[name].connections]
     total = sum(int(info[name].msgcount or 0) for name in key)
     done = 0
     ns = (None if start is None else round(start * 1e9),
           None if stop is None else round(stop * 1e9))
-    for conn, t, data in bag.messages(conns, *ns):
-        buf, times = raw[conn.topic], log_ns[conn.topic]
-        buf.append(data)
-        times.append(t)
-        if len(buf) == READ_CHUNK:
-            parts[conn.topic].add(bag.decode(conn.topic, msgtype[conn.topic], buf, times))
-            buf.clear()
-            times.clear()
-            done += READ_CHUNK
-            if progress is not None:
-                progress(done, total)
+    for conn, log_ns, raw in bag.batches(conns, *ns):
+        decoded = parts[conn.topic].add(log_ns, raw)
+        done += decoded
+        if decoded and progress is not None:
+            progress(done, total)
     out: dict[str, Series] = {}
-    for name, buf in raw.items():
-        if buf or parts[name].first is None:
-            parts[name].add(bag.decode(name, msgtype[name], buf, log_ns[name]))
+    for name in key:
         series = parts[name].result()
         if not window and info[name].msgcount and len(series) != info[name].msgcount:
             raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "
