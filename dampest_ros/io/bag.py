@@ -27,7 +27,7 @@ from contextlib import suppress
 from dataclasses import dataclass, fields
 from itertools import chain
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -426,7 +426,40 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
     if csv_folder.is_csv_folder(path):
         return csv_folder.read_csv_folder(path, topics, start, stop)
     with Bag(path) as bag:
-        return _read(bag, topics, progress, start, stop)
+        return {k: v.series for k, v in _read(bag, topics, progress, _ns(start), _ns(stop)
+                                              ).items()}
+
+
+def _ns(seconds: float | None) -> int | None:
+    """A log time (s) in ns."""
+    return None if seconds is None else round(seconds * 1e9)
+
+
+class Logged(NamedTuple):
+    """A topic's messages read from a bag: the series and each message's log time (ns)."""
+
+    series: Series
+    log_ns: NDArray[np.int64]
+
+    def between(self, start: int | None, stop: int | None) -> Logged:
+        """The messages logged in [start, stop) (ns; None: unbounded)."""
+        if start is None and stop is None:
+            return self
+        keep = np.ones(len(self.log_ns), dtype=bool)
+        if start is not None:
+            keep &= self.log_ns >= start
+        if stop is not None:
+            keep &= self.log_ns < stop
+        return Logged(self.series.select(keep), self.log_ns[keep])
+
+    def then(self, later: Logged) -> Logged:
+        """These messages followed by ``later``'s (of the same topic)."""
+        if not len(later.log_ns) or not len(self.log_ns):
+            return later if not len(self.log_ns) else self
+        joined = _Assembler(len(self.log_ns) + len(later.log_ns))
+        joined.add(self.series)
+        joined.add(later.series)
+        return Logged(joined.result(), np.concatenate([self.log_ns, later.log_ns]))
 
 
 class _Topic:
@@ -447,6 +480,7 @@ class _Topic:
         self.raw: list[cdr.Messages] = []
         self.log_ns: list[NDArray[np.int64]] = []
         self.held = 0
+        self.decoded: list[NDArray[np.int64]] = []
 
     def add(self, log_ns: NDArray[np.int64], raw: cdr.Messages) -> int:
         """Take a batch (log times in ns, messages); the number of messages decoded."""
@@ -463,21 +497,23 @@ class _Topic:
         for i in range(0, k, READ_CHUNK):
             self.parts.add(self.bag.decode(self.topic, self.msgtype, raw[i:i + READ_CHUNK],
                                            log_ns[i:i + READ_CHUNK]))
+        self.decoded.append(log_ns[:k])
         self.raw, self.log_ns, self.held = [raw[k:]], [log_ns[k:]], len(log_ns) - k
         return k
 
-    def result(self) -> Series:
-        """The whole series (the messages still held decoded)."""
+    def result(self) -> Logged:
+        """The whole series (the messages still held decoded) and its log times."""
         self._decode(self.held)
         if self.parts.first is None:  # no message
             self.parts.add(cdr.decode(self.msgtype, []))
-        return self.parts.result()
+        return Logged(self.parts.result(), np.concatenate([np.zeros(0, np.int64),
+                                                           *self.decoded]))
 
 
 def _read(bag: Bag, topics: Sequence[str] | None,
-          progress: Callable[[int, int], None] | None, start: float | None,
-          stop: float | None) -> dict[str, Series]:
-    """:func:`read_bag` on a bag already open."""
+          progress: Callable[[int, int], None] | None, start: int | None,
+          stop: int | None) -> dict[str, Logged]:
+    """:func:`read_bag` on a bag already open (``start``, ``stop`` in ns), with log times."""
     info = bag.reader.topics
     if topics is None:
         wanted = {_relative(t): t for t, i in info.items() if i.msgtype in cdr.SERIES_CLASSES}
@@ -500,20 +536,18 @@ def _read(bag: Bag, topics: Sequence[str] | None,
     conns = [c for name in key for c in info[name].connections]
     total = sum(int(info[name].msgcount or 0) for name in key)
     done = 0
-    ns = (None if start is None else round(start * 1e9),
-          None if stop is None else round(stop * 1e9))
-    for conn, log_ns, raw in bag.batches(conns, *ns):
+    for conn, log_ns, raw in bag.batches(conns, start, stop):
         decoded = parts[conn.topic].add(log_ns, raw)
         done += decoded
         if decoded and progress is not None:
             progress(done, total)
-    out: dict[str, Series] = {}
+    out: dict[str, Logged] = {}
     for name in key:
-        series = parts[name].result()
-        if not window and info[name].msgcount and len(series) != info[name].msgcount:
+        logged = parts[name].result()
+        if not window and info[name].msgcount and len(logged.series) != info[name].msgcount:
             raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "
-                           f"{len(series)} of its {info[name].msgcount} messages")
-        out[key[name]] = series
+                           f"{len(logged.series)} of its {info[name].msgcount} messages")
+        out[key[name]] = logged
     if progress is not None:
         progress(total, total)
     return out
@@ -649,7 +683,12 @@ class BagSource:
         Called as ``progress(seconds_read, seconds_total)`` as windows are read.
     together : sequence of str
         Topics read in one pass per window (their messages share the bag's chunks, which
-        would otherwise be decompressed once per topic).
+        would otherwise be decompressed once per topic). The last two windows read are kept
+        (with the messages' log times): the part of a window that one of them holds is not
+        read again (the frame checks' first window, the overlap of consecutive stretches).
+    whole : sequence of str
+        Small topics (DVL, pressure) read whole, in one pass, the first time one of them is
+        asked for, and kept: their windows are cut from them.
 
     The bag stays open until :meth:`close` (or the end of a ``with`` block): opening a ROS 1
     bag reads its whole index, which per window would cost in proportion to the bag.
@@ -657,7 +696,7 @@ class BagSource:
 
     def __init__(self, path: str | Path,
                  progress: Callable[[int, int], None] | None = None,
-                 together: Sequence[str] = ()) -> None:
+                 together: Sequence[str] = (), whole: Sequence[str] = ()) -> None:
         from dampest_ros.io import csv_folder  # a folder of per-topic CSV files reads like a bag
 
         self.path = Path(path)
@@ -667,9 +706,16 @@ class BagSource:
         else:
             self._bag = Bag(self.path)
             self.summary = _summary(self._bag)
+        #: the first log time (ns): no message is logged before it
+        self._first = (self._bag.reader.start_time
+                       if self._bag is not None and self._bag.reader.message_count else 0)
         self.progress = progress
         self.together = [_relative(t) for t in together]
-        self._cache: tuple[tuple[float, float], dict[str, Series]] | None = None
+        have = set(self.topics())
+        self.whole = [_relative(t) for t in whole if _relative(t) in have]
+        #: windows read of the together topics: [start, stop) (ns) and their messages
+        self._windows: list[tuple[int, int, dict[str, Logged]]] = []
+        self._whole: dict[str, Logged] | None = None
 
     def __enter__(self) -> BagSource:
         return self
@@ -682,10 +728,9 @@ class BagSource:
         if self._bag is not None:
             self._bag.__exit__()
 
-    def _read(self, topics: Sequence[str], start: float | None, stop: float | None
-              ) -> dict[str, Series]:
-        if self._bag is None:
-            return read_bag(self.path, topics, start=start, stop=stop)
+    def _read(self, topics: Sequence[str], start: int | None, stop: int | None
+              ) -> dict[str, Logged]:
+        assert self._bag is not None
         return _read(self._bag, topics, None, start, stop)
 
     def topics(self) -> list[str]:
@@ -696,12 +741,33 @@ class BagSource:
                stop: float | None = None) -> Series:
         """Messages of ``topic`` logged in [start, stop) (s); the whole topic by default."""
         name = _relative(topic)
-        if start is None or stop is None or name not in self.together:
-            return self._read([topic], start, stop)[name]
-        if self._cache is None or self._cache[0] != (start, stop):
-            self._cache = ((start, stop), self._read(self.together, start, stop))
-        out = self._cache[1][name]
+        if self._bag is None:
+            return read_bag(self.path, [topic], start=start, stop=stop)[name]
+        a, b = _ns(start), _ns(stop)
+        if name in self.whole:
+            if self._whole is None:
+                self._whole = self._read(self.whole, None, None)
+            return self._whole[name].between(a, b).series
+        if b is None or name not in self.together:
+            return self._read([topic], a, b)[name].series
+        out = self._window(self._first if a is None else a, b)[name].series
         if self.progress is not None:
             total = self.summary.end - self.summary.start
-            self.progress(round(min(max(stop - self.summary.start, 0.0), total)), round(total))
+            self.progress(round(min(max(b / 1e9 - self.summary.start, 0.0), total)),
+                          round(total))
         return out
+
+    def _window(self, a: int, b: int) -> dict[str, Logged]:
+        """The together topics logged in [a, b) (ns), read but for what a kept window
+        holds; a window that extends a kept one replaces it, another the older one."""
+        for i, (c, d, held) in enumerate(self._windows):
+            if (c <= a or c <= self._first) and a < d:  # it holds all messages of [a, min(b, d))
+                if b <= d:
+                    return {t: x.between(a, b) for t, x in held.items()}
+                later = self._read(self.together, d, b)
+                got = {t: x.between(a, None).then(later[t]) for t, x in held.items()}
+                self._windows = [*self._windows[:i], *self._windows[i + 1:], (a, b, got)]
+                return got
+        got = self._read(self.together, a, b)
+        self._windows = [*self._windows[-1:], (a, b, got)]
+        return got
