@@ -165,6 +165,23 @@ def _rows(raw: bytes, offsets: NDArray[np.int64], sizes: NDArray[np.int64]) -> c
     return [raw[o:o + n] for o, n in zip(offsets.tolist(), sizes.tolist(), strict=True)]
 
 
+def _indexed(storage: McapReader, chunk: ChunkInfo) -> NDArray[np.int64] | None:
+    """Where the chunk's message indexes say its messages start (offsets in its records),
+    sorted; None when the indexes lie outside the bytes after the chunk."""
+    base = chunk.chunk_start_offset + chunk.chunk_length
+    raw = _read_at(storage, base, chunk.message_index_length)
+    parts = [np.zeros(0, np.uint64)]
+    for cid, offset in chunk.message_index_offsets.items():
+        # a message index record: opcode, length, channel id (u16), byte length (u32),
+        # then (log time, offset) uint64 pairs
+        at, count = offset - base + 15, chunk.channel_count.get(cid, 0)
+        if at < 15 or at + 16 * count > len(raw):
+            return None
+        parts.append(np.frombuffer(raw, "<u8", 2 * count, at)[1::2])
+    starts = np.sort(np.concatenate(parts))
+    return None if len(starts) and starts[-1] >= 2**62 else starts.astype(np.int64)
+
+
 def _field(raw: bytes, dtype: str, offsets: NDArray[np.int64]) -> NDArray[Any]:
     """The ``dtype`` values at byte ``offsets`` of ``raw``."""
     if not len(offsets):
@@ -189,7 +206,7 @@ def _parse(storage: McapReader, chunk: ChunkInfo, cmap: dict[int, Connection],
     its message indexes; the messages of ``cmap``'s channels in [start, stop), one batch
     per channel."""
     raw = _records(storage, chunk)
-    starts, end = mcap_records.record_starts(raw, _IN_CHUNK)
+    starts, end = mcap_records.record_starts(raw, _IN_CHUNK, _indexed(storage, chunk))
     is_msg = np.frombuffer(raw, np.uint8)[starts] == _OP_MESSAGE
     msg, size = starts[is_msg], _field(raw, "<u8", starts[is_msg] + 1).astype(np.int64)
     body = msg + mcap_records.HEADER

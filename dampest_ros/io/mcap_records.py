@@ -6,7 +6,9 @@ per record every byte that could start one (a known opcode, a body within the ch
 candidate, each candidate points to where its successor would start, and the chain from
 byte 0 is followed by pointer doubling: about log2(records) numpy passes over the candidates.
 The records found are exactly those a record-by-record parse finds, and it stops where that
-parse would.
+parse would. Where the chunk's message indexes already list every record (no schema or
+channel record inside it), checking that they chain from the first byte to the last
+replaces the search.
 """
 
 from __future__ import annotations
@@ -40,7 +42,21 @@ def at_every_byte(raw: bytes, dtype: DTypeLike) -> NDArray[Any]:
                       strides=(1,))
 
 
-def record_starts(raw: bytes, opcodes: Collection[int]) -> tuple[NDArray[np.int64], int]:
+def _is_chain(raw: bytes, known: NDArray[np.bool_], starts: NDArray[np.int64]) -> bool:
+    """Whether ``starts`` are exactly the records of ``raw``, from its first byte to its
+    last, each of a known opcode."""
+    n = len(raw)
+    if not len(starts) or starts[0] != 0 or starts.max() > n - HEADER:
+        return False
+    length = at_every_byte(raw, "<u8")[starts + 1]
+    if not known[np.frombuffer(raw, np.uint8)[starts]].all() or (length > n).any():
+        return False
+    nxt = starts + HEADER + length.astype(np.int64)
+    return bool((nxt[:-1] == starts[1:]).all() and nxt[-1] == n)
+
+
+def record_starts(raw: bytes, opcodes: Collection[int],
+                  hint: NDArray[np.int64] | None = None) -> tuple[NDArray[np.int64], int]:
     """Byte offsets of the records read whole from the start of ``raw``.
 
     Parameters
@@ -49,6 +65,10 @@ def record_starts(raw: bytes, opcodes: Collection[int]) -> tuple[NDArray[np.int6
         A chunk's records, decompressed.
     opcodes : collection of int
         The opcodes a record may have.
+    hint : ndarray of int64, shape (k,), optional
+        Where the records may start, increasing (a chunk's message indexes): taken, without
+        looking at the other bytes, when they are exactly the chain of records from the
+        first byte to the last; else the chain is found over all bytes.
 
     Returns
     -------
@@ -61,10 +81,14 @@ def record_starts(raw: bytes, opcodes: Collection[int]) -> tuple[NDArray[np.int6
     n = len(raw)
     if n < HEADER:
         return np.zeros(0, np.int64), 0
+    known = np.zeros(256, dtype=bool)
+    known[list(opcodes)] = True
+    if hint is not None and _is_chain(raw, known, hint):
+        return hint, n
     lo, hi = min(opcodes), max(opcodes)
     first = np.frombuffer(raw, np.uint8, n - HEADER + 1)
     cand = np.flatnonzero(first - np.uint8(lo) <= hi - lo)  # wraps below lo: one pass
-    cand = cand[np.isin(first[cand], list(opcodes))]
+    cand = cand[known[first[cand]]]
     length = at_every_byte(raw, "<u8")[cand + 1]
     fits = length <= (n - HEADER - cand).astype(np.uint64)
     cand = cand[fits]

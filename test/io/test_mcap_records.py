@@ -65,3 +65,20 @@ def test_reading_stops_at_the_first_damaged_record() -> None:
     assert found.tolist() == starts[:-1] and end == starts[-1]
     found, end = record_starts(b"\x05\x00\x00", OPCODES)
     assert (found.size, end) == (0, 0)
+
+
+def test_a_hint_is_taken_only_when_it_is_the_chain() -> None:
+    """The message indexes' offsets replace the search when they chain from the first byte
+    to the last; one missing, one extra or one on a damaged record: the search, which finds
+    the same records or stops at the same byte as without a hint."""
+    raw, starts = chunk(300, seed=3)
+    hint = np.array(starts, np.int64)
+    found, end = record_starts(raw, OPCODES, hint)
+    assert found is hint and end == len(raw)
+    for wrong in (np.delete(hint, 150), np.insert(hint, 150, hint[150] + 1), hint[1:]):
+        found, end = record_starts(raw, OPCODES, wrong)
+        assert found.tolist() == starts and end == len(raw)
+    at = starts[200]
+    flipped = raw[:at] + b"\x07" + raw[at + 1:]
+    found, end = record_starts(flipped, OPCODES, hint)
+    assert found.tolist() == starts[:200] and end == at
