@@ -155,7 +155,7 @@ class Batch(NamedTuple):
     log_time: NDArray[np.int64]   # (n,) ns
     chunk: NDArray[np.int64]      # (n,)
     position: NDArray[np.int64]   # (n,)
-    data: cdr.Messages                    # (n,) serialized messages
+    data: cdr.Messages            # (n,) serialized messages
 
 
 def _rows(raw: bytes, offsets: NDArray[np.int64], sizes: NDArray[np.int64]) -> cdr.Messages:
