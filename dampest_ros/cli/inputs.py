@@ -185,7 +185,8 @@ def _bag_samples(p: Path, vehicle: Vehicle, args: argparse.Namespace,
     topics = bag_topics(p, vehicle, args)
     cfg = PreprocessConfig(max_gap=args.max_gap)
     with BagSource(p, progress=Progress(f"processing {p.name} (s of log)"),
-                   together=[topics["imu"], tau_topic(topics)]) as rec:
+                   together=[topics["imu"], tau_topic(topics)],
+                   whole=[topics["dvl"], topics["pressure"]]) as rec:
         given = check_options(args, args.rate, rec.summary.duration, resample=True,
                               min_rate=2 * cfg.cutoff)
         auto = given is None

@@ -11,8 +11,10 @@ fully qualified (``/imu/data``) and returned relative (``imu/data``), as in
 :data:`dampest_ros.core.signals.measurements.TOPIC_TYPES`.
 
 Messages are serialized and deserialized with the fixed-layout numpy codec of
-:mod:`dampest_ros.io.cdr`; the only per-message Python work is the rosbags read or write call
-(and, for a ROS 1 bag, rosbags' conversion of the message to CDR).
+:mod:`dampest_ros.io.cdr`. An indexed MCAP bag is read without per-message Python work: each
+chunk's records are found, checked and copied out with numpy (:mod:`dampest_ros.io.mcap_check`);
+other bags cost the rosbags read call per message (and, for a ROS 1 bag, rosbags' conversion
+of the message to CDR); writing costs the rosbags write call per message.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from contextlib import suppress
 from dataclasses import dataclass, fields
 from itertools import chain
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -277,25 +279,48 @@ class Bag:
         except Exception as exc:
             raise self._damaged(exc) from exc
 
-    def _checked_messages(self, conns: Sequence[Connection], start: int | None,
-                          stop: int | None) -> Iterator[tuple[Connection, int, bytes]]:
-        """:meth:`messages` of an MCAP bag, file by file, each chunk checked as it is read."""
+    def batches(self, conns: Sequence[Connection], start: int | None = None,
+                stop: int | None = None
+                ) -> Iterator[tuple[Connection, NDArray[np.int64], cdr.Messages]]:
+        """:meth:`messages` a batch at a time: connection, log times (ns) and CDR of
+        consecutive messages of one connection; an indexed MCAP bag's chunk by chunk, with
+        numpy, other bags' :data:`READ_CHUNK` messages of a connection at a time."""
+        if not self.checked:
+            yield from _grouped(self.messages(conns, start, stop))
+            return
+        try:
+            for storage, ours, theirs in self._per_file(conns):
+                for group in mcap_check.batches(storage, theirs, start, stop):
+                    for b in group:
+                        yield ours[b.connection.id], b.log_time, b.data
+        except Exception as exc:
+            raise self._damaged(exc) from exc
+
+    def _per_file(self, conns: Sequence[Connection]
+                  ) -> Iterator[tuple[McapReader, dict[int, Connection], list[Connection]]]:
+        """The checked MCAP files, each with its connection ids → the one of ``conns`` of
+        the same topic and type, and those connections of its own."""
         for storage in self.checked:
             ours = {x.id: c for x in storage.connections for c in conns
                     if (x.topic, x.msgtype) == (c.topic, c.msgtype)}
-            theirs = [x for x in storage.connections if x.id in ours]
+            yield storage, ours, [x for x in storage.connections if x.id in ours]
+
+    def _checked_messages(self, conns: Sequence[Connection], start: int | None,
+                          stop: int | None) -> Iterator[tuple[Connection, int, bytes]]:
+        """:meth:`messages` of an MCAP bag, file by file, each chunk checked as it is read."""
+        for storage, ours, theirs in self._per_file(conns):
             for x, t, data in mcap_check.messages(storage, theirs, start, stop):
                 yield ours[x.id], t, data
 
-    def decode(self, topic: str, msgtype: str, raw: list[bytes | memoryview],
-               log_ns: list[int]) -> Series:
+    def decode(self, topic: str, msgtype: str, raw: cdr.Messages,
+               log_ns: NDArray[np.int64]) -> Series:
         """The series of ``raw`` (messages of ``topic`` logged at ``log_ns``); messages that
         do not deserialise are damaged bytes, named with their log times and the repair."""
         try:
             return cdr.decode(msgtype, raw)
         except Exception as exc:
-            bad = [(t, err) for t, m in zip(log_ns, raw, strict=True)
-                   if (err := cdr.undecodable(msgtype, m))]
+            bad = [(t, err) for t, m in zip(log_ns.tolist(), raw, strict=True)
+                   if (err := cdr.undecodable(msgtype, bytes(m)))]
             if bad:
                 raise self._damaged(mcap_check.DamagedFileError(
                     f"{len(bad)} of {len(raw)} messages of {topic} logged from "
@@ -304,6 +329,23 @@ class Bag:
                     f"{bad[0][1]}")) from exc
             raise BagError(f"cannot decode {topic} ({msgtype}) in bag {_files(self.path)}: "
                            f"{exc}") from exc
+
+
+def _grouped(messages: Iterable[tuple[Connection, int, bytes | memoryview]]
+             ) -> Iterator[tuple[Connection, NDArray[np.int64], list[bytes | memoryview]]]:
+    """Messages gathered per connection, :data:`READ_CHUNK` at a time (the rest at the end):
+    connection, log times (ns) and messages."""
+    held: dict[int, tuple[Connection, list[int], list[bytes | memoryview]]] = {}
+    for conn, t, data in messages:
+        _, times, raw = held.setdefault(conn.id, (conn, [], []))
+        times.append(t)
+        raw.append(data)
+        if len(raw) == READ_CHUNK:
+            yield conn, np.array(times, np.int64), raw
+            held[conn.id] = (conn, [], [])
+    for conn, times, raw in held.values():
+        if raw:
+            yield conn, np.array(times, np.int64), raw
 
 
 class _Assembler:
@@ -384,13 +426,94 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None,
     if csv_folder.is_csv_folder(path):
         return csv_folder.read_csv_folder(path, topics, start, stop)
     with Bag(path) as bag:
-        return _read(bag, topics, progress, start, stop)
+        return {k: v.series for k, v in _read(bag, topics, progress, _ns(start), _ns(stop)
+                                              ).items()}
+
+
+def _ns(seconds: float | None) -> int | None:
+    """A log time (s) in ns."""
+    return None if seconds is None else round(seconds * 1e9)
+
+
+class Logged(NamedTuple):
+    """A topic's messages read from a bag: the series and each message's log time (ns)."""
+
+    series: Series
+    log_ns: NDArray[np.int64]
+
+    def between(self, start: int | None, stop: int | None) -> Logged:
+        """The messages logged in [start, stop) (ns; None: unbounded)."""
+        if start is None and stop is None:
+            return self
+        keep = np.ones(len(self.log_ns), dtype=bool)
+        if start is not None:
+            keep &= self.log_ns >= start
+        if stop is not None:
+            keep &= self.log_ns < stop
+        return Logged(self.series.select(keep), self.log_ns[keep])
+
+    def then(self, later: Logged) -> Logged:
+        """These messages followed by ``later``'s (of the same topic)."""
+        if not len(later.log_ns) or not len(self.log_ns):
+            return later if not len(self.log_ns) else self
+        joined = _Assembler(len(self.log_ns) + len(later.log_ns))
+        joined.add(self.series)
+        joined.add(later.series)
+        return Logged(joined.result(), np.concatenate([self.log_ns, later.log_ns]))
+
+
+class _Topic:
+    """The batches of one topic, decoded :data:`READ_CHUNK` messages at a time (the last
+    ones at the end) into an :class:`_Assembler`.
+
+    Parameters
+    ----------
+    bag : Bag
+    topic, msgtype : str
+    count : int
+        Messages announced (0: unknown).
+    """
+
+    def __init__(self, bag: Bag, topic: str, msgtype: str, count: int) -> None:
+        self.bag, self.topic, self.msgtype = bag, topic, msgtype
+        self.parts = _Assembler(count)
+        self.raw: list[cdr.Messages] = []
+        self.log_ns: list[NDArray[np.int64]] = []
+        self.held = 0
+        self.decoded: list[NDArray[np.int64]] = []
+
+    def add(self, log_ns: NDArray[np.int64], raw: cdr.Messages) -> int:
+        """Take a batch (log times in ns, messages); the number of messages decoded."""
+        self.raw.append(raw)
+        self.log_ns.append(log_ns)
+        self.held += len(log_ns)
+        return self._decode(self.held - self.held % READ_CHUNK) if self.held >= READ_CHUNK else 0
+
+    def _decode(self, k: int) -> int:
+        """Decode the first ``k`` messages held, :data:`READ_CHUNK` at a time."""
+        if not k:
+            return 0
+        raw, log_ns = cdr.join(self.raw), np.concatenate(self.log_ns)
+        for i in range(0, k, READ_CHUNK):
+            self.parts.add(self.bag.decode(self.topic, self.msgtype, raw[i:i + READ_CHUNK],
+                                           log_ns[i:i + READ_CHUNK]))
+        self.decoded.append(log_ns[:k])
+        self.raw, self.log_ns, self.held = [raw[k:]], [log_ns[k:]], len(log_ns) - k
+        return k
+
+    def result(self) -> Logged:
+        """The whole series (the messages still held decoded) and its log times."""
+        self._decode(self.held)
+        if self.parts.first is None:  # no message
+            self.parts.add(cdr.decode(self.msgtype, []))
+        return Logged(self.parts.result(), np.concatenate([np.zeros(0, np.int64),
+                                                           *self.decoded]))
 
 
 def _read(bag: Bag, topics: Sequence[str] | None,
-          progress: Callable[[int, int], None] | None, start: float | None,
-          stop: float | None) -> dict[str, Series]:
-    """:func:`read_bag` on a bag already open."""
+          progress: Callable[[int, int], None] | None, start: int | None,
+          stop: int | None) -> dict[str, Logged]:
+    """:func:`read_bag` on a bag already open (``start``, ``stop`` in ns), with log times."""
     info = bag.reader.topics
     if topics is None:
         wanted = {_relative(t): t for t, i in info.items() if i.msgtype in cdr.SERIES_CLASSES}
@@ -407,36 +530,24 @@ def _read(bag: Bag, topics: Sequence[str] | None,
         if typ not in cdr.SERIES_CLASSES:
             raise TypeError(f"topic {name} has type {typ}, which has no series class; "
                             f"readable types: {sorted(cdr.SERIES_CLASSES)}")
-    raw: dict[str, list[bytes | memoryview]] = {name: [] for name in key}
-    log_ns: dict[str, list[int]] = {name: [] for name in key}
     window = start is not None or stop is not None
-    parts = {name: _Assembler(0 if window else int(info[name].msgcount or 0))
-             for name in key}
+    parts = {name: _Topic(bag, name, msgtype[name],
+                          0 if window else int(info[name].msgcount or 0)) for name in key}
     conns = [c for name in key for c in info[name].connections]
     total = sum(int(info[name].msgcount or 0) for name in key)
     done = 0
-    ns = (None if start is None else round(start * 1e9),
-          None if stop is None else round(stop * 1e9))
-    for conn, t, data in bag.messages(conns, *ns):
-        buf, times = raw[conn.topic], log_ns[conn.topic]
-        buf.append(data)
-        times.append(t)
-        if len(buf) == READ_CHUNK:
-            parts[conn.topic].add(bag.decode(conn.topic, msgtype[conn.topic], buf, times))
-            buf.clear()
-            times.clear()
-            done += READ_CHUNK
-            if progress is not None:
-                progress(done, total)
-    out: dict[str, Series] = {}
-    for name, buf in raw.items():
-        if buf or parts[name].first is None:
-            parts[name].add(bag.decode(name, msgtype[name], buf, log_ns[name]))
-        series = parts[name].result()
-        if not window and info[name].msgcount and len(series) != info[name].msgcount:
+    for conn, log_ns, raw in bag.batches(conns, start, stop):
+        decoded = parts[conn.topic].add(log_ns, raw)
+        done += decoded
+        if decoded and progress is not None:
+            progress(done, total)
+    out: dict[str, Logged] = {}
+    for name in key:
+        logged = parts[name].result()
+        if not window and info[name].msgcount and len(logged.series) != info[name].msgcount:
             raise BagError(f"bag {_files(bag.path)} is truncated or corrupt: {name} has "
-                           f"{len(series)} of its {info[name].msgcount} messages")
-        out[key[name]] = series
+                           f"{len(logged.series)} of its {info[name].msgcount} messages")
+        out[key[name]] = logged
     if progress is not None:
         progress(total, total)
     return out
@@ -572,7 +683,12 @@ class BagSource:
         Called as ``progress(seconds_read, seconds_total)`` as windows are read.
     together : sequence of str
         Topics read in one pass per window (their messages share the bag's chunks, which
-        would otherwise be decompressed once per topic).
+        would otherwise be decompressed once per topic). The last two windows read are kept
+        (with the messages' log times): the part of a window that one of them holds is not
+        read again (the frame checks' first window, the overlap of consecutive stretches).
+    whole : sequence of str
+        Small topics (DVL, pressure) read whole, in one pass, the first time one of them is
+        asked for, and kept: their windows are cut from them.
 
     The bag stays open until :meth:`close` (or the end of a ``with`` block): opening a ROS 1
     bag reads its whole index, which per window would cost in proportion to the bag.
@@ -580,7 +696,7 @@ class BagSource:
 
     def __init__(self, path: str | Path,
                  progress: Callable[[int, int], None] | None = None,
-                 together: Sequence[str] = ()) -> None:
+                 together: Sequence[str] = (), whole: Sequence[str] = ()) -> None:
         from dampest_ros.io import csv_folder  # a folder of per-topic CSV files reads like a bag
 
         self.path = Path(path)
@@ -590,9 +706,16 @@ class BagSource:
         else:
             self._bag = Bag(self.path)
             self.summary = _summary(self._bag)
+        #: the first log time (ns): no message is logged before it
+        self._first = (self._bag.reader.start_time
+                       if self._bag is not None and self._bag.reader.message_count else 0)
         self.progress = progress
         self.together = [_relative(t) for t in together]
-        self._cache: tuple[tuple[float, float], dict[str, Series]] | None = None
+        have = set(self.topics())
+        self.whole = [_relative(t) for t in whole if _relative(t) in have]
+        #: windows read of the together topics: [start, stop) (ns) and their messages
+        self._windows: list[tuple[int, int, dict[str, Logged]]] = []
+        self._whole: dict[str, Logged] | None = None
 
     def __enter__(self) -> BagSource:
         return self
@@ -605,10 +728,9 @@ class BagSource:
         if self._bag is not None:
             self._bag.__exit__()
 
-    def _read(self, topics: Sequence[str], start: float | None, stop: float | None
-              ) -> dict[str, Series]:
-        if self._bag is None:
-            return read_bag(self.path, topics, start=start, stop=stop)
+    def _read(self, topics: Sequence[str], start: int | None, stop: int | None
+              ) -> dict[str, Logged]:
+        assert self._bag is not None
         return _read(self._bag, topics, None, start, stop)
 
     def topics(self) -> list[str]:
@@ -619,12 +741,33 @@ class BagSource:
                stop: float | None = None) -> Series:
         """Messages of ``topic`` logged in [start, stop) (s); the whole topic by default."""
         name = _relative(topic)
-        if start is None or stop is None or name not in self.together:
-            return self._read([topic], start, stop)[name]
-        if self._cache is None or self._cache[0] != (start, stop):
-            self._cache = ((start, stop), self._read(self.together, start, stop))
-        out = self._cache[1][name]
+        if self._bag is None:
+            return read_bag(self.path, [topic], start=start, stop=stop)[name]
+        a, b = _ns(start), _ns(stop)
+        if name in self.whole:
+            if self._whole is None:
+                self._whole = self._read(self.whole, None, None)
+            return self._whole[name].between(a, b).series
+        if b is None or name not in self.together:
+            return self._read([topic], a, b)[name].series
+        out = self._window(self._first if a is None else a, b)[name].series
         if self.progress is not None:
             total = self.summary.end - self.summary.start
-            self.progress(round(min(max(stop - self.summary.start, 0.0), total)), round(total))
+            self.progress(round(min(max(b / 1e9 - self.summary.start, 0.0), total)),
+                          round(total))
         return out
+
+    def _window(self, a: int, b: int) -> dict[str, Logged]:
+        """The together topics logged in [a, b) (ns), read but for what a kept window
+        holds; a window that extends a kept one replaces it, another the older one."""
+        for i, (c, d, held) in enumerate(self._windows):
+            if (c <= a or c <= self._first) and a < d:  # it holds all messages of [a, min(b, d))
+                if b <= d:
+                    return {t: x.between(a, b) for t, x in held.items()}
+                later = self._read(self.together, d, b)
+                got = {t: x.between(a, None).then(later[t]) for t, x in held.items()}
+                self._windows = [*self._windows[:i], *self._windows[i + 1:], (a, b, got)]
+                return got
+        got = self._read(self.together, a, b)
+        self._windows = [*self._windows[-1:], (a, b, got)]
+        return got

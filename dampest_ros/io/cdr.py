@@ -65,6 +65,19 @@ _SEC, _NSEC = "header.stamp.sec", "header.stamp.nanosec"
 _NS_PER_S = 1_000_000_000
 
 
+#: Serialized messages: one bytes-like each, or the rows of a (N,) void array when they
+#: are all of one length (as a bag's chunks are read, :mod:`dampest_ros.io.mcap_check`).
+Messages = Sequence[bytes | memoryview] | NDArray[np.void]
+
+
+def join(parts: Sequence[Messages]) -> Messages:
+    """Messages of several parts, in order: one void array when all are of one length."""
+    arrays = [p for p in parts if isinstance(p, np.ndarray)]
+    if len(arrays) == len(parts) and len({p.dtype for p in arrays}) == 1:
+        return np.concatenate(arrays)
+    return [bytes(m) for p in parts for m in p]
+
+
 class LayoutError(ValueError):
     """The messages do not share one fixed layout of their message type."""
 
@@ -423,14 +436,14 @@ def encode(series: Series) -> list[bytes]:
 # --- decode --------------------------------------------------------------------------------
 
 
-def decode_fixed(msgtype: str, messages: Sequence[bytes | memoryview]) -> Series:
+def decode_fixed(msgtype: str, messages: Messages) -> Series:
     """Decode messages that share one fixed layout with a single ``np.frombuffer``.
 
     Parameters
     ----------
     msgtype : str
         ROS 2 message type, a key of :data:`SERIES_CLASSES`.
-    messages : sequence of bytes, length N
+    messages : Messages, length N
         Serialized messages, all of the same length.
 
     Returns
@@ -444,13 +457,17 @@ def decode_fixed(msgtype: str, messages: Sequence[bytes | memoryview]) -> Series
         If the messages do not share the layout of the first one.
     """
     cls = series_class(msgtype)
-    if not messages:
+    if len(messages) == 0:
         return cls(stamp=np.zeros(0))
     first = bytes(messages[0])
-    if len(set(map(len, messages))) != 1:
-        raise LayoutError("messages differ in length")
-    b, dtype = _layout(msgtype, first=first)
-    arr = np.frombuffer(b"".join(messages), dtype=dtype)
+    if isinstance(messages, np.ndarray):
+        b, dtype = _layout(msgtype, first=first)
+        arr = np.ascontiguousarray(messages).view(dtype)
+    else:
+        if len(set(map(len, messages))) != 1:
+            raise LayoutError("messages differ in length")
+        b, dtype = _layout(msgtype, first=first)
+        arr = np.frombuffer(b"".join(messages), dtype=dtype)
     for name, value in b.consts.items():
         if not np.all(arr[name] == value):
             raise LayoutError(f"{name} changes between messages")
@@ -464,14 +481,14 @@ def decode_fixed(msgtype: str, messages: Sequence[bytes | memoryview]) -> Series
     return cls(**kw)
 
 
-def decode(msgtype: str, messages: Sequence[bytes | memoryview]) -> Series:
+def decode(msgtype: str, messages: Messages) -> Series:
     """Decode serialized messages into a series: fixed layout if possible, else rosbags.
 
     Parameters
     ----------
     msgtype : str
         ROS 2 message type, a key of :data:`SERIES_CLASSES`.
-    messages : sequence of bytes, length N
+    messages : Messages, length N
 
     Returns
     -------
@@ -482,7 +499,7 @@ def decode(msgtype: str, messages: Sequence[bytes | memoryview]) -> Series:
     try:
         return decode_fixed(msgtype, messages)
     except LayoutError:
-        return decode_messages(msgtype, [typestore().deserialize_cdr(m, msgtype)
+        return decode_messages(msgtype, [typestore().deserialize_cdr(bytes(m), msgtype)
                                          for m in messages])
 
 

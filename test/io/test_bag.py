@@ -240,6 +240,36 @@ def test_empty_series_topic(tmp_path: Path) -> None:
     assert bag.bag_summary(path).topics["/dvl/twist"].count == 0
 
 
+def test_bag_source_windows_equal_fresh_reads_and_each_message_is_read_once(
+        tmp_path: Path, recording: dict[str, Series], assert_same: AssertSame,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The frame checks' first window, heads from the start, overlapping stretches and the
+    small topics whole and in windows, as identify asks for them: each the messages a fresh
+    read gives, and the 560 messages of the four topics read once (2 s of log)."""
+    path = bag.write_bag(tmp_path / "run", recording)
+    asks = [("imu/data", 0.0, 1.0), ("thrusters/state", 0.0, 1.0), ("dvl/twist", 0.0, 1.0),
+            ("pressure", 0.0, 1.0), ("dvl/twist", None, None), ("imu/data", None, 0.3),
+            ("pressure", None, None), ("imu/data", -0.2, 0.6), ("thrusters/state", -0.2, 0.6),
+            ("imu/data", 0.4, 1.6), ("thrusters/state", 0.4, 1.6), ("imu/data", 1.4, 2.5),
+            ("thrusters/state", 1.4, 2.5)]
+    fresh = [bag.read_bag(path, [t], start=a, stop=b)[t] for t, a, b in asks]
+    read: list[int] = []
+    real = bag._read
+
+    def counted(*args: Any) -> dict[str, bag.Logged]:
+        out = real(*args)
+        read.append(sum(len(x.log_ns) for x in out.values()))
+        return out
+
+    monkeypatch.setattr(bag, "_read", counted)
+    with bag.BagSource(path, together=["imu/data", "thrusters/state"],
+                       whole=["/dvl/twist", "pressure"]) as src:
+        for (topic, a, b), want in zip(asks, fresh, strict=True):
+            assert_same(src.series(topic, a, b), want)
+    assert len(fresh[-2]) == 120 and len(fresh[2]) == 10  # 200 Hz over [1.4, 2.0); 10 Hz
+    assert sum(read) == 400 + 100 + 20 + 40
+
+
 def test_read_bag_reports_progress_to_the_end(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                               recording: dict[str, Series]) -> None:
     bag.write_bag(tmp_path / "b", recording)
