@@ -376,7 +376,8 @@ def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
     kept = [base.names[k] for k in base.independent]
     est = ArmEstimate(tuple(names), kept, res.wls.theta, res.wls.std,
                       np.ones(base.size, dtype=bool), base.mapping(),
-                      identity=arm_model_identity(str(args.arm), arm, kept))
+                      identity=arm_model_identity(str(args.arm), arm, kept),
+                      coulomb_width=float(args.coulomb_width))
     save_arm_model(path, est, str(args.arm), {
         "source": f"dampest arm identify {args.bag}",
         "ols": [float(x) for x in res.ols.theta],
@@ -385,7 +386,6 @@ def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
         "consistent_full": {"names": list(base.names),
                             "values": [float(x) for x in res.consistent.full]},
         "noise_estimate": [float(x) for x in res.noise],
-        "coulomb_width": float(args.coulomb_width),
         **({"lock": list(joint_list(args.lock))} if joint_list(args.lock) else {})})
 
 
