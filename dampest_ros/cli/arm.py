@@ -31,7 +31,8 @@ EXAMPLES = {
 HELP = {
     "design": "optimise an FFS excitation trajectory for the base regressor's conditioning",
     "simulate": "run a trajectory on the MuJoCo arm and write a JointState bag",
-    "identify": "identify base parameters and joint friction from a JointState bag",
+    "identify": "identify base parameters and joint friction from a JointState bag or a CSV "
+                "log",
 }
 
 
@@ -108,13 +109,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "clock jump: named (sample, stamp, seconds back), the record split there."),
                        epilog="example:\n" + EXAMPLES["identify"],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    i.add_argument("bag", metavar="BAG", help="rosbag2 bag with sensor_msgs/JointState")
+    i.add_argument("bag", metavar="LOG", help="sensor_msgs/JointState in a rosbag2 bag or a "
+                   "ROS 1 .bag file, or a CSV log: time, <joint>.q (rad), <joint>.qd "
+                   "(rad/s, optional), <joint>.tau (N m), joints by name")
+    i.add_argument("--columns", metavar="YAML",
+                   help="column map of a CSV log ('their name: our name', at the top level "
+                        "or under 'columns:'; ours: time, <joint>.q, <joint>.qd, <joint>.tau)")
     _arm_option(i)
     i.add_argument("--topic", metavar="TOPIC",
                    help="JointState topic (default: joint_states, or the only one)")
     i.add_argument("--validate", metavar="BAG",
-                   help="a bag of another trajectory: torque RMSE per joint of the identified "
-                        "and the nominal parameters against the noise floor")
+                   help="a log (bag or CSV) of another trajectory: torque RMSE per joint of "
+                        "the identified and the nominal parameters against the noise floor")
     i.add_argument("--cutoff", type=float, default=10.0, metavar="HZ",
                    help="zero-phase low-pass of q and torque (default: 10)")
     i.add_argument("--rate-out", type=float, default=50.0, metavar="HZ",
@@ -283,7 +289,7 @@ def _identify(args: argparse.Namespace) -> int:
     )
     from dampest_ros.core.arm.regressor import full_parameters
     from dampest_ros.core.signals.resample import increasing_runs, interpolate
-    from dampest_ros.io.arm import load_arm, read_joint_bag
+    from dampest_ros.io.arm import load_arm
 
     check_outputs(args, {"out": "arm_model.yaml"}, ("report",))
     if not (np.isfinite(args.coulomb_width) and args.coulomb_width >= 0):
@@ -294,8 +300,8 @@ def _identify(args: argparse.Namespace) -> int:
     arm = load_arm(args.arm, lock=joint_list(args.lock))
     names = arm.model.names
     t0 = time.perf_counter()
-    data, _ = read_joint_bag(args.bag, names, args.topic)
-    val = read_joint_bag(args.validate, names, args.topic) if args.validate else None
+    data, _ = _read_joints(args.bag, names, args)
+    val = _read_joints(args.validate, names, args) if args.validate else None
     t1 = time.perf_counter()
     base = base_parameters(arm.model)
     nominal = full_parameters(arm.model, arm.dynamics)
@@ -361,6 +367,19 @@ def _identify(args: argparse.Namespace) -> int:
         _write_params(args.out, args, base, res, names, arm.model)
         print(f"\nwrote {args.out}")
     return 0
+
+
+def _read_joints(path: str, names: tuple[str, ...], args: argparse.Namespace) -> Any:
+    """The joint log at ``path`` in the model's order and the truth beside it (None for a
+    CSV log): a CSV file through ``--columns``, a rosbag2 or ROS 1 bag through ``--topic``."""
+    from dampest_ros.io.arm import read_joint_bag
+    from dampest_ros.io.arm_csv import read_joint_csv
+    from dampest_ros.io.csv import is_csv, load_column_map
+
+    if is_csv(path):
+        cmap = load_column_map(args.columns) if args.columns else None
+        return read_joint_csv(path, names, cmap), None
+    return read_joint_bag(path, names, args.topic)
 
 
 def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
