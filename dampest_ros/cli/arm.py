@@ -137,7 +137,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write the arm model file (WLS base parameters with sigma, the OLS "
                         "and consistent fits beside them; arm_estimator_node's prior)")
     i.add_argument("--report", metavar="DIR",
-                   help="write an HTML report (index.html and a torque figure) to DIR")
+                   help="write an HTML report to DIR: index.html with the trajectory, "
+                        "measured vs model torque with the residual, the base parameters "
+                        "with sigma vs nominal (and the validation torque with --validate)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -360,7 +362,9 @@ def _identify(args: argparse.Namespace) -> int:
                      "RMSE / noise floor"), rows))
         validation = (fv.t, measured, shown, rows, floor_from)
     if args.report:
-        path = _write_report(args.report, args, base, res, names, nominal,
+        fit = (filtered, predict(arm.model, base, res.wls.theta, filtered.q, filtered.qd,
+                                 filtered.qdd, cfg))
+        path = _write_report(args.report, args, base, res, names, nominal, fit,
                              validation if val is not None else None)
         print(f"\nwrote {path}")
     if args.out:
@@ -409,15 +413,19 @@ def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
 
 
 def _write_report(out_dir: str, args: argparse.Namespace, base: Any, res: Any,
-                  names: tuple[str, ...], nominal: np.ndarray, validation: Any) -> Any:
-    """index.html in the style of the vehicle reports: base parameters, joint friction,
-    the mapping, validation RMSE and a figure of measured and predicted torque."""
+                  names: tuple[str, ...], nominal: np.ndarray, fit: Any,
+                  validation: Any) -> Any:
+    """index.html in the style of the vehicle reports: the trajectory, measured and model
+    torque with the residual and the base parameters with σ against the nominal (``fit``:
+    the filtered data and the WLS model's torque on them), the base parameters' table, the
+    mapping, and the validation RMSE with a figure of measured and predicted torque."""
     import html
     from pathlib import Path
 
     import numpy as np
     from matplotlib.figure import Figure
 
+    from dampest_ros.report.arm import parameter_figure, torque_figure, trajectory_figure
     from dampest_ros.report.figures import CSS
 
     out = Path(out_dir)
@@ -439,6 +447,13 @@ def _write_report(out_dir: str, args: argparse.Namespace, base: Any, res: Any,
              f"<p class='meta'>{html.escape(str(args.bag))}; {base.size} base parameters; rows "
              f"per joint {res.rows.tolist()}; cutoff {args.cutoff:g} Hz, {args.rate_out:g} Hz"
              "</p>"]
+    filtered, model_tau = fit
+    figures = (trajectory_figure(filtered.t, filtered.q, names, out / "trajectory.png"),
+               torque_figure(filtered.t, filtered.tau, model_tau, names,
+                             out / "fit_torque.png"),
+               parameter_figure(ind, res.wls.theta, res.wls.std, nom, out / "parameters.png"))
+    parts += ["<h2>Identification data and fit</h2>"] + [
+        f"<img src='{f}' alt='{f[:-4]}'>" for f in figures]
     if validation is not None:
         t, measured, shown, rows, floor_from = validation
         k = slice(0, min(len(t), int(20.0 / max(float(np.median(np.diff(t))), 1e-9))))

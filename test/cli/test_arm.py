@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -234,3 +236,39 @@ def test_a_misspelt_csv_column_is_one_line_with_the_closest_name(
     assert len(err) == 1 and "the column map maps 'elbow_joint_.q' to 'elbow_joint.q' " \
         "(joint elbow_joint's position in rad), but the file has no column 'elbow_joint_.q'; " \
         "closest column: 'elbow_jiont.q'" in err[0] and str(log) in err[0]
+
+
+def test_report_draws_trajectory_fit_and_parameters_with_units(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], saved_figures: list[Any],
+        axis_unit_problems: Callable[[list[Any]], list[str]]) -> None:
+    """--report draws the trajectory, the measured torque against the model's with its
+    residual, and the base parameters with σ against the nominal, every axis with its
+    unit; what they show is the fit: the residual is measured − model, the parameter panels
+    hold the model file's θ (elbow friction within 2 % of the simulated 2 N·m)."""
+    bag = tmp_path / "train"
+    assert main(["arm", "simulate", "--random", "3", "--duration", "20", "--seed", "1",
+                 "--rate", "500", "--out", str(bag)]) == 0
+    saved_figures.clear()
+    assert main(["arm", "identify", str(bag), "--out", str(tmp_path / "p.yaml"),
+                 "--report", str(tmp_path / "rep")]) == 0
+    capsys.readouterr()
+    model = load_arm_model(tmp_path / "p.yaml")
+    titles = [f.texts[0].get_text() for f in saved_figures]
+    assert titles == ["Joint trajectory (filtered positions q)",
+                      "Joint torque: measured (filtered) vs the WLS model",
+                      "Base parameters: WLS estimate with 95 % interval vs nominal"]
+    assert axis_unit_problems(saved_figures) == []
+    page = (tmp_path / "rep" / "index.html").read_text()
+    for png in ("trajectory.png", "fit_torque.png", "parameters.png"):
+        assert f"src='{png}'" in page and (tmp_path / "rep" / png).stat().st_size > 10_000
+    torque = saved_figures[1].axes
+    measured, fitted = (line.get_ydata() for line in torque[0].lines[:2])
+    np.testing.assert_allclose(torque[1].lines[0].get_ydata(), measured - fitted, atol=1e-12)
+    assert torque[0].get_ylabel() == "shoulder_pan_joint (N·m)"
+    panels = {ax.get_title(): ax for ax in saved_figures[2].axes if ax.get_visible()}
+    assert list(panels) == model.parameter_names
+    fc = panels["elbow_joint.Fc"]
+    estimate = fc.lines[0].get_ydata()[0] if fc.lines[0].get_xdata()[0] == 0 else None
+    assert estimate == model.theta[model.parameter_names.index("elbow_joint.Fc")]
+    assert estimate == pytest.approx(2.0, rel=0.02)
+    assert fc.get_ylabel() == "(N·m)"
