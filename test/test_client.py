@@ -423,7 +423,7 @@ def test_a_client_for_one_vehicle_refuses_another_vehicles_model(tmp_path: Path)
     path = save_model(tmp_path / "heavy.yaml", Model(
         heavy.damping.parameter_names, heavy.theta, 0.1 * np.abs(heavy.theta) + 0.01,
         heavy.body.M, damping=heavy.damping, identity=heavy.identity))
-    with served(path, "identity") as (ex, _, probe):
+    with served(model_server(path), "identity") as (ex, _, probe):
         other = ModelClient(probe, "model_server_node",
                             vehicle=load_vehicle("platform_a").identity)
         same = ModelClient(probe, "model_server_node", vehicle=heavy.identity)
@@ -437,13 +437,11 @@ def test_a_client_for_one_vehicle_refuses_another_vehicles_model(tmp_path: Path)
 
 
 @contextlib.contextmanager
-def served(model_file: Path, tag: str) -> Iterator[tuple[Any, Any, Any]]:
-    """A model_server_node on ``model_file`` and a node ``probe`` in a namespace of their
-    own, in one executor the test spins: (executor, server, probe)."""
+def served(start: Callable[[Any, str], Any], tag: str) -> Iterator[tuple[Any, Any, Any]]:
+    """A server node ``start(context, namespace)`` and a node ``probe`` in a namespace of
+    their own, in one executor the test spins: (executor, server, probe)."""
     rclpy = pytest.importorskip("rclpy")
     from rclpy.executors import SingleThreadedExecutor
-
-    from dampest_ros.ros.model_server_node import ModelServerNode
 
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", "77")
@@ -452,8 +450,7 @@ def served(model_file: Path, tag: str) -> Iterator[tuple[Any, Any, Any]]:
     rclpy.init(context=context)
     ex = SingleThreadedExecutor(context=context)
     try:
-        server = ModelServerNode(context=context, cli_args=[
-            "--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={model_file}"])
+        server = start(context, ns)
         probe = rclpy.create_node("probe", namespace=ns, context=context)
         for n in (server, probe):
             ex.add_node(n)
@@ -461,6 +458,16 @@ def served(model_file: Path, tag: str) -> Iterator[tuple[Any, Any, Any]]:
     finally:
         ex.shutdown()
         rclpy.try_shutdown(context=context)
+
+
+def model_server(model_file: Path) -> Callable[[Any, str], Any]:
+    """:func:`served`'s start of a model_server_node on ``model_file``."""
+    def start(context: Any, ns: str) -> Any:
+        from dampest_ros.ros.model_server_node import ModelServerNode
+
+        return ModelServerNode(context=context, cli_args=[
+            "--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={model_file}"])
+    return start
 
 
 @contextlib.contextmanager
@@ -596,7 +603,7 @@ def test_model_server_serves_an_arm_model_to_the_arm_client(tmp_path: Path) -> N
     from dampest_ros.ros.common import LATCHED_QOS
 
     path, est = ur5_model_file(tmp_path / "ur5.yaml")
-    with served(path, "arm_server") as (ex, server, probe):
+    with served(model_server(path), "arm_server") as (ex, server, probe):
         texts: list[str] = []
         probe.create_subscription(String, "dampest/arm_model", lambda m: texts.append(m.data),
                                   LATCHED_QOS)
@@ -616,3 +623,32 @@ def test_model_server_serves_an_arm_model_to_the_arm_client(tmp_path: Path) -> N
         assert not other.available and other.errors, other.errors
         assert "belongs to arm 'ur5'" in other.errors[0]
         assert "z1like.urdf'" in other.errors[0]
+
+
+def test_the_arm_client_reads_arm_estimator_node_alike(tmp_path: Path) -> None:
+    """arm_estimator_node's model.* (before any data: its prior, a UR5 model file) reach the
+    same client: the feed-forward is the prior's Y_b θ to 1e-12 with the node's Coulomb
+    width."""
+    pytest.importorskip("rclpy")
+    from rclpy.parameter import Parameter
+
+    from dampest_ros.ros.arm_estimator_node import ArmEstimatorNode
+
+    path, est = ur5_model_file(tmp_path / "ur5.yaml")
+
+    def start(context: Any, ns: str) -> Any:
+        return ArmEstimatorNode(context=context, namespace=ns, parameter_overrides=[
+            Parameter("prior", value=str(path)), Parameter("resume", value=False),
+            Parameter("coulomb_width", value=0.05),
+            Parameter("save_path", value=str(tmp_path / "saved.yaml"))])
+
+    with served(start, "arm_estimator") as (ex, _, probe):
+        client = ArmModelClient(probe, arm="ur5")
+        end = time.monotonic() + 10.0
+        while not (client.available or client.errors) and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        assert client.available, client.errors
+        q, qd, qdd = random_states(6, 40, seed=13)
+        np.testing.assert_allclose(client.feedforward(q, qd, qdd, offsets=True),
+                                   core_torque(est, q, qd, qdd), rtol=0, atol=1e-12)
+        assert client.version == 0 and client.model.coulomb_width == 0.05
