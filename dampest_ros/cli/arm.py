@@ -118,7 +118,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     _arm_option(i)
     i.add_argument("--topic", metavar="TOPIC",
                    help="JointState topic (default: joint_states, or the only one)")
-    i.add_argument("--validate", metavar="BAG",
+    i.add_argument("--validate", metavar="LOG",
                    help="a log (bag or CSV) of another trajectory: torque RMSE per joint of "
                         "the identified and the nominal parameters against the noise floor")
     i.add_argument("--cutoff", type=float, default=10.0, metavar="HZ",
