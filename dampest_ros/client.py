@@ -1,4 +1,6 @@
-"""Client of the model service: what a controller imports to use the identified damping.
+"""Client of the model service: what a controller imports to use the identified damping
+(:class:`ModelClient`) or an arm's identified dynamics (:class:`ArmModelClient`: the
+joint-torque feed-forward; both follow a server through :class:`ServedModelClient`).
 
 Fetches ``model.*`` (docs/architecture.md §3) from a node (``estimator_node``,
 ``model_server_node``) with the standard ``list_parameters`` and ``get_parameters`` services,
@@ -53,14 +55,24 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, Protocol, Self, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from dampest_ros.core.arm.base import base_parameters
+from dampest_ros.core.arm.identify import IdentifyConfig, predict
+from dampest_ros.core.arm.model import arm_model_identity
+from dampest_ros.core.arm.online import ArmEstimate
 from dampest_ros.core.identification.model import Model
-from dampest_ros.core.physics.identity import Identity
+from dampest_ros.core.physics.identity import Identity, mismatch, unchecked
 from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.io.arm import (
+    ArmDescription,
+    arm_model_from_parameters,
+    load_arm,
+    read_arm_model,
+)
 from dampest_ros.io.yaml_io import load_model, model_from_parameters
 
 FloatArray = NDArray[np.float64]
@@ -89,13 +101,34 @@ PROBE_TIME = 2.0
 #: Where a model comes from, for messages.
 SERVERS = ("model_server_node (serves a saved model file) or estimator_node (identifies the "
            "model live)")
+#: The parameters of an arm's model (the contract of arm_estimator_node, docs/architecture.md
+#: §3).
+ARM_MODEL_PARAMETERS = ("model.kind", "model.joint_names", "model.parameter_names",
+                        "model.theta", "model.theta_std", "model.version")
 
 class ModelUnavailableError(RuntimeError):
     """No model yet (the server has not answered, or its model is invalid)."""
 
 
-class ModelClient:
-    """The identified model of one server node, kept up to date.
+class _Served(Protocol):
+    """What every served model has (a vehicle's :class:`Model`, an arm's ArmEstimate)."""
+
+    @property
+    def version(self) -> int: ...
+
+    @property
+    def identified(self) -> NDArray[np.bool_]: ...
+
+
+ServedT = TypeVar("ServedT", bound=_Served)
+
+
+class ServedModelClient(Generic[ServedT]):
+    """The ``model.*`` of one server node, kept up to date: the fetching, following and
+    watching that :class:`ModelClient` (a vehicle's damping) and :class:`ArmModelClient` (an
+    arm's base parameters) share; each subclass says which parameters it needs
+    (:attr:`REQUIRED`), where such a model comes from (:attr:`SERVERS`) and how the values
+    become its model (:meth:`_accept`).
 
     Parameters
     ----------
@@ -106,30 +139,30 @@ class ModelClient:
     follow : bool
         Refresh on ``/parameter_events`` of the server.
     on_update : callable, optional
-        Called with the new :class:`Model` after each refresh.
+        Called with the new model after each refresh.
     timeout : float
         Seconds the server may be missing from the graph before it counts as lost
         (:attr:`lost`; checked every ``min(timeout / 4, 0.5)`` s of wall-clock time).
-    vehicle : Identity, optional
-        The vehicle the caller controls: a model of another hull is refused (kept out,
-        recorded in :attr:`errors`, logged with both names), as a wrong feed-forward would
-        be worse than none.
     """
 
+    #: The parameters the server must hold.
+    REQUIRED: tuple[str, ...] = MODEL_PARAMETERS
+    #: Where the model comes from, for messages.
+    SERVERS: str = SERVERS
+
     def __init__(self, node: Any = None, server: str = "estimator_node", follow: bool = True,
-                 on_update: Callable[[Model], None] | None = None,
-                 timeout: float = 5.0, vehicle: Identity | None = None) -> None:
+                 on_update: Callable[[ServedT], None] | None = None,
+                 timeout: float = 5.0) -> None:
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout}")
         self.node = node
         self.server = server
-        self.vehicle = vehicle
         self.on_update = on_update
         self.timeout = float(timeout)
         self._received_at = math.nan     # time.monotonic() when the model in hand arrived
         self._missing_since: float | None = None  # since when the server is not in the graph
         self._lost_logged = False
-        self._model: Model | None = None
+        self._model: ServedT | None = None
         self._lock = threading.Lock()
         self._got = threading.Event()
         self.refreshes = 0
@@ -155,20 +188,16 @@ class ModelClient:
                                             clock=Clock(clock_type=ClockType.STEADY_TIME))
             self.request()
 
-    # --- without ROS ---------------------------------------------------------------------
-
-    @classmethod
-    def from_yaml(cls, path: str | Path) -> ModelClient:
-        """A client holding the model of a model file (no ROS needed)."""
-        client = cls(None)
-        client._set(_evaluable(load_model(path)))
-        return client
+    def _accept(self, values: dict[str, Any]) -> ServedT:
+        """The model of the server's ``model.*`` values (dotted name → value), checked;
+        raises why it is refused."""
+        raise NotImplementedError
 
     # --- with ROS ------------------------------------------------------------------------
 
     @classmethod
     def standalone(cls, server: str = "estimator_node", name: str = "dampest_model_client",
-                   **kwargs: Any) -> ModelClient:
+                   **kwargs: Any) -> Self:
         """A client with its own node, spun by a background thread (rclpy must be initialised;
         call :meth:`close` at the end)."""
         import rclpy
@@ -218,7 +247,7 @@ class ModelClient:
         from rcl_interfaces.srv import GetParameters
         try:
             names = list(future.result().result.names)
-            missing = sorted(set(MODEL_PARAMETERS) - set(names))
+            missing = sorted(set(self.REQUIRED) - set(names))
             if not names:
                 raise ModelUnavailableError(self._not_a_server())
             if missing:
@@ -251,12 +280,10 @@ class ModelClient:
             if len(values) != len(names):
                 raise ModelUnavailableError(f"{self.server} answered {len(values)} of "
                                             f"{len(names)} model parameters")
-            m = model_from_parameters({n: parameter_value_to_python(v)
-                                       for n, v in zip(names, values, strict=True)})
+            m = self._accept({n: parameter_value_to_python(v)
+                              for n, v in zip(names, values, strict=True)})
             self._stale = 0
-            if self.vehicle is not None:
-                m.belongs_to(self.vehicle, f"the model of {self.server}")
-            self._set(_evaluable(m))
+            self._set(m)
         except Exception as exc:  # a bad answer must not kill the caller's executor
             self._refuse(exc)
 
@@ -297,7 +324,7 @@ class ModelClient:
         if "model.version" in changed:
             self.request()
 
-    def _set(self, model: Model) -> None:
+    def _set(self, model: ServedT) -> None:
         with self._lock:
             self._model = model
             self._received_at = time.monotonic()
@@ -306,7 +333,7 @@ class ModelClient:
         if self.on_update is not None:
             self.on_update(model)
 
-    def wait(self, timeout: float = 10.0) -> Model:
+    def wait(self, timeout: float = 10.0) -> ServedT:
         """Block until a model is available (the node must be spun elsewhere).
 
         Raises
@@ -348,7 +375,7 @@ class ModelClient:
         shown = (f"; it publishes {', '.join(topics[:6])}" + (" …" if len(topics) > 6 else "")
                  if topics else "")
         return (f"{self._full_name} declares no model.* parameters: it is not a model "
-                f"server{shown}. Point the client at {SERVERS}")
+                f"server{shown}. Point the client at {self.SERVERS}")
 
     def _not_on_graph(self) -> str:
         """No node of the server's name: the nodes that declare ``model.*``, closest name
@@ -359,7 +386,7 @@ class ModelClient:
             None, target, n.rsplit("/", 1)[-1]).ratio())
         domain = os.environ.get("ROS_DOMAIN_ID") or "0 (unset)"
         seen = (f"nodes with model.* parameters: {', '.join(servers)}" if servers else
-                f"no node here declares model.* parameters (start {SERVERS})")
+                f"no node here declares model.* parameters (start {self.SERVERS})")
         return (f"no node {self._full_name} on the graph of ROS_DOMAIN_ID {domain}; {seen}. "
                 "A server on another ROS_DOMAIN_ID (or beyond "
                 "ROS_AUTOMATIC_DISCOVERY_RANGE) is not seen")
@@ -386,7 +413,7 @@ class ModelClient:
             for c in clients.values():
                 self.node.destroy_client(c)
 
-    # --- evaluation ----------------------------------------------------------------------
+    # --- the model in hand ----------------------------------------------------------------
 
     @property
     def available(self) -> bool:
@@ -405,7 +432,7 @@ class ModelClient:
         return time.monotonic() - self._received_at
 
     @property
-    def model(self) -> Model:
+    def model(self) -> ServedT:
         """The latest model."""
         with self._lock:
             if self._model is None:
@@ -422,6 +449,38 @@ class ModelClient:
         """Per coefficient of the latest model (θ order), True when the data determined it;
         False: its value is the prior (``model.identified``)."""
         return self.model.identified
+
+
+class ModelClient(ServedModelClient[Model]):
+    """The identified damping model of one server node, kept up to date (the parameters
+    of :class:`ServedModelClient`).
+
+    Parameters
+    ----------
+    vehicle : Identity, optional
+        The vehicle the caller controls: a model of another hull is refused (kept out,
+        recorded in :attr:`errors`, logged with both names), as a wrong feed-forward would
+        be worse than none.
+    """
+
+    def __init__(self, node: Any = None, server: str = "estimator_node", follow: bool = True,
+                 on_update: Callable[[Model], None] | None = None,
+                 timeout: float = 5.0, vehicle: Identity | None = None) -> None:
+        self.vehicle = vehicle
+        super().__init__(node, server, follow, on_update, timeout)
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> ModelClient:
+        """A client holding the model of a model file (no ROS needed)."""
+        client = cls(None)
+        client._set(_evaluable(load_model(path)))
+        return client
+
+    def _accept(self, values: dict[str, Any]) -> Model:
+        m = model_from_parameters(values)
+        if self.vehicle is not None:
+            m.belongs_to(self.vehicle, f"the model of {self.server}")
+        return _evaluable(m)
 
     @property
     def held(self) -> dict[str, str]:
@@ -443,3 +502,91 @@ class ModelClient:
     def feedforward(self, nu: FloatArray) -> FloatArray:
         """D(ν)ν + C(ν)ν."""
         return self.model.feedforward(nu)
+
+
+class ArmModelClient(ServedModelClient[ArmEstimate]):
+    """The base parameters of the arm a controller drives, from a model server, kept up to
+    date: the joint-torque feed-forward τ(q, q̇, q̈) = Y_b(q, q̇, q̈) θ, rigid body, armature,
+    viscous and Coulomb friction (in the Coulomb form the model was identified with,
+    ``model.coulomb_width``) and, on request, the torque offsets.
+
+    Parameters
+    ----------
+    node, server, follow, on_update, timeout
+        As :class:`ServedModelClient`; ``server`` defaults to ``arm_estimator_node``
+        (``model_server_node`` serves a saved arm model file).
+    arm : str or ArmDescription
+        The arm the caller drives (preset or URDF path, or a loaded description, e.g. with
+        locked joints): the regressor's kinematics. A model of another arm (identity, joints
+        or base parameters) is refused with both names, kept out and recorded in
+        :attr:`errors`.
+    """
+
+    REQUIRED = ARM_MODEL_PARAMETERS
+    SERVERS = ("model_server_node (serves a saved arm model file) or arm_estimator_node "
+               "(identifies the arm live)")
+
+    def __init__(self, node: Any = None, server: str = "arm_estimator_node",
+                 follow: bool = True, on_update: Callable[[ArmEstimate], None] | None = None,
+                 timeout: float = 5.0, *, arm: str | ArmDescription) -> None:
+        self.arm = load_arm(arm) if isinstance(arm, str) else arm
+        self.base = base_parameters(self.arm.model)
+        self._kept = [self.base.names[i] for i in self.base.independent]
+        self.owner = arm_model_identity(self.arm.source, self.arm.model, self._kept)
+        super().__init__(node, server, follow, on_update, timeout)
+
+    @classmethod
+    def from_yaml(cls, path: str | Path, arm: str | ArmDescription) -> ArmModelClient:
+        """A client holding the arm model of a model file (no ROS needed; refused as from a
+        server)."""
+        client = cls(None, arm=arm)
+        est, _ = read_arm_model(path)
+        client._set(client._checked(est, str(path)))
+        return client
+
+    def _accept(self, values: dict[str, Any]) -> ArmEstimate:
+        est, _ = arm_model_from_parameters(values)
+        return self._checked(est, f"the model of {self.server}")
+
+    def _checked(self, est: ArmEstimate, source: str) -> ArmEstimate:
+        """``est`` if it holds this arm's base parameters (ConfigError naming both arms
+        otherwise; a model without an identity is checked by its names, with a warning)."""
+        why = mismatch(est.identity, self.owner, source)
+        if why is not None:
+            raise ConfigError("model.identity", why)
+        if est.joint_names != self.arm.model.names or est.parameter_names != self._kept:
+            raise ConfigError("model.parameter_names", (
+                f"{source} holds the base parameters of joints {list(est.joint_names)} "
+                f"({len(est.parameter_names)}), not those of the arm in use "
+                f"{self.arm.source!r} (joints {list(self.arm.model.names)}, "
+                f"{len(self._kept)}): use the arm the model was made for"))
+        warning = unchecked(est.identity, self.owner, source)
+        if warning is not None and self.node is not None:
+            self.node.get_logger().warning(warning)
+        return est
+
+    def feedforward(self, q: FloatArray, qd: FloatArray, qdd: FloatArray,
+                    offsets: bool = False) -> FloatArray:
+        """Joint torques τ = Y_b(q, q̇, q̈) θ of the latest model.
+
+        Parameters
+        ----------
+        q, qd, qdd : ndarray, shape (n,) or (N, n)
+            Joint positions (rad), velocities (rad/s), accelerations (rad/s²), in the
+            model's joint order (:attr:`ArmEstimate.joint_names`).
+        offsets : bool
+            Include the torque offsets (base parameters ``<joint>.off``: a bias of the
+            measured effort, which a motor need not produce; default False).
+
+        Returns
+        -------
+        ndarray, shape of q
+            N m.
+        """
+        est = self.model
+        theta = est.theta if offsets else np.where(
+            [n.endswith(".off") for n in est.parameter_names], 0.0, est.theta)
+        q2, qd2, qdd2 = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, qd, qdd))
+        tau = predict(self.arm.model, self.base, theta, q2, qd2, qdd2,
+                      IdentifyConfig(coulomb_width=est.coulomb_width))
+        return tau.reshape(np.shape(q))

@@ -16,12 +16,20 @@ from typing import Any
 import numpy as np
 import pytest
 
-from dampest_ros.client import STALE_RETRIES, ModelClient
+from dampest_ros.client import STALE_RETRIES, ArmModelClient, ModelClient
+from dampest_ros.core.arm.base import base_parameters, random_states
+from dampest_ros.core.arm.model import arm_model_identity
+from dampest_ros.core.arm.online import ArmEstimate
+from dampest_ros.core.arm.regressor import full_parameters, regressor
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, coriolis_force
 from dampest_ros.core.physics.vehicle import damping_from_spec
+from dampest_ros.io.arm import load_arm, save_arm_model
 from dampest_ros.io.yaml_io import damping_spec, load_vehicle, save_model, vehicle_path
+
+#: The test data: a second arm (z1like.urdf and its MJCF).
+DATA = Path(__file__).parent / "data"
 
 SPEC: dict[str, Any] = {
     "linear": {"X_u": 0, "Y_v": 0, "Z_w": 0, "K_p": 0, "M_q": 0, "N_r": 0, "Y_r": 0},
@@ -411,27 +419,11 @@ def test_a_client_for_one_vehicle_refuses_another_vehicles_model(tmp_path: Path)
     """A controller of platform_a pointed at a server of the BlueROV2 Heavy's model: the
     model is refused with both names (a wrong feed-forward is worse than none); a client of
     the Heavy takes it."""
-    rclpy = pytest.importorskip("rclpy")
-    from rclpy.executors import SingleThreadedExecutor
-
-    from dampest_ros.ros.model_server_node import ModelServerNode
-
     heavy = load_vehicle("bluerov2_heavy")
     path = save_model(tmp_path / "heavy.yaml", Model(
         heavy.damping.parameter_names, heavy.theta, 0.1 * np.abs(heavy.theta) + 0.01,
         heavy.body.M, damping=heavy.damping, identity=heavy.identity))
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    os.environ.setdefault("ROS_DOMAIN_ID", "77")
-    ns = f"/test_identity_{os.getpid()}"
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    ex = SingleThreadedExecutor(context=context)
-    try:
-        server = ModelServerNode(context=context, cli_args=[
-            "--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={path}"])
-        probe = rclpy.create_node("probe", namespace=ns, context=context)
-        for n in (server, probe):
-            ex.add_node(n)
+    with served(model_server(path), "identity") as (ex, _, probe):
         other = ModelClient(probe, "model_server_node",
                             vehicle=load_vehicle("platform_a").identity)
         same = ModelClient(probe, "model_server_node", vehicle=heavy.identity)
@@ -442,9 +434,40 @@ def test_a_client_for_one_vehicle_refuses_another_vehicles_model(tmp_path: Path)
         assert not other.available and other.errors, other.errors
         assert "belongs to vehicle_damping 'bluerov2_heavy'" in other.errors[0]
         assert "'platform_a'" in other.errors[0]
+
+
+@contextlib.contextmanager
+def served(start: Callable[[Any, str], Any], tag: str) -> Iterator[tuple[Any, Any, Any]]:
+    """A server node ``start(context, namespace)`` and a node ``probe`` in a namespace of
+    their own, in one executor the test spins: (executor, server, probe)."""
+    rclpy = pytest.importorskip("rclpy")
+    from rclpy.executors import SingleThreadedExecutor
+
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "77")
+    ns = f"/test_{tag}_{os.getpid()}"
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    ex = SingleThreadedExecutor(context=context)
+    try:
+        server = start(context, ns)
+        probe = rclpy.create_node("probe", namespace=ns, context=context)
+        for n in (server, probe):
+            ex.add_node(n)
+        yield ex, server, probe
     finally:
         ex.shutdown()
         rclpy.try_shutdown(context=context)
+
+
+def model_server(model_file: Path) -> Callable[[Any, str], Any]:
+    """:func:`served`'s start of a model_server_node on ``model_file``."""
+    def start(context: Any, ns: str) -> Any:
+        from dampest_ros.ros.model_server_node import ModelServerNode
+
+        return ModelServerNode(context=context, cli_args=[
+            "--ros-args", "-r", f"__ns:={ns}", "-p", f"model_file:={model_file}"])
+    return start
 
 
 @contextlib.contextmanager
@@ -520,3 +543,112 @@ def test_a_client_pointed_at_the_wrong_node_says_what_is_wrong(tmp_path: Path) -
         assert 3.0 <= took < 3.0 + 2.5       # the wait, then at most PROBE_TIME of asking
         # the right name still works from the same probe
         assert ModelClient(probe, "model_server_node").wait(10.0).version == 4
+
+
+# --- the arm's model -------------------------------------------------------------------------
+
+
+def ur5_model_file(path: Path, coulomb_width: float = 0.05, seed: int = 4
+                   ) -> tuple[Path, ArmEstimate]:
+    """A UR5 arm model file: the nominal base parameters with torque offsets, moved by 10 %
+    (seeded), so that no term is what the client could take from the URDF."""
+    desc = load_arm("ur5")
+    base = base_parameters(desc.model)
+    kept = [base.names[i] for i in base.independent]
+    rng = np.random.default_rng(seed)
+    theta = base.of(full_parameters(desc.model, desc.dynamics, rng.normal(0.0, 0.5, 6)))
+    theta = theta * (1.0 + 0.1 * rng.normal(size=theta.size))
+    est = ArmEstimate(desc.model.names, kept, theta, 0.01 * np.abs(theta) + 1e-3,
+                      np.ones(theta.size, dtype=bool), base.mapping(), 3,
+                      arm_model_identity("ur5", desc.model, kept), coulomb_width)
+    return save_arm_model(path, est, "ur5"), est
+
+
+def core_torque(est: ArmEstimate, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+                ) -> np.ndarray:
+    """The core's Y_b(q, q̇, q̈) θ of a UR5 model, shape (N, 6)."""
+    arm = load_arm("ur5").model
+    Y = base_parameters(arm).columns(regressor(arm, q, qd, qdd, est.coulomb_width))
+    return Y @ est.theta
+
+
+def test_arm_client_from_yaml_is_the_cores_regressor_times_theta(tmp_path: Path) -> None:
+    """From a file: τ = Y_b θ to 1e-12 on random states (one state and many), the offsets
+    only when asked for; a file of another arm is refused naming both."""
+    path, est = ur5_model_file(tmp_path / "ur5.yaml")
+    client = ArmModelClient.from_yaml(path, "ur5")
+    q, qd, qdd = random_states(6, 40, seed=11)
+    want = core_torque(est, q, qd, qdd)
+    np.testing.assert_allclose(client.feedforward(q, qd, qdd, offsets=True), want,
+                               rtol=0, atol=1e-12)
+    off = np.array([est.theta[est.parameter_names.index(f"{j}.off")]
+                    for j in est.joint_names])
+    np.testing.assert_allclose(client.feedforward(q, qd, qdd), want - off, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(client.feedforward(q[3], qd[3], qdd[3]), want[3] - off,
+                               rtol=0, atol=1e-12)
+    assert client.model.coulomb_width == 0.05
+    with pytest.raises(ConfigError, match=r"belongs to arm 'ur5'.*not to the arm in use "
+                                          r"'.*z1like\.urdf'"):
+        ArmModelClient.from_yaml(path, str(DATA / "z1like.urdf"))
+
+
+def test_model_server_serves_an_arm_model_to_the_arm_client(tmp_path: Path) -> None:
+    """model_server_node given a UR5 arm model file holds arm_estimator_node's model.*
+    contract and publishes the file on dampest/arm_model; a UR5 client's feed-forward is the
+    core's Y_b θ to 1e-12 on random states, a client of another arm refuses the model with
+    both names."""
+    pytest.importorskip("rclpy")
+    from std_msgs.msg import String
+
+    from dampest_ros.ros.common import LATCHED_QOS
+
+    path, est = ur5_model_file(tmp_path / "ur5.yaml")
+    with served(model_server(path), "arm_server") as (ex, server, probe):
+        texts: list[str] = []
+        probe.create_subscription(String, "dampest/arm_model", lambda m: texts.append(m.data),
+                                  LATCHED_QOS)
+        same = ArmModelClient(probe, "model_server_node", arm="ur5")
+        other = ArmModelClient(probe, "model_server_node", arm=str(DATA / "z1like.urdf"))
+        end = time.monotonic() + 10.0
+        while not (same.available and other.errors and texts) and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        assert same.available, same.errors
+        assert server.get_parameter("model.kind").value == "arm_base_parameters"
+        assert server.get_parameter("model.coulomb_width").value == 0.05
+        assert "kind: arm_base_parameters" in texts[-1] and "model_server_node" in texts[-1]
+        q, qd, qdd = random_states(6, 40, seed=12)
+        np.testing.assert_allclose(same.feedforward(q, qd, qdd, offsets=True),
+                                   core_torque(est, q, qd, qdd), rtol=0, atol=1e-12)
+        assert same.version == 3 and same.model.parameter_names == est.parameter_names
+        assert not other.available and other.errors, other.errors
+        assert "belongs to arm 'ur5'" in other.errors[0]
+        assert "z1like.urdf'" in other.errors[0]
+
+
+def test_the_arm_client_reads_arm_estimator_node_alike(tmp_path: Path) -> None:
+    """arm_estimator_node's model.* (before any data: its prior, a UR5 model file) reach the
+    same client: the feed-forward is the prior's Y_b θ to 1e-12 with the node's Coulomb
+    width."""
+    pytest.importorskip("rclpy")
+    from rclpy.parameter import Parameter
+
+    from dampest_ros.ros.arm_estimator_node import ArmEstimatorNode
+
+    path, est = ur5_model_file(tmp_path / "ur5.yaml")
+
+    def start(context: Any, ns: str) -> Any:
+        return ArmEstimatorNode(context=context, namespace=ns, parameter_overrides=[
+            Parameter("prior", value=str(path)), Parameter("resume", value=False),
+            Parameter("coulomb_width", value=0.05),
+            Parameter("save_path", value=str(tmp_path / "saved.yaml"))])
+
+    with served(start, "arm_estimator") as (ex, _, probe):
+        client = ArmModelClient(probe, arm="ur5")
+        end = time.monotonic() + 10.0
+        while not (client.available or client.errors) and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        assert client.available, client.errors
+        q, qd, qdd = random_states(6, 40, seed=13)
+        np.testing.assert_allclose(client.feedforward(q, qd, qdd, offsets=True),
+                                   core_torque(est, q, qd, qdd), rtol=0, atol=1e-12)
+        assert client.version == 0 and client.model.coulomb_width == 0.05

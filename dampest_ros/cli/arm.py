@@ -31,7 +31,8 @@ EXAMPLES = {
 HELP = {
     "design": "optimise an FFS excitation trajectory for the base regressor's conditioning",
     "simulate": "run a trajectory on the MuJoCo arm and write a JointState bag",
-    "identify": "identify base parameters and joint friction from a JointState bag",
+    "identify": "identify base parameters and joint friction from a JointState bag or a CSV "
+                "log",
 }
 
 
@@ -108,13 +109,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "clock jump: named (sample, stamp, seconds back), the record split there."),
                        epilog="example:\n" + EXAMPLES["identify"],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    i.add_argument("bag", metavar="BAG", help="rosbag2 bag with sensor_msgs/JointState")
+    i.add_argument("bag", metavar="LOG", help="sensor_msgs/JointState in a rosbag2 bag or a "
+                   "ROS 1 .bag file, or a CSV log: time, <joint>.q (rad), <joint>.qd "
+                   "(rad/s, optional), <joint>.tau (N m), joints by name")
+    i.add_argument("--columns", metavar="YAML",
+                   help="column map of a CSV log ('their name: our name', at the top level "
+                        "or under 'columns:'; ours: time, <joint>.q, <joint>.qd, <joint>.tau)")
     _arm_option(i)
     i.add_argument("--topic", metavar="TOPIC",
                    help="JointState topic (default: joint_states, or the only one)")
-    i.add_argument("--validate", metavar="BAG",
-                   help="a bag of another trajectory: torque RMSE per joint of the identified "
-                        "and the nominal parameters against the noise floor")
+    i.add_argument("--validate", metavar="LOG",
+                   help="a log (bag or CSV) of another trajectory: torque RMSE per joint of "
+                        "the identified and the nominal parameters against the noise floor")
     i.add_argument("--cutoff", type=float, default=10.0, metavar="HZ",
                    help="zero-phase low-pass of q and torque (default: 10)")
     i.add_argument("--rate-out", type=float, default=50.0, metavar="HZ",
@@ -131,7 +137,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write the arm model file (WLS base parameters with sigma, the OLS "
                         "and consistent fits beside them; arm_estimator_node's prior)")
     i.add_argument("--report", metavar="DIR",
-                   help="write an HTML report (index.html and a torque figure) to DIR")
+                   help="write an HTML report to DIR: index.html with the trajectory, "
+                        "measured vs model torque with the residual, the base parameters "
+                        "with sigma vs nominal (and the validation torque with --validate)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -283,7 +291,7 @@ def _identify(args: argparse.Namespace) -> int:
     )
     from dampest_ros.core.arm.regressor import full_parameters
     from dampest_ros.core.signals.resample import increasing_runs, interpolate
-    from dampest_ros.io.arm import load_arm, read_joint_bag
+    from dampest_ros.io.arm import load_arm
 
     check_outputs(args, {"out": "arm_model.yaml"}, ("report",))
     if not (np.isfinite(args.coulomb_width) and args.coulomb_width >= 0):
@@ -294,8 +302,8 @@ def _identify(args: argparse.Namespace) -> int:
     arm = load_arm(args.arm, lock=joint_list(args.lock))
     names = arm.model.names
     t0 = time.perf_counter()
-    data, _ = read_joint_bag(args.bag, names, args.topic)
-    val = read_joint_bag(args.validate, names, args.topic) if args.validate else None
+    data, _ = _read_joints(args.bag, names, args)
+    val = _read_joints(args.validate, names, args) if args.validate else None
     t1 = time.perf_counter()
     base = base_parameters(arm.model)
     nominal = full_parameters(arm.model, arm.dynamics)
@@ -354,13 +362,28 @@ def _identify(args: argparse.Namespace) -> int:
                      "RMSE / noise floor"), rows))
         validation = (fv.t, measured, shown, rows, floor_from)
     if args.report:
-        path = _write_report(args.report, args, base, res, names, nominal,
+        fit = (filtered, predict(arm.model, base, res.wls.theta, filtered.q, filtered.qd,
+                                 filtered.qdd, cfg))
+        path = _write_report(args.report, args, base, res, names, nominal, fit,
                              validation if val is not None else None)
         print(f"\nwrote {path}")
     if args.out:
         _write_params(args.out, args, base, res, names, arm.model)
         print(f"\nwrote {args.out}")
     return 0
+
+
+def _read_joints(path: str, names: tuple[str, ...], args: argparse.Namespace) -> Any:
+    """The joint log at ``path`` in the model's order and the truth beside it (None for a
+    CSV log): a CSV file through ``--columns``, a rosbag2 or ROS 1 bag through ``--topic``."""
+    from dampest_ros.io.arm import read_joint_bag
+    from dampest_ros.io.arm_csv import read_joint_csv
+    from dampest_ros.io.csv import is_csv, load_column_map
+
+    if is_csv(path):
+        cmap = load_column_map(args.columns) if args.columns else None
+        return read_joint_csv(path, names, cmap), None
+    return read_joint_bag(path, names, args.topic)
 
 
 def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
@@ -376,7 +399,8 @@ def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
     kept = [base.names[k] for k in base.independent]
     est = ArmEstimate(tuple(names), kept, res.wls.theta, res.wls.std,
                       np.ones(base.size, dtype=bool), base.mapping(),
-                      identity=arm_model_identity(str(args.arm), arm, kept))
+                      identity=arm_model_identity(str(args.arm), arm, kept),
+                      coulomb_width=float(args.coulomb_width))
     save_arm_model(path, est, str(args.arm), {
         "source": f"dampest arm identify {args.bag}",
         "ols": [float(x) for x in res.ols.theta],
@@ -385,20 +409,23 @@ def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
         "consistent_full": {"names": list(base.names),
                             "values": [float(x) for x in res.consistent.full]},
         "noise_estimate": [float(x) for x in res.noise],
-        "coulomb_width": float(args.coulomb_width),
         **({"lock": list(joint_list(args.lock))} if joint_list(args.lock) else {})})
 
 
 def _write_report(out_dir: str, args: argparse.Namespace, base: Any, res: Any,
-                  names: tuple[str, ...], nominal: np.ndarray, validation: Any) -> Any:
-    """index.html in the style of the vehicle reports: base parameters, joint friction,
-    the mapping, validation RMSE and a figure of measured and predicted torque."""
+                  names: tuple[str, ...], nominal: np.ndarray, fit: Any,
+                  validation: Any) -> Any:
+    """index.html in the style of the vehicle reports: the trajectory, measured and model
+    torque with the residual and the base parameters with σ against the nominal (``fit``:
+    the filtered data and the WLS model's torque on them), the base parameters' table, the
+    mapping, and the validation RMSE with a figure of measured and predicted torque."""
     import html
     from pathlib import Path
 
     import numpy as np
     from matplotlib.figure import Figure
 
+    from dampest_ros.report.arm import parameter_figure, torque_figure, trajectory_figure
     from dampest_ros.report.figures import CSS
 
     out = Path(out_dir)
@@ -420,6 +447,13 @@ def _write_report(out_dir: str, args: argparse.Namespace, base: Any, res: Any,
              f"<p class='meta'>{html.escape(str(args.bag))}; {base.size} base parameters; rows "
              f"per joint {res.rows.tolist()}; cutoff {args.cutoff:g} Hz, {args.rate_out:g} Hz"
              "</p>"]
+    filtered, model_tau = fit
+    figures = (trajectory_figure(filtered.t, filtered.q, names, out / "trajectory.png"),
+               torque_figure(filtered.t, filtered.tau, model_tau, names,
+                             out / "fit_torque.png"),
+               parameter_figure(ind, res.wls.theta, res.wls.std, nom, out / "parameters.png"))
+    parts += ["<h2>Identification data and fit</h2>"] + [
+        f"<img src='{f}' alt='{f[:-4]}'>" for f in figures]
     if validation is not None:
         t, measured, shown, rows, floor_from = validation
         k = slice(0, min(len(t), int(20.0 / max(float(np.median(np.diff(t))), 1e-9))))

@@ -33,8 +33,8 @@ from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.signals.measurements import JointSeries, Series
 from dampest_ros.io.bag import bag_summary, read_bag, write_bag
 from dampest_ros.io.schema import check, load_checked
-from dampest_ros.io.strict_yaml import InputError, load_yaml
-from dampest_ros.io.yaml_io import atomic_write, located, model_section
+from dampest_ros.io.strict_yaml import InputError, YamlDoc, load_yaml
+from dampest_ros.io.yaml_io import atomic_write, located, model_mapping, model_section
 
 FloatArray = NDArray[np.float64]
 
@@ -342,8 +342,9 @@ def arm_model_parameters(est: ArmEstimate, arm: str) -> dict[str, Any]:
     dict
         ``model.kind``, ``model.arm``, ``model.joint_names``, ``model.parameter_names``,
         ``model.theta``, ``model.theta_std``, ``model.identified``, ``model.mapping``,
-        ``model.version`` and, when the estimate has one, ``model.identity.*`` (kind, name,
-        hash, parts): what ``--params-file`` gives for the file of :func:`save_arm_model`.
+        ``model.version``, ``model.coulomb_width`` and, when the estimate has one,
+        ``model.identity.*`` (kind, name, hash, parts): what ``--params-file`` gives for the
+        file of :func:`save_arm_model`.
     """
     identity = {} if est.identity is None else {
         f"model.identity.{k}": v for k, v in est.identity.as_dict().items() if k != "parts"}
@@ -355,20 +356,15 @@ def arm_model_parameters(est: ArmEstimate, arm: str) -> dict[str, Any]:
             "model.theta": [float(x) for x in est.theta],
             "model.theta_std": [float(x) for x in est.theta_std],
             "model.identified": [bool(x) for x in est.identified],
-            "model.mapping": list(est.mapping), "model.version": int(est.version)}
+            "model.mapping": list(est.mapping), "model.version": int(est.version),
+            "model.coulomb_width": float(est.coulomb_width)}
 
 
 def arm_model_text(est: ArmEstimate, arm: str, extra: dict[str, Any] | None = None) -> str:
     """The model file's text: a ROS 2 parameters file (``/**: ros__parameters: model:``);
     ``extra`` entries (plain YAML types, names other than the model's) are added to
     ``model``."""
-    model: dict[str, Any] = {}
-    for key, value in arm_model_parameters(est, arm).items():
-        *path, leaf = key.removeprefix("model.").split(".")
-        node = model
-        for part in path:
-            node = node.setdefault(part, {})
-        node[leaf] = value
+    model = model_mapping(arm_model_parameters(est, arm))
     clash = sorted(set(extra or {}) & set(model))
     if clash:
         raise ValueError(f"extra entries {clash} would replace the model's own")
@@ -389,7 +385,14 @@ def save_arm_model(path: str | Path, est: ArmEstimate, arm: str,
 
 
 def load_arm_model(path: str | Path) -> ArmEstimate:
-    """Read a model file of :func:`save_arm_model`.
+    """Read a model file of :func:`save_arm_model` (:func:`read_arm_model` without the arm's
+    name)."""
+    return read_arm_model(path)[0]
+
+
+def read_arm_model(path: str | Path) -> tuple[ArmEstimate, str]:
+    """Read a model file of :func:`save_arm_model`: the estimate and the arm it names
+    (``model.arm``, a preset or URDF path).
 
     Raises
     ------
@@ -400,7 +403,33 @@ def load_arm_model(path: str | Path) -> ArmEstimate:
         lengths or non-finite numbers.
     """
     try:
-        doc = load_yaml(path)
+        return _arm_model_from_doc(load_yaml(path))
+    except OSError as exc:
+        raise ArmDataError(f"arm model file {path}: cannot be read ({exc.strerror}); write one "
+                           "with 'dampest arm identify --out' or arm_estimator_node's ~/save"
+                           ) from None
+
+
+def is_arm_model_file(path: str | Path) -> bool:
+    """Whether ``path`` is a YAML file whose model says ``kind: arm_base_parameters`` (False
+    for anything else, which the vehicle's reader then names)."""
+    try:
+        return model_section(load_yaml(path))[1].get("kind") == ARM_MODEL_KIND
+    except (ValueError, OSError):  # InputError, ConfigError
+        return False
+
+
+def arm_model_from_parameters(values: dict[str, Any]) -> tuple[ArmEstimate, str]:
+    """:func:`read_arm_model` for the ``model.*`` parameters of a node (dotted name → value,
+    as :func:`arm_model_parameters` gives them); errors name the source ``<parameters>``."""
+    return _arm_model_from_doc(YamlDoc({"/**": {"ros__parameters": {
+        "model": model_mapping(values)}}}, "<parameters>"))
+
+
+def _arm_model_from_doc(doc: YamlDoc) -> tuple[ArmEstimate, str]:
+    """The estimate and arm name of a parsed arm model file, checked (see
+    :func:`read_arm_model`)."""
+    try:
         where, m = model_section(doc)
         if m.get("kind") != ARM_MODEL_KIND:
             raise located(doc, where, ConfigError(
@@ -427,10 +456,7 @@ def load_arm_model(path: str | Path) -> ArmEstimate:
             raise located(doc, where, exc) from None
         return ArmEstimate(tuple(str(x) for x in m["joint_names"]), names, theta, std,
                            np.asarray(m["identified"], dtype=bool),
-                           [str(x) for x in m["mapping"]], int(m["version"]), identity)
+                           [str(x) for x in m["mapping"]], int(m["version"]), identity,
+                           float(m.get("coulomb_width", 0.0))), str(m["arm"])
     except InputError as exc:
         raise ArmDataError(str(exc)) from None
-    except OSError as exc:
-        raise ArmDataError(f"arm model file {path}: cannot be read ({exc.strerror}); write one "
-                           "with 'dampest arm identify --out' or arm_estimator_node's ~/save"
-                           ) from None

@@ -490,7 +490,16 @@ def model_from_parameters(values: Mapping[str, Any]) -> Model:
     InputError
         As :func:`load_model`, the source named ``<parameters>``.
     """
-    model: dict[str, Any] = {"sign_convention": SIGN_CONVENTION}
+    model = {"sign_convention": SIGN_CONVENTION, **model_mapping(values)}
+    return _model_from_doc(YamlDoc({"/**": {"ros__parameters": {"model": model}}},
+                                   "<parameters>"))
+
+
+def model_mapping(values: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``model`` mapping of a model file from dotted ``model.*`` parameters
+    (``model.identity.name`` → ``{"identity": {"name": ...}}``; arrays as lists, other names
+    left out)."""
+    model: dict[str, Any] = {}
     for name, value in values.items():
         head, _, rest = name.partition(".")
         if head != "model" or not rest:
@@ -500,8 +509,7 @@ def model_from_parameters(values: Mapping[str, Any]) -> Model:
         for key in path:
             node = node.setdefault(key, {})
         node[leaf] = _plain(value)
-    return _model_from_doc(YamlDoc({"/**": {"ros__parameters": {"model": model}}},
-                                   "<parameters>"))
+    return model
 
 
 def _model_from_doc(doc: YamlDoc) -> Model:

@@ -126,18 +126,21 @@ def save_figure(fig: Figure, path: Path, bottom: float = 0.08, wspace: float = 0
     return path.name
 
 
-def _measured_vs_model(t: FloatArray, measured: FloatArray, model: FloatArray,
-                       labels: tuple[str, str], names: Sequence[str], units: Sequence[str],
-                       title: str, path: Path) -> str:
-    """Six DOFs (surge…heave left, roll…yaw right), each a panel of a measured signal and
-    its model's, shapes (N, 6), against time t (s), over a panel of the residual measured −
-    model in the same unit. Tick labels are plain numbers: matplotlib's offset text
-    (×10ⁿ, +c) would sit on the panel above."""
-    fig = Figure(figsize=(11, 9.5))
-    grid_spec = fig.add_gridspec(6, 2, height_ratios=[3, 1.2] * 3)
+def measured_vs_model(t: FloatArray, measured: FloatArray, model: FloatArray,
+                      labels: tuple[str, str], names: Sequence[str], units: Sequence[str],
+                      title: str, path: Path) -> str:
+    """n signals in two columns (six DOFs: surge…heave left, roll…yaw right), each a panel
+    of a measured signal and its model's, shapes (N, n), against time t (s), over a panel of
+    the residual measured − model in the same unit. Tick labels are plain numbers:
+    matplotlib's offset text (×10ⁿ, +c) would sit on the panel above."""
+    n = measured.shape[1]
+    rows = -(-n // 2)
+    fig = Figure(figsize=(11, 9.5 * rows / 3))
+    grid_spec = fig.add_gridspec(2 * rows, 2, height_ratios=[3, 1.2] * rows)
     first = fig.add_subplot(grid_spec[0, 0])
-    for i in range(6):
-        row, col = 2 * (i % 3), i // 3
+    for i in range(n):
+        row, col = 2 * (i % rows), i // rows
+        last = row == 2 * rows - 2 or i == n - 1
         ax = first if i == 0 else fig.add_subplot(grid_spec[row, col], sharex=first)
         res = fig.add_subplot(grid_spec[row + 1, col], sharex=first)
         ax.plot(t, measured[:, i], lw=1.0, color="0.2", label=labels[0])
@@ -150,18 +153,18 @@ def _measured_vs_model(t: FloatArray, measured: FloatArray, model: FloatArray,
         res.axhline(0.0, color="0.5", lw=0.6)
         res.set_ylabel(f"resid. ({units[i]})", fontsize=8)
         res.legend(loc="upper right", fontsize=7, framealpha=0.7)
-        res.tick_params(labelbottom=row == 4)
+        res.tick_params(labelbottom=last)
         for a in (ax, res):
             a.ticklabel_format(axis="y", style="plain", useOffset=False)
             a.grid(alpha=0.3)
-        if row == 4:
+        if last:
             res.set_xlabel("time (s)")
     fig.suptitle(title)
     return save_figure(fig, path, bottom=0.06, hspace=0.15, wspace=0.25)
 
 
 def force_figure(t: FloatArray, y: FloatArray, y_hat: FloatArray, path: Path) -> str:
-    return _measured_vs_model(
+    return measured_vs_model(
         t, y, y_hat, ("measured y", "model Φθ"), FORCE_NAMES, FORCE_UNITS,
         "Damping force: measured y = τ − Mν̇ − C(ν)ν − g(η) vs model Φ(ν)θ", path)
 
@@ -230,10 +233,12 @@ def psd_unit(i: int) -> str:
 def coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray,
                  held: NDArray[np.bool_], identified: NDArray[np.bool_],
                  prior: FloatArray | None, truth: FloatArray | None,
-                 units: Mapping[str, str], path: Path) -> str:
+                 units: Mapping[str, str], path: Path, prior_label: str = "prior",
+                 title: str = "Coefficients (SI units on each axis, positive = dissipative)"
+                 ) -> str:
     """One panel per parameter (its unit on the y axis): estimate with its 95 % interval,
-    prior, truth; a parameter held at its prior shows no estimate, one the data do not
-    determine has a red title."""
+    prior (called ``prior_label``), truth; a parameter held at its prior shows no estimate,
+    one the data do not determine has a red title."""
     nrows, ncols = grid(len(names), 6)
     fig = Figure(figsize=(13, 1.9 * nrows + 0.8))
     axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
@@ -251,11 +256,11 @@ def coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray,
             ax.text(0.5, 0.5, "held at prior", transform=ax.transAxes, ha="center",
                     va="center", color="tab:red", fontsize=9)
         if prior is not None and np.isfinite(prior[j]):
-            ax.plot([-0.6], [prior[j]], "s", color="0.4", label="prior")
+            ax.plot([-0.6], [prior[j]], "s", color="0.4", label=prior_label)
         if truth is not None and np.isfinite(truth[j]):
             ax.plot([0.6], [truth[j]], "*", color="tab:orange", ms=11, label="truth")
         ax.set_xlim(-1, 1)
-        ticks = [(x, lab) for x, lab, shown in ((-0.6, "prior", prior is not None),
+        ticks = [(x, lab) for x, lab, shown in ((-0.6, prior_label, prior is not None),
                                                  (0.0, "est.", True),
                                                  (0.6, "truth", truth is not None)) if shown]
         ax.set_xticks([x for x, _ in ticks], [lab for _, lab in ticks], fontsize=7)
@@ -273,13 +278,13 @@ def coef_figure(names: Sequence[str], est: FloatArray, ci: FloatArray,
                 labels.append(lab)
     if handles:
         fig.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=9)
-    fig.suptitle("Coefficients (SI units on each axis, positive = dissipative)")
+    fig.suptitle(title, y=1.0 - 0.1 / fig.get_figheight())  # above the panels' titles
     return save_figure(fig, path, bottom=0.5 / fig.get_figheight() + 0.05, wspace=0.6,
-                 hspace=0.45)
+                 hspace=0.45, title_height=0.8)
 
 
 def free_run_figure(t: FloatArray, nu: FloatArray, sim: FloatArray, path: Path) -> str:
-    return _measured_vs_model(
+    return measured_vs_model(
         t, nu, sim, ("measured ν", "free run"), DOF_NAMES, VEL_UNITS,
         "Free-run simulation driven by the measured τ and attitude vs measured ν", path)
 

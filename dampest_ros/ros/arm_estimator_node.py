@@ -13,7 +13,8 @@ dampest_ros.core.arm.online.prior_std (or a model file).
 Holds the estimate as the parameters model.kind (arm_base_parameters), model.arm,
 model.joint_names, model.parameter_names (each base parameter named by the full parameter it
 keeps), model.theta, model.theta_std, model.identified, model.mapping (what each base
-parameter combines) and model.version (bumped at each publish), read-only from outside,
+parameter combines), model.coulomb_width (the dry-friction form of the Coulomb parameters)
+and model.version (bumped at each publish), read-only from outside,
 and publishes it on dampest/arm_model (std_msgs/String with the model file YAML, transient
 local) and on /diagnostics (diagnostic_msgs/DiagnosticArray: per joint innovation RMS, noise
 and excitation, covariance trace, lag, the change alarms with their time and joints, and every

@@ -191,6 +191,9 @@ class ArmEstimate:
     identity : Identity or None
         The arm it belongs to (:func:`~dampest_ros.core.arm.model.arm_model_identity`); None
         for files written before models carried one.
+    coulomb_width : float
+        The dry-friction form the Coulomb parameters belong to: 0 for Fc·sign(q̇), w > 0 for
+        Fc·tanh(q̇ / w) (rad/s; :func:`~dampest_ros.core.arm.regressor.joint_columns`).
     """
 
     joint_names: tuple[str, ...]
@@ -201,6 +204,7 @@ class ArmEstimate:
     mapping: list[str]
     version: int = 1
     identity: Identity | None = None
+    coulomb_width: float = 0.0
 
 
 class ArmEstimator:
@@ -264,7 +268,7 @@ class ArmEstimator:
                            [self.base.names[i] for i in self.base.independent],
                            self.theta.copy(), self.std.copy(),
                            np.asarray(self.std <= 0.5 * self.std0), self.base.mapping(),
-                           int(version), self.identity)
+                           int(version), self.identity, self.config.coulomb_width)
 
     @property
     def theta(self) -> FloatArray:
