@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import shutil
 import struct
 import time
 from collections.abc import Callable, Sequence
@@ -363,11 +364,14 @@ class BagRecorder:
         self._chunk_opened = 0.0   # wall time of the first message of that chunk
         self.chunks = 0            # chunks written
         self.closed = False
+        self.opened = False        # open() completed
+        self._made = False         # open() made the directory
 
     # -- life cycle --
 
     def open(self) -> BagRecorder:
-        """Create the bag directory and its first storage file."""
+        """Create the bag directory and its first storage file (all or nothing: an open that
+        fails or is interrupted removes what it made)."""
         if self._file is not None or self.closed:
             raise RecorderError(f"bag {self.path} is already open or closed")
         try:
@@ -377,12 +381,28 @@ class BagRecorder:
             raise FileExistsError(f"{self.path} exists{'; ' + busy if busy else ''}; the "
                                   "recorder never overwrites a bag, remove it or choose "
                                   "another output") from None
-        self._lock = BagLock(self.path, "a recorder")
-        self._reserve_fd = os.open(self.path / RESERVE_NAME,
-                                   os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-        self._start_file()
-        self._commit()
+        self._made = True
+        try:
+            self._lock = BagLock(self.path, "a recorder")
+            self._reserve_fd = os.open(self.path / RESERVE_NAME,
+                                       os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+            self._start_file()
+            self._commit()
+        except BaseException:  # e.g. a Ctrl-C meanwhile: no half-made bag is left behind
+            self.discard()
+            raise
+        self.opened = True
         return self
+
+    def discard(self) -> None:
+        """Undo an :meth:`open` that did not complete (it failed or was interrupted): the
+        directory it made is removed with what it holds, which is no recorded message."""
+        if self.opened:
+            raise RecorderError(f"bag {self.path} was opened: close it, do not discard it")
+        self._release()
+        if self._made:
+            shutil.rmtree(self.path, ignore_errors=True)
+            self._made = False
 
     def __enter__(self) -> BagRecorder:
         return self.open()

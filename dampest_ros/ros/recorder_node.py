@@ -50,7 +50,14 @@ from dampest_ros.io.recorder import (
     StorageError,
 )
 from dampest_ros.ros.bag_interop import compatible_qos, import_message_type, to_bag_qos
-from dampest_ros.ros.common import DRAIN_LIMIT, Param, ParamNode, TakenElsewhere, main_for
+from dampest_ros.ros.common import (
+    DRAIN_LIMIT,
+    Param,
+    ParamNode,
+    TakenElsewhere,
+    main_for,
+    signals_held,
+)
 
 #: The topics of docs/architecture.md §3 (relative: resolved in the node's namespace).
 DEFAULT_TOPICS = ["truth/odom", "imu/data", "dvl/twist", "pressure", "thrusters/state",
@@ -133,15 +140,24 @@ class RecorderNode(ParamNode):
             max_bag_size=int(self.p("max_bag_size")),
             max_bag_duration=float(self.p("max_bag_duration")),
             compression=str(self.p("compression")))
-        try:
-            self.recorder.open()
-        except (OSError, RecorderError) as exc:  # a refusal at start: one line, status 2
-            raise ValueError(f"output {output}: {exc}") from None
         wanted = [t for t in self.p("topics") if t]
         self.regex = re.compile(str(self.p("regex"))) if self.p("regex") else None
         if not wanted and self.regex is None:
             raise ValueError("topics must name at least one topic, or be ['all'], or regex "
                              "select them")
+        try:
+            self.recorder.open()
+            self._start(wanted)
+        except (OSError, RecorderError) as exc:  # a refusal at start: one line, status 2
+            raise ValueError(f"output {output}: {exc}") from None
+        except BaseException:  # e.g. a Ctrl-C while starting: no bag left open or half made
+            with signals_held(self.get_name()):
+                self._abandon()
+            raise
+
+    def _start(self, wanted: list[str]) -> None:
+        """Everything after the bag is open: the subscriptions' state, the take thread, the
+        timers; ``wanted``: the topics parameter."""
         self.all_topics = wanted == ["all"]
         self.wanted = [] if self.all_topics else [self.resolve_topic_name(t) for t in wanted]
         self.exclude = {self.resolve_topic_name(t) for t in self.p("exclude") if t}
@@ -183,6 +199,20 @@ class RecorderNode(ParamNode):
             [*self.wanted, *([f"the topics matching {self.regex.pattern!r}"]
                              if self.regex is not None else [])])
         self.get_logger().info(f"recording {what} to {self.recorder.path}")
+
+    def _abandon(self) -> None:
+        """End what an interrupted start began: the take thread if it runs, then close the
+        bag (summary, metadata.yaml, lock released), or discard it if its open was cut
+        short."""
+        self._running = False
+        taker = getattr(self, "_taker", None)
+        if taker is not None and taker.is_alive():
+            self._wake.trigger()
+            taker.join()
+        if not self.recorder.opened:
+            self.recorder.discard()
+        elif not self.recorder.closed:
+            self.recorder.close()
 
     def on_parameters(self, names: list[str]) -> None:
         """discovery_period and status_period apply at once."""

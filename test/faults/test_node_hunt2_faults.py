@@ -233,9 +233,11 @@ def test_recorder_names_a_wanted_topic_nobody_publishes_and_the_closest(
 
 def test_recorder_closes_its_bag_through_a_train_of_signals(tmp_path: Path) -> None:
     """Ctrl-C pressed again and again (or a launch system's repeated SIGTERM) from the moment
-    the recorder records until it has exited: the close finishes (metadata.yaml written), at
-    most one warning, no traceback, status 0. Before, a second SIGINT raised KeyboardInterrupt
-    inside the close (3 runs of 3)."""
+    the recorder creates its bag until it has exited: the close finishes (metadata.yaml
+    written) or, stopped inside the bag's open, nothing is left; at most one warning, no
+    traceback, status 0. Before, a second SIGINT raised
+    KeyboardInterrupt inside the close (3 runs of 3), and one during the node's start left
+    the bag open without metadata.yaml."""
     import os
     import signal
     import subprocess
@@ -253,11 +255,11 @@ def test_recorder_closes_its_bag_through_a_train_of_signals(tmp_path: Path) -> N
     reader.start()
     try:
         deadline = time.monotonic() + 30.0
-        while not any("recording" in line for line in lines) and time.monotonic() < deadline:
-            time.sleep(0.05)
+        while not out.exists() and time.monotonic() < deadline:  # the bag is open: the
+            time.sleep(0.001)  # node may still be starting (a Ctrl-C there closes it too)
         while proc.poll() is None and time.monotonic() < deadline:
             proc.send_signal(signal.SIGINT)
-            time.sleep(0.002)
+            time.sleep(0.01)  # ten times as fast as a hand on Ctrl-C
         proc.wait(timeout=30)
     finally:
         if proc.poll() is None:
@@ -267,7 +269,8 @@ def test_recorder_closes_its_bag_through_a_train_of_signals(tmp_path: Path) -> N
     text = "".join(lines)
     assert proc.returncode == 0, text
     assert "Traceback" not in text and "KeyboardInterrupt" not in text, text
-    assert (out / "metadata.yaml").exists()
+    # a bag complete with its metadata, or (stopped inside its open) no bag at all
+    assert (out / "metadata.yaml").exists() or not out.exists(), sorted(out.iterdir())
     assert text.count("while closing: finishing the close first") <= 1, text
 
 
