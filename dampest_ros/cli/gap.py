@@ -255,7 +255,7 @@ def current_refit(data: GapData, result: GapResult) -> RelativeRefit | None:
     e, p = found[0]
     upd = updated_model(data, result.effects)
     print("refitting the model's terms at the relative velocity ...", file=sys.stderr)
-    return refit_relative(data, upd.model, upd.theta, e.ned(p))
+    return refit_relative(data, upd.model, upd.theta, e.ned(p), result.r)
 
 
 def refit_text(rel: RelativeRefit) -> str:

@@ -253,6 +253,11 @@ def bind(fn: Callable[[GapData, Chunk, FloatArray], FloatArray], data: GapData,
     return call
 
 
+def noise_weights(r: FloatArray, mask: BoolArray) -> FloatArray:
+    """Per-DOF weights 1/σ_i² from the residual on ``mask`` rows, shape (6,)."""
+    return np.asarray(1.0 / np.maximum(np.mean(r[mask] ** 2, axis=0), 1e-12))
+
+
 def rms(r: FloatArray, mask: BoolArray) -> FloatArray:
     """RMS per DOF of the residual on the ``mask`` rows, shape (6,)."""
     return np.asarray(np.sqrt(np.mean(r[mask] ** 2, axis=0)))

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, optimize
 
-from dampest_ros.core.gap.data import GapData
+from dampest_ros.core.gap.data import GapData, noise_weights
 from dampest_ros.core.gap.effects import relative_motion
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
 from dampest_ros.core.identification.regression import accumulate
@@ -73,7 +73,8 @@ def _profile(data: GapData, model: DampingModel, v_c: FloatArray, w: FloatArray)
 
 
 def refit_relative(data: GapData, model: DampingModel, theta: FloatArray, v_c: FloatArray,
-                   step: float = 0.02, tol: float = 5e-4) -> RelativeRefit:
+                   r: FloatArray | None = None, step: float = 0.02, tol: float = 5e-4
+                   ) -> RelativeRefit:
     """Refit ``model``'s terms at ν_r jointly with the horizontal current.
 
     The current is refined from ``v_c`` by minimising the training profile likelihood
@@ -92,13 +93,17 @@ def refit_relative(data: GapData, model: DampingModel, theta: FloatArray, v_c: F
         Their values before (the prior of what the data do not determine).
     v_c : ndarray, shape (3,)
         The current named (north, east, down; m/s); the down component is kept.
+    r : ndarray, shape (N, 6), optional
+        The residual the named effects leave (N, N·m): its training part sets the per-DOF
+        weights 1/σ_i² of the profile (the noise, not the gap the current explains).
+        Default: the believed model's residual.
 
     Returns
     -------
     RelativeRefit
     """
     v_c = np.asarray(v_c, dtype=float)
-    w = 1.0 / np.maximum(np.mean(data.r0[data.train] ** 2, axis=0), 1e-12)
+    w = noise_weights(data.r0 if r is None else r, data.train)
 
     def cost(x: FloatArray) -> float:
         return _profile(data, model, np.array([x[0], x[1], v_c[2]]), w)

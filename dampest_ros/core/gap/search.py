@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, optimize, stats
 
-from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData, bind, rms
+from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData, bind, noise_weights, rms
 from dampest_ros.core.gap.effects import Effect
 from dampest_ros.core.gap.library import library
 from dampest_ros.core.gap.trust import Degradation, degradations
@@ -205,11 +205,6 @@ class GapOptions:
     max_trade: float = 0.1
 
 
-def _weights(r: FloatArray, mask: BoolArray) -> FloatArray:
-    """Per-DOF weights 1/σ_i² from the residual on ``mask`` rows, shape (6,)."""
-    return np.asarray(1.0 / np.maximum(np.mean(r[mask] ** 2, axis=0), 1e-12))
-
-
 def _lsq(X: FloatArray, y: FloatArray, w: FloatArray) -> FloatArray:
     """Weighted least squares Σ_n Σ_i w_i (y_ni − X_ni p)², minimum-norm for zero columns.
 
@@ -369,7 +364,7 @@ def refit(data: GapData, effects: Sequence[tuple[Effect, FloatArray]], w: FloatA
                                      method="trf", max_nfev=max_nfev, xtol=1e-6, ftol=1e-8)
         x = res.x
         # per-DOF weights from the residual the effects leave (the noise, not the gap)
-        w = _weights(resid(x).reshape(-1, 6) / sw, np.ones(int(tr.sum()), dtype=bool))
+        w = noise_weights(resid(x).reshape(-1, 6) / sw, np.ones(int(tr.sum()), dtype=bool))
         sw = np.sqrt(w)
     # block-robust covariance on the training rows
     J = jac(x).reshape(int(tr.sum()), 6, -1) / -sw[None, :, None]
@@ -434,7 +429,7 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
     k_total = 0
     conclusion = NO_FURTHER
     while True:
-        w = _weights(r, tr)
+        w = noise_weights(r, tr)
         done = {a.key for a, _ in added}
         round_ = [screen(data, e, r, w, opts) for e in cands if e.key not in done]
         round_.sort(key=lambda s: -s.score(data.n_eff_test))
