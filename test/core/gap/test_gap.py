@@ -68,7 +68,13 @@ from dampest_ros.core.physics.rigid_body import (
     RigidBody,
     coriolis_force,
 )
-from dampest_ros.core.physics.terms import CrossSpec, cross_term, linear_term, quadratic_term
+from dampest_ros.core.physics.terms import (
+    CrossSpec,
+    coriolis_term,
+    cross_term,
+    linear_term,
+    quadratic_term,
+)
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.measurements import JointSeries
 from dampest_ros.core.signals.preprocess import PreprocessConfig, preprocess
@@ -678,3 +684,20 @@ def test_relative_samples_leave_the_rigid_body_force_unchanged() -> None:
 
     assert np.allclose(rigid(rel), rigid(s), atol=1e-9)
     assert not np.allclose(rel.nu[:, :3], s.nu[:, :3])
+
+
+def test_the_updated_model_keeps_every_kind_of_term() -> None:
+    """Before: a coriolis term (what ``identify --select`` finds for MuJoCo's Magnus lift)
+    was dropped from the updated model, so --out wrote the model without it and the refit at
+    ν_r fitted the selected terms less that one."""
+    v = vehicle()
+    samples, _ = clean(1)
+    model = DampingModel([linear_term(), quadratic_term(), coriolis_term()])
+    theta = np.concatenate([v.theta, [1.5, -2.0, 3.0]])
+    data = GapData(samples.take(slice(0, 3000)), model, theta, v.body)
+    lib = {e.key: e for e in library()}
+    upd = updated_model(data, [(lib["linear.X_u"], np.array([1.0]))])
+    assert upd.model.kinds == ["linear", "quadratic", "coriolis"]
+    values = dict(zip(upd.model.parameter_names, upd.theta, strict=True))
+    assert [values[f"coriolis.m_{d}"] for d in "uvw"] == [1.5, -2.0, 3.0]
+    assert values["X_u"] == pytest.approx(NOMINAL["X_u"] + 1.0)
