@@ -106,12 +106,13 @@ def degradations(data: GapData, effects: Sequence[tuple[Effect, FloatArray]],
 
     A DOF grows when its held-out mean square rises by more than an effect with k unknowns
     fitted to noise adds (4 k / n_eff,train) and its RMS by more than ``min_change`` of its
-    force scale. Its rise is extrapolation when the effects move ν_r outside the believed
-    model's flown envelope (:func:`outside`) and, on the held-out rows that stay inside, the
-    DOF does not grow (or fewer than :data:`MIN_INSIDE` of them stay inside), or grows by
-    less than the model's own error: its mean square by at most the square of its residual
-    RMS on its own fit data (:attr:`GapData.model_rmse`; the effect moves the points where the
-    model is evaluated, and away from its fit samples it is not more accurate than that).
+    force scale. Its rise is extrapolation when the new effect (the last of ``effects``)
+    moves ν_r outside the believed model's flown envelope (:func:`outside`) and, on the
+    held-out rows that stay inside, the DOF does not grow (or fewer than :data:`MIN_INSIDE`
+    of them stay inside), or grows by less than the model's own error: its mean square by at
+    most the square of its residual RMS on its own fit data (:attr:`GapData.model_rmse`; the
+    effect moves the points where the model is evaluated, and away from its fit samples it
+    is not more accurate than that).
 
     Parameters
     ----------
@@ -135,7 +136,8 @@ def degradations(data: GapData, effects: Sequence[tuple[Effect, FloatArray]],
     grows = _grows(ms0, ms1, data.force_scale, data, k, min_change)
     if not grows.any():
         return []
-    nu_r = relative_velocity(data, effects)
+    # only the new effect's own move of ν_r excuses a rise (not a current named before it)
+    nu_r = relative_velocity(data, effects[-1:])
     out_rows = outside(data, nu_r) & te if nu_r is not None else np.zeros_like(te)
     inside = te & ~out_rows
     share_out = float(out_rows.sum()) / max(float(te.sum()), 1.0)

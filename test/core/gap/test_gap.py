@@ -647,9 +647,13 @@ def test_a_rise_without_a_moved_velocity_is_not_extrapolation() -> None:
     r = data.r0
     after = r.copy()
     after[data.test, 2] *= 2.0
-    [d] = degradations(data, [(library(["thrusters"])[0], np.array([0.0]))], r, after, 1,
-                       0.0025)
+    gain = (library(["thrusters"])[0], np.array([0.0]))
+    [d] = degradations(data, [gain], r, after, 1, 0.0025)
     assert not d.extrapolation and d.why == "inside the believed model's flown envelope"
+    # nor one named after a current: only the new effect's own move of ν_r counts
+    [d] = degradations(data, [(Current(), np.array([0.12, -0.08])), gain], r, after, 1,
+                       0.0025)
+    assert not d.extrapolation, d.text
 
 
 def test_the_refit_at_the_relative_velocity_recovers_the_current() -> None:
