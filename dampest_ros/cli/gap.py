@@ -20,9 +20,11 @@ from dampest_ros.cli.common import check_outputs, table
 from dampest_ros.cli.inputs import load_model_for, load_samples
 from dampest_ros.cli.pool import expand_inputs, map_logs_on_dask
 from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData
+from dampest_ros.core.gap.effects import Current
 from dampest_ros.core.gap.library import library
 from dampest_ros.core.gap.localise import LocalRow, concentration, localise, residual_psd
 from dampest_ros.core.gap.model_effects import Memory
+from dampest_ros.core.gap.relative import RelativeRefit, refit_relative
 from dampest_ros.core.gap.search import GapOptions, GapResult, correction, find_gap
 from dampest_ros.core.gap.update import free_run_errors, updated_model
 from dampest_ros.core.identification.model import Model
@@ -125,7 +127,8 @@ def run(args: argparse.Namespace) -> int:
     if reason is not None:
         raise DataError(f"{args.input}: {reason}")
     data = GapData(samples, model, mf.theta, body, vehicle.thrusters, joints,
-                       cutoff=args.cutoff, split=args.split)
+                   cutoff=args.cutoff, split=args.split, flown=mf.flown,
+                   model_rmse=model_rmse(mf))
     seconds = len(samples) / samples.rate
     print(f"{args.input}: {len(samples)} samples ({seconds:.0f} s in "
           f"{int(samples.segment.max()) + 1} segment(s)); fit on the first "
@@ -149,8 +152,12 @@ def run(args: argparse.Namespace) -> int:
     print()
     print(steps_table(data, result) if result.steps else "no effect named.")
     print(f"\n{result.conclusion}.")
+    relative = current_refit(data, result)
+    if relative is not None:
+        print("\n5. the model's terms refitted at the relative velocity ν_r, jointly with the "
+              "current:\n" + refit_text(relative))
     # the model file first: it does not depend on the free run
-    final = final_model(data, result, mf, args, logs, vehicle.identity)
+    final = final_model(data, result, mf, args, logs, vehicle.identity, relative)
     if args.out:
         save_model(Path(args.out), final)
     free = free_run_errors(data, result.effects)
@@ -160,10 +167,21 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {args.out}")
     if args.report:
         out = Path(args.report)
-        write_report(out, data, result, rows, free, final, args)
+        write_report(out, data, result, rows, free, final, args, relative)
         print(f"wrote {out / 'index.html'}")
     print(f"({time.perf_counter() - t0:.1f} s)")
     return 0
+
+
+def model_rmse(mf: Model) -> np.ndarray | None:
+    """The believed model's residual RMS per DOF on its own fit data (``extra['rmse']``,
+    written by ``dampest identify``), or None when the file does not say."""
+    given = mf.extra.get("rmse")
+    try:
+        out = np.asarray(given, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return out if out.shape == (6,) and np.all(np.isfinite(out)) else None
 
 
 def _model_force(data: GapData) -> np.ndarray:
@@ -221,9 +239,39 @@ def steps_table(data: GapData, result: GapResult) -> str:
     rms = table(("step", *(f"{f} before→after" for f in FORCE_NAMES)),
                 [(k, *(f"{st.rms_before[i]:.3g}→{st.rms_after[i]:.3g}" for i in range(6)))
                  for k, st in enumerate(result.steps, 1)])
+    worse = "".join(f"\n  step {k}: {d.text}" for k, st in enumerate(result.steps, 1)
+                    for d in st.worse)
     return (head + "\n\nmagnitudes after the final joint refit (± 1σ, block-robust; "
             "as written to the model):\n" + mags
-            + "\n\nheld-out residual RMS per DOF (N, N·m):\n" + rms)
+            + "\n\nheld-out residual RMS per DOF (N, N·m):\n" + rms
+            + ("\n\nDOFs whose held-out residual grew, and why:" + worse if worse else ""))
+
+
+def current_refit(data: GapData, result: GapResult) -> RelativeRefit | None:
+    """When a current is named, the believed terms (with any the gap added) refitted at ν_r
+    jointly with it (:func:`refit_relative`); else None."""
+    found = [(e, p) for e, p in result.effects if isinstance(e, Current)]
+    if not found:
+        return None
+    e, p = found[0]
+    upd = updated_model(data, result.effects)
+    print("refitting the model's terms at the relative velocity ...", file=sys.stderr)
+    return refit_relative(data, upd.model, upd.theta, e.ned(p), result.r)
+
+
+def refit_text(rel: RelativeRefit) -> str:
+    """The jointly estimated current and the held-out R² and RMS per DOF before (believed
+    model at ν) and after (refit at ν_r)."""
+    v = rel.current
+    head = (f"  current {float(np.hypot(v[0], v[1])):.3f} m/s towards "
+            f"{float(np.degrees(np.arctan2(v[1], v[0])) % 360.0):.1f}° (north {v[0]:+.3f}, "
+            f"east {v[1]:+.3f} m/s)\n")
+    return head + table(
+        ("held-out", *(f"{f} ({u})" for f, u in zip(FORCE_NAMES, FORCE_UNITS, strict=True))),
+        [("R² believed", *(f"{x:.4f}" for x in rel.r2_before)),
+         ("R² refit at ν_r", *(f"{x:.4f}" for x in rel.r2_after)),
+         ("RMS believed", *(f"{x:.3g}" for x in rel.rms_before)),
+         ("RMS refit at ν_r", *(f"{x:.3g}" for x in rel.rms_after))])
 
 
 def free_run_text(free: dict[str, Any] | str) -> str:
@@ -252,10 +300,13 @@ def _param_key(key: str) -> str:
 
 def final_model(data: GapData, result: GapResult, mf: Model, args: argparse.Namespace,
                 logs: dict[str, list[str]] | None = None,
-                identity: Identity | None = None) -> Model:
+                identity: Identity | None = None,
+                relative: RelativeRefit | None = None) -> Model:
     """The believed model with the named effects applied, its σ and what they updated;
     ``logs``: the logs pooled and left out (:func:`pooled_logs`), recorded in ``extra``;
-    ``identity``: the vehicle's (else the believed model's)."""
+    ``identity``: the vehicle's (else the believed model's). With a current named, the
+    ``relative`` refit's θ, σ and held coefficients replace them (the terms fitted at ν_r),
+    its current and held-out scores under ``extra['gap']['refit']``."""
     upd = updated_model(data, result.effects)
     std = dict(zip(mf.parameter_names, mf.theta_std.tolist(), strict=True))
     effects: dict[str, Any] = {}
@@ -285,7 +336,20 @@ def final_model(data: GapData, result: GapResult, mf: Model, args: argparse.Name
                 "conclusion": result.conclusion, **effects, **upd.extra}}
     # a coefficient the believed model held at its prior stays held unless an effect set it
     held = {n: why for n, why in mf.held.items() if n in names and n not in updated}
-    return Model(names, upd.theta, np.array([std.get(n, 0.0) for n in names]), upd.M,
+    theta, theta_std = upd.theta, np.array([std.get(n, 0.0) for n in names])
+    if relative is not None:
+        f = relative.fit
+        theta, theta_std = f.theta, f.std
+        held = f.held_reasons
+        extra["gap"]["refit"] = {
+            "what": "the model's terms refitted at the relative velocity, jointly with the "
+                    "current; theta is this refit",
+            "current_ned": [float(x) for x in relative.current],
+            "r2_heldout_before": [float(x) for x in relative.r2_before],
+            "r2_heldout_after": [float(x) for x in relative.r2_after],
+            "rmse_heldout_before": [float(x) for x in relative.rms_before],
+            "rmse_heldout_after": [float(x) for x in relative.rms_after]}
+    return Model(names, theta, theta_std, upd.M,
                  damping=upd.model, extra=extra, M_A=upd.M_A,
                  added_mass_terms=upd.added_mass_terms, held=held,
                  identity=identity or mf.identity)
@@ -363,8 +427,10 @@ def _residual_figure(data: GapData, before: np.ndarray, after: np.ndarray, title
 
 def write_report(out: Path, data: GapData, result: GapResult,
                  rows: list[LocalRow], free: dict[str, Any] | str,
-                 final: Model, args: argparse.Namespace) -> Path:
-    """index.html, residual figures per step and final_model.yaml in ``out``."""
+                 final: Model, args: argparse.Namespace,
+                 relative: RelativeRefit | None = None) -> Path:
+    """index.html, residual figures per step and final_model.yaml in ``out``; with a
+    current named, the ``relative`` refit as the last row of the per-DOF residuals."""
     out.mkdir(parents=True, exist_ok=True)
     save_model(out / "final_model.yaml", final)
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>dampest gap</title>"
@@ -420,9 +486,20 @@ def write_report(out: Path, data: GapData, result: GapResult,
                           *(f"{st.rms_before[i]:.3g} → {st.rms_after[i]:.3g}" for i in range(6)),
                           f"{st.bic_before:.0f} → {st.bic_after:.0f}",
                           f"{100 * st.screen.heldout:.1f} %"])
+        if relative is not None:
+            srows.append(["refit", "the model's terms refitted at ν_r with the current",
+                          html.escape(refit_text(relative).splitlines()[0].strip()),
+                          *(f"{relative.rms_before[i]:.3g} → {relative.rms_after[i]:.3g} "
+                            f"(R² {relative.r2_after[i]:.4f})" for i in range(6)), "", ""])
         parts.append(_html_table(["step", "effect", "magnitude ± σ (final joint refit)",
-                                  *(f"{f} held-out RMS" for f in FORCE_NAMES), "BIC",
-                                  "held-out reduction"], srows))
+                                  *(f"{f} held-out RMS ({u})"
+                                    for f, u in zip(FORCE_NAMES, FORCE_UNITS, strict=True)),
+                                  "BIC", "held-out reduction"], srows))
+        worse = [f"step {k}: {d.text}" for k, st in enumerate(result.steps, 1)
+                 for d in st.worse]
+        if worse:
+            parts.append("<p>DOFs whose held-out residual grew in a step, and why:</p><ul>"
+                         + "".join(f"<li>{html.escape(w)}</li>" for w in worse) + "</ul>")
         r_prev = result.r0
         for k, (st, mag) in enumerate(zip(result.steps, mags, strict=True), 1):
             r_after = data.r0 - correction(data, result.effects[:k]) \

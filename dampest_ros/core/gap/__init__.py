@@ -19,9 +19,13 @@ depth, as a vehicle logs them; never ground truth). This package
    ``split`` (70 %) of the time and scoring the residual reduction on the rest (held out), with
    the error-reduction ratio and the BIC change as in
    :mod:`dampest_ros.core.identification.selection`; the best significant one is refined on its
-   exact (nonlinear) model with ``scipy.optimize.least_squares``, added, all added effects are
-   refitted jointly, and the search repeats until no candidate is significant: "no further missing
-   effect found";
+   exact (nonlinear) model with ``scipy.optimize.least_squares``, all added effects are
+   refitted jointly, and it is added when its magnitudes pass their Wald test and the
+   held-out log-likelihood gain summed over the DOFs is significant; a DOF that grows only
+   where a current moves ν_r outside the believed model's flown envelope is extrapolation,
+   not evidence against it (:mod:`.trust`). The search repeats until no candidate is
+   significant: "no further missing effect found". With a current named, the believed terms
+   are refitted at ν_r jointly with it (:mod:`.relative`);
 4. applies what it found to the believed model and compares the free runs of both
    (:mod:`.update`).
 

@@ -91,13 +91,22 @@ class GapData:
         Block length (s) of the robust covariance of the magnitudes.
     crossover : float
         DVL/IMU fusion crossover of the preprocessing (Hz), for the DVL-bias candidate.
+    flown : ndarray, shape (2, 6), optional
+        Smallest and largest velocity per DOF of the data the believed model was fitted on
+        (:attr:`Model.flown <dampest_ros.core.identification.model.Model.flown>`; m/s,
+        rad/s): where it is trusted. Default: the range of the measured ν.
+    model_rmse : ndarray, shape (6,), optional
+        The believed model's own residual RMS per DOF on the data it was fitted on (N, N·m):
+        how well it predicts away from the very samples it was fitted on. Default: unknown
+        (zero).
     """
 
     def __init__(self, samples: Samples, model: DampingModel, theta: FloatArray,
                  body: RigidBody, thrusters: Thrusters | None = None,
                  joints: JointSeries | None = None, cutoff: float = 2.0, split: float = 0.7,
                  chunk: int = CHUNK, margin: float = 5.0, block: float = 10.0,
-                 crossover: float = 0.3) -> None:
+                 crossover: float = 0.3, flown: FloatArray | None = None,
+                 model_rmse: FloatArray | None = None) -> None:
         if not 0.2 <= split <= 0.9:
             raise ConfigError("split", f"must be in [0.2, 0.9], got {split}")
         if len(samples) < 200:
@@ -116,6 +125,14 @@ class GapData:
         self.margin = float(margin)
         self.block = float(block)
         self.crossover = float(crossover)
+        self.flown = np.array([samples.nu.min(axis=0), samples.nu.max(axis=0)]) \
+            if flown is None else np.asarray(flown, dtype=float)
+        if self.flown.shape != (2, 6):
+            raise ConfigError("flown", f"needs shape (2, 6), got {self.flown.shape}")
+        self.model_rmse = np.zeros(6) if model_rmse is None else \
+            np.asarray(model_rmse, dtype=float)
+        if self.model_rmse.shape != (6,) or not np.all(np.isfinite(self.model_rmse)):
+            raise ConfigError("model_rmse", "needs 6 finite numbers")
         self.rate = samples.rate
         N = len(samples)
         self.train: BoolArray = np.arange(N) < round(split * N)
@@ -234,6 +251,11 @@ def bind(fn: Callable[[GapData, Chunk, FloatArray], FloatArray], data: GapData,
     def call(ch: Chunk) -> FloatArray:
         return fn(data, ch, p)
     return call
+
+
+def noise_weights(r: FloatArray, mask: BoolArray) -> FloatArray:
+    """Per-DOF weights 1/σ_i² from the residual on ``mask`` rows, shape (6,)."""
+    return np.asarray(1.0 / np.maximum(np.mean(r[mask] ** 2, axis=0), 1e-12))
 
 
 def rms(r: FloatArray, mask: BoolArray) -> FloatArray:

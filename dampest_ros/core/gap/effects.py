@@ -97,6 +97,12 @@ class Effect:
             out[:, :, j] = (self.predict(data, ch, b) - self.predict(data, ch, a)) / (b[j] - a[j])
         return out
 
+    def relative_velocity(self, data: GapData, ch: Chunk, p: FloatArray) -> FloatArray | None:
+        """The velocity the vehicle's damping sees on the rows of ``ch`` with magnitudes p,
+        shape (n, 6) (m/s, rad/s), when the effect moves it away from the measured ν (a
+        current: ν_r); None when it does not."""
+        return None
+
     def describe(self, p: FloatArray, cov: FloatArray) -> str:
         """Magnitude ± σ in physical words."""
         s = np.sqrt(np.abs(np.diag(cov)))
@@ -149,13 +155,18 @@ class Current(Effect):
         self.units = ("m/s",) * self.k
         self.steps = (0.02,) * self.k
 
-    def predict(self, data: GapData, ch: Chunk, p: FloatArray) -> FloatArray:
+    def ned(self, p: FloatArray) -> FloatArray:
+        """The current in NED (north, east, down; m/s), shape (3,)."""
         vc = np.zeros(3)
         vc[:self.k] = p
-        vcb = np.einsum("nji,j->ni", ch.R, vc)  # Rᵀ v_c
-        nu_c = np.concatenate([vcb, np.zeros_like(vcb)], axis=1)
-        nu_r = ch.nu - nu_c
-        nu_c_dot = np.concatenate([-np.cross(ch.nu[:, 3:], vcb), np.zeros_like(vcb)], axis=1)
+        return vc
+
+    def relative_velocity(self, data: GapData, ch: Chunk, p: FloatArray) -> FloatArray:
+        """ν_r = ν − [Rᵀ v_c; 0], shape (n, 6)."""
+        return relative_motion(ch.nu, ch.R, self.ned(p))[0]
+
+    def predict(self, data: GapData, ch: Chunk, p: FloatArray) -> FloatArray:
+        nu_r, nu_c_dot = relative_motion(ch.nu, ch.R, self.ned(p))
         b = data.body
         out = (b.added_coriolis_force(nu_r) - b.added_coriolis_force(ch.nu)
                + data.damping_force(nu_r) - data.damping_force(ch.nu))
@@ -186,9 +197,33 @@ class Current(Effect):
         return out
 
     def model_update(self, data: GapData, p: FloatArray) -> dict[str, Any]:
-        vc = np.zeros(3)
-        vc[:self.k] = p
-        return {"extra": {"current_ned": [float(x) for x in vc]}}
+        return {"extra": {"current_ned": [float(x) for x in self.ned(p)]}}
+
+
+def relative_motion(nu: FloatArray, R: FloatArray, v_c: FloatArray
+                    ) -> tuple[FloatArray, FloatArray]:
+    """The velocity relative to a current constant in NED and the current's rate in the body.
+
+    Parameters
+    ----------
+    nu : ndarray, shape (n, 6)
+        Body velocity ν (m/s, rad/s), FRD.
+    R : ndarray, shape (n, 3, 3)
+        Body → NED rotations.
+    v_c : ndarray, shape (3,)
+        The current (north, east, down; m/s).
+
+    Returns
+    -------
+    nu_r : ndarray, shape (n, 6)
+        ν − [Rᵀ v_c; 0].
+    nu_c_dot : ndarray, shape (n, 6)
+        ν̇_c = [−ω × Rᵀ v_c; 0] (m/s²).
+    """
+    vcb = np.einsum("nji,j->ni", R, v_c)  # Rᵀ v_c
+    zero = np.zeros_like(vcb)
+    nu_r = nu - np.concatenate([vcb, zero], axis=1)
+    return nu_r, np.concatenate([-np.cross(nu[:, 3:], vcb), zero], axis=1)
 
 
 class Buoyancy(LinearEffect):

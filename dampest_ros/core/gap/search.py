@@ -11,9 +11,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, optimize, stats
 
-from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData, bind, rms
+from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData, bind, noise_weights, rms
 from dampest_ros.core.gap.effects import Effect
 from dampest_ros.core.gap.library import library
+from dampest_ros.core.gap.trust import Degradation, degradations
 from dampest_ros.core.gap.update import updated_model
 from dampest_ros.core.identification.regression import information_criteria
 from dampest_ros.core.physics.damping import DampingModel
@@ -94,6 +95,9 @@ class Step:
         BIC of the training part (n_eff Σ_i log(RSS_i/N) + k log n_eff).
     runner_up : str
         Title of the second-best candidate (what it competed with).
+    worse : list of Degradation
+        The DOFs whose held-out residual grew in the step, with why
+        (:func:`.trust.degradations`).
     """
 
     effect: Effect
@@ -105,6 +109,7 @@ class Step:
     bic_before: float
     bic_after: float
     runner_up: str = ""
+    worse: list[Degradation] = field(default_factory=list)
 
     @property
     def description(self) -> str:
@@ -182,7 +187,11 @@ class GapOptions:
         Function evaluations of the exact refit.
     alpha : float
         Probability of naming an effect that is absent, for the test of its magnitudes
-        against their own σ (:func:`insignificance`).
+        against their own σ (:func:`insignificance`) and of the summed held-out gain
+        (:func:`rejection`).
+    max_trade : float
+        Largest share of the held-out log-likelihood an effect gains that DOFs growing inside
+        the believed model's flown envelope may cost (:func:`rejection`).
     """
 
     min_heldout: float = 0.03
@@ -193,11 +202,7 @@ class GapOptions:
     max_tries: int = 6
     refit_nfev: int = 30
     alpha: float = 1e-3
-
-
-def _weights(r: FloatArray, mask: BoolArray) -> FloatArray:
-    """Per-DOF weights 1/σ_i² from the residual on ``mask`` rows, shape (6,)."""
-    return np.asarray(1.0 / np.maximum(np.mean(r[mask] ** 2, axis=0), 1e-12))
+    max_trade: float = 0.1
 
 
 def _lsq(X: FloatArray, y: FloatArray, w: FloatArray) -> FloatArray:
@@ -359,7 +364,7 @@ def refit(data: GapData, effects: Sequence[tuple[Effect, FloatArray]], w: FloatA
                                      method="trf", max_nfev=max_nfev, xtol=1e-6, ftol=1e-8)
         x = res.x
         # per-DOF weights from the residual the effects leave (the noise, not the gap)
-        w = _weights(resid(x).reshape(-1, 6) / sw, np.ones(int(tr.sum()), dtype=bool))
+        w = noise_weights(resid(x).reshape(-1, 6) / sw, np.ones(int(tr.sum()), dtype=bool))
         sw = np.sqrt(w)
     # block-robust covariance on the training rows
     J = jac(x).reshape(int(tr.sum()), 6, -1) / -sw[None, :, None]
@@ -387,8 +392,10 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
     candidate not yet added is screened (:func:`screen`); the significant ones
     are tried in order of their held-out log-likelihood gain, less ½ log n_eff per unknown:
     all added effects and the candidate are refitted jointly on their exact models
-    (:func:`refit`), and the candidate is added unless :func:`rejection` finds a reason
-    (a DOF's held-out residual grows, M would not be positive definite, D(ν) would generate
+    (:func:`refit`), and the candidate is added unless :func:`insignificance` or
+    :func:`rejection` finds a reason (its magnitudes are within their own σ, a DOF grows
+    inside the believed model's envelope by more than the others gain, the summed held-out
+    gain is not significant, M would not be positive definite, D(ν) would generate
     energy), in which case the next one is tried (at most ``options.max_tries`` per round;
     a candidate rejected in one round is tried again in the next, when another effect may
     have taken the share of the residual it traded against). The held-out RMS per DOF
@@ -422,7 +429,7 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
     k_total = 0
     conclusion = NO_FURTHER
     while True:
-        w = _weights(r, tr)
+        w = noise_weights(r, tr)
         done = {a.key for a, _ in added}
         round_ = [screen(data, e, r, w, opts) for e in cands if e.key not in done]
         round_.sort(key=lambda s: -s.score(data.n_eff_test))
@@ -439,7 +446,8 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
             new = [(e, p) for (e, _), p in zip(trial, ps, strict=True)]
             r_new = data.r0 - correction(data, new)
             why = insignificance(cand.effect, new[-1][1], cs[-1], opts.alpha) or \
-                rejection(data, new, r, r_new, cand.effect.k, opts.min_relevance)
+                rejection(data, new, r, r_new, cand.effect.k, opts.min_relevance, opts.alpha,
+                          opts.max_trade)
             if not why:
                 chosen = cand, new, cs, r_new
                 rejected.pop(cand.effect.key, None)
@@ -457,8 +465,9 @@ def find_gap(data: GapData, candidates: Sequence[Effect] | None = None,
         k_total += best.effect.k
         bic_after = _bic(np.sum(r_new[tr] ** 2, axis=0), n_tr, data.n_eff_train, k_total)
         runner = next((s.effect.title for s in round_ if s is not best), "")
+        worse = degradations(data, new, r, r_new, best.effect.k, opts.min_relevance)
         steps.append(Step(best.effect, best, new[-1][1], cs[-1], rms(r, te), rms(r_new, te),
-                          bic_before, bic_after, runner))
+                          bic_before, bic_after, runner, worse))
         added, covs, r = new, cs, r_new
     return GapResult(steps, added, covs, data.r0, r, screens, skipped, conclusion, rejected)
 
@@ -496,18 +505,22 @@ def insignificance(effect: Effect, p: FloatArray, cov: FloatArray, alpha: float)
 
 
 def rejection(data: GapData, effects: Sequence[tuple[Effect, FloatArray]], r_before: FloatArray,
-              r_after: FloatArray, k: int, min_change: float = GapOptions.min_relevance
+              r_after: FloatArray, k: int, min_change: float = GapOptions.min_relevance,
+              alpha: float = GapOptions.alpha, max_trade: float = GapOptions.max_trade
               ) -> str:
     """Why the model with ``effects`` (the last one new) must not be accepted; empty if it may.
 
-    Reasons, in this order:
+    The step is weighed on the whole held-out evidence, the log-likelihood gain of the
+    stacked DOFs ½ n_eff Σ_i log(MS_i,before / MS_i,after) (each DOF normalised by its own
+    noise). A DOF that grows only where the effects move ν_r outside the believed model's
+    flown envelope is extrapolation of that model (:func:`.trust.degradations`) and is left
+    out of the sum. Reasons, in this order:
 
-    - a DOF's held-out residual grows: its mean square rises by more than the
-      4 k / n_eff,train an effect with k unknowns fitted to noise alone is expected to add,
-      and its RMS by more than ``min_change`` × the DOF's force scale (a change that does
-      not matter, as in :attr:`GapOptions.min_relevance`) (an effect that is there lowers
-      the residual of every DOF it acts on; one that trades a DOF against another
-      describes a modelling error, not itself);
+    - DOFs grow inside the envelope by more than ``max_trade`` of what the other DOFs gain
+      (in log-likelihood): the effect trades a DOF against another, which describes a
+      modelling error, not itself;
+    - the summed gain is not significant: twice it stays below the χ²(k) (1 − ``alpha``)
+      point;
     - the updated M_RB + M_A is not symmetric positive definite (or M_A not positive
       semi-definite);
     - the updated D(ν) generates energy: νᵀD(ν)ν below the believed model's smallest value
@@ -524,16 +537,32 @@ def rejection(data: GapData, effects: Sequence[tuple[Effect, FloatArray]], r_bef
         Unknowns of the new effect.
     min_change : float
         Smallest rise of a DOF's held-out RMS that counts, as a share of its force scale.
+    alpha : float
+        False-alarm probability of the summed gain.
+    max_trade : float
+        Largest share of the gained log-likelihood that DOFs growing inside the envelope may
+        cost.
     """
     te = data.test
     ms0 = np.mean(r_before[te] ** 2, axis=0)
     ms1 = np.mean(r_after[te] ** 2, axis=0)
-    worse = ((ms1 > ms0 * (1.0 + 4.0 * k / max(data.n_eff_train, 1.0)))
-             & (np.sqrt(ms1) - np.sqrt(ms0) > min_change * data.force_scale))
-    if worse.any():
-        i = int(np.argmax(np.where(worse, ms1 / np.maximum(ms0, 1e-300), 0.0)))
-        return (f"the held-out residual of {FORCE_NAMES[i]} grows (RMS "
-                f"{np.sqrt(ms0[i]):.3g} → {np.sqrt(ms1[i]):.3g} {FORCE_UNITS[i]})")
+    gain = 0.5 * data.n_eff_test * np.log(np.maximum(ms0, 1e-300) / np.maximum(ms1, 1e-300))
+    worse = degradations(data, effects, r_before, r_after, k, min_change)
+    counted = np.ones(6, dtype=bool)
+    counted[[d.dof for d in worse if d.extrapolation]] = False
+    inside = [d for d in worse if not d.extrapolation]
+    gained = float(np.sum(np.maximum(gain[counted], 0.0)))
+    lost = float(sum(-gain[d.dof] for d in inside))
+    if inside and lost > max_trade * gained:
+        d = max(inside, key=lambda d: d.after / max(d.before, 1e-300))
+        return (f"the held-out residual of {FORCE_NAMES[d.dof]} grows (RMS {d.before:.3g} → "
+                f"{d.after:.3g} {FORCE_UNITS[d.dof]}, {d.why}), more than "
+                f"{100 * max_trade:g} % of what the other DOFs gain")
+    evidence = float(np.sum(gain[counted]))
+    limit = float(stats.chi2.isf(alpha, k))
+    if 2.0 * evidence <= limit:
+        return (f"the held-out evidence summed over the DOFs is not significant (2 Δlog L "
+                f"{2.0 * evidence:.3g} ≤ {limit:.3g})")
     upd = updated_model(data, effects)
     try:
         upd.body(data)

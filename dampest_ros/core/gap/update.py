@@ -14,7 +14,7 @@ from scipy import linalg
 from dampest_ros.core.gap.data import FORCE_UNITS, GapData, bind
 from dampest_ros.core.gap.effects import Effect
 from dampest_ros.core.identification.validate import free_run_error, longest_segment
-from dampest_ros.core.physics.damping import DampingModel, DampingTerm
+from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel, DampingTerm
 from dampest_ros.core.physics.rigid_body import (
     DOF_NAMES,
     FORCE_NAMES,
@@ -127,8 +127,7 @@ def updated_model(data: GapData, effects: Sequence[tuple[Effect, FloatArray]]) -
         terms["freq"] = mem
         values.update({n: freq[(int(d), float(r))] for n, d, r in
                        zip(mem.parameter_names, mem.state_dofs, mem.rates, strict=True)})
-    order = ("linear", "quadratic", "cross", "freq", "added", "residual")
-    model = DampingModel([terms[k] for k in order if k in terms])
+    model = DampingModel([terms[k] for k in TERM_KINDS if k in terms])
     theta = np.array([values.get(n, 0.0) for n in model.parameter_names])
     switches["munk"] = switches["munk"] and switches["coriolis"]
     return UpdatedModel(model, theta, M, M - data.M_RB, AddedMassTerms(**switches), extra)

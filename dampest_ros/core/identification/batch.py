@@ -194,6 +194,12 @@ class Fit:
         """Bayesian information criterion."""
         return -2 * self.log_likelihood + self.n_free * float(np.log(self.n_eff))
 
+    @property
+    def held_reasons(self) -> dict[str, str]:
+        """The coefficients not identified with why: their flag, else the constraint."""
+        return {n: self.flags.get(n) or self.constrained[n]
+                for n, ok in zip(self.names, self.identified, strict=True) if not ok}
+
     def to_model(self, damping: DampingModel, body: RigidBody,
                  extra: dict[str, Any] | None = None,
                  identity: Identity | None = None) -> Model:
@@ -214,8 +220,7 @@ class Fit:
             <dampest_ros.core.physics.vehicle.Vehicle.identity>`).
         """
         ci = self.interval()
-        held = {n: self.flags.get(n) or self.constrained[n]
-                for n, ok in zip(self.names, self.identified, strict=True) if not ok}
+        held = self.held_reasons
         figures = {"method": self.method, "samples": int(self.n),
                    "ci95_low": [float(x) for x in ci[:, 0]],
                    "ci95_high": [float(x) for x in ci[:, 1]],

@@ -1,12 +1,17 @@
 """Sim-to-real gap on physics we did not write: the MuJoCo backend.
 
 Each vehicle flies protocol B for 600 s in MuJoCo's ellipsoid fluid model (default sensor
-noise, through the CSV of ``dampest simulate``); the model is fitted on a clean run (no
-current, seed 1) with the command the README recommends for such vehicles
-(``dampest identify --select``: MuJoCo's drag is not of the preset's form). ``dampest gap``
-against that model must name a hidden 0.25 m/s horizontal current first, within 5 % of its
-speed and 3° of its direction, and then stop; on a clean run of another seed it names nothing;
-every model it writes loads back with ``--model``.
+noise); the model is fitted on a clean run (no current, seed 1) with the command the README
+recommends for such vehicles (``dampest identify --select``: MuJoCo's drag is not of the
+preset's form), or with the preset's terms only (plain ``identify``: a model that
+extrapolates poorly). ``dampest gap`` reads either the synchronised CSV of ``dampest
+simulate`` or its sensor bag (the noisy route a vehicle logs). Against a hidden horizontal
+current (0.25 m/s on the ROV, 0.3 m/s on the torpedo, three directions, seeds 1–3) it must
+name the current first, within 5 % of its speed and 3° of its direction (the current
+estimated jointly with the refit at ν_r, what ``--out`` writes), and the refit lowers every
+DOF's held-out residual; on clean runs of seeds 2 and 3 it names nothing. Every model it
+writes loads back with ``--model``. That the refit reaches a held-out R² ≥ 0.99 in every DOF
+with the selected model is asserted but not yet met (xfail, with what was measured).
 
 On a model with the preset's structure (fitted by plain ``identify``), whose residual on
 these data is a modelling error of 15–60 % of the force, no step may make a DOF's held-out
@@ -27,7 +32,8 @@ from dampest_ros.io.yaml_io import load_model, load_vehicle
 
 pytestmark = pytest.mark.slow
 
-SPEED = 0.25
+SPEED = {"rov": 0.25, "torpedo": 0.3}
+DIRECTIONS = {"rov": (137.0, 30.0, 250.0), "torpedo": (60.0, 180.0, 300.0)}
 VEHICLES = {"rov": "config/vehicles/bluerov2_heavy_mujoco.yaml",
             "torpedo": "config/vehicles/torpedo_auv.yaml"}
 ROOT = Path(__file__).resolve().parents[3]
@@ -44,30 +50,37 @@ def vehicle_path(name: str) -> str:
 
 @cache
 def simulated(root: Path, name: str, seed: int, direction: float | None) -> Path:
-    """The CSV of a 600 s protocol-B MuJoCo run, with a horizontal current of SPEED towards
-    ``direction`` (degrees from north) or none."""
+    """The bag of a 600 s protocol-B MuJoCo run (and its CSV next to it, ``.csv``), with a
+    horizontal current of SPEED towards ``direction`` (degrees from north) or none."""
     tag = "clean" if direction is None else f"cur{direction:g}"
-    csv = root / f"{name}_{tag}_s{seed}.csv"
+    bag = root / f"{name}_{tag}_s{seed}"
     argv = ["simulate", "--backend", "mujoco", "--vehicle", vehicle_path(name),
             "--protocol", "B", "--duration", "600", "--seed", str(seed),
-            "--out", str(root / f"{name}_{tag}_s{seed}"), "--csv", str(csv)]
+            "--out", str(bag), "--csv", str(bag.with_suffix(".csv"))]
     if direction is not None:
-        a = np.radians(direction)
-        argv += ["--effects", f"{{current: [{SPEED * np.cos(a)}, {SPEED * np.sin(a)}, 0.0]}}"]
+        a, v = np.radians(direction), SPEED[name]
+        argv += ["--effects", f"{{current: [{v * np.cos(a)}, {v * np.sin(a)}, 0.0]}}"]
     assert main(argv) == 0
-    return csv
+    return bag
+
+
+def log(root: Path, name: str, seed: int, direction: float | None, route: str) -> Path:
+    """The sensor bag (``route`` 'bag') or the synchronised CSV ('csv') of a run."""
+    bag = simulated(root, name, seed, direction)
+    return bag if route == "bag" else bag.with_suffix(".csv")
 
 
 @cache
 def fitted(root: Path, name: str, select: bool) -> Path:
     """The model fitted on the clean seed-1 run (``--select`` or the preset's terms)."""
     out = root / f"{name}_{'select' if select else 'preset'}.yaml"
-    argv = ["identify", str(simulated(root, name, 1, None)), "--vehicle", vehicle_path(name),
+    argv = ["identify", str(log(root, name, 1, None, "csv")), "--vehicle", vehicle_path(name),
             "--out", str(out)]
     assert main(argv + (["--select"] if select else [])) == 0
     return out
 
 
+@cache
 def run_gap(root: Path, name: str, log: Path, model: Path, tag: str) -> dict:
     out = root / f"gap_{tag}.yaml"
     assert main(["gap", str(log), "--model", str(model), "--vehicle", vehicle_path(name),
@@ -79,23 +92,59 @@ def run_gap(root: Path, name: str, log: Path, model: Path, tag: str) -> dict:
     return gap
 
 
-@pytest.mark.parametrize(("name", "direction"), [("rov", 30.0), ("rov", 200.0),
-                                                 ("torpedo", 120.0), ("torpedo", 300.0)])
-def test_hidden_current_is_named_first_then_nothing(work: Path, name: str,
-                                                    direction: float) -> None:
-    gap = run_gap(work, name, simulated(work, name, 1, direction), fitted(work, name, True),
-                  f"{name}_{direction:g}")
-    assert gap["named"] == ["current"], gap["named"]
-    north, east = gap["current"]["v_north"], gap["current"]["v_east"]
-    assert np.hypot(north, east) == pytest.approx(SPEED, rel=0.05)
+def current_gap(root: Path, name: str, direction: float, seed: int, route: str,
+                select: bool) -> dict:
+    """gap on a run with a hidden current against the selected or the preset-terms model."""
+    model = fitted(root, name, select)
+    return run_gap(root, name, log(root, name, seed, direction, route), model,
+                   f"{name}_{direction:g}_s{seed}_{route}_{'select' if select else 'preset'}")
+
+
+CURRENT_CASES = [(name, d, seed, route, select)
+                 for name in ("rov", "torpedo") for d in DIRECTIONS[name]
+                 for seed in (1, 2, 3) for route in ("csv", "bag")
+                 for select in ((True, False) if name == "torpedo" else (True,))]
+#: the torpedo with the preset's terms only: the current is named first, but its speed is
+#: biased by the terms' misfit (held-out R² 0.49-0.95 after the refit)
+PRESET_BIAS = pytest.mark.xfail(reason="measured on seed 1 (60°, 180°, 300°): speed −17 %, "
+                                       "+5.8 %, −26.5 % as named, +11.3 %, +3.1 %, +6.8 % "
+                                       "after the joint refit; direction within 3.3°",
+                                strict=False)
+
+
+@pytest.mark.parametrize(("name", "direction", "seed", "route", "select"),
+                         [pytest.param(*c, marks=() if c[4] else PRESET_BIAS)
+                          for c in CURRENT_CASES])
+def test_hidden_current_is_named_first(work: Path, name: str, direction: float, seed: int,
+                                       route: str, select: bool) -> None:
+    gap = current_gap(work, name, direction, seed, route, select)
+    assert gap["named"][0] == "current", gap["named"]
+    north, east, _ = gap["refit"]["current_ned"]
+    assert np.hypot(north, east) == pytest.approx(SPEED[name], rel=0.05)
     off = (np.degrees(np.arctan2(east, north)) - direction + 180.0) % 360.0 - 180.0
     assert abs(off) <= 3.0, (north, east)
+    after = np.array(gap["refit"]["rmse_heldout_after"])
+    assert np.all(after <= np.array(gap["refit"]["rmse_heldout_before"])), after
 
 
-@pytest.mark.parametrize("name", ["rov", "torpedo"])
-def test_clean_run_of_another_seed_names_nothing(work: Path, name: str) -> None:
-    gap = run_gap(work, name, simulated(work, name, 2, None), fitted(work, name, True),
-                  f"{name}_clean")
+@pytest.mark.xfail(reason="measured on seed 1: after the refit at ν_r the selected terms "
+                          "reach held-out R² 0.979-0.989 in X and 0.982-0.990 in N on the "
+                          "torpedo, 0.987 in K on the ROV", strict=False)
+@pytest.mark.parametrize(("name", "direction", "seed", "route"),
+                         [c[:4] for c in CURRENT_CASES if c[4]])
+def test_after_the_refit_every_dof_is_explained(work: Path, name: str, direction: float,
+                                                 seed: int, route: str) -> None:
+    gap = current_gap(work, name, direction, seed, route, True)
+    assert np.all(np.array(gap["refit"]["r2_heldout_after"]) >= 0.99), gap["refit"]
+
+
+@pytest.mark.parametrize(("name", "seed", "route"),
+                         [(n, s, r) for n in ("rov", "torpedo") for s in (2, 3)
+                          for r in ("csv", "bag")])
+def test_clean_run_of_another_seed_names_nothing(work: Path, name: str, seed: int,
+                                                 route: str) -> None:
+    gap = run_gap(work, name, log(work, name, seed, None, route), fitted(work, name, True),
+                  f"{name}_clean_s{seed}_{route}")
     assert gap["named"] == ["none"], gap["named"]
 
 
@@ -105,7 +154,7 @@ def test_no_step_worsens_a_dof_on_a_modelling_error(
     residual of every DOF, and a sensor bias is not blamed for the misfit (a +4.2 °/s gyro
     bias was, before a gyro bias had to show in the attitude)."""
     capsys.readouterr()
-    gap = run_gap(work, "rov", simulated(work, "rov", 1, None), fitted(work, "rov", False),
+    gap = run_gap(work, "rov", log(work, "rov", 1, None, "csv"), fitted(work, "rov", False),
                   "rov_preset")
     printed = capsys.readouterr().out
     assert not {"dvl_bias", "gyro_bias", "thrust_gain", "added_mass_scale"} & set(gap["named"])

@@ -1,0 +1,123 @@
+"""The believed structure refitted at the relative velocity once a current is named
+(:func:`refit_relative`): the same damping terms, their θ and the current estimated jointly on
+ν_r, so that the believed model's error away from the velocities it was fitted on does not
+bias the current, and the gap it leaves is shown per DOF."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg, optimize
+
+from dampest_ros.core.gap.data import GapData, noise_weights
+from dampest_ros.core.gap.effects import relative_motion
+from dampest_ros.core.identification.batch import Fit, FitOptions, fit
+from dampest_ros.core.identification.regression import accumulate
+from dampest_ros.core.identification.validate import force_scores
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.frames import matrix_from_euler
+from dampest_ros.core.signals.samples import Samples
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass
+class RelativeRefit:
+    """The believed structure refitted at ν_r with the current.
+
+    Attributes
+    ----------
+    current : ndarray, shape (3,)
+        The current (north, east, down; m/s) estimated jointly with θ.
+    fit : Fit
+        The fit of the believed terms at ν_r on the training part (θ, σ, what the data did
+        not determine).
+    r2_before, r2_after : ndarray, shape (6,)
+        Held-out R² per DOF of the damping force: the believed model at the measured ν, the
+        refit at ν_r.
+    rms_before, rms_after : ndarray, shape (6,)
+        Held-out residual RMS per DOF (N, N·m), same models.
+    """
+
+    current: FloatArray
+    fit: Fit
+    r2_before: FloatArray
+    r2_after: FloatArray
+    rms_before: FloatArray
+    rms_after: FloatArray
+
+
+def relative_samples(samples: Samples, v_c: FloatArray) -> Samples:
+    """``samples`` as seen in water moving with the current ``v_c`` (north, east, down; m/s):
+    ν_r = ν − [Rᵀv_c; 0] and ν̇_r = ν̇ − ν̇_c.
+
+    The rigid-body terms M_RB ν̇ + C_RB(ν)ν are unchanged by this for a constant current
+    (Fossen 2011, property 8.1), so the regression on these samples is the equation with
+    M_A, C_A and D acting on ν_r."""
+    nu_r, nu_c_dot = relative_motion(samples.nu, matrix_from_euler(samples.euler),
+                                     np.asarray(v_c, dtype=float))
+    return replace(samples, nu=nu_r, nu_dot=samples.nu_dot - nu_c_dot)
+
+
+def _profile(data: GapData, model: DampingModel, v_c: FloatArray, w: FloatArray) -> float:
+    """Σ_i log RSS_i of the weighted least-squares fit of ``model`` at ν_r on the training
+    part (the stacked Gaussian likelihood, up to constants)."""
+    train = relative_samples(data.samples.take(data.train), v_c)
+    ne = accumulate(train, model, data.body, folds=1, chunk=data.chunk, cutoff=data.cutoff)
+    A, b, _ = ne.total(w)
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    theta = linalg.lstsq(A / np.outer(d, d), b / d, cond=1e-10)[0] / d
+    return float(np.sum(np.log(np.maximum(ne.rss(theta), 1e-300))))
+
+
+def refit_relative(data: GapData, model: DampingModel, theta: FloatArray, v_c: FloatArray,
+                   r: FloatArray | None = None, step: float = 0.02, tol: float = 5e-4
+                   ) -> RelativeRefit:
+    """Refit ``model``'s terms at ν_r jointly with the horizontal current.
+
+    The current is refined from ``v_c`` by minimising the training profile likelihood
+    Σ_i log RSS_i (θ solved by weighted least squares for every current; Nelder–Mead from a
+    simplex of ``step`` m/s to ``tol`` m/s); θ is then fitted at that current by the
+    identification's batch fit (:func:`dampest_ros.core.identification.batch.fit`, default
+    options at the gap's low-pass, ``theta`` as the value of what the data do not
+    determine) and scored on the held-out part.
+
+    Parameters
+    ----------
+    data : GapData
+    model : DampingModel
+        The damping terms to refit (the believed model's, with any the gap added).
+    theta : ndarray, shape (p,)
+        Their values before (the prior of what the data do not determine).
+    v_c : ndarray, shape (3,)
+        The current named (north, east, down; m/s); the down component is kept.
+    r : ndarray, shape (N, 6), optional
+        The residual the named effects leave (N, N·m): its training part sets the per-DOF
+        weights 1/σ_i² of the profile (the noise, not the gap the current explains).
+        Default: the believed model's residual.
+
+    Returns
+    -------
+    RelativeRefit
+    """
+    v_c = np.asarray(v_c, dtype=float)
+    w = noise_weights(data.r0 if r is None else r, data.train)
+
+    def cost(x: FloatArray) -> float:
+        return _profile(data, model, np.array([x[0], x[1], v_c[2]]), w)
+
+    simplex = v_c[:2] + np.array([[0.0, 0.0], [step, 0.0], [0.0, step]])
+    res = optimize.minimize(cost, v_c[:2], method="Nelder-Mead",
+                            options={"initial_simplex": simplex, "xatol": tol,
+                                     "fatol": 1e-6, "maxfev": 80})
+    current = np.array([res.x[0], res.x[1], v_c[2]])
+    rel = relative_samples(data.samples, current)
+    found = fit(rel.take(data.train), model, data.body, FitOptions(cutoff=data.cutoff),
+                prior=theta)
+    test = data.samples.take(data.test)
+    before = force_scores(test, data.model, data.body, data.theta, data.cutoff)
+    after = force_scores(rel.take(data.test), model, data.body, found.theta, data.cutoff)
+    return RelativeRefit(current, found, before["nse"], after["nse"], before["rmse"],
+                         after["rmse"])
