@@ -76,7 +76,7 @@ def fitted(root: Path, name: str, select: bool) -> Path:
     out = root / f"{name}_{'select' if select else 'preset'}.yaml"
     argv = ["identify", str(log(root, name, 1, None, "csv")), "--vehicle", vehicle_path(name),
             "--out", str(out)]
-    assert main(argv + (["--select"] if select else [])) == 0
+    assert main(argv + (["--select"] if select else ["--no-select"])) == 0
     return out
 
 
