@@ -28,7 +28,7 @@ State estimation (FRD body, NED world; frames converted only through
 - **Mounting** (:mod:`dampest_ros.core.physics.mounting`, the vehicle's ``sensors:``): the IMU's
   attitude, rates and specific force are turned to the body axes, its specific force moved to
   the origin with ω̇ from the angular filter; the DVL velocity is turned to the body axes and
-  its lever arm removed with ω of the angular filter at the DVL stamp; the depth of the
+  its lever arm removed with the gyro at the DVL stamp; the depth of the
   pressure sensor is moved to the origin with the sample's attitude. Messages whose frame_id
   is not the configured one are counted (``frame_id_mismatch``), the first of each topic
   reported in ``events``.
@@ -502,7 +502,7 @@ class OnlinePreprocessor:
             return
         row = _interp_rows(ts, X, np.array([td]))[0] if len(ts) > 1 else X[0]
         Rd = row[12:21].reshape(3, 3)
-        # v = R_bs v_s − ω × r, ω of the angular filter at td
+        # v = R_bs v_s − ω × r, ω the gyro at td
         v_body = dvl_to_body(self.mount.dvl, v_sensor, row[6:9])
         # NED velocity at td, moved forward by the inertial increment up to the IMU time
         z = Rd @ v_body + (self._v_int - row[21:24])
