@@ -59,7 +59,9 @@ class OnlineConfig:
     clock_jump : float
         A stamp this much (s) behind its topic's last stamp is a clock jump: reset.
     thrust_window : float
-        Averaging window of the thruster telemetry (s); 0: the message period.
+        Message period of the thruster telemetry (s), each message the mean over the period
+        before its stamp: puts the sample grid on the window centres and tells a gap (a
+        stamp step over 2.5 periods: no sample from those messages); 0: from the stamps.
     atmospheric_pressure : float
         Pa.
     """

@@ -249,7 +249,8 @@ def _interp(t: FloatArray, tp: FloatArray, x: FloatArray) -> FloatArray:
     return out.reshape((len(t), *x.shape[1:]))
 
 
-def from_window_means(t: FloatArray, stamps: FloatArray, means: FloatArray) -> FloatArray:
+def from_window_means(t: FloatArray, stamps: FloatArray, means: FloatArray,
+                      average: float = 0.0) -> FloatArray:
     """The signal at ``t`` whose mean over each message period (s_{k−1}, s_k] is the message
     (histopolation): the derivative of the quintic spline through its running integral
     F(s_k) = Σ_{j≤k} (s_j − s_{j−1}) x̄_j.
@@ -270,6 +271,10 @@ def from_window_means(t: FloatArray, stamps: FloatArray, means: FloatArray) -> F
         Message stamps (s), increasing; the first message only starts the integral.
     means : ndarray, shape (M, k)
         Each message's mean over the period since the previous stamp.
+    average : float, optional
+        If > 0 (s), the signal's mean over [t − average/2, t + average/2] instead of its value
+        at t (the spline's difference over the window): the boxcar that the other signals of
+        a sample get. Over a message period it is that message.
 
     Returns
     -------
@@ -280,6 +285,9 @@ def from_window_means(t: FloatArray, stamps: FloatArray, means: FloatArray) -> F
                                np.cumsum(steps * means[1:], axis=0)])
     # quintic (fewer messages: the highest degree they allow)
     spline = make_interp_spline(stamps, integral, k=min(5, len(stamps) - 1), axis=0)
+    if average > 0:
+        return np.asarray((spline(t + average / 2) - spline(t - average / 2)) / average,
+                          dtype=float)
     return np.asarray(spline(t, 1), dtype=float)
 
 

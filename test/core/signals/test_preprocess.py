@@ -192,6 +192,15 @@ def test_window_means_give_back_the_signal_without_loss_or_phase() -> None:
     fine = np.linspace(stamps[100], stamps[101], 101)
     np.testing.assert_allclose(np.trapezoid(from_window_means(fine, stamps, x), fine, axis=0)
                                * rate, x[101], atol=1e-4)
+    # and so is ``average`` over a message period, exactly; over any window, the trapezoid
+    centres = stamps[100:110] - 0.5 / rate
+    np.testing.assert_allclose(from_window_means(centres, stamps, x, 1.0 / rate), x[100:110],
+                               rtol=0.0, atol=1e-12)
+    fine = np.linspace(stamps[100] + 0.013, stamps[100] + 0.033, 201)
+    np.testing.assert_allclose(from_window_means(np.array([stamps[100] + 0.023]), stamps, x,
+                                                 0.02)[0],
+                               np.trapezoid(from_window_means(fine, stamps, x), fine, axis=0)
+                               / 0.02, rtol=0.0, atol=1e-4)
 
 
 def test_lightly_damped_roll_from_slow_thrust_telemetry_is_unbiased() -> None:
