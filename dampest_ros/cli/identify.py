@@ -37,7 +37,7 @@ from dampest_ros.core.identification.pool import (
     pooled_fit,
     pooled_samples,
 )
-from dampest_ros.core.identification.selection import Selection, select_terms
+from dampest_ros.core.identification.selection import MIN_ERR, Selection, select_terms
 from dampest_ros.core.identification.validate import force_scores
 from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
 from dampest_ros.core.online.estimator import EstimatorConfig, nominal_of
@@ -384,8 +384,8 @@ def selection_table(selection: Selection) -> str:
         dropped = "\nleft out of the search:\n" + \
             "\n".join(f"  {', '.join(names)}: {why}" for why, names in groups.items())
     return ("term selection (stepwise over the damping library; a term must raise the "
-            "held-out R² of 5 contiguous time folds, lower BIC by 10 and remove ≥ 10 % of its "
-            "DOF's residual; − marks a removal):\n"
+            f"held-out R² of 5 contiguous time folds, lower BIC by 10 and remove ≥ {MIN_ERR:.0%} "
+            "of its DOF's residual; − marks a removal):\n"
             + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates
             + "\n" + r2 + dropped + "".join("\n" + ev.describe() for ev in selection.memory)
             + "\n")
