@@ -162,11 +162,16 @@ def test_pure_axis_intervals_of_the_default_identify_hold_mujocos_drag(
         vehicle: str, tmp_path: Path) -> None:
     """Seeds 1–5, realistic sensors (bag route), the default command: the 95 % intervals of
     the 12 pure-axis coefficients (linear and quadratic, u..r) hold the truth in ≥ 90 % of
-    the cases. Measured (see README): 15 of 60 on the torpedo, COVERAGE_ROV of 60 on the ROV."""
+    the cases. Measured (README): 19 of 60 on each preset (quadratic 5 and 6 of 30). The
+    quadratic estimates are within 9 % of the truth but for the torpedo's surge (+43 %) and roll
+    (−39 %), where MuJoCo's projected area changes fastest near the axis, while σ is ~1 %; the
+    linear ones (truth ~0.01) carry 0.03–4.8 of what the quadratic form misses."""
     inside = []
     for seed in range(1, 6):
         bag = tmp_path / f"bag{seed}"
         assert main(["simulate", "--backend", "mujoco", "--vehicle", vehicle, "--protocol", "B",
                      "--duration", "600", "--seed", str(seed), "--out", str(bag)]) == 0
-        inside.append(identify_coverage(bag, vehicle).inside)
-    assert np.mean(inside) >= 0.9, np.mean(inside)
+        c = identify_coverage(bag, vehicle)
+        # an axis whose terms mix has no clean truth: left out (none did here)
+        inside.append(np.where(np.isnan(c.std), np.nan, c.inside))
+    assert np.nanmean(inside) >= 0.9, np.nanmean(inside)
