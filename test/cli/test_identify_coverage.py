@@ -155,7 +155,7 @@ def test_pure_axis_functionals_sum_the_terms_that_act_along_the_axis() -> None:
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="the intervals hold MuJoCo's pure-axis drag in about a "
-                   "quarter of the cases: σ covers the noise, not the error of a model form "
+                   "third of the cases: σ covers the noise, not the error of a model form "
                    "that is only approximately MuJoCo's, extrapolated to pure-axis motion")
 @pytest.mark.parametrize("vehicle", ["torpedo_auv", "bluerov2_heavy_mujoco"])
 def test_pure_axis_intervals_of_the_default_identify_hold_mujocos_drag(
