@@ -7,7 +7,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -37,7 +37,7 @@ from dampest_ros.core.identification.pool import (
     pooled_fit,
     pooled_samples,
 )
-from dampest_ros.core.identification.selection import Selection, select_terms
+from dampest_ros.core.identification.selection import MIN_ERR, Selection, select_terms
 from dampest_ros.core.identification.validate import force_scores
 from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
 from dampest_ros.core.online.estimator import EstimatorConfig, nominal_of
@@ -66,31 +66,8 @@ def run(args: argparse.Namespace) -> int:
     args.input = paths[0]
     if args.method == "rls":
         return run_rls(args, vehicle)
-    model, nominal = structure_of(args, vehicle)
     substitutions: list[str] = []
-    samples = cut(load_samples(args.input, vehicle, args, substitutions), args)
-    held = None
-    if args.holdout is not None:
-        samples, held = split_holdout(samples, args.holdout)
-    preset = model
-    if args.select:
-        with Elapsed("selecting the damping terms"):
-            selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
-        print(selection_table(selection))
-        print("terms per DOF: the preset's that stay, and those selection added:")
-        print(added_table([n for n in selection.model.parameter_names
-                           if n in model.parameter_names], selection.added(model),
-                          *selection.cv_r2))
-        model = selection.model
-    else:
-        model = default_selection(samples, model, vehicle.body, args)
-    nominal = nominal_of(model, preset, nominal)
-    spec = prior_spec(args, vehicle)
-    prior = prior_of(model, nominal, spec)[0]
-    identifier = DampingIdentifier(vehicle, method=args.method, cutoff=args.cutoff,
-                                   prior=spec, structure=model).fit(samples)
-    result = identifier.fit_
-    assert result is not None  # fit() sets it
+    preset, model, prior, result, samples, held = fit_log(args, vehicle, substitutions)
     elapsed = time.perf_counter() - t0
     print(f"{args.input}: {len(samples)} samples ({len(samples) / samples.rate:.0f} s in "
           f"{int(samples.segment.max()) + 1} segment(s)), {result.method}, "
@@ -132,6 +109,49 @@ def run(args: argparse.Namespace) -> int:
                             heldout_note=heldout_note(held) if held is not None else "")
         print(f"wrote {page}")
     return 0
+
+
+class LogFit(NamedTuple):
+    """What :func:`fit_log` fitted: the preset's structure and the fitted one, the prior θ,
+    the fit, the samples fitted and the held-out part (None without ``--holdout``)."""
+
+    preset: DampingModel
+    model: DampingModel
+    prior: np.ndarray
+    result: Fit
+    samples: Samples
+    held: Samples | None
+
+
+def fit_log(args: argparse.Namespace, vehicle: Vehicle, substitutions: list[str]) -> LogFit:
+    """Read and preprocess one log, choose the structure (the preset's, ``--select``'s or
+    the default's) and fit it: the batch part of ``dampest identify`` (``substitutions``
+    collects the sources that stood in for missing topics)."""
+    model, nominal = structure_of(args, vehicle)
+    samples = cut(load_samples(args.input, vehicle, args, substitutions), args)
+    held = None
+    if args.holdout is not None:
+        samples, held = split_holdout(samples, args.holdout)
+    preset = model
+    if args.select:
+        with Elapsed("selecting the damping terms"):
+            selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
+        print(selection_table(selection))
+        print("terms per DOF: the preset's that stay, and those selection added:")
+        print(added_table([n for n in selection.model.parameter_names
+                           if n in model.parameter_names], selection.added(model),
+                          *selection.cv_r2))
+        model = selection.model
+    else:
+        model = default_selection(samples, model, vehicle.body, args)
+    nominal = nominal_of(model, preset, nominal)
+    spec = prior_spec(args, vehicle)
+    prior = prior_of(model, nominal, spec)[0]
+    identifier = DampingIdentifier(vehicle, method=args.method, cutoff=args.cutoff,
+                                   prior=spec, structure=model).fit(samples)
+    result = identifier.fit_
+    assert result is not None  # fit() sets it
+    return LogFit(preset, model, prior, result, samples, held)
 
 
 def prior_spec(args: argparse.Namespace, vehicle: Vehicle) -> Prior | None:
@@ -364,8 +384,8 @@ def selection_table(selection: Selection) -> str:
         dropped = "\nleft out of the search:\n" + \
             "\n".join(f"  {', '.join(names)}: {why}" for why, names in groups.items())
     return ("term selection (stepwise over the damping library; a term must raise the "
-            "held-out R² of 5 contiguous time folds, lower BIC by 10 and remove ≥ 10 % of its "
-            "DOF's residual; − marks a removal):\n"
+            f"held-out R² of 5 contiguous time folds, lower BIC by 10 and remove ≥ {MIN_ERR:.0%} "
+            "of its DOF's residual; − marks a removal):\n"
             + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates
             + "\n" + r2 + dropped + "".join("\n" + ev.describe() for ev in selection.memory)
             + "\n")

@@ -52,9 +52,11 @@ def worst_z(model: Path, truth: Path) -> float:
 def test_stating_the_mask_recovers_the_truth_and_fits_every_dof_better(plant: Path) -> None:
     """(b) within 3 σ of the truth in every coefficient (1.8 σ here; 3.4 σ in K_pp from a
     300 s log), (a) biased by > 20 σ (235 σ in coriolis.m_v from the whole log); (b)'s
-    held-out force R² ≥ (a)'s in every DOF."""
+    held-out force R² ≥ (a)'s in every DOF; both with the preset's terms alone (--no-select), what
+    the comparison is about: by default library terms make up for most of the wrong mask in (a)
+    (X_vxr, X_wxq, K_vxq, K_wxr …; held-out R² ≥ .995 in every DOF)."""
     truth = plant / "bag" / "truth_model.yaml"
-    a, b = identify(plant, "a"), identify(plant, "b")
+    a, b = identify(plant, "a", "--no-select"), identify(plant, "b", "--no-select")
     assert load_model(truth).added_mass_terms == load_model(b).added_mass_terms
     assert worst_z(b, truth) < 3.0
     assert worst_z(a, truth) > 20.0

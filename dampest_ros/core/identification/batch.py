@@ -144,14 +144,16 @@ class Fit:
         """Standard deviations, shape (p,)."""
         return np.sqrt(np.abs(np.diag(self.cov)))
 
-    def interval(self, level: float = 0.95) -> FloatArray:
-        """Two-sided confidence intervals, shape (p, 2).
+    def quantile(self, level: float = 0.95) -> float:
+        """Half-width of a two-sided ``level`` interval in standard deviations: Student-t
+        with (blocks − 1) degrees of freedom, as suits a covariance estimated from that many
+        block scores; normal when the block count is unknown."""
+        return float(stats.t.ppf(0.5 + level / 2, self.blocks - 1) if self.blocks > 1
+                     else stats.norm.ppf(0.5 + level / 2))
 
-        Student-t with (blocks − 1) degrees of freedom, as suits a covariance estimated from
-        that many block scores; normal when the block count is unknown.
-        """
-        z = float(stats.t.ppf(0.5 + level / 2, self.blocks - 1) if self.blocks > 1
-                  else stats.norm.ppf(0.5 + level / 2))
+    def interval(self, level: float = 0.95) -> FloatArray:
+        """Two-sided confidence intervals (:meth:`quantile`), shape (p, 2)."""
+        z = self.quantile(level)
         return np.stack([self.theta - z * self.std, self.theta + z * self.std], axis=1)
 
     @property

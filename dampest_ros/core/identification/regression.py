@@ -47,6 +47,28 @@ def memory_states(samples: Samples, model: DampingModel) -> FloatArray:
     return out
 
 
+def low_pass_live(Phi: FloatArray, rate: float, cutoff: float) -> FloatArray:
+    """:func:`zero_phase` of the entries of Φ that are not zero throughout; a zero column
+    filters to zero, and a single-entry coefficient fills one force row of six, so most are.
+
+    Parameters
+    ----------
+    Phi : ndarray, shape (n, ...)
+        Time on axis 0.
+    rate, cutoff : float
+        Sample rate and low-pass cutoff (Hz).
+
+    Returns
+    -------
+    ndarray, shape of Phi
+    """
+    flat = Phi.reshape(len(Phi), -1)
+    live = np.flatnonzero(np.any(flat != 0.0, axis=0))
+    out = np.zeros_like(flat)
+    out[:, live] = zero_phase(flat[:, live], rate, cutoff)
+    return out.reshape(Phi.shape)
+
+
 def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
                     chunk: int = CHUNK, cutoff: float = 0.0, margin: float = 5.0,
                     offset: FloatArray | None = None, decimate: bool = False,
@@ -88,7 +110,7 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
             Phi = (regressor or model.regressor)(samples.nu[ext], z[ext] if has_z else None)
             y = target(samples, body, ext)
             if cutoff > 0:
-                Phi = zero_phase(Phi, samples.rate, cutoff)
+                Phi = low_pass_live(Phi, samples.rate, cutoff)
                 y = zero_phase(y, samples.rate, cutoff)
             if step > 1:
                 # every k-th sample counted from the segment's first: a segment gives the

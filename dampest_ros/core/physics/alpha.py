@@ -34,8 +34,9 @@ class Alpha:
     kinds: ``one`` (1), ``abs`` (|ν_i|), ``lin`` (ν_i), ``norm`` (‖[u, v, w]‖, m/s),
     ``anorm`` (‖[p, q, r]‖, rad/s), ``pnorm`` (‖[ν_i, ν_j]‖, the cross-flow speed of a body
     slender along the third axis), ``area`` (ν_i² / ‖v‖ for a linear ν_i, ν_i² / ‖ω‖ for an
-    angular one; 0 at rest), ``prod`` (ν_i ν_j), ``absprod`` (|ν_i ν_j|),
-    ``absproj`` (|wᵀν| for a unit 6-vector w).
+    angular one; with j ≥ 0 the pair (ν_i² + ν_j²) / ‖·‖, both linear or both angular, the
+    cross-flow share of a body of revolution about the third axis; 0 at rest), ``prod``
+    (ν_i ν_j), ``absprod`` (|ν_i ν_j|), ``absproj`` (|wᵀν| for a unit 6-vector w).
     """
 
     kind: str = "one"
@@ -59,7 +60,7 @@ class Alpha:
         if k == "pnorm":
             return np.hypot(nu[:, self.i], nu[:, self.j])
         if k == "area":
-            return _area(nu, np.array([self.i]))[:, 0]
+            return _area(nu, np.array([self.i]), np.array([self.j]))[:, 0]
         if k == "prod":
             return nu[:, self.i] * nu[:, self.j]
         if k == "absprod":
@@ -85,7 +86,8 @@ class Alpha:
         if k == "pnorm":
             return float(max(s[self.i], s[self.j]))
         if k == "area":
-            return float(s[self.i] ** 2 / (s[:3].max() if self.i < 3 else s[3:].max()))
+            top = max(s[self.i], s[self.j]) if self.j >= 0 else s[self.i]
+            return float(top ** 2 / (s[:3].max() if self.i < 3 else s[3:].max()))
         if k == "norm":
             return float(s[:3].max())
         if k == "anorm":
@@ -104,7 +106,8 @@ class Alpha:
             "norm": "|U|",
             "anorm": "|W|",
             "pnorm": f"|{n[self.i]},{n[self.j]}|" if self.i >= 0 else "",
-            "area": f"{n[self.i]}^2/{'|U|' if self.i < 3 else '|W|'}" if self.i >= 0 else "",
+            "area": (f"|{n[self.i]},{n[self.j]}|" if self.j >= 0 else n[self.i]) +
+                    f"^2/{'|U|' if self.i < 3 else '|W|'}" if self.i >= 0 else "",
             "prod": f"{n[self.i]}{n[self.j]}" if self.i >= 0 else "",
             "absprod": f"|{n[self.i]}{n[self.j]}|" if self.i >= 0 else "",
             "absproj": "|w'nu|",
@@ -113,7 +116,7 @@ class Alpha:
     @classmethod
     def parse(cls, text: str) -> Alpha:
         """Parse ``1``, ``|r|``, ``u``, ``|U|`` (‖v‖), ``|W|`` (‖ω‖), ``|v,w|`` (‖(v, w)‖),
-        ``uv``, ``|uv|``."""
+        ``v^2/|U|``, ``|v,w|^2/|U|`` ((v² + w²) / ‖v‖), ``uv``, ``|uv|``."""
         t = text.replace(" ", "")
         if t in ("1", "", "one"):
             return cls("one")
@@ -122,11 +125,11 @@ class Alpha:
         if t in ("|W|", "anorm"):
             return cls("anorm")
         if t.endswith(("^2/|U|", "^2/|W|")):
-            i = dof_index(t[:-6], "alpha")
-            if (i < 3) != t.endswith("|U|"):
+            idx = [dof_index(c, "alpha") for c in t[:-6].strip("|").split(",")]
+            if len(idx) > 2 or any((i < 3) != t.endswith("|U|") for i in idx):
                 raise ConfigError("alpha", f"{text!r}: a linear velocity goes over |U|, an "
                                   "angular one over |W|")
-            return cls("area", i)
+            return cls("area", idx[0], idx[1] if len(idx) == 2 else -1)
         if "," in t and t.startswith("|") and t.endswith("|"):
             pair = [dof_index(c, "alpha") for c in t.strip("|").split(",")]
             if len(pair) == 2:
@@ -166,7 +169,7 @@ class AlphaBank:
         for k, a in enumerate(alphas):
             if a.kind in ("abs", "lin", "prod", "absprod", "pnorm", "area"):
                 self.i[k] = a.i
-            if a.kind in ("prod", "absprod", "pnorm"):
+            if a.kind in ("prod", "absprod", "pnorm") or (a.kind == "area" and a.j >= 0):
                 self.j[k] = a.j
             self.absolute[k] = a.kind in ("abs", "absprod", "absproj")
             self.norm[k] = a.kind == "norm"
@@ -191,7 +194,7 @@ class AlphaBank:
         if self.any_pnorm:
             a = np.where(self.pnorm, np.hypot(aug[:, self.i], aug[:, self.j]), a)
         if self.any_area:
-            a[:, self.area] = _area(nu, self.i[self.area])
+            a[:, self.area] = _area(nu, self.i[self.area], self.j[self.area])
         if self.any_proj:
             a = np.where(self.proj, nu @ self.W, a)
         if self.any_norm:
@@ -205,10 +208,14 @@ class AlphaBank:
         return a
 
 
-def _area(nu: FloatArray, k: NDArray[np.int64]) -> FloatArray:
-    """ν_k² / ‖v‖ for linear k, ν_k² / ‖ω‖ for angular k, 0 at rest; shape (N, len(k))."""
+def _area(nu: FloatArray, k: NDArray[np.int64], pair: NDArray[np.int64]) -> FloatArray:
+    """ν_k² / ‖v‖ for linear k, ν_k² / ‖ω‖ for angular k, plus ν_l² / ‖·‖ where the
+    ``pair`` index l is a velocity (0..5; none otherwise); 0 at rest, shape (N, len(k))."""
+    square = nu[:, k] ** 2
+    second = (pair >= 0) & (pair < 6)
+    square[:, second] += nu[:, pair[second]] ** 2
     lin = np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))
     ang = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))
     norm = np.where(k < 3, lin[:, None], ang[:, None])
     # ν_k² / ‖·‖ (≤ ‖·‖, so it goes to 0 with the speed)
-    return np.divide(nu[:, k] ** 2, norm, out=np.zeros_like(norm), where=norm > 0)
+    return np.divide(square, norm, out=np.zeros_like(norm), where=norm > 0)

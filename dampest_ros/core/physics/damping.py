@@ -237,6 +237,11 @@ class DampingModel:
         # B_j as one (6, 6·atoms) matrix: ν B_flat[b, a·atoms + j] = (B_j ν)_a as one product
         self._B_flat = self._Bs.transpose(2, 1, 0).reshape(6, -1)
         self._bank = AlphaBank([alpha for _, _, alpha in static])
+        # the entries of the B_j when none has two in one row (single-entry bases, the
+        # library's): (B_j ν)_a is then one product, no 6 × 6 matrix product needed
+        atom, row, col = np.nonzero(self._Bs)
+        self._sparse = not (np.count_nonzero(self._Bs, axis=2) > 1).any()
+        self._entries = (atom, row, col, self._Bs[atom, row, col])
         self._static_params = np.unique(self._static_idx)
         # atom → parameter sum (None: one atom per parameter, the common case)
         self._atom_sum: FloatArray | None = None
@@ -326,7 +331,12 @@ class DampingModel:
         Phi = np.empty((N, 6, self.n_params))
         if len(self._static_idx):
             # column j: α_j(ν) B_j ν (summed over the parameter's atoms)
-            Bnu = (nu @ self._B_flat).reshape(N, 6, -1) * self._bank(nu)[:, None, :]
+            if self._sparse:
+                atom, row, col, value = self._entries
+                Bnu = np.zeros((N, 6, len(self._static_idx)))
+                Bnu[:, row, atom] = nu[:, col] * value * self._bank(nu)[:, atom]
+            else:
+                Bnu = (nu @ self._B_flat).reshape(N, 6, -1) * self._bank(nu)[:, None, :]
             if self._atom_sum is None:
                 Phi[:, :, self._static_idx] = Bnu
             else:

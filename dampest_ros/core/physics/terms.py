@@ -20,12 +20,20 @@ cross-flow speed           ν_j ‖(ν_k, ν_l)‖        ``F_jUkl``  ``|k,l|`` 
 projected area (``area``)  ν_j ν_k² / ‖v‖ (k       ``F_jAk``   ``k^2/|U|`` (``X_uAv``,
                            linear), ν_j ν_k² / ‖ω‖             ``q^2/|W|``  ``K_pAq``)
                            (k angular)
+cross-flow area            ν_j (ν_k² + ν_l²) / ‖v‖ ``F_jAkl``  ``|k,l|^2   (``X_uAvw``,
+(``area``)                 (pairs as cross-flow                /|U|``      ``K_pAqr``)
+                           speed; ‖ω‖ if angular)
 =========================  =====================  ==========  ============================
 
 The projected-area family is bluff-body drag with a direction-dependent area: the drag
 ρ C A(v̂) ‖v‖ ν_j with the area interpolated by the squared direction cosines,
 A(v̂) ≈ Σ_k A_k v_k² / ‖v‖², is Σ_k (ρ C A_k) ν_j v_k² / ‖v‖, linear in the A_k; the three
-columns of one ν_j sum to ν_j ‖v‖ (MuJoCo's ellipsoid drag is of this kind).
+columns of one ν_j sum to ν_j ‖v‖ (MuJoCo's ellipsoid drag is of this kind). A body of
+revolution about one axis (a torpedo about x) has one cross-flow area for every direction
+across it, so its force depends on v² + w² together: the cross-flow area column
+ν_j (v² + w²) / ‖v‖, the sum of two projected-area columns, is that force in one term (a
+slender hull's lift-induced surge drag, u (v² + w²) / ‖v‖), which a search adding one column at
+a time would not find from either half alone.
 
 The bilinear name carries an ``x`` (times) so that it never equals the cross-flow name of the
 same letters (Y_{v|r|} is ``Y_vr``, Y_{v r} is ``Y_vxr``); ν_j ν_k and ν_k ν_j are one column,
@@ -110,6 +118,9 @@ def cross_term(specs: Sequence[CrossSpec]) -> DampingTerm:
 
 #: Named families of the term library (see the module docstring for their names).
 FAMILIES = ("linear", "crossflow", "bilinear", "norm", "area")
+#: The cross-flow planes of a body slender along u, v, w, p, q, r's axes in turn: the pairs
+#: of the cross-flow speed ‖(ν_k, ν_l)‖ and cross-flow area (ν_k² + ν_l²) / ‖·‖ columns.
+CROSS_PAIRS = ((1, 2), (0, 2), (0, 1), (4, 5), (3, 5), (3, 4))
 
 
 def library_name(row: int, col: int, alpha: Alpha) -> str:
@@ -140,7 +151,7 @@ def library_name(row: int, col: int, alpha: Alpha) -> str:
     if k == "pnorm":
         return f"{f}_{n[col]}{'U' if alpha.i < 3 else 'W'}{n[alpha.i]}{n[alpha.j]}"
     if k == "area":
-        return f"{f}_{n[col]}A{n[alpha.i]}"
+        return f"{f}_{n[col]}A{n[alpha.i]}{n[alpha.j] if alpha.j >= 0 else ''}"
     return CrossSpec(row, col, alpha).label
 
 
@@ -152,7 +163,8 @@ def library(families: Sequence[str] = FAMILIES, rows: Iterable[str | int] = DOF_
     them), ``bilinear`` ν_j ν_k for j ≤ k (21, lift u·w, Magnus-like ω × v products),
     ``norm`` ν_j ‖v‖ and ν_j ‖ω‖ (12) and the cross-flow speeds ν_j ‖(v, w)‖, ν_j ‖(u, w)‖,
     ν_j ‖(u, v)‖, ν_j ‖(q, r)‖, ν_j ‖(p, r)‖, ν_j ‖(p, q)‖ (36), ``area`` ν_j ν_k² / ‖v‖
-    and ν_j ν_k² / ‖ω‖ (36). Every column appears once
+    and ν_j ν_k² / ‖ω‖ (36) and the cross-flow areas ν_j (v² + w²) / ‖v‖ … ν_j (p² + q²) / ‖ω‖
+    over the same pairs (36). Every column appears once
     per row (ν_j ν_k and ν_k ν_j are one). Ordered simplest first, which decides which of two
     numerically equal columns a selection keeps.
 
@@ -179,10 +191,10 @@ def library(families: Sequence[str] = FAMILIES, rows: Iterable[str | int] = DOF_
         alphas += [(j, Alpha("lin", k)) for j in range(6) for k in range(j, 6)]
     if "norm" in families:
         alphas += [(j, Alpha(kind)) for kind in ("norm", "anorm") for j in range(6)]
-        pairs = ((1, 2), (0, 2), (0, 1), (4, 5), (3, 5), (3, 4))
-        alphas += [(j, Alpha("pnorm", k, m)) for k, m in pairs for j in range(6)]
+        alphas += [(j, Alpha("pnorm", k, m)) for k, m in CROSS_PAIRS for j in range(6)]
     if "area" in families:
         alphas += [(j, Alpha("area", k)) for k in range(6) for j in range(6)]
+        alphas += [(j, Alpha("area", k, m)) for k, m in CROSS_PAIRS for j in range(6)]
     out = []
     for r in rows:
         i = dof_index(r, "rows")

@@ -104,9 +104,9 @@ def held_out_r2(samples: Samples, model: DampingModel, body: RigidBody) -> np.nd
 def test_library_names_are_unique_documented_and_round_trip(tmp_path: Path) -> None:
     specs = library()
     names = [s.label for s in specs]
-    assert len(specs) == 882 and len(set(names)) == 882  # 147 columns in each of 6 rows
+    assert len(specs) == 1098 and len(set(names)) == 1098  # 183 columns in each of 6 rows
     for name in ("X_u", "Y_r", "Y_vr", "X_uu", "Z_uxw", "Y_vxr", "X_uU", "K_pW", "N_rU",
-                 "X_uUvw", "K_pWqr", "X_uAv", "K_pAq"):
+                 "X_uUvw", "K_pWqr", "X_uAv", "K_pAq", "X_uAvw", "K_pAqr"):
         assert name in names, name
     # α text parses back to the same α (what the model file stores)
     for s in specs:
@@ -114,7 +114,7 @@ def test_library_names_are_unique_documented_and_round_trip(tmp_path: Path) -> N
     model = DampingModel([linear_term(), quadratic_term(),
                           cross_term([s for s in specs if s.label in (
                               "Z_uxw", "Y_vr", "X_uU", "K_pW", "N_rv", "M_wxq",
-                              "X_uUvw", "X_uAv", "K_pAq")])])
+                              "X_uUvw", "X_uAv", "K_pAq", "X_uAvw", "N_rApq")])])
     theta = np.arange(1.0, model.n_params + 1.0)
     path = save_model(tmp_path / "m.yaml", Model(model.parameter_names, theta,
                                                  np.zeros(model.n_params), np.eye(6),
@@ -128,8 +128,9 @@ def test_library_names_are_unique_documented_and_round_trip(tmp_path: Path) -> N
 
 
 def test_projected_area_columns_sum_to_the_speed_magnitude_drag() -> None:
-    """ν_j v_k²/‖v‖ over k = u, v, w is ν_j ‖v‖ (and ν_j ω_k²/‖ω‖ sums to ν_j ‖ω‖); every
-    α of the library evaluates alike one by one and all at once (AlphaBank); 0 at rest."""
+    """ν_j v_k²/‖v‖ over k = u, v, w is ν_j ‖v‖ (and ν_j ω_k²/‖ω‖ sums to ν_j ‖ω‖); a
+    cross-flow area column is the sum of its pair's (X_uAvw = X_uAv + X_uAw); every α of the
+    library evaluates alike one by one and all at once (AlphaBank); 0 at rest."""
     nu = np.random.default_rng(3).normal(size=(40, 6))
     nu[0] = 0.0
     specs = library(("area", "norm"), rows=["X"])
@@ -139,6 +140,10 @@ def test_projected_area_columns_sum_to_the_speed_magnitude_drag() -> None:
     for j, d in enumerate("uvwpqr"):
         lin = sum(Phi[:, col[f"X_{d}A{k}"]] for k in "uvw")
         ang = sum(Phi[:, col[f"X_{d}A{k}"]] for k in "pqr")
+        for pair in ("vw", "uw", "uv", "qr", "pr", "pq"):
+            np.testing.assert_allclose(Phi[:, col[f"X_{d}A{pair}"]],
+                                       sum(Phi[:, col[f"X_{d}A{k}"]] for k in pair),
+                                       rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(lin, Phi[:, col[f"X_{d}U"]], rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(ang, Phi[:, col[f"X_{d}W"]], rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(Phi[:, col[f"X_{d}Av"]],
@@ -158,8 +163,9 @@ def test_angular_norm_alpha() -> None:
     assert a.kind == "anorm" and a.label() == "|W|"
     np.testing.assert_allclose(a(nu), np.linalg.norm(nu[:, 3:], axis=1))
     alphas = [Alpha("norm"), Alpha("anorm"), Alpha("abs", 2), Alpha("lin", 4),
-              Alpha.parse("|v,w|")]
+              Alpha.parse("|v,w|^2/|U|"), Alpha.parse("|v,w|")]
     assert alphas[-1] == Alpha("pnorm", 1, 2) and alphas[-1].label() == "|v,w|"
+    assert alphas[-2] == Alpha("area", 1, 2) and alphas[-2].label() == "|v,w|^2/|U|"
     np.testing.assert_allclose(AlphaBank(alphas)(nu), np.stack([x(nu) for x in alphas], 1))
     assert a.scale(np.array([1.0, 1.0, 1.0, 2.0, 3.0, 0.5])) == 3.0
 

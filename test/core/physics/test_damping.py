@@ -12,7 +12,9 @@ from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.terms import (
     CrossSpec,
     added_mass_term,
+    coriolis_term,
     cross_term,
+    library,
     linear_term,
     memory_term,
     quadratic_term,
@@ -372,3 +374,20 @@ def test_param_scales_prime_values() -> None:
     assert s["X_uu"] == pytest.approx(1 / (0.5 * rho * L**2), rel=1e-12)
     assert s["N_rr"] == pytest.approx(1 / (0.5 * rho * L**5), rel=1e-12)
     assert s["freq.w.c1"] == pytest.approx(v / 3.0 / F, rel=1e-12)
+
+
+def test_regressor_column_is_alpha_times_basis_product() -> None:
+    """Φ[:, :, j] = α_j(ν) B_j ν, bit for bit, for single-entry bases (the library, computed
+    entry by entry), multi-atom ones (coriolis) and full matrices (a residual mode)."""
+    rng = np.random.default_rng(5)
+    nu = rng.normal(size=(200, 6))
+    for model in (DampingModel([cross_term(library(rows=["X", "K"])), coriolis_term()]),
+                  DampingModel([residual_term(rng.normal(size=(6, 2)))])):
+        expected = np.zeros((200, 6, model.n_params))
+        k = 0
+        for term in model.terms:
+            for b in term.bases:
+                for B, alpha in b.atoms:
+                    expected[:, :, k] += alpha(nu)[:, None] * (nu @ B.T)
+                k += 1
+        np.testing.assert_allclose(model.regressor(nu), expected, rtol=1e-14, atol=1e-14)

@@ -1,0 +1,177 @@
+"""dampest identify on MuJoCo's fluid model: do the 95 % intervals of the default identify
+contain the pure-axis damping coefficients MuJoCo's ellipsoid model defines?
+
+Along one axis ν = s e_k (every geom then sees a velocity along one of its principal axes, so
+no Kutta lift, and no Magnus force without rotation) MuJoCo's force in row k is exactly
+a_k s + b_k s|s|. For a translation, per geom of semi-axes r (MuJoCo's documented ellipsoid
+model): the viscous a = 3π D μ with D = (2/3)(r_x + r_y + r_z) and the drag
+b = ρ (C_blunt A_k + C_slender (A_max − A_k)), A_k the area projected along k and A_max that
+of the two largest semi-axes. A rotation moves the geoms off the origin through the water
+too: its a and b are read off MuJoCo's own wrench at ±s (the form is exact, to 1e-14). The
+identified counterpart is the same functional of θ: the model's row-k force along the axis
+split into its s and s|s| parts, each a linear combination cᵀθ with σ = √(cᵀΣc).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import pytest
+
+from dampest_ros.cli.identify import fit_log
+from dampest_ros.cli.main import build_parser, main
+from dampest_ros.core.identification.batch import Fit
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.rigid_body import coriolis_force
+from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.io.yaml_io import load_vehicle
+
+mujoco = pytest.importorskip("mujoco")
+
+#: Speeds (m/s, rad/s) at which the pure-axis forms are read.
+SPEEDS = np.array([-0.8, -0.3, -0.05, 0.05, 0.3, 0.8])
+
+
+def documented_translation(vehicle: Vehicle) -> np.ndarray:
+    """(a, b) of u, v, w from MuJoCo's documented ellipsoid formulas, shape (2, 3)."""
+    assert vehicle.geometry is not None
+    mu, rho = vehicle.geometry.viscosity, vehicle.body.rho
+    out = np.zeros((2, 3))
+    for g in vehicle.geometry.geoms:
+        r = np.asarray(g.size, dtype=float)
+        big = np.sort(r)[::-1]
+        a_max = np.pi * big[0] * big[1]
+        for k in range(3):
+            a_k = np.pi * np.prod(np.delete(r, k))
+            out[0, k] += 3.0 * np.pi * (2.0 / 3.0) * r.sum() * mu
+            out[1, k] += rho * (g.fluidcoef[0] * a_k + g.fluidcoef[1] * (a_max - a_k))
+    return out
+
+
+def pure_axis_truth(vehicle: Vehicle) -> np.ndarray:
+    """(a_k, b_k) of every axis, shape (2, 6): MuJoCo's wrench at ±s less its added-mass
+    Coriolis force, fitted by a s + b s|s| (exact); the translations equal the documented
+    formulas."""
+    from dampest_ros.core.simulation.mujoco_backend import compile_model
+
+    assert vehicle.geometry is not None
+    m = compile_model(vehicle.body, vehicle.geometry, 0.002)
+    d = mujoco.MjData(m)
+    X = np.c_[SPEEDS, SPEEDS * np.abs(SPEEDS)]
+    out = np.zeros((2, 6))
+    for k in range(6):
+        f = np.zeros(len(SPEEDS))
+        for n, s in enumerate(SPEEDS):
+            nu = np.zeros(6)
+            nu[k] = s
+            d.qvel[:] = nu
+            mujoco.mj_forward(m, d)
+            # D(ν)ν = −(fluid wrench) − C_A(ν)ν
+            f[n] = -(d.qfrc_fluid[k] + coriolis_force(vehicle.body.added_mass, nu)[k])
+        out[:, k], *_ = np.linalg.lstsq(X, f, rcond=None)
+        np.testing.assert_allclose(X @ out[:, k], f, atol=1e-9 * np.abs(f).max())
+    np.testing.assert_allclose(out[:, :3], documented_translation(vehicle), rtol=1e-9)
+    return out
+
+
+def pure_axis_functionals(model: DampingModel) -> np.ndarray:
+    """c with (a_k, b_k) = c[:, k] θ for the model's row-k force along axis k, shape
+    (2, 6, p); NaN where a column along the axis is not of the form a s + b s|s| (s² or a
+    higher power: the terms mix)."""
+    X = np.c_[SPEEDS, SPEEDS * np.abs(SPEEDS), SPEEDS ** 2]
+    out = np.zeros((2, 6, model.n_params))
+    for k in range(6):
+        nu = np.zeros((len(SPEEDS), 6))
+        nu[:, k] = SPEEDS
+        Phi = model.regressor(nu)[:, k, :]
+        c, *_ = np.linalg.lstsq(X, Phi, rcond=None)
+        mixed = (np.abs(X @ c - Phi).max(axis=0) > 1e-9) | (np.abs(c[2]) > 1e-9)
+        # round-off of the split (≤ 1e-15) is no contribution
+        out[:, k] = np.where(mixed, np.nan, np.where(np.abs(c[:2]) > 1e-9, c[:2], 0.0))
+    return out
+
+
+class Coverage(NamedTuple):
+    """Per axis (u..r): truth, estimate, σ and whether the 95 % interval holds the truth."""
+
+    truth: np.ndarray      # (2, 6): linear a, quadratic b
+    value: np.ndarray      # (2, 6)
+    std: np.ndarray        # (2, 6)
+    inside: np.ndarray     # (2, 6) bool
+
+
+def coverage(vehicle: Vehicle, model: DampingModel, fit: Fit) -> Coverage:
+    """The pure-axis truths against the fit's values and 95 % intervals (the fit's own
+    Student-t quantile, :meth:`Fit.quantile`)."""
+    c = pure_axis_functionals(model)
+    value = np.einsum("akp,p->ak", np.nan_to_num(c), fit.theta)
+    cov = np.nan_to_num(fit.cov)
+    std = np.sqrt(np.einsum("akp,pq,akq->ak", np.nan_to_num(c), cov, np.nan_to_num(c)))
+    std[np.isnan(c).any(axis=2)] = np.nan
+    truth = pure_axis_truth(vehicle)
+    return Coverage(truth, value, std, np.abs(value - truth) <= fit.quantile(0.95) * std)
+
+
+def identify_coverage(bag: Path, vehicle: str) -> Coverage:
+    """The default ``dampest identify`` of ``bag`` and its pure-axis coverage."""
+    args = build_parser().parse_args(["identify", str(bag), "--vehicle", vehicle])
+    args.input = str(bag)  # run() takes the one path of the input list so
+    v = load_vehicle(vehicle)
+    fitted = fit_log(args, v, [])
+    return coverage(v, fitted.model, fitted.result)
+
+
+@pytest.mark.parametrize("vehicle", ["torpedo_auv", "bluerov2_heavy_mujoco", "box_rov"])
+def test_documented_pure_axis_drag_is_mujocos(vehicle: str) -> None:
+    """MuJoCo's wrench along each axis is a s + b s|s| to 1e-9, and along u, v, w its a and b
+    are the documented ellipsoid formulas (pure_axis_truth asserts both); e.g. the torpedo's
+    surge: a = 3π (2/3)(0.8 + 0.1 + 0.1) 1e-3 + four fins = 0.0105 N s/m, b = 92.17 N s²/m²."""
+    truth = pure_axis_truth(load_vehicle(vehicle))
+    assert np.all(truth[1] > 0) and np.all(truth[0] > 0)
+    if vehicle == "torpedo_auv":
+        np.testing.assert_allclose(truth[:, 0], [0.01045522, 92.174328], rtol=1e-6)
+
+
+def test_pure_axis_functionals_sum_the_terms_that_act_along_the_axis() -> None:
+    """X_uu and X_uU both act as u|u| along surge (their sum is the pure-axis drag), X_uAvw
+    not at all; a u·u column (X_uxu) is neither s nor s|s| (NaN: surge's coefficients mix,
+    :func:`coverage` leaves the axis out)."""
+    from dampest_ros.core.physics.terms import cross_term, library, linear_term, quadratic_term
+
+    specs = {s.label: s for s in library(rows=["X"])}
+    model = DampingModel([linear_term(), quadratic_term(),
+                          cross_term([specs["X_uU"], specs["X_uAvw"]])])
+    c = pure_axis_functionals(model)
+    names = model.parameter_names
+    assert [names[k] for k in np.flatnonzero(c[1, 0])] == ["X_uu", "X_uU"]
+    assert [names[k] for k in np.flatnonzero(c[0, 0])] == ["X_u"]
+    np.testing.assert_allclose(c[1, 0][c[1, 0] != 0], [1.0, 1.0])
+    mixed = DampingModel([quadratic_term(), cross_term([specs["X_uxu"]])])
+    c = pure_axis_functionals(mixed)[:, 0]
+    assert np.isnan(c[:, -1]).all() and not np.isnan(c[:, :-1]).any()
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="the intervals hold MuJoCo's pure-axis drag in about a "
+                   "third of the cases: σ covers the noise, not the error of a model form "
+                   "that is only approximately MuJoCo's, extrapolated to pure-axis motion")
+@pytest.mark.parametrize("vehicle", ["torpedo_auv", "bluerov2_heavy_mujoco"])
+def test_pure_axis_intervals_of_the_default_identify_hold_mujocos_drag(
+        vehicle: str, tmp_path: Path) -> None:
+    """Seeds 1–5, realistic sensors (bag route), the default command: the 95 % intervals of
+    the 12 pure-axis coefficients (linear and quadratic, u..r) hold the truth in ≥ 90 % of
+    the cases. Measured (README): 19 of 60 on each preset (quadratic 5 and 6 of 30). The
+    quadratic estimates are within 9 % of the truth but for the torpedo's surge (+43 %) and roll
+    (−39 %), where MuJoCo's projected area changes fastest near the axis, while σ is ~1 %; the
+    linear ones (truth ~0.01) carry 0.03–4.8 of what the quadratic form misses."""
+    inside = []
+    for seed in range(1, 6):
+        bag = tmp_path / f"bag{seed}"
+        assert main(["simulate", "--backend", "mujoco", "--vehicle", vehicle, "--protocol", "B",
+                     "--duration", "600", "--seed", str(seed), "--out", str(bag)]) == 0
+        c = identify_coverage(bag, vehicle)
+        # an axis whose terms mix has no clean truth: left out (none did here)
+        inside.append(np.where(np.isnan(c.std), np.nan, c.inside))
+    assert np.nanmean(inside) >= 0.9, np.nanmean(inside)
