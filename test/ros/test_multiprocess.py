@@ -55,6 +55,10 @@ def processes(colcon_install: Path, tmp_path_factory: pytest.TempPathFactory,
     context = rclpy.Context()
     rclpy.init(context=context)
     start = time.monotonic()
+    probe = rclpy.create_node("test_multiprocess_probe", context=context)
+    while (set(procs) - set(probe.get_node_names())) and time.monotonic() < start + 60.0:
+        time.sleep(0.1)  # every node running (a signal before its interpreter runs kills it)
+    probe.destroy_node()
     yield {"procs": procs, "logs": logs, "context": context, "start": start}
     for p in procs.values():
         if p.poll() is None:
@@ -133,4 +137,5 @@ def test_nodes_stop_cleanly_on_sigint(processes: dict) -> None:
     for p in procs.values():
         p.send_signal(signal.SIGINT)
     for name, p in procs.items():
-        assert p.wait(timeout=15) == 0, (processes["logs"] / f"{name}.log").read_text()[-2000:]
+        assert p.wait(timeout=15) == 0, name + ": " + (processes["logs"] / f"{name}.log"
+                                                       ).read_text()[-2000:]
