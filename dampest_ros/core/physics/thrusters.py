@@ -125,8 +125,8 @@ class Thrusters:
         if tm <= 0:
             return command, command, command, command
         decay = np.exp(-h / tm)
-        mid = command + (n0 - command) * np.exp(-h / (2 * tm))
-        end = command + (n0 - command) * decay
+        mid = lag_toward(n0, command, np.exp(-h / (2 * tm)))
+        end = lag_toward(n0, command, decay)
         # mean of n over the step: c + (n₀ − c) (T/h)(1 − e^{−h/T})
         mean = command + (n0 - command) * (tm / h) * (1 - decay)
         return n0, mid, end, mean
@@ -178,3 +178,9 @@ class Thrusters:
             raise ConfigError(f"thrusters.units.{exc.args[0]}", "missing") from None
         except TypeError as exc:
             raise ConfigError("thrusters.model", str(exc)) from None
+
+
+def lag_toward(n0: FloatArray, command: FloatArray, decay: float) -> FloatArray:
+    """c + (n₀ − c) e^{−s/T}: a first-order lag from n₀ toward the command c after a time s,
+    given its decay e^{−s/T} (rev/s), the shape of n₀."""
+    return command + (n0 - command) * decay
