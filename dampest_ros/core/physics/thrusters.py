@@ -141,6 +141,15 @@ class Thrusters:
         # (T(n₀) + 4 T(n_mid) + T(n_end)) / 6
         return (f(start) + 4 * f(mid) + f(end)) / 6.0
 
+    def step_means(self, n0: FloatArray, command: FloatArray, h: float
+                   ) -> tuple[FloatArray, FloatArray]:
+        """What a vehicle logs over steps of length h: the exact mean rotor speed (rev/s) and
+        the mean nominal thrust (N, Simpson), from the speeds at the steps' starts and the
+        commands held over them, shape (..., n) each (:meth:`lag_step`, :meth:`step_thrust`).
+        """
+        start, mid, end, mean = self.lag_step(n0, command, h)
+        return mean, self.step_thrust(start, mid, end)
+
     def speed_for_thrust(self, thrust: FloatArray) -> FloatArray:
         """Inverse curve: n = sign(T) √(|T| / k_T ρ D⁴), saturated at ±n_max (rev/s)."""
         n = np.sign(thrust) * np.sqrt(np.abs(thrust) / self.gain)

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.physics.frames import roll_pitch
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.thrusters import lag_toward
 from dampest_ros.core.physics.vehicle import Vehicle
@@ -286,14 +286,9 @@ class Simulator:
                                                     zip(*self._steps, strict=True))
         self._steps = []
         tau_mean = (tau1 + 2 * tau2 + 2 * tau3 + tau4) / 6.0
-        # step means of the logged rotor speed (exact) and nominal thrust (Simpson)
-        start, mid, end, n_mean = self._thr.lag_step(n0, cmd, self.dt)
-        thrust_mean = self._thr.step_thrust(start, mid, end)
-        current = (np.array([self.current_ned(s) for s in t.tolist()])
-                   if self.effects.current_variation
-                   else np.tile(self.current_ned(0.0), (len(t), 1)))
+        n_mean, thrust_mean = self._thr.step_means(n0, cmd, self.dt)
         return np.column_stack([t, x[:, :13], k1[:, 7:13], tau_mean, n_mean, thrust_mean,
-                                current, x[:, 13:13 + nm]])
+                                self.effects.current_series(t), x[:, 13:13 + nm]])
 
     def take_log(self, keep: int = 1) -> Trajectory:
         """The steps recorded so far as a Trajectory, then forget all but the last ``keep``.
@@ -400,8 +395,8 @@ def run(vehicle: Vehicle, excitation: Excitation | ProtocolStream, effects: Effe
     sub = max(1, round(dt_c / dt))
     ctrl = VelocityPI.for_vehicle(vehicle, excitation.bandwidth)
     for k in range(excitation.ticks):
-        roll, pitch, _ = euler_from_matrix(quat_to_matrix(sim.quaternion))
-        cmd = excitation.command(k, sim.nu, float(roll), float(pitch), float(sim.position[2]))
+        roll, pitch = roll_pitch(sim.quaternion)
+        cmd = excitation.command(k, sim.nu, roll, pitch, float(sim.position[2]))
         tau = ctrl(cmd, sim.nu, dt_c) + excitation.feedforward(k)
         rotor = sim.wrench_to_command(tau)
         for _ in range(sub):
