@@ -37,6 +37,18 @@ def _cross(a: list[float], b: list[float]) -> list[float]:
     return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
+def _coriolis_force(v: list[float], om: list[float], a: list[float]) -> list[float]:
+    """C(ν)ν = [ω × a1, v × a1 + ω × a2] for ν = [v, ω] and a = M ν, on Python floats
+    (one call for what takes three of :func:`_cross`)."""
+    v0, v1, v2 = v
+    w0, w1, w2 = om
+    a0, a1, a2, a3, a4, a5 = a
+    return [w1 * a2 - w2 * a1, w2 * a0 - w0 * a2, w0 * a1 - w1 * a0,
+            (v1 * a2 - v2 * a1) + (w1 * a5 - w2 * a4),
+            (v2 * a0 - v0 * a2) + (w2 * a3 - w0 * a5),
+            (v0 * a1 - v1 * a0) + (w0 * a4 - w1 * a3)]
+
+
 class Simulator:
     """Fixed-step RK4 integration of the true vehicle, one step at a time.
 
@@ -213,16 +225,12 @@ class Simulator:
                   ) -> list[float]:
         """C_RB(ν)ν + C_A(ν_r)ν_r (FRD, N and N·m), with C(ν)ν = [ν2 × a1, ν1 × a1 + ν2 × a2],
         a = M ν."""
-        a = (self._M_RB @ nu).tolist()
-        c1, c2, c3 = _cross(om, a[:3]), _cross(v, a[:3]), _cross(om, a[3:])
-        cor = [c1[0], c1[1], c1[2], c2[0] + c3[0], c2[1] + c3[1], c2[2] + c3[2]]
+        cor = _coriolis_force(v, om, (self._M_RB @ nu).tolist())
         if not self._C_A_all:
             # the added-mass switches of the vehicle: only the acting part of C_A(ν_r)ν_r
             return (np.array(cor) + self._body.added_coriolis_force(nu_r)).tolist()
-        ar = (self._M_A @ nu_r).tolist()
         vr, omr = (v, om) if nu_r is nu else (nu_r[:3].tolist(), nu_r[3:].tolist())
-        a1, a2, a3 = _cross(omr, ar[:3]), _cross(vr, ar[:3]), _cross(omr, ar[3:])
-        added = [a1[0], a1[1], a1[2], a2[0] + a3[0], a2[1] + a3[1], a2[2] + a3[2]]
+        added = _coriolis_force(vr, omr, (self._M_A @ nu_r).tolist())
         return [c + a_ for c, a_ in zip(cor, added, strict=True)]
 
     def _damping(self, t: float, x: FloatArray, nu_r: FloatArray) -> list[float]:
