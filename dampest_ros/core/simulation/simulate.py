@@ -182,7 +182,7 @@ class Simulator:
         tau = self._alloc @ np.array([0.0 if abs(n_) < dz else gain * n_ * abs(n_)
                                       for n_ in n])
         cor = self._coriolis(nu, v, om, nu_r)
-        d = self._damping(t, x, nu_r)
+        d = self._damping(t, x, nu_r, v + om if nu_r is nu else nu_r.tolist())
         # g(η) = −[f_g + f_b ; r_g × f_g + r_b × f_b] with f = (W, −B) · Rᵀ e_z
         down = R[2]
         fg, fb = [self._W * d_ for d_ in down], [-self._B * d_ for d_ in down]
@@ -233,11 +233,13 @@ class Simulator:
         added = _coriolis_force(vr, omr, (self._M_A @ nu_r).tolist())
         return [c + a_ for c, a_ in zip(cor, added, strict=True)]
 
-    def _damping(self, t: float, x: FloatArray, nu_r: FloatArray) -> list[float]:
-        """D(ν_r)ν_r = (α(ν_r) K) ν_r plus the memory force Σ c_m z_m (FRD, N and N·m)."""
+    def _damping(self, t: float, x: FloatArray, nu_r: FloatArray, nu_r_list: list[float]
+                 ) -> list[float]:
+        """D(ν_r)ν_r = (α(ν_r) K) ν_r plus the memory force Σ c_m z_m (FRD, N and N·m);
+        ``nu_r_list`` is ν_r on Python floats."""
         e = self.effects
         K, c_mem = (self._gain_changed if 0 <= e.damping_change_time <= t else self._gain)
-        d = (self._model.alpha_one(nu_r.tolist()) @ K).reshape(6, 6) @ nu_r
+        d = (self._model.alpha_one(nu_r_list) @ K).reshape(6, 6) @ nu_r
         nm = self._n_mem
         if nm:
             np.add.at(d, self._mem_dofs, c_mem * x[13:13 + nm])
