@@ -85,12 +85,11 @@ def dissipation_points(model: DampingModel, theta: FloatArray, data: FloatArray,
     chunk : int
         Velocities per evaluation of the regressor.
     """
-    grid = envelope(data if flown is None else flown)
     pts, power, on_data = [], [], []
-    for src, is_data in ((data, True), (grid, False)):
-        for start in range(0, len(src), chunk):
-            nu = src[start:start + chunk]
-            g = power_rows(model, nu)
+    grid = (_grid_rows(model, flown, chunk) if flown is not None
+            else _chunk_rows(model, envelope(data), chunk))
+    for rows, is_data in ((_chunk_rows(model, data, chunk), True), (grid, False)):
+        for nu, g in rows:
             P = g @ theta
             bad = P < -1e-9 * (np.abs(g) @ np.abs(theta))
             pts.append(nu[bad])
@@ -98,6 +97,29 @@ def dissipation_points(model: DampingModel, theta: FloatArray, data: FloatArray,
             on_data.append(np.full(int(bad.sum()), is_data))
     order = np.argsort(np.concatenate(power))
     return np.concatenate(pts)[order], np.concatenate(on_data)[order]
+
+
+def _chunk_rows(model: DampingModel, nu: FloatArray, chunk: int
+                ) -> list[tuple[FloatArray, FloatArray]]:
+    """(ν, g(ν)) per chunk of ``chunk`` velocities, g of shape (chunk, p)."""
+    return [(nu[k:k + chunk], power_rows(model, nu[k:k + chunk]))
+            for k in range(0, len(nu), chunk)]
+
+
+# the grid of the last (model, flown envelope, chunk) and its power rows: the online
+# projection checks each estimate on the same grid until a new extreme is flown
+_last_grid: list[tuple[DampingModel, bytes, int, list[tuple[FloatArray, FloatArray]]]] = []
+
+
+def _grid_rows(model: DampingModel, flown: FloatArray, chunk: int
+               ) -> list[tuple[FloatArray, FloatArray]]:
+    """:func:`_chunk_rows` of the :func:`envelope` of ``flown``, the last one kept."""
+    lo_hi = np.stack([flown.min(axis=0), flown.max(axis=0)]).tobytes()
+    if _last_grid and _last_grid[0][0] is model and _last_grid[0][1:3] == (lo_hi, chunk):
+        return _last_grid[0][3]
+    rows = _chunk_rows(model, envelope(flown), chunk)
+    _last_grid[:] = [(model, lo_hi, chunk, rows)]
+    return rows
 
 
 def misfit_report(model: DampingModel, theta: FloatArray, pts: FloatArray,

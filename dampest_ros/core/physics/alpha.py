@@ -185,6 +185,11 @@ class AlphaBank:
         self.any_area = bool(self.area.any())
         self.any_proj = bool(self.proj.any())
         self.any_abs = bool(self.absolute.any())
+        # the bank is a list of products (kinds one, lin, abs, prod, absprod) unless it holds
+        # a norm, an area or a projection: then one sample goes through __call__ as well
+        self._products = None if (self.any_norm or self.any_anorm or self.any_pnorm
+                                  or self.any_area or self.any_proj) else list(
+            zip(self.i.tolist(), self.j.tolist(), self.absolute.tolist(), strict=True))
 
     def __call__(self, nu: FloatArray) -> FloatArray:
         """α for samples ``nu`` (N, 6); returns (N, p)."""
@@ -206,6 +211,18 @@ class AlphaBank:
         if self.any_abs:
             a = np.where(self.absolute, np.abs(a), a)
         return a
+
+    def one(self, nu: list[float]) -> FloatArray:
+        """α for one sample ``nu`` (6 floats); shape (p,), the same numbers as ``__call__``.
+
+        A bank of products is evaluated on Python floats (a simulator calls this four times
+        per step: numpy's per-call overhead would dominate).
+        """
+        if self._products is None:
+            return self(np.array([nu]))[0]
+        aug = [*nu, 1.0]  # ν_6 ≡ 1, as in __call__
+        return np.array([abs(aug[i] * aug[j]) if a else aug[i] * aug[j]
+                         for i, j, a in self._products])
 
 
 def _area(nu: FloatArray, k: NDArray[np.int64], pair: NDArray[np.int64]) -> FloatArray:

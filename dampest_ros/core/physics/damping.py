@@ -370,6 +370,11 @@ class DampingModel:
         (N, n_atoms)."""
         return self._bank(nu)
 
+    def alpha_one(self, nu: list[float]) -> FloatArray:
+        """α(ν) of the static atoms for one sample ν (6 floats), shape (n_atoms,): the row
+        :meth:`alphas` gives, computed without numpy's per-call overhead."""
+        return self._bank.one(nu)
+
     def static_gain(self, theta: FloatArray) -> FloatArray:
         """θ B of the static atoms, flattened: D(ν) = α(ν) K, shape (n_atoms, 36)."""
         return (theta[self._static_idx, None, None] * self._Bs).reshape(-1, 36)

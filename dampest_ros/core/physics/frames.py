@@ -10,6 +10,8 @@ either direction.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -179,6 +181,20 @@ def euler_from_matrix(R: FloatArray) -> FloatArray:
     theta = -np.arcsin(np.clip(R[..., 2, 0], -1.0, 1.0))
     psi = np.arctan2(R[..., 1, 0], R[..., 0, 0])
     return np.stack([phi, theta, psi], axis=-1)
+
+
+def roll_pitch(q: FloatArray) -> tuple[float, float]:
+    """Roll φ and pitch θ (rad) of one attitude quaternion [w, x, y, z], shape (4,).
+
+    The numbers of ``euler_from_matrix(quat_to_matrix(q))[:2]``, computed on Python floats
+    (a controller asks once per tick: numpy's per-call overhead would dominate); the arc
+    functions stay numpy's, whose results can differ from :mod:`math`'s in the last bit.
+    """
+    w, x, y, z = np.asarray(q, dtype=float).tolist()
+    n = math.sqrt(((w * w + x * x) + y * y) + z * z)  # np.linalg.norm's order
+    w, x, y, z = w / n, x / n, y / n, z / n
+    r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    return (float(np.arctan2(r21, r22)), float(-np.arcsin(min(max(r20, -1.0), 1.0))))
 
 
 def matrix_from_euler(angles: FloatArray) -> FloatArray:

@@ -125,8 +125,8 @@ class Thrusters:
         if tm <= 0:
             return command, command, command, command
         decay = np.exp(-h / tm)
-        mid = command + (n0 - command) * np.exp(-h / (2 * tm))
-        end = command + (n0 - command) * decay
+        mid = lag_toward(n0, command, np.exp(-h / (2 * tm)))
+        end = lag_toward(n0, command, decay)
         # mean of n over the step: c + (n₀ − c) (T/h)(1 − e^{−h/T})
         mean = command + (n0 - command) * (tm / h) * (1 - decay)
         return n0, mid, end, mean
@@ -140,6 +140,15 @@ class Thrusters:
 
         # (T(n₀) + 4 T(n_mid) + T(n_end)) / 6
         return (f(start) + 4 * f(mid) + f(end)) / 6.0
+
+    def step_means(self, n0: FloatArray, command: FloatArray, h: float
+                   ) -> tuple[FloatArray, FloatArray]:
+        """What a vehicle logs over steps of length h: the exact mean rotor speed (rev/s) and
+        the mean nominal thrust (N, Simpson), from the speeds at the steps' starts and the
+        commands held over them, shape (..., n) each (:meth:`lag_step`, :meth:`step_thrust`).
+        """
+        start, mid, end, mean = self.lag_step(n0, command, h)
+        return mean, self.step_thrust(start, mid, end)
 
     def speed_for_thrust(self, thrust: FloatArray) -> FloatArray:
         """Inverse curve: n = sign(T) √(|T| / k_T ρ D⁴), saturated at ±n_max (rev/s)."""
@@ -178,3 +187,9 @@ class Thrusters:
             raise ConfigError(f"thrusters.units.{exc.args[0]}", "missing") from None
         except TypeError as exc:
             raise ConfigError("thrusters.model", str(exc)) from None
+
+
+def lag_toward(n0: FloatArray, command: FloatArray, decay: float) -> FloatArray:
+    """c + (n₀ − c) e^{−s/T}: a first-order lag from n₀ toward the command c after a time s,
+    given its decay e^{−s/T} (rev/s), the shape of n₀."""
+    return command + (n0 - command) * decay

@@ -101,6 +101,12 @@ class Effects:
             c = c + self.current_variation * np.array([np.sin(w * t), np.cos(w * t), 0.0])
         return c
 
+    def current_series(self, t: FloatArray) -> FloatArray:
+        """:meth:`current_at` at each time of ``t`` (s, shape (N,)), shape (N, 3) (m/s)."""
+        if not self.current_variation:
+            return np.tile(self.current_at(0.0), (len(t), 1))
+        return np.array([self.current_at(s) for s in np.asarray(t, dtype=float).tolist()])
+
     def as_dict(self) -> dict[str, Any]:
         """The effects that differ from the defaults."""
         default = Effects()

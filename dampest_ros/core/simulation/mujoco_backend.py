@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from dampest_ros.core.physics.frames import quat_to_matrix
 from dampest_ros.core.physics.geometry import Geometry
 from dampest_ros.core.physics.rigid_body import AddedMassTerms, ConfigError, RigidBody, skew
+from dampest_ros.core.physics.thrusters import lag_toward
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.simulation.effects import Effects
 from dampest_ros.core.simulation.trajectory import Trajectory
@@ -222,6 +223,8 @@ class MujocoSimulator:
         MuJoCo steps per control step (default: steps of at most :data:`MAX_STEP`).
     """
 
+    BLOCK = 4096  # steps kept as rows of values before they become log rows
+
     def __init__(self, vehicle: Vehicle, effects: Effects | None = None, dt: float = 0.02,
                  position: FloatArray | None = None, quaternion: FloatArray | None = None,
                  record: bool = True, substeps: int | None = None) -> None:
@@ -272,7 +275,14 @@ class MujocoSimulator:
         self.rotor = np.zeros(self._thr.count)  # what the vehicle logs (undelayed)
         self._rotor_phys = np.zeros(self._thr.count)
         self._record = record
+        tm = self._thr.time_constant
+        # the lag's decay over half a step and over a step (none without a lag)
+        self._decay = ((np.exp(-self.dt / (2 * tm)), np.exp(-self.dt / tm)) if tm > 0
+                       else ())
+        self._nu: FloatArray | None = None
+        # blocks of log rows, and the values of the steps since the last block
         self._log: list[FloatArray] = []
+        self._steps: list[tuple[list[float], FloatArray, FloatArray]] = []
 
     # --- state access (the Simulator interface) ----------------------------------------
 
@@ -289,8 +299,10 @@ class MujocoSimulator:
     @property
     def nu(self) -> FloatArray:
         """Body velocity over ground (FRD), shape (6,)."""
-        R = quat_to_matrix(self.quaternion)
-        return np.concatenate([R.T @ self.data.qvel[:3], self.data.qvel[3:6]])
+        if self._nu is None:  # once per step: the controller asks more than once
+            R = quat_to_matrix(self.quaternion)
+            self._nu = np.concatenate([R.T @ self.data.qvel[:3], self.data.qvel[3:6]])
+        return self._nu.copy()
 
     def current_ned(self, t: float) -> FloatArray:
         """Water current in NED at time t (m/s), shape (3,)."""
@@ -330,8 +342,11 @@ class MujocoSimulator:
             phys_cmd = cmd
         h = self.dt
         # rotor speeds over the step (first-order lag, exact) and the mean thrust (Simpson)
-        n0, n_mid, n_end, n_mean = thr.lag_step(self.rotor, cmd, h)
-        p0, p_mid, p_end, _ = thr.lag_step(self._rotor_phys, phys_cmd, h)
+        n0, n_end = self.rotor, self._lag_end(self.rotor, cmd)
+        p0, p_mid, p_end = ((self._rotor_phys, lag_toward(self._rotor_phys, phys_cmd,
+                                                          self._decay[0]),
+                             self._lag_end(self._rotor_phys, phys_cmd))
+                            if self._decay else (phys_cmd, phys_cmd, phys_cmd))
         tau_thr = thr.wrench(thr.step_thrust(p0, p_mid, p_end, e.thrust_gain_error,
                                              self._deadzone))
         t = self.t
@@ -342,15 +357,9 @@ class MujocoSimulator:
         self._buoy(d)
         if self._record:
             mj.mj_forward(m, d)
-            R = d.xmat[1].reshape(3, 3)
-            nu = np.concatenate([R.T @ d.qvel[:3], d.qvel[3:6]])
-            # ν̇ = [Rᵀ a − ω × v, ω̇] from the NED acceleration of the origin
-            nu_dot = np.concatenate([R.T @ d.qacc[:3] - np.cross(nu[3:], nu[:3]),
-                                     d.qacc[3:6]])
-            hydro = np.concatenate([R.T @ d.qfrc_fluid[:3], d.qfrc_fluid[3:6]])
-            thrust_mean = thr.step_thrust(n0, n_mid, n_end)
-            self._log.append(np.concatenate([[t], d.qpos[:7], nu, nu_dot, tau_thr, n_mean,
-                                             thrust_mean, self.current_ned(t), hydro]))
+            self._steps.append((self._state_row(t, tau_thr), n0, cmd))
+            if len(self._steps) >= self.BLOCK:
+                self._log.append(self._rows())
         for k in range(self.substeps):
             if k:
                 self._buoy(d)
@@ -363,18 +372,49 @@ class MujocoSimulator:
                                 f"({text.strip()}); try a shorter --dt or gentler excitation")
         self.rotor = n_end
         self._rotor_phys = p_end
+        self._nu = None
         self.t = t + h
+
+    def _lag_end(self, n0: FloatArray, command: FloatArray) -> FloatArray:
+        """Rotor speeds at the end of a step from n₀ with the command held (rev/s)."""
+        return lag_toward(n0, command, self._decay[1]) if self._decay else command
+
+    def _state_row(self, t: float, tau_thr: FloatArray) -> list[float]:
+        """[t, qpos (7), ν, ν̇, τ_thr, fluid wrench] of the state ``mj_forward`` left in
+        ``data`` (FRD body), on Python floats."""
+        d = self.data
+        Rt = d.xmat[1].reshape(3, 3).T
+        v = (Rt @ d.qvel[:3]).tolist()
+        w = d.qvel[3:6].tolist()
+        # ν̇ = [Rᵀ a − ω × v, ω̇] from the NED acceleration of the origin
+        a = (Rt @ d.qacc[:3]).tolist()
+        wxv = [w[1] * v[2] - w[2] * v[1], w[2] * v[0] - w[0] * v[2], w[0] * v[1] - w[1] * v[0]]
+        return [t, *d.qpos[:7].tolist(), *v, *w, *(a_ - c for a_, c in zip(a, wxv, strict=True)),
+                *d.qacc[3:6].tolist(), *tau_thr.tolist(), *(Rt @ d.qfrc_fluid[:3]).tolist(),
+                *d.qfrc_fluid[3:6].tolist()]
+
+    def _rows(self) -> FloatArray:
+        """The pending steps as log rows: [t, qpos, ν, ν̇, τ_thr, mean rotor speed, mean
+        thrust, current, fluid wrench], the step means computed for the whole block."""
+        state, n0, cmd = (np.array(c) for c in zip(*self._steps, strict=True))
+        self._steps = []
+        n_mean, thrust_mean = self._thr.step_means(n0, cmd, self.dt)
+        return np.column_stack([state[:, :26], n_mean, thrust_mean,
+                                self.effects.current_series(state[:, 0]), state[:, 26:]])
 
     def take_log(self, keep: int = 1) -> Trajectory:
         """The steps recorded so far, then forget all but the last ``keep`` (streaming)."""
         traj = self.trajectory()
-        self._log = self._log[-keep:] if keep > 0 else []
+        self._log = [self._log[0][-keep:]] if keep > 0 and self._log else []
         return traj
 
     def trajectory(self) -> Trajectory:
         """Ground truth of every recorded step, with MuJoCo's fluid wrench as ``hydro``."""
         nt = self._thr.count
-        log = np.array(self._log) if self._log else np.zeros((0, 26 + 2 * nt + 3 + 6))
+        if self._steps:
+            self._log.append(self._rows())
+        self._log = [np.concatenate(self._log)] if self._log else []
+        log = self._log[0] if self._log else np.zeros((0, 26 + 2 * nt + 3 + 6))
         cols = np.cumsum([1, 3, 4, 6, 6, 6, nt, nt, 3])
         t, pos, quat, nu, nu_dot, tau, rotor, thrust, cur, hydro = np.split(log, cols, axis=1)
         return Trajectory(t=t[:, 0], position=pos, quaternion=quat, nu=nu, nu_dot=nu_dot,

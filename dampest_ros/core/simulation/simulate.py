@@ -9,6 +9,7 @@ Equations (FRD body, NED world, ν_r = ν − ν_c the velocity relative to the 
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Protocol
 
@@ -16,8 +17,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.physics.damping import DampingModel
-from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
+from dampest_ros.core.physics.frames import roll_pitch
 from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.physics.thrusters import lag_toward
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.measurements import Recording
 from dampest_ros.core.simulation.control import VelocityPI
@@ -33,6 +35,18 @@ FloatArray = NDArray[np.float64]
 def _cross(a: list[float], b: list[float]) -> list[float]:
     # a × b on Python floats: cheaper than numpy for single 3-vectors
     return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def _coriolis_force(v: list[float], om: list[float], a: list[float]) -> list[float]:
+    """C(ν)ν = [ω × a1, v × a1 + ω × a2] for ν = [v, ω] and a = M ν, on Python floats
+    (one call for what takes three of :func:`_cross`)."""
+    v0, v1, v2 = v
+    w0, w1, w2 = om
+    a0, a1, a2, a3, a4, a5 = a
+    return [w1 * a2 - w2 * a1, w2 * a0 - w0 * a2, w0 * a1 - w1 * a0,
+            (v1 * a2 - v2 * a1) + (w1 * a5 - w2 * a4),
+            (v2 * a0 - v0 * a2) + (w2 * a3 - w0 * a5),
+            (v0 * a1 - v1 * a0) + (w0 * a4 - w1 * a3)]
 
 
 class Simulator:
@@ -53,6 +67,8 @@ class Simulator:
     record : bool
         Keep the ground truth of every step for :meth:`trajectory`.
     """
+
+    BLOCK = 4096  # steps kept raw before they become log rows (bounds the memory)
 
     def __init__(self, vehicle: Vehicle, effects: Effects | None = None, dt: float = 0.02,
                  position: FloatArray | None = None, quaternion: FloatArray | None = None,
@@ -105,8 +121,11 @@ class Simulator:
                                  np.zeros(self._n_mem), np.zeros(self._n_thr)])
         self.rotor = np.zeros(self._n_thr)  # what the vehicle logs (undelayed)
         self._record = record
+        self._half_dt = self.dt / 2
+        self._decay = np.exp(-self.dt / tm) if tm > 0 else None
+        # blocks of log rows, and the raw values of the steps since the last block
         self._log: list[FloatArray] = []
-        self._last_tau = np.zeros(6)
+        self._steps: list[tuple[float | FloatArray, ...]] = []
 
     # --- state access ------------------------------------------------------------------
 
@@ -138,80 +157,93 @@ class Simulator:
 
     # --- dynamics ----------------------------------------------------------------------
 
-    def _rhs(self, t: float, x: FloatArray, n_cmd: FloatArray) -> FloatArray:
+    def _rhs(self, t: float, x: FloatArray, n_cmd: list[float]) -> tuple[FloatArray, FloatArray]:
+        """ẋ at (t, x) and the thruster wrench τ (FRD), both ndarrays.
+
+        The element-wise arithmetic runs on Python floats (numpy's per-call overhead would
+        dominate on 3- and 6-vectors); the matrix products stay numpy's, so every number is
+        the same as with whole-array numpy arithmetic.
+        """
         nm = self._n_mem
-        w, qx, qy, qz = x[3:7].tolist()
+        xl = x.tolist()
+        w, qx, qy, qz = xl[3:7]
         s = 1.0 / (w * w + qx * qx + qy * qy + qz * qz) ** 0.5
         w, qx, qy, qz = w * s, qx * s, qy * s, qz * s
         R = [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - w * qz), 2 * (qx * qz + w * qy)],
              [2 * (qx * qy + w * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - w * qx)],
              [2 * (qx * qz - w * qy), 2 * (qy * qz + w * qx), 1 - 2 * (qx * qx + qy * qy)]]
         nu = x[7:13]
-        v, om = nu[:3].tolist(), nu[3:].tolist()
-        e = self.effects
-        nu_r = nu
-        nu_c_dot = None
-        if self._has_current:
-            # current in the body frame and its derivative: ν̇_c = −ω × v_c + Rᵀ v̇_c
-            c, c_dot = self.current_ned(t).tolist(), self._current_rate(t).tolist()
-            vc = [R[0][i] * c[0] + R[1][i] * c[1] + R[2][i] * c[2] for i in range(3)]
-            vc_dot = [R[0][i] * c_dot[0] + R[1][i] * c_dot[1] + R[2][i] * c_dot[2]
-                      for i in range(3)]
-            wxv = _cross(om, vc)
-            nu_r = nu - np.array([*vc, 0.0, 0.0, 0.0])
-            nu_c_dot = np.array([vc_dot[i] - wxv[i] for i in range(3)] + [0.0, 0.0, 0.0])
+        v, om = xl[7:10], xl[10:13]
+        nu_r, nu_c_dot = (self._relative(t, R, nu, om) if self._has_current
+                          else (nu, None))
         # thrust of the physical rotors (with the hidden gain error and dead-zone)
-        n = x[13 + nm:]
-        f = self._thrust_gain * n * np.abs(n)
-        if self._deadzone > 0:
-            f[np.abs(n) < self._deadzone] = 0.0
-        tau = self._alloc @ f
-        self._last_tau = tau
-        # C_RB(ν)ν + C_A(ν_r)ν_r, with C(ν)ν = [ν2 × a1, ν1 × a1 + ν2 × a2], a = M ν
-        a = (self._M_RB @ nu).tolist()
-        c1, c2, c3 = _cross(om, a[:3]), _cross(v, a[:3]), _cross(om, a[3:])
-        cor = np.array([c1[0], c1[1], c1[2], c2[0] + c3[0], c2[1] + c3[1], c2[2] + c3[2]])
-        if self._C_A_all:
-            ar = (self._M_A @ nu_r).tolist()
-            vr, omr = nu_r[:3].tolist(), nu_r[3:].tolist()
-            a1, a2, a3 = _cross(omr, ar[:3]), _cross(vr, ar[:3]), _cross(omr, ar[3:])
-            cor += [a1[0], a1[1], a1[2], a2[0] + a3[0], a2[1] + a3[1], a2[2] + a3[2]]
-        else:
-            # the added-mass switches of the vehicle: only the acting part of C_A(ν_r)ν_r
-            cor += self._body.added_coriolis_force(nu_r)
-        # D(ν_r)ν_r = (α(ν_r) K) ν_r plus the memory force Σ c_m z_m
-        K, c_mem = (self._gain_changed if 0 <= e.damping_change_time <= t else self._gain)
-        d = (self._model.alphas(nu_r[None, :]) @ K).reshape(6, 6) @ nu_r
-        z = x[13:13 + nm]
-        if nm:
-            np.add.at(d, self._mem_dofs, c_mem * z)
+        n = xl[13 + nm:]
+        gain, dz = self._thrust_gain, self._deadzone
+        tau = self._alloc @ np.array([0.0 if abs(n_) < dz else gain * n_ * abs(n_)
+                                      for n_ in n])
+        cor = self._coriolis(nu, v, om, nu_r)
+        d = self._damping(t, x, nu_r, v + om if nu_r is nu else nu_r.tolist())
         # g(η) = −[f_g + f_b ; r_g × f_g + r_b × f_b] with f = (W, −B) · Rᵀ e_z
         down = R[2]
         fg, fb = [self._W * d_ for d_ in down], [-self._B * d_ for d_ in down]
         mg, mb = _cross(self._r_g_l, fg), _cross(self._r_b_l, fb)
-        g = np.array([fg[0] + fb[0], fg[1] + fb[1], fg[2] + fb[2],
-                      mg[0] + mb[0], mg[1] + mb[1], mg[2] + mb[2]])
+        g = [fg[0] + fb[0], fg[1] + fb[1], fg[2] + fb[2],
+             mg[0] + mb[0], mg[1] + mb[1], mg[2] + mb[2]]
         # (M_RB + M_A) ν̇ = τ − C_RB ν − C_A ν_r − D ν_r − g + M_A ν̇_c   (g enters as −g(η));
         # without the inertial added-mass effect M_RB ν̇ = τ − C_RB ν − C_A ν_r − D ν_r − g
-        rhs = tau - cor - d + g
+        rhs = np.array([t_ - c_ - d_ + g_ for t_, c_, d_, g_ in
+                        zip(tau.tolist(), cor, d, g, strict=True)])
         if nu_c_dot is not None and self._M_A_dot is not None:
             rhs += self._M_A_dot @ nu_c_dot
-        nu_dot = self._M_inv @ rhs
+        nu_dot = (self._M_inv @ rhs).tolist()
         # kinematics: ṗ = R v, q̇ = ½ q ⊗ (0, ω)
         p_dot = [R[i][0] * v[0] + R[i][1] * v[1] + R[i][2] * v[2] for i in range(3)]
         q_dot = [0.5 * (-qx * om[0] - qy * om[1] - qz * om[2]),
                  0.5 * (w * om[0] + qy * om[2] - qz * om[1]),
                  0.5 * (w * om[1] + qz * om[0] - qx * om[2]),
                  0.5 * (w * om[2] + qx * om[1] - qy * om[0])]
-        out = np.empty_like(x)
-        out[0:3] = p_dot
-        out[3:7] = q_dot
-        out[7:13] = nu_dot
         # memory ż = −λ z + ν_r[dof]; motor lag ṅ = (n_cmd − n)/T_m
+        z_dot = ((-self._mem_rates * x[13:13 + nm] + nu_r[self._mem_dofs]).tolist() if nm
+                 else [])
+        inv_tm = self._inv_tm
+        n_dot = [(c - n_) * inv_tm for c, n_ in zip(n_cmd, n, strict=True)]
+        return np.array(p_dot + q_dot + nu_dot + z_dot + n_dot), tau
+
+    def _relative(self, t: float, R: list[list[float]], nu: FloatArray, om: list[float]
+                  ) -> tuple[FloatArray, FloatArray]:
+        """ν_r = ν − ν_c and ν̇_c = −ω × v_c + Rᵀ v̇_c (FRD), shape (6,) each, with the
+        current's angular part zero."""
+        c, c_dot = self.current_ned(t).tolist(), self._current_rate(t).tolist()
+        vc = [R[0][i] * c[0] + R[1][i] * c[1] + R[2][i] * c[2] for i in range(3)]
+        vc_dot = [R[0][i] * c_dot[0] + R[1][i] * c_dot[1] + R[2][i] * c_dot[2]
+                  for i in range(3)]
+        wxv = _cross(om, vc)
+        return (nu - np.array([*vc, 0.0, 0.0, 0.0]),
+                np.array([vc_dot[i] - wxv[i] for i in range(3)] + [0.0, 0.0, 0.0]))
+
+    def _coriolis(self, nu: FloatArray, v: list[float], om: list[float], nu_r: FloatArray
+                  ) -> list[float]:
+        """C_RB(ν)ν + C_A(ν_r)ν_r (FRD, N and N·m), with C(ν)ν = [ν2 × a1, ν1 × a1 + ν2 × a2],
+        a = M ν."""
+        cor = _coriolis_force(v, om, (self._M_RB @ nu).tolist())
+        if not self._C_A_all:
+            # the added-mass switches of the vehicle: only the acting part of C_A(ν_r)ν_r
+            return (np.array(cor) + self._body.added_coriolis_force(nu_r)).tolist()
+        vr, omr = (v, om) if nu_r is nu else (nu_r[:3].tolist(), nu_r[3:].tolist())
+        added = _coriolis_force(vr, omr, (self._M_A @ nu_r).tolist())
+        return [c + a_ for c, a_ in zip(cor, added, strict=True)]
+
+    def _damping(self, t: float, x: FloatArray, nu_r: FloatArray, nu_r_list: list[float]
+                 ) -> list[float]:
+        """D(ν_r)ν_r = (α(ν_r) K) ν_r plus the memory force Σ c_m z_m (FRD, N and N·m);
+        ``nu_r_list`` is ν_r on Python floats."""
+        e = self.effects
+        K, c_mem = (self._gain_changed if 0 <= e.damping_change_time <= t else self._gain)
+        d = (self._model.alpha_one(nu_r_list) @ K).reshape(6, 6) @ nu_r
+        nm = self._n_mem
         if nm:
-            out[13:13 + nm] = -self._mem_rates * z + nu_r[self._mem_dofs]
-        out[13 + nm:] = (n_cmd - n) * self._inv_tm
-        return out
+            np.add.at(d, self._mem_dofs, c_mem * x[13:13 + nm])
+        return list(d.tolist())
 
     def step(self, rotor_command: FloatArray) -> None:
         """Advance one step ``dt`` with the rotor speed command held (rev/s).
@@ -220,40 +252,53 @@ class Simulator:
         ----------
         rotor_command : ndarray, shape (n_thrusters,)
         """
-        cmd = np.clip(np.asarray(rotor_command, dtype=float), -self._thr.n_max, self._thr.n_max)
-        tm = self._thr.time_constant
+        n_max = self._thr.n_max
+        # np.clip, on Python floats
+        cmd_l = [min(max(c, -n_max), n_max) for c in np.asarray(rotor_command, float).tolist()]
+        cmd = np.array(cmd_l)
         if self._delay_steps:
             self._cmd_queue.append(cmd)
             phys_cmd = self._cmd_queue.popleft()
+            phys_l = phys_cmd.tolist()
         else:
-            phys_cmd = cmd
-        if tm <= 0:
+            phys_cmd, phys_l = cmd, cmd_l
+        if self._decay is None:
             # no motor lag: the rotors turn at the command during this whole step, and the
             # logged speed (undelayed) already shows it in this step's record
             self.x[13 + self._n_mem:] = phys_cmd
             self.rotor = cmd
-        h, t, x = self.dt, self.t, self.x
-        k1 = self._rhs(t, x, phys_cmd)
-        tau1 = self._last_tau
-        k2 = self._rhs(t + h / 2, x + h / 2 * k1, phys_cmd)
-        tau2 = self._last_tau
-        k3 = self._rhs(t + h / 2, x + h / 2 * k2, phys_cmd)
-        tau3 = self._last_tau
-        k4 = self._rhs(t + h, x + h * k3, phys_cmd)
+        h, h2, t, x = self.dt, self._half_dt, self.t, self.x
+        k1, tau1 = self._rhs(t, x, phys_l)
+        k2, tau2 = self._rhs(t + h2, x + h2 * k1, phys_l)
+        k3, tau3 = self._rhs(t + h2, x + h2 * k2, phys_l)
+        k4, tau4 = self._rhs(t + h, x + h * k3, phys_l)
         # RK4: x_{k+1} = x_k + h/6 (k1 + 2 k2 + 2 k3 + k4); the same weights give the mean τ
-        # that the step applied
-        self.x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-        self.x[3:7] /= np.linalg.norm(self.x[3:7])
-        # the logged rotor follows the undelayed command exactly: n(s) = c + (n₀ − c) e^{−s/T}
-        n0, n_mid, self.rotor, n_mean = self._thr.lag_step(self.rotor, cmd, h)
+        # that the step applied (:meth:`_rows`)
+        x_new = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        quat = x_new[3:7]
+        quat /= math.sqrt(quat.dot(quat))  # np.linalg.norm's arithmetic
+        self.x = x_new
+        n0 = self.rotor
+        if self._decay is not None:
+            # the logged rotor follows the undelayed command exactly: n(s) = c + (n₀ − c) e^{−s/T}
+            self.rotor = lag_toward(n0, cmd, self._decay)
         if self._record:
-            tau_mean = (tau1 + 2 * tau2 + 2 * tau3 + self._last_tau) / 6.0
-            # step means of the logged rotor speed (exact) and nominal thrust (Simpson)
-            thrust_mean = self._thr.step_thrust(n0, n_mid, self.rotor)
-            self._log.append(np.concatenate([[t], x[:13], k1[7:13], tau_mean, n_mean,
-                                             thrust_mean, self.current_ned(t),
-                                             x[13:13 + self._n_mem]]))
+            self._steps.append((t, x, k1, tau1, tau2, tau3, tau4, n0, cmd))
+            if len(self._steps) >= self.BLOCK:
+                self._log.append(self._rows())
         self.t = t + h
+
+    def _rows(self) -> FloatArray:
+        """The pending steps as log rows, whole arrays at once (the same numbers as step by
+        step): [t, p, q, ν, ν̇, mean τ, mean rotor speed, mean thrust, current, memory]."""
+        nm = self._n_mem
+        t, x, k1, tau1, tau2, tau3, tau4, n0, cmd = (np.array(c) for c in
+                                                    zip(*self._steps, strict=True))
+        self._steps = []
+        tau_mean = (tau1 + 2 * tau2 + 2 * tau3 + tau4) / 6.0
+        n_mean, thrust_mean = self._thr.step_means(n0, cmd, self.dt)
+        return np.column_stack([t, x[:, :13], k1[:, 7:13], tau_mean, n_mean, thrust_mean,
+                                self.effects.current_series(t), x[:, 13:13 + nm]])
 
     def take_log(self, keep: int = 1) -> Trajectory:
         """The steps recorded so far as a Trajectory, then forget all but the last ``keep``.
@@ -262,7 +307,7 @@ class Simulator:
         kept steps let the next chunk interpolate across the boundary.
         """
         traj = self.trajectory()
-        self._log = self._log[-keep:] if keep > 0 else []
+        self._log = [self._log[0][-keep:]] if keep > 0 and self._log else []
         return traj
 
     def wrench_to_command(self, tau: FloatArray) -> FloatArray:
@@ -272,7 +317,10 @@ class Simulator:
     def trajectory(self) -> Trajectory:
         """Ground truth of every recorded step."""
         nt, nm = self._n_thr, self._n_mem
-        log = np.array(self._log) if self._log else np.zeros((0, 26 + 2 * nt + 3 + nm))
+        if self._steps:
+            self._log.append(self._rows())
+        self._log = [np.concatenate(self._log)] if self._log else []
+        log = self._log[0] if self._log else np.zeros((0, 26 + 2 * nt + 3 + nm))
         cols = np.cumsum([1, 3, 4, 6, 6, 6, nt, nt, 3])
         t, pos, quat, nu, nu_dot, tau, rotor, thrust, cur, mem = np.split(log, cols, axis=1)
         return Trajectory(t=t[:, 0], position=pos, quaternion=quat, nu=nu, nu_dot=nu_dot,
@@ -357,8 +405,8 @@ def run(vehicle: Vehicle, excitation: Excitation | ProtocolStream, effects: Effe
     sub = max(1, round(dt_c / dt))
     ctrl = VelocityPI.for_vehicle(vehicle, excitation.bandwidth)
     for k in range(excitation.ticks):
-        roll, pitch, _ = euler_from_matrix(quat_to_matrix(sim.quaternion))
-        cmd = excitation.command(k, sim.nu, float(roll), float(pitch), float(sim.position[2]))
+        roll, pitch = roll_pitch(sim.quaternion)
+        cmd = excitation.command(k, sim.nu, roll, pitch, float(sim.position[2]))
         tau = ctrl(cmd, sim.nu, dt_c) + excitation.feedforward(k)
         rotor = sim.wrench_to_command(tau)
         for _ in range(sub):

@@ -20,10 +20,10 @@ from numpy.typing import NDArray
 from dampest_ros.core.physics.frames import (
     body_vec,
     continuous,
-    euler_from_matrix,
     quat_frd_ned_to_flu_enu,
     quat_mul,
     quat_to_matrix,
+    roll_pitch,
     small_rotation,
     world_vec,
     wxyz_to_xyzw,
@@ -327,8 +327,8 @@ class LiveSimulation:
                 tau = self._cmd
                 self.external_steps += 1
             else:
-                roll, pitch, _ = euler_from_matrix(quat_to_matrix(sim.quaternion))
-                ref = ex.command(self.k, sim.nu, float(roll), float(pitch),
+                roll, pitch = roll_pitch(sim.quaternion)
+                ref = ex.command(self.k, sim.nu, roll, pitch,
                                  float(sim.position[2]))
                 tau = self.controller(ref, sim.nu, self.dt_control) + ex.feedforward(self.k)
             rotor = sim.wrench_to_command(tau)

@@ -63,3 +63,30 @@ def test_the_projection_is_the_information_weighted_nearest_dissipative_estimate
     # the truth is dissipative, so it is no nearer to θ̂ in the metric H
     d_proj, d_true = projected - bad, theta - bad
     assert d_proj @ H @ d_proj <= d_true @ H @ d_true
+
+
+def test_the_kept_grid_follows_the_model_and_the_envelope() -> None:
+    """The power rows of the last grid are kept: changing the envelope or the model and
+    coming back gives the points a fresh computation gives."""
+    model, theta = linear_quadratic()
+    other, other_theta = linear_quadratic()
+    bad = theta.copy()
+    bad[model.parameter_names.index("X_u")] = -30.0
+    none = np.zeros((0, 6))
+    wide = FLOWN * 2.0
+
+    def points(m: DampingModel, th: np.ndarray, flown: np.ndarray) -> np.ndarray:
+        return dissipation_points(m, th, none, flown)[0]
+
+    first = points(model, bad, FLOWN)
+    assert len(first) > 0
+    # the truth, from the rows of the whole grid: −30 X_u generates energy at slow surge
+    G = power_rows(model, envelope(FLOWN))
+    P = G @ bad
+    assert len(first) == int(np.sum(P < -1e-9 * (np.abs(G) @ np.abs(bad))))
+    wider = points(model, bad, wide)
+    assert len(wider) == int(np.sum(power_rows(model, envelope(wide)) @ bad
+                                    < -1e-9 * (np.abs(power_rows(model, envelope(wide)))
+                                               @ np.abs(bad))))
+    assert len(points(other, other_theta, FLOWN)) == 0
+    assert points(model, bad, FLOWN).tobytes() == first.tobytes()

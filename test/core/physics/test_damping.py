@@ -175,6 +175,24 @@ def test_alpha_bank_matches_alpha_call() -> None:
         np.testing.assert_allclose(bank[:, k], a(nu), rtol=0, atol=1e-15)
 
 
+@pytest.mark.parametrize("kinds", [("one", "abs", "lin", "prod", "absprod"),
+                                   ("one", "abs", "norm", "absproj")])
+def test_alpha_bank_one_sample_is_the_row_of_the_whole_call(kinds: tuple[str, ...]) -> None:
+    """Products on Python floats (the first bank), numpy for the rest: the same bits."""
+    make = {"one": Alpha("one"), "abs": Alpha("abs", 5), "lin": Alpha("lin", 0),
+            "prod": Alpha("prod", 0, 1), "absprod": Alpha("absprod", 2, 3),
+            "norm": Alpha("norm"), "absproj": Alpha("absproj", w=(0.6, 0, 0.8, 0, 0, 0))}
+    bank = AlphaBank([make[k] for k in kinds])
+    nu = np.random.default_rng(3).normal(size=(50, 6))
+    whole = bank(nu)
+    for k in range(len(nu)):
+        assert bank.one(nu[k].tolist()).tobytes() == whole[k].tobytes()
+    # known truth: ν = [0.5, −2, 3, −4, 0, −1] gives 1, |r|, u, u v, |w p|
+    if kinds[-1] == "absprod":
+        assert bank.one([0.5, -2.0, 3.0, -4.0, 0.0, -1.0]).tolist() == [1.0, 1.0, 0.5, -1.0,
+                                                                       12.0]
+
+
 # --- Alpha text form ---------------------------------------------------------------------------
 
 

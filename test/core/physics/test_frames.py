@@ -14,6 +14,7 @@ from dampest_ros.core.physics.frames import (
     matrix_to_quat,
     quat_frd_ned_to_flu_enu,
     quat_to_matrix,
+    roll_pitch,
     rotation,
     world_vec,
 )
@@ -188,3 +189,14 @@ def test_attitude_conversion_is_an_involution() -> None:
     q = random_quats(np.random.default_rng(7), 500)
     back = quat_frd_ned_to_flu_enu(quat_frd_ned_to_flu_enu(q))
     assert same_rotation(back, q).max() < 1e-12
+
+
+def test_roll_pitch_is_the_euler_angles_bit_for_bit() -> None:
+    rng = np.random.default_rng(7)
+    q = rng.normal(size=(2000, 4)) * rng.uniform(0.5, 1.5, size=(2000, 1))  # not normalised
+    angles = euler_from_matrix(quat_to_matrix(q))
+    for k in range(len(q)):
+        assert roll_pitch(q[k]) == (float(angles[k, 0]), float(angles[k, 1]))
+    # known truth: roll 0.3, pitch −0.2, yaw 1.1 rad
+    R = matrix_from_euler(np.array([0.3, -0.2, 1.1]))
+    np.testing.assert_allclose(roll_pitch(matrix_to_quat(R)), (0.3, -0.2), rtol=0, atol=1e-15)

@@ -349,3 +349,39 @@ def test_added_mass_switches_reach_the_physics(terms: dict[str, bool]) -> None:
     d["vehicle"].pop("added_mass_terms")
     wrong = target(smp, Vehicle.from_dict(d).body)
     assert np.abs(wrong - d_force).max() > 1e-3 * np.abs(d_force).max()
+
+
+
+def test_log_blocks_and_streaming_give_the_same_trajectory(monkeypatch: pytest.MonkeyPatch
+                                                           ) -> None:
+    """Log rows built per block of steps (any block size) and taken in chunks as the
+    simulator node takes them: the one trajectory, bit for bit; its mean τ is the RK4-weighted
+    mean of the applied thrust, which at a steady command is the thrust itself."""
+    v = Vehicle.from_dict(preset("bluerov2_heavy"))
+    fx = Effects(current=(0.1, 0.0, 0.0), current_variation=0.05, memory=(
+        {"dof": "u", "rate": 2.0, "c": 5.0},), delay=0.04)
+    cmd = np.linspace(-20.0, 20.0, v.thrusters.count)
+
+    def fly(block: int, chunk: int) -> list[Trajectory]:
+        monkeypatch.setattr(Simulator, "BLOCK", block)
+        sim = Simulator(v, fx)
+        parts = []
+        for k in range(1, 61):
+            sim.step(cmd)
+            if k % chunk == 0:
+                parts.append(sim.take_log(keep=1))
+        return parts
+
+    whole = fly(4096, 60)[0]
+    pieces = fly(7, 20)
+    for name in ("t", "position", "quaternion", "nu", "nu_dot", "tau", "rotor_speed", "thrust",
+                 "current", "memory"):
+        joined = np.concatenate([getattr(pieces[0], name)]
+                                + [getattr(p, name)[1:] for p in pieces[1:]])
+        assert joined.tobytes() == np.asarray(getattr(whole, name)).tobytes(), name
+    # the rotors settle (T_m = 0.05 s, 24 of them): the last step's mean thrust is T(n) of
+    # the command, and the applied wrench its allocation
+    thrust = v.thrusters.gain * cmd * np.abs(cmd)
+    np.testing.assert_allclose(whole.thrust[-1], thrust, rtol=1e-9)
+    np.testing.assert_allclose(whole.tau[-1], v.thrusters.wrench(thrust), rtol=0,
+                               atol=1e-9 * np.abs(thrust).max())
