@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from dampest_ros.cli.common import check_outputs, table
+from dampest_ros.cli.common import Elapsed, check_outputs, table
 from dampest_ros.cli.inputs import load_model_for, load_samples
 from dampest_ros.cli.pool import expand_inputs, map_logs_on_dask
 from dampest_ros.core.gap.data import FORCE_UNITS, Chunk, GapData
@@ -255,8 +255,8 @@ def current_refit(data: GapData, result: GapResult) -> RelativeRefit | None:
         return None
     e, p = found[0]
     upd = updated_model(data, result.effects)
-    print("refitting the model's terms at the relative velocity ...", file=sys.stderr)
-    return refit_relative(data, upd.model, upd.theta, e.ned(p), result.r)
+    with Elapsed("refitting the model's terms at the relative velocity"):
+        return refit_relative(data, upd.model, upd.theta, e.ned(p), result.r)
 
 
 def refit_text(rel: RelativeRefit) -> str:
