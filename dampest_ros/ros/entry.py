@@ -16,20 +16,27 @@ import sys
 from functools import partial
 from types import FrameType
 
+#: The signals received while the node's module was imported.
+_received: list[int] = []
+
 
 def _interrupt(signum: int, frame: FrameType | None) -> None:
+    _received.append(signum)
     raise KeyboardInterrupt
 
 
 def run(module: str) -> None:
     """Import ``dampest_ros.ros.<module>`` and call its ``main()``; interrupted while
     importing or after the node has closed: exit 0."""
-    previous = signal.signal(signal.SIGTERM, _interrupt)
+    previous = {s: signal.signal(s, _interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         main = importlib.import_module(f"dampest_ros.ros.{module}").main
     except KeyboardInterrupt:
         sys.exit(0)
-    signal.signal(signal.SIGTERM, previous)
+    for s, handler in previous.items():
+        signal.signal(s, handler)
+    if _received:  # its KeyboardInterrupt was swallowed by an import (a bare except)
+        sys.exit(0)
     try:
         main()
     except KeyboardInterrupt:  # a Ctrl-C after the node had closed (held while it closed)
