@@ -270,3 +270,18 @@ class OutsideSim:
 def outside() -> type[OutsideSim]:
     """The joint terms, sensors and trajectories of the outside-arm tests."""
     return OutsideSim
+
+
+@pytest.fixture(scope="session")
+def linear_roll_torpedo() -> Any:
+    """torpedo_auv with purely linear roll damping (K_p = 0.5885, K_pp = 0): a lightly damped
+    roll mode (0.75 Hz, damping ratio 0.2) whose K_p the preprocessing must not bias."""
+    from dataclasses import replace
+
+    from dampest_ros.io.yaml_io import load_vehicle
+
+    vehicle = load_vehicle("torpedo_auv")
+    names = vehicle.damping.parameter_names
+    theta = vehicle.theta.copy()
+    theta[names.index("K_p")], theta[names.index("K_pp")] = 0.5885, 0.0
+    return replace(vehicle, theta=theta)

@@ -511,8 +511,8 @@ def test_rls_is_the_batch_estimate_on_both_backends(name: str, backend: str,
 @pytest.mark.slow
 @pytest.mark.parametrize("sensors,rate", [(CLEAN, 10.0), (SensorConfig(), 10.0), (CLEAN, 50.0)],
                          ids=["clean-10Hz", "noisy-10Hz", "clean-50Hz"])
-def test_lightly_damped_roll_from_thrust_telemetry_is_unbiased(sensors: SensorConfig,
-                                                               rate: float) -> None:
+def test_lightly_damped_roll_from_thrust_telemetry_is_unbiased(
+        sensors: SensorConfig, rate: float, linear_roll_torpedo: Vehicle) -> None:
     """torpedo_auv's roll mode (0.75 Hz, damping ratio 0.2) with purely linear roll damping
     K_p = 0.5885, native, protocol B 300 s, seed 1, RLS (λ = 1). 10 Hz thruster telemetry:
     K_p 0.5899 ± 0.0011 noise-free, 0.5896 ± 0.0017 noisy; M_q 1.989 ± 0.008 and
@@ -524,11 +524,7 @@ def test_lightly_damped_roll_from_thrust_telemetry_is_unbiased(sensors: SensorCo
     With ν, ν̇ and τ taken at the sample instant instead of all three averaged over the sample
     period: at 50 Hz Y_v 5.049 ± 0.010, Z_w 5.036 ± 0.009, K_p 0.5903 ± 0.0003; at 10 Hz
     Y_v 5.042 ± 0.009 and K_p 0.5913 ± 0.0011 noise-free, σ(K_p) 0.0022 noisy."""
-    vehicle = load_vehicle("torpedo_auv")
-    names = vehicle.damping.parameter_names
-    theta = vehicle.theta.copy()
-    theta[names.index("K_p")], theta[names.index("K_pp")] = 0.5885, 0.0
-    vehicle = replace(vehicle, theta=theta)
+    vehicle = linear_roll_torpedo
     traj = run(vehicle, make_excitation("B", vehicle, 300.0, seed=1))
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity,
                   replace(sensors, thruster_rate=rate), seed=1)

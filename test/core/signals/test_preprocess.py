@@ -203,17 +203,15 @@ def test_window_means_give_back_the_signal_without_loss_or_phase() -> None:
                                / 0.02, rtol=0.0, atol=1e-4)
 
 
-def test_lightly_damped_roll_from_slow_thrust_telemetry_is_unbiased() -> None:
+def test_lightly_damped_roll_from_slow_thrust_telemetry_is_unbiased(
+        linear_roll_torpedo: Vehicle) -> None:
     """torpedo_auv's roll mode (0.75 Hz, damping ratio 0.2) with purely linear roll damping
     K_p = 0.5885, flown with protocol B and 10 Hz thruster telemetry, noise-free sensors,
     bag route: K_p within 2σ and 0.3 % of the truth (0.5887 ± 0.0008, M_q 1.999 ± 0.014).
     With τ interpolated linearly between window centres: K_p 0.5803 ± 0.0016 (5 σ low),
     M_q 2.556 ± 0.086 (6.5 σ high)."""
-    vehicle = load_vehicle("torpedo_auv")
+    vehicle = linear_roll_torpedo
     names = vehicle.damping.parameter_names
-    theta = vehicle.theta.copy()
-    theta[names.index("K_p")], theta[names.index("K_pp")] = 0.5885, 0.0
-    vehicle = replace(vehicle, theta=theta)
     traj = run(vehicle, make_excitation("B", vehicle, 150.0, seed=1))
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity,
                   replace(QUIET, thruster_rate=10.0), seed=1)
