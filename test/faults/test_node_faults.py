@@ -27,7 +27,11 @@ from std_srvs.srv import Trigger  # noqa: E402
 
 from dampest_ros.core.identification.model import Model  # noqa: E402
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model  # noqa: E402
-from dampest_ros.ros.common import DIAGNOSTICS_TOPIC, ParamNode  # noqa: E402
+from dampest_ros.ros.common import (  # noqa: E402
+    DIAGNOSTICS_TOPIC,
+    DUPLICATE_WINDOW,
+    ParamNode,
+)
 from dampest_ros.ros.controller_node import ControllerNode  # noqa: E402
 from dampest_ros.ros.estimator_node import EstimatorNode  # noqa: E402
 from dampest_ros.ros.model_server_node import ModelServerNode  # noqa: E402
@@ -69,6 +73,24 @@ def start(children: Any, name: str, params: dict[str, Any], log: Path, *extra: s
     args = [a for k, v in params.items() for a in ("-p", f"{k}:={v}")]
     return children.start([sys.executable, "-m", f"dampest_ros.ros.{name}", "--ros-args",
                            *args, *extra], log=log, env=children.ros_env(DOMAIN))
+
+
+def on_graph(node: tuple[str, str], monkeypatch: pytest.MonkeyPatch, timeout: float = 60.0
+             ) -> None:
+    """Wait until ``node`` (name, namespace) is on DOMAIN's graph (localhost)."""
+    monkeypatch.setenv("ROS_DOMAIN_ID", DOMAIN)
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    probe = rclpy.create_node("test_node_faults_probe", context=context)
+    try:
+        end = time.monotonic() + timeout
+        while node not in probe.get_node_names_and_namespaces():
+            assert time.monotonic() < end, f"{node} not on the graph within {timeout} s"
+            time.sleep(0.1)
+    finally:
+        probe.destroy_node()
+        rclpy.shutdown(context=context)
 
 
 # --- bad parameters ----------------------------------------------------------------------------
@@ -161,12 +183,16 @@ def test_every_ranged_and_choice_parameter_is_rejected_at_runtime_with_its_reaso
 # --- two nodes of one name -----------------------------------------------------------------
 
 
-def test_a_second_node_of_the_same_name_is_refused(tmp_path: Path, children: Any) -> None:
+def test_a_second_node_of_the_same_name_is_refused(tmp_path: Path, children: Any,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
     """Was: no warning; a client alternated between two estimators' models. The one that
     starts second logs one line and exits 2; the first runs on and stops cleanly."""
     first = start(children, "controller_node", {}, tmp_path / "first.log", "-r", "__ns:=/dup81")
     try:
-        time.sleep(3.0)
+        # the first on the graph and past its own watch (a loaded machine takes seconds to
+        # start it; a second started inside the first's window makes both refuse)
+        on_graph(("controller_node", "/dup81"), monkeypatch)
+        time.sleep(DUPLICATE_WINDOW + 0.5)
         second = start(children, "controller_node", {}, tmp_path / "second.log", "-r",
                        "__ns:=/dup81")
         assert second.wait(timeout=60) == 2
