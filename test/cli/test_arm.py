@@ -272,3 +272,18 @@ def test_report_draws_trajectory_fit_and_parameters_with_units(
     assert estimate == model.theta[model.parameter_names.index("elbow_joint.Fc")]
     assert estimate == pytest.approx(2.0, rel=0.02)
     assert fc.get_ylabel() == "(N·m)"
+
+
+def test_design_objective_dopt_writes_its_log_det(tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "dopt.yaml"
+    assert main(["arm", "design", "--objective", "dopt", "--harmonics", "2", "--iterations",
+                 "2", "--out", str(out)]) == 0
+    doc = yaml.safe_load(out.read_text())
+    assert doc["objective"] == "dopt" and doc["logdet"] > doc["logdet_random_median"]
+    assert "log det of the column-normalised information matrix" in capsys.readouterr().out
+    # a misspelt objective is argparse's one line and exit 2, no file
+    with pytest.raises(SystemExit) as exc:
+        main(["arm", "design", "--objective", "dopd", "--out", str(tmp_path / "x.yaml")])
+    assert exc.value.code == 2 and not (tmp_path / "x.yaml").exists()
+    assert "invalid choice: 'dopd'" in capsys.readouterr().err

@@ -1,7 +1,8 @@
 """Excitation design of an arm: FFS coefficients that minimise the condition number of the
-base regressor (friction columns included) over one period, within joint position,
-velocity, acceleration and torque limits, by the shared design engine
-(:mod:`dampest_ros.core.simulation.design`: scaling to the limits, L-BFGS-B on log cond, random FFS
+base regressor (friction columns included) over one period, or maximise the log det of its
+column-normalised information matrix (D-optimal), within joint position, velocity,
+acceleration and torque limits, by the shared design engine
+(:mod:`dampest_ros.core.simulation.design`: scaling to the limits, L-BFGS-B, random FFS
 coefficients within the same limits as the baseline).
 """
 
@@ -72,8 +73,9 @@ def design_excitation(arm: ArmModel, base: BaseParameters, nominal: FloatArray,
                       limits: DesignLimits, harmonics: int = 5, base_frequency: float = 0.1,
                       center: FloatArray | None = None, seed: int = 0,
                       iterations: int = 60, points: int | None = None,
-                      baseline: int = 8) -> Design:
-    """Optimise FFS coefficients for the base regressor's condition number.
+                      baseline: int = 8, objective: str = "cond") -> Design:
+    """Optimise FFS coefficients for the base regressor's condition number (``cond``) or
+    D-optimality (``dopt``: log det of its column-normalised information matrix).
 
     Parameters
     ----------
@@ -97,6 +99,8 @@ def design_excitation(arm: ArmModel, base: BaseParameters, nominal: FloatArray,
     points : int, optional
         Grid points per period of the condition number (default 10 per harmonic); the
         limits hold on a grid ten times finer.
+    objective : str
+        ``cond`` or ``dopt`` (:data:`dampest_ros.core.simulation.design.OBJECTIVES`).
 
     Returns
     -------
@@ -105,15 +109,17 @@ def design_excitation(arm: ArmModel, base: BaseParameters, nominal: FloatArray,
     Raises
     ------
     ValueError
-        If the limits cannot be met (a torque limit below what holding the arm at q0
-        takes; names each joint and quantity) or leave no exciting motion.
+        If the objective is unknown, the limits cannot be met (a torque limit below what
+        holding the arm at q0 takes; names each joint and quantity) or leave no exciting
+        motion.
     """
     q0 = 0.5 * (limits.lower + limits.upper) if center is None else np.asarray(center, float)
     n = arm.n
     template = FourierTrajectory(q0, np.zeros((n, harmonics)), np.zeros((n, harmonics)),
                                  float(base_frequency))
     problem = _problem(arm, base, nominal, limits, template, points or 10 * harmonics)
-    return optimise(problem, arm.names, seed=seed, iterations=iterations, baseline=baseline)
+    return optimise(problem, arm.names, seed=seed, iterations=iterations, baseline=baseline,
+                    objective=objective)
 
 
 def within_limits(arm: ArmModel, trajectory: FourierTrajectory, limits: DesignLimits,

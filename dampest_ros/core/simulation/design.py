@@ -1,5 +1,6 @@
 """Excitation design, shared by the arm and the vehicle: finite-Fourier-series (FFS)
-coefficients that minimise the condition number of a regressor over one period, within
+coefficients that minimise the condition number of a regressor over one period (``cond``) or
+maximise the log determinant of its information matrix (``dopt``, D-optimal), within
 position, velocity, acceleration and effort limits (Swevers et al. 1997; Gautier & Khalil
 1992).
 
@@ -19,13 +20,23 @@ arm's base regressor with friction columns, the vehicle's damping regressor), an
 Limits are met by construction: any coefficient vector is first scaled per coordinate so
 that its position excursion, |q̇| and |q̈| over one period reach at most the limits, then as a
 whole until the nominal effort does too (while optimising on the condition number's grid,
-for the result on a grid ten times finer). The optimiser (scipy L-BFGS-B on log cond,
-numerical gradient) therefore searches shapes without constraints, and random coefficients
-put through the same scaling are the fair baseline.
+for the result on a grid ten times finer). The optimiser (scipy L-BFGS-B on log cond or
+−log det, numerical gradient) therefore searches shapes without constraints, and random
+coefficients put through the same scaling are the fair baseline.
+
+The two objectives differ in what they reward. The condition number is the spread of the
+information matrix WᵀW's eigenvalues: it rewards balance and is blind to the overall size of
+the information. D-optimality, log det WᵀW, is the (negative log) volume of the parameters'
+confidence ellipsoid under white noise: it rewards every direction's information, the weakest
+included. Its columns are normalised by the median column RMS of the random baseline
+(W ↦ W S⁻¹, S fixed per problem), which only shifts log det by a constant, so the optimum is
+the same and the number is readable: 0 is a trajectory whose columns are orthogonal with the
+random ones' energy.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -37,6 +48,9 @@ FloatArray = NDArray[np.float64]
 #: (q, q̇, q̈), each (N, n) → an array of N rows per sample: the stacked regressor (R, p)
 #: or the effort (N, m).
 Kinematic = Callable[[FloatArray, FloatArray, FloatArray], FloatArray]
+#: The design objectives: the condition number (minimised) and D-optimality (log det of the
+#: column-normalised information matrix, maximised).
+OBJECTIVES = ("cond", "dopt")
 
 
 @dataclass(frozen=True)
@@ -201,6 +215,12 @@ class Design:
     cond_random : float
         Median condition number of ``baseline`` random trajectories within the same limits.
     iterations : int
+    objective : str
+        What was optimised, one of :data:`OBJECTIVES`.
+    logdet_start, logdet, logdet_random : float
+        log det (WₙᵀWₙ / R) of the start, the result and the median of the random ones, W's
+        R rows over one period and its columns divided by the random trajectories' median
+        column RMS (so that the numbers of two designs of one problem and seed compare).
     """
 
     trajectory: FourierTrajectory
@@ -209,6 +229,10 @@ class Design:
     cond: float
     cond_random: float
     iterations: int
+    objective: str = "cond"
+    logdet_start: float = float("nan")
+    logdet: float = float("nan")
+    logdet_random: float = float("nan")
 
 
 class DesignProblem:
@@ -270,27 +294,66 @@ class DesignProblem:
             traj = traj.with_coefficients(lo * full)
         return traj
 
-    def cond(self, traj: FourierTrajectory) -> float:
-        """Condition number of the stacked regressor over the period grid."""
+    def information(self, traj: FourierTrajectory) -> FloatArray:
+        """Eigenvalues of the information matrix WᵀW / R of the stacked regressor over the
+        period grid, ascending, shape (p,); NaN if W is not finite."""
         assert self.regressor is not None
         W = self.regressor(*traj.evaluate(self.t))
         if not np.all(np.isfinite(W)):
+            return np.full(W.shape[1], np.nan)
+        # eigenvalues of WᵀW (p × p: cheaper than the SVD of W)
+        return np.asarray(np.linalg.eigvalsh(W.T @ W / len(W)), dtype=float)
+
+    def column_rms(self, traj: FourierTrajectory) -> FloatArray:
+        """RMS of each column of the stacked regressor over the period grid, shape (p,)."""
+        assert self.regressor is not None
+        W = self.regressor(*traj.evaluate(self.t))
+        return np.asarray(np.sqrt(np.mean(W ** 2, axis=0)), dtype=float)
+
+    def cond(self, traj: FourierTrajectory) -> float:
+        """Condition number of the stacked regressor over the period grid."""
+        lam = self.information(traj)
+        if not np.all(np.isfinite(lam)):
             return float("inf")
-        # cond(W) = sqrt(λ_max / λ_min) of WᵀW (p × p: cheaper than the SVD of W)
-        lam = np.linalg.eigvalsh(W.T @ W)
+        # cond(W) = sqrt(λ_max / λ_min) of WᵀW
         return float(np.sqrt(lam[-1] / lam[0])) if lam[0] > 0 else float("inf")
+
+    def logdet(self, traj: FourierTrajectory, scale: FloatArray) -> float:
+        """log det (Wₙᵀ Wₙ / R), Wₙ = W diag(scale)⁻¹ (−inf if singular or not finite).
+
+        Parameters
+        ----------
+        traj : FourierTrajectory
+        scale : ndarray, shape (p,)
+            Column units (those of W), fixed per problem.
+        """
+        lam = self.information(traj)
+        if not (np.all(np.isfinite(lam)) and lam[0] > 0):
+            return float("-inf")
+        return float(np.sum(np.log(lam)) - 2.0 * np.sum(np.log(scale)))
 
     def objective(self, x: FloatArray) -> float:
         """log cond of the scaled trajectory (log: the optimiser sees orders of magnitude);
         an unexcited parameter counts as cond 1e17."""
         return float(np.log(min(self.cond(self.scaled(x)), 1e17)))
 
+    def d_objective(self, x: FloatArray, scale: FloatArray) -> float:
+        """−log det of the scaled trajectory's column-normalised information matrix; an
+        unexcited parameter counts as an eigenvalue 1e-34 (cond 1e17) of the strongest."""
+        lam = self.information(self.scaled(x))
+        if not np.all(np.isfinite(lam)) or lam[-1] <= 0:
+            return float(-scale.size * np.log(1e-34))
+        lam = np.maximum(lam, 1e-34 * lam[-1])
+        return float(-(np.sum(np.log(lam)) - 2.0 * np.sum(np.log(scale))))
+
 
 def optimise(problem: DesignProblem, names: tuple[str, ...], seed: int = 0,
              iterations: int = 60, baseline: int = 8,
              effort_names: tuple[str, ...] | None = None,
-             units: tuple[str, str, str, str] = ("rad", "rad/s", "rad/s²", "N m")) -> Design:
-    """Optimise the FFS coefficients of ``problem`` for its regressor's condition number.
+             units: tuple[str, str, str, str] = ("rad", "rad/s", "rad/s²", "N m"),
+             objective: str = "cond") -> Design:
+    """Optimise the FFS coefficients of ``problem`` for its regressor's condition number
+    (``cond``) or the log det of its column-normalised information matrix (``dopt``).
 
     Parameters
     ----------
@@ -305,6 +368,8 @@ def optimise(problem: DesignProblem, names: tuple[str, ...], seed: int = 0,
         Random trajectories whose median condition number is the reference.
     effort_names, units
         As :meth:`DesignLimits.violations`.
+    objective : str
+        One of :data:`OBJECTIVES`.
 
     Returns
     -------
@@ -313,20 +378,28 @@ def optimise(problem: DesignProblem, names: tuple[str, ...], seed: int = 0,
     Raises
     ------
     ValueError
-        If the limits cannot be met (an effort limit below what holding still at q0 takes;
-        names each coordinate and quantity) or leave no motion that excites every parameter.
+        If the objective is unknown, the limits cannot be met (an effort limit below what
+        holding still at q0 takes; names each coordinate and quantity) or leave no motion
+        that excites every parameter.
     """
+    if objective not in OBJECTIVES:
+        raise ValueError(f"unknown design objective {objective!r}; use one of "
+                         + ", ".join(OBJECTIVES))
     n, L = problem.template.a.shape
     rng = np.random.default_rng(seed)
     randoms = [problem.scaled(rng.uniform(-1.0, 1.0, 2 * n * L), fine=True)
                for _ in range(max(baseline, 1))]
     start = randoms[0]
+    rms = np.median([problem.column_rms(r) for r in randoms], axis=0)
+    scale = np.where(rms > 1e-12 * rms.max(), rms, 1.0)
+    fun = (problem.objective if objective == "cond"
+           else functools.partial(problem.d_objective, scale=scale))
     # L-BFGS-B stops when a line search fails at a kink of the scaling (a max over the
     # grid); it restarts from where it stopped until the iterations are spent or a restart
     # gains nothing
     x, f, used = problem.scaled(start.coefficients).coefficients, np.inf, 0
     while used < iterations:
-        sol = scipy.optimize.minimize(problem.objective, x, method="L-BFGS-B",
+        sol = scipy.optimize.minimize(fun, x, method="L-BFGS-B",
                                       options={"maxiter": iterations - used, "eps": 1e-6})
         used += max(int(sol.nit), 1)
         if not sol.fun < f - 1e-4:
@@ -345,4 +418,6 @@ def optimise(problem: DesignProblem, names: tuple[str, ...], seed: int = 0,
         raise ValueError("the limits leave no motion that excites every parameter (effort "
                          "limits barely above holding still at q0?); widen them")
     return Design(best, start, problem.cond(start), cond,
-                  float(np.median([problem.cond(r) for r in randoms])), used)
+                  float(np.median([problem.cond(r) for r in randoms])), used, objective,
+                  problem.logdet(start, scale), problem.logdet(best, scale),
+                  float(np.median([problem.logdet(r, scale) for r in randoms])))
