@@ -56,7 +56,7 @@ COMMANDS: dict[str, Command] = {
                     "dampest_ros.cli.live:run"),
     "live": Command("online pipeline (sim, preprocess, RLS, controller) in one process",
                     "dampest_ros.cli.live_options:add_arguments", "dampest_ros.cli.live:run"),
-    "arm": Command("6-axis arm: design excitation, simulate in MuJoCo, identify dynamic "
+    "arm": Command("an arm: design excitation, simulate in MuJoCo, identify dynamic "
                    "parameters and joint friction", "dampest_ros.cli.arm:add_arguments",
                    "dampest_ros.cli.arm:run"),
 }

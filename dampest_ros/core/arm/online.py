@@ -6,7 +6,7 @@ Joint samples arrive in any pieces. They are filtered exactly as offline
 (:func:`dampest_ros.core.arm.identify.filter_joints`) in windows that reach ``margin`` =
 10 / cutoff seconds past the samples they emit, so the stream's rows equal the offline
 ones and the estimate lags the data by that margin plus one hop. Each decimated sample is
-one RLS update with the six joints as its six rows; a joint's row is zeroed where its
+one RLS update with the arm's n joints as its n rows; a joint's row is zeroed where its
 friction does not follow the Coulomb model (:func:`dampest_ros.core.arm.identify.usable_rows`).
 Jittered stamps are resampled onto a uniform grid in each window (as offline); at a gap
 (:func:`dampest_ros.core.arm.identify.gaps`: lost messages, a pause) the samples before it
@@ -36,7 +36,6 @@ from dampest_ros.core.arm.model import ArmModel
 from dampest_ros.core.arm.regressor import regressor
 from dampest_ros.core.online.rls.least_squares import RecursiveLeastSquares, RLSConfig
 from dampest_ros.core.physics.identity import Identity
-from dampest_ros.core.physics.rigid_body import FORCE_NAMES
 from dampest_ros.core.signals.resample import gaps
 
 FloatArray = NDArray[np.float64]
@@ -165,7 +164,8 @@ def default_rls(arm: ArmModel, base: BaseParameters, theta: FloatArray,
     RLSConfig
     """
     return RLSConfig(forgetting_factor=forgetting_factor, adapt_weights=adapt_weights,
-                     noise_var=initial_noise_var(arm, base, theta), trace_max=10.0 * base.size)
+                     noise_var=initial_noise_var(arm, base, theta), trace_max=10.0 * base.size,
+                     row_names=tuple(arm.names))
 
 
 @dataclass(frozen=True)
@@ -221,8 +221,8 @@ class ArmEstimator:
     config : IdentifyConfig
         Filter, decimation and row selection (as offline).
     rls : RLSConfig, optional
-        Forgetting, noise and CUSUM settings of the vehicle's RLS (the arm needs 6 joints:
-        its six rows). Default: :func:`default_rls`.
+        Forgetting, noise and CUSUM settings of the vehicle's RLS with a row per joint
+        (``row_names`` the joints). Default: :func:`default_rls`.
     hop : float
         Seconds of samples emitted per filtering pass.
     identity : Identity, optional
@@ -232,9 +232,6 @@ class ArmEstimator:
     def __init__(self, arm: ArmModel, base: BaseParameters, theta0: FloatArray,
                  std0: FloatArray, config: IdentifyConfig, rls: RLSConfig | None = None,
                  hop: float = 1.0, identity: Identity | None = None) -> None:
-        if arm.n != 6:
-            raise ValueError(f"the RLS core takes six rows per sample; this arm has {arm.n} "
-                             "joints")
         self.arm, self.base, self.config, self.hop = arm, base, config, float(hop)
         self.identity = identity
         rls = rls or default_rls(arm, base, theta0)
@@ -345,9 +342,6 @@ class ArmEstimator:
             # the RLS has reset its covariance (boost_on_alarm); the detector learns the new
             # innovation statistics afresh, so that re-convergence does not alarm again
             self.alarms.append(float(self.rls.monitor.alarm_time or t[-1]))
-            # channel "X bias+" of the vehicle's RLS is row 0 here: the first joint
-            self.alarm_joints.append([
-                f"{self.arm.names[FORCE_NAMES.index(c[0])]}{c[1:]}"
-                for c in self.rls.monitor.channels()])
+            self.alarm_joints.append(self.rls.monitor.channels())
             self.rls.monitor.reset()
         return len(t)

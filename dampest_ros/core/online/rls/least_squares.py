@@ -34,7 +34,7 @@ from dampest_ros.core.online.rls.update import (
     scaled_trace,
     step,
 )
-from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -67,8 +67,12 @@ class RLSConfig:
     trace_max : float
         Bound of Σ_j P_jj / s_j² (s the parameter scales); ≤ 0: p (never above the prior
         when the scales are the prior standard deviations).
-    noise_var : tuple of 6 float
-        Initial per-DOF noise variances r_i (N², N²m²).
+    noise_var : tuple of m float
+        Initial per-row noise variances r_i (N², N²m²); m rows per sample (default 6, the
+        vehicle's DOFs).
+    row_names : tuple of str, optional
+        Names of the m rows (an arm's joints), for the change alarm's channels and the
+        unexcited rows; default (None) the vehicle's: forces X..N and DOFs u..r (m = 6).
     adapt_noise : bool
         Re-estimate r_i from the innovations: r_i = Σ f² ε_i² / Σ f (exponentially weighted)
         with f = r_i / S_ii the share of the innovation variance that is noise. The estimate
@@ -136,6 +140,7 @@ class RLSConfig:
     outlier_gate: float = OUTLIER_GATE
     gate_warmup: int = 250
     gate_window: float = 500.0
+    row_names: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         if not 0.9 <= self.forgetting_factor <= 1.0:
@@ -144,8 +149,9 @@ class RLSConfig:
         if self.forgetting_mode not in FORGETTING_MODES:
             raise ConfigError("forgetting_mode", f"must be one of {FORGETTING_MODES}, got "
                                                  f"{self.forgetting_mode!r}")
-        if len(self.noise_var) != 6 or min(self.noise_var) <= 0:
-            raise ConfigError("noise_var", f"need 6 variances > 0, got {self.noise_var}")
+        if len(self.noise_var) != self.rows or min(self.noise_var) <= 0:
+            raise ConfigError("noise_var", f"need {self.rows} variances > 0 (one per row), "
+                                           f"got {self.noise_var}")
         for name in ("noise_window", "stats_window"):
             if getattr(self, name) < 1:
                 raise ConfigError(name, "must be ≥ 1 sample")
@@ -158,6 +164,21 @@ class RLSConfig:
         if self.gate_warmup < 1 or self.gate_window < 1:
             raise ConfigError("gate_warmup", "need gate_warmup ≥ 1 and gate_window ≥ 1")
 
+    @property
+    def rows(self) -> int:
+        """m, rows per sample."""
+        return 6 if self.row_names is None else len(self.row_names)
+
+    @property
+    def dof_names(self) -> tuple[str, ...]:
+        """What :attr:`Diagnostics.unexcited` names the rows by: DOFs u..r or row_names."""
+        return tuple(DOF_NAMES) if self.row_names is None else self.row_names
+
+    @property
+    def force_names(self) -> tuple[str, ...]:
+        """What the change alarm's channels name the rows by: forces X..N or row_names."""
+        return tuple(FORCE_NAMES) if self.row_names is None else self.row_names
+
 
 @dataclass
 class Diagnostics:
@@ -166,23 +187,23 @@ class Diagnostics:
     Attributes
     ----------
     samples : int
-    innovation_rms : ndarray, shape (6,)
-        EW RMS of the innovations per DOF (N, N·m).
-    noise_std : ndarray, shape (6,)
+    innovation_rms : ndarray, shape (m,)
+        EW RMS of the innovations per DOF (row) (N, N·m).
+    noise_std : ndarray, shape (m,)
         √r_i (N, N·m).
-    excitation : ndarray, shape (6,)
+    excitation : ndarray, shape (m,)
         Per DOF i, the largest RMS of a term's force θ_j Φ_ij over the samples the estimate
         remembers (an exponential window of 1 / (1 − λ) samples; all of them at λ = 1), over
         the noise standard deviation. Per term, not the sum Φθ: terms that a misfit sets
         against each other (X_u < 0 with X_uu > 0) cancel in the sum however hard the DOF is
         flown; and over the estimate's memory, not the last ``stats_window`` samples.
-    excited : ndarray of bool, shape (6,)
+    excited : ndarray of bool, shape (m,)
     covariance_trace : float
         Σ_j P_jj / s_j².
     condition_number : float
         Of the information matrix P⁻¹ scaled to unit diagonal (NaN if not computed).
-    cusum : ndarray, shape (12,)
-        Statistics, ``bias`` channels X..N then ``gain`` channels X..N.
+    cusum : ndarray, shape (2 m,)
+        Statistics, ``bias`` channels X..N then ``gain`` channels X..N (or of the rows).
     alarm : bool
     alarm_channels : list of str
         e.g. ``['Y gain+']``: the damping force in Y became larger than predicted.
@@ -201,11 +222,12 @@ class Diagnostics:
     alarm: bool
     alarm_channels: list[str] = field(default_factory=list)
     outliers: int = 0
+    names: tuple[str, ...] = tuple(DOF_NAMES)
 
     @property
     def unexcited(self) -> list[str]:
-        """Names (u..r) of the DOFs that are not excited."""
-        return [DOF_NAMES[i] for i in range(6) if not self.excited[i]]
+        """Names (u..r, or the rows' names) of the DOFs that are not excited."""
+        return [self.names[i] for i in range(len(self.excited)) if not self.excited[i]]
 
 
 class RecursiveLeastSquares:
@@ -270,18 +292,19 @@ class RecursiveLeastSquares:
         self.P = self.P0.copy()
         self.R = np.array(cfg.noise_var, dtype=float)  # estimated noise variances
         self.R_w = self.R.copy()  # variances that weight the update
-        self._phi2 = np.zeros((6, self.n_params))  # Σ Φ² per row and parameter
-        self._term2 = np.zeros((6, self.n_params))  # mean of (θ_j Φ_ij)² over the memory
+        m = cfg.rows
+        self._phi2 = np.zeros((m, self.n_params))  # Σ Φ² per row and parameter
+        self._term2 = np.zeros((m, self.n_params))  # mean of (θ_j Φ_ij)² over the memory
         self.n = 0
         self._e2 = self.R.copy()  # EW mean of ε², seeded with the prior noise
         # weighted EW estimate of r; the prior counts as 1 % of one informative sample
         self._r_num = 0.01 * self.R
-        self._r_den = np.full(6, 0.01)
-        self.correlation = CorrelationFactor(cfg.correlation_block, cfg.correlation_prior)
+        self._r_den = np.full(m, 0.01)
+        self.correlation = CorrelationFactor(cfg.correlation_block, cfg.correlation_prior, m)
         self.monitor = InnovationMonitor(cfg.cusum_block, cfg.cusum_drift, cfg.cusum_threshold,
-                                         cfg.cusum_window, cfg.cusum_warmup)
-        self.gate = OutlierGate(cfg.outlier_gate, cfg.gate_warmup, cfg.gate_window)
-        self.last_innovation = np.zeros(6)
+                                         cfg.cusum_window, cfg.cusum_warmup, cfg.force_names)
+        self.gate = OutlierGate(cfg.outlier_gate, cfg.gate_warmup, cfg.gate_window, m)
+        self.last_innovation = np.zeros(m)
         self.skipped = 0
         self.boosts = 0
 
@@ -298,7 +321,7 @@ class RecursiveLeastSquares:
 
     @property
     def parameter_dof(self) -> NDArray[np.int64]:
-        """The DOF (0..5) each parameter acts on most in the data so far, shape (p,)."""
+        """The DOF (row 0..m−1) each parameter acts on most in the data so far, shape (p,)."""
         return np.asarray(np.argmax(self._phi2, axis=0), dtype=np.int64)
 
     @property
@@ -327,20 +350,20 @@ class RecursiveLeastSquares:
 
         Parameters
         ----------
-        Phi : ndarray, shape (n, 6, p)
-        y : ndarray, shape (n, 6)
+        Phi : ndarray, shape (n, m, p)
+        y : ndarray, shape (n, m)
             Raw target (N, N·m).
         """
         return self.gate(np.asarray(Phi, dtype=float), np.asarray(y, dtype=float), self.theta,
                          self.P, self.R / self.R_w)
 
     def update(self, Phi: FloatArray, y: FloatArray, t: float | None = None) -> FloatArray:
-        """Process one sample; returns the innovation y − Φθ (6,) (before the update).
+        """Process one sample; returns the innovation y − Φθ (m,) (before the update).
 
         Parameters
         ----------
-        Phi : ndarray, shape (6, p)
-        y : ndarray, shape (6,)
+        Phi : ndarray, shape (m, p)
+        y : ndarray, shape (m,)
         t : float, optional
             Time of the sample (s), recorded with the first alarm.
 
@@ -353,7 +376,7 @@ class RecursiveLeastSquares:
         y = np.asarray(y, dtype=float)
         if not np.isfinite(Phi.sum() + y.sum()):
             self.skipped += 1
-            return np.full(6, np.nan)
+            return np.full(len(y), np.nan)
         cfg = self.config
         if self.frozen:
             e = y - Phi @ self.theta
@@ -364,7 +387,7 @@ class RecursiveLeastSquares:
                       rho=cfg.directional_rho if cfg.directional_rho > 0 else None)
             if not np.isfinite(r.theta.sum() + r.P.trace()):
                 self.skipped += 1  # defensive: never store a non-finite state
-                return np.full(6, np.nan)
+                return np.full(len(y), np.nan)
             self.theta, self.P, e, S = r.theta, r.P, r.innovation, r.S
         self.n += 1
         self.last_innovation = e
@@ -407,12 +430,12 @@ class RecursiveLeastSquares:
 
     def update_many(self, Phi: FloatArray, y: FloatArray,
                     t: FloatArray | None = None) -> FloatArray:
-        """:meth:`update` over N samples in order; returns the innovations (N, 6).
+        """:meth:`update` over N samples in order; returns the innovations (N, m).
 
         Parameters
         ----------
-        Phi : ndarray, shape (N, 6, p)
-        y : ndarray, shape (N, 6)
+        Phi : ndarray, shape (N, m, p)
+        y : ndarray, shape (N, m)
         t : ndarray, shape (N,), optional
             Sample times (s).
 
@@ -424,7 +447,7 @@ class RecursiveLeastSquares:
         """
         Phi = np.asarray(Phi, dtype=float)
         y = np.asarray(y, dtype=float)
-        out = np.empty((len(y), 6))
+        out = np.empty(y.shape)
         k = 0
         while k < len(y):
             n = self._block_length(Phi[k:k + BLOCK], y[k:k + BLOCK])
@@ -438,7 +461,7 @@ class RecursiveLeastSquares:
         return out
 
     def _block_length(self, Phi: FloatArray, y: FloatArray) -> int:
-        """How many of the next samples (n, 6, p) one block can take exactly: finite ones,
+        """How many of the next samples (n, m, p) one block can take exactly: finite ones,
         while the forgetting is 1/λ at every step (0: sample by sample)."""
         cfg = self.config
         if self.frozen or cfg.forgetting_mode != "exponential" or cfg.adapt_weights:
@@ -455,7 +478,7 @@ class RecursiveLeastSquares:
 
     def _update_block(self, Phi: FloatArray, y: FloatArray, t: FloatArray | None,
                       out: FloatArray) -> int:
-        """Samples (n, 6, p) as one block; returns how many were taken (fewer when a change
+        """Samples (n, m, p) as one block; returns how many were taken (fewer when a change
         alarm boosts P after one of them; 0 when the block is not finite)."""
         cfg = self.config
         b = block_update(self.theta, self.P, Phi, y, self.lam, self.R_w)
@@ -467,7 +490,7 @@ class RecursiveLeastSquares:
         if cfg.adapt_noise:
             R_prev, num, den = self._noise_path(e, b.S_diag)
         else:
-            R_prev = np.broadcast_to(self.R, (n, 6))
+            R_prev = np.broadcast_to(self.R, y.shape)
         s_diag = b.S_diag * (R_prev / self.R_w)
         force = np.einsum("jip,jp->ji", Phi, b.thetas)
         term = (Phi * b.thetas[:, None, :]).reshape(n, -1)
@@ -497,7 +520,7 @@ class RecursiveLeastSquares:
     def _noise_path(self, e: FloatArray, S_diag: FloatArray
                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """The noise estimate of :meth:`update` over n samples: r_i before each sample
-        (n, 6) and the weighted sums Σ f² ε², Σ f after each (n, 6).
+        (n, m) and the weighted sums Σ f² ε², Σ f after each (n, m).
 
         The sums are linear recursions with the constant factor 1 − 1/noise_window (a
         lower-triangular Toeplitz product); only the clipping of ε² at 9 S_ii depends on the
@@ -510,7 +533,7 @@ class RecursiveLeastSquares:
         f = self.R_w / S_diag  # the noise share r_i / S_ii of the innovation variance
         den = T @ f + dk * self._r_den
         e2 = e * e
-        lim = np.full((n, 6), np.inf)  # 9 S_ii with the estimate of the time: clip level
+        lim = np.full(e.shape, np.inf)  # 9 S_ii with the estimate of the time: clip level
         for _ in range(n + 1):
             num = T @ (f * f * np.minimum(e2, lim)) + dk * self._r_num
             R_prev = np.vstack([self.R, np.maximum(num[:-1] / den[:-1], cfg.noise_floor)])
@@ -554,4 +577,5 @@ class RecursiveLeastSquares:
             covariance_trace=scaled_trace(self.P, self.scale),
             condition_number=self.condition_number() if condition else float("nan"),
             cusum=self.monitor.cusum.statistic.copy(), alarm=self.monitor.alarm,
-            alarm_channels=self.monitor.channels(), outliers=self.gate.rejected)
+            alarm_channels=self.monitor.channels(), outliers=self.gate.rejected,
+            names=self.config.dof_names)

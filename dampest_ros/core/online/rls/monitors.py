@@ -37,7 +37,10 @@ from dampest_ros.core.physics.rigid_body import FORCE_NAMES, ConfigError
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-CUSUM_CHANNELS = [f"{f} bias" for f in FORCE_NAMES] + [f"{f} gain" for f in FORCE_NAMES]
+
+def cusum_channels(rows: tuple[str, ...]) -> list[str]:
+    """The CUSUM channel names of rows named ``rows``: ``bias`` then ``gain`` per row."""
+    return [f"{f} bias" for f in rows] + [f"{f} gain" for f in rows]
 
 
 def ew_mean(m0: FloatArray, x: FloatArray, a: FloatArray) -> FloatArray:
@@ -121,23 +124,25 @@ class CorrelationFactor:
         L, samples per block (a few seconds of samples).
     prior : float
         κ₀, the floor (and the factor before the first block is complete).
+    rows : int
+        m, rows per sample (6 DOFs of a vehicle, n joints of an arm).
     """
 
-    def __init__(self, block: int, prior: float = 1.0) -> None:
-        self.block, self.prior = int(block), float(prior)
+    def __init__(self, block: int, prior: float = 1.0, rows: int = 6) -> None:
+        self.block, self.prior, self.rows = int(block), float(prior), int(rows)
         self.reset()
 
     def reset(self) -> None:
         """Forget the blocks."""
-        self._sum = np.zeros(6)  # Σ u of the open block
-        self._sq = np.zeros(6)  # Σ u² of the open block
+        self._sum = np.zeros(self.rows)  # Σ u of the open block
+        self._sq = np.zeros(self.rows)  # Σ u² of the open block
         self._n = 0
         self.blocks = 0
-        self._num = np.zeros(6)  # Σ_b B_b²
-        self._den = np.zeros(6)  # Σ u² over the complete blocks
+        self._num = np.zeros(self.rows)  # Σ_b B_b²
+        self._den = np.zeros(self.rows)  # Σ u² over the complete blocks
 
     def update(self, u: FloatArray) -> None:
-        """Add the residuals u (n, 6) of n consecutive samples."""
+        """Add the residuals u (n, m) of n consecutive samples."""
         i = 0
         while i < len(u):
             k = min(len(u) - i, self.block - self._n)
@@ -155,7 +160,7 @@ class CorrelationFactor:
 
     @property
     def factor(self) -> FloatArray:
-        """κ per DOF, shape (6,)."""
+        """κ per row, shape (m,)."""
         with np.errstate(divide="ignore", invalid="ignore"):
             # κ̂ = Σ_b B_b² / Σ_n u_n²
             ratio = np.where(self._den > 0, self._num / self._den, self.prior)
@@ -166,7 +171,8 @@ class InnovationMonitor:
     """Change detector on normalised innovations: block means → robust standardisation →
     AR(1) whitening → two-sided :class:`Cusum`.
 
-    Channels (12): ``bias`` z_i and ``gain`` z_i · sign(ŷ_i) for the six DOFs, z_i = ε_i/√S_ii.
+    Channels (2 m): ``bias`` z_i and ``gain`` z_i · sign(ŷ_i) for the m rows (the six DOFs of
+    a vehicle, the joints of an arm), z_i = ε_i/√S_ii.
     Every ``block`` samples the channel means m_b are standardised by an exponentially
     weighted mean and standard deviation of past block means (``window`` blocks; the update
     is winsorised at ±4σ so that a change enters with bounded weight), then whitened with
@@ -186,46 +192,52 @@ class InnovationMonitor:
         Blocks in the exponential window of the standardisation.
     warmup : int
         Blocks before the CUSUM runs.
+    rows : tuple of str
+        The m rows' names (default the vehicle's forces X..N); the channels are named
+        ``<row> bias`` and ``<row> gain``.
     """
 
     def __init__(self, block: int = 50, drift: float = 1.0, threshold: float = 15.0,
-                 window: float = 120.0, warmup: int = 20) -> None:
+                 window: float = 120.0, warmup: int = 20,
+                 rows: tuple[str, ...] = FORCE_NAMES) -> None:
         self.block, self.window, self.warmup = int(block), float(window), int(warmup)
-        self.cusum = Cusum(12, drift, threshold)
+        self.names = cusum_channels(rows)
+        self.m = len(rows)
+        self.cusum = Cusum(2 * self.m, drift, threshold)
         self.reset()
 
     def reset(self) -> None:
         """Forget the statistics and the alarms."""
         self.cusum.reset()
-        self._sum = np.zeros(12)
+        self._sum = np.zeros(2 * self.m)
         self._n = 0
         self.blocks = 0
-        self._mu = np.zeros(12)
-        self._var = np.zeros(12)
-        self._c1 = np.zeros(12)
-        self._prev = np.zeros(12)
+        self._mu = np.zeros(2 * self.m)
+        self._var = np.zeros(2 * self.m)
+        self._c1 = np.zeros(2 * self.m)
+        self._prev = np.zeros(2 * self.m)
         self.alarm_time: float | None = None
 
     def update(self, z: FloatArray, sign: FloatArray, t: float | None = None) -> BoolArray:
-        """Add one sample's normalised innovations z (6,) and signs of ŷ (6,); returns the
+        """Add one sample's normalised innovations z (m,) and signs of ŷ (m,); returns the
         channels that went into alarm at this sample."""
-        self._sum[:6] += z
-        self._sum[6:] += z * sign
+        self._sum[:self.m] += z
+        self._sum[self.m:] += z * sign
         self._n += 1
         if self._n < self.block:
-            return np.zeros(12, dtype=bool)
+            return np.zeros(2 * self.m, dtype=bool)
         return self._close_block(t)
 
     def update_many(self, z: FloatArray, sign: FloatArray, t: FloatArray | None = None,
                     stop_at_alarm: bool = False) -> tuple[int, bool]:
-        """:meth:`update` for n samples in order, z and sign (n, 6), t (n,); with
+        """:meth:`update` for n samples in order, z and sign (n, m), t (n,); with
         ``stop_at_alarm`` it stops after the first sample that raised an alarm. Returns the
         number of samples taken and whether the last of them raised an alarm."""
         n, i = len(z), 0
         while i < n:
             k = min(n - i, self.block - self._n)
-            self._sum[:6] += z[i:i + k].sum(axis=0)
-            self._sum[6:] += (z[i:i + k] * sign[i:i + k]).sum(axis=0)
+            self._sum[:self.m] += z[i:i + k].sum(axis=0)
+            self._sum[self.m:] += (z[i:i + k] * sign[i:i + k]).sum(axis=0)
             self._n += k
             i += k
             if self._n < self.block:
@@ -248,7 +260,7 @@ class InnovationMonitor:
             self._mu += a * (m - self._mu)
             self._var += a * ((m - self._mu) ** 2 - self._var)
             self._prev = (m - self._mu) / np.sqrt(self._var + 1e-300)
-            return np.zeros(12, dtype=bool)
+            return np.zeros(2 * self.m, dtype=bool)
         sd = np.sqrt(np.maximum(self._var, 1e-300))
         x = (m - self._mu) / sd
         rho = np.clip(self._c1, 0.0, 0.95)
@@ -273,7 +285,7 @@ class InnovationMonitor:
     def channels(self) -> list[str]:
         """Names of the channels in alarm with the sign of the shift, e.g. ``X gain+``."""
         c = self.cusum
-        return [f"{CUSUM_CHANNELS[i]}{'+' if c.alarm_sign[i] > 0 else '-'}"
+        return [f"{self.names[i]}{'+' if c.alarm_sign[i] > 0 else '-'}"
                 for i in np.flatnonzero(c.alarm)]
 
 
@@ -288,15 +300,18 @@ class OutlierGate:
         Samples before the gate opens.
     window : float
         Samples of the exponential window of the innovation variances V.
+    rows : int
+        m, rows per sample.
     """
 
-    def __init__(self, threshold: float, warmup: int, window: float) -> None:
+    def __init__(self, threshold: float, warmup: int, window: float, rows: int = 6) -> None:
         self.threshold, self.warmup, self.window = float(threshold), int(warmup), float(window)
+        self.rows = int(rows)
         self.reset()
 
     def reset(self) -> None:
         """Forget the variances and the count."""
-        self.v = np.zeros(6)
+        self.v = np.zeros(self.rows)
         self.n = 0
         self.rejected = 0
 
@@ -306,25 +321,25 @@ class OutlierGate:
 
         Parameters
         ----------
-        Phi : ndarray, shape (n, 6, p)
+        Phi : ndarray, shape (n, m, p)
             Raw regressors.
-        y : ndarray, shape (n, 6)
+        y : ndarray, shape (n, m)
             Raw targets (N, N·m).
         theta : ndarray, shape (p,)
         P : ndarray, shape (p, p)
             The estimate and its covariance before these samples (weighting-noise units).
-        c : ndarray, shape (6,)
-            Estimated over weighting noise variance per DOF, r̂_i / r_i.
+        c : ndarray, shape (m,)
+            Estimated over weighting noise variance per row, r̂_i / r_i.
 
         Notes
         -----
-        All n samples are judged against θ, P and V as they were before them (O(n · 6p²)).
+        All n samples are judged against θ, P and V as they were before them (O(n · m p²)).
         """
         n = len(y)
         e = y - np.einsum("nip,p->ni", Phi, theta)
         sc = np.sqrt(c)
         S = np.einsum("nip,pq,njq->nij", Phi, P, Phi) * np.outer(sc, sc)
-        S[:, np.arange(6), np.arange(6)] += self.v + 1e-300
+        S[:, np.arange(self.rows), np.arange(self.rows)] += self.v + 1e-300
         reject = np.zeros(n, dtype=bool)
         if self.threshold > 0 and self.n >= self.warmup:
             d2 = np.einsum("ni,ni->n", e, np.linalg.solve(S, e[:, :, None])[:, :, 0])

@@ -1,5 +1,6 @@
-"""The recursive least-squares update of the stacked damping parameters θ, one sample (6 rows)
-at a time, in blocks of samples, and the forgetting that keeps P bounded.
+"""The recursive least-squares update of the stacked damping parameters θ, one sample (m rows:
+the vehicle's 6 DOFs, an arm's joints) at a time, in blocks of samples, and the forgetting
+that keeps P bounded.
 
 Model per sample n (FRD body frame; the target and regressor of
 :mod:`dampest_ros.core.identification.batch`):
@@ -71,9 +72,9 @@ class StepResult:
         Updated estimate.
     P : ndarray, shape (p, p)
         Updated covariance.
-    innovation : ndarray, shape (6,)
+    innovation : ndarray, shape (m,)
         ε = y − Φ θ_prior (N, N·m).
-    S : ndarray, shape (6, 6)
+    S : ndarray, shape (m, m)
         Innovation covariance Φ P⁻ Φᵀ + R.
     """
 
@@ -213,9 +214,9 @@ class BlockResult:
         θ after each sample.
     P : ndarray, shape (p, p)
         Covariance after the last sample.
-    innovation : ndarray, shape (n, 6)
+    innovation : ndarray, shape (n, m)
         ε_j = y_j − Φ_j θ_{j−1} (N, N·m).
-    S_diag : ndarray, shape (n, 6)
+    S_diag : ndarray, shape (n, m)
         Diagonals of the innovation covariances Φ_j P⁻_j Φ_jᵀ + R.
     """
 
