@@ -1,4 +1,4 @@
-"""dampest arm: dynamic parameters and joint friction of a 6-axis arm.
+"""dampest arm: dynamic parameters and joint friction of an arm (revolute joints).
 
 design: finite-Fourier-series excitation optimised for the condition number of the base
 regressor (friction columns included) or its D-optimality (log det of the column-normalised
@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
-from dampest_ros.cli.common import Elapsed, check_outputs, describe, joint_list, table
+from dampest_ros.cli.common import Elapsed, check_outputs, describe, table
 
 if TYPE_CHECKING:
     import numpy as np
@@ -181,7 +181,7 @@ def _design(args: argparse.Namespace) -> int:
     from dampest_ros.core.arm.base import base_parameters
     from dampest_ros.core.arm.design import design_excitation
     from dampest_ros.core.arm.regressor import full_parameters
-    from dampest_ros.io.arm import load_arm, save_trajectory
+    from dampest_ros.io.arm import joint_list, load_arm, save_trajectory
 
     if args.harmonics < 1 or not args.base_frequency > 0 or args.iterations < 0:
         raise ValueError("--harmonics must be >= 1, --base-frequency > 0, --iterations >= 0")
@@ -232,7 +232,13 @@ def _simulate(args: argparse.Namespace) -> int:
         scaled_sensors,
         simulate_arm,
     )
-    from dampest_ros.io.arm import joint_series, load_arm, load_trajectory, write_joint_bag
+    from dampest_ros.io.arm import (
+        joint_list,
+        joint_series,
+        load_arm,
+        load_trajectory,
+        write_joint_bag,
+    )
 
     out = Path(args.out)
     if out.exists():
@@ -305,7 +311,7 @@ def _identify(args: argparse.Namespace) -> int:
     )
     from dampest_ros.core.arm.regressor import full_parameters
     from dampest_ros.core.signals.resample import increasing_runs, interpolate
-    from dampest_ros.io.arm import load_arm
+    from dampest_ros.io.arm import joint_list, load_arm
 
     check_outputs(args, {"out": "arm_model.yaml"}, ("report",))
     if not (np.isfinite(args.coulomb_width) and args.coulomb_width >= 0):
@@ -408,7 +414,7 @@ def _write_params(path: str, args: argparse.Namespace, base: Any, res: Any,
 
     from dampest_ros.core.arm.model import arm_model_identity
     from dampest_ros.core.arm.online import ArmEstimate
-    from dampest_ros.io.arm import save_arm_model
+    from dampest_ros.io.arm import joint_list, save_arm_model
 
     kept = [base.names[k] for k in base.independent]
     est = ArmEstimate(tuple(names), kept, res.wls.theta, res.wls.std,

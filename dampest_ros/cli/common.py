@@ -352,11 +352,6 @@ def speed_table(samples_nu: np.ndarray) -> str:
     return table(("dof", "min", "max", "rms"), rows)
 
 
-def joint_list(text: str) -> tuple[str, ...]:
-    """The joints of a ``--lock`` comma list, in its order."""
-    return tuple(j.strip() for j in text.split(",") if j.strip())
-
-
 def term_list(text: str | None) -> list[str]:
     """The term kinds of a ``--terms`` comma list (empty: all terms)."""
     return [k.strip() for k in (text or "").split(",") if k.strip()]

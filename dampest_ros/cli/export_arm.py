@@ -45,8 +45,7 @@ def run(args: argparse.Namespace, arm_name: str, lock: tuple[str, ...]) -> int:
 def run_import(args: argparse.Namespace) -> int:
     """Read an arm's MJCF or URDF into an arm model file (its base parameters, σ 0, nothing
     marked identified: a description, not a measurement)."""
-    from dampest_ros.cli.common import joint_list
-    from dampest_ros.io.arm import load_arm, save_arm_model
+    from dampest_ros.io.arm import joint_list, load_arm, save_arm_model
     from dampest_ros.io.export.arm import import_arm, imported_estimate
 
     if args.format not in ("mjcf", "urdf"):

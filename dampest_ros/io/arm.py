@@ -92,6 +92,11 @@ def arm_files(name_or_path: str | Path) -> tuple[str, str | None]:
     return path.read_text(), mj.read_text() if mj.is_file() else None
 
 
+def joint_list(text: str) -> tuple[str, ...]:
+    """The joints of a comma list (``--lock``, the node's ``lock``), in its order."""
+    return tuple(j.strip() for j in text.split(",") if j.strip())
+
+
 def load_arm(name_or_path: str | Path, lock: tuple[str, ...] = ()) -> ArmDescription:
     """Load an arm: a preset name (``ur5``) or a URDF path. An MJCF beside the URDF (same
     stem, ``.xml``) is the simulated arm; without one, the MJCF is written from the URDF

@@ -28,6 +28,13 @@ published on /diagnostics at once. Services: ~/reset (std_srvs/Trigger, back to 
 ~/save (Trigger, atomic write of the model file to save_path), ~/freeze (std_srvs/SetBool:
 stop or resume updating). With resume (default) it starts from the model file at save_path
 with its version when that file holds this arm's base parameters.
+
+The arm is the parameter arm with the joints of lock held fixed at 0 (a gripper's: a Panda's
+fingers), as dampest arm --lock. A prior or resumed model file identified with another
+coulomb_width than the node's is refused in one line naming both widths (its Coulomb
+parameters mean another friction form; adopting it quietly would change what the parameter
+says): a prior at start ends the node with status 2, a resumed file is counted
+(resume_refused), a change of either parameter while running is rejected.
 """
 
 from __future__ import annotations
@@ -50,6 +57,7 @@ from dampest_ros.io.arm import (
     ArmDataError,
     arm_model_parameters,
     arm_model_text,
+    joint_list,
     load_arm,
     load_arm_model,
     save_arm_model,
@@ -71,12 +79,9 @@ from dampest_ros.ros.common import (
 HANDOVER = 250
 
 
-def _arm_check(value: Any) -> str | None:
-    try:
-        load_arm(str(value))
-    except ArmDataError as exc:
-        return f"arm: {exc}"
-    return None
+def _width(w: float) -> str:
+    """A Coulomb width as the dry-friction form it means."""
+    return f"{w:g} rad/s (Fc·tanh(q̇/{w:g}))" if w > 0 else "0 (Fc·sign(q̇))"
 
 
 def _prior_check(value: Any) -> str | None:
@@ -96,7 +101,10 @@ class ArmEstimatorNode(EstimatorParamNode):
     PARAMS = (
         Param("arm", "ur5", "arm preset or URDF path (an MJCF beside it, or written from "
               "the URDF): joint names, "
-              "kinematics and the nominal parameters (the prior mean)", check=_arm_check),
+              "kinematics and the nominal parameters (the prior mean)"),
+        Param("lock", "", "joints held fixed at 0 (a gripper's, e.g. "
+              "'panda_finger_joint1,panda_finger_joint2'), comma separated, as dampest arm "
+              "--lock; for a URDF without an MJCF beside it ('': none)"),
         Param("cutoff", 10.0, "zero-phase low-pass of q and torque in Hz (at most "
               "rate_out/2)", low=0.5, high=200.0),
         Param("rate_out", 50.0, "rate the filtered samples are decimated to, one RLS update "
@@ -104,8 +112,8 @@ class ArmEstimatorNode(EstimatorParamNode):
         Param("min_speed", 0.1, "a joint's rows slower than this (rad/s) are not used: dry "
               "friction is undefined at rest", low=0.0, high=10.0),
         Param("coulomb_width", 0.0, "dry friction as Fc·tanh(q̇/width) with this width in "
-              "rad/s (0: Fc·sign(q̇)); the one the prior was identified with", low=0.0,
-              high=10.0),
+              "rad/s (0: Fc·sign(q̇)); must be the one a prior or resumed model file was "
+              "identified with (another is refused, naming both)", low=0.0, high=10.0),
         Param("forgetting_factor", 0.9995, "RLS forgetting factor λ (memory ≈ 1/(1−λ) "
               "samples at rate_out)", low=0.9, high=1.0),
         Param("hop", 1.0, "s of samples filtered per pass (the estimate lags by 10/cutoff + "
@@ -151,7 +159,10 @@ class ArmEstimatorNode(EstimatorParamNode):
         if not 2.0 * self.p("cutoff") <= self.p("rate_out"):
             raise ValueError(f"parameter cutoff {self.p('cutoff')} Hz must be at most "
                              f"rate_out/2 = {0.5 * self.p('rate_out')} Hz")
-        self.arm = load_arm(self.p("arm"))
+        reason = self._arm_problem(self.p("arm"), self.p("lock"))
+        if reason is not None:
+            raise ValueError(f"parameter {reason}")
+        self.arm = load_arm(self.p("arm"), lock=joint_list(self.p("lock")))
         base = base_parameters(self.arm.model)
         theta0 = base.of(full_parameters(self.arm.model, self.arm.dynamics))
         std0 = prior_std(self.arm.model, base, theta0, self.p("prior_std_factor"))
@@ -191,15 +202,46 @@ class ArmEstimatorNode(EstimatorParamNode):
         warning = unchecked(m.identity, self.owner(), source)
         if warning is not None:
             self.get_logger().warning(warning)
+        if m.coulomb_width != self.p("coulomb_width"):
+            return self._width_mismatch(m.coulomb_width, self.p("coulomb_width"))
         if m.parameter_names != self._kept:
             return (f"holds the base parameters of another arm ({len(m.parameter_names)} "
                     f"named, {self.p('arm')} has {len(self._kept)}: {self._kept[:3]} ...)")
+        return None
+
+    @staticmethod
+    def _width_mismatch(file_width: float, node_width: float) -> str:
+        """Why a model file of another Coulomb width is refused, and how to fix it."""
+        return (f"was identified with coulomb_width {_width(file_width)}, this node's "
+                f"coulomb_width is {_width(node_width)}; its Coulomb parameters belong to "
+                f"its form: set -p coulomb_width:={file_width:g}, or identify it again with "
+                f"--coulomb-width {node_width:g}")
+
+    @staticmethod
+    def _arm_problem(arm: str, lock: str) -> str | None:
+        """Why arm ``arm`` with joints ``lock`` locked cannot be loaded (None: it can)."""
+        try:
+            load_arm(str(arm), lock=joint_list(str(lock)))
+        except ArmDataError as exc:
+            return f"{'lock' if joint_list(str(lock)) else 'arm'}: {exc}"
         return None
 
     def _model_values(self) -> dict[str, Any]:
         return arm_model_parameters(self.estimator.estimate(self.version), self.p("arm"))
 
     def check_parameter(self, name: str, value: Any) -> str | None:
+        if name in ("arm", "lock"):
+            return self._arm_problem(*((value, self.p("lock")) if name == "arm"
+                                       else (self.p("arm"), value)))
+        prior = str(value if name == "prior" else self.p("prior")).strip()
+        if name in ("prior", "coulomb_width") and prior:
+            width = float(value) if name == "coulomb_width" else self.p("coulomb_width")
+            try:
+                file_width = load_arm_model(prior).coulomb_width
+            except (ArmDataError, OSError) as exc:
+                return f"prior: {exc}"
+            if file_width != width:
+                return f"prior: {prior} {self._width_mismatch(file_width, width)}"
         if name == "cutoff" and not 2.0 * value <= self.p("rate_out"):
             return f"cutoff must be at most rate_out/2 = {0.5 * self.p('rate_out')} Hz, got " \
                    f"{value}"

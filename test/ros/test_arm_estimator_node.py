@@ -184,7 +184,8 @@ def test_a_bad_parameter_at_start_is_one_line_and_exit_2(tmp_path: Path, childre
     env = {**os.environ, "ROS_DOMAIN_ID": "92", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     for args, says in ((["-p", "arm:=nope"], "neither a preset"),
                        (["-p", "cutoff:=40.0"], "rate_out/2"),
-                       (["-p", f"prior:={tmp_path / 'missing.yaml'}"], "prior:")):
+                       (["-p", f"prior:={tmp_path / 'missing.yaml'}"], "prior:"),
+                       (["-p", "lock:=gripper"], "lock: arm ur5: cannot lock gripper")):
         p = children.run([sys.executable, "-c", "from dampest_ros.ros.entry import "
                           "arm_estimator_node; arm_estimator_node()", "--ros-args", *args],
                          capture_output=True, text=True, env=env, timeout=60)
@@ -206,14 +207,15 @@ def _publish_run(ex, pub, names: tuple[str, ...], run, node,  # type: ignore[no-
         spin_until(ex, lambda s=sent: node.counts["received"] >= s, 10.0)
 
 
-@pytest.mark.parametrize("which", ["ur5", "ur10"])
+@pytest.mark.parametrize("which", ["ur5", "ur10", "panda"])
 def test_from_the_default_prior_the_node_reaches_the_batch_fit(
         which: str, tmp_path: Path, spin_until: Callable[..., bool], outside_arm,
         outside) -> None:  # type: ignore[no-untyped-def]
     """62 s on joint_states at 500 Hz, the node on its defaults: after the data of 60 s its
     estimate is within 3 σ of the batch fit of those 60 s (measured: UR5 0.45 σ median, 1.19
-    σ worst; UR10 0.44 and 1.14 σ), the UR5 on a designed excitation
-    (test/data/ur5_excite.yaml) and the UR10 of example-robot-data from its URDF alone. With
+    σ worst; UR10 0.44 and 1.14 σ; Panda 0.44 and 0.94 σ), the UR5 on a designed excitation
+    (test/data/ur5_excite.yaml) and the UR10 and the Panda (7 joints, its fingers locked
+    with the parameter lock) of example-robot-data from their URDFs alone. With
     the old prior and weights the estimator ended 2.7 σ and 17.7 σ off on the UR5 and 62 σ
     and 925 σ on the UR10, whose URDF states no friction (the same runs at 1 kHz,
     test/core/arm/test_online.py)."""
@@ -226,7 +228,7 @@ def test_from_the_default_prior_the_node_reaches_the_batch_fit(
         arm, dyn, sensors, param = desc.model, desc.dynamics, REALISTIC, "ur5"
         traj, _ = load_trajectory(Path(__file__).parents[1] / "data" / "ur5_excite.yaml", 6)
     else:
-        param, lock = outside_arm("ur10")
+        param, lock = outside_arm(which)
         desc = load_arm(param, lock=lock)
         arm = desc.model
         dyn, sensors = outside.joint_terms(arm), outside.sensors(arm)
@@ -243,6 +245,7 @@ def test_from_the_default_prior_the_node_reaches_the_batch_fit(
     rclpy.init(context=context)
     node = ArmEstimatorNode(context=context, parameter_overrides=[
         Parameter("arm", value=param), Parameter("resume", value=False),
+        Parameter("lock", value=",".join(lock) if which != "ur5" else ""),
         Parameter("save_path", value=str(tmp_path / "m.yaml"))])
     probe = rclpy.create_node("arm_probe", context=context)
     pub = probe.create_publisher(JointState, "joint_states", SENSOR_QOS)
@@ -260,4 +263,54 @@ def test_from_the_default_prior_the_node_reaches_the_batch_fit(
         ex.shutdown()
         node.destroy_node()
         probe.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_lock_and_a_model_file_of_another_coulomb_width(tmp_path: Path, outside_arm
+                                                        ) -> None:  # type: ignore[no-untyped-def]
+    """The parameter lock holds the Panda's fingers as dampest arm --lock does (its 7 joints
+    are the rows); a lock that leaves a prismatic joint or names no joint is rejected. A
+    prior or resumed model file identified with another coulomb_width is refused in one line
+    naming both widths; with the file's width it is taken."""
+    path, lock = outside_arm("panda")
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    common = [Parameter("arm", value=path), Parameter("lock", value=",".join(lock))]
+
+    def node(*more: Parameter) -> ArmEstimatorNode:
+        return ArmEstimatorNode(context=context, parameter_overrides=[*common, *more])
+
+    saved = tmp_path / "tanh.yaml"
+    nodes = [node(Parameter("coulomb_width", value=0.02), Parameter("resume", value=False),
+                  Parameter("save_path", value=str(saved)))]
+    try:
+        first = nodes[0]
+        assert first.names == tuple(f"panda_joint{k}" for k in range(1, 8))
+        assert len(first.estimator.rls.R) == 7
+        for value, says in (("", "arm: arm "), ("panda_finger_joint3", "no joint "
+                                                                        "panda_finger_joint3")):
+            r = first.set_parameters([Parameter("lock", value=value)])[0]
+            assert not r.successful and says in r.reason, r.reason
+        first._save()
+        with pytest.raises(ValueError, match=(
+                r"parameter prior: .*tanh.yaml was identified with coulomb_width 0.02 rad/s "
+                r"\(Fc·tanh\(q̇/0.02\)\), this node's coulomb_width is 0 \(Fc·sign\(q̇\)\); .*"
+                r"set -p coulomb_width:=0.02, or identify it again with --coulomb-width 0")):
+            node(Parameter("prior", value=str(saved)), Parameter("resume", value=False),
+                 Parameter("save_path", value=str(tmp_path / "other.yaml")))
+        resumed = node(Parameter("save_path", value=str(saved)))  # width 0: not resumed
+        nodes.append(resumed)
+        assert resumed.resume_refused == 1 and "coulomb_width 0.02" in resumed.resumed
+        r = resumed.set_parameters([Parameter("prior", value=str(saved))])[0]
+        assert not r.successful and "coulomb_width 0.02 rad/s" in r.reason
+        taken = node(Parameter("coulomb_width", value=0.02), Parameter("resume", value=False),
+                     Parameter("prior", value=str(saved)),
+                     Parameter("save_path", value=str(tmp_path / "other.yaml")))
+        nodes.append(taken)
+        assert np.array_equal(taken.estimator.theta, load_arm_model(saved).theta)
+        r = taken.set_parameters([Parameter("coulomb_width", value=0.05)])[0]
+        assert not r.successful and "coulomb_width 0.02 rad/s" in r.reason
+    finally:
+        for n in nodes:
+            n.destroy_node()
         rclpy.try_shutdown(context=context)
