@@ -61,6 +61,11 @@ def arm_rows(args: argparse.Namespace, tmp: str) -> list[tuple[str, ...]]:
 
 #: Methods of :func:`arm_peer`: ours (WLS), FIGAROH, MuJoCo's sysid.
 PEERS = ("ours", "figaroh", "mujoco_sysid")
+#: Row selections of :func:`arm_peer` for the estimators that fit filtered samples: ``ours``
+#: leaves out the rows the friction model does not cover (|q̇_j| < 0.1 rad/s and 2 / cutoff
+#: s around a reversal of q̇_j: :func:`~dampest_ros.core.arm.identify.usable_rows`), ``all``
+#: fits every row (FIGAROH's own). MuJoCo's sysid rolls the model out: no selection.
+ROWS = ("ours", "all")
 
 
 def _peer_data(seconds: float) -> tuple[Any, Any, Any, Any]:
@@ -83,11 +88,12 @@ def _peer_data(seconds: float) -> tuple[Any, Any, Any, Any]:
     return arm, train, val, REALISTIC
 
 
-def _figaroh(arm: Any, data: Any) -> Any:
+def _figaroh(arm: Any, data: Any, use: Any) -> Any:
     """FIGAROH's base-parameter least squares on our filtered samples: its regressor
     (Pinocchio per sample, with viscous and Coulomb friction, armature and offset columns),
     its elimination of zero columns and its double QR decomposition (base parameters and
-    their least-squares estimate); returns the prediction function of the estimate."""
+    their least-squares estimate) on the rows ``use`` (M, n) of bool; returns the
+    prediction function of the estimate."""
     from figaroh.identification.parameter import (
         add_standard_additional_parameters,
         get_standard_parameters,
@@ -114,8 +120,10 @@ def _figaroh(arm: Any, data: Any) -> Any:
     eliminated, active = get_index_eliminate(W, standard, tol_e=1e-3)
     decomposer = QRDecomposer(tolerance=1e-6)
     # FIGAROH stacks the rows joint after joint: τ = [τ_1(t_1..t_N), τ_2(...), ...]
+    keep = use.T.ravel()
     _, _, _, phi, _ = decomposer.double_decomposition(
-        data.tau.T.ravel(), build_regressor_reduced(W, eliminated), active, standard)
+        data.tau.T.ravel()[keep], build_regressor_reduced(W, eliminated)[keep], active,
+        standard)
     kept = list(decomposer.get_base_indices())
 
     def predict(q: Any, qd: Any, qdd: Any) -> Any:
@@ -211,13 +219,14 @@ def _mujoco_sysid(arm: Any, run: Any, seconds: float, iterations: int) -> Any:
                                     axis=1).ravel()])
 
 
-def arm_peer(method: str, seconds: str, sysid_seconds: str, iterations: str
-             ) -> dict[str, float]:
-    """Identify the same simulated UR5 data with ``method`` (:data:`PEERS`) and validate on
-    another trajectory: wall time of the identification from the filtered samples on (ours,
-    FIGAROH: both get the same zero-phase filtered 50 Hz samples; the filter's time is
-    reported apart) or from the raw samples on (MuJoCo's sysid, which rolls the model out),
-    and per joint the validation torque RMSE over the noise floor (std of the torque sensor's
+def arm_peer(method: str, seconds: str, sysid_seconds: str, iterations: str,
+             rows: str = "ours") -> dict[str, float]:
+    """Identify the same simulated UR5 data with ``method`` (:data:`PEERS`) on the rows
+    ``rows`` (:data:`ROWS`; ours and FIGAROH) and validate on another trajectory: wall time
+    of the identification from the filtered samples on (ours, FIGAROH: both get the same
+    zero-phase filtered 50 Hz samples; the filter's time is reported apart) or from the raw
+    samples on (MuJoCo's sysid, which rolls the model out), the share of rows fitted, and
+    per joint the validation torque RMSE over the noise floor (std of the torque sensor's
     error), all predicted through our regressor (for ours and sysid) or FIGAROH's (its
     base parameters)."""
     import numpy as np
@@ -229,9 +238,12 @@ def arm_peer(method: str, seconds: str, sysid_seconds: str, iterations: str
         identify_arm,
         predict,
         torque_rmse,
+        usable_rows,
     )
     from dampest_ros.core.arm.regressor import full_parameters
 
+    if rows not in ROWS:
+        raise ValueError(f"rows {rows!r} is not one of {ROWS}")
     arm, train, val, _ = _peer_data(float(seconds))
     cfg = IdentifyConfig()
     base = base_parameters(arm.model)
@@ -241,13 +253,15 @@ def arm_peer(method: str, seconds: str, sysid_seconds: str, iterations: str
     data = filter_joints(train.t, train.position, train.effort, cfg)
     filtered = time.perf_counter() - t0
     t0 = time.perf_counter()
+    use = (usable_rows(data.t, data.qd, cfg) if rows == "ours"
+           else np.ones(data.qd.shape, dtype=bool))
     if method == "ours":
         theta = identify_arm(arm.model, base, data, full_parameters(arm.model, arm.dynamics),
-                             cfg).wls.theta
+                             cfg, rows=use).wls.theta
         seconds_taken = time.perf_counter() - t0
         tau = predict(arm.model, base, theta, fv.q, fv.qd, fv.qdd, vcfg)
     elif method == "figaroh":
-        fig = _figaroh(arm, data)
+        fig = _figaroh(arm, data, use)
         seconds_taken = time.perf_counter() - t0
         tau = fig(fv.q, fv.qd, fv.qdd)
     elif method == "mujoco_sysid":
@@ -258,33 +272,40 @@ def arm_peer(method: str, seconds: str, sysid_seconds: str, iterations: str
         raise ValueError(f"method {method!r} is not one of {PEERS}")
     floor = np.std(val.effort - val.tau, axis=0)
     rmse = torque_rmse(val.effort[fv.index], tau, fv.qd, cfg.min_speed)[0]
-    out = {"seconds": seconds_taken, "filter_seconds": filtered}
+    out = {"seconds": seconds_taken, "filter_seconds": filtered,
+           "rows_used": float(use.mean())}
     out.update({f"rmse_{j}": float(r) for j, r in enumerate(rmse / floor)})
     return out
 
 
 def arm_peers_rows(args: argparse.Namespace, tmp: str) -> list[tuple[str, ...]]:
-    """Ours beside FIGAROH and MuJoCo's sysid on the same UR5 data (make bench-peers)."""
+    """Ours beside FIGAROH and MuJoCo's sysid on the same UR5 data (make bench-peers), each
+    estimator that fits filtered samples on both row selections (:data:`ROWS`), so that
+    which rows an estimator is fed and the estimator itself are told apart."""
     rows: list[tuple[str, ...]] = []
     seconds, sysid_seconds, iterations = 60.0, 10.0, 30
-    for method in PEERS:
-        runs = [(seconds, f"{seconds:g} s")]
-        if method == "mujoco_sysid":
-            runs = [(sysid_seconds, f"first {sysid_seconds:g} s, {iterations} iterations")]
-        elif method == "ours":
-            runs.append((sysid_seconds, f"first {sysid_seconds:g} s"))
-        for length, what in runs:
-            label = f"arm peers: {method} on {what} of 1 kHz UR5 data"
-            try:
-                r = child("arm.arm_peer", method, str(length), str(sysid_seconds),
-                          str(iterations))
-            except RuntimeError as exc:  # not installed (make bench-peers) or failed
-                last = str(exc).strip().splitlines()[-1]
-                rows.append((label, "-", f"did not run: {last}", "", ""))
-                continue
-            ratios = " ".join(f"{r['rmse_' + str(j)]:.3f}" for j in range(6))
-            rows.append((label, f"{r['seconds']:.2f} s",
-                         f"validation torque RMSE / noise floor per joint: {ratios} "
-                         f"(filter {r['filter_seconds']:.2f} s)", "beside ours",
-                         f"{r['peak_mb']:.0f}"))
+    runs = [("ours", "ours", seconds, f"{seconds:g} s"),
+            ("ours", "all", seconds, f"{seconds:g} s"),
+            ("ours", "ours", sysid_seconds, f"first {sysid_seconds:g} s"),
+            ("figaroh", "all", seconds, f"{seconds:g} s"),
+            ("figaroh", "ours", seconds, f"{seconds:g} s"),
+            ("mujoco_sysid", "ours", sysid_seconds,
+             f"first {sysid_seconds:g} s, {iterations} iterations")]
+    for method, selection, length, what in runs:
+        fed = ("rollouts of the raw samples" if method == "mujoco_sysid"
+               else f"{selection} rows")
+        label = f"arm peers: estimator {method}, row selection {fed}, on {what} of UR5 data"
+        try:
+            r = child("arm.arm_peer", method, str(length), str(sysid_seconds),
+                      str(iterations), selection)
+        except RuntimeError as exc:  # not installed (make bench-peers) or failed
+            last = str(exc).strip().splitlines()[-1]
+            rows.append((label, "-", f"did not run: {last}", "", ""))
+            continue
+        ratios = " ".join(f"{r['rmse_' + str(j)]:.3f}" for j in range(6))
+        share = "" if method == "mujoco_sysid" else f", {100 * r['rows_used']:.0f} % of rows"
+        rows.append((label, f"{r['seconds']:.2f} s",
+                     f"validation torque RMSE / noise floor per joint: {ratios} "
+                     f"(filter {r['filter_seconds']:.2f} s{share})", "beside ours",
+                     f"{r['peak_mb']:.0f}"))
     return rows

@@ -328,7 +328,8 @@ def filter_stretches(t: FloatArray, position: FloatArray, effort: FloatArray,
 
 
 def accumulate(arm: ArmModel, data: Filtered, config: IdentifyConfig,
-               normals: JointNormals | None = None) -> JointNormals:
+               normals: JointNormals | None = None,
+               rows: NDArray[np.bool_] | None = None) -> JointNormals:
     """Per-joint normal equations of filtered data, regressor built in chunks.
 
     Parameters
@@ -338,6 +339,8 @@ def accumulate(arm: ArmModel, data: Filtered, config: IdentifyConfig,
     config : IdentifyConfig
     normals : JointNormals, optional
         Sums to add to (a second run, a window of a long log).
+    rows : ndarray of bool, shape (M, n), optional
+        The rows to fit; default :func:`usable_rows` (those the friction model covers).
 
     Returns
     -------
@@ -345,7 +348,7 @@ def accumulate(arm: ArmModel, data: Filtered, config: IdentifyConfig,
     """
     p = 14 * arm.n
     normals = normals or JointNormals.empty(arm.n, p)
-    use = usable_rows(data.t, data.qd, config)
+    use = usable_rows(data.t, data.qd, config) if rows is None else rows
     for s in range(0, len(data.t), config.chunk):
         k = slice(s, s + config.chunk)
         Y = regressor(arm, data.q[k], data.qd[k], data.qdd[k], config.coulomb_width)
@@ -410,7 +413,8 @@ class ArmIdentification:
 
 
 def identify_arm(arm: ArmModel, base: BaseParameters, data: Filtered, nominal: FloatArray,
-                 config: IdentifyConfig) -> ArmIdentification:
+                 config: IdentifyConfig, rows: NDArray[np.bool_] | None = None
+                 ) -> ArmIdentification:
     """OLS, WLS and physically consistent fits of filtered joint data.
 
     Parameters
@@ -421,12 +425,14 @@ def identify_arm(arm: ArmModel, base: BaseParameters, data: Filtered, nominal: F
     nominal : ndarray, shape (14 n,)
         Nominal full parameters (the physically consistent fit's start and tie-break).
     config : IdentifyConfig
+    rows : ndarray of bool, shape (M, n), optional
+        The rows to fit (:func:`accumulate`); default those the friction model covers.
 
     Returns
     -------
     ArmIdentification
     """
-    normals = accumulate(arm, data, config)
+    normals = accumulate(arm, data, config, rows=rows)
     # filtered noise has 2 B independent samples per second (B its noise bandwidth)
     per = config.rate_out / (2.0 * _noise_bandwidth(config.cutoff))
     ols = fit_base(normals, base, weighted=False, rows_per_independent=per)
