@@ -221,6 +221,7 @@ OUTSIDE_ARMS = {
     "panda": ("panda_description/urdf/panda.urdf",
               ("panda_finger_joint1", "panda_finger_joint2")),
     "xarm7": ("xarm_description/urdf/xarm7.urdf", ()),
+    "so101": ("so_arm_description/urdf/so101.urdf", ("gripper",)),
 }
 
 

@@ -24,11 +24,21 @@ measured trajectory adds its own 10²–10³: (1/5e-6 × 10³)² ≈ 1e16 is flo
 information matrix was singular. Such a direction is folded like an exact dependency; the
 model error of the fold is its pivot's relative size (5e-6 of a torque). Every kept pivot of
 the arms tried (UR3, UR5, UR10, Z1, Kinova Jaco, Panda, xArm7) is above 0.4 × |R_00|.
+
+The pivot test alone does not catch every such frame. The SO-101 (example-robot-data) writes
+π as 3.14159 and π/2 as 1.5708 in joints whose links are light: a link's mass column, which
+the algebra zeroes, is left at 1e-4 of the largest column, above the column test, and scaled
+to unit norm it took a pivot, leaving two genuine combinations at pivots of 5e-4 and 4e-4
+(49 base parameters where there are 47), and the information matrix of a 60 s trajectory was
+singular. So the split is also made for the arm with its joint frames turned exactly square
+wherever a rotation entry is within ``tol`` of 0 (:func:`square_frames`); when that has fewer
+independent columns, the others were rounding and its split is taken, β coming from the arm
+as it is (least squares). Every arm above has as many either way and keeps its split and β.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg
@@ -117,6 +127,49 @@ def random_states(n: int, samples: int, seed: int
     return q, qd, qdd
 
 
+def square_frames(arm: ArmModel, tol: float = 1e-5) -> ArmModel:
+    """The arm with the rotation entries of its joint frames within ``tol`` of 0 set to 0
+    and each frame made orthonormal again (the nearest rotation): a URDF's rounded π/2 or π
+    (1.5708, 3.14159) turned exactly square, real angles kept. The arm itself when no entry
+    is that close to 0 without being 0.
+
+    Parameters
+    ----------
+    arm : ArmModel
+    tol : float
+        Largest |entry| taken as 0.
+
+    Returns
+    -------
+    ArmModel
+    """
+    r = arm.rotation
+    off = (np.abs(r) <= tol) & (r != 0.0)
+    if not off.any():
+        return arm
+    u, _, vt = np.linalg.svd(np.where(off, 0.0, r))
+    return replace(arm, rotation=u @ vt)
+
+
+def _split(W: FloatArray, tol: float) -> tuple[NDArray[np.int64], NDArray[np.int64],
+                                               FloatArray]:
+    """Independent and dependent columns of a stacked regressor W (R, p) by QR with column
+    pivoting, and β (r, p − r) with W_dep = W_ind β (module docstring)."""
+    # columns of rounding only are zero; the others scaled to unit norm so the pivoting
+    # ranks directions, not units
+    norm = np.linalg.norm(W, axis=0)
+    live = norm > tol * norm.max()
+    norm[~live] = 1.0
+    _, R, perm = scipy.linalg.qr(np.where(live, W / norm, 0.0), mode="economic",
+                                 pivoting=True)
+    diag = np.abs(np.diag(R))
+    r = int(np.sum(diag > tol * diag[0]))
+    ind, dep = perm[:r], perm[r:]
+    # β in the scaled columns, then back: Y_dep = Y_ind β  (β = R11⁻¹ R12, unscaled)
+    beta_s = scipy.linalg.solve_triangular(R[:r, :r], R[:r, r:])
+    return ind, dep, beta_s * norm[dep][None, :] / norm[ind][:, None]
+
+
 def base_parameters(arm: ArmModel, samples: int = 400, seed: int = 0,
                     tol: float = 1e-5) -> BaseParameters:
     """Base parameters of an arm's full regressor (rigid body and joint columns), from
@@ -132,26 +185,25 @@ def base_parameters(arm: ArmModel, samples: int = 400, seed: int = 0,
     tol : float
         Relative tolerance: a column whose norm is at most tol × the largest column norm is
         structurally zero; a pivot |R_kk| at most tol × |R_00| ends the independent set
-        (see the module docstring for why 1e-5).
+        (see the module docstring for why 1e-5); a rotation entry of a joint frame within
+        tol of 0 is 0 for the split (:func:`square_frames`).
 
     Returns
     -------
     BaseParameters
     """
-    W = regressor(arm, *random_states(arm.n, samples, seed)).reshape(samples * arm.n, -1)
-    # columns of rounding only are zero; the others scaled to unit norm so the pivoting
-    # ranks directions, not units
-    norm = np.linalg.norm(W, axis=0)
-    live = norm > tol * norm.max()
-    norm[~live] = 1.0
-    _, R, perm = scipy.linalg.qr(np.where(live, W / norm, 0.0), mode="economic",
-                                 pivoting=True)
-    diag = np.abs(np.diag(R))
-    r = int(np.sum(diag > tol * diag[0]))
-    ind, dep = perm[:r], perm[r:]
-    # β in the scaled columns, then back: Y_dep = Y_ind β  (β = R11⁻¹ R12, unscaled)
-    beta_s = scipy.linalg.solve_triangular(R[:r, :r], R[:r, r:])
-    beta = beta_s * norm[dep][None, :] / norm[ind][:, None]
+    states = random_states(arm.n, samples, seed)
+    W = regressor(arm, *states).reshape(samples * arm.n, -1)
+    ind, dep, beta = _split(W, tol)
+    square = square_frames(arm, tol)
+    if square is not arm:
+        ind_sq, dep_sq, _ = _split(regressor(square, *states).reshape(W.shape), tol)
+        if len(ind_sq) < len(ind):  # the extra columns were rounding: fold them
+            ind, dep = ind_sq, dep_sq
+            norm = np.maximum(np.linalg.norm(W, axis=0), 1e-300)
+            # Y_dep = Y_ind β in the least-squares sense, in scaled columns then back
+            beta = np.linalg.lstsq(W[:, ind] / norm[ind], W[:, dep] / norm[dep],
+                                   rcond=None)[0] * norm[dep][None, :] / norm[ind][:, None]
     order = np.argsort(ind)
     return BaseParameters(parameter_names(arm), ind[order].astype(np.int64),
                           dep.astype(np.int64), beta[order])
