@@ -323,7 +323,7 @@ class _Settled:
 
 def fit_consistent(normals: JointNormals, base: BaseParameters, fit: BaseFit,
                    nominal: FloatArray, prior_weight: float = 1e-5,
-                   max_evaluations: int = 2000) -> ConsistentFit:
+                   max_evaluations: int = 4000) -> ConsistentFit:
     """Physically consistent least squares (log-Cholesky links, bounded joint terms).
 
     Parameters
@@ -338,7 +338,8 @@ def fit_consistent(normals: JointNormals, base: BaseParameters, fit: BaseFit,
     prior_weight : float
         Weight of ‖π − π_nominal‖ (scaled per parameter) against the data's cost.
     max_evaluations : int
-        Residual evaluations after which the solver stops unconverged.
+        Residual evaluations after which the solver stops unconverged (the SO-101's links of
+        0.1 kg took 2542; at 2000 it stopped 10 % above its optimal cost).
 
     Returns
     -------

@@ -67,7 +67,12 @@ def acceptance(name: str, urdf: str, lock: tuple[str, ...], outside: Any
 
 #: The Z1 misses the median bound on this noise draw, and it is the draw: the noise-free
 #: run's error is 0.04 sigma (median), and over noise seeds 1-8 on the same trajectory the
-#: RMS z is 1.04 (0.78-1.44; medians 0.45-1.12, above 1 for seeds 1 and 8).
+#: RMS z is 1.04 (0.78-1.44; medians 0.45-1.12, above 1 for seeds 1 and 8; 1.07 measured
+#: again over all 8 x 58 at once). The spread of
+#: the estimates over those seeds is 1.03 sigma (median over the parameters), and whitened
+#: by the full covariance seed 1 has a median of 0.76 and chi2/b 1.29 (seeds 1-8: 0.58-0.91,
+#: 0.80-1.29; the other arms over seeds 1-4: 0.55-0.87, 0.88-1.48): the 58 errors are
+#: correlated, so the median of one draw moves far.
 Z1_SIGMA = pytest.mark.xfail(strict=True, reason=(
     "z1, noise seed 1: median 1.04 sigma (max 2.88); sigma is calibrated over seeds 1-8 "
     "(RMS z 1.04), two of eight draws have a median above 1"))
@@ -75,7 +80,7 @@ Z1_SIGMA = pytest.mark.xfail(strict=True, reason=(
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["ur10", "kinova", pytest.param("z1", marks=Z1_SIGMA),
-                                  "panda", "xarm7"])
+                                  "panda", "xarm7", "so101"])
 def test_outside_arm_identifies(name: str, outside_arm, outside) -> None:  # type: ignore[no-untyped-def]
     got = acceptance(name, *outside_arm(name), outside)
     assert got["z_median"] <= 1.0 and got["z_max"] <= 3.0
