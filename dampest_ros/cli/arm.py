@@ -31,7 +31,8 @@ EXAMPLES = {
 }
 
 HELP = {
-    "design": "optimise an FFS excitation trajectory for the base regressor's conditioning",
+    "design": "optimise an FFS excitation trajectory for the base regressor's conditioning "
+              "(--objective cond) or D-optimality (--objective dopt)",
     "simulate": "run a trajectory on the MuJoCo arm and write a JointState bag",
     "identify": "identify base parameters and joint friction from a JointState bag or a CSV "
                 "log",
