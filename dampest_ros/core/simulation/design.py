@@ -229,10 +229,10 @@ class Design:
     cond: float
     cond_random: float
     iterations: int
-    objective: str = "cond"
-    logdet_start: float = float("nan")
-    logdet: float = float("nan")
-    logdet_random: float = float("nan")
+    objective: str
+    logdet_start: float
+    logdet: float
+    logdet_random: float
 
 
 class DesignProblem:
