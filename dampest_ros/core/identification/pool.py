@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
 from dampest_ros.core.identification.regression import NormalEquations, accumulate
@@ -200,6 +199,8 @@ def drift(logs: Sequence[LogStatistics], alpha: float = 0.01) -> Drift:
     alpha : float
         Family-wise false-alarm probability over the coefficients.
     """
+    from scipy import stats  # ~1 s to import: not on the workers, which only reduce logs
+
     if len(logs) < 2:
         raise ConfigError("logs", "a drift needs at least two logs")
     order = sorted(range(len(logs)), key=lambda k: (logs[k].start, k))
@@ -307,6 +308,8 @@ def consistency(logs: Sequence[LogStatistics], alpha: float = 0.001) -> Consiste
         somewhat optimistic (χ²/dof up to 2.5 between 60 s native logs of one vehicle), so
         the default is 0.1 %; a log of another vehicle scores p ~ 1e-7.
     """
+    from scipy import stats  # ~1 s to import: not on the workers, which only reduce logs
+
     B = len(logs)
     kept = list(range(B))
     chi2, dof = np.full(B, np.nan), np.zeros(B, dtype=np.int64)
