@@ -41,7 +41,6 @@ from dampest_ros.core.identification.selection import MIN_ERR, Selection, select
 from dampest_ros.core.identification.validate import force_scores
 from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
 from dampest_ros.core.online.estimator import EstimatorConfig, nominal_of
-from dampest_ros.core.online.preprocessor import OnlinePreprocessor
 from dampest_ros.core.online.sample import OnlineConfig
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.mounting import frame_id_note
@@ -285,6 +284,8 @@ def run_rls(args: argparse.Namespace, vehicle: Vehicle) -> int:
     if "wrench" in topics:
         del topics["thrusters"]  # τ from the body wrench: the thruster topic is not read
     rec = read_bag(path, list(topics.values()))
+    # filterpy's Kalman filters import scipy.stats (~1 s): only for --method rls
+    from dampest_ros.core.online.preprocessor import OnlinePreprocessor
     pre = OnlinePreprocessor(vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho,
                              OnlineConfig(rate=args.rate, max_dvl_gap=args.max_gap),
                              mounting=vehicle.mounting)

@@ -458,3 +458,17 @@ def test_delay_auto_on_a_csv_of_samples_finds_and_removes_the_delay(
                                       truth.theta, strict=True):
             if t:
                 assert abs(value - t) <= 3.0 * sd, (delay, name, value, sd, t)
+
+
+def test_identify_imports_neither_scipy_stats_nor_scipy_signal() -> None:
+    """They take ~1 s to import and a plain identify uses neither (quantiles come from
+    scipy.special; filters, spectra and Kalman filters are imported where they are used)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, dampest_ros.cli.identify, dampest_ros.cli.pool; "
+            "print(sorted(m for m in ('scipy.stats', 'scipy.signal', 'scipy.integrate', "
+            "'filterpy', 'matplotlib') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, check=True, cwd=Path(__file__).parents[2])
+    assert out.stdout.strip() == "[]", out.stdout

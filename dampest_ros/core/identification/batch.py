@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, stats
+from scipy import linalg, special
 from scipy.sparse import csgraph
 
 from dampest_ros.core.identification.covariance import (
@@ -147,9 +147,12 @@ class Fit:
     def quantile(self, level: float = 0.95) -> float:
         """Half-width of a two-sided ``level`` interval in standard deviations: Student-t
         with (blocks − 1) degrees of freedom, as suits a covariance estimated from that many
-        block scores; normal when the block count is unknown."""
-        return float(stats.t.ppf(0.5 + level / 2, self.blocks - 1) if self.blocks > 1
-                     else stats.norm.ppf(0.5 + level / 2))
+        block scores; normal when the block count is unknown. (scipy.special's quantiles,
+        which scipy.stats's t and norm call: the same numbers without its second of
+        import.)"""
+        q = 0.5 + level / 2
+        return float(special.stdtrit(self.blocks - 1, q) if self.blocks > 1
+                     else special.ndtri(q))
 
     def interval(self, level: float = 0.95) -> FloatArray:
         """Two-sided confidence intervals (:meth:`quantile`), shape (p, 2)."""
@@ -369,7 +372,7 @@ def _flags(theta: FloatArray, cov: FloatArray, names: list[str], scale: FloatArr
            opts: FitOptions, candidates: NDArray[np.bool_]) -> dict[str, str]:
     """Parameters among ``candidates`` whose 95 % half-width exceeds
     ``opts.max_rel_halfwidth`` of their data scale (:func:`parameter_scale`)."""
-    z = float(stats.norm.ppf(0.975))
+    z = float(special.ndtri(0.975))  # the normal's 97.5 % quantile
     half = z * np.sqrt(np.abs(np.diag(cov)))
     return {name: (f"poorly determined: 95 % half-width {half[j]:.3g} exceeds "
                    f"{opts.max_rel_halfwidth:.0%} of {scale[j]:.3g} (the larger of |estimate| "

@@ -7,7 +7,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize
 
 from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import NormalEquations, accumulate
@@ -89,6 +88,7 @@ def profile_delay(samples: Samples, model: DampingModel, body: RigidBody, cutoff
     -------
     DelayEstimate
     """
+    from scipy import optimize  # slow to import: only where a delay is searched
 
     def cost(delay: float) -> float:
         rss = _rss(accumulate(shift_tau(samples, delay), model, body, folds=1, cutoff=cutoff))

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize, signal
 
 from dampest_ros.core.identification.regression import iter_regression
 from dampest_ros.core.physics.damping import DampingModel
@@ -90,6 +89,8 @@ def memory_impedance(samples: Samples, model: DampingModel, body: RigidBody,
 def _rational_fit(samples: Samples, nu: FloatArray, r: FloatArray, nper: int,
                   band: tuple[float, float]) -> ImpedanceFit:
     """Welch estimate of Z(ω) = S_{ν r} / S_{ν ν} of one DOF and its fit c/(λ + iω) − d."""
+    from scipy import optimize, signal  # slow to import: only where memory is tested
+
     rate = samples.rate
     s_vr = np.zeros(nper // 2 + 1, dtype=complex)
     s_vv = np.zeros(nper // 2 + 1)

@@ -9,7 +9,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize
 
 from dampest_ros.core.identification.frequency import memory_impedance
 from dampest_ros.core.identification.quadratic import solve_normal
@@ -107,6 +106,8 @@ def profile_rate(samples: Samples, base: DampingModel, body: RigidBody, dof: int
     gain : float
         The unconstrained least-squares gain c at that rate (≤ 0: no passive memory).
     """
+    from scipy import optimize  # slow to import: only where memory is tested
+
     A, b, c = ne.total(weights)
     # the same (decimated) samples as the normal equations
     parts = [(np.arange(len(samples))[sl], Phi[:, dof, :], y[:, dof])

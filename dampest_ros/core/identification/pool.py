@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
+from scipy import special
 
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
 from dampest_ros.core.identification.regression import NormalEquations, accumulate
@@ -215,8 +215,9 @@ def drift(logs: Sequence[LogStatistics], alpha: float = 0.01) -> Drift:
     dof = np.maximum(ok.sum(axis=0) - 1, 0)
     tested = dof > 0  # identified by two logs or more
     chi2 = np.where(tested, np.where(ok, w * (th - mean) ** 2, 0.0).sum(axis=0), np.nan)
-    p_value = np.where(tested, stats.chi2.sf(np.where(tested, chi2, 0.0),
-                                             np.maximum(dof, 1)), np.nan)
+    # the χ² survival function (scipy.special's, which scipy.stats.chi2.sf calls)
+    p_value = np.where(tested, special.chdtrc(np.maximum(dof, 1), np.where(tested, chi2, 0.0)),
+                       np.nan)
     moved = (dof > 0) & (p_value < alpha / max(len(names), 1))
     B, p = theta.shape
     change_after = np.full(p, -1, dtype=np.int64)
@@ -314,7 +315,7 @@ def consistency(logs: Sequence[LogStatistics], alpha: float = 0.001) -> Consiste
     while True:
         for b in kept:
             chi2[b], dof[b] = _against(logs, b, [k for k in kept if k != b])
-        p_value = np.where(dof > 0, stats.chi2.sf(np.nan_to_num(chi2), np.maximum(dof, 1)),
+        p_value = np.where(dof > 0, special.chdtrc(np.maximum(dof, 1), np.nan_to_num(chi2)),
                            np.nan)
         worst = min(kept, key=lambda k: (np.nan_to_num(p_value[k], nan=1.0), -k))
         if len(kept) < 3 or not p_value[worst] < alpha / B:

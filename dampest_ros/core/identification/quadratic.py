@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, optimize
+from scipy import linalg
 
 FloatArray = NDArray[np.float64]
 
@@ -77,6 +77,8 @@ def constrained_quadratic(H: FloatArray, g: FloatArray, E: FloatArray, h: FloatA
     -------
     ndarray, shape (r,), or None
     """
+    from scipy import optimize  # slow to import: only where a constraint binds
+
     lam, V = np.linalg.eigh(H)
     lam = np.maximum(lam, 1e-12 * max(float(lam.max()), 1e-300))
     R_inv = V / np.sqrt(lam)  # R = √Λ Vᵀ, R⁻¹ = V Λ^{-1/2}

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import fft, signal
+from scipy import fft
 
 from dampest_ros.core.identification.regression import iter_regression
 from dampest_ros.core.physics.damping import DampingModel
@@ -277,6 +277,8 @@ def residual_spectrum(r: FloatArray, rate: float, window: float = 20.0
     psd : ndarray, shape (F, 6)
         One-sided PSD ((N)²/Hz, (N·m)²/Hz).
     """
+    from scipy import signal  # ~0.4 s to import: only where a spectrum is asked for
+
     r = np.asarray(r, dtype=float)
     nper = int(min(r.shape[0], max(8, round(window * rate))))
     f, p = signal.welch(r, fs=rate, nperseg=nper, axis=0, detrend="constant")
@@ -343,6 +345,8 @@ def frf_error(samples: Samples, y: FloatArray, y_hat: FloatArray, rate: float,
     -------
     FrfError
     """
+    from scipy import signal  # ~0.4 s to import: only where a response is asked for
+
     tau = samples.tau
     segs = list(samples.segments())
     longest = max((s.stop - s.start for s in segs), default=0)

@@ -194,22 +194,21 @@ class AlphaBank:
     def __call__(self, nu: FloatArray) -> FloatArray:
         """α for samples ``nu`` (N, 6); returns (N, p)."""
         aug = np.concatenate([nu, np.ones((nu.shape[0], 1))], axis=1)
-        # products ν_i ν_j with ν_6 ≡ 1 cover the kinds one, lin and prod
+        # products ν_i ν_j with ν_6 ≡ 1 cover the kinds one, lin and prod; each other kind
+        # overwrites its own columns only (a library bank has hundreds over long logs)
         a = aug[:, self.i] * aug[:, self.j]
         if self.any_pnorm:
-            a = np.where(self.pnorm, np.hypot(aug[:, self.i], aug[:, self.j]), a)
+            a[:, self.pnorm] = np.hypot(aug[:, self.i[self.pnorm]], aug[:, self.j[self.pnorm]])
         if self.any_area:
             a[:, self.area] = _area(nu, self.i[self.area], self.j[self.area])
         if self.any_proj:
-            a = np.where(self.proj, nu @ self.W, a)
+            a[:, self.proj] = (nu @ self.W)[:, self.proj]
         if self.any_norm:
-            speed = np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))
-            a = np.where(self.norm, speed[:, None], a)
+            a[:, self.norm] = np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))[:, None]
         if self.any_anorm:
-            turn = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))
-            a = np.where(self.anorm, turn[:, None], a)
+            a[:, self.anorm] = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))[:, None]
         if self.any_abs:
-            a = np.where(self.absolute, np.abs(a), a)
+            a[:, self.absolute] = np.abs(a[:, self.absolute])
         return a
 
     def one(self, nu: list[float]) -> FloatArray:

@@ -33,7 +33,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
 
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
@@ -355,6 +354,8 @@ class _Smooth:
         self.z2: FloatArray | None = None
 
     def __call__(self, x: FloatArray) -> FloatArray:
+        from scipy import signal  # ~0.4 s to import: not for those who only read the limits
+
         if self.x0 is None:
             self.x0 = x[0].copy()
             self.z1 = np.zeros((1, *x.shape[1:]))

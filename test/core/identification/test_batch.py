@@ -260,3 +260,18 @@ def test_dissipative_on_foreign_physics(torpedo: tuple[Vehicle, Samples]) -> Non
     # what it costs is surge's fit (the misfit); the DOFs it did not touch keep theirs
     assert f.r2[0] < free.r2[0]
     np.testing.assert_allclose(f.r2[1:4], free.r2[1:4], atol=0.01)
+
+
+@pytest.mark.parametrize(("blocks", "half_width"), [(10, 2.262157162798205),
+                                                     (360, 1.9665939377682302),
+                                                     (1, 1.959963984540054),
+                                                     (0, 1.959963984540054)])
+def test_the_95_percent_quantile_is_students_t_of_the_blocks_else_normal(
+        blocks: int, half_width: float) -> None:
+    """t_{0.975} with blocks − 1 degrees of freedom (scipy.special's, the numbers of
+    scipy.stats.t.ppf), the normal's 1.96 when the block count is unknown."""
+    from types import SimpleNamespace
+
+    from dampest_ros.core.identification.batch import Fit
+
+    assert Fit.quantile(SimpleNamespace(blocks=blocks)) == half_width  # type: ignore[arg-type]

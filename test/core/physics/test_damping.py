@@ -175,6 +175,24 @@ def test_alpha_bank_matches_alpha_call() -> None:
         np.testing.assert_allclose(bank[:, k], a(nu), rtol=0, atol=1e-15)
 
 
+def test_a_bank_of_every_kind_is_each_alphas_own_call_bit_for_bit() -> None:
+    """Each kind overwrites only its own columns of the bank (areas over one axis and over a
+    pair, norms of both halves, pair norms, absolute values among them)."""
+    alphas = [Alpha("one"), Alpha("abs", 5), Alpha("lin", 0), Alpha("norm"), Alpha("anorm"),
+              Alpha("prod", 0, 1), Alpha("absprod", 2, 3), Alpha("pnorm", 1, 2),
+              Alpha("area", 1, -1), Alpha("area", 3, 5), Alpha("area", 0, 2), Alpha("abs", 1),
+              Alpha("absproj", w=(0.6, 0, 0.8, 0, 0, 0))]
+    nu = np.random.default_rng(4).normal(size=(64, 6))
+    nu[0] = 0.0  # at rest: every area is 0
+    bank = AlphaBank(alphas)(nu)
+    for k, a in enumerate(alphas[:-1]):
+        assert bank[:, k].tobytes() == a(nu).tobytes(), a
+    np.testing.assert_allclose(bank[:, -1], alphas[-1](nu), rtol=0, atol=1e-15)  # a product
+    # known truth at ν = [3, 4, 0, 0, 0, 2]: |U| = 5, v²/|U| = 3.2, (u² + w²)/|U| = 1.8
+    one = AlphaBank(alphas)(np.array([[3.0, 4.0, 0.0, 0.0, 0.0, 2.0]]))[0]
+    assert one[[3, 4, 7, 8, 10]].tolist() == [5.0, 2.0, 4.0, 3.2, 1.8]
+
+
 @pytest.mark.parametrize("kinds", [("one", "abs", "lin", "prod", "absprod"),
                                    ("one", "abs", "norm", "absproj")])
 def test_alpha_bank_one_sample_is_the_row_of_the_whole_call(kinds: tuple[str, ...]) -> None:
