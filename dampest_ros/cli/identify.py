@@ -37,7 +37,12 @@ from dampest_ros.core.identification.pool import (
     pooled_fit,
     pooled_samples,
 )
-from dampest_ros.core.identification.selection import MIN_ERR, Selection, select_terms
+from dampest_ros.core.identification.selection import (
+    MIN_ERR,
+    Selection,
+    row_by_row,
+    select_terms,
+)
 from dampest_ros.core.identification.validate import force_scores
 from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
 from dampest_ros.core.online.estimator import EstimatorConfig, nominal_of
@@ -433,7 +438,7 @@ def default_selection(samples: Samples, model: DampingModel, vehicle: Vehicle,
     try:
         with Elapsed("checking the preset's terms against the term library"):
             sel = select_terms(samples, model, vehicle.body, cutoff=args.cutoff,
-                               memory_dofs=(), keep_base=True, points=element_drags(vehicle))
+                               memory_dofs=(), keep_base=True)
     except ConfigError:
         return model  # a structure the library search does not take (a residual term)
     before, after = sel.cv_r2
@@ -451,11 +456,21 @@ def default_selection(samples: Samples, model: DampingModel, vehicle: Vehicle,
               f"--structure) identify adds the library terms: dampest identify {args.input} "
               f"--vehicle {args.vehicle}")
         return model
+    with Elapsed("searching element drags, then the library again"):
+        drags = select_terms(samples, model, vehicle.body, cutoff=args.cutoff, memory_dofs=(),
+                             keep_base=True, points=element_drags(vehicle))
+    print(element_drag_table(drags))
+    chosen, taken = row_by_row(sel, drags, model, bad)
+    # held-out R² of each row's chosen search (its own target's sum of squares)
+    after = np.where(np.isin(np.arange(6), taken), drags.cv_r2[1], after)
     print("terms added by selection in the DOFs that misfit (blocked cross-validation, BIC "
-          "and the one-standard-error rule; --no-select: the preset's terms alone):")
+          "and the one-standard-error rule; each DOF's from the search, with or without the "
+          "element drags first, that predicts it better: "
+          f"{', '.join(FORCE_NAMES[i] for i in taken) or 'none'} with them; --no-select: the "
+          "preset's terms alone):")
+    added = Selection(chosen).added(model)
     print(added_table(model.parameter_names, {i: added[i] for i in bad}, before, after))
-    print(element_drag_table(sel))
-    return sel.only_in(model, bad)
+    return chosen
 
 
 def added_table(kept: list[str], added: dict[int, list[str]], before: np.ndarray,

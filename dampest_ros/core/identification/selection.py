@@ -166,6 +166,39 @@ class Selection:
         return self.points.r2[0], 1.0 - self.steps[-1].cv / self.points.tss
 
 
+def row_by_row(without: Selection, drags: Selection, base: DampingModel, rows: Sequence[int]
+               ) -> tuple[DampingModel, list[int]]:
+    """The terms two searches added to ``base`` in ``rows``, each row's from the search with
+    the smaller held-out residual there: ``without`` element drags, or ``drags``
+    (``points`` given, the drags searched first). The drags stay when a row takes the terms
+    of ``drags``.
+
+    Each row's single-entry terms are fitted to that row alone, so a row can take either
+    search's terms; an element drag acts in several rows and joins with the first row that
+    takes ``drags``. Comparing the held-out residual sums of squares (not R², whose
+    denominators differ by the shared terms' force) keeps both searches' rules: each row's
+    terms passed its blocked cross-validation and one-standard-error rule.
+
+    Returns
+    -------
+    model : DampingModel
+    taken : list of int
+        The rows that take the terms of ``drags``.
+    """
+    taken = [i for i in rows if drags.steps[-1].cv[i] < without.steps[-1].cv[i]]
+    if not taken:
+        return without.only_in(base, rows), []
+    mine, theirs = drags.added(base), without.added(base)
+    others = [i for i in rows if i not in taken]
+    point = drags.model.term("point")
+    keep = {n for i in taken for n in mine[i]} | set(point.parameter_names if point else [])
+    model = _without(drags.model, [n for i in range(6) for n in mine[i] if n not in keep])
+    specs = {b.name: CrossSpec(*_single_entry(b), b.alpha, b.name) for t in without.model.terms
+             if t.kind == "cross" for b in t.bases}
+    return _with_terms(model, [specs[n] for i in others for n in theirs[i] if n in specs],
+                       {}), taken
+
+
 #: Searches of :func:`select_terms` when the base has terms acting in several rows: their
 #: force is estimated with the base, then with the terms the previous search chose.
 SHARED_ROUNDS = 2
