@@ -5,10 +5,12 @@ force and two moments at once, so it cannot be searched row by row like the libr
 single-entry terms (:mod:`.selection`). It is searched first, on top of the base model and
 before the library (physically named terms first), by the same rules: a greedy forward path over the
 candidates, each step the candidate with the least held-out error of the blocked
-cross-validation (contiguous time folds apart by a guard, :mod:`.cv_budget`), and the path cut
-at its one-standard-error size. The six rows are fitted together with weights 1 / Σ y_i², so
-the error is Σ_i RSS_i / TSS_i, the unexplained shares of the six DOFs (N and N·m weigh
-alike), and a coefficient fits all the rows it acts in at once.
+cross-validation (contiguous time folds apart by a guard, :mod:`.cv_budget`). The six rows are
+fitted together with weights 1 / Σ y_i², so the error is Σ_i RSS_i / TSS_i, the unexplained
+shares of the six DOFs (N and N·m weigh alike), and a coefficient fits all the rows it acts in
+at once. The path is cut as the library search cuts each row's, at the one-standard-error size
+of a DOF's own held-out errors along it: the largest of the six, so that a drag stays while
+one DOF gains more than its standard error from it.
 """
 
 from __future__ import annotations
@@ -120,15 +122,19 @@ def select_points(samples: Samples, base: DampingModel, body: RigidBody,
     path = [(name, float(e.sum()), float(np.sqrt(len(e)) * np.std(e, ddof=1)))
             for name, e in zip(["base", *(candidates[k].label for k in chosen)], errors,
                                strict=True)]
-    kept = [candidates[k] for k in chosen[:one_se_size(np.array(errors))]]
-    cols = [*base_cols, *(index[k.label] for k in kept)]
-    r2 = (1.0 - _row_errors(ne, A, b, base_cols) / tss, 1.0 - _row_errors(ne, A, b, cols) / tss)
+    # each DOF's held-out errors per fold along the path, shape (K + 1, F, 6)
+    rows = np.array([_row_fold_errors(ne, A, b, [*base_cols, *(cand_cols[k] for k in chosen[:j])])
+                     for j in range(len(chosen) + 1)])
+    # a drag stays while one DOF gains more than its own standard error from it
+    kept = [candidates[k] for k in chosen[:max(one_se_size(rows[:, :, i]) for i in range(6))]]
+    r2 = (1.0 - rows[0].sum(0) / tss, 1.0 - rows[len(kept)].sum(0) / tss)
     return PointSelection(with_points(base, kept), kept, r2, tss, path)
 
 
-def _row_errors(ne: NormalEquations, A: FloatArray, b: FloatArray, cols: Sequence[int]
-                ) -> FloatArray:
-    """Held-out residual sum of squares per row of the joint fit on ``cols``, shape (6,).
+def _row_fold_errors(ne: NormalEquations, A: FloatArray, b: FloatArray, cols: Sequence[int]
+                     ) -> FloatArray:
+    """Held-out residual sum of squares per fold and row of the joint fit on ``cols``, each
+    fold predicted from the others, shape (F, 6).
 
     Parameters
     ----------
@@ -139,9 +145,9 @@ def _row_errors(ne: NormalEquations, A: FloatArray, b: FloatArray, cols: Sequenc
     cols : sequence of int
     """
     S = np.asarray(cols, dtype=np.int64)
-    out = ne.c.sum(0).copy()
+    out = np.array(ne.c, dtype=float)
     for f, theta in enumerate(fold_fits(A, b, S)):
         # ‖y_i − Φ_i θ‖² on fold f = c_i − 2 b_iᵀθ + θᵀA_iθ, every row i
         Af, bf = ne.A[f][:, S][:, :, S], ne.b[f][:, S]
-        out += -2.0 * bf @ theta + np.einsum("p,ipq,q->i", theta, Af, theta)
+        out[f] += -2.0 * bf @ theta + np.einsum("p,ipq,q->i", theta, Af, theta)
     return out
