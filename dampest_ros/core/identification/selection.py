@@ -48,7 +48,12 @@ from dampest_ros.core.identification.cv_budget import (
     one_se_size,
 )
 from dampest_ros.core.identification.memory_rates import MemoryEvidence, memory_evidence
-from dampest_ros.core.identification.point_selection import PointSelection, select_points
+from dampest_ros.core.identification.point_selection import (
+    EntryRules,
+    PointSelection,
+    prune_points,
+    select_points,
+)
 from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import (
     NormalEquations,
@@ -390,7 +395,9 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         "folds": folds, "max_terms": max_terms, "min_improvement": min_improvement,
         "min_err": min_err, "tol": tol, "strict_base": strict_base, "rounds": rounds,
         "exchange": exchange, "keep_base": keep_base}
-    found = select_points(samples, base, body, points, cutoff, folds) if points else None
+    duration = len(samples) / samples.rate
+    rules = EntryRules(0.0, min_improvement, min(float(len(samples)), 2.0 * cutoff * duration))
+    found = select_points(samples, base, body, points, cutoff, rules, folds) if points else None
     base = base if found is None else found.model
     shared = [t for t in base.terms if any(b.more for b in t.bases) or t.kind == "point"]
     if not shared:
@@ -406,6 +413,10 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         selection = _search(replace(samples, tau=samples.tau - known), single, body, shared,
                             **options)
         model = selection.model
+    if found is not None:
+        pruned, removed = prune_points(samples, selection.model, body, cutoff, rules)
+        selection = replace(selection, model=pruned)
+        found = replace(found, pruned=removed)
     return replace(selection, points=found)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dampest_ros.core.identification.point_selection import select_points
+from dampest_ros.core.identification.point_selection import EntryRules, select_points
 from dampest_ros.core.identification.regression import accumulate
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.point_drag import PointSpec, point_library, point_term
@@ -31,7 +31,8 @@ def test_the_drag_at_its_point_is_found_first_and_alone() -> None:
     law = base.force(nu, base_theta) \
         + DampingModel([point_term([TRUTH])]).force(nu, np.array([60.0]))
     samples = synthetic(body, nu, law, 0.01, seed=3)
-    found = select_points(samples, base, body, point_library(POINTS), cutoff=2.0)
+    found = select_points(samples, base, body, point_library(POINTS), 2.0,
+                          EntryRules(0.05, 10.0, 2.0 * 2.0 * 120.0))
     assert found.chosen == [TRUTH]
     before, after = found.r2
     assert before[[2, 4]].max() < 0.99 and after[[2, 4]].min() > 0.999, (before, after)
