@@ -194,6 +194,9 @@ class AlphaBank:
         self.any_area = bool(self.area.any())
         self.any_proj = bool(self.proj.any())
         self.any_abs = bool(self.absolute.any())
+        self._columns = {name: np.flatnonzero(mask) for name, mask in (
+            ("pnorm", self.pnorm), ("proj", self.proj), ("norm", self.norm),
+            ("anorm", self.anorm), ("absolute", self.absolute))}
         self.any_pspeed = bool(self.pspeed.any())
         # the bank is a list of products (kinds one, lin, abs, prod, absprod) unless it holds
         # a norm, an area, a projection or a point's speed: then one sample goes through
@@ -205,24 +208,28 @@ class AlphaBank:
     def __call__(self, nu: FloatArray) -> FloatArray:
         """α for samples ``nu`` (N, 6); returns (N, p)."""
         aug = np.concatenate([nu, np.ones((nu.shape[0], 1))], axis=1)
-        # products ν_i ν_j with ν_6 ≡ 1 cover the kinds one, lin and prod
+        # products ν_i ν_j with ν_6 ≡ 1 cover the kinds one, lin and prod; the other kinds
+        # overwrite their own columns only
         a = aug[:, self.i] * aug[:, self.j]
         if self.any_pnorm:
-            a = np.where(self.pnorm, np.hypot(aug[:, self.i], aug[:, self.j]), a)
+            k = self._columns["pnorm"]
+            a[:, k] = np.hypot(aug[:, self.i[k]], aug[:, self.j[k]])
         if self.any_area:
             a[:, self.area] = _area(nu, self.i[self.area], self.j[self.area])
         if self.any_proj:
-            a = np.where(self.proj, nu @ self.W, a)
+            k = self._columns["proj"]
+            a[:, k] = nu @ self.W[:, k]
         if self.any_norm:
-            speed = np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))
-            a = np.where(self.norm, speed[:, None], a)
+            a[:, self._columns["norm"]] = np.sqrt(np.einsum("ni,ni->n", nu[:, :3],
+                                                            nu[:, :3]))[:, None]
         if self.any_anorm:
-            turn = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))
-            a = np.where(self.anorm, turn[:, None], a)
+            a[:, self._columns["anorm"]] = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:],
+                                                             nu[:, 3:]))[:, None]
         if self.any_pspeed:
             a[:, self.pspeed] = point_speeds(nu, self.points)
         if self.any_abs:
-            a = np.where(self.absolute, np.abs(a), a)
+            k = self._columns["absolute"]
+            a[:, k] = np.abs(a[:, k])
         return a
 
     def one(self, nu: list[float]) -> FloatArray:
