@@ -206,18 +206,17 @@ def test_default_identify_predicts_mujoco_in_every_dof(vehicle: str, seed: int,
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("seed", [1, 2, 3])
 def test_default_identify_on_a_geometry_nobody_tuned_on(seed: int, tmp_path: Path) -> None:
     """box_rov, a flat work-class ROV added after the defaults were set, realistic and
-    noiseless sensors: held-out force R² ≥ 0.995 in surge, sway, heave and yaw (measured
-    ≥ .9959); roll and pitch stop at ≥ 0.98 (measured .982–.991): the drag and Kutta lift
-    of the foam, skids and sled act on their own velocity v + ω × r, whose norm mixes linear
-    and angular rates, a form no library column has (the whole library fitted to MuJoCo's
-    exact roll moment reaches .994)."""
+    noiseless sensors: held-out force R² ≥ 0.995 in every DOF (measured ≥ .9978, roll
+    ≥ .9991 and pitch ≥ .9981; the library alone stopped roll and pitch at .989–.995): the
+    drag of the foam, skids and sled acts on their own velocity v + ω × r, which the element
+    drags at the geoms' positions carry and no library column has."""
     for clean in (False, True):
         (tmp_path / str(clean)).mkdir()
         r2 = select_heldout(tmp_path / str(clean), "box_rov", seed, clean, options=())[1.0][1]
-        assert np.all(r2[[0, 1, 2, 5]] >= 0.995) and np.all(r2[3:5] >= 0.98), (clean, r2)
+        assert np.all(r2 >= 0.995), (clean, r2)
 
 
 @pytest.mark.slow
