@@ -243,6 +243,14 @@ class DampingModel:
         sparse = np.isin(np.arange(len(self._Bs)), self._dense, invert=True)
         atom, row, col = np.nonzero(self._Bs * sparse[:, None, None])
         self._entries = (atom, row, col, self._Bs[atom, row, col])
+        # each sparse entry written straight into its parameter's column when no two entries
+        # (of a parameter's several atoms) share a row and a parameter, and no matrix-product
+        # atom shares its parameter: then no atom sum is needed
+        param = self._static_idx[atom]
+        dense_params = self._static_idx[self._dense]
+        self._direct = (len(set(zip(row.tolist(), param.tolist(), strict=True))) == len(row)
+                        and not np.isin(dense_params, param).any()
+                        and len(np.unique(dense_params)) == len(dense_params))
         self._static_params = np.unique(self._static_idx)
         # atom → parameter sum (None: one atom per parameter, the common case)
         self._atom_sum: FloatArray | None = None
@@ -329,8 +337,16 @@ class DampingModel:
         """
         nu = np.atleast_2d(np.asarray(nu, dtype=float))
         N = nu.shape[0]
-        Phi = np.empty((N, 6, self.n_params))
-        if len(self._static_idx):
+        Phi = np.zeros((N, 6, self.n_params))
+        if len(self._static_idx) and self._direct:
+            # column j: α_j(ν) B_j ν, each entry (or matrix-product atom) in its own place
+            atom, row, col, value = self._entries
+            alpha = self._bank(nu)
+            Phi[:, row, self._static_idx[atom]] = nu[:, col] * value * alpha[:, atom]
+            if len(self._dense):
+                Phi[:, :, self._static_idx[self._dense]] = (
+                    (nu @ self._B_flat).reshape(N, 6, -1) * alpha[:, None, self._dense])
+        elif len(self._static_idx):
             # column j: α_j(ν) B_j ν (summed over the parameter's atoms)
             atom, row, col, value = self._entries
             alpha = self._bank(nu)
@@ -347,7 +363,6 @@ class DampingModel:
             if states is None:
                 raise ValueError("the freq term needs its memory states")
             # column m: e_{dof_m} z_m
-            Phi[:, :, self._freq_idx] = 0.0
             Phi[:, self.memory_dofs, self._freq_idx] = states
         return Phi
 
