@@ -40,6 +40,7 @@ from dampest_ros.core.identification.pool import (
 from dampest_ros.core.identification.selection import (
     MIN_ERR,
     Selection,
+    added_terms,
     row_by_row,
     select_terms,
 )
@@ -470,7 +471,7 @@ def default_selection(samples: Samples, model: DampingModel, vehicle: Vehicle,
           "element drags first, that predicts it better: "
           f"{', '.join(FORCE_NAMES[i] for i in taken) or 'none'} with them; --no-select: the "
           "preset's terms alone):")
-    added = Selection(chosen).added(model)
+    added = added_terms(chosen, model)
     print(added_table(model.parameter_names, {i: added[i] for i in bad}, before, after))
     return chosen
 

@@ -84,20 +84,19 @@ def with_points(base: DampingModel, points: Sequence[PointSpec]) -> DampingModel
 
 @dataclass(frozen=True)
 class EntryRules:
-    """The test a candidate passes to enter the path, the library search's (:mod:`.selection`):
-    in at least one DOF it acts in, it removes ``min_err`` of the residual sum of squares and
-    lowers BIC by more than ``min_improvement``, with ``n_eff`` independent samples."""
+    """The test a candidate passes to enter the path, the library search's BIC test
+    (:mod:`.selection`): in at least one DOF it acts in, it lowers BIC by more than
+    ``min_improvement``, with ``n_eff`` independent samples."""
 
-    min_err: float
     min_improvement: float
     n_eff: float
 
     def passed(self, rss_without: FloatArray, rss_with: FloatArray) -> bool:
-        """Whether a DOF's in-sample RSS, shape (6,) each, falls by the test's margins."""
+        """Whether a DOF's in-sample RSS, shape (6,) each, falls by the test's margin."""
         ratio = np.maximum(rss_with, 1e-300) / np.maximum(rss_without, 1e-300)
         # ΔBIC of the row = n_eff log(RSS_with / RSS_without) + log n_eff
         dbic = self.n_eff * np.log(ratio) + np.log(self.n_eff)
-        return bool(np.any((ratio <= 1.0 - self.min_err) & (dbic < -self.min_improvement)))
+        return bool(np.any(dbic < -self.min_improvement))
 
 
 def select_points(samples: Samples, base: DampingModel, body: RigidBody,

@@ -133,24 +133,9 @@ class Selection:
     points: PointSelection | None = None
 
     def added(self, base: DampingModel) -> dict[int, list[str]]:
-        """The parameters the search added to ``base``, per force row 0..5 (X..N), in the order
-        of the model (memory gains in the row of their DOF)."""
-        out: dict[int, list[str]] = {i: [] for i in range(6)}
-        for t in self.model.terms:
-            if t.kind == "freq":
-                for d, name in zip(t.state_dofs, t.parameter_names, strict=True):
-                    if name not in base.parameter_names:
-                        out[int(d)].append(name)
-                continue
-            for b in t.bases:
-                if b.name in base.parameter_names or b.more:
-                    continue
-                # an element drag is listed in every row it acts in
-                rows = np.flatnonzero(np.diag(b.B)) if t.kind == "point" \
-                    else [_single_entry(b)[0]]
-                for i in rows:
-                    out[int(i)].append(b.name)
-        return out
+        """The parameters the search added to ``base``, per force row 0..5 (X..N)
+        (:func:`added_terms`)."""
+        return added_terms(self.model, base)
 
     def only_in(self, base: DampingModel, rows: Sequence[int]) -> DampingModel:
         """The selected model without the static terms it added outside ``rows`` (force rows
@@ -169,6 +154,26 @@ class Selection:
         if self.points is None:
             return 1.0 - self.steps[0].cv / self.tss, 1.0 - self.steps[-1].cv / self.tss
         return self.points.r2[0], 1.0 - self.steps[-1].cv / self.points.tss
+
+
+def added_terms(model: DampingModel, base: DampingModel) -> dict[int, list[str]]:
+    """The parameters of ``model`` that ``base`` lacks, per force row 0..5 (X..N), in the
+    order of the model (memory gains in the row of their DOF, an element drag in every row it
+    acts in)."""
+    out: dict[int, list[str]] = {i: [] for i in range(6)}
+    for t in model.terms:
+        if t.kind == "freq":
+            for d, name in zip(t.state_dofs, t.parameter_names, strict=True):
+                if name not in base.parameter_names:
+                    out[int(d)].append(name)
+            continue
+        for b in t.bases:
+            if b.name in base.parameter_names or b.more:
+                continue
+            rows = np.flatnonzero(np.diag(b.B)) if t.kind == "point" else [_single_entry(b)[0]]
+            for i in rows:
+                out[int(i)].append(b.name)
+    return out
 
 
 def row_by_row(without: Selection, drags: Selection, base: DampingModel, rows: Sequence[int]
@@ -396,7 +401,7 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         "min_err": min_err, "tol": tol, "strict_base": strict_base, "rounds": rounds,
         "exchange": exchange, "keep_base": keep_base}
     duration = len(samples) / samples.rate
-    rules = EntryRules(0.0, min_improvement, min(float(len(samples)), 2.0 * cutoff * duration))
+    rules = EntryRules(min_improvement, min(float(len(samples)), 2.0 * cutoff * duration))
     found = select_points(samples, base, body, points, cutoff, rules, folds) if points else None
     base = base if found is None else found.model
     shared = [t for t in base.terms if any(b.more for b in t.bases) or t.kind == "point"]

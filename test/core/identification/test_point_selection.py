@@ -32,7 +32,7 @@ def test_the_drag_at_its_point_is_found_first_and_alone() -> None:
         + DampingModel([point_term([TRUTH])]).force(nu, np.array([60.0]))
     samples = synthetic(body, nu, law, 0.01, seed=3)
     found = select_points(samples, base, body, point_library(POINTS), 2.0,
-                          EntryRules(0.05, 10.0, 2.0 * 2.0 * 120.0))
+                          EntryRules(10.0, 2.0 * 2.0 * 120.0))
     assert found.chosen == [TRUTH]
     before, after = found.r2
     assert before[[2, 4]].max() < 0.99 and after[[2, 4]].min() > 0.999, (before, after)
