@@ -391,17 +391,17 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
 
     Base parameters that act in several rows at once (the ``coriolis`` and ``point`` terms)
     cannot be chosen row by row: they stay, and the search runs on the target less their
-    force, estimated by least squares with the base, then again with the terms the first
-    search chose (:data:`SHARED_ROUNDS` searches); the fit of the selected model estimates
-    them with the chosen terms.
+    force, estimated by least squares (the rows weighted by 1 / Σ y_i², so that N and N·m
+    weigh alike) with the base, then again with the terms the first search chose
+    (:data:`SHARED_ROUNDS` searches); the fit of the selected model estimates them with the
+    chosen terms.
     """
     options: dict[str, Any] = {
         "cross": cross, "families": families, "memory_dofs": memory_dofs, "cutoff": cutoff,
         "folds": folds, "max_terms": max_terms, "min_improvement": min_improvement,
         "min_err": min_err, "tol": tol, "strict_base": strict_base, "rounds": rounds,
         "exchange": exchange, "keep_base": keep_base}
-    duration = len(samples) / samples.rate
-    rules = EntryRules(min_improvement, min(float(len(samples)), 2.0 * cutoff * duration))
+    rules = EntryRules(min_improvement, _n_eff(samples, cutoff))
     found = select_points(samples, base, body, points, cutoff, rules, folds) if points else None
     base = base if found is None else found.model
     shared = [t for t in base.terms if any(b.more for b in t.bases) or t.kind == "point"]
@@ -453,10 +453,9 @@ def _search(samples: Samples, base: DampingModel, body: RigidBody,
     zero, corr, same_as = _equal_columns(ne.A.sum(0)[0][:m, :m], tol)
     usable, unsearched = _searchable(cand, base_cols, feats, zero, corr, same_as)
     dropped.update(unsearched)
-    duration = len(samples) / samples.rate
     search = _Stepwise(ne, m, [*base_cols, *base_mem], [*usable, *cand_mem], zero,
                        base.n_params + sum(t.n_params for t in shared),
-                       min(float(len(samples)), 2.0 * cutoff * duration),
+                       _n_eff(samples, cutoff),
                        _Rules(math.inf if max_terms is None else max_terms, min_improvement,
                               min_err, tol, strict_base, exchange, keep_base),
                        "base: " + "+".join([*base.kinds, *(t.kind for t in shared)]))
@@ -475,6 +474,12 @@ def _search(samples: Samples, base: DampingModel, body: RigidBody,
     return Selection(model, search.steps, {f"freq.{DOF_NAMES[d]}.lambda1": lam
                                            for d, lam in keep_mem.items()}, dropped,
                      total_sum_of_squares(ne), memory)
+
+
+def _n_eff(samples: Samples, cutoff: float) -> float:
+    """Independent samples of the regression low-passed at ``cutoff`` Hz: 2 · cutoff · T, at
+    most the number of samples."""
+    return min(float(len(samples)), 2.0 * cutoff * len(samples) / samples.rate)
 
 
 def _feature_columns(base: DampingModel, specs: Sequence[CrossSpec]
