@@ -37,14 +37,21 @@ from dampest_ros.core.identification.pool import (
     pooled_fit,
     pooled_samples,
 )
-from dampest_ros.core.identification.selection import MIN_ERR, Selection, select_terms
+from dampest_ros.core.identification.selection import (
+    MIN_ERR,
+    Selection,
+    added_terms,
+    row_by_row,
+    select_terms,
+)
 from dampest_ros.core.identification.validate import force_scores
 from dampest_ros.core.identifier import DampingIdentifier, Prior, prior_arrays
 from dampest_ros.core.online.estimator import EstimatorConfig, nominal_of
 from dampest_ros.core.online.sample import OnlineConfig
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.mounting import frame_id_note
-from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
+from dampest_ros.core.physics.point_drag import PointSpec, candidate_points, point_library
+from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.preprocess import DataError
 from dampest_ros.core.signals.samples import Samples
@@ -134,15 +141,17 @@ def fit_log(args: argparse.Namespace, vehicle: Vehicle, substitutions: list[str]
     preset = model
     if args.select:
         with Elapsed("selecting the damping terms"):
-            selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff)
+            selection = select_terms(samples, model, vehicle.body, cutoff=args.cutoff,
+                                     points=element_drags(vehicle))
         print(selection_table(selection))
         print("terms per DOF: the preset's that stay, and those selection added:")
         print(added_table([n for n in selection.model.parameter_names
                            if n in model.parameter_names], selection.added(model),
                           *selection.cv_r2))
+        print(element_drag_table(selection))
         model = selection.model
     else:
-        model = default_selection(samples, model, vehicle.body, args)
+        model = default_selection(samples, model, vehicle, args)
     nominal = nominal_of(model, preset, nominal)
     spec = prior_spec(args, vehicle)
     prior = prior_of(model, nominal, spec)[0]
@@ -392,7 +401,33 @@ def selection_table(selection: Selection) -> str:
             + "\n")
 
 
-def default_selection(samples: Samples, model: DampingModel, body: RigidBody,
+def element_drags(vehicle: Vehicle) -> list[PointSpec]:
+    """The candidate element drags of a vehicle: at its geoms off the origin, else at a
+    generic set of points (:func:`point_drag.candidate_points`)."""
+    return point_library(candidate_points(vehicle.geometry, vehicle.length))
+
+
+def element_drag_table(selection: Selection) -> str:
+    """The element drag search of a selection: its path (the one-standard-error cut) and
+    the held-out R² per DOF of the base without and with the kept drags."""
+    found = selection.points
+    if found is None:
+        return ""
+    before, after = found.r2
+    path = table(("term", "held-out Σ(1 − R²)", "± standard error", "kept"),
+                 [(n, f"{e:.5f}", f"{se:.5f}", "yes" if k <= len(found.chosen) else "no")
+                  for k, (n, e, se) in enumerate(found.path)])
+    r2 = table(("dof", "held-out R² base", "with element drags"),
+               [(FORCE_NAMES[i], f"{before[i]:.4f}", f"{after[i]:.4f}") for i in range(6)])
+    return (f"element drags (the drag of an element on its own velocity v + ω × r at a point "
+            f"of the body; {len(found.chosen)} kept of {len(found.path) - 1} on the path, "
+            "blocked cross-validation and the one-standard-error rule, the six DOFs fitted "
+            f"together), searched before the library terms:\n{path}\n{r2}"
+            + (f"\ntaken out once the library terms joined (no longer lowering BIC by 10 in "
+               f"any DOF): {', '.join(found.pruned)}" if found.pruned else ""))
+
+
+def default_selection(samples: Samples, model: DampingModel, vehicle: Vehicle,
                       args: argparse.Namespace, ratio: float = 3.0, floor: float = 0.999
                       ) -> DampingModel:
     """The preset's terms, and where they misfit the data, the library terms the data select.
@@ -406,8 +441,8 @@ def default_selection(samples: Samples, model: DampingModel, body: RigidBody,
     """
     try:
         with Elapsed("checking the preset's terms against the term library"):
-            sel = select_terms(samples, model, body, cutoff=args.cutoff, memory_dofs=(),
-                               keep_base=True)
+            sel = select_terms(samples, model, vehicle.body, cutoff=args.cutoff,
+                               memory_dofs=(), keep_base=True)
     except ConfigError:
         return model  # a structure the library search does not take (a residual term)
     before, after = sel.cv_r2
@@ -425,10 +460,21 @@ def default_selection(samples: Samples, model: DampingModel, body: RigidBody,
               f"--structure) identify adds the library terms: dampest identify {args.input} "
               f"--vehicle {args.vehicle}")
         return model
+    with Elapsed("searching element drags, then the library again"):
+        drags = select_terms(samples, model, vehicle.body, cutoff=args.cutoff, memory_dofs=(),
+                             keep_base=True, points=element_drags(vehicle))
+    print(element_drag_table(drags))
+    chosen, taken = row_by_row(sel, drags, model, bad)
+    # held-out R² of each row's chosen search (its own target's sum of squares)
+    after = np.where(np.isin(np.arange(6), taken), drags.cv_r2[1], after)
     print("terms added by selection in the DOFs that misfit (blocked cross-validation, BIC "
-          "and the one-standard-error rule; --no-select: the preset's terms alone):")
+          "and the one-standard-error rule; each DOF's from the search, with or without the "
+          "element drags first, that predicts it better: "
+          f"{', '.join(FORCE_NAMES[i] for i in taken) or 'none'} with them; --no-select: the "
+          "preset's terms alone):")
+    added = added_terms(chosen, model)
     print(added_table(model.parameter_names, {i: added[i] for i in bad}, before, after))
-    return sel.only_in(model, bad)
+    return chosen
 
 
 def added_table(kept: list[str], added: dict[int, list[str]], before: np.ndarray,

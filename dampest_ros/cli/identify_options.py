@@ -8,7 +8,10 @@ estimator node's recursive least squares with its default prior and settings, so
 result is the estimator node's on the same data.
 
 Terms: the preset's (the vehicle file's damping section) and, in each DOF where they misfit
-the data, the library terms the data select: a DOF misfits when its held-out R² with the
+the data, the element drags and library terms the data select (element drags first: the drag
+of an appendage at a point r of the body on its own velocity v + ω × r, one coefficient in a
+force and its moments, at the vehicle file's geoms off the origin, else at ± L/2 along x and
+± L/4 along y and z): a DOF misfits when its held-out R² with the
 preset's terms is below 0.999 and its residual more than 3 times what a library search on the
 same data leaves. The number of terms added is the data's (blocked cross-validation over 5
 contiguous time folds with a guard of two filter periods at each boundary, BIC, and the

@@ -76,6 +76,7 @@ from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.alpha import Alpha
 from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel
 from dampest_ros.core.physics.identity import ARM_KIND, VEHICLE_KIND, Identity, mismatch
+from dampest_ros.core.physics.point_drag import point_spec
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 from dampest_ros.core.signals.measurements import FloatArray
@@ -230,6 +231,9 @@ def damping_spec(model: DampingModel, theta: FloatArray) -> dict[str, Any]:
             spec["freq"] = [{"dof": DOF_NAMES[int(d)], "rate": float(lam), "c": v}
                             for d, lam, v in zip(term.state_dofs, term.rates, values,
                                                  strict=True)]
+        elif term.kind == "point":
+            spec["point"] = [{**point_spec(b).to_dict(), "value": v}
+                             for b, v in zip(term.bases, values, strict=True)]
         elif term.kind == "residual":
             spec["residual"] = {"modes": [list(map(float, b.alpha.w)) for b in term.bases],
                                 "values": values}
@@ -252,6 +256,11 @@ def _terms_params(spec: Mapping[str, Any]) -> dict[str, Any]:
                        "rates": [float(x["rate"]) for x in spec["freq"]]}
     if "added" in spec:
         out["added"] = True
+    if spec.get("point"):
+        p = spec["point"]
+        out["point"] = {"positions": [float(x) for e in p for x in e["position"]],
+                        "axes": [DOF_NAMES.index(e["axis"]) for e in p],
+                        "speeds": [e["speed"] for e in p]}
     if spec.get("residual"):
         out["residual"] = {"modes": [float(v) for m in spec["residual"]["modes"] for v in m]}
     return out
@@ -274,6 +283,11 @@ def _spec_from_params(terms: Mapping[str, Any]) -> dict[str, Any]:
                                         strict=True)]
     if terms.get("added"):
         spec["added"] = {}
+    if "point" in terms:
+        p = terms["point"]
+        spec["point"] = [{"position": list(r), "axis": DOF_NAMES[int(a)], "speed": str(s)}
+                         for r, a, s in zip(np.reshape(p["positions"], (-1, 3)).tolist(),
+                                            p["axes"], p["speeds"], strict=True)]
     if "residual" in terms:
         spec["residual"] = {"modes": np.reshape(terms["residual"]["modes"], (-1, 6)).tolist()}
     return spec
@@ -556,11 +570,15 @@ def _model_from_mapping(model: Mapping[str, Any]) -> Model:
     names = [str(n) for n in model["parameter_names"]]
     _same_length(model, ("theta", "theta_std", "identified"), len(names), "parameter_names")
     for first, others in (("terms.cross.rows", ("cols", "alphas", "names")),
-                          ("terms.freq.dofs", ("rates",)), ("held.names", ("reasons",))):
+                          ("terms.freq.dofs", ("rates",)), ("terms.point.axes", ("speeds",)),
+                          ("held.names", ("reasons",))):
         group = first.rpartition(".")[0]
         found = _entry(model, first)
         if found is not None:
             _same_length(model, tuple(f"{group}.{k}" for k in others), len(found), first)
+    axes = _entry(model, "terms.point.axes")
+    if axes is not None:
+        _same_length(model, ("terms.point.positions",), 3 * len(axes), "3 × terms.point.axes")
     modes = _entry(model, "terms.residual.modes")
     if modes is not None and len(modes) % 6:
         raise ConfigError("model.terms.residual.modes", f"has {len(modes)} numbers; give 6 "

@@ -83,6 +83,11 @@ def parameter_units(model: DampingModel) -> dict[str, str]:
                 dims = _sub(_sub(_FORCE_DIMS[int(d)], _VEL_DIMS[int(d)]), (0, 0, 1, 0))
                 units[name] = _unit_text(dims)
             continue
+        if term.kind == "point":
+            # an element's force c ‖v_p‖ v_p,a (its moments follow from the lever arm): N s²/m²
+            dims = _sub(_sub(_FORCE_DIMS[0], _VEL_DIMS[0]), _VEL_DIMS[0])
+            units.update({n: _unit_text(dims) for n in term.parameter_names})
+            continue
         for b in term.bases:
             # [F_row] / ([α] [ν_col]) over every entry of every atom; one unit or "SI"
             found: set[_Dims | None] = set()

@@ -205,19 +205,39 @@ def test_default_identify_predicts_mujoco_in_every_dof(vehicle: str, seed: int,
         assert np.all(r2 >= 0.995), (clean, r2)
 
 
+def test_default_identify_puts_element_drags_at_the_geoms(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """180 s of box_rov in MuJoCo, seed 1, the default command: element drags at the
+    positions of its geoms off the origin enter (the search printed), the model file carries
+    them and reads back, and the held-out force R² is ≥ 0.97 in every DOF (measured ≥ .9766,
+    roll the least on so short a log; --no-select .84-.97)."""
+    bag, out = tmp_path / "bag", tmp_path / "model.yaml"
+    assert main(["simulate", "--backend", "mujoco", "--vehicle", "box_rov", "--protocol", "B",
+                 "--duration", "180", "--seed", "1", "--out", str(bag)]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(bag), "--vehicle", "box_rov", "--holdout", "0.3", "--out",
+                 str(out)]) == 0
+    assert "element drags (the drag of an element" in capsys.readouterr().out
+    m = load_model(out)
+    drags = [n for n in m.parameter_names if n.startswith("drag.")]
+    geoms = {"(0,0,-0.22)", "(0,-0.3,0.21)", "(0,0.3,0.21)", "(0.3,0,0.2)"}
+    assert drags and {n.split("@")[1] for n in drags} <= geoms, drags
+    assert m.damping is not None and m.damping.term("point") is not None
+    assert np.min(m.extra["heldout_r2"]) >= 0.97, m.extra["heldout_r2"]
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("seed", [1, 2, 3])
 def test_default_identify_on_a_geometry_nobody_tuned_on(seed: int, tmp_path: Path) -> None:
     """box_rov, a flat work-class ROV added after the defaults were set, realistic and
-    noiseless sensors: held-out force R² ≥ 0.995 in surge, sway, heave and yaw (measured
-    ≥ .9959); roll and pitch stop at ≥ 0.98 (measured .982–.991): the drag and Kutta lift
-    of the foam, skids and sled act on their own velocity v + ω × r, whose norm mixes linear
-    and angular rates, a form no library column has (the whole library fitted to MuJoCo's
-    exact roll moment reaches .994)."""
+    noiseless sensors: held-out force R² ≥ 0.995 in every DOF (measured ≥ .9978, roll
+    ≥ .9991 and pitch ≥ .9981; the library alone stopped roll and pitch at .989–.995): the
+    drag of the foam, skids and sled acts on their own velocity v + ω × r, which the element
+    drags at the geoms' positions carry and no library column has."""
     for clean in (False, True):
         (tmp_path / str(clean)).mkdir()
         r2 = select_heldout(tmp_path / str(clean), "box_rov", seed, clean, options=())[1.0][1]
-        assert np.all(r2[[0, 1, 2, 5]] >= 0.995) and np.all(r2[3:5] >= 0.98), (clean, r2)
+        assert np.all(r2 >= 0.995), (clean, r2)
 
 
 @pytest.mark.slow

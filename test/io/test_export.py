@@ -462,6 +462,20 @@ def test_memory_and_residual_are_listed_never_dropped(tmp_path: Path) -> None:
             assert name in out.text, (fmt, name)
 
 
+def test_element_drags_are_listed_as_left_out(tmp_path: Path) -> None:
+    """No format has a drag at a point on its own velocity: each is listed, with its value,
+    in the file and the result, in every format; the rest is written."""
+    mf = model_file(tmp_path, {"quadratic": {"X_uu": 40.0},
+                               "point": [{"position": [0.3, 0.0, 0.2], "axis": "w",
+                                          "value": 12.0}]})
+    for fmt in ("gz", "urdf", "uuv"):
+        with pytest.warns(ExportWarning, match=r"drag\.w\|U\|@\(0\.3,0,0\.2\)"):
+            out = export_model(mf, fmt)
+        assert [x.split(" =")[0] for x in out.left_out] == ["drag.w|U|@(0.3,0,0.2)"], fmt
+        assert "= 12.0 (the drag of an element at a point" in out.left_out[0]
+        assert "drag.w|U|@(0.3,0,0.2)" in out.text, fmt
+
+
 def test_unknown_format_and_frame(heavy_file: Model) -> None:
     with pytest.raises(ValueError, match=r"unknown export format 'sdf'.*gz.*urdf.*uuv"):
         export_model(heavy_file, "sdf")

@@ -31,6 +31,8 @@ FULL_SPEC: dict[str, Any] = {
     "freq": [{"dof": "u", "rate": 2.0, "c": 5.0}, {"dof": "r", "rate": 0.5, "c": 0.2},
              {"dof": "u", "rate": 7.0, "c": 1.0}],
     "added": {"added.N_uv": 0.3},
+    "point": [{"position": [0.3, 0.0, 0.2], "axis": "w", "value": 12.0},
+              {"position": [0.0, -0.3, 0.21], "axis": "v", "speed": "normal", "value": 7.5}],
     "residual": {"modes": [[1, 0, 1, 0, 0, 0], [0, 1, 0, 0, 0, 1], [0, 0, 1, 0, 1, 0]],
                  "values": [4.0, 5.0, 6.0]},
 }

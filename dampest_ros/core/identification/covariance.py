@@ -161,10 +161,13 @@ def bias_normals(samples: Samples, first: int, model: DampingModel, body: RigidB
         A = np.zeros((p, p))
         b = np.zeros(p)
         if len(data):
+            root = np.sqrt(weights)
             for _, Phi, y in iter_regression(data, model, body, chunk, cutoff, offset=offset,
                                              decimate=True):
-                A += np.einsum("nip,niq,i->pq", Phi, Phi, weights)
-                b += np.einsum("nip,ni,i->p", Phi, y, weights)
+                # Σ_n Σ_i w_i Φ_niᵀ Φ_ni as one matrix product of the √w-weighted rows
+                P = (Phi * root[None, :, None]).reshape(-1, p)
+                A += P.T @ P
+                b += P.T @ (y * root).reshape(-1)
         out.append((A, b))
     return out
 

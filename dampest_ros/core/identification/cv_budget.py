@@ -48,6 +48,28 @@ def _fit(G: FloatArray, bv: FloatArray) -> FloatArray:
     return np.asarray(np.linalg.lstsq(G * np.outer(d, d), bv * d, rcond=1e-13)[0] * d)
 
 
+def fold_fits(A: FloatArray, b: FloatArray, cols: Sequence[int] | NDArray[np.int64]
+              ) -> FloatArray:
+    """The least-squares fit of each fold's complement: θ_{−f} on the columns ``cols``.
+
+    Parameters
+    ----------
+    A : ndarray, shape (F, m, m)
+    b : ndarray, shape (F, m)
+        Per-fold normal equations (ΦᵀΦ, Φᵀy).
+    cols : sequence of int
+        The columns of the model.
+
+    Returns
+    -------
+    ndarray, shape (F, len(cols))
+    """
+    S = np.asarray(cols, dtype=np.int64)
+    G, bv = A.sum(0)[np.ix_(S, S)], b.sum(0)[S]
+    return np.array([_fit(G - A[f][np.ix_(S, S)], bv - b[f][S]) for f in range(len(A))]
+                    ).reshape(len(A), len(S))
+
+
 def fold_errors(A: FloatArray, b: FloatArray, c: FloatArray, cols: Sequence[int] | NDArray[np.int64]
                 ) -> FloatArray:
     """Held-out residual sum of squares of each fold, predicted from the other folds' fit.
@@ -70,10 +92,8 @@ def fold_errors(A: FloatArray, b: FloatArray, c: FloatArray, cols: Sequence[int]
     out = np.array(c, dtype=float)
     if not len(S):
         return out
-    G, bv = A.sum(0)[np.ix_(S, S)], b.sum(0)[S]
-    for f in range(len(c)):
+    for f, theta in enumerate(fold_fits(A, b, S)):
         Af, bf = A[f][np.ix_(S, S)], b[f][S]
-        theta = _fit(G - Af, bv - bf)
         # ‖y − Φθ‖² on fold f = c − 2 bᵀθ + θᵀAθ
         out[f] = c[f] - 2.0 * bf @ theta + theta @ Af @ theta
     return out

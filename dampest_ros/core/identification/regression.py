@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from dampest_ros.core.identification.cv_budget import guarded_folds
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.physics.rigid_body import RigidBody
@@ -167,7 +168,7 @@ def fold_index(n: int, folds: int) -> NDArray[np.int64]:
 
 
 def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: int = 5,
-               chunk: int = CHUNK, cutoff: float = 0.0) -> NormalEquations:
+               chunk: int = CHUNK, cutoff: float = 0.0, guard: int = 0) -> NormalEquations:
     """Accumulate :class:`NormalEquations` over contiguous time folds in chunks.
 
     Parameters
@@ -181,16 +182,19 @@ def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: in
         Samples per chunk (memory ∝ chunk · 6 · p).
     cutoff : float
         Parallel low-pass of y and Φ (Hz); 0: none.
+    guard : int
+        Samples on each side of a boundary between folds that belong to none
+        (:func:`cv_budget.guarded_folds`).
     """
     p, N = model.n_params, len(samples)
-    fold_of = fold_index(N, folds)
+    fold_of = guarded_folds(N, folds, guard) if guard else fold_index(N, folds)
     A = np.zeros((folds, 6, p, p))
     b = np.zeros((folds, 6, p))
     c = np.zeros((folds, 6))
     n = np.zeros(folds)
     for sl, Phi, y in iter_regression(samples, model, body, chunk, cutoff, decimate=True):
         fo = fold_of[sl]
-        for f in np.unique(fo):
+        for f in np.unique(fo[fo >= 0]):
             m = fo == f
             P, Y = Phi[m], y[m]
             # per DOF i: ΦᵢᵀΦᵢ, Φᵢᵀyᵢ, yᵢᵀyᵢ

@@ -48,6 +48,12 @@ from dampest_ros.core.identification.cv_budget import (
     one_se_size,
 )
 from dampest_ros.core.identification.memory_rates import MemoryEvidence, memory_evidence
+from dampest_ros.core.identification.point_selection import (
+    EntryRules,
+    PointSelection,
+    prune_points,
+    select_points,
+)
 from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import (
     NormalEquations,
@@ -58,6 +64,7 @@ from dampest_ros.core.identification.regression import (
 )
 from dampest_ros.core.physics.alpha import Alpha, AlphaBank
 from dampest_ros.core.physics.damping import TERM_KINDS, Basis, DampingModel, DampingTerm
+from dampest_ros.core.physics.point_drag import PointSpec
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError, RigidBody
 from dampest_ros.core.physics.terms import (
     FAMILIES,
@@ -112,6 +119,9 @@ class Selection:
     memory : list of MemoryEvidence
         Time- and frequency-domain estimates of each chosen memory state, with the final
         model's static terms in place.
+    points : PointSelection or None
+        The element drags searched before the library (:mod:`.point_selection`), when
+        candidates were given.
     """
 
     model: DampingModel
@@ -120,32 +130,83 @@ class Selection:
     dropped: dict[str, str] = field(default_factory=dict)
     tss: FloatArray = field(default_factory=lambda: np.ones(6))
     memory: list[MemoryEvidence] = field(default_factory=list)
+    points: PointSelection | None = None
 
     def added(self, base: DampingModel) -> dict[int, list[str]]:
-        """The parameters the search added to ``base``, per force row 0..5 (X..N), in the order
-        of the model (memory gains in the row of their DOF)."""
-        out: dict[int, list[str]] = {i: [] for i in range(6)}
-        for t in self.model.terms:
-            if t.kind == "freq":
-                for d, name in zip(t.state_dofs, t.parameter_names, strict=True):
-                    if name not in base.parameter_names:
-                        out[int(d)].append(name)
-                continue
-            for b in t.bases:
-                if b.name not in base.parameter_names and not b.more:
-                    out[_single_entry(b)[0]].append(b.name)
-        return out
+        """The parameters the search added to ``base``, per force row 0..5 (X..N)
+        (:func:`added_terms`)."""
+        return added_terms(self.model, base)
 
     def only_in(self, base: DampingModel, rows: Sequence[int]) -> DampingModel:
         """The selected model without the static terms it added outside ``rows`` (force rows
-        0..5): what the search found where the base misfits, and the rest as selected."""
+        0..5): what the search found where the base misfits, and the rest as selected (an
+        element drag stays when one of the rows it acts in is among ``rows``)."""
         added = self.added(base)
-        return _without(self.model, [n for i in range(6) if i not in rows for n in added[i]])
+        inside = {n for i in rows for n in added[i]}
+        return _without(self.model, [n for i in range(6) if i not in rows for n in added[i]
+                                     if n not in inside])
 
     @property
     def cv_r2(self) -> tuple[FloatArray, FloatArray]:
-        """Held-out R² per DOF of the base model and of the selected one, each shape (6,)."""
-        return 1.0 - self.steps[0].cv / self.tss, 1.0 - self.steps[-1].cv / self.tss
+        """Held-out R² per DOF of the base model and of the selected one, each shape (6,)
+        (after an element drag search, the base's without the element drags, and both of the
+        whole target)."""
+        if self.points is None:
+            return 1.0 - self.steps[0].cv / self.tss, 1.0 - self.steps[-1].cv / self.tss
+        return self.points.r2[0], 1.0 - self.steps[-1].cv / self.points.tss
+
+
+def added_terms(model: DampingModel, base: DampingModel) -> dict[int, list[str]]:
+    """The parameters of ``model`` that ``base`` lacks, per force row 0..5 (X..N), in the
+    order of the model (memory gains in the row of their DOF, an element drag in every row it
+    acts in)."""
+    out: dict[int, list[str]] = {i: [] for i in range(6)}
+    for t in model.terms:
+        if t.kind == "freq":
+            for d, name in zip(t.state_dofs, t.parameter_names, strict=True):
+                if name not in base.parameter_names:
+                    out[int(d)].append(name)
+            continue
+        for b in t.bases:
+            if b.name in base.parameter_names or b.more:
+                continue
+            rows = np.flatnonzero(np.diag(b.B)) if t.kind == "point" else [_single_entry(b)[0]]
+            for i in rows:
+                out[int(i)].append(b.name)
+    return out
+
+
+def row_by_row(without: Selection, drags: Selection, base: DampingModel, rows: Sequence[int]
+               ) -> tuple[DampingModel, list[int]]:
+    """The terms two searches added to ``base`` in ``rows``, each row's from the search with
+    the smaller held-out residual there: ``without`` element drags, or ``drags``
+    (``points`` given, the drags searched first). The drags stay when a row takes the terms
+    of ``drags``.
+
+    Each row's single-entry terms are fitted to that row alone, so a row can take either
+    search's terms; an element drag acts in several rows and joins with the first row that
+    takes ``drags``. Comparing the held-out residual sums of squares (not R², whose
+    denominators differ by the shared terms' force) keeps both searches' rules: each row's
+    terms passed its blocked cross-validation and one-standard-error rule.
+
+    Returns
+    -------
+    model : DampingModel
+    taken : list of int
+        The rows that take the terms of ``drags``.
+    """
+    taken = [i for i in rows if drags.steps[-1].cv[i] < without.steps[-1].cv[i]]
+    if not taken:
+        return without.only_in(base, rows), []
+    mine, theirs = drags.added(base), without.added(base)
+    others = [i for i in rows if i not in taken]
+    point = drags.model.term("point")
+    keep = {n for i in taken for n in mine[i]} | set(point.parameter_names if point else [])
+    model = _without(drags.model, [n for i in range(6) for n in mine[i] if n not in keep])
+    specs = {b.name: CrossSpec(*_single_entry(b), b.alpha, b.name) for t in without.model.terms
+             if t.kind == "cross" for b in t.bases}
+    return _with_terms(model, [specs[n] for i in others for n in theirs[i] if n in specs],
+                       {}), taken
 
 
 #: Searches of :func:`select_terms` when the base has terms acting in several rows: their
@@ -274,9 +335,10 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
                  memory_dofs: Sequence[int] = (0, 1, 2, 5), cutoff: float = 2.0,
                  folds: int = 5, max_terms: int | None = None, min_improvement: float = 10.0,
                  min_err: float = MIN_ERR, tol: float = 1e-8, strict_base: bool = True,
-                 rounds: int = 10, exchange: float = 2.0, keep_base: bool = False
-                 ) -> Selection:
-    """Forward selection of library terms and memory states on top of ``base``.
+                 rounds: int = 10, exchange: float = 2.0, keep_base: bool = False,
+                 points: Sequence[PointSpec] = ()) -> Selection:
+    """Forward selection of element drags, library terms and memory states on top of
+    ``base``.
 
     Parameters
     ----------
@@ -319,14 +381,18 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         best candidate when that gains ``exchange`` times as much.
     keep_base : bool
         Keep every term of ``base`` whatever the data say (the search only adds).
+    points : sequence of PointSpec
+        Candidate element drags (:func:`point_drag.point_library`), searched first
+        (:func:`point_selection.select_points`); those kept join the base as a shared term.
 
     Returns
     -------
     Selection
 
-    Base parameters that act in several rows at once (the ``coriolis`` term) cannot be chosen
-    row by row: they stay, and the search runs on the target less their force, estimated by
-    least squares with the base, then again with the terms the first search chose
+    Base parameters that act in several rows at once (the ``coriolis`` and ``point`` terms)
+    cannot be chosen row by row: they stay, and the search runs on the target less their
+    force, estimated by least squares (the rows weighted by 1 / Σ y_i², so that N and N·m
+    weigh alike) with the base, then again with the terms the first search chose
     (:data:`SHARED_ROUNDS` searches); the fit of the selected model estimates them with the
     chosen terms.
     """
@@ -335,9 +401,12 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         "folds": folds, "max_terms": max_terms, "min_improvement": min_improvement,
         "min_err": min_err, "tol": tol, "strict_base": strict_base, "rounds": rounds,
         "exchange": exchange, "keep_base": keep_base}
-    shared = [t for t in base.terms if any(b.more for b in t.bases)]
+    rules = EntryRules(min_improvement, _n_eff(samples, cutoff))
+    found = select_points(samples, base, body, points, cutoff, rules, folds) if points else None
+    base = base if found is None else found.model
+    shared = [t for t in base.terms if any(b.more for b in t.bases) or t.kind == "point"]
     if not shared:
-        return _search(samples, base, body, (), **options)
+        return replace(_search(samples, base, body, (), **options), points=found)
     single = DampingModel([t for t in base.terms if t not in shared])
     model = base
     for _ in range(SHARED_ROUNDS):
@@ -349,7 +418,11 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         selection = _search(replace(samples, tau=samples.tau - known), single, body, shared,
                             **options)
         model = selection.model
-    return selection
+    if found is not None:
+        pruned, removed = prune_points(samples, selection.model, body, cutoff, rules)
+        selection = replace(selection, model=pruned)
+        found = replace(found, pruned=removed)
+    return replace(selection, points=found)
 
 
 #: A value per candidate (shape (|C|,)) or of one term.
@@ -380,10 +453,9 @@ def _search(samples: Samples, base: DampingModel, body: RigidBody,
     zero, corr, same_as = _equal_columns(ne.A.sum(0)[0][:m, :m], tol)
     usable, unsearched = _searchable(cand, base_cols, feats, zero, corr, same_as)
     dropped.update(unsearched)
-    duration = len(samples) / samples.rate
     search = _Stepwise(ne, m, [*base_cols, *base_mem], [*usable, *cand_mem], zero,
                        base.n_params + sum(t.n_params for t in shared),
-                       min(float(len(samples)), 2.0 * cutoff * duration),
+                       _n_eff(samples, cutoff),
                        _Rules(math.inf if max_terms is None else max_terms, min_improvement,
                               min_err, tol, strict_base, exchange, keep_base),
                        "base: " + "+".join([*base.kinds, *(t.kind for t in shared)]))
@@ -402,6 +474,12 @@ def _search(samples: Samples, base: DampingModel, body: RigidBody,
     return Selection(model, search.steps, {f"freq.{DOF_NAMES[d]}.lambda1": lam
                                            for d, lam in keep_mem.items()}, dropped,
                      total_sum_of_squares(ne), memory)
+
+
+def _n_eff(samples: Samples, cutoff: float) -> float:
+    """Independent samples of the regression low-passed at ``cutoff`` Hz: 2 · cutoff · T, at
+    most the number of samples."""
+    return min(float(len(samples)), 2.0 * cutoff * len(samples) / samples.rate)
 
 
 def _feature_columns(base: DampingModel, specs: Sequence[CrossSpec]
@@ -834,9 +912,11 @@ class _Stepwise:
 
 def _least_squares(samples: Samples, model: DampingModel, body: RigidBody, cutoff: float
                    ) -> FloatArray:
-    """Unweighted least-squares θ of ``model`` (every parameter free), shape (p,)."""
+    """Least-squares θ of ``model`` (every parameter free), shape (p,): the six rows
+    together, each weighted by 1 / Σ y_i² (its unexplained share, so that N and N·m weigh
+    alike)."""
     ne = accumulate(samples, model, body, cutoff=cutoff)
-    A, b, _ = ne.total(np.ones(6))
+    A, b, _ = ne.total(1.0 / np.maximum(total_sum_of_squares(ne), 1e-300))
     return solve_normal(A, b, np.ones(model.n_params, dtype=bool), np.zeros(model.n_params))
 
 

@@ -36,7 +36,9 @@ class Alpha:
     slender along the third axis), ``area`` (ν_i² / ‖v‖ for a linear ν_i, ν_i² / ‖ω‖ for an
     angular one; with j ≥ 0 the pair (ν_i² + ν_j²) / ‖·‖, both linear or both angular, the
     cross-flow share of a body of revolution about the third axis; 0 at rest), ``prod``
-    (ν_i ν_j), ``absprod`` (|ν_i ν_j|), ``absproj`` (|wᵀν| for a unit 6-vector w).
+    (ν_i ν_j), ``absprod`` (|ν_i ν_j|), ``absproj`` (|wᵀν| for a 6-vector w), ``pspeed``
+    (‖v + ω × r‖, the speed through the water of the point r = ``w`` (3 floats, m, FRD) of the
+    body: an element's local speed, m/s).
     """
 
     kind: str = "one"
@@ -67,6 +69,8 @@ class Alpha:
             return np.abs(nu[:, self.i] * nu[:, self.j])
         if k == "absproj":
             return np.abs(nu @ np.asarray(self.w))
+        if k == "pspeed":
+            return point_speeds(nu, np.array([self.w]))[:, 0]
         raise ConfigError("alpha", f"unknown kind {k!r}")
 
     def scale(self, nu_scale: FloatArray) -> float:
@@ -94,6 +98,8 @@ class Alpha:
             return float(s[3:].max())
         if k == "absproj":
             return float(s[np.abs(np.asarray(self.w)) > 0].max())
+        if k == "pspeed":
+            return float(max(s[:3].max(), s[3:].max() * np.linalg.norm(self.w)))
         raise ConfigError("alpha", f"unknown kind {k!r}")
 
     def label(self) -> str:
@@ -111,6 +117,7 @@ class Alpha:
             "prod": f"{n[self.i]}{n[self.j]}" if self.i >= 0 else "",
             "absprod": f"|{n[self.i]}{n[self.j]}|" if self.i >= 0 else "",
             "absproj": "|w'nu|",
+            "pspeed": "|v+w x r|",
         }[self.kind]
 
     @classmethod
@@ -166,6 +173,8 @@ class AlphaBank:
         self.area = np.zeros(p, dtype=bool)
         self.W = np.zeros((6, p))
         self.proj = np.zeros(p, dtype=bool)
+        self.pspeed = np.array([a.kind == "pspeed" for a in alphas], dtype=bool)
+        self.points = np.array([a.w for a in alphas if a.kind == "pspeed"]).reshape(-1, 3)
         for k, a in enumerate(alphas):
             if a.kind in ("abs", "lin", "prod", "absprod", "pnorm", "area"):
                 self.i[k] = a.i
@@ -185,30 +194,42 @@ class AlphaBank:
         self.any_area = bool(self.area.any())
         self.any_proj = bool(self.proj.any())
         self.any_abs = bool(self.absolute.any())
+        self._columns = {name: np.flatnonzero(mask) for name, mask in (
+            ("pnorm", self.pnorm), ("proj", self.proj), ("norm", self.norm),
+            ("anorm", self.anorm), ("absolute", self.absolute))}
+        self.any_pspeed = bool(self.pspeed.any())
         # the bank is a list of products (kinds one, lin, abs, prod, absprod) unless it holds
-        # a norm, an area or a projection: then one sample goes through __call__ as well
+        # a norm, an area, a projection or a point's speed: then one sample goes through
+        # __call__ as well
         self._products = None if (self.any_norm or self.any_anorm or self.any_pnorm
-                                  or self.any_area or self.any_proj) else list(
+                                  or self.any_area or self.any_proj or self.any_pspeed) else list(
             zip(self.i.tolist(), self.j.tolist(), self.absolute.tolist(), strict=True))
 
     def __call__(self, nu: FloatArray) -> FloatArray:
         """α for samples ``nu`` (N, 6); returns (N, p)."""
         aug = np.concatenate([nu, np.ones((nu.shape[0], 1))], axis=1)
-        # products ν_i ν_j with ν_6 ≡ 1 cover the kinds one, lin and prod; each other kind
-        # overwrites its own columns only (a library bank has hundreds over long logs)
+        # products ν_i ν_j with ν_6 ≡ 1 cover the kinds one, lin and prod; the other kinds
+        # overwrite their own columns only
         a = aug[:, self.i] * aug[:, self.j]
         if self.any_pnorm:
-            a[:, self.pnorm] = np.hypot(aug[:, self.i[self.pnorm]], aug[:, self.j[self.pnorm]])
+            k = self._columns["pnorm"]
+            a[:, k] = np.hypot(aug[:, self.i[k]], aug[:, self.j[k]])
         if self.any_area:
             a[:, self.area] = _area(nu, self.i[self.area], self.j[self.area])
         if self.any_proj:
-            a[:, self.proj] = (nu @ self.W)[:, self.proj]
+            k = self._columns["proj"]
+            a[:, k] = nu @ self.W[:, k]
         if self.any_norm:
-            a[:, self.norm] = np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))[:, None]
+            a[:, self._columns["norm"]] = np.sqrt(np.einsum("ni,ni->n", nu[:, :3],
+                                                            nu[:, :3]))[:, None]
         if self.any_anorm:
-            a[:, self.anorm] = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))[:, None]
+            a[:, self._columns["anorm"]] = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:],
+                                                             nu[:, 3:]))[:, None]
+        if self.any_pspeed:
+            a[:, self.pspeed] = point_speeds(nu, self.points)
         if self.any_abs:
-            a[:, self.absolute] = np.abs(a[:, self.absolute])
+            k = self._columns["absolute"]
+            a[:, k] = np.abs(a[:, k])
         return a
 
     def one(self, nu: list[float]) -> FloatArray:
@@ -235,3 +256,23 @@ def _area(nu: FloatArray, k: NDArray[np.int64], pair: NDArray[np.int64]) -> Floa
     norm = np.where(k < 3, lin[:, None], ang[:, None])
     # ν_k² / ‖·‖ (≤ ‖·‖, so it goes to 0 with the speed)
     return np.divide(square, norm, out=np.zeros_like(norm), where=norm > 0)
+
+
+def point_speeds(nu: FloatArray, points: FloatArray) -> FloatArray:
+    """‖v + ω × r‖ of each point r of the body: its speed through the water.
+
+    Parameters
+    ----------
+    nu : ndarray, shape (N, 6)
+        Body velocity (m/s, rad/s), FRD.
+    points : ndarray, shape (P, 3)
+        Positions r in the body frame (m), FRD.
+
+    Returns
+    -------
+    ndarray, shape (N, P)
+        m/s.
+    """
+    # v_p = v + ω × r per sample and point, shape (N, P, 3)
+    vp = nu[:, None, :3] + np.cross(nu[:, None, 3:], points[None, :, :])
+    return np.sqrt(np.einsum("npi,npi->np", vp, vp))

@@ -32,7 +32,7 @@ from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
 
 FloatArray = NDArray[np.float64]
 
-TERM_KINDS = ("linear", "quadratic", "cross", "freq", "added", "coriolis", "residual")
+TERM_KINDS = ("linear", "quadratic", "cross", "freq", "added", "coriolis", "point", "residual")
 
 
 @dataclass(frozen=True)
@@ -146,11 +146,11 @@ class DampingTerm:
     def project(self, theta: FloatArray) -> FloatArray:
         """Project this term's parameters so that the term is dissipative on its own.
 
-        Linear term: the symmetric part of D_linear onto the PSD cone. Quadratic and residual
-        terms: negative weights of PSD bases to zero. Memory: c_m ≥ 0 (a positive kernel
-        is passive). Cross and added-mass terms have indefinite bases: left unchanged; their
-        effect is checked on data with :meth:`DampingModel.dissipation` (the ``coriolis``
-        term does no work at all: its D(ν) is skew).
+        Linear term: the symmetric part of D_linear onto the PSD cone. Quadratic, point-drag
+        and residual terms: negative weights of PSD bases to zero. Memory: c_m ≥ 0 (a
+        positive kernel is passive). Cross and added-mass terms have indefinite bases: left
+        unchanged; their effect is checked on data with :meth:`DampingModel.dissipation`
+        (the ``coriolis`` term does no work at all: its D(ν) is skew).
         """
         theta = np.array(theta, dtype=float)
         if self.kind == "freq":
@@ -180,7 +180,7 @@ class DampingTerm:
                     lo, hi = (mid, hi) if min_eig(mid) >= 0.0 else (lo, mid)
                 out = np.where(diag, out, lo * out)
             return out
-        if self.kind in ("quadratic", "residual"):
+        if self.kind in ("quadratic", "point", "residual"):
             psd = np.array([np.linalg.eigvalsh(0.5 * (b.B + b.B.T)).min() >= -1e-12
                             for b in self.bases])
             theta[psd] = np.maximum(theta[psd], 0.0)
@@ -234,14 +234,23 @@ class DampingModel:
                   if t.kind != "freq" for k, b in enumerate(t.bases) for B, alpha in b.atoms]
         self._static_idx = np.array([k for k, _, _ in static], dtype=np.int64)
         self._Bs = np.stack([B for _, B, _ in static]) if static else np.zeros((0, 6, 6))
-        # B_j as one (6, 6·atoms) matrix: ν B_flat[b, a·atoms + j] = (B_j ν)_a as one product
-        self._B_flat = self._Bs.transpose(2, 1, 0).reshape(6, -1)
         self._bank = AlphaBank([alpha for _, _, alpha in static])
-        # the entries of the B_j when none has two in one row (single-entry bases, the
-        # library's): (B_j ν)_a is then one product, no 6 × 6 matrix product needed
-        atom, row, col = np.nonzero(self._Bs)
-        self._sparse = not (np.count_nonzero(self._Bs, axis=2) > 1).any()
+        # the atoms whose B_j has two entries in one row (a mode, an element drag) go through
+        # a matrix product, ν B_flat[b, a·k + j] = (B_j ν)_a over those k atoms; the others'
+        # (the library's single entries) (B_j ν)_a is one product of an entry and ν
+        self._dense = np.flatnonzero((np.count_nonzero(self._Bs, axis=2) > 1).any(axis=1))
+        self._B_flat = self._Bs[self._dense].transpose(2, 1, 0).reshape(6, -1)
+        sparse = np.isin(np.arange(len(self._Bs)), self._dense, invert=True)
+        atom, row, col = np.nonzero(self._Bs * sparse[:, None, None])
         self._entries = (atom, row, col, self._Bs[atom, row, col])
+        # each sparse entry written straight into its parameter's column when no two entries
+        # (of a parameter's several atoms) share a row and a parameter, and no matrix-product
+        # atom shares its parameter: then no atom sum is needed
+        param = self._static_idx[atom]
+        dense_params = self._static_idx[self._dense]
+        self._direct = (len(set(zip(row.tolist(), param.tolist(), strict=True))) == len(row)
+                        and not np.isin(dense_params, param).any()
+                        and len(np.unique(dense_params)) == len(dense_params))
         self._static_params = np.unique(self._static_idx)
         # atom → parameter sum (None: one atom per parameter, the common case)
         self._atom_sum: FloatArray | None = None
@@ -328,15 +337,24 @@ class DampingModel:
         """
         nu = np.atleast_2d(np.asarray(nu, dtype=float))
         N = nu.shape[0]
-        Phi = np.empty((N, 6, self.n_params))
-        if len(self._static_idx):
+        Phi = np.zeros((N, 6, self.n_params))
+        if len(self._static_idx) and self._direct:
+            # column j: α_j(ν) B_j ν, each entry (or matrix-product atom) in its own place
+            atom, row, col, value = self._entries
+            alpha = self._bank(nu)
+            Phi[:, row, self._static_idx[atom]] = nu[:, col] * value * alpha[:, atom]
+            if len(self._dense):
+                Phi[:, :, self._static_idx[self._dense]] = (
+                    (nu @ self._B_flat).reshape(N, 6, -1) * alpha[:, None, self._dense])
+        elif len(self._static_idx):
             # column j: α_j(ν) B_j ν (summed over the parameter's atoms)
-            if self._sparse:
-                atom, row, col, value = self._entries
-                Bnu = np.zeros((N, 6, len(self._static_idx)))
-                Bnu[:, row, atom] = nu[:, col] * value * self._bank(nu)[:, atom]
-            else:
-                Bnu = (nu @ self._B_flat).reshape(N, 6, -1) * self._bank(nu)[:, None, :]
+            atom, row, col, value = self._entries
+            alpha = self._bank(nu)
+            Bnu = np.zeros((N, 6, len(self._static_idx)))
+            Bnu[:, row, atom] = nu[:, col] * value * alpha[:, atom]
+            if len(self._dense):
+                Bnu[:, :, self._dense] = ((nu @ self._B_flat).reshape(N, 6, -1)
+                                          * alpha[:, None, self._dense])
             if self._atom_sum is None:
                 Phi[:, :, self._static_idx] = Bnu
             else:
@@ -345,7 +363,6 @@ class DampingModel:
             if states is None:
                 raise ValueError("the freq term needs its memory states")
             # column m: e_{dof_m} z_m
-            Phi[:, :, self._freq_idx] = 0.0
             Phi[:, self.memory_dofs, self._freq_idx] = states
         return Phi
 

@@ -29,6 +29,7 @@ from dampest_ros.core.physics.damping import DampingModel, DampingTerm
 from dampest_ros.core.physics.geometry import Geometry
 from dampest_ros.core.physics.identity import Identity, vehicle_identity
 from dampest_ros.core.physics.mounting import Mounting
+from dampest_ros.core.physics.point_drag import PointSpec, point_term
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, RigidBody
 from dampest_ros.core.physics.terms import (
     CrossSpec,
@@ -125,6 +126,12 @@ def damping_from_spec(spec: dict[str, Any]) -> tuple[DampingModel, FloatArray]:
                                                   f"coriolis.m_w; got {list(cor)}")
         terms.append(coriolis_term(axes))
         values.update(cor)
+    if spec.get("point"):
+        points = [PointSpec.from_dict(d, f"damping.point[{k}]")
+                  for k, d in enumerate(spec["point"])]
+        terms.append(point_term(points))
+        values.update({p.label: float(d.get("value", 0.0))
+                       for p, d in zip(points, spec["point"], strict=True)})
     if "residual" in spec:
         res = spec["residual"] or {}
         term = residual_term(np.asarray(res["modes"], dtype=float).T if "modes" in res else None)

@@ -191,8 +191,8 @@ def coefficients(model: DampingModel, theta: FloatArray) -> tuple[list[Coefficie
     coefficients : list of Coefficient
         Every static basis with one non-zero entry and α ∈ {1, |ν_k|, ν_k}.
     other : list of str
-        ``"name = value (reason)"`` for the rest: memory states, residual modes, α = ‖v‖,
-        products.
+        ``"name = value (reason)"`` for the rest: memory states, residual modes, element
+        drags, α = ‖v‖, products.
     """
     theta = np.asarray(theta, dtype=float)
     out: list[Coefficient] = []
@@ -207,7 +207,11 @@ def coefficients(model: DampingModel, theta: FloatArray) -> tuple[list[Coefficie
         for b, v in zip(term.bases, th, strict=True):
             nz = np.argwhere(b.B != 0)
             a = b.alpha
-            if b.more:
+            if term.kind == "point":
+                other.append(f"{b.name} = {num(v)} (the drag of an element at a point of the "
+                             "body on its own velocity v + ω × r, one coefficient in a force "
+                             "and its moments: the format has no such term)")
+            elif b.more:
                 other.append(f"{b.name} = {num(v)} (an added-mass correction acting through "
                              "the Coriolis force and Munk moment only, not inertially: the "
                              "format's added mass acts both ways)")

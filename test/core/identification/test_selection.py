@@ -298,3 +298,35 @@ def test_the_added_term_and_its_library_twin_do_not_make_a_singular_fit(
     assert "M_uxw" not in names and "added.M_uw" in names
     r = fit(samples, sel.model, body, FitOptions(method="ols", gyro_bias=0.0, dvl_bias=0.0))
     assert r.theta[names.index("added.M_uw")] == pytest.approx(12.0, rel=0.05)
+
+
+def test_each_dof_takes_the_terms_of_the_search_that_predicts_it_better(
+        body: RigidBody) -> None:
+    """Linear + quadratic drag, a heave drag of 60 N s²/m² at (0.3, 0, 0.2) m (Z and M)
+    and a sway–yaw Y ← 30 v|r| (Y only), 300 s, 1 % noise, seeded. The library alone
+    leaves heave and pitch at .9973 and .9906 held out; the search with element drags first
+    finds the drag, and the DOFs it acts in (Z, M) take that search's terms: the combined
+    model keeps the drag and Y_vr (nothing else) and reaches ≥ 0.9999 in every DOF (fit on
+    70 %, scored on the last 30 %)."""
+    from dampest_ros.core.identification.selection import row_by_row
+    from dampest_ros.core.physics.point_drag import PointSpec, point_library, point_term
+
+    rng = np.random.default_rng(4)
+    nu = smooth(rng, int(300 * RATE), np.array([0.3, 0.2, 0.2, 0.3, 0.3, 0.3]), 0.5)
+    base = base_model()
+    truth = PointSpec((0.3, 0.0, 0.2), 2)
+    law = base.force(nu, np.r_[[10.0, 12.0, 15.0, 1.0, 1.0, 1.0],
+                               [40.0, 50.0, 60.0, 2.0, 2.0, 2.0]]) \
+        + DampingModel([point_term([truth])]).force(nu, np.array([60.0]))
+    law[:, 1] += 30.0 * nu[:, 1] * np.abs(nu[:, 5])
+    samples = synthetic(body, nu, law, 0.01, seed=5)
+    alone = select_terms(samples, base, body, memory_dofs=(), keep_base=True)
+    drags = select_terms(samples, base, body, memory_dofs=(), keep_base=True,
+                         points=point_library([(0.3, 0.0, 0.2), (-0.2, 0.1, -0.1)]))
+    before = held_out_r2(samples, alone.model, body)
+    assert before[2] < 0.998 and before[4] < 0.991, before  # measured .9973, .9906
+    model, taken = row_by_row(alone, drags, base, range(6))
+    assert taken == [2, 4]
+    assert set(model.parameter_names) == {*base.parameter_names, "Y_vr", truth.label}
+    after = held_out_r2(samples, model, body)
+    assert np.all(after >= 0.9999), after  # measured ≥ .99999

@@ -1,0 +1,266 @@
+"""Which element drags at points of the body the data support (the ``point`` term).
+
+An element drag (:mod:`dampest_ros.core.physics.point_drag`) has one coefficient acting in a
+force and two moments at once, so it cannot be searched row by row like the library's
+single-entry terms (:mod:`.selection`). It is searched first, on top of the base model and
+before the library (physically named terms first), by the same rules: a greedy forward path
+over the candidates, each step the candidate with the least held-out error of the blocked
+cross-validation (contiguous time folds apart by a guard, :mod:`.cv_budget`). The six rows are
+fitted together with weights 1 / Σ y_i², so the error is Σ_i RSS_i / TSS_i, the unexplained
+shares of the six DOFs (N and N·m weigh alike), and a coefficient fits all the rows it acts in
+at once. A candidate enters only when, in a DOF it acts in, it lowers BIC by more than 10
+(the library's test, :class:`EntryRules`; its 5 % share of the residual, which judges one
+row's term, would stop the drags that each take a little from several DOFs). The path is cut
+as the library search cuts each row's, at the one-standard-error size of a DOF's own held-out
+errors along it: the largest of the six, so that a drag stays while one DOF gains more than
+its standard error. Once the library terms have joined, a drag that no longer passes the test
+it entered by goes (:func:`prune_points`), as the library search's backward step takes out a
+weak term: a pair of drags at the bow and the stern stands in for a yaw cross-flow drag
+N ∝ r|v| until the library's own N_rv enters.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dampest_ros.core.identification.cv_budget import (
+    GUARD_PERIODS,
+    fold_errors,
+    fold_fits,
+    one_se_size,
+)
+from dampest_ros.core.identification.quadratic import solve_normal
+from dampest_ros.core.identification.regression import NormalEquations, accumulate
+from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel
+from dampest_ros.core.physics.point_drag import PointSpec, point_spec, point_term
+from dampest_ros.core.physics.rigid_body import RigidBody
+from dampest_ros.core.signals.samples import Samples
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass
+class PointSelection:
+    """Result of :func:`select_points`.
+
+    Attributes
+    ----------
+    model : DampingModel
+        The base with the element drags kept (in the order they entered).
+    chosen : list of PointSpec
+        The element drags kept.
+    r2 : tuple of two ndarrays, shape (6,)
+        Held-out R² per DOF of the base and of ``model`` (the rows fitted together).
+    tss : ndarray, shape (6,)
+        Σ y² per DOF of the low-passed target (held-out R² = 1 − CV / tss).
+    path : list of (str, float, float)
+        The base (``base``), then each candidate as it entered (the kept ones first), with
+        the held-out error Σ_i CV_i / TSS_i after it and its standard error.
+    pruned : list of str
+        The kept drags taken out once the library terms joined (:func:`prune_points`).
+    """
+
+    model: DampingModel
+    chosen: list[PointSpec]
+    r2: tuple[FloatArray, FloatArray]
+    tss: FloatArray
+    path: list[tuple[str, float, float]]
+    pruned: list[str] = field(default_factory=list)
+
+
+def with_points(base: DampingModel, points: Sequence[PointSpec]) -> DampingModel:
+    """``base`` with the element drags ``points`` added to its ``point`` term (made if none)."""
+    if not points:
+        return base
+    terms = {t.kind: t for t in base.terms}
+    old = terms.get("point")
+    terms["point"] = point_term([*(point_spec(b) for b in (old.bases if old else [])), *points])
+    return DampingModel([terms[k] for k in TERM_KINDS if k in terms])
+
+
+@dataclass(frozen=True)
+class EntryRules:
+    """The test a candidate passes to enter the path, the library search's BIC test
+    (:mod:`.selection`): in at least one DOF it acts in, it lowers BIC by more than
+    ``min_improvement``, with ``n_eff`` independent samples."""
+
+    min_improvement: float
+    n_eff: float
+
+    def passed(self, rss_without: FloatArray, rss_with: FloatArray) -> bool:
+        """Whether a DOF's in-sample RSS, shape (6,) each, falls by the test's margin."""
+        ratio = np.maximum(rss_with, 1e-300) / np.maximum(rss_without, 1e-300)
+        # ΔBIC of the row = n_eff log(RSS_with / RSS_without) + log n_eff
+        dbic = self.n_eff * np.log(ratio) + np.log(self.n_eff)
+        return bool(np.any(dbic < -self.min_improvement))
+
+
+def select_points(samples: Samples, base: DampingModel, body: RigidBody,
+                  candidates: Sequence[PointSpec], cutoff: float, rules: EntryRules,
+                  folds: int = 5) -> PointSelection:
+    """The element drags among ``candidates`` the data support on top of ``base`` (module
+    docstring).
+
+    Parameters
+    ----------
+    samples : Samples
+    base : DampingModel
+        Terms always kept.
+    body : RigidBody
+    candidates : sequence of PointSpec
+        Simplest first: among sizes the data cannot tell apart, the path's order decides.
+    cutoff : float
+        Parallel low-pass of the regression (Hz).
+    rules : EntryRules
+        What a candidate must do to enter the path.
+    folds : int
+        Contiguous time folds of the cross-validation.
+
+    Returns
+    -------
+    PointSelection
+    """
+    names = set(base.parameter_names)
+    candidates = [c for c in candidates if c.label not in names]
+    model = with_points(base, candidates)
+    guard = round(GUARD_PERIODS * samples.rate / cutoff) if cutoff > 0 else 0
+    ne = accumulate(samples, model, body, folds=folds, cutoff=cutoff, guard=guard)
+    index = {n: k for k, n in enumerate(model.parameter_names)}
+    base_cols = [index[n] for n in base.parameter_names]
+    cand_cols = [index[c.label] for c in candidates]
+    tss = np.maximum(ne.c.sum(0), 1e-300)
+    # the six rows together, each weighted by 1 / TSS_i: Σ_i RSS_i / TSS_i
+    A = np.einsum("fipq,i->fpq", ne.A, 1.0 / tss)
+    b = np.einsum("fip,i->fp", ne.b, 1.0 / tss)
+    c = ne.c @ (1.0 / tss)
+    chosen, errors = _path(ne, (A, b, c), base_cols, cand_cols, rules)
+    path = [(name, float(e.sum()), float(np.sqrt(len(e)) * np.std(e, ddof=1)))
+            for name, e in zip(["base", *(candidates[k].label for k in chosen)], errors,
+                               strict=True)]
+    # each DOF's held-out errors per fold along the path, shape (K + 1, F, 6)
+    rows = np.array([_row_fold_errors(ne, A, b, [*base_cols, *(cand_cols[k] for k in chosen[:j])])
+                     for j in range(len(chosen) + 1)])
+    # a drag stays while one DOF gains more than its own standard error from it
+    kept = [candidates[k] for k in chosen[:max(one_se_size(rows[:, :, i]) for i in range(6))]]
+    r2 = (1.0 - rows[0].sum(0) / tss, 1.0 - rows[len(kept)].sum(0) / tss)
+    return PointSelection(with_points(base, kept), kept, r2, tss, path)
+
+
+def prune_points(samples: Samples, model: DampingModel, body: RigidBody, cutoff: float,
+                 rules: EntryRules) -> tuple[DampingModel, list[str]]:
+    """``model`` without its element drags that no longer pass ``rules`` beside its other
+    terms, the weakest (least BIC gained in its best DOF) first, one at a time.
+
+    Returns
+    -------
+    model : DampingModel
+    removed : list of str
+        The names of the drags taken out, in that order.
+    """
+    point = model.term("point")
+    if point is None:
+        return model, []
+    ne = accumulate(samples, model, body, cutoff=cutoff)
+    tss = np.maximum(ne.c.sum(0), 1e-300)
+    A, b = np.einsum("fipq,i->fpq", ne.A, 1.0 / tss), np.einsum("fip,i->fp", ne.b, 1.0 / tss)
+    names = model.parameter_names
+    cols = list(range(len(names)))
+    drags = [names.index(n) for n in point.parameter_names]
+    removed: list[str] = []
+    while drags:
+        rss = _row_rss(ne, A, b, cols)
+        without = {k: _row_rss(ne, A, b, [j for j in cols if j != k]) for k in drags}
+        weak = [k for k in drags if not rules.passed(without[k], rss)]
+        if not weak:
+            break
+        k = min(weak, key=lambda j: float((without[j] / np.maximum(rss, 1e-300)).max()))
+        cols.remove(k)
+        drags.remove(k)
+        removed.append(names[k])
+    keep = [point_spec(bs) for bs in point.bases if bs.name not in removed]
+    rest = DampingModel([t for t in model.terms if t.kind != "point"])
+    return with_points(rest, keep), removed
+
+
+def _path(ne: NormalEquations, joint: tuple[FloatArray, FloatArray, FloatArray],
+          base_cols: Sequence[int], cand_cols: Sequence[int], rules: EntryRules
+          ) -> tuple[list[int], list[FloatArray]]:
+    """The greedy forward path: each step the candidate that passes ``rules`` with the least
+    joint held-out error, while that error falls.
+
+    Parameters
+    ----------
+    ne : NormalEquations
+        Per-fold, per-row normal equations of the base's and the candidates' columns.
+    joint : tuple of ndarrays, shapes (F, p, p), (F, p), (F,)
+        The rows' weighted sum.
+    base_cols, cand_cols : sequence of int
+        The base's columns and each candidate's.
+    rules : EntryRules
+
+    Returns
+    -------
+    chosen : list of int
+        Indices into ``cand_cols``, in the order they entered.
+    errors : list of ndarray, shape (F,) each
+        The joint held-out error per fold of the base, then after each step.
+    """
+    A, b, c = joint
+    cols = list(base_cols)
+    chosen: list[int] = []
+    errors = [fold_errors(A, b, c, cols)]
+    rss = _row_rss(ne, A, b, cols)
+    pool = list(range(len(cand_cols)))
+    while pool:
+        trials = [(k, fold_errors(A, b, c, [*cols, cand_cols[k]]),
+                   _row_rss(ne, A, b, [*cols, cand_cols[k]])) for k in pool]
+        good = [t for t in trials if rules.passed(rss, t[2])]
+        if not good:
+            break
+        k, e, r = min(good, key=lambda t: float(t[1].sum()))
+        if e.sum() >= errors[-1].sum():
+            break
+        pool.remove(k)
+        chosen.append(k)
+        cols.append(cand_cols[k])
+        errors.append(e)
+        rss = r
+    return chosen, errors
+
+
+def _row_rss(ne: NormalEquations, A: FloatArray, b: FloatArray, cols: Sequence[int]
+             ) -> FloatArray:
+    """In-sample residual sum of squares per row of the joint fit on ``cols`` over all folds,
+    shape (6,)."""
+    S = np.asarray(cols, dtype=np.int64)
+    theta = solve_normal(A.sum(0)[np.ix_(S, S)], b.sum(0)[S], np.ones(len(S), dtype=bool),
+                         np.zeros(len(S)))
+    G, bv = ne.A.sum(0)[:, S][:, :, S], ne.b.sum(0)[:, S]
+    # ‖y_i − Φ_i θ‖² = c_i − 2 b_iᵀθ + θᵀA_iθ, every row i
+    return np.asarray(ne.c.sum(0) - 2.0 * bv @ theta + np.einsum("p,ipq,q->i", theta, G, theta))
+
+
+def _row_fold_errors(ne: NormalEquations, A: FloatArray, b: FloatArray, cols: Sequence[int]
+                     ) -> FloatArray:
+    """Held-out residual sum of squares per fold and row of the joint fit on ``cols``, each
+    fold predicted from the others, shape (F, 6).
+
+    Parameters
+    ----------
+    ne : NormalEquations
+        Per-fold, per-row normal equations.
+    A, b : ndarray, shapes (F, p, p) and (F, p)
+        The rows' weighted sum, whose fit on the other folds predicts each fold.
+    cols : sequence of int
+    """
+    S = np.asarray(cols, dtype=np.int64)
+    out = np.array(ne.c, dtype=float)
+    for f, theta in enumerate(fold_fits(A, b, S)):
+        # ‖y_i − Φ_i θ‖² on fold f = c_i − 2 b_iᵀθ + θᵀA_iθ, every row i
+        Af, bf = ne.A[f][:, S][:, :, S], ne.b[f][:, S]
+        out[f] += -2.0 * bf @ theta + np.einsum("p,ipq,q->i", theta, Af, theta)
+    return out

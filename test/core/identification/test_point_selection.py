@@ -1,0 +1,42 @@
+"""The element drag search (dampest_ros.core.identification.point_selection) on data with a
+known drag at a point of the body."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dampest_ros.core.identification.point_selection import EntryRules, select_points
+from dampest_ros.core.identification.regression import accumulate
+from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.point_drag import PointSpec, point_library, point_term
+from dampest_ros.core.physics.terms import linear_term, quadratic_term
+from dampest_ros.io.yaml_io import load_vehicle
+from test.core.identification.test_selection import RATE, smooth, synthetic
+
+#: The element of the truth: a skid 0.3 m forward and 0.2 m below the origin, heave drag.
+TRUTH = PointSpec((0.3, 0.0, 0.2), 2)
+POINTS = [(0.3, 0.0, 0.2), (0.0, -0.3, 0.21), (-0.2, 0.1, -0.1)]
+
+
+def test_the_drag_at_its_point_is_found_first_and_alone() -> None:
+    """Linear + quadratic drag and a heave drag of 60 N s²/m² at (0.3, 0, 0.2) m (heave and
+    pitch), 120 s, 1 % noise, seeded: of 18 candidates at three points the search keeps the
+    true one only, which lifts the held-out R² of Z and M from below 0.99 to above 0.999; its
+    least-squares coefficient is within 2 % of 60."""
+    body = load_vehicle("bluerov2_heavy").body
+    rng = np.random.default_rng(11)
+    nu = smooth(rng, int(120 * RATE), np.array([0.3, 0.2, 0.2, 0.3, 0.3, 0.3]), 0.5)
+    base = DampingModel([linear_term(), quadratic_term()])
+    base_theta = np.r_[[10.0, 12.0, 15.0, 1.0, 1.0, 1.0], [40.0, 50.0, 60.0, 2.0, 2.0, 2.0]]
+    law = base.force(nu, base_theta) \
+        + DampingModel([point_term([TRUTH])]).force(nu, np.array([60.0]))
+    samples = synthetic(body, nu, law, 0.01, seed=3)
+    found = select_points(samples, base, body, point_library(POINTS), 2.0,
+                          EntryRules(10.0, 2.0 * 2.0 * 120.0))
+    assert found.chosen == [TRUTH]
+    before, after = found.r2
+    assert before[[2, 4]].max() < 0.99 and after[[2, 4]].min() > 0.999, (before, after)
+    ne = accumulate(samples, found.model, body, cutoff=2.0)
+    A, b, _ = ne.total(1.0 / ne.c.sum(0))
+    theta = np.linalg.solve(A, b)
+    assert abs(theta[-1] - 60.0) < 1.2, theta[-1]
