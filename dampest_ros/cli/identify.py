@@ -30,6 +30,7 @@ from dampest_ros.cli.pool import (
     reduce_all,
 )
 from dampest_ros.core.identification.batch import Fit, FitOptions
+from dampest_ros.core.identification.misfit import misfit_terms
 from dampest_ros.core.identification.pool import (
     LogStatistics,
     consistency,
@@ -392,33 +393,19 @@ def selection_table(selection: Selection) -> str:
 
 
 def default_selection(samples: Samples, model: DampingModel, body: RigidBody,
-                      args: argparse.Namespace, ratio: float = 3.0, floor: float = 0.999
-                      ) -> DampingModel:
-    """The preset's terms, and where they misfit the data, the library terms the data select.
-
-    The library search (:func:`select_terms` on top of the preset's terms, all kept, without
-    memory) gives the held-out residual a sparse model reaches on the same data: our estimate
-    of the noise floor. A DOF whose held-out R² with the preset's terms is below ``floor``
-    while its unexplained share is more than ``ratio`` times the library's is a misfit: one
-    line each, and unless ``--no-select`` (or ``--structure``) the terms the search added in
-    those DOFs join the preset's (printed per DOF). Without a misfit the model is the preset's.
-    """
-    try:
-        with Elapsed("checking the preset's terms against the term library"):
-            sel = select_terms(samples, model, body, cutoff=args.cutoff, memory_dofs=(),
-                               keep_base=True)
-    except ConfigError:
-        return model  # a structure the library search does not take (a residual term)
-    before, after = sel.cv_r2
-    bad = [i for i in range(6) if before[i] < floor
-           and 1.0 - before[i] > ratio * max(1.0 - after[i], 1e-12)]
-    if not bad:
+                      args: argparse.Namespace) -> DampingModel:
+    """The preset's terms, and where they misfit the data, the library terms the data select
+    (:func:`misfit_terms`): one line per misfit DOF and, unless ``--no-select`` (or
+    ``--structure``), the terms added there (printed per DOF). Without a misfit the model is
+    the preset's."""
+    with Elapsed("checking the preset's terms against the term library"):
+        found = misfit_terms(samples, model, body, args.cutoff)
+    if found is None or not found.rows:
         return model
-    added = sel.added(model)
-    for i in bad:
-        print(f"misfit: {FORCE_NAMES[i]}: held-out R² {before[i]:.3f} with the preset's terms, "
-              f"{after[i]:.3f} with {len(added[i])} library terms added: the residual is "
-              f"{(1.0 - before[i]) / max(1.0 - after[i], 1e-12):.0f}× what the data allow")
+    for i in found.rows:
+        print(f"misfit: {FORCE_NAMES[i]}: held-out R² {found.before[i]:.3f} with the preset's "
+              f"terms, {found.after[i]:.3f} with {len(found.added[i])} library terms added: "
+              f"the residual is {found.ratio(i):.0f}× what the data allow")
     if args.no_select or args.structure:
         print("the damping structure misses physics in these data; without --no-select (or "
               f"--structure) identify adds the library terms: dampest identify {args.input} "
@@ -426,8 +413,8 @@ def default_selection(samples: Samples, model: DampingModel, body: RigidBody,
         return model
     print("terms added by selection in the DOFs that misfit (blocked cross-validation, BIC "
           "and the one-standard-error rule; --no-select: the preset's terms alone):")
-    print(added_table(model.parameter_names, {i: added[i] for i in bad}, before, after))
-    return sel.only_in(model, bad)
+    print(added_table(model.parameter_names, found.added, found.before, found.after))
+    return found.model
 
 
 def added_table(kept: list[str], added: dict[int, list[str]], before: np.ndarray,
