@@ -267,7 +267,7 @@ def refit_text(rel: RelativeRefit) -> str:
             f"{float(np.degrees(np.arctan2(v[1], v[0])) % 360.0):.1f}° (north {v[0]:+.3f}, "
             f"east {v[1]:+.3f} m/s)\n")
     if rel.added:
-        head += (f"  terms added where the model's misfit ν_r (default selection, "
+        head += (f"  terms added where the model's terms misfit ν_r (default selection, "
                  f"{rel.rounds} current–terms round(s)):\n" + "".join(
                      f"    {FORCE_NAMES[i]}: {', '.join(names)}\n"
                      for i, names in rel.added.items()))
