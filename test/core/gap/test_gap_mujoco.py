@@ -13,13 +13,13 @@ DOF's held-out residual; after the refit (the terms chosen again at ν_r as ``id
 by default) every DOF's held-out R² is ≥ 0.99; on clean runs of seeds 2 and 3 it names
 nothing. Every model it writes loads back with ``--model``.
 
-Measured (seeds 1–3, every direction, CSV route; the bag route on seed 1 gave the same
-numbers): with the selected model the refit's current is within 0.44 % and 0.22°, every DOF's
-held-out R² 0.9947–1.0 (0.9884 in X on the torpedo when the selection had no cross-flow-area
-terms: the refit then adds X_uAvw and X_uAu at ν_r, X 0.9974). With the preset's terms the
-current as named is off by −6.6 % to +19.3 % and up to 5.9°, by +2.9 % to +15.2 % after a
-refit of those terms alone (R² 0.59–0.95); with the terms chosen again at ν_r it is within
-0.38 % and 0.22°, every DOF's R² ≥ 0.9947.
+Measured (seeds 1–3, every direction, CSV route; on the bag route, five cases of seeds 1–3,
+the same to 0.07 % and 0.01°): with the selected model the refit's current is within 0.44 %
+and 0.22°, every DOF's held-out R² 0.9947–1.0 (0.9884 in X on the torpedo when the selection
+had no cross-flow-area terms: the refit then adds X_uAvw and X_uAu at ν_r, X 0.9974). With
+the preset's terms the current as named is off by −6.6 % to +19.3 % and up to 5.9°, by +2.9 %
+to +15.2 % after a refit of those terms alone (R² 0.59–0.95); with the terms chosen again at
+ν_r it is within 0.38 % and 0.22°, every DOF's R² ≥ 0.9947.
 
 On a model with the preset's structure (fitted by plain ``identify``), whose residual on
 these data is a modelling error of 15–60 % of the force, no step may make a DOF's held-out
