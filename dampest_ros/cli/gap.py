@@ -154,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"\n{result.conclusion}.")
     relative = current_refit(data, result)
     if relative is not None:
-        print("\n5. the model's terms refitted at the relative velocity ν_r, jointly with the "
+        print("\n5. the model refitted at the relative velocity ν_r, jointly with the "
               "current:\n" + refit_text(relative))
     # the model file first: it does not depend on the free run
     final = final_model(data, result, mf, args, logs, vehicle.identity, relative)
@@ -248,24 +248,31 @@ def steps_table(data: GapData, result: GapResult) -> str:
 
 
 def current_refit(data: GapData, result: GapResult) -> RelativeRefit | None:
-    """When a current is named, the believed terms (with any the gap added) refitted at ν_r
-    jointly with it (:func:`refit_relative`); else None."""
+    """When a current is named, the believed model (with any terms the gap added) refitted at
+    ν_r jointly with it, its terms chosen again there (:func:`refit_relative`); else None."""
     found = [(e, p) for e, p in result.effects if isinstance(e, Current)]
     if not found:
         return None
     e, p = found[0]
     upd = updated_model(data, result.effects)
-    with Elapsed("refitting the model's terms at the relative velocity"):
+    with Elapsed("refitting the model at the relative velocity"):
         return refit_relative(data, upd.model, upd.theta, e.ned(p), result.r)
 
 
 def refit_text(rel: RelativeRefit) -> str:
-    """The jointly estimated current and the held-out R² and RMS per DOF before (believed
-    model at ν) and after (refit at ν_r)."""
+    """The jointly estimated current, the terms added at ν_r per DOF, and the held-out R² and
+    RMS per DOF before (believed model at ν) and after (refit at ν_r)."""
     v = rel.current
     head = (f"  current {float(np.hypot(v[0], v[1])):.3f} m/s towards "
             f"{float(np.degrees(np.arctan2(v[1], v[0])) % 360.0):.1f}° (north {v[0]:+.3f}, "
             f"east {v[1]:+.3f} m/s)\n")
+    if rel.added:
+        head += (f"  terms added where the model's terms misfit ν_r (default selection, "
+                 f"{rel.rounds} current–terms round(s)):\n" + "".join(
+                     f"    {FORCE_NAMES[i]}: {', '.join(names)}\n"
+                     for i, names in rel.added.items()))
+    else:
+        head += "  no terms added: the model's terms fit ν_r as well as the library's\n"
     return head + table(
         ("held-out", *(f"{f} ({u})" for f, u in zip(FORCE_NAMES, FORCE_UNITS, strict=True))),
         [("R² believed", *(f"{x:.4f}" for x in rel.r2_before)),
@@ -305,8 +312,9 @@ def final_model(data: GapData, result: GapResult, mf: Model, args: argparse.Name
     """The believed model with the named effects applied, its σ and what they updated;
     ``logs``: the logs pooled and left out (:func:`pooled_logs`), recorded in ``extra``;
     ``identity``: the vehicle's (else the believed model's). With a current named, the
-    ``relative`` refit's θ, σ and held coefficients replace them (the terms fitted at ν_r),
-    its current and held-out scores under ``extra['gap']['refit']``."""
+    ``relative`` refit's terms, θ, σ and held coefficients replace them (the model fitted at
+    ν_r), its current, the terms it added and its held-out scores under
+    ``extra['gap']['refit']``."""
     upd = updated_model(data, result.effects)
     std = dict(zip(mf.parameter_names, mf.theta_std.tolist(), strict=True))
     effects: dict[str, Any] = {}
@@ -329,7 +337,8 @@ def final_model(data: GapData, result: GapResult, mf: Model, args: argparse.Name
             entry[_param_key(name) + "_std"] = float(sd)
         entry["title"] = e.title
         effects[_param_key(e.key)] = entry
-    names = upd.model.parameter_names
+    damping = upd.model if relative is None else relative.model
+    names = damping.parameter_names
     extra: dict[str, Any] = {
         "source": f"dampest gap {args.input} --model {args.model}", **(logs or {}),
         "gap": {"named": [e.key for e, _ in result.effects] or ["none"],
@@ -342,15 +351,17 @@ def final_model(data: GapData, result: GapResult, mf: Model, args: argparse.Name
         theta, theta_std = f.theta, f.std
         held = f.held_reasons
         extra["gap"]["refit"] = {
-            "what": "the model's terms refitted at the relative velocity, jointly with the "
-                    "current; theta is this refit",
+            "what": "the model refitted at the relative velocity, jointly with the current, "
+                    "with library terms added where its terms misfit; theta is this refit",
             "current_ned": [float(x) for x in relative.current],
+            "added_terms": [n for i in sorted(relative.added) for n in relative.added[i]]
+            or ["none"],
             "r2_heldout_before": [float(x) for x in relative.r2_before],
             "r2_heldout_after": [float(x) for x in relative.r2_after],
             "rmse_heldout_before": [float(x) for x in relative.rms_before],
             "rmse_heldout_after": [float(x) for x in relative.rms_after]}
     return Model(names, theta, theta_std, upd.M,
-                 damping=upd.model, extra=extra, M_A=upd.M_A,
+                 damping=damping, extra=extra, M_A=upd.M_A,
                  added_mass_terms=upd.added_mass_terms, held=held,
                  identity=identity or mf.identity)
 
@@ -487,7 +498,9 @@ def write_report(out: Path, data: GapData, result: GapResult,
                           f"{st.bic_before:.0f} → {st.bic_after:.0f}",
                           f"{100 * st.screen.heldout:.1f} %"])
         if relative is not None:
-            srows.append(["refit", "the model's terms refitted at ν_r with the current",
+            added = ", ".join(n for names in relative.added.values() for n in names)
+            srows.append(["refit", html.escape("the model refitted at ν_r with the current; "
+                                               f"terms added: {added or 'none'}"),
                           html.escape(refit_text(relative).splitlines()[0].strip()),
                           *(f"{relative.rms_before[i]:.3g} → {relative.rms_after[i]:.3g} "
                             f"(R² {relative.r2_after[i]:.4f})" for i in range(6)), "", ""])

@@ -30,6 +30,7 @@ from dampest_ros.cli.pool import (
     reduce_all,
 )
 from dampest_ros.core.identification.batch import Fit, FitOptions
+from dampest_ros.core.identification.misfit import misfit_terms
 from dampest_ros.core.identification.pool import (
     LogStatistics,
     consistency,
@@ -428,33 +429,20 @@ def element_drag_table(selection: Selection) -> str:
 
 
 def default_selection(samples: Samples, model: DampingModel, vehicle: Vehicle,
-                      args: argparse.Namespace, ratio: float = 3.0, floor: float = 0.999
-                      ) -> DampingModel:
-    """The preset's terms, and where they misfit the data, the library terms the data select.
-
-    The library search (:func:`select_terms` on top of the preset's terms, all kept, without
-    memory) gives the held-out residual a sparse model reaches on the same data: our estimate
-    of the noise floor. A DOF whose held-out R² with the preset's terms is below ``floor``
-    while its unexplained share is more than ``ratio`` times the library's is a misfit: one
-    line each, and unless ``--no-select`` (or ``--structure``) the terms the search added in
-    those DOFs join the preset's (printed per DOF). Without a misfit the model is the preset's.
-    """
-    try:
-        with Elapsed("checking the preset's terms against the term library"):
-            sel = select_terms(samples, model, vehicle.body, cutoff=args.cutoff,
-                               memory_dofs=(), keep_base=True)
-    except ConfigError:
-        return model  # a structure the library search does not take (a residual term)
-    before, after = sel.cv_r2
-    bad = [i for i in range(6) if before[i] < floor
-           and 1.0 - before[i] > ratio * max(1.0 - after[i], 1e-12)]
-    if not bad:
+                      args: argparse.Namespace) -> DampingModel:
+    """The preset's terms, and where they misfit the data, the terms the data select there
+    (:func:`misfit_terms`): one line per misfit DOF and, unless ``--no-select`` (or
+    ``--structure``), per misfit DOF the terms of the search, with or without the element
+    drags first, that predicts it better (printed per DOF). Without a misfit the model is the
+    preset's."""
+    with Elapsed("checking the preset's terms against the term library"):
+        found = misfit_terms(samples, model, vehicle.body, args.cutoff)
+    if found is None or not found.rows:
         return model
-    added = sel.added(model)
-    for i in bad:
-        print(f"misfit: {FORCE_NAMES[i]}: held-out R² {before[i]:.3f} with the preset's terms, "
-              f"{after[i]:.3f} with {len(added[i])} library terms added: the residual is "
-              f"{(1.0 - before[i]) / max(1.0 - after[i], 1e-12):.0f}× what the data allow")
+    for i in found.rows:
+        print(f"misfit: {FORCE_NAMES[i]}: held-out R² {found.before[i]:.3f} with the preset's "
+              f"terms, {found.after[i]:.3f} with {len(found.added[i])} library terms added: "
+              f"the residual is {found.ratio(i):.0f}× what the data allow")
     if args.no_select or args.structure:
         print("the damping structure misses physics in these data; without --no-select (or "
               f"--structure) identify adds the library terms: dampest identify {args.input} "
@@ -464,16 +452,17 @@ def default_selection(samples: Samples, model: DampingModel, vehicle: Vehicle,
         drags = select_terms(samples, model, vehicle.body, cutoff=args.cutoff, memory_dofs=(),
                              keep_base=True, points=element_drags(vehicle))
     print(element_drag_table(drags))
-    chosen, taken = row_by_row(sel, drags, model, bad)
+    chosen, taken = row_by_row(found.selection, drags, model, found.rows)
     # held-out R² of each row's chosen search (its own target's sum of squares)
-    after = np.where(np.isin(np.arange(6), taken), drags.cv_r2[1], after)
+    after = np.where(np.isin(np.arange(6), taken), drags.cv_r2[1], found.after)
     print("terms added by selection in the DOFs that misfit (blocked cross-validation, BIC "
           "and the one-standard-error rule; each DOF's from the search, with or without the "
           "element drags first, that predicts it better: "
           f"{', '.join(FORCE_NAMES[i] for i in taken) or 'none'} with them; --no-select: the "
           "preset's terms alone):")
     added = added_terms(chosen, model)
-    print(added_table(model.parameter_names, {i: added[i] for i in bad}, before, after))
+    print(added_table(model.parameter_names, {i: added[i] for i in found.rows}, found.before,
+                      after))
     return chosen
 
 

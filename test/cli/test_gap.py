@@ -207,9 +207,9 @@ def test_several_logs_are_screened_pooled(tmp_path: Path,
 def test_a_named_current_is_refitted_at_the_relative_velocity_and_written(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A bag with a hidden 0.25 m/s current towards 306.9° against the exact model: the
-    current is named first, the model's terms are refitted at ν_r jointly with it, --out
-    holds that refit and its held-out scores, and the report shows the residual per DOF
-    before → after each step and the refit, with units."""
+    current is named first, the model is refitted at ν_r jointly with it (no terms added:
+    the exact model's fit there), --out holds that refit and its held-out scores, and the
+    report shows the residual per DOF before → after each step and the refit, with units."""
     assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "B", "--duration",
                  "200", "--seed", "3", "--out", str(tmp_path / "bag"),
                  "--effects", "{current: [0.15, -0.2, 0.0]}"]) == 0
@@ -232,6 +232,9 @@ def test_a_named_current_is_refitted_at_the_relative_velocity_and_written(
     assert np.degrees(np.arctan2(east, north)) % 360 == pytest.approx(306.87, abs=3.0)
     after = np.array(gap["refit"]["rmse_heldout_after"])
     assert np.all(after <= np.array(gap["refit"]["rmse_heldout_before"]))
+    # the exact model's terms fit ν_r: selection there adds none
+    assert gap["refit"]["added_terms"] == ["none"]
+    assert "no terms added: the model's terms fit ν_r" in printed
     # the written θ is the refit's, with its own σ
     assert final.parameter_names == v.damping.parameter_names
     assert np.all(final.theta_std > 0)

@@ -24,8 +24,9 @@ depth, as a vehicle logs them; never ground truth). This package
    held-out log-likelihood gain summed over the DOFs is significant; a DOF that grows only
    where a current moves ν_r outside the believed model's flown envelope is extrapolation,
    not evidence against it (:mod:`.trust`). The search repeats until no candidate is
-   significant: "no further missing effect found". With a current named, the believed terms
-   are refitted at ν_r jointly with it (:mod:`.relative`);
+   significant: "no further missing effect found". With a current named, the believed model
+   is refitted at ν_r jointly with it, library terms added where its terms misfit ν_r
+   (:mod:`.relative`);
 4. applies what it found to the believed model and compares the free runs of both
    (:mod:`.update`).
 

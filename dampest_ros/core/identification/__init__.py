@@ -4,7 +4,8 @@ The regression form F = Φ(ν)θ, parallel-filtered (:mod:`.regression`), the ba
 prior, constraints and held coefficients (:mod:`.batch`, :mod:`.quadratic`,
 :mod:`.covariance`), dissipativity νᵀD(ν)ν ≥ 0 (:mod:`.dissipative`), the structure search
 (:mod:`.selection`, its cross-validation budget :mod:`.cv_budget`, :mod:`.memory_rates`,
-:mod:`.frequency`), the τ delay (:mod:`.delay`),
+:mod:`.frequency`; the default structure, library terms where a model misfits:
+:mod:`.misfit`), the τ delay (:mod:`.delay`),
 pooled logs (:mod:`.pool`), held-out and free-run validation (:mod:`.validate`), and the
 identified model every tool passes around (:mod:`.model`, :mod:`.identified`).
 
