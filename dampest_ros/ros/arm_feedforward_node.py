@@ -75,11 +75,10 @@ class ArmFeedforwardNode(ParamNode):
             f"rejected_{what}_{TOPIC}" for what in ("joints", "fields", "stamp", "nonfinite")])
         self._order: dict[tuple[str, ...], np.ndarray | str] = {}  # or why refused
         self._previous: tuple[float, np.ndarray] | None = None  # stamp and q̇ of the last
-        self._told = False  # why nothing is published has been logged
+        self._told = False  # why nothing is published has been logged since the last command
         self.commands = 0
 
     def _on_model(self, m: Any) -> None:
-        self._told = False
         log = self.get_logger()
         (log.info if self.client.refreshes == 1 else log.debug)(f"arm model version {m.version}")
 
@@ -89,11 +88,13 @@ class ArmFeedforwardNode(ParamNode):
         if names not in self._order:
             missing = [n for n in self.names if n not in names]
             unknown = sorted({n for n in names if n not in self.names})
-            self._order[names] = np.array([names.index(n) for n in self.names]) if not (
-                missing or unknown or len(set(names)) < len(names)) else (
-                f"{TOPIC}: a message naming joints {list(names)} rejected (missing "
-                f"{missing}, unknown {unknown}); name each joint of the arm "
-                f"{list(self.names)} once")
+            if missing or unknown or len(set(names)) < len(names):
+                self._order[names] = (
+                    f"{TOPIC}: a message naming joints {list(names)} rejected (missing "
+                    f"{missing}, unknown {unknown}); name each joint of the arm "
+                    f"{list(self.names)} once")
+            else:
+                self._order[names] = np.array([names.index(n) for n in self.names])
         order = self._order[names]
         if isinstance(order, str):
             self.rejected.reject(f"rejected_joints_{TOPIC}", order)
@@ -143,13 +144,15 @@ class ArmFeedforwardNode(ParamNode):
         if not self.client.available:
             if not self._told:
                 self._told = True
-                why = (f"model server {self.client.server} lost" if self.client.lost
-                       else self.client.why(probe=False))
+                why = (f"model server {self.client.server} lost: not in the graph for "
+                       f"{self.client.timeout:g} s; publishing resumes when it is back"
+                       if self.client.lost else self.client.why(probe=False))
                 self.get_logger().warning(f"no arm model, publishing nothing: {why}")
             return
         tau = self.client.feedforward(q, qd, qdd, offsets=self.p("offsets"))
         self.pub.publish(Float64MultiArray(data=tau.tolist()))
         self.commands += 1
+        self._told = False  # a model lost later is told again
 
 
 main = main_for(ArmFeedforwardNode, __doc__ or "")

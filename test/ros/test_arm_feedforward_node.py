@@ -3,7 +3,7 @@ joint states published on joint_reference with the joints in another order than 
 come back on effort_feedforward as the core's Y_b(q, q̇, q̈) θ in the model's joint order, q̈
 the backward difference of q̇ over the stamps. A message missing a joint or naming an unknown
 one, a non-finite one and one stamped before its predecessor are counted and refused; without
-a model nothing is published and the reason is logged once."""
+a model, or with its server lost, nothing is published and the reason is logged once."""
 
 from __future__ import annotations
 
@@ -114,7 +114,7 @@ class Graph:
 @pytest.fixture
 def served(tmp_path: Path) -> Iterator[tuple[Graph, ArmEstimate]]:
     est = ur5_model(tmp_path / "ur5.yaml")
-    graph = Graph("served", tmp_path / "ur5.yaml")
+    graph = Graph("served", tmp_path / "ur5.yaml", timeout=0.5)
     try:
         assert graph.spin_until(lambda: graph.ff.client.available), graph.ff.client.errors
         yield graph, est
@@ -183,3 +183,25 @@ def test_without_a_model_nothing_is_published_and_why_is_said_once(
                                  "arm live)"), lines[0]
     finally:
         graph.close()
+
+
+def test_a_lost_server_stops_the_feedforward_and_says_so_once(
+        served: tuple[Graph, ArmEstimate], capfd: pytest.CaptureFixture[str]) -> None:
+    graph, est = served
+    names = list(est.joint_names)
+    q, qd, _ = random_states(6, 4, seed=8)
+    graph.send(1.0, names, q[0], qd[0])
+    graph.send(1.0 + DT, names, q[1], qd[1])
+    assert graph.spin_until(lambda: len(graph.got) == 1)
+    server = graph.nodes[0]
+    graph.ex.remove_node(server)
+    server.destroy_node()
+    assert graph.spin_until(lambda: graph.ff.client.lost)
+    for k in (2, 3):
+        graph.send(1.0 + k * DT, names, q[k], qd[k])
+    graph.spin_until(lambda: False, 0.3)
+    assert len(graph.got) == 1 and graph.ff.commands == 1
+    lines = [x for x in capfd.readouterr().err.splitlines() if "no arm model" in x]
+    assert len(lines) == 1 and lines[0].endswith(
+        "no arm model, publishing nothing: model server model_server_node lost: not in the "
+        "graph for 0.5 s; publishing resumes when it is back"), lines
