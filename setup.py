@@ -19,6 +19,7 @@ NODE_SCRIPTS: dict[str, str] = {
     "arm_estimator_node": "dampest_ros.ros.entry:arm_estimator_node",
     "model_server_node": "dampest_ros.ros.entry:model_server_node",
     "controller_node": "dampest_ros.ros.entry:controller_node",
+    "arm_feedforward_node": "dampest_ros.ros.entry:arm_feedforward_node",
     "recorder_node": "dampest_ros.ros.entry:recorder_node",
     "replay_node": "dampest_ros.ros.entry:replay_node",
 }

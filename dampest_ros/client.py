@@ -341,21 +341,29 @@ class ServedModelClient(Generic[ServedT]):
         ModelUnavailableError
             None within ``timeout`` s, saying why: the last refusal (e.g. the node declares
             no ``model.*``), else whether a node of that name is on the graph at all
-            (:meth:`_why`).
+            (:meth:`why`).
         """
         if not self._got.wait(timeout):
             raise ModelUnavailableError(f"no model from {self.server} within {timeout:g} s: "
-                                        f"{self._why()}")
+                                        f"{self.why()}")
         return self.model
 
-    def _why(self) -> str:
-        """Why there is no model: the last refusal, else whether the server is on the graph."""
+    def why(self, probe: bool = True) -> str:
+        """Why there is no model: the last refusal, else whether the server is on the graph.
+
+        Parameters
+        ----------
+        probe : bool
+            When the server is not on the graph, ask the nodes that are which of them serve
+            a model (up to :data:`PROBE_TIME` s, the node spun elsewhere); False: answer at
+            once, as a callback of the client's own node must.
+        """
         if self.errors:
             return self.errors[-1]
         if self.node is None:
             return "this client reads a YAML file; it has no ROS node"
         if self._full_name not in self._graph():
-            return self._not_on_graph()
+            return self._not_on_graph(probe)
         return f"{self._full_name} is on the graph but has not answered list_parameters"
 
     def _graph(self) -> list[str]:
@@ -377,14 +385,18 @@ class ServedModelClient(Generic[ServedT]):
         return (f"{self._full_name} declares no model.* parameters: it is not a model "
                 f"server{shown}. Point the client at {self.SERVERS}")
 
-    def _not_on_graph(self) -> str:
+    def _not_on_graph(self, probe: bool = True) -> str:
         """No node of the server's name: the nodes that declare ``model.*``, closest name
-        first (asked within :data:`PROBE_TIME` s), and the domain looked on."""
+        first (asked within :data:`PROBE_TIME` s; without ``probe``, the nodes on the graph),
+        and the domain looked on."""
+        domain = os.environ.get("ROS_DOMAIN_ID") or "0 (unset)"
+        if not probe:
+            return (f"no node {self._full_name} on the graph of ROS_DOMAIN_ID {domain} (nodes "
+                    f"there: {', '.join(self._graph()) or 'none'}); start {self.SERVERS}")
         servers = self._model_servers(self._graph(), PROBE_TIME)
         target = self._full_name.rsplit("/", 1)[-1]
         servers.sort(key=lambda n: -difflib.SequenceMatcher(
             None, target, n.rsplit("/", 1)[-1]).ratio())
-        domain = os.environ.get("ROS_DOMAIN_ID") or "0 (unset)"
         seen = (f"nodes with model.* parameters: {', '.join(servers)}" if servers else
                 f"no node here declares model.* parameters (start {self.SERVERS})")
         return (f"no node {self._full_name} on the graph of ROS_DOMAIN_ID {domain}; {seen}. "

@@ -69,6 +69,7 @@ from dampest_ros.ros.common import (
     SENSOR_QOS,
     EstimatorParamNode,
     Param,
+    arm_problem,
     diagnostic_array,
     main_for,
     save_path_check,
@@ -159,7 +160,7 @@ class ArmEstimatorNode(EstimatorParamNode):
         if not 2.0 * self.p("cutoff") <= self.p("rate_out"):
             raise ValueError(f"parameter cutoff {self.p('cutoff')} Hz must be at most "
                              f"rate_out/2 = {0.5 * self.p('rate_out')} Hz")
-        reason = self._arm_problem(self.p("arm"), self.p("lock"))
+        reason = arm_problem(self.p("arm"), self.p("lock"))
         if reason is not None:
             raise ValueError(f"parameter {reason}")
         self.arm = load_arm(self.p("arm"), lock=joint_list(self.p("lock")))
@@ -217,21 +218,12 @@ class ArmEstimatorNode(EstimatorParamNode):
                 f"its form: set -p coulomb_width:={file_width:g}, or identify it again with "
                 f"--coulomb-width {node_width:g}")
 
-    @staticmethod
-    def _arm_problem(arm: str, lock: str) -> str | None:
-        """Why arm ``arm`` with joints ``lock`` locked cannot be loaded (None: it can)."""
-        try:
-            load_arm(str(arm), lock=joint_list(str(lock)))
-        except ArmDataError as exc:
-            return f"{'lock' if joint_list(str(lock)) else 'arm'}: {exc}"
-        return None
-
     def _model_values(self) -> dict[str, Any]:
         return arm_model_parameters(self.estimator.estimate(self.version), self.p("arm"))
 
     def check_parameter(self, name: str, value: Any) -> str | None:
         if name in ("arm", "lock"):
-            return self._arm_problem(*((value, self.p("lock")) if name == "arm"
+            return arm_problem(*((value, self.p("lock")) if name == "arm"
                                        else (self.p("arm"), value)))
         prior = str(value if name == "prior" else self.p("prior")).strip()
         if name in ("prior", "coulomb_width") and prior:

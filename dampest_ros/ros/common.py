@@ -381,6 +381,18 @@ def vehicle_check(value: Any) -> str | None:
     return None
 
 
+def arm_problem(arm: str, lock: str) -> str | None:
+    """Why arm ``arm`` (preset or URDF path) with the joints of ``lock`` (comma list) held
+    fixed cannot be loaded (None: it can), prefixed with the parameter to blame."""
+    from dampest_ros.io.arm import ArmDataError, joint_list, load_arm
+
+    try:
+        load_arm(str(arm), lock=joint_list(str(lock)))
+    except ArmDataError as exc:
+        return f"{'lock' if joint_list(str(lock)) else 'arm'}: {exc}"
+    return None
+
+
 def save_path_check(value: Any) -> str | None:
     """A :class:`Param` check for the file a node's ~/save writes: not empty, in an existing
     directory."""
@@ -756,8 +768,8 @@ def diagnostic_array(node: Node, task: str, values: dict[str, Any], level: int =
 
 
 class NonFiniteCounter:
-    """Messages a node refuses for a non-finite value, counted per topic and published on
-    ``/diagnostics`` once a second (wall clock) as ``count.<key>``; the first of each topic is
+    """Messages a node refuses, counted per reason and topic and published on
+    ``/diagnostics`` once a second (wall clock) as ``count.<key>``; the first of each key is
     logged. A NaN let through would poison a controller's integrator or a simulation's state
     for good.
 
@@ -782,19 +794,24 @@ class NonFiniteCounter:
         numbers = [float(v) for v in values]
         if all(math.isfinite(v) for v in numbers):
             return True
+        self.reject(key, f"{topic}: a message with a non-finite value {numbers} rejected; "
+                         "fix its publisher")
+        return False
+
+    def reject(self, key: str, line: str) -> None:
+        """Count a refused message under ``key``; log ``line`` (what was refused and how to
+        fix it) for the first one of that key."""
         self.counts[key] += 1
         if self.counts[key] == 1:
             self.node.get_logger().error(
-                f"{topic}: a message with a non-finite value {numbers} rejected (these are "
-                f"counted in /diagnostics count.{key}); fix its publisher")
-        return False
+                f"{line} (these are counted in /diagnostics count.{key})")
 
     def publish(self) -> None:
         """The counts on /diagnostics (WARN once any message was rejected)."""
         bad = sum(self.counts.values())
         self.pub.publish(diagnostic_array(
             self.node, self.task, {f"count.{k}": v for k, v in self.counts.items()},
-            1 if bad else 0, f"{bad} messages with non-finite values rejected" if bad else "ok"))
+            1 if bad else 0, f"{bad} messages rejected" if bad else "ok"))
 
 
 def _text(v: Any) -> str:

@@ -27,6 +27,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 
 from dampest_ros.core.identification.model import Model  # noqa: E402
 from dampest_ros.io.yaml_io import load_model, load_vehicle, save_model  # noqa: E402
+from dampest_ros.ros.arm_feedforward_node import ArmFeedforwardNode  # noqa: E402
 from dampest_ros.ros.common import (  # noqa: E402
     DIAGNOSTICS_TOPIC,
     DUPLICATE_WINDOW,
@@ -43,7 +44,7 @@ from dampest_ros.ros.sim_node import SimNode  # noqa: E402
 DOMAIN = "81"
 NODES: dict[str, type[ParamNode]] = {
     c.NODE_NAME: c for c in (SimNode, PreprocessNode, EstimatorNode, ControllerNode,
-                             ModelServerNode, RecorderNode, ReplayNode)}
+                             ArmFeedforwardNode, ModelServerNode, RecorderNode, ReplayNode)}
 
 
 
@@ -106,6 +107,9 @@ START_CASES = [
     ("preprocess_node", "settle", "-1.0", "settle must be in [0.0, 60.0], got -1.0"),
     ("controller_node", "reference", "[1.0,0.0]",
      "reference needs 6 finite numbers (u, v, w, p, q, r), got [1.0, 0.0]"),
+    ("arm_feedforward_node", "arm", "nope",
+     "arm: arm 'nope' is neither a preset (ur5) nor an existing .urdf file"),
+    ("arm_feedforward_node", "timeout", "0.0", "timeout must be in [0.1, 60.0], got 0.0"),
     ("recorder_node", "topics", "imu", "topics must be a list, e.g. [a, b], got 'imu'"),
     ("replay_node", "rate", "0", "rate must be in [0.01, 1000.0], got 0"),
     ("model_server_node", "model_file", "/nonexistent.yaml",
@@ -177,7 +181,7 @@ def test_every_ranged_and_choice_parameter_is_rejected_at_runtime_with_its_reaso
                 tried += 1
         finally:
             node.destroy_node()
-    assert tried == 43  # every ranged or choice parameter of the seven nodes
+    assert tried == 44  # every ranged or choice parameter of the eight nodes
 
 
 # --- two nodes of one name -----------------------------------------------------------------
@@ -358,14 +362,16 @@ def test_every_node_stops_cleanly_on_sigint_and_sigterm_while_busy(
         swapped: bool, tmp_path: Path, sim_bag: Path, model_file: Path, children: Any
 ) -> None:
     """Was: 'RCLError: publisher's context is invalid', status 1 (sim_node,
-    preprocess_node). The seven nodes run together (sim at 20x real time, replay at 5x); four
-    get SIGINT, three SIGTERM at once (the other way round in the slow case), and each ends
-    with status 0 and no traceback."""
+    preprocess_node). The eight nodes run together (sim at 20x real time, replay at 5x); four
+    get SIGINT, four SIGTERM at once (the other way round in the slow case), and each ends
+    with status 0 and no traceback (arm_feedforward_node waits for an arm model that never
+    comes)."""
     ns = f"/sig{int(swapped)}_81"
     params: dict[str, dict[str, Any]] = {
         "sim_node": {"rate_factor": "20.0"}, "preprocess_node": {},
         "estimator_node": {"save_path": str(tmp_path / "est.yaml"), "publish_rate": "10.0"},
         "controller_node": {}, "model_server_node": {"model_file": str(model_file)},
+        "arm_feedforward_node": {"model_node": "arm_estimator_node"},
         "recorder_node": {"output": str(tmp_path / "bag"), "topics": "[all]"},
         "replay_node": {"bag": str(sim_bag), "rate": "5.0", "loop": "true",
                         "remap": "['/truth/odom:=/replayed']"}}

@@ -13,7 +13,8 @@ import pytest
 pytest.importorskip("rclpy")
 
 NODES = ("sim_node", "preprocess_node", "estimator_node", "arm_estimator_node",
-         "model_server_node", "controller_node", "recorder_node", "replay_node")
+         "model_server_node", "controller_node", "arm_feedforward_node", "recorder_node",
+         "replay_node")
 
 
 def refusal(node: str, args: list[str], capfd: pytest.CaptureFixture[str]) -> str:
