@@ -425,7 +425,8 @@ def element_drag_table(selection: Selection) -> str:
             "blocked cross-validation and the one-standard-error rule, the six DOFs fitted "
             f"together), searched before the library terms:\n{path}\n{r2}"
             + (f"\ntaken out once the library terms joined (no longer lowering BIC by 10 in "
-               f"any DOF): {', '.join(found.pruned)}" if found.pruned else ""))
+               f"any DOF), and the library searched again without them: "
+               f"{', '.join(found.pruned)}" if found.pruned else ""))
 
 
 def default_selection(samples: Samples, model: DampingModel, vehicle: Vehicle,

@@ -14,9 +14,11 @@ row's term, would stop the drags that each take a little from several DOFs). The
 as the library search cuts each row's, at the one-standard-error size of a DOF's own held-out
 errors along it: the largest of the six, so that a drag stays while one DOF gains more than
 its standard error. Once the library terms have joined, a drag that no longer passes the test
-it entered by goes (:func:`prune_points`), as the library search's backward step takes out a
+it entered by goes (:func:`weak_points`), as the library search's backward step takes out a
 weak term: a pair of drags at the bow and the stern stands in for a yaw cross-flow drag
-N ∝ r|v| until the library's own N_rv enters.
+N ∝ r|v| until the library's own N_rv enters. The library is then searched again without it
+(:func:`.selection.select_terms`): a term that entered only to make up for a drag's side
+effect (the roll moment of a sway drag above the origin) does not outlive the drag.
 """
 
 from __future__ import annotations
@@ -61,7 +63,8 @@ class PointSelection:
         The base (``base``), then each candidate as it entered (the kept ones first), with
         the held-out error Σ_i CV_i / TSS_i after it and its standard error.
     pruned : list of str
-        The kept drags taken out once the library terms joined (:func:`prune_points`).
+        The kept drags taken out once the library terms joined (:func:`weak_points`), the
+        library searched again without them.
     """
 
     model: DampingModel
@@ -150,20 +153,19 @@ def select_points(samples: Samples, base: DampingModel, body: RigidBody,
     return PointSelection(with_points(base, kept), kept, r2, tss, path)
 
 
-def prune_points(samples: Samples, model: DampingModel, body: RigidBody, cutoff: float,
-                 rules: EntryRules) -> tuple[DampingModel, list[str]]:
-    """``model`` without its element drags that no longer pass ``rules`` beside its other
-    terms, the weakest (least BIC gained in its best DOF) first, one at a time.
+def weak_points(samples: Samples, model: DampingModel, body: RigidBody, cutoff: float,
+                rules: EntryRules) -> list[str]:
+    """The element drags of ``model`` that no longer pass ``rules`` beside its other terms,
+    taken out one at a time, the weakest (least BIC gained in its best DOF) first.
 
     Returns
     -------
-    model : DampingModel
-    removed : list of str
+    list of str
         The names of the drags taken out, in that order.
     """
     point = model.term("point")
     if point is None:
-        return model, []
+        return []
     ne = accumulate(samples, model, body, cutoff=cutoff)
     tss = np.maximum(ne.c.sum(0), 1e-300)
     A, b = np.einsum("fipq,i->fpq", ne.A, 1.0 / tss), np.einsum("fip,i->fp", ne.b, 1.0 / tss)
@@ -181,9 +183,7 @@ def prune_points(samples: Samples, model: DampingModel, body: RigidBody, cutoff:
         cols.remove(k)
         drags.remove(k)
         removed.append(names[k])
-    keep = [point_spec(bs) for bs in point.bases if bs.name not in removed]
-    rest = DampingModel([t for t in model.terms if t.kind != "point"])
-    return with_points(rest, keep), removed
+    return removed
 
 
 def _path(ne: NormalEquations, joint: tuple[FloatArray, FloatArray, FloatArray],

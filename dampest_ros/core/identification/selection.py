@@ -51,8 +51,8 @@ from dampest_ros.core.identification.memory_rates import MemoryEvidence, memory_
 from dampest_ros.core.identification.point_selection import (
     EntryRules,
     PointSelection,
-    prune_points,
     select_points,
+    weak_points,
 )
 from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import (
@@ -384,6 +384,10 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
     points : sequence of PointSpec
         Candidate element drags (:func:`point_drag.point_library`), searched first
         (:func:`point_selection.select_points`); those kept join the base as a shared term.
+        Those that no longer pass their entry test beside the library terms go
+        (:func:`point_selection.weak_points`), and the library is searched again without
+        them, until none goes: a term that entered to make up for a drag's force in another
+        row is tested without the drag.
 
     Returns
     -------
@@ -403,14 +407,36 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         "exchange": exchange, "keep_base": keep_base}
     rules = EntryRules(min_improvement, _n_eff(samples, cutoff))
     found = select_points(samples, base, body, points, cutoff, rules, folds) if points else None
-    base = base if found is None else found.model
+    if found is not None:
+        base = found.model
+    selection = _search_beside_shared(samples, base, body, options)
+    pruned: list[str] = []
+    while found is not None:
+        removed = weak_points(samples, selection.model, body, cutoff, rules)
+        if not removed:
+            break
+        # the library again without them: the terms that made up for them go too
+        pruned += removed
+        base = _without(base, removed)
+        selection = _search_beside_shared(samples, base, body, options)
+    if found is not None:
+        found = replace(found, pruned=pruned)
+    return replace(selection, points=found)
+
+
+def _search_beside_shared(samples: Samples, base: DampingModel, body: RigidBody,
+                          options: dict[str, Any]) -> Selection:
+    """:func:`_search` on top of ``base`` (``options`` its keywords): its terms acting in
+    several rows (the ``coriolis`` and ``point`` terms) stay, the search runs on the target
+    less their force, estimated with the base, then with the terms the previous search chose
+    (:data:`SHARED_ROUNDS` searches)."""
     shared = [t for t in base.terms if any(b.more for b in t.bases) or t.kind == "point"]
     if not shared:
-        return replace(_search(samples, base, body, (), **options), points=found)
+        return _search(samples, base, body, (), **options)
     single = DampingModel([t for t in base.terms if t not in shared])
     model = base
     for _ in range(SHARED_ROUNDS):
-        theta = _least_squares(samples, model, body, cutoff)
+        theta = _least_squares(samples, model, body, options["cutoff"])
         values = dict(zip(model.parameter_names, theta, strict=True))
         part = DampingModel(shared)
         known = part.force(samples.nu, np.array([values[n] for n in part.parameter_names]))
@@ -418,11 +444,7 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         selection = _search(replace(samples, tau=samples.tau - known), single, body, shared,
                             **options)
         model = selection.model
-    if found is not None:
-        pruned, removed = prune_points(samples, selection.model, body, cutoff, rules)
-        selection = replace(selection, model=pruned)
-        found = replace(found, pruned=removed)
-    return replace(selection, points=found)
+    return selection
 
 
 #: A value per candidate (shape (|C|,)) or of one term.

@@ -7,9 +7,10 @@ import numpy as np
 
 from dampest_ros.core.identification.point_selection import EntryRules, select_points
 from dampest_ros.core.identification.regression import accumulate
+from dampest_ros.core.identification.selection import select_terms
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.point_drag import PointSpec, point_library, point_term
-from dampest_ros.core.physics.terms import linear_term, quadratic_term
+from dampest_ros.core.physics.terms import CrossSpec, cross_term, linear_term, quadratic_term
 from dampest_ros.io.yaml_io import load_vehicle
 from test.core.identification.test_selection import RATE, smooth, synthetic
 
@@ -37,6 +38,32 @@ def test_the_drag_at_its_point_is_found_first_and_alone() -> None:
     before, after = found.r2
     assert before[[2, 4]].max() < 0.99 and after[[2, 4]].min() > 0.999, (before, after)
     ne = accumulate(samples, found.model, body, cutoff=2.0)
+    A, b, _ = ne.total(1.0 / ne.c.sum(0))
+    theta = np.linalg.solve(A, b)
+    assert abs(theta[-1] - 60.0) < 1.2, theta[-1]
+
+
+def test_a_term_that_made_up_for_a_pruned_drag_goes_with_it() -> None:
+    """Linear + quadratic drag and a sway–yaw coupling Y_v|r| = 60 (no element drag), 300 s,
+    2 % noise, seeded: the sway drags at (0, ±0.625, 0) stand in for Y_v|r| and enter first,
+    the library's Y_vr then makes them weak and they go. The library searched again without
+    them adds Y_vr alone (searched only beside them it also kept Y_vU, which had entered to
+    make up for their speed-dependent part), whose least-squares value is within 2 % of 60."""
+    body = load_vehicle("bluerov2_heavy").body
+    rng = np.random.default_rng(12)
+    nu = smooth(rng, int(300 * RATE), np.array([0.2, 0.3, 0.2, 0.1, 0.1, 0.5]), 0.5)
+    base = DampingModel([linear_term(), quadratic_term()])
+    base_theta = np.r_[[10.0, 12.0, 15.0, 1.0, 1.0, 1.0], [40.0, 50.0, 60.0, 2.0, 2.0, 2.0]]
+    coupling = DampingModel([cross_term([CrossSpec.from_dict(
+        {"row": "Y", "col": "v", "alpha": "|r|"})])])
+    law = base.force(nu, base_theta) + coupling.force(nu, np.array([60.0]))
+    samples = synthetic(body, nu, law, 0.02, seed=3)
+    points = [(0.0, 0.625, 0.0), (0.0, -0.625, 0.0), (0.0, 0.0, 0.625), (0.0, 0.0, -0.625)]
+    sel = select_terms(samples, base, body, memory_dofs=(), points=point_library(points))
+    assert sel.points is not None
+    assert sorted(sel.points.pruned) == ["drag.v|U|@(0,-0.625,0)", "drag.v|U|@(0,0.625,0)"]
+    assert sel.model.parameter_names == [*base.parameter_names, "Y_vr"]
+    ne = accumulate(samples, sel.model, body, cutoff=2.0)
     A, b, _ = ne.total(1.0 / ne.c.sum(0))
     theta = np.linalg.solve(A, b)
     assert abs(theta[-1] - 60.0) < 1.2, theta[-1]
