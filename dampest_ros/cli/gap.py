@@ -8,6 +8,7 @@ import html
 import re
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
@@ -27,8 +28,10 @@ from dampest_ros.core.gap.model_effects import Memory
 from dampest_ros.core.gap.relative import RelativeRefit, refit_relative
 from dampest_ros.core.gap.search import GapOptions, GapResult, correction, find_gap
 from dampest_ros.core.gap.update import free_run_errors, updated_model
+from dampest_ros.core.identification.misfit import element_drags
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.identity import Identity
+from dampest_ros.core.physics.point_drag import PointSpec
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.measurements import JointSeries
@@ -152,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
     print()
     print(steps_table(data, result) if result.steps else "no effect named.")
     print(f"\n{result.conclusion}.")
-    relative = current_refit(data, result)
+    relative = current_refit(data, result, element_drags(vehicle))
     if relative is not None:
         print("\n5. the model refitted at the relative velocity ν_r, jointly with the "
               "current:\n" + refit_text(relative))
@@ -247,16 +250,18 @@ def steps_table(data: GapData, result: GapResult) -> str:
             + ("\n\nDOFs whose held-out residual grew, and why:" + worse if worse else ""))
 
 
-def current_refit(data: GapData, result: GapResult) -> RelativeRefit | None:
+def current_refit(data: GapData, result: GapResult, points: Sequence[PointSpec]
+                  ) -> RelativeRefit | None:
     """When a current is named, the believed model (with any terms the gap added) refitted at
-    ν_r jointly with it, its terms chosen again there (:func:`refit_relative`); else None."""
+    ν_r jointly with it, its terms chosen again there as identify chooses them, ``points``'
+    element drags included (:func:`refit_relative`); else None."""
     found = [(e, p) for e, p in result.effects if isinstance(e, Current)]
     if not found:
         return None
     e, p = found[0]
     upd = updated_model(data, result.effects)
     with Elapsed("refitting the model at the relative velocity"):
-        return refit_relative(data, upd.model, upd.theta, e.ned(p), result.r)
+        return refit_relative(data, upd.model, upd.theta, e.ned(p), result.r, points=points)
 
 
 def refit_text(rel: RelativeRefit) -> str:

@@ -30,7 +30,11 @@ from dampest_ros.cli.pool import (
     reduce_all,
 )
 from dampest_ros.core.identification.batch import Fit, FitOptions
-from dampest_ros.core.identification.misfit import misfit_terms
+from dampest_ros.core.identification.misfit import (
+    element_drags,
+    misfit_terms,
+    with_element_drags,
+)
 from dampest_ros.core.identification.pool import (
     LogStatistics,
     consistency,
@@ -41,8 +45,6 @@ from dampest_ros.core.identification.pool import (
 from dampest_ros.core.identification.selection import (
     MIN_ERR,
     Selection,
-    added_terms,
-    row_by_row,
     select_terms,
 )
 from dampest_ros.core.identification.validate import force_scores
@@ -51,7 +53,6 @@ from dampest_ros.core.online.estimator import EstimatorConfig, nominal_of
 from dampest_ros.core.online.sample import OnlineConfig
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.mounting import frame_id_note
-from dampest_ros.core.physics.point_drag import PointSpec, candidate_points, point_library
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.preprocess import DataError
@@ -402,16 +403,10 @@ def selection_table(selection: Selection) -> str:
             + "\n")
 
 
-def element_drags(vehicle: Vehicle) -> list[PointSpec]:
-    """The candidate element drags of a vehicle: at its geoms off the origin, else at a
-    generic set of points (:func:`point_drag.candidate_points`)."""
-    return point_library(candidate_points(vehicle.geometry, vehicle.length))
-
-
-def element_drag_table(selection: Selection) -> str:
+def element_drag_table(selection: Selection | None) -> str:
     """The element drag search of a selection: its path (the one-standard-error cut) and
     the held-out R² per DOF of the base without and with the kept drags."""
-    found = selection.points
+    found = None if selection is None else selection.points
     if found is None:
         return ""
     before, after = found.r2
@@ -450,21 +445,16 @@ def default_selection(samples: Samples, model: DampingModel, vehicle: Vehicle,
               f"--vehicle {args.vehicle}")
         return model
     with Elapsed("searching element drags, then the library again"):
-        drags = select_terms(samples, model, vehicle.body, cutoff=args.cutoff, memory_dofs=(),
-                             keep_base=True, points=element_drags(vehicle))
-    print(element_drag_table(drags))
-    chosen, taken = row_by_row(found.selection, drags, model, found.rows)
-    # held-out R² of each row's chosen search (its own target's sum of squares)
-    after = np.where(np.isin(np.arange(6), taken), drags.cv_r2[1], found.after)
+        found = with_element_drags(found, samples, model, vehicle.body, args.cutoff,
+                                   element_drags(vehicle))
+    print(element_drag_table(found.drags))
     print("terms added by selection in the DOFs that misfit (blocked cross-validation, BIC "
           "and the one-standard-error rule; each DOF's from the search, with or without the "
           "element drags first, that predicts it better: "
-          f"{', '.join(FORCE_NAMES[i] for i in taken) or 'none'} with them; --no-select: the "
-          "preset's terms alone):")
-    added = added_terms(chosen, model)
-    print(added_table(model.parameter_names, {i: added[i] for i in found.rows}, found.before,
-                      after))
-    return chosen
+          f"{', '.join(FORCE_NAMES[i] for i in found.taken) or 'none'} with them; --no-select: "
+          "the preset's terms alone):")
+    print(added_table(model.parameter_names, found.added, found.before, found.after))
+    return found.model
 
 
 def added_table(kept: list[str], added: dict[int, list[str]], before: np.ndarray,

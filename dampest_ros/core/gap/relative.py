@@ -7,6 +7,7 @@ current nor the written model lacks the terms ν_r needs; the gap it leaves is s
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -16,11 +17,12 @@ from scipy import linalg, optimize
 from dampest_ros.core.gap.data import GapData, noise_weights
 from dampest_ros.core.gap.effects import relative_motion
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
-from dampest_ros.core.identification.misfit import misfit_terms
+from dampest_ros.core.identification.misfit import misfit_terms, with_element_drags
 from dampest_ros.core.identification.regression import accumulate
 from dampest_ros.core.identification.validate import force_scores
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.frames import matrix_from_euler
+from dampest_ros.core.physics.point_drag import PointSpec
 from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
@@ -107,7 +109,7 @@ def _prior(model: DampingModel, theta: FloatArray, chosen: DampingModel) -> Floa
 
 def refit_relative(data: GapData, model: DampingModel, theta: FloatArray, v_c: FloatArray,
                    r: FloatArray | None = None, step: float = 0.02, tol: float = 5e-4,
-                   rounds: int = 3) -> RelativeRefit:
+                   rounds: int = 3, points: Sequence[PointSpec] = ()) -> RelativeRefit:
     """Refit ``model`` at ν_r, its terms chosen again there, jointly with the horizontal
     current.
 
@@ -115,7 +117,8 @@ def refit_relative(data: GapData, model: DampingModel, theta: FloatArray, v_c: F
     profile likelihood Σ_i log RSS_i (θ solved by weighted least squares for every current;
     Nelder–Mead from a simplex of ``step`` m/s to ``tol`` m/s); the terms given the current,
     ``model``'s and library terms where they misfit the training rows at ν_r
-    (:func:`~dampest_ros.core.identification.misfit.misfit_terms`). It stops when the terms
+    (:func:`~dampest_ros.core.identification.misfit.misfit_terms`, with ``points``' element
+    drags as ``dampest identify`` chooses them). It stops when the terms
     repeat or the current moves less than 2 ``tol``. θ is then fitted at that current by the
     identification's batch fit (:func:`dampest_ros.core.identification.batch.fit`, default
     options at the gap's low-pass, ``theta`` as the value of what the data do not
@@ -137,6 +140,9 @@ def refit_relative(data: GapData, model: DampingModel, theta: FloatArray, v_c: F
         Default: the believed model's residual.
     rounds : int
         Most choices of the terms (0: ``model``'s terms only).
+    points : sequence of PointSpec
+        The vehicle's candidate element drags
+        (:func:`~dampest_ros.core.identification.misfit.element_drags`); none by default.
 
     Returns
     -------
@@ -148,6 +154,8 @@ def refit_relative(data: GapData, model: DampingModel, theta: FloatArray, v_c: F
     while done < rounds:
         train = relative_samples(data.samples, current).take(data.train)
         found = misfit_terms(train, model, data.body, data.cutoff)
+        if found is not None and found.rows and points:
+            found = with_element_drags(found, train, model, data.body, data.cutoff, points)
         if found is None or found.model.parameter_names == chosen.parameter_names:
             break
         chosen, added, done = found.model, found.added, done + 1

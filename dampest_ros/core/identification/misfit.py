@@ -5,20 +5,31 @@ The library search (:func:`.selection.select_terms` on top of the model's terms,
 without memory) gives the held-out residual a sparse model reaches on the same data: our
 estimate of the noise floor. A DOF whose held-out R² with the model's terms alone is below a
 floor while its unexplained share is several times the library's misfits; the terms the search
-added in those DOFs join the model's. ``dampest identify`` chooses its structure so, and
-``dampest gap`` again at the relative velocity once it has named a current.
+added in those DOFs join the model's. Where the vehicle offers element drags
+(:func:`element_drags`), :func:`with_element_drags` searches again with them first and each
+misfit DOF takes the terms of the search that predicts it better. ``dampest identify``
+chooses its structure so, and ``dampest gap`` again at the relative velocity once it has
+named a current.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
-from dampest_ros.core.identification.selection import Selection, select_terms
+from dampest_ros.core.identification.selection import (
+    Selection,
+    added_terms,
+    row_by_row,
+    select_terms,
+)
 from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.point_drag import PointSpec, candidate_points, point_library
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
+from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
@@ -45,9 +56,14 @@ class Misfit:
         The parameters added per misfit row.
     before, after : ndarray, shape (6,)
         Held-out R² per DOF (blocked cross-validation) with the base's terms and with the
-        library terms added in every row.
+        terms added (the library's in every row; after :func:`with_element_drags`, each
+        row's chosen search).
     selection : Selection
         The library search itself (its terms in every row).
+    drags : Selection or None
+        The search with the element drags first (:func:`with_element_drags`), if it ran.
+    taken : list of int
+        The rows that take that search's terms.
     """
 
     model: DampingModel
@@ -56,6 +72,8 @@ class Misfit:
     before: FloatArray
     after: FloatArray
     selection: Selection
+    drags: Selection | None = None
+    taken: list[int] = field(default_factory=list)
 
     def ratio(self, i: int) -> float:
         """The unexplained share of DOF ``i`` with the base's terms over the library's."""
@@ -95,3 +113,34 @@ def misfit_terms(samples: Samples, base: DampingModel, body: RigidBody, cutoff: 
     added = sel.added(base)
     model = sel.only_in(base, rows) if rows else base
     return Misfit(model, rows, {i: added[i] for i in rows}, before, after, sel)
+
+
+def element_drags(vehicle: Vehicle) -> list[PointSpec]:
+    """The candidate element drags of a vehicle: at its geoms off the origin, else at a
+    generic set of points (:func:`~dampest_ros.core.physics.point_drag.candidate_points`)."""
+    return point_library(candidate_points(vehicle.geometry, vehicle.length))
+
+
+def with_element_drags(found: Misfit, samples: Samples, base: DampingModel, body: RigidBody,
+                       cutoff: float, points: Sequence[PointSpec]) -> Misfit:
+    """``found`` with the search run again, ``points``' element drags first, and each misfit
+    row's terms taken from the search that predicts it better
+    (:func:`~dampest_ros.core.identification.selection.row_by_row`).
+
+    Parameters
+    ----------
+    found : Misfit
+        What :func:`misfit_terms` found for ``base`` on ``samples`` (some rows misfit).
+    samples, base, body, cutoff
+        As given to :func:`misfit_terms`.
+    points : sequence of PointSpec
+        The candidate element drags (:func:`element_drags`).
+    """
+    drags = select_terms(samples, base, body, cutoff=cutoff, memory_dofs=(), keep_base=True,
+                         points=points)
+    chosen, taken = row_by_row(found.selection, drags, base, found.rows)
+    # held-out R² of each row's chosen search (its own target's sum of squares)
+    after = np.where(np.isin(np.arange(6), taken), drags.cv_r2[1], found.after)
+    added = added_terms(chosen, base)
+    return replace(found, model=chosen, added={i: added[i] for i in found.rows}, after=after,
+                   drags=drags, taken=taken)
