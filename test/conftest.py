@@ -12,16 +12,16 @@ import subprocess
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from dampest_ros.core.arm.design import default_limits, within_limits
-from dampest_ros.core.arm.ffs import FourierTrajectory, random_trajectory
-from dampest_ros.core.arm.model import ArmModel, JointDynamics
-from dampest_ros.core.arm.simulate import ArmSensors, scaled_sensors
+if TYPE_CHECKING:  # the arm core (Pinocchio, MuJoCo) is imported by the fixtures that use it
+    from dampest_ros.core.arm.ffs import FourierTrajectory
+    from dampest_ros.core.arm.model import ArmModel, JointDynamics
+    from dampest_ros.core.arm.simulate import ArmSensors
 
 #: The checkout the tests run from.
 REPO = Path(__file__).resolve().parents[1]
@@ -246,12 +246,16 @@ class OutsideSim:
     def joint_terms(arm: ArmModel) -> JointDynamics:
         """Armature, viscous and Coulomb friction in proportion to each joint's effort limit
         (the UR5 preset's shoulder: 0.25 kg m², 2 N m s/rad, 3 N m of 150 N m)."""
+        from dampest_ros.core.arm.model import JointDynamics
+
         e = arm.effort_limit
         return JointDynamics(armature=0.0015 * e, damping=0.015 * e, frictionloss=0.02 * e)
 
     @staticmethod
     def sensors(arm: ArmModel) -> ArmSensors:
         """20-bit encoders, torque noise 0.27 % and offsets ±0.2 % of the effort limit."""
+        from dampest_ros.core.arm.simulate import scaled_sensors
+
         return scaled_sensors(arm)
 
     @staticmethod
@@ -259,6 +263,9 @@ class OutsideSim:
                    seed: int) -> FourierTrajectory:
         """Random FFS coefficients within the default design limits of the arm's own
         joints."""
+        from dampest_ros.core.arm.design import default_limits, within_limits
+        from dampest_ros.core.arm.ffs import random_trajectory
+
         lim = default_limits(arm)
         q0 = 0.5 * (lim.lower + lim.upper)
         traj = random_trajectory(q0, harmonics, frequency, lim.velocity,
