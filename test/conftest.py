@@ -292,3 +292,30 @@ def linear_roll_torpedo() -> Any:
     theta = vehicle.theta.copy()
     theta[names.index("K_p")], theta[names.index("K_pp")] = 0.5885, 0.0
     return replace(vehicle, theta=theta)
+
+
+@pytest.fixture(scope="session")
+def heavy_b60() -> tuple[Any, Any]:
+    """bluerov2_heavy (native), 60 s of protocol B, seed 3: the trajectory and what the
+    default sensors measure of it (seed 3). Read only: the online, mounting and validation
+    tests share it."""
+    from dampest_ros.core.simulation.excitation import make_excitation
+    from dampest_ros.core.simulation.sensors import measure
+    from dampest_ros.core.simulation.simulate import run
+    from dampest_ros.io.yaml_io import load_vehicle
+
+    vehicle = load_vehicle("bluerov2_heavy")
+    traj = run(vehicle, make_excitation("B", vehicle, 60.0, seed=3))
+    return traj, measure(traj, vehicle.body.rho, vehicle.body.gravity, seed=3)
+
+
+@pytest.fixture(scope="session")
+def heavy_b60_online(heavy_b60: tuple[Any, Any]) -> tuple[Any, list[Any]]:
+    """The default online preprocessor after the whole recording of :func:`heavy_b60`, and
+    the samples it returned (read only)."""
+    from dampest_ros.core.online.preprocessor import OnlinePreprocessor
+    from dampest_ros.io.yaml_io import load_vehicle
+
+    vehicle = load_vehicle("bluerov2_heavy")
+    op = OnlinePreprocessor(vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho)
+    return op, op.run(heavy_b60[1])

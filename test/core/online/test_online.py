@@ -38,10 +38,10 @@ def vehicle() -> Vehicle:
 
 
 @pytest.fixture(scope="module")
-def flight(vehicle: Vehicle) -> tuple[Trajectory, Recording]:
-    """60 s of protocol B with the default (realistic) sensor noise, seed 3."""
-    traj = run(vehicle, make_excitation("B", vehicle, 60.0, seed=3))
-    return traj, measure(traj, vehicle.body.rho, vehicle.body.gravity, SensorConfig(), seed=3)
+def flight(heavy_b60: tuple[Trajectory, Recording]) -> tuple[Trajectory, Recording]:
+    """60 s of protocol B with the default (realistic) sensor noise, seed 3 (the session's
+    :func:`heavy_b60`)."""
+    return heavy_b60
 
 
 def preprocessor(v: Vehicle, **cfg: float) -> OnlinePreprocessor:
@@ -49,12 +49,11 @@ def preprocessor(v: Vehicle, **cfg: float) -> OnlinePreprocessor:
 
 
 @pytest.fixture(scope="module")
-def preprocessed(vehicle: Vehicle, flight: tuple[Trajectory, Recording]
+def preprocessed(heavy_b60_online: tuple[OnlinePreprocessor, list[OnlineSample]]
                  ) -> tuple[OnlinePreprocessor, list[OnlineSample]]:
     """The default preprocessor after the whole flight, and the samples it returned (read
-    only: the tests share them)."""
-    op = preprocessor(vehicle)
-    return op, op.run(flight[1])
+    only: the tests share them; the session's :func:`heavy_b60_online`)."""
+    return heavy_b60_online
 
 
 def truth_at(traj: Trajectory, t: np.ndarray, x: np.ndarray) -> np.ndarray:
