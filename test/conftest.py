@@ -34,9 +34,9 @@ PACKAGE_FILES = ["package.xml", "setup.py", "setup.cfg", "pyproject.toml", "reso
 UNIT = re.compile(r"[(\[][^()\[\]]*[A-Za-z²][^()\[\]]*[)\]]")
 
 
-@pytest.fixture
-def saved_figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
-    """Every Figure saved from now on (Figure.savefig wrapped)."""
+def record_figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
+    """Every Figure saved from now on, until ``monkeypatch`` is undone (Figure.savefig
+    wrapped)."""
     saved: list[Figure] = []
     original = Figure.savefig
 
@@ -46,6 +46,18 @@ def saved_figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
 
     monkeypatch.setattr(Figure, "savefig", savefig)
     return saved
+
+
+@pytest.fixture
+def saved_figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
+    """Every Figure saved from now on in the test (:func:`record_figures`)."""
+    return record_figures(monkeypatch)
+
+
+@pytest.fixture(scope="session")
+def figure_recorder() -> Callable[[pytest.MonkeyPatch], list[Figure]]:
+    """:func:`record_figures`, for a module fixture that writes a report once."""
+    return record_figures
 
 
 def label_problems(figures: list[Figure]) -> list[str]:
