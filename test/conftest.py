@@ -12,16 +12,16 @@ import subprocess
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from dampest_ros.core.arm.design import default_limits, within_limits
-from dampest_ros.core.arm.ffs import FourierTrajectory, random_trajectory
-from dampest_ros.core.arm.model import ArmModel, JointDynamics
-from dampest_ros.core.arm.simulate import ArmSensors, scaled_sensors
+if TYPE_CHECKING:  # the arm core (Pinocchio, MuJoCo) is imported by the fixtures that use it
+    from dampest_ros.core.arm.ffs import FourierTrajectory
+    from dampest_ros.core.arm.model import ArmModel, JointDynamics
+    from dampest_ros.core.arm.simulate import ArmSensors
 
 #: The checkout the tests run from.
 REPO = Path(__file__).resolve().parents[1]
@@ -34,9 +34,9 @@ PACKAGE_FILES = ["package.xml", "setup.py", "setup.cfg", "pyproject.toml", "reso
 UNIT = re.compile(r"[(\[][^()\[\]]*[A-Za-z²][^()\[\]]*[)\]]")
 
 
-@pytest.fixture
-def saved_figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
-    """Every Figure saved from now on (Figure.savefig wrapped)."""
+def record_figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
+    """Every Figure saved from now on, until ``monkeypatch`` is undone (Figure.savefig
+    wrapped)."""
     saved: list[Figure] = []
     original = Figure.savefig
 
@@ -46,6 +46,18 @@ def saved_figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
 
     monkeypatch.setattr(Figure, "savefig", savefig)
     return saved
+
+
+@pytest.fixture
+def saved_figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
+    """Every Figure saved from now on in the test (:func:`record_figures`)."""
+    return record_figures(monkeypatch)
+
+
+@pytest.fixture(scope="session")
+def figure_recorder() -> Callable[[pytest.MonkeyPatch], list[Figure]]:
+    """:func:`record_figures`, for a module fixture that writes a report once."""
+    return record_figures
 
 
 def label_problems(figures: list[Figure]) -> list[str]:
@@ -247,12 +259,16 @@ class OutsideSim:
     def joint_terms(arm: ArmModel) -> JointDynamics:
         """Armature, viscous and Coulomb friction in proportion to each joint's effort limit
         (the UR5 preset's shoulder: 0.25 kg m², 2 N m s/rad, 3 N m of 150 N m)."""
+        from dampest_ros.core.arm.model import JointDynamics
+
         e = arm.effort_limit
         return JointDynamics(armature=0.0015 * e, damping=0.015 * e, frictionloss=0.02 * e)
 
     @staticmethod
     def sensors(arm: ArmModel) -> ArmSensors:
         """20-bit encoders, torque noise 0.27 % and offsets ±0.2 % of the effort limit."""
+        from dampest_ros.core.arm.simulate import scaled_sensors
+
         return scaled_sensors(arm)
 
     @staticmethod
@@ -260,6 +276,9 @@ class OutsideSim:
                    seed: int) -> FourierTrajectory:
         """Random FFS coefficients within the default design limits of the arm's own
         joints."""
+        from dampest_ros.core.arm.design import default_limits, within_limits
+        from dampest_ros.core.arm.ffs import random_trajectory
+
         lim = default_limits(arm)
         q0 = 0.5 * (lim.lower + lim.upper)
         traj = random_trajectory(q0, harmonics, frequency, lim.velocity,
@@ -286,3 +305,30 @@ def linear_roll_torpedo() -> Any:
     theta = vehicle.theta.copy()
     theta[names.index("K_p")], theta[names.index("K_pp")] = 0.5885, 0.0
     return replace(vehicle, theta=theta)
+
+
+@pytest.fixture(scope="session")
+def heavy_b60() -> tuple[Any, Any]:
+    """bluerov2_heavy (native), 60 s of protocol B, seed 3: the trajectory and what the
+    default sensors measure of it (seed 3). Read only: the online, mounting and validation
+    tests share it."""
+    from dampest_ros.core.simulation.excitation import make_excitation
+    from dampest_ros.core.simulation.sensors import measure
+    from dampest_ros.core.simulation.simulate import run
+    from dampest_ros.io.yaml_io import load_vehicle
+
+    vehicle = load_vehicle("bluerov2_heavy")
+    traj = run(vehicle, make_excitation("B", vehicle, 60.0, seed=3))
+    return traj, measure(traj, vehicle.body.rho, vehicle.body.gravity, seed=3)
+
+
+@pytest.fixture(scope="session")
+def heavy_b60_online(heavy_b60: tuple[Any, Any]) -> tuple[Any, list[Any]]:
+    """The default online preprocessor after the whole recording of :func:`heavy_b60`, and
+    the samples it returned (read only)."""
+    from dampest_ros.core.online.preprocessor import OnlinePreprocessor
+    from dampest_ros.io.yaml_io import load_vehicle
+
+    vehicle = load_vehicle("bluerov2_heavy")
+    op = OnlinePreprocessor(vehicle.thrusters, vehicle.body.gravity, vehicle.body.rho)
+    return op, op.run(heavy_b60[1])

@@ -25,7 +25,13 @@ from dampest_ros.report.identify import write_report
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
-def test_report_files_names_and_pngs(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def batch_report(tmp_path_factory: pytest.TempPathFactory,
+                 figure_recorder: Callable[[pytest.MonkeyPatch], list[Figure]]
+                 ) -> tuple[Path, list[Figure]]:
+    """The identification report of 60 s of protocol B (seed 2) fitted from a prior 1.2 ×
+    the truth, K_pp held at its prior with a reason: its index.html and the figures it
+    saved (Figure.savefig wrapped while it is written)."""
     vehicle = load_vehicle("bluerov2_heavy")
     traj = run(vehicle, make_excitation("B", vehicle, 60.0, seed=2))
     euler = frames.euler_from_matrix(frames.quat_to_matrix(traj.quaternion))
@@ -38,13 +44,19 @@ def test_report_files_names_and_pngs(tmp_path: Path) -> None:
     result = dataclasses.replace(result, flags={"K_pp": "low speed only: test reason"},
                                  held=held)
     truth = dict(zip(vehicle.damping.parameter_names, vehicle.theta, strict=True))
+    with pytest.MonkeyPatch.context() as mp:
+        saved = figure_recorder(mp)
+        index = write_report(tmp_path_factory.mktemp("batch") / "report", samples,
+                             vehicle.damping, vehicle.body, result, prior=prior, truth=truth,
+                             title="BlueROV2 Heavy <test>", source="sim/b60.csv",
+                             tau_hold="zero")
+    return index, saved
 
-    out = tmp_path / "report"
-    index = write_report(out, samples, vehicle.damping, vehicle.body, result, prior=prior,
-                         truth=truth, title="BlueROV2 Heavy <test>", source="sim/b60.csv",
-                         tau_hold="zero")
 
-    assert index == out / "index.html" and index.is_file()
+def test_report_files_names_and_pngs(batch_report: tuple[Path, list[Figure]]) -> None:
+    vehicle = load_vehicle("bluerov2_heavy")
+    index, out = batch_report[0], batch_report[0].parent
+    assert index.name == "index.html" and index.is_file()
     text = index.read_text(encoding="utf-8")
     for name in vehicle.damping.parameter_names:
         assert f"<td>{name}</td>" in text, name
@@ -64,17 +76,9 @@ def test_report_files_names_and_pngs(tmp_path: Path) -> None:
 # --- units on every axis ----------------------------------------------------------------------
 
 def test_every_axis_of_the_report_has_a_unit(
-        tmp_path: Path, saved_figures: list[Figure],
+        batch_report: tuple[Path, list[Figure]],
         axis_unit_problems: Callable[[list[Figure]], list[str]]) -> None:
-    vehicle = load_vehicle("bluerov2_heavy")
-    traj = run(vehicle, make_excitation("B", vehicle, 40.0, seed=3))
-    euler = frames.euler_from_matrix(frames.quat_to_matrix(traj.quaternion))
-    samples = Samples(traj.t, traj.nu, traj.nu_dot, traj.tau, euler, traj.position[:, 2],
-                      np.zeros(len(traj), dtype=np.int64))
-    result = fit(samples, vehicle.damping, vehicle.body, prior=vehicle.theta)
-    figures = saved_figures
-    write_report(tmp_path / "batch", samples, vehicle.damping, vehicle.body, result,
-                 prior=vehicle.theta, truth=vehicle.theta)
+    figures = batch_report[1]
     assert len(figures) == 6
     assert axis_unit_problems(figures) == []
     coef = next(f for f in figures if "Coefficients" in f.texts[0].get_text())

@@ -96,22 +96,23 @@ def test_live_stopped_with_sigterm_saves_the_run_like_ctrl_c(tmp_path: Path, chi
     model identified so far is written and the exit status is 0 (it was 143, nothing kept)."""
     import os
     import signal
-    import subprocess
     import sys
     import time
 
-    out = tmp_path / "run"
+    out, log = tmp_path / "run", tmp_path / "live.log"
     env = {**os.environ, "ROS_DOMAIN_ID": "94", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     proc = children.start([sys.executable, "-m", "dampest_ros.cli.main", "live",
-                           "--duration", "600", "--out", str(out)], env=env,
-                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                           "--duration", "600", "--every", "1", "--out", str(out)], log=log,
+                          env=env)
+    tables = re.compile(r"^t =\s+[\d.]+ s", re.M)
     deadline = time.monotonic() + 60.0
-    while not (out / "prior.yaml").exists() and time.monotonic() < deadline:
+    # some samples in: the table after 1 s of simulated time, after the prior's at t = 0
+    while len(tables.findall(log.read_text())) < 2 and time.monotonic() < deadline:
+        assert proc.poll() is None, log.read_text()
         time.sleep(0.2)
-    time.sleep(3.0)  # some samples in
-    proc.send_signal(signal.SIGTERM)
-    text, _ = proc.communicate(timeout=60)
-    assert proc.returncode == 0, text
+    assert children.stop(proc, signal.SIGTERM, timeout=60.0) == 0, log.read_text()
+    text = log.read_text()
+    assert len(tables.findall(text)) >= 2, text
     assert "interrupted: saving what was identified so far" in text
     model = load_model(out / "model.yaml")
     assert model.version >= 1 and np.all(np.isfinite(model.theta))

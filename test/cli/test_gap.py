@@ -8,6 +8,8 @@ the model and say that nothing further is missing.
 
 from __future__ import annotations
 
+import contextlib
+import io
 from pathlib import Path
 
 import numpy as np
@@ -68,13 +70,20 @@ def test_bag_names_the_three_missing_effects_and_writes_the_report(
     assert load_model(report / "final_model.yaml").parameter_names == final.parameter_names
 
 
-def test_csv_input_skips_the_dead_zone_and_finds_the_same(
-        measured: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    capsys.readouterr()
-    assert main(["gap", str(measured / "samples.csv"), "--model",
-                 str(measured / "sim_model.yaml"), "--vehicle", "bluerov2_heavy",
-                 "--candidates", "thrusters,buoyancy,damping"]) == 0
-    printed = capsys.readouterr().out
+@pytest.fixture(scope="module")
+def csv_gap(measured: Path) -> tuple[str, Path]:
+    """``gap`` on the CSV of samples with the thruster, buoyancy and damping candidates: what
+    it prints and the model it writes."""
+    out, printed = measured / "final_csv.yaml", io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main(["gap", str(measured / "samples.csv"), "--model",
+                     str(measured / "sim_model.yaml"), "--vehicle", "bluerov2_heavy",
+                     "--candidates", "thrusters,buoyancy,damping", "--out", str(out)]) == 0
+    return printed.getvalue(), out
+
+
+def test_csv_input_skips_the_dead_zone_and_finds_the_same(csv_gap: tuple[str, Path]) -> None:
+    printed = csv_gap[0]
     assert "skipped deadzone" in printed and "rotor speeds" in printed
     assert "thrust-gain error" in printed and "buoyancy/weight offset" in printed
     assert "no further missing effect found" in printed
@@ -93,16 +102,10 @@ def test_unknown_candidate_is_an_error(measured: Path,
 # --- what gap prints and writes, bad options, several logs ------------------------------
 
 
-def test_printed_magnitudes_are_what_the_model_file_holds(
-        measured: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_printed_magnitudes_are_what_the_model_file_holds(csv_gap: tuple[str, Path]) -> None:
     """Before: each step printed its own refit (ΔX_uu +40.6 at step 2) while the file held
     the final joint refit of all three effects."""
-    out = measured / "final_printed.yaml"
-    capsys.readouterr()
-    assert main(["gap", str(measured / "samples.csv"), "--model",
-                 str(measured / "sim_model.yaml"), "--vehicle", "bluerov2_heavy",
-                 "--candidates", "thrusters,buoyancy,damping", "--out", str(out)]) == 0
-    printed = capsys.readouterr().out
+    printed, out = csv_gap
     final = load_model(out)
     gap = final.extra["gap"]
     x_uu = final.theta[final.parameter_names.index("X_uu")]

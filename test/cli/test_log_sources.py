@@ -85,8 +85,12 @@ def _messages(ts: Any, s: Series) -> list[Any]:
             for t, v, e in zip(s.stamp, s.velocity, s.effort, strict=True)]
 
 
-def write_with_rosbags(path: Path, rec: dict[str, Series]) -> Path:
-    """An MCAP rosbag2 bag of ``rec`` by rosbags' Writer and serialize_cdr."""
+def write_with_rosbags(path: Path, rec: dict[str, Series],
+                       serialized: dict[int, list[bytes]] | None = None) -> Path:
+    """An MCAP rosbag2 bag of ``rec`` by rosbags' Writer and serialize_cdr. ``serialized``:
+    the messages of each series serialised so far, by ``id(series)``, for the bags of one
+    flight that share series (which must stay alive while it is used)."""
+    cache: dict[int, list[bytes]] = {} if serialized is None else serialized
     ts = typestore()
     names = {ImuSeries: "sensor_msgs/msg/Imu", OdometrySeries: "nav_msgs/msg/Odometry",
              TwistSeries: "geometry_msgs/msg/TwistWithCovarianceStamped",
@@ -96,8 +100,10 @@ def write_with_rosbags(path: Path, rec: dict[str, Series]) -> Path:
         for topic, s in rec.items():
             msgtype = names[type(s)]
             conn = w.add_connection(f"/{topic}", msgtype, typestore=ts)
-            for t, msg in zip(s.stamp, _messages(ts, s), strict=True):
-                w.write(conn, round(t * 1e9), bytes(ts.serialize_cdr(msg, msgtype)))
+            if id(s) not in cache:
+                cache[id(s)] = [bytes(ts.serialize_cdr(m, msgtype)) for m in _messages(ts, s)]
+            for t, data in zip(s.stamp, cache[id(s)], strict=True):
+                w.write(conn, round(t * 1e9), data)
     return path
 
 
@@ -161,8 +167,8 @@ def flight(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFact
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity, seed=seed)
     rec6 = measure(traj, vehicle.body.rho, vehicle.body.gravity, SensorConfig(dvl_rate=6.0),
                    seed=seed)
-    bags = {case: write_with_rosbags(root / case, r)
-            for case, r in _cases(rec, rec6, seed).items()}
+    cases, serialized = _cases(rec, rec6, seed), {}  # the series the bags share: once
+    bags = {case: write_with_rosbags(root / case, r, serialized) for case, r in cases.items()}
     # the preset's terms alone (--no-select) in every case: the same parameters to compare,
     # where the default would add MuJoCo's terms chosen by each log's own selection
     assert main(["identify", str(bags["clean"]), "--vehicle", name, "--no-select",

@@ -41,7 +41,7 @@ from dampest_ros.ros.replay_node import ReplayNode  # noqa: E402
 from dampest_ros.ros.sim_node import SimNode  # noqa: E402
 
 LIVE_DOMAIN, REPLAY_DOMAIN = 65, 66
-SIM_SECONDS = 30.0
+SIM_SECONDS = 20.0
 RATE_FACTOR = 2.0   # live: simulated seconds per wall second (about half a core)
 # replay: bag seconds per wall second; the recorder logs the live run's wall time, so this is
 # 3x simulated time (lossless with a margin on an idle machine, where at 6x the 200 Hz IMU
@@ -213,7 +213,8 @@ def test_live_replay_and_offline_theta_agree(runs: dict[str, Any]) -> None:
               f"(max |Δθ|/|θ| = {plain:.1e})")
         assert dist <= 1e-6, dict(zip(live["names"], theta - ref, strict=True))
     # a real estimate, not the prior: the data shrank the uncertainty of the well-excited
-    # quadratic terms a hundredfold and the estimates are near the simulator's values
+    # quadratic terms a hundredfold and the estimates are near the simulator's values (20 s,
+    # seeds 5, 6, 7: σ/prior σ ≤ 0.0023, 0.0018, 0.0048; |error| ≤ 1.8 %, 1.1 %, 0.8 %)
     for name, value in {"X_uu": 141.0, "Y_vv": 217.0, "Z_ww": 190.0, "N_rr": 1.5}.items():
         j = live["names"].index(name)
         assert live["std"][j] < 0.01 * live["prior_std"][j], name

@@ -34,9 +34,9 @@ def vehicle() -> Vehicle:
 
 
 @pytest.fixture(scope="module")
-def sim(vehicle: Vehicle) -> Samples:
-    """60 s of protocol B at 50 Hz, noise-free."""
-    return samples_from(run(vehicle, make_excitation("B", vehicle, 60.0, seed=3)))
+def sim(heavy_b60: tuple[Trajectory, object]) -> Samples:
+    """60 s of protocol B at 50 Hz, noise-free (the session's :func:`heavy_b60`)."""
+    return samples_from(heavy_b60[0])
 
 
 # --- free run ------------------------------------------------------------------------------

@@ -38,14 +38,22 @@ def vehicle() -> Vehicle:
 
 
 @pytest.fixture(scope="module")
-def flight(vehicle: Vehicle) -> tuple[Trajectory, Recording]:
-    """60 s of protocol B with the default (realistic) sensor noise, seed 3."""
-    traj = run(vehicle, make_excitation("B", vehicle, 60.0, seed=3))
-    return traj, measure(traj, vehicle.body.rho, vehicle.body.gravity, SensorConfig(), seed=3)
+def flight(heavy_b60: tuple[Trajectory, Recording]) -> tuple[Trajectory, Recording]:
+    """60 s of protocol B with the default (realistic) sensor noise, seed 3 (the session's
+    :func:`heavy_b60`)."""
+    return heavy_b60
 
 
 def preprocessor(v: Vehicle, **cfg: float) -> OnlinePreprocessor:
     return OnlinePreprocessor(v.thrusters, v.body.gravity, v.body.rho, OnlineConfig(**cfg))
+
+
+@pytest.fixture(scope="module")
+def preprocessed(heavy_b60_online: tuple[OnlinePreprocessor, list[OnlineSample]]
+                 ) -> tuple[OnlinePreprocessor, list[OnlineSample]]:
+    """The default preprocessor after the whole flight, and the samples it returned (read
+    only: the tests share them; the session's :func:`heavy_b60_online`)."""
+    return heavy_b60_online
 
 
 def truth_at(traj: Trajectory, t: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -112,10 +120,11 @@ def test_tau_is_rebuilt_from_the_window_means_of_the_messages_around_it(f: float
     assert 0.2 - 1e-9 <= np.min(sent - t) and np.max(sent - t) < 0.3
 
 
-def test_samples_follow_the_truth(vehicle: Vehicle, flight: tuple[Trajectory, Recording]) -> None:
-    traj, rec = flight
-    op = preprocessor(vehicle)
-    out = op.run(rec)
+def test_samples_follow_the_truth(
+        flight: tuple[Trajectory, Recording],
+        preprocessed: tuple[OnlinePreprocessor, list[OnlineSample]]) -> None:
+    traj, _ = flight
+    op, out = preprocessed
     s = to_samples(out, 50.0)
     assert op.counts["rejected_nonfinite"] == 0 and op.counts["clock_resets"] == 0
     assert np.all(np.diff(s.t) > 0)
@@ -144,9 +153,8 @@ def _euler(traj: Trajectory) -> np.ndarray:
 
 
 def test_batch_fit_on_online_samples_finds_the_truth(
-        vehicle: Vehicle, flight: tuple[Trajectory, Recording]) -> None:
-    _, rec = flight
-    s = to_samples(preprocessor(vehicle).run(rec), 50.0)
+        vehicle: Vehicle, preprocessed: tuple[OnlinePreprocessor, list[OnlineSample]]) -> None:
+    s = to_samples(preprocessed[1], 50.0)
     f = fit(s, vehicle.damping, vehicle.body, prior=vehicle.theta)
     for name, est, true in zip(f.names, f.theta, vehicle.theta, strict=True):
         if name in ("X_uu", "Y_vv", "Z_ww", "K_pp", "N_rr", "Z_w"):
@@ -340,13 +348,11 @@ def test_step_change_is_tracked_and_detected(vehicle: Vehicle) -> None:
 
 @pytest.mark.slow
 def test_hovering_for_an_hour_keeps_the_covariance_bounded(
-        vehicle: Vehicle, flight: tuple[Trajectory, Recording]) -> None:
+        vehicle: Vehicle, preprocessed: tuple[OnlinePreprocessor, list[OnlineSample]]) -> None:
     """Converge on 60 s of protocol B, then 1 h of station keeping (no excitation) at
     λ = 0.995: without the bound, P would grow by 0.995⁻³⁶⁰⁰⁰ in the unexcited directions."""
-    _, rec = flight
     rls = rls_for(vehicle, 0.995)
-    T, Phi, y = OnlineRegression(vehicle.damping, vehicle.body).process(
-        preprocessor(vehicle).run(rec))
+    T, Phi, y = OnlineRegression(vehicle.damping, vehicle.body).process(preprocessed[1])
     rls.update_many(Phi, y, T)
     converged = rls.diagnostics(condition=False)
     assert converged.excited.all()
@@ -383,13 +389,12 @@ def test_hovering_for_an_hour_keeps_the_covariance_bounded(
 
 
 def test_estimator_std_starts_at_the_prior_and_covers_the_truth(
-        vehicle: Vehicle, flight: tuple[Trajectory, Recording]) -> None:
+        vehicle: Vehicle, preprocessed: tuple[OnlinePreprocessor, list[OnlineSample]]) -> None:
     """``dampest demo``'s estimator (prior 0.5 × nominal, std 10 × that, λ = 0.999) on 60 s of
     protocol B: σ at t = 0 is the prior file's, and the ±2σ band holds the truth over the
     second half. The old σ, the RLS P scaled by a fixed √(rate / (2 · cutoff)), is 3.5 times
     the prior at t = 0 and misses the truth a third of the time for some coefficients
     (measured on seeds 1–5: new mean 93–100 %, old 73–92 %)."""
-    _, rec = flight
     prior = 0.5 * vehicle.theta
     prior_std = 10.0 * parameter_scale(vehicle.damping, prior)
     cfg = EstimatorConfig(forgetting_factor=0.999)
@@ -405,7 +410,7 @@ def test_estimator_std_starts_at_the_prior_and_covers_the_truth(
     # the old σ against the raw RLS estimate it was made for (the published one is also held
     # dissipative, which keeps K_p ≥ 0 and so covers the truth K_p = 0 under any σ)
     t, theta, raw, std, old = [0.0], [e.theta], [e.rls.theta], [e.theta_std], [old_std()]
-    for s in preprocessor(vehicle).run(rec):
+    for s in preprocessed[1]:
         if e.add_sample(s) and e.last_sample_t >= t[-1] + 0.5:
             t.append(e.last_sample_t)
             theta.append(e.theta)
@@ -424,11 +429,11 @@ def test_estimator_std_starts_at_the_prior_and_covers_the_truth(
 
 
 def test_one_1e6_newton_sample_is_gated_counted_and_leaves_the_estimate(
-        vehicle: Vehicle, flight: tuple[Trajectory, Recording]) -> None:
+        vehicle: Vehicle, preprocessed: tuple[OnlinePreprocessor, list[OnlineSample]]) -> None:
     """A 1e6 N surge wrench in one sample at t = 30 s of 60 s: without the gate it moves X_u
     by thousands of σ; with it the sample is rejected, counted once, and θ is the run
     without it to 0.1σ (the sample enters the low-pass as zeros instead of its value)."""
-    samples = [s for s in preprocessor(vehicle).run(flight[1]) if s.usable]
+    samples = [s for s in preprocessed[1] if s.usable]
     k = int(np.searchsorted([s.t for s in samples], 30.0))
     bad = list(samples)
     bad[k] = replace(samples[k], tau=samples[k].tau + np.array([1e6, 0, 0, 0, 0, 0]))
@@ -455,13 +460,15 @@ CLEAN = SensorConfig(gyro_noise=0.0, gyro_bias_walk=0.0, accel_noise=0.0, accel_
                      pressure_noise=0.0, rpm_noise=0.0)
 
 
-def rls_against_batch(vehicle: Vehicle, rec: Recording) -> tuple[np.ndarray, OnlineEstimator]:
-    """The RLS final estimate (λ = 1) minus the batch estimate of ``dampest identify`` (its
-    default options) on the very samples the RLS used, in batch standard deviations, for the
-    coefficients the batch identifies; and the estimator."""
+def rls_against_batch(vehicle: Vehicle, samples: list[OnlineSample]
+                      ) -> tuple[np.ndarray, OnlineEstimator]:
+    """The RLS final estimate (λ = 1) on the preprocessor's ``samples`` minus the batch
+    estimate of ``dampest identify`` (its default options) on the very samples the RLS used,
+    in batch standard deviations, for the coefficients the batch identifies; and the
+    estimator."""
     est = OnlineEstimator(vehicle, config=EstimatorConfig(forgetting_factor=1.0),
                           keep_samples=True)
-    for s in preprocessor(vehicle).run(rec):
+    for s in samples:
         est.add_sample(s)
     est.process(force=True)
     s = to_samples(est.samples_log, 50.0)
@@ -477,9 +484,9 @@ def rls_against_batch(vehicle: Vehicle, rec: Recording) -> tuple[np.ndarray, Onl
 
 
 def test_rls_is_the_batch_estimate_on_the_same_samples(
-        vehicle: Vehicle, flight: tuple[Trajectory, Recording]) -> None:
+        vehicle: Vehicle, preprocessed: tuple[OnlinePreprocessor, list[OnlineSample]]) -> None:
     """Native BlueROV2 Heavy, protocol B, 60 s, seed 3, default sensor noise."""
-    assert np.all(np.abs(rls_against_batch(vehicle, flight[1])[0]) <= 3.0)
+    assert np.all(np.abs(rls_against_batch(vehicle, preprocessed[1])[0]) <= 3.0)
 
 
 @pytest.mark.slow
@@ -505,7 +512,7 @@ def test_rls_is_the_batch_estimate_on_both_backends(name: str, backend: str,
     v = load_vehicle(name)
     traj = run(v, make_excitation("B", v, 300.0, seed=1), backend=backend)
     rec = measure(traj, v.body.rho, v.body.gravity, sensors, seed=1)
-    assert np.all(np.abs(rls_against_batch(v, rec)[0]) <= 3.0)
+    assert np.all(np.abs(rls_against_batch(v, preprocessor(v).run(rec))[0]) <= 3.0)
 
 
 @pytest.mark.slow
@@ -528,7 +535,7 @@ def test_lightly_damped_roll_from_thrust_telemetry_is_unbiased(
     traj = run(vehicle, make_excitation("B", vehicle, 300.0, seed=1))
     rec = measure(traj, vehicle.body.rho, vehicle.body.gravity,
                   replace(sensors, thruster_rate=rate), seed=1)
-    z, est = rls_against_batch(vehicle, rec)
+    z, est = rls_against_batch(vehicle, preprocessor(vehicle).run(rec))
     assert np.all(np.abs(z) <= 3.0)
     k_p, m_q, y_v, z_w = (est.names.index(n) for n in ("K_p", "M_q", "Y_v", "Z_w"))
     assert abs(est.theta[k_p] - 0.5885) < 0.002  # 0.011 on main, 0.0028 at the instant
@@ -541,7 +548,8 @@ def test_lightly_damped_roll_from_thrust_telemetry_is_unbiased(
 
 
 def test_the_published_estimate_is_dissipative_and_says_what_the_constraint_holds(
-        vehicle: Vehicle, flight: tuple[Trajectory, Recording], tmp_path: Path) -> None:
+        vehicle: Vehicle, preprocessed: tuple[OnlinePreprocessor, list[OnlineSample]],
+        tmp_path: Path) -> None:
     """A prior that pins X_u at −40 (σ 1e-3) keeps the raw RLS estimate non-dissipative at
     slow surge; the published θ is projected onto νᵀD(ν)ν ≥ 0 over the flown envelope and the
     model file marks X_u as not identified, with the reason."""
@@ -551,7 +559,7 @@ def test_the_published_estimate_is_dissipative_and_says_what_the_constraint_hold
     theta[names.index("X_u")], std[names.index("X_u")] = -40.0, 1e-3
     est = OnlineEstimator(vehicle, config=EstimatorConfig(forgetting_factor=1.0),
                           prior=(names, theta, std))
-    for s in preprocessor(vehicle).run(flight[1]):
+    for s in preprocessed[1]:
         est.add_sample(s)
     est.process(force=True)
     j = names.index("X_u")
@@ -564,7 +572,7 @@ def test_the_published_estimate_is_dissipative_and_says_what_the_constraint_hold
     raw = OnlineEstimator(vehicle, config=EstimatorConfig(forgetting_factor=1.0,
                                                           dissipative=False),
                           prior=(names, theta, std))
-    for s in preprocessor(vehicle).run(flight[1]):
+    for s in preprocessed[1]:
         raw.add_sample(s)
     raw.process(force=True)
     np.testing.assert_array_equal(raw.theta, est.rls.theta)

@@ -14,7 +14,7 @@ import yaml
 
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
 from dampest_ros.core.online.preprocessor import OnlinePreprocessor
-from dampest_ros.core.online.sample import to_samples
+from dampest_ros.core.online.sample import OnlineSample, to_samples
 from dampest_ros.core.physics.frames import matrix_from_euler, matrix_to_quat
 from dampest_ros.core.physics.mounting import Mounting, SensorMount
 from dampest_ros.core.physics.rigid_body import ConfigError
@@ -48,9 +48,10 @@ def vehicle() -> Vehicle:
 
 
 @pytest.fixture(scope="module")
-def flight(vehicle: Vehicle) -> Trajectory:
-    """60 s of protocol B on the native BlueROV2 Heavy."""
-    return run(vehicle, make_excitation("B", vehicle, 60.0, seed=3))
+def flight(heavy_b60: tuple[Trajectory, Recording]) -> Trajectory:
+    """60 s of protocol B on the native BlueROV2 Heavy, seed 3 (the session's
+    :func:`heavy_b60`)."""
+    return heavy_b60[0]
 
 
 def spinning(duration: float = 2.0, dt: float = 0.01, yaw_rate: float = 0.5,
@@ -216,20 +217,23 @@ def test_identification_with_mounted_sensors_equals_the_centred_case(
     assert np.max(np.abs(wrong.theta - centred.theta) / np.sqrt(np.diag(centred.cov))) > 20.0
 
 
-def test_online_preprocessing_removes_the_mounting(vehicle: Vehicle, flight: Trajectory) -> None:
+def test_online_preprocessing_removes_the_mounting(
+        vehicle: Vehicle, flight: Trajectory,
+        heavy_b60_online: tuple[OnlinePreprocessor, list[OnlineSample]]) -> None:
     """The online path (the preprocess node's code): mounted and corrected, θ within σ of
-    centred sensors; uncorrected, the DVL disagrees with the inertial velocity and is gated
-    out, so hardly a sample is usable."""
+    centred sensors (the session's centred run of the same flight and seed); uncorrected,
+    the DVL disagrees with the inertial velocity and is gated out, so hardly a sample is
+    usable."""
     g, rho = vehicle.body.gravity, vehicle.body.rho
 
-    def online(rec_mount: Mounting | None, pre_mount: Mounting | None, until: float = 60.0
+    def online(rec_mount: Mounting, pre_mount: Mounting | None, until: float = np.inf
                ) -> tuple[OnlinePreprocessor, list]:
         pre = OnlinePreprocessor(vehicle.thrusters, g, rho, mounting=pre_mount)
         rec = measure(flight, rho, g, seed=3, mounting=rec_mount)
         return pre, pre.run({k: s.select(np.flatnonzero(s.stamp < until))
                              for k, s in rec.items()})
 
-    _, c = online(None, None)
+    c = heavy_b60_online[1]
     _, m = online(MOUNTED, MOUNTED)
     fc, fm = (fit(to_samples(x, 50.0), vehicle.damping, vehicle.body, FitOptions())
               for x in (c, m))
