@@ -36,9 +36,12 @@ lint: $(STAMP)
 	$(BIN)/mypy dampest_ros
 	$(BIN)/lint-imports
 
+# The tests that use no ROS on two workers, then those that do one at a time (test/conftest.py
+# marks them `ros`: fixed ROS domains, asserted node timings).
 test: export OPENBLAS_NUM_THREADS = 1
 test: lint
-	$(BIN)/python -m pytest -q -m "not slow" --durations=15 test
+	$(BIN)/python -m pytest -q -m "not slow and not ros" -n 2 --dist loadfile --durations=10 test
+	$(BIN)/python -m pytest -q -m "not slow and ros" --durations=10 test
 
 bench: $(STAMP)
 	$(BIN)/python -m dampest_ros.bench

@@ -34,6 +34,23 @@ PACKAGE_FILES = ["package.xml", "setup.py", "setup.cfg", "pyproject.toml", "reso
 UNIT = re.compile(r"[(\[][^()\[\]]*[A-Za-z²][^()\[\]]*[)\]]")
 
 
+#: What a test module that uses ROS says: rclpy in the test's process, a ROS domain, or node
+#: processes (the child fixtures, the colcon build).
+ROS_WORDS = re.compile(r"rclpy|ROS_DOMAIN_ID|children|colcon_install|ros_env")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark ``ros`` every test of a module that uses ROS. ``make test`` runs the others in
+    parallel and these one at a time: two tests on one fixed ROS domain at once would see
+    each other's nodes and messages, and node timings are asserted."""
+    uses: dict[Path, bool] = {}
+    for item in items:
+        if item.path not in uses:
+            uses[item.path] = bool(ROS_WORDS.search(item.path.read_text(encoding="utf-8")))
+        if uses[item.path]:
+            item.add_marker(pytest.mark.ros)
+
+
 def record_figures(monkeypatch: pytest.MonkeyPatch) -> list[Figure]:
     """Every Figure saved from now on, until ``monkeypatch`` is undone (Figure.savefig
     wrapped)."""
