@@ -214,6 +214,20 @@ def row_by_row(without: Selection, drags: Selection, base: DampingModel, rows: S
 SHARED_ROUNDS = 2
 
 
+#: Scores of two candidates closer than this (relative) are a tie, taken by the order of the
+#: candidates (row, then library order): candidates that explain the same part of the data
+#: (columns equal given the terms already in) score equal up to rounding, and rounding must not
+#: decide the structure (a log read from a bag and from its CSV export differ by 1e-11 and chose
+#: different terms).
+TIE_RTOL = 1e-9
+
+
+def _first_best(score: FloatArray) -> int:
+    """The first index whose ``score`` is within :data:`TIE_RTOL` of the smallest."""
+    low = float(score.min())
+    return int(np.flatnonzero(score <= low + TIE_RTOL * abs(low))[0])
+
+
 #: Share of its row's residual a term must remove to enter the path. The one-standard-error
 #: rule on the blocked cross-validation curve sizes the model; this only keeps the path from
 #: wandering into noise. At 10 % it stopped paths on a plateau where the next term opened a
@@ -822,8 +836,8 @@ class _Stepwise:
             if good.any():
                 # score: change of the row's held-out unexplained share, (CV_c − CV_i) / TSS_i
                 score = np.where(good, (cv_c - self.cv[i]) / self.tss[i], np.inf)
-                j = int(np.argmin(score))
-                if best is None or score[j] < best[0]:
+                j = _first_best(score)
+                if best is None or score[j] < best[0] - TIE_RTOL * abs(best[0]):
                     best = (float(score[j]), i, j)
         return best
 
