@@ -33,6 +33,10 @@ def run(module: str) -> None:
         main = importlib.import_module(f"dampest_ros.ros.{module}").main
     except KeyboardInterrupt:
         sys.exit(0)
+    except ImportError:
+        if _received:  # the KeyboardInterrupt hit an extension module's initialisation,
+            sys.exit(0)  # which reports it as "ImportError: initialization failed"
+        raise
     for s, handler in previous.items():
         signal.signal(s, handler)
     if _received:  # its KeyboardInterrupt was swallowed by an import (a bare except)
