@@ -7,6 +7,7 @@ a model, or with its server lost, nothing is published and the reason is logged 
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -64,6 +65,10 @@ def core_torque(est: ArmEstimate, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     return (Y @ theta)[0]
 
 
+#: Numbers the graphs of this process.
+GRAPHS = itertools.count()
+
+
 class Graph:
     """A model server (when given a file), an arm_feedforward_node and a probe in a namespace
     of their own, spun by the test."""
@@ -71,7 +76,9 @@ class Graph:
     def __init__(self, tag: str, model_file: Path | None, **params: Any) -> None:
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         os.environ.setdefault("ROS_DOMAIN_ID", "94")
-        ns = f"/ff_{tag}_{os.getpid()}"
+        # a namespace no earlier graph used: a server of an earlier test, destroyed in another
+        # context, can stay on this one's graph until its lease ends
+        self.ns = ns = f"/ff_{tag}_{os.getpid()}_{next(GRAPHS)}"
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.ex = SingleThreadedExecutor(context=self.context)
@@ -175,12 +182,15 @@ def test_without_a_model_nothing_is_published_and_why_is_said_once(
         assert graph.got == [] and graph.ff.commands == 0
         lines = [x for x in capfd.readouterr().err.splitlines() if "no arm model" in x]
         assert len(lines) == 1, lines
-        assert lines[0].endswith(f"no arm model, publishing nothing: no node /ff_none_"
-                                 f"{os.getpid()}/no_such_server on the graph of ROS_DOMAIN_ID "
-                                 f"{os.environ['ROS_DOMAIN_ID']} (nodes there: /ff_none_"
-                                 f"{os.getpid()}/probe); start model_server_node (serves a "
-                                 "saved arm model file) or arm_estimator_node (identifies the "
-                                 "arm live)"), lines[0]
+        # the nodes listed: this graph's probe, and any of an earlier test's graph that its
+        # context's end has not yet taken off this one's
+        head, nodes = lines[0].split(" (nodes there: ")
+        assert head.endswith(f"no arm model, publishing nothing: no node {graph.ns}"
+                             "/no_such_server on the graph of ROS_DOMAIN_ID "
+                             f"{os.environ['ROS_DOMAIN_ID']}"), lines[0]
+        assert f"{graph.ns}/probe" in nodes.split(")")[0].split(", ")
+        assert nodes.endswith("); start model_server_node (serves a saved arm model file) or "
+                              "arm_estimator_node (identifies the arm live)"), lines[0]
     finally:
         graph.close()
 
