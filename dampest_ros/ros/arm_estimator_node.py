@@ -75,6 +75,7 @@ from dampest_ros.ros.common import (
     save_path_check,
     stamp_ns,
 )
+from dampest_ros.ros.convert import joint_columns
 
 #: Messages buffered before they are handed to the estimator (a quarter second at 1 kHz).
 HANDOVER = 250
@@ -248,9 +249,7 @@ class ArmEstimatorNode(EstimatorParamNode):
         """Where the arm's joints are in a message naming ``names`` (None: not all there;
         the first such message is logged)."""
         if names not in self._order:
-            missing = [n for n in self.names if n not in names]
-            self._order[names] = None if missing else np.array(
-                [names.index(n) for n in self.names])
+            self._order[names], missing = joint_columns(self.names, names)
             if missing:
                 self.get_logger().error(
                     f"joint_states names {list(names)} lack the joints {missing} of arm "

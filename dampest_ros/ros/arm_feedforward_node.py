@@ -36,6 +36,7 @@ from dampest_ros.ros.common import (
     main_for,
     seconds,
 )
+from dampest_ros.ros.convert import joint_columns
 
 TOPIC = "joint_reference"
 
@@ -86,15 +87,15 @@ class ArmFeedforwardNode(ParamNode):
         """Where the model's joints are in a message naming ``names`` (None: a joint missing,
         unknown or named twice; counted, and the first such message is logged)."""
         if names not in self._order:
-            missing = [n for n in self.names if n not in names]
+            columns, missing = joint_columns(self.names, names)
             unknown = sorted({n for n in names if n not in self.names})
-            if missing or unknown or len(set(names)) < len(names):
+            if columns is None or unknown or len(set(names)) < len(names):
                 self._order[names] = (
                     f"{TOPIC}: a message naming joints {list(names)} rejected (missing "
                     f"{missing}, unknown {unknown}); name each joint of the arm "
                     f"{list(self.names)} once")
             else:
-                self._order[names] = np.array([names.index(n) for n in self.names])
+                self._order[names] = columns
         order = self._order[names]
         if isinstance(order, str):
             self.rejected.reject(f"rejected_joints_{TOPIC}", order)

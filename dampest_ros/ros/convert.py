@@ -123,6 +123,14 @@ def _filler(s: Series) -> Callable[[int], Any]:
     return stamped
 
 
+def joint_columns(joints: tuple[str, ...], names: tuple[str, ...]
+                  ) -> tuple[NDArray[np.intp] | None, list[str]]:
+    """Where each of ``joints`` is in a JointState naming ``names`` (the first of a name
+    given twice), and the joints it lacks; the indices are None when it lacks any."""
+    missing = [n for n in joints if n not in names]
+    return (None if missing else np.array([names.index(n) for n in joints])), missing
+
+
 def twist6(m: TwistWithCovarianceStamped) -> FloatArray:
     """[linear, angular] of a TwistWithCovarianceStamped (FLU)."""
     tw = m.twist.twist
