@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import itertools
 import os
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -73,12 +72,14 @@ class Graph:
     """A model server (when given a file), an arm_feedforward_node and a probe in a namespace
     of their own, spun by the test."""
 
-    def __init__(self, tag: str, model_file: Path | None, **params: Any) -> None:
+    def __init__(self, tag: str, model_file: Path | None, spin: Callable[..., bool],
+                 **params: Any) -> None:
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         os.environ.setdefault("ROS_DOMAIN_ID", "94")
         # a namespace no earlier graph used: a server of an earlier test, destroyed in another
         # context, can stay on this one's graph until its lease ends
         self.ns = ns = f"/ff_{tag}_{os.getpid()}_{next(GRAPHS)}"
+        self._spin = spin
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.ex = SingleThreadedExecutor(context=self.context)
@@ -99,10 +100,8 @@ class Graph:
         self.pub = self.probe.create_publisher(JointState, "joint_reference", RELIABLE_QOS)
 
     def spin_until(self, done: Callable[[], bool], timeout: float = 10.0) -> bool:
-        end = time.monotonic() + timeout
-        while not done() and time.monotonic() < end:
-            self.ex.spin_once(timeout_sec=0.02)
-        return done()
+        """Spin this graph until ``done()`` or ``timeout`` s (the ``spin_until`` fixture)."""
+        return self._spin(self.ex, done, timeout)
 
     def send(self, t: float, names: list[str], q: np.ndarray, qd: np.ndarray) -> None:
         """Publish one reference; spin until the node has taken it."""
@@ -119,9 +118,10 @@ class Graph:
 
 
 @pytest.fixture
-def served(tmp_path: Path) -> Iterator[tuple[Graph, ArmEstimate]]:
+def served(tmp_path: Path, spin_until: Callable[..., bool]
+           ) -> Iterator[tuple[Graph, ArmEstimate]]:
     est = ur5_model(tmp_path / "ur5.yaml")
-    graph = Graph("served", tmp_path / "ur5.yaml", timeout=0.5)
+    graph = Graph("served", tmp_path / "ur5.yaml", spin_until, timeout=0.5)
     try:
         assert graph.spin_until(lambda: graph.ff.client.available), graph.ff.client.errors
         yield graph, est
@@ -171,8 +171,8 @@ def test_refused_references_are_counted_and_publish_nothing(
 
 
 def test_without_a_model_nothing_is_published_and_why_is_said_once(
-        capfd: pytest.CaptureFixture[str]) -> None:
-    graph = Graph("none", None, model_node="no_such_server")
+        capfd: pytest.CaptureFixture[str], spin_until: Callable[..., bool]) -> None:
+    graph = Graph("none", None, spin_until, model_node="no_such_server")
     try:
         names = list(graph.ff.names)
         q, qd, _ = random_states(6, 3, seed=7)
