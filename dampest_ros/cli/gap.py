@@ -81,7 +81,7 @@ def pooled_logs(paths: list[str], args: argparse.Namespace
     its reason. The third value names the logs pooled and left out (for the model file)."""
     if len(paths) == 1 and not is_url(paths[0]):
         return (*_load_log(paths[0], args), {})
-    with map_logs_on_dask(paths, partial(_load_log, args=args), args) as (_, done, failed):
+    with map_logs_on_dask(paths, partial(_load_log, args=args), args) as (_, done, failed, _):
         parts: list[tuple[Samples, JointSeries | None]] = list(done.values())
     logs = {"logs": list(done), "logs_left_out": list(failed) or ["none"]}
     shifted: list[Samples] = []

@@ -2,8 +2,9 @@
 drift of the damping between the logs (the maths: dampest_ros/core/identification/pool.py).
 
 Workers read the logs themselves (paths as the workers see them), so nothing but the logs'
-preprocessed samples and statistics travels; a log named by URL is copied to the worker
-that reads it (dampest_ros/io/remote.py). By default a LocalCluster of --workers
+preprocessed samples and statistics travels, once: each log stays on the worker that reduced
+it until the pooled fit's pass over the samples has run there; a log named by URL is copied
+to the worker that reads it (dampest_ros/io/remote.py). By default a LocalCluster of --workers
 processes runs on this machine; --scheduler ADDRESS uses an existing Dask cluster. A log that
 fails is reported with its reason and left out; the rest go on.
 """
@@ -172,7 +173,9 @@ def local_workers(asked: int | None, n_logs: int) -> int:
 
 def local_cluster(workers: int, processes: bool = True) -> Any:
     """A Dask LocalCluster of ``workers`` single-threaded processes (threads of this
-    process if not ``processes``), quiet, no dashboard.
+    process if not ``processes``), quiet; its scheduler's HTTP server (which runs whatever
+    the dashboard option says) on a free port, so that two commands at once do not warn
+    that port 8787 is taken.
 
     Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_ set, which also fixes glibc's
     mmap threshold: every array over 128 kB is then mapped and unmapped afresh, and the
@@ -183,30 +186,40 @@ def local_cluster(workers: int, processes: bool = True) -> Any:
     Each worker process imports this module (numpy, scipy, the readers and the
     preprocessing: 0.5 s of CPU) as it starts, not in its first log: the cluster is ready
     when it is up, and a log's time is its own work (the first log of each worker took
-    0.5 s longer, which no number of workers shares out)."""
+    0.5 s longer, which no number of workers shares out).
+
+    Dask's statistical profiler is off in our workers: it samples the running task's stack
+    every 10 ms, and with as many workers as CPUs it takes that time from the tasks (a
+    600 s log's reduction: 0.38–0.44 s with it, 0.35–0.40 s without, on 2 workers and
+    2 CPUs; 0.35 s on 1 worker)."""
     import dask
     from dask.distributed import LocalCluster
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+                          "distributed.worker.profile.enabled": False}):
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=processes,
-                            dashboard_address=None, silence_logs=logging.CRITICAL,
+                            dashboard_address=":0", silence_logs=logging.CRITICAL,
                             preload=[__name__] if processes else [])
 
 
 @contextlib.contextmanager
 def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: argparse.Namespace,
-                     verb: str = "read") -> Iterator[tuple[Any, dict[str, Any], dict[str, str]]]:
+                     verb: str = "read", keep: bool = False
+                     ) -> Iterator[tuple[Any, dict[str, Any], dict[str, str], dict[str, Any]]]:
     """Run ``work(path)`` for every log on Dask (--workers, --scheduler), with a progress line
     on stderr and each log's notes prefixed by its path.
 
-    Yields the client, the result of each log that worked, in the given order, and the
-    reason of each that failed; the cluster lives until the block ends. The workers keep
-    nothing: their memory does not grow with the number of logs.
+    Yields the client, the result of each log that worked, in the given order, the reason
+    of each that failed, and, when ``keep``, each worked log's future: its result stays on
+    the worker that made it until the block ends (to run more work there, where it is held).
+    Otherwise the workers keep nothing: their memory does not grow with the number of logs.
+    The cluster lives until the block ends.
     """
     need_dask()
     from dask.distributed import as_completed
     client = _client(args, paths)
     done: dict[str, Any] = {}
     failed: dict[str, str] = {}
+    held: dict[str, Any] = {}
     try:
         futures = {client.submit(guarded, work, p, args.debug, pure=False): p for p in paths}
         for k, future in enumerate(as_completed(futures), 1):
@@ -218,6 +231,8 @@ def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: arg
                 failed[path] = why
             else:
                 done[path] = result
+                if keep:
+                    held[path] = future
             sys.stderr.write(f"\rlogs [{'#' * (25 * k // len(paths)):25s}] {k}/{len(paths)}"
                              f" {verb}, {len(failed)} failed")
             sys.stderr.flush()
@@ -226,12 +241,19 @@ def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: arg
             print(f"left out: {path}: {why}", file=sys.stderr)
         if not done:
             raise ConfigError("INPUT", "none of the logs could be read (reasons above)")
-        yield client, {p: done[p] for p in paths if p in done}, failed
+        yield client, {p: done[p] for p in paths if p in done}, failed, held
     finally:
         cluster = getattr(client, "cluster", None)
         client.close()
         if cluster is not None and not args.scheduler:
             cluster.close()
+
+
+def on_reduced(reduced: tuple[LogStatistics, str, str], k: int,
+               fn: Callable[[LogStatistics, int], Any]) -> Any:
+    """``fn(log, k)`` on the worker holding ``reduced``, :func:`guarded`'s result of
+    :func:`reduce_log` for log k."""
+    return fn(reduced[0], k)
 
 
 @contextlib.contextmanager
@@ -245,33 +267,15 @@ def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray
     each log on a worker (the pooled fit's passes over the samples).
     """
     work = partial(reduce_log, args=args, prior=prior, prior_std=prior_std)
-    with map_logs_on_dask(paths, work, args, "reduced") as (client, done, failed):
+    with map_logs_on_dask(paths, work, args, "reduced", keep=True) as (client, done, failed,
+                                                                        held):
         logs: list[LogStatistics] = list(done.values())
 
         def map_logs(fn: Callable[[LogStatistics, int], Any]) -> list[Any]:
-            # each log sent to a worker with its call, at most two per worker at a time, and
-            # forgotten when done: the workers' memory stays that of two logs
-            from dask.distributed import as_completed
-            window = 2 * max(len(client.scheduler_info()["workers"]), 1)
-            out: list[Any] = [None] * len(logs)
-            todo = list(enumerate(logs))[::-1]
-            log_of: dict[Any, int] = {}
-
-            def send() -> Any:
-                k, stats = todo.pop()
-                # hash=False: a key of its own per pass; a content-hashed key is shared with
-                # the previous pass's scatter of the same log, released as that one is
-                # forgotten ("lost dependencies" with in-process workers)
-                future = client.submit(fn, client.scatter(stats, hash=False), k, pure=False)
-                log_of[future] = k
-                return future
-
-            running = as_completed([send() for _ in range(min(window, len(todo)))])
-            for future in running:
-                out[log_of.pop(future)] = future.result()
-                if todo:
-                    running.add(send())
-            return out
+            # each call on the worker that reduced the log and holds it: no log travels again
+            return list(client.gather([client.submit(on_reduced, held[g.name], k, fn,
+                                                     pure=False)
+                                       for k, g in enumerate(logs)]))
 
         yield logs, failed, map_logs
 

@@ -138,3 +138,20 @@ def test_five_bags_pool_exactly_skip_a_corrupt_one_and_show_a_20_percent_drift(
     assert main(["identify", *bags[:3], "--vehicle", "bluerov2_heavy", "--workers", "2",
                  "--out", str(out)]) == 0
     assert load_model(out).extra["drift_changed"] == ["none"]
+
+
+def test_two_local_clusters_at_once_start_without_a_warning() -> None:
+    """Two pooled commands at once: the second's scheduler does not warn that the
+    dashboard's port 8787 is taken (it used to, in four lines on stderr)."""
+    import warnings
+
+    from dampest_ros.cli.pool import local_cluster
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        first = local_cluster(1, processes=False)
+        try:
+            second = local_cluster(1, processes=False)
+            second.close()
+        finally:
+            first.close()
