@@ -19,11 +19,12 @@ from scipy import linalg, special
 from scipy.sparse import csgraph
 
 from dampest_ros.core.identification.covariance import (
+    BiasStatistics,
     MapParts,
-    bias_covariance,
+    bias_statistics,
     block_count,
     block_length,
-    robust_covariance,
+    covariance,
 )
 from dampest_ros.core.identification.dissipative import dissipation_points, impose, misfit_report
 from dampest_ros.core.identification.model import Model
@@ -259,11 +260,13 @@ class FitOptions:
         sample count n_eff = 2 · cutoff · T used by AIC/BIC.
     gyro_bias, dvl_bias : float
         Standard deviation of an unknown constant gyro (rad/s) and DVL (m/s) bias per axis:
-        the sensor error budget that :func:`bias_covariance` propagates into θ. 0 ignores
-        it.
+        the sensor error budget that
+        :func:`~dampest_ros.core.identification.covariance.bias_covariance` propagates into
+        θ. 0 ignores it.
     bias_stretch : int
-        On logs longer than three times this many samples, the sensor-bias refits use three
-        evenly spread stretches of it (:func:`bias_covariance`).
+        Of a segment longer than three times this many samples, the sensor-bias refits use
+        three evenly spread stretches of it
+        (:func:`~dampest_ros.core.identification.covariance.bias_rows`).
     speed_range : tuple of 6 float, optional
         Speeds the vehicle can reach per DOF; quadratic terms of DOFs flown below 15 % of
         it are flagged (:func:`speed_coverage_flags`).
@@ -549,17 +552,6 @@ def _free(model: DampingModel, samples: Samples, opts: FitOptions, live: NDArray
     return free
 
 
-def _covariance(samples: Samples, model: DampingModel, body: RigidBody, theta: FloatArray,
-                w: FloatArray, ne: NormalEquations, free: NDArray[np.bool_], T: FloatArray,
-                opts: FitOptions, chunk: int, map_parts: MapParts | None) -> FloatArray:
-    """Covariance of θ̂, shape (p, p): the block-robust one (:func:`robust_covariance`) plus
-    the sensor-bias budget (:func:`bias_covariance`), both in the directions ``T``, shape
-    (p_free, r), spans; ``w``, shape (6,), are the fit's per-DOF weights."""
-    return (robust_covariance(samples, model, body, theta, w, ne, free, T, opts, chunk,
-                              map_parts)
-            + bias_covariance(samples, model, body, theta, w, free, T, opts, chunk, map_parts))
-
-
 def _combinations(W: FloatArray, s: FloatArray, names: list[str], free: NDArray[np.bool_],
                   theta: FloatArray, cov: FloatArray, flags: dict[str, str]
                   ) -> list[Combination]:
@@ -647,7 +639,8 @@ def _effective_samples(samples: Samples, n: int, cutoff: float) -> float:
 def fit(samples: Samples, model: DampingModel, body: RigidBody,
         options: FitOptions | None = None, prior: FloatArray | None = None,
         prior_std: FloatArray | None = None, normal: NormalEquations | None = None,
-        chunk: int = CHUNK, map_parts: MapParts | None = None) -> Fit:
+        chunk: int = CHUNK, map_parts: MapParts | None = None,
+        bias: BiasStatistics | None = None) -> Fit:
     """Identify θ from samples.
 
     1. Per-DOF weights 1/σ_i² from the residuals (``wls``), σ_i floored at
@@ -681,9 +674,13 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     chunk : int
         Samples per chunk.
     map_parts : MapParts, optional
-        Runs the covariances' passes over the samples part by part where the parts are
-        held (:data:`~dampest_ros.core.identification.covariance.MapParts`; default: ``samples`` at
-        once).
+        Runs the robust covariance's pass over the samples part by part where the parts are
+        held (:data:`~dampest_ros.core.identification.covariance.MapParts`; default:
+        ``samples`` at once).
+    bias : BiasStatistics, optional
+        Precomputed data of the sensor-bias refits
+        (:func:`~dampest_ros.core.identification.covariance.bias_statistics` of ``samples``,
+        formed here when not given and the options give a sensor a bias).
 
     Returns
     -------
@@ -703,7 +700,9 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     free = _free(model, samples, opts, live, prior_v, flags)
     T, W, s = determined_directions(ne.total(w)[0], free, opts.max_vif)
     theta = problem.solve(w, free, T)
-    cov = _covariance(samples, model, body, theta, w, ne, free, T, opts, chunk, map_parts)
+    if bias is None:
+        bias = bias_statistics(samples, model, body, opts, chunk)
+    cov = covariance(samples, model, body, theta, w, ne, free, T, opts, bias, chunk, map_parts)
     combos = _combinations(W, s, names, free, theta, cov, flags)
     flags.update(_flags(theta, cov, names, parameter_scale(ne, theta), opts,
                         free & np.array([n not in flags for n in names])))

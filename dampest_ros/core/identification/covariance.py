@@ -2,17 +2,20 @@
 
 The residuals of a damping fit are correlated over seconds (low-passed noise, unmodelled slow
 effects), so the covariance is the sandwich A⁺ (Σ_b s_b s_bᵀ) A⁺ over blocks of samples
-(:func:`robust_covariance`); constant sensor biases, which residuals cannot reveal, add the
+(:func:`robust_pass`); constant sensor biases, which residuals cannot reveal, add the
 covariance of refits with the data offset by each bias (:func:`bias_covariance`).
 
-Both are sums over the samples, so they run where the data are: each takes ``map_parts``,
-which applies a function to every part of the samples (e.g. the logs of a pooled fit, each on
-the worker that holds it) and returns the parts' results, which add up to those of the whole.
+Both are sums over the samples, so they run where the data are. The refits' data do not
+depend on θ: :class:`BiasStatistics` are formed with the normal equations (a pooled fit's
+are each log's, summed). The sandwich needs the residuals at θ: it is a :class:`Pass`, a
+function applied to every part of the samples (e.g. the logs of a pooled fit, each on the
+worker that holds it) and the sum of the parts' results.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from functools import partial
 from typing import Any, Protocol
 
@@ -36,6 +39,15 @@ MapParts = Callable[[Callable[[Samples, int], Any]], list[Any]]
 def whole(samples: Samples) -> MapParts:
     """The samples as their only part (the :data:`MapParts` of data held in memory)."""
     return lambda fn: [fn(samples, 0)]
+
+
+@dataclass(frozen=True)
+class Pass:
+    """A covariance as a pass over the parts of the samples: ``part(samples, first)`` where
+    each part is held (picklable), ``total(results)`` of the parts' results, in order."""
+
+    part: Callable[[Samples, int], Any]
+    total: Callable[[list[Any]], FloatArray]
 
 
 class CovarianceOptions(Protocol):
@@ -93,7 +105,7 @@ def block_scores(samples: Samples, first: int, model: DampingModel, body: RigidB
                  block: float, t0: float, cutoff: float, chunk: int = CHUNK
                  ) -> tuple[FloatArray, int]:
     """Σ_b s_b s_bᵀ over the blocks of these samples and their number B (a part of
-    :func:`robust_covariance`; ``first`` is unused: blocks need only ``t0``)."""
+    :func:`robust_pass`; ``first`` is unused: blocks need only ``t0``)."""
     block_idx = block_index(samples, block, t0)
     S = np.zeros((int(block_idx.max()) + 1, int(free.sum())))
     for sl, Phi, y in iter_regression(samples, model, body, chunk, cutoff, decimate=True):
@@ -104,11 +116,10 @@ def block_scores(samples: Samples, first: int, model: DampingModel, body: RigidB
     return S.T @ S, len(S)
 
 
-def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
-                      theta: FloatArray, weights: FloatArray, ne: NormalEquations,
-                      free: NDArray[np.bool_], basis: FloatArray, opts: CovarianceOptions,
-                      chunk: int = CHUNK, map_parts: MapParts | None = None) -> FloatArray:
-    """Block sandwich covariance A⁺ (Σ_b s_b s_bᵀ) A⁺ of the free parameters.
+def robust_pass(samples: Samples, model: DampingModel, body: RigidBody, theta: FloatArray,
+                weights: FloatArray, ne: NormalEquations, free: NDArray[np.bool_],
+                basis: FloatArray, opts: CovarianceOptions, chunk: int = CHUNK) -> Pass:
+    """Block sandwich covariance A⁺ (Σ_b s_b s_bᵀ) A⁺ of the free parameters, as a pass.
 
     A⁺ = T (Tᵀ A T)⁻¹ Tᵀ is the inverse of A over the directions ``basis`` (T, shape
     (p_free, r)) spans, 0 in those the data do not determine (:func:`determined_directions`).
@@ -116,96 +127,148 @@ def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
     s_b = Σ_{n ∈ block b} Σ_i w_i Φ_{n,i}ᵀ r_{n,i} is the weighted score of a block of
     :func:`block_length` seconds; summing within blocks makes the estimate robust to
     residuals that are correlated over less than a block (filtered noise, unmodelled slow
-    effects). The blocks' sums are formed part by part (``map_parts``, default: all of
-    ``samples`` at once); a block never spans two segments, so never two parts.
+    effects). The blocks' sums are formed part by part; a block never spans two segments,
+    so never two parts. The total is NaN where a parameter is not free.
     """
     p = model.n_params
-    cov = np.full((p, p), np.nan)
-    if not free.any():
+    part = partial(block_scores, model=model, body=body, theta=theta, weights=weights,
+                   free=free, block=block_length(samples, opts, basis.shape[1]),
+                   t0=float(samples.t[0]), cutoff=opts.cutoff, chunk=chunk)
+
+    def total(parts: list[tuple[FloatArray, int]]) -> FloatArray:
+        cov = np.full((p, p), np.nan)
+        A, _, _ = ne.total(weights)
+        Af = A[np.ix_(free, free)]
+        B = sum(b for _, b in parts)
+        # Σ_b s_b s_bᵀ · B/(B − 1), the blocks of all parts
+        meat = sum(m for m, _ in parts) * (B / max(B - 1, 1))
+        Ainv = basis @ linalg.inv(basis.T @ Af @ basis) @ basis.T
+        cov[np.ix_(free, free)] = Ainv @ meat @ Ainv
         return cov
-    A, _, _ = ne.total(weights)
-    Af = A[np.ix_(free, free)]
-    parts = (map_parts or whole(samples))(partial(
-        block_scores, model=model, body=body, theta=theta, weights=weights, free=free,
-        block=block_length(samples, opts, basis.shape[1]), t0=float(samples.t[0]),
-        cutoff=opts.cutoff, chunk=chunk))
-    B = sum(b for _, b in parts)
-    # Σ_b s_b s_bᵀ · B/(B − 1), the blocks of all parts
-    meat = sum(m for m, _ in parts) * (B / max(B - 1, 1))
-    Ainv = basis @ linalg.inv(basis.T @ Af @ basis) @ basis.T
-    cov[np.ix_(free, free)] = Ainv @ meat @ Ainv
-    return cov
+
+    return Pass(part, total)
 
 
-def bias_normals(samples: Samples, first: int, model: DampingModel, body: RigidBody,
-                 weights: FloatArray, offsets: list[FloatArray | None],
-                 starts: NDArray[np.int64] | None, stretch: int, cutoff: float,
-                 chunk: int = CHUNK) -> list[tuple[FloatArray, FloatArray]]:
-    """Weighted normal equations (A, b) of these samples with ν offset by each of
-    ``offsets`` (None: no offset), over the stretches ``[start, start + stretch)`` of the
-    whole (all samples when ``starts`` is None) that fall in this part, which begins at
-    sample ``first`` of the whole (a part of :func:`bias_covariance`)."""
-    data = samples
-    if starts is not None:
-        index = np.arange(first, first + len(samples))
-        # stretch k of each sample, −1 outside every stretch
-        k = np.full(len(samples), -1)
-        for j, a in enumerate(starts):
-            k[(index >= a) & (index < a + stretch)] = j
-        keep = np.flatnonzero(k >= 0)
-        data = samples.take(keep)
-        data.segment = k[keep] + len(starts) * data.segment
+@dataclass
+class BiasStatistics:
+    """The sensor-bias refits' data: per-DOF normal equations of the samples with ν offset
+    by each sensor axis's σ, and without an offset, over the rows :func:`bias_statistics`
+    takes. Unweighted per DOF, so any fit's weights apply, and additive: the statistics of
+    several logs (each its own segments) sum to those of all their samples at once.
+
+    Attributes
+    ----------
+    A : ndarray, shape (1 + k, 6, p, p)
+        Σ_n Φ_niᵀ Φ_ni per DOF i, first without an offset, then with each of the k offsets.
+    b : ndarray, shape (1 + k, 6, p)
+        Σ_n Φ_niᵀ y_ni likewise.
+    complete : bool
+        Every row of the samples was taken (no segment was cut to stretches).
+    """
+
+    A: FloatArray
+    b: FloatArray
+    complete: bool
+
+    def __add__(self, other: BiasStatistics) -> BiasStatistics:
+        return BiasStatistics(self.A + other.A, self.b + other.b,
+                              self.complete and other.complete)
+
+
+def bias_offsets(opts: CovarianceOptions) -> list[FloatArray]:
+    """ν offsets of the bias refits: σ e_k for each DVL axis (``opts.dvl_bias``, m/s) and
+    gyro axis (``opts.gyro_bias``, rad/s) with σ > 0, each shape (6,)."""
+    sigma = np.array([opts.dvl_bias] * 3 + [opts.gyro_bias] * 3)
+    return [sigma[k] * np.eye(6)[k] for k in np.flatnonzero(sigma > 0)]
+
+
+def bias_rows(samples: Samples, stretch: int) -> tuple[Samples, bool]:
+    """The rows the bias refits take: every segment whole, but a segment longer than three
+    stretches of ``stretch`` samples as three evenly spread stretches of it (a sensitivity is
+    an average property of the data, which these give at a fraction of the cost), each its
+    own segment; and whether that is every row."""
+    keep: list[NDArray[np.int64]] = []
+    for sl in samples.segments():
+        a, n = sl.start or 0, (sl.stop or 0) - (sl.start or 0)
+        if n > 3 * stretch:
+            keep += [np.arange(a + s, a + s + stretch)
+                     for s in np.linspace(0, n - stretch, 3).astype(np.int64)]
+        else:
+            keep.append(np.arange(a, a + n))
+    complete = sum(len(k) for k in keep) == len(samples)
+    if complete:
+        return samples, True
+    data = samples.take(np.concatenate(keep))
+    data.segment = np.repeat(np.arange(len(keep)), [len(k) for k in keep])
+    return data, False
+
+
+def bias_statistics(samples: Samples, model: DampingModel, body: RigidBody,
+                    opts: CovarianceOptions, chunk: int = CHUNK) -> BiasStatistics | None:
+    """The :class:`BiasStatistics` of ``samples`` (:func:`bias_rows`, low-passed and
+    decimated as the fit's normal equations); None when no sensor has a bias."""
+    offsets: list[FloatArray | None] = [None, *bias_offsets(opts)]
+    if len(offsets) == 1:
+        return None
+    data, complete = bias_rows(samples, opts.bias_stretch)
     p = model.n_params
-    out = []
-    for offset in offsets:
-        A = np.zeros((p, p))
-        b = np.zeros(p)
-        if len(data):
-            root = np.sqrt(weights)
-            for _, Phi, y in iter_regression(data, model, body, chunk, cutoff, offset=offset,
-                                             decimate=True):
-                # Σ_n Σ_i w_i Φ_niᵀ Φ_ni as one matrix product of the √w-weighted rows
-                P = (Phi * root[None, :, None]).reshape(-1, p)
-                A += P.T @ P
-                b += P.T @ (y * root).reshape(-1)
-        out.append((A, b))
-    return out
+    A = np.zeros((len(offsets), 6, p, p))
+    b = np.zeros((len(offsets), 6, p))
+    for j, offset in enumerate(offsets):
+        for _, Phi, y in iter_regression(data, model, body, chunk, opts.cutoff, offset=offset,
+                                         decimate=True):
+            rows = Phi.transpose(1, 0, 2)  # (6, n, p)
+            # per DOF i: ΦᵢᵀΦᵢ and Φᵢᵀyᵢ, one matrix product each
+            A[j] += rows.transpose(0, 2, 1) @ rows
+            b[j] += np.einsum("inp,ni->ip", rows, y)
+    return BiasStatistics(A, b, complete)
 
 
-def bias_covariance(samples: Samples, model: DampingModel, body: RigidBody,
-                    theta: FloatArray, weights: FloatArray, free: NDArray[np.bool_],
-                    basis: FloatArray, opts: CovarianceOptions, chunk: int = CHUNK,
-                    map_parts: MapParts | None = None) -> FloatArray:
+def bias_covariance(stats: BiasStatistics | None, theta: FloatArray, weights: FloatArray,
+                    free: NDArray[np.bool_], basis: FloatArray) -> FloatArray:
     """Covariance of θ caused by unknown constant sensor biases (the error budget).
 
-    For each axis k of the gyro (σ = ``opts.gyro_bias``) and of the DVL (``opts.dvl_bias``)
-    the data are refitted with ν offset by σ e_k; the change Δθ_k is one standard deviation
-    of the error that bias causes, and Σ_k Δθ_k Δθ_kᵀ is the covariance (biases independent).
-    Such errors are constant over the record, so the residuals cannot reveal them. The
-    refits estimate the directions ``basis`` spans (:func:`determined_directions`); their
-    normal equations are summed part by part (``map_parts``, default: all of ``samples``).
+    For each axis k of the gyro and of the DVL (:func:`bias_offsets`) the data are refitted
+    with ν offset by σ e_k; the change Δθ_k is one standard deviation of the error that bias
+    causes, and Σ_k Δθ_k Δθ_kᵀ is the covariance (biases independent). Such errors are
+    constant over the record, so the residuals cannot reveal them. The refits estimate the
+    directions ``basis`` (shape (p_free, r)) spans (:func:`determined_directions`) with the
+    fit's per-DOF ``weights`` (shape (6,)); they are differenced from θ when they took every
+    row, else from the refit of the same rows without an offset. 0 when ``stats`` is None.
     """
-    p = model.n_params
+    p = len(theta)
     cov = np.zeros((p, p))
-    sigma = np.array([opts.dvl_bias] * 3 + [opts.gyro_bias] * 3)
-    if not free.any() or not np.any(sigma > 0):
+    if stats is None:
         return cov
-    # a sensitivity is an average property of the data: on long logs, three evenly spread
-    # stretches of opts.bias_stretch samples give it at a fraction of the cost, refitted
-    # without an offset too
-    n, stretch = len(samples), opts.bias_stretch
-    starts = np.linspace(0, n - stretch, 3).astype(np.int64) if n > 3 * stretch else None
-    axes = np.flatnonzero(sigma > 0)
-    offsets: list[FloatArray | None] = [sigma[k] * np.eye(6)[k] for k in axes]
-    if starts is not None:
-        offsets.insert(0, None)
-    parts = (map_parts or whole(samples))(partial(
-        bias_normals, model=model, body=body, weights=weights, offsets=offsets, starts=starts,
-        stretch=stretch, cutoff=opts.cutoff, chunk=chunk))
-    refits = [solve_normal(sum(part[j][0] for part in parts), sum(part[j][1] for part in parts),
-                           free, theta, basis=basis) for j in range(len(offsets))]
-    base = theta if starts is None else refits.pop(0)
-    for th in refits:
+    # Σ_i w_i ΦᵢᵀΦᵢ, Σ_i w_i Φᵢᵀyᵢ of each refit
+    A = np.einsum("i,jipq->jpq", weights, stats.A)
+    b = np.einsum("i,jip->jp", weights, stats.b)
+    refits = [solve_normal(A[j], b[j], free, theta, basis=basis) for j in range(len(A))]
+    base = theta if stats.complete else refits[0]
+    for th in refits[1:]:
         d = th - base
         cov += np.outer(d, d)
     return cov
+
+
+def covariance(samples: Samples, model: DampingModel, body: RigidBody, theta: FloatArray,
+               weights: FloatArray, ne: NormalEquations, free: NDArray[np.bool_],
+               basis: FloatArray, opts: CovarianceOptions, bias: BiasStatistics | None,
+               chunk: int = CHUNK, map_parts: MapParts | None = None) -> FloatArray:
+    """Covariance of θ̂, shape (p, p): the block-robust one (:func:`robust_pass`, a pass over
+    the parts, ``map_parts``, default: all of ``samples`` at once) plus the sensor-bias
+    budget (:func:`bias_covariance` of ``bias``), both in the directions ``basis`` (shape
+    (p_free, r)) spans; NaN where no parameter is free.
+
+    Parameters
+    ----------
+    weights : ndarray, shape (6,)
+        The fit's per-DOF weights.
+    """
+    p = model.n_params
+    if not free.any():
+        return np.full((p, p), np.nan)
+    robust = robust_pass(samples, model, body, theta, weights, ne, free, basis, opts, chunk)
+    # robust + bias: independent errors
+    return (robust.total((map_parts or whole(samples))(robust.part))
+            + bias_covariance(bias, theta, weights, free, basis))

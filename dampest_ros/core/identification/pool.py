@@ -3,9 +3,10 @@
 The batch fit's normal equations are sufficient statistics: the statistics of several logs
 add up to those of all their samples at once, A = Σ_b A_b, b = Σ_b b_b, c = Σ_b c_b. Each log
 is therefore preprocessed and reduced on its own (in parallel, anywhere: :class:`LogStatistics`
-is all a worker returns), and the pooled fit solves the summed statistics; its second passes
-(block-robust covariance, sensor-bias sensitivity, the dissipativity check) run over the logs'
-samples as segments of one set, log by log where each log is held (``map_logs``).
+is all a worker returns), and the pooled fit solves the summed statistics, the sensor-bias
+refits' included (:class:`~dampest_ros.core.identification.covariance.BiasStatistics`); its
+one second pass, the block-robust covariance's, runs over the logs' samples as segments of one
+set, log by log where each log is held (``map_logs``).
 Cross-validation folds of the pooled fit are the k-th fifths of
 every log (:func:`pooled_normal`), so each fold holds some of every trial.
 
@@ -27,6 +28,7 @@ from numpy.typing import NDArray
 from scipy import special
 
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
+from dampest_ros.core.identification.covariance import BiasStatistics, bias_statistics
 from dampest_ros.core.identification.regression import NormalEquations, accumulate
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
@@ -49,6 +51,8 @@ class LogStatistics:
         Its preprocessed samples.
     normal : NormalEquations
         Their statistics (:func:`~dampest_ros.core.identification.batch.accumulate`, 5 folds).
+    bias : BiasStatistics or None
+        Those of the sensor-bias refits (None: the options give no sensor a bias).
     fit : Fit
         The log's own estimate (for the drift).
     """
@@ -57,6 +61,7 @@ class LogStatistics:
     start: float
     samples: Samples
     normal: NormalEquations
+    bias: BiasStatistics | None
     fit: Fit
 
 
@@ -76,8 +81,10 @@ def log_statistics(name: str, samples: Samples, model: DampingModel, body: Rigid
     prior, prior_std : ndarray, shape (p,), optional
     """
     ne = accumulate(samples, model, body, cutoff=options.cutoff)
-    own = fit(samples, model, body, options, prior=prior, prior_std=prior_std, normal=ne)
-    return LogStatistics(name, float(samples.t[0]), samples, ne, own)
+    bias = bias_statistics(samples, model, body, options)
+    own = fit(samples, model, body, options, prior=prior, prior_std=prior_std, normal=ne,
+              bias=bias)
+    return LogStatistics(name, float(samples.t[0]), samples, ne, bias, own)
 
 
 def pooled_normal(normals: Sequence[NormalEquations]) -> NormalEquations:
@@ -119,9 +126,10 @@ def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBo
 
     θ, its covariance and every per-DOF figure equal those of
     :func:`~dampest_ros.core.identification.batch.fit` on :func:`pooled_samples` to rounding; only
-    the cross-validation folds differ (see :func:`pooled_normal`). The covariances' passes over
-    the samples run log by log through ``map_logs`` (default: here, one after the other).
-    ``samples`` is :func:`pooled_samples` of ``logs`` when the caller has made it already.
+    the cross-validation folds differ (see :func:`pooled_normal`). The robust covariance's
+    pass over the samples runs log by log through ``map_logs`` (default: here, one after the
+    other). ``samples`` is :func:`pooled_samples` of ``logs`` when the caller has made it
+    already.
     """
     firsts = np.cumsum([0] + [len(g.samples) for g in logs[:-1]]).tolist()
     run = map_logs or (lambda fn: [fn(g, k) for k, g in enumerate(logs)])
@@ -130,8 +138,10 @@ def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBo
         return run(partial(on_samples, fn=fn, firsts=firsts))
 
     whole = pooled_samples(logs) if samples is None else samples
+    biases = [g.bias for g in logs if g.bias is not None]  # none, or every log's
+    bias = sum(biases[1:], biases[0]) if biases else None
     return fit(whole, model, body, options, prior=prior, prior_std=prior_std,
-               normal=pooled_normal([g.normal for g in logs]), map_parts=map_parts)
+               normal=pooled_normal([g.normal for g in logs]), map_parts=map_parts, bias=bias)
 
 
 @dataclass
