@@ -166,44 +166,29 @@ class AlphaBank:
         p = len(alphas)
         self.i = np.full(p, self._ONE)
         self.j = np.full(p, self._ONE)
-        self.absolute = np.zeros(p, dtype=bool)
-        self.norm = np.zeros(p, dtype=bool)
-        self.anorm = np.zeros(p, dtype=bool)
-        self.pnorm = np.zeros(p, dtype=bool)
-        self.area = np.zeros(p, dtype=bool)
-        self.W = np.zeros((6, p))
-        self.proj = np.zeros(p, dtype=bool)
-        self.pspeed = np.array([a.kind == "pspeed" for a in alphas], dtype=bool)
-        self.points = np.array([a.w for a in alphas if a.kind == "pspeed"]).reshape(-1, 3)
         for k, a in enumerate(alphas):
             if a.kind in ("abs", "lin", "prod", "absprod", "pnorm", "area"):
                 self.i[k] = a.i
             if a.kind in ("prod", "absprod", "pnorm") or (a.kind == "area" and a.j >= 0):
                 self.j[k] = a.j
-            self.absolute[k] = a.kind in ("abs", "absprod", "absproj")
-            self.norm[k] = a.kind == "norm"
-            self.anorm[k] = a.kind == "anorm"
-            self.pnorm[k] = a.kind == "pnorm"
-            self.area[k] = a.kind == "area"
-            if a.kind == "absproj":
-                self.proj[k] = True
-                self.W[:, k] = a.w
-        self.any_norm = bool(self.norm.any())
-        self.any_anorm = bool(self.anorm.any())
-        self.any_pnorm = bool(self.pnorm.any())
-        self.any_area = bool(self.area.any())
-        self.any_proj = bool(self.proj.any())
-        self.any_abs = bool(self.absolute.any())
-        self._columns = {name: np.flatnonzero(mask) for name, mask in (
-            ("pnorm", self.pnorm), ("proj", self.proj), ("norm", self.norm),
-            ("anorm", self.anorm), ("absolute", self.absolute))}
-        self.any_pspeed = bool(self.pspeed.any())
+
+        def columns(*kinds: str) -> NDArray[np.int64]:
+            return np.array([k for k, a in enumerate(alphas) if a.kind in kinds],
+                            dtype=np.int64)
+
+        # the columns of each kind that is not a product ν_i ν_j (with ν_6 ≡ 1)
+        self.pnorm, self.area, self.proj = columns("pnorm"), columns("area"), columns("absproj")
+        self.norm, self.anorm, self.pspeed = columns("norm"), columns("anorm"), columns("pspeed")
+        self.absolute = columns("abs", "absprod", "absproj")
+        self.W = np.array([alphas[k].w for k in self.proj], dtype=float).reshape(-1, 6).T
+        self.points = np.array([alphas[k].w for k in self.pspeed], dtype=float).reshape(-1, 3)
         # the bank is a list of products (kinds one, lin, abs, prod, absprod) unless it holds
         # a norm, an area, a projection or a point's speed: then one sample goes through
         # __call__ as well
-        self._products = None if (self.any_norm or self.any_anorm or self.any_pnorm
-                                  or self.any_area or self.any_proj or self.any_pspeed) else list(
-            zip(self.i.tolist(), self.j.tolist(), self.absolute.tolist(), strict=True))
+        special = (self.pnorm, self.area, self.proj, self.norm, self.anorm, self.pspeed)
+        self._products = None if any(len(k) for k in special) else list(
+            zip(self.i.tolist(), self.j.tolist(),
+                np.isin(np.arange(p), self.absolute).tolist(), strict=True))
 
     def __call__(self, nu: FloatArray) -> FloatArray:
         """α for samples ``nu`` (N, 6); returns (N, p)."""
@@ -211,24 +196,19 @@ class AlphaBank:
         # products ν_i ν_j with ν_6 ≡ 1 cover the kinds one, lin and prod; the other kinds
         # overwrite their own columns only
         a = aug[:, self.i] * aug[:, self.j]
-        if self.any_pnorm:
-            k = self._columns["pnorm"]
+        if len(k := self.pnorm):
             a[:, k] = np.hypot(aug[:, self.i[k]], aug[:, self.j[k]])
-        if self.any_area:
-            a[:, self.area] = _area(nu, self.i[self.area], self.j[self.area])
-        if self.any_proj:
-            k = self._columns["proj"]
-            a[:, k] = nu @ self.W[:, k]
-        if self.any_norm:
-            a[:, self._columns["norm"]] = np.sqrt(np.einsum("ni,ni->n", nu[:, :3],
-                                                            nu[:, :3]))[:, None]
-        if self.any_anorm:
-            a[:, self._columns["anorm"]] = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:],
-                                                             nu[:, 3:]))[:, None]
-        if self.any_pspeed:
-            a[:, self.pspeed] = point_speeds(nu, self.points)
-        if self.any_abs:
-            k = self._columns["absolute"]
+        if len(k := self.area):
+            a[:, k] = _area(nu, self.i[k], self.j[k])
+        if len(k := self.proj):
+            a[:, k] = nu @ self.W
+        if len(k := self.norm):
+            a[:, k] = np.sqrt(np.einsum("ni,ni->n", nu[:, :3], nu[:, :3]))[:, None]
+        if len(k := self.anorm):
+            a[:, k] = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))[:, None]
+        if len(k := self.pspeed):
+            a[:, k] = point_speeds(nu, self.points)
+        if len(k := self.absolute):
             a[:, k] = np.abs(a[:, k])
         return a
 
