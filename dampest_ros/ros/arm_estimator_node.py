@@ -34,7 +34,9 @@ fingers), as dampest arm --lock. A prior or resumed model file identified with a
 coulomb_width than the node's is refused in one line naming both widths (its Coulomb
 parameters mean another friction form; adopting it quietly would change what the parameter
 says): a prior at start ends the node with status 2, a resumed file is counted
-(resume_refused), a change of either parameter while running is rejected.
+(resume_refused), a change of either parameter while running is rejected. One identified
+with other joints locked (``dampest arm identify --lock``) is refused the same way, naming
+the file's lock and the node's.
 """
 
 from __future__ import annotations
@@ -198,7 +200,7 @@ class ArmEstimatorNode(EstimatorParamNode):
         """Why arm model ``m`` does not hold this arm's base parameters (None: it does; a
         file without an identity is taken with a warning)."""
         source = str(self.p("save_path"))
-        why = mismatch(m.identity, self.owner(), source)
+        why = self._lock_mismatch(m) or mismatch(m.identity, self.owner(), source)
         if why is not None:
             return why
         warning = unchecked(m.identity, self.owner(), source)
@@ -210,6 +212,20 @@ class ArmEstimatorNode(EstimatorParamNode):
             return (f"holds the base parameters of another arm ({len(m.parameter_names)} "
                     f"named, {self.p('arm')} has {len(self._kept)}: {self._kept[:3]} ...)")
         return None
+
+    def _lock_mismatch(self, m: ArmEstimate) -> str | None:
+        """Why arm model ``m``, made with other joints of this arm locked, does not fit this
+        node's ``lock`` (None: same joints, or joints of another arm)."""
+        mine = tuple(self.arm.model.names)
+        held = list(joint_list(self.p("lock")))
+        if tuple(m.joint_names) == mine or not set(m.joint_names) <= {*mine, *held}:
+            return None
+        theirs = [j for j in (*mine, *held) if j not in m.joint_names]
+        fix = f"--lock {','.join(held)}" if held else "without --lock"
+        return (f"was identified with lock {','.join(theirs) or '(none)'}, this node's lock "
+                f"is {','.join(held) or '(none)'}: its parameters belong to the joints "
+                f"{', '.join(m.joint_names)}; set -p lock:={','.join(theirs)}, or identify "
+                f"it again {fix}")
 
     @staticmethod
     def _width_mismatch(file_width: float, node_width: float) -> str:

@@ -271,7 +271,8 @@ def test_lock_and_a_model_file_of_another_coulomb_width(tmp_path: Path, outside_
     """The parameter lock holds the Panda's fingers as dampest arm --lock does (its 7 joints
     are the rows); a lock that leaves a prismatic joint or names no joint is rejected. A
     prior or resumed model file identified with another coulomb_width is refused in one line
-    naming both widths; with the file's width it is taken."""
+    naming both widths; with the file's width it is taken. One identified with other joints
+    locked is refused naming both locks and the parameter that takes the file's."""
     path, lock = outside_arm("panda")
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -310,6 +311,20 @@ def test_lock_and_a_model_file_of_another_coulomb_width(tmp_path: Path, outside_
         assert np.array_equal(taken.estimator.theta, load_arm_model(saved).theta)
         r = taken.set_parameters([Parameter("coulomb_width", value=0.05)])[0]
         assert not r.successful and "coulomb_width 0.02 rad/s" in r.reason
+        # a model file of the Panda with its last joint locked too: the lock is named
+        six = tmp_path / "six.yaml"
+        nodes.append(node(Parameter("lock", value=",".join([*lock, "panda_joint7"])),
+                          Parameter("resume", value=False), Parameter("save_path",
+                                                                      value=str(six))))
+        nodes[-1]._save()
+        fingers = ",".join(lock)
+        with pytest.raises(ValueError, match=(
+                rf"parameter prior: .*six.yaml was identified with lock panda_joint7,"
+                rf"{fingers}, this node's lock is {fingers}: its parameters belong to the "
+                rf"joints panda_joint1, .*, panda_joint6; set -p lock:=panda_joint7,{fingers}, "
+                rf"or identify it again --lock {fingers}")):
+            node(Parameter("prior", value=str(six)), Parameter("resume", value=False),
+                 Parameter("save_path", value=str(tmp_path / "other.yaml")))
     finally:
         for n in nodes:
             n.destroy_node()
