@@ -116,6 +116,7 @@ def test_five_bags_pool_exactly_skip_a_corrupt_one_and_show_a_20_percent_drift(
                  "--workers", "2", "--keep-all", "--out", str(out)]) == 0
     printed = capsys.readouterr()
     assert f"left out: {broken}:" in printed.err and "Traceback" not in printed.err
+    assert "note: the logs are pooled on bluerov2_heavy's preset terms" in printed.err
     model = load_model(out)
     assert model.extra["logs"] == bags and model.extra["logs_left_out"] == [str(broken)]
     changed = set(model.extra["drift_changed"])
@@ -136,8 +137,9 @@ def test_five_bags_pool_exactly_skip_a_corrupt_one_and_show_a_20_percent_drift(
     np.testing.assert_allclose(model.theta_std, f.std, rtol=1e-10, atol=0)
     # the same damping in every bag: no change reported
     assert main(["identify", *bags[:3], "--vehicle", "bluerov2_heavy", "--workers", "2",
-                 "--out", str(out)]) == 0
+                 "--no-select", "--out", str(out)]) == 0
     assert load_model(out).extra["drift_changed"] == ["none"]
+    assert "note:" not in capsys.readouterr().err  # --no-select: the preset is meant
 
 
 def test_two_local_clusters_at_once_start_without_a_warning() -> None:
