@@ -12,7 +12,10 @@ export refuses coefficients that the target would apply non-dissipatively at som
 status 2, one line naming the coefficient and the speed where the damping turns, unless
 --clamp (the nearest dissipative set, labelled in the file) or --force (as is, labelled NOT
 DISSIPATIVE). The file labels every coefficient estimate, constrained (was ...) or held at
-prior.
+prior. Terms a format has no place for (element drags, library products, speed norms) are
+written as the coefficients the format has that reproduce their force best over the flown
+speeds, labelled as an approximation with the share of their force reproduced per DOF
+(--no-refold: left out and listed, as fluid memory always is).
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ EXPORT_EXAMPLE = ("examples:\n"
                   "--out hydrodynamics.sdf\n"
                   "  dampest export model.yaml --format uuv --vehicle bluerov2_heavy "
                   "--out uuv_hydrodynamics.sdf\n"
+                  "  dampest export box_model.yaml --format urdf --vehicle box_rov "
+                  "--no-refold\n"
                   "  dampest export arm_params.yaml --format mjcf --out arm.xml")
 IMPORT_EXAMPLE = ("examples:\n  dampest import hydrodynamics.sdf --vehicle bluerov2_heavy "
                   "--out model.yaml\n"
@@ -57,6 +62,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="gz, uuv: the link the plugin acts on (default: base_link)")
     p.add_argument("--frame", choices=FRAMES, default="flu",
                    help="gz: frame of that link, flu (Gazebo/REP-103, default) or frd")
+    folding = p.add_mutually_exclusive_group()
+    folding.add_argument("--refold", dest="refold", action="store_const", const=True,
+                         default=None,
+                         help="write the terms the format cannot carry (element drags, "
+                              "library products, speed norms) as the coefficients it can "
+                              "that reproduce their force best over the flown speeds (least "
+                              "squares); the file says so and gives the share of their force "
+                              "reproduced per DOF. The default when the model file records "
+                              "its flown speeds; with --refold a file without them is refused")
+    folding.add_argument("--no-refold", dest="refold", action="store_const", const=False,
+                         help="leave those terms out, listed in the file and on stderr")
     safety = p.add_mutually_exclusive_group()
     safety.add_argument("--clamp", action="store_true",
                         help="when the coefficients would make the target's damping "
@@ -123,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         warnings.simplefilter("ignore", ExportWarning)
         result = export_model(model, args.format, vehicle, link_name=args.link_name,
                               frame=args.frame, source=str(args.model), force=args.force,
-                              clamp=args.clamp)
+                              clamp=args.clamp, refold=args.refold)
     if args.out:
         Path(args.out).write_text(result.text, encoding="utf-8")
         print(f"wrote {args.out} ({args.format})", file=sys.stderr)

@@ -463,8 +463,9 @@ def test_memory_and_residual_are_listed_never_dropped(tmp_path: Path) -> None:
 
 
 def test_element_drags_are_listed_as_left_out(tmp_path: Path) -> None:
-    """No format has a drag at a point on its own velocity: each is listed, with its value,
-    in the file and the result, in every format; the rest is written."""
+    """No format has a drag at a point on its own velocity: without flown speeds to refold
+    it over, each is listed, with its value, in the file and the result, in every format,
+    and the file says why it was not refolded; the rest is written."""
     mf = model_file(tmp_path, {"quadratic": {"X_uu": 40.0},
                                "point": [{"position": [0.3, 0.0, 0.2], "axis": "w",
                                           "value": 12.0}]})
@@ -474,6 +475,7 @@ def test_element_drags_are_listed_as_left_out(tmp_path: Path) -> None:
         assert [x.split(" =")[0] for x in out.left_out] == ["drag.w|U|@(0.3,0,0.2)"], fmt
         assert "= 12.0 (the drag of an element at a point" in out.left_out[0]
         assert "drag.w|U|@(0.3,0,0.2)" in out.text, fmt
+        assert "Not refolded: the model file records no flown speeds" in out.text, fmt
 
 
 def test_unknown_format_and_frame(heavy_file: Model) -> None:
@@ -746,3 +748,39 @@ def test_export_labels_estimates_constrained_and_held_at_prior(
     assert main(["export", str(path), "--format", fmt, "--out", str(tmp_path / "x")]) == 0
     assert "warning: not identified, exported at its prior: Y_vv = 217.0 (held at prior" \
         in capsys.readouterr().err
+
+
+def test_refold_writes_element_drags_as_the_formats_coefficients(tmp_path: Path) -> None:
+    """--refold: a drag at the origin on its normal speed along u is F_x = −c |u| u, written
+    as that diagonal entry (gz xUabsU, URDF's quadratic X, UUV's quadratic_damping[0,0]),
+    added to X_uu (one coefficient, checked for dissipativity as the sum the simulator
+    applies), labelled refolded, not left out; the header gives each DOF's share.
+    refold=False leaves it out; refold=True refuses a file without flown speeds, naming the
+    option."""
+    spec = {"quadratic": {"X_uu": 40.0},
+            "point": [{"position": [0.0, 0.0, 0.0], "axis": "u", "speed": "normal",
+                       "value": 12.0}]}
+    model, theta = damping_from_spec(spec)
+    flown = {"flown_speeds": {"min": [-1.0] * 6, "max": [1.0] * 6}}
+    path = save_model(tmp_path / "m.yaml", Model(model.parameter_names, theta,
+                                                  np.zeros(model.n_params), np.eye(6) * 20.0,
+                                                  extra=flown, damping=model))
+    mf = load_model(path)
+    for fmt, written in (("gz", r"<xUabsU>(\S+)</xUabsU>"), ("urdf", r'Xuu="(\S+)"'),
+                         ("uuv", r"<quadratic_damping>\s*(\S+)")):
+        out = export_model(mf, fmt, refold=True)
+        assert out.left_out == (), (fmt, out.left_out)
+        body = out.text.split("-->", 1)[1]  # the element after the header comment
+        found = re.search(written, body)
+        assert found is not None, (fmt, body)
+        assert float(found.group(1)) == pytest.approx(-52.0, rel=1e-12), fmt  # SNAME sign
+        assert "REFOLDED: drag.uu@(0,0,0)" in out.text, fmt
+        assert "per DOF X Y Z K M N: 1.0000 - - - - -" in out.text, fmt
+        label = re.search(r"X_uu \+ refold:X_u\|u\| = (\S+): estimate \+ refolded",
+                          out.text)
+        assert label is not None and float(label.group(1)) == pytest.approx(52.0), fmt
+        kept = export_model(mf, fmt, refold=False)
+        assert [x.split(" =")[0] for x in kept.left_out] == ["drag.uu@(0,0,0)"], fmt
+    bare = model_file(tmp_path, spec, name="bare.yaml")
+    with pytest.raises(ConfigError, match=r"--refold: the model file records no flown speeds"):
+        export_model(bare, "gz", refold=True)

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from dampest_ros.core.identification.model import Model
+from dampest_ros.core.identification.refold import Entry, refold
 from dampest_ros.core.physics.damping import DampingModel, FloatArray
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
@@ -345,11 +346,81 @@ def made_safe(coefs: Sequence[Coefficient], policy: str, fmt: str,
     return clamped, Safety(policy, found, changed)
 
 
+#: The name prefix of a coefficient :func:`refolded` wrote.
+REFOLDED = "refold:"
+
+
+def refolded(mf: Model, model: DampingModel, theta: FloatArray,
+             written: Sequence[Coefficient], entries: Sequence[Entry], fmt: str,
+             required: bool = False) -> tuple[list[Coefficient], set[str], list[str]]:
+    """``--refold``: ``written`` with coefficients on the format's ``entries`` that
+    reproduce, over the model's flown envelope, the force of its static parameters the format
+    does not write (:func:`~dampest_ros.core.identification.refold.refold`), each added to
+    the written coefficient of its entry if there is one (the simulator sees the sum, so the
+    dissipativity check and a clamp judge the sum); the names they stand in for; and the
+    header lines that say so, with the share of their force reproduced per DOF.
+
+    A model file that records no flown speeds (the envelope to refold over) is left as it
+    is, and a line says so, unless ``required``.
+
+    Raises
+    ------
+    ConfigError
+        ``required`` and the model file records no flown speeds.
+    """
+    placed = {c.name for c in written}
+    which = np.array([b.name not in placed and not b.more and term.kind != "freq"
+                      for term in model.terms for b in term.bases], dtype=bool)
+    if not which.any():
+        return list(written), set(), []
+    flown = mf.flown
+    if flown is None:
+        if required:
+            raise ConfigError("--refold", "the model file records no flown speeds "
+                                          "(extra.flown_speeds), the envelope to refold "
+                                          "over: identify it again with this version")
+        return list(written), set(), [f"Not refolded: the model file records no flown "
+                                      f"speeds, so the terms {fmt} cannot carry are left out "
+                                      "(listed below)."]
+    r = refold(model, theta, which, flown, entries)
+    out = list(written)
+    for (i, j, k), v in zip(r.entries, r.values, strict=True):
+        kind = "const" if k < 0 else "abs"
+        at = next((n for n, c in enumerate(out) if (c.row, c.col, c.kind, c.k) == (i, j, kind, k)),
+                  None)
+        name = f"{REFOLDED}{FORCE_NAMES[i]}_{DOF_NAMES[j]}" + (f"|{DOF_NAMES[k]}|" if k >= 0
+                                                                else "")
+        if at is None:
+            out.append(Coefficient(i, j, kind, k, float(v), name))
+        else:
+            c = out[at]
+            out[at] = replace(c, value=c.value + float(v), name=f"{c.name} + {name}")
+    names = [n for n, w in zip(model.parameter_names, which, strict=True) if w]
+    share = " ".join("-" if not np.isfinite(x) else f"{x:.4f}" for x in r.share)
+    lines = [f"REFOLDED: {', '.join(names)}, which {fmt} cannot carry, are written as "
+             f"{len(r.entries)} {fmt} coefficients ({REFOLDED}..., added to the model's own "
+             "where they share one) fitted by least squares to their force over the flown "
+             "envelope (5^6 velocities between the flown minima and maxima, and at 1/2, 1/4 "
+             "and 1/10 of that size): an approximation, not an estimate. Share of their force "
+             f"reproduced per DOF X Y Z K M N: {share}; RMS of what is missed: "
+             + " ".join(f"{x:.3g}" for x in r.rms) + " N, N m."]
+    return out, set(names), lines
+
+
+def without(left_out: Sequence[str], names: set[str]) -> list[str]:
+    """The left-out lines (``"name = value (why)"``) but those of ``names``."""
+    return [line for line in left_out if line.split(" = ", 1)[0] not in names]
+
+
 def label(mf: Model, name: str, safety: Safety) -> str:
-    """``estimate``, ``constrained (was …)`` or ``held at prior``: what a written
-    coefficient's value is."""
+    """``estimate``, ``constrained (was …)``, ``held at prior`` or ``refolded``: what a
+    written coefficient's value is."""
     if name in safety.changed:
         return f"constrained (was {num(safety.changed[name])})"
+    if name.startswith(REFOLDED):
+        return "refolded (an approximation, see above)"
+    if f" + {REFOLDED}" in name:
+        return f"{label(mf, name.split(' + ')[0], safety)} + refolded (see above)"
     why = mf.held.get(name, "")
     was = re.search(r"unconstrained \S+ = (\S+)", why)
     if was is not None:

@@ -22,7 +22,7 @@ _MARKS = {"gz": "a gz-sim Hydrodynamics <plugin>", "urdf": "a <hydrodynamics> bl
 def export_model(mf: Model, fmt: str, vehicle: Vehicle | None = None, *,
                  link_name: str = "base_link", frame: str = "flu",
                  source: str | None = None, force: bool = False,
-                 clamp: bool = False) -> Exported:
+                 clamp: bool = False, refold: bool | None = None) -> Exported:
     """Export a model in one of :data:`~dampest_ros.io.export.FORMATS`.
 
     Parameters
@@ -42,6 +42,11 @@ def export_model(mf: Model, fmt: str, vehicle: Vehicle | None = None, *,
         For coefficients the format would apply non-dissipatively at some speed: write them
         as they are, labelled NOT DISSIPATIVE (``force``), or the nearest dissipative set,
         labelled constrained (``clamp``); neither: refused.
+    refold : bool, optional
+        Write the static terms the format cannot carry as coefficients it can that
+        reproduce their force over the flown envelope (labelled): by default when the model
+        file records its flown speeds; False leaves them out, listed; True refuses a file
+        without flown speeds.
 
     Returns
     -------
@@ -57,12 +62,13 @@ def export_model(mf: Model, fmt: str, vehicle: Vehicle | None = None, *,
     """
     if fmt == "gz":
         return export_gz(mf, vehicle, link_name=link_name, frame=frame, source=source,
-                         force=force, clamp=clamp)
+                         force=force, clamp=clamp, refold=refold)
     if fmt == "urdf":
-        return export_urdf(mf, vehicle, source=source, force=force, clamp=clamp)
+        return export_urdf(mf, vehicle, source=source, force=force, clamp=clamp,
+                           refold=refold)
     if fmt == "uuv":
         return export_uuv(mf, vehicle, link_name=link_name, source=source, force=force,
-                          clamp=clamp)
+                          clamp=clamp, refold=refold)
     raise ValueError(f"unknown export format {fmt!r}; use one of {FORMATS}")
 
 

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from dampest_ros.core.identification.model import Model
+from dampest_ros.core.identification.refold import all_entries
 from dampest_ros.core.physics.damping import FloatArray
 from dampest_ros.core.physics.frames import body_twist
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
@@ -55,6 +56,8 @@ from dampest_ros.io.export.common import (
     num,
     parse_xml,
     policy_of,
+    refolded,
+    without,
     xml_bool,
     xml_comment,
     xml_float,
@@ -108,7 +111,7 @@ def _added_mass_in(frame: str, M_A: FloatArray) -> FloatArray:
 
 def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "base_link",
               frame: str = "flu", source: str | None = None, force: bool = False,
-              clamp: bool = False) -> Exported:
+              clamp: bool = False, refold: bool | None = None) -> Exported:
     """The gz-sim Hydrodynamics plugin element for a model.
 
     Parameters
@@ -126,6 +129,12 @@ def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "ba
         For coefficients that are not dissipative at every speed (gz-sim applies them at
         every speed): write them as they are (``force``) or the nearest dissipative set
         (``clamp``); the header says which.
+    refold : bool, optional
+        Write the static terms gz-sim has no tag for (element drags, products, speed
+        norms) as the tags that reproduce their force best over the flown envelope
+        (:func:`~dampest_ros.io.export.common.refolded`; the header gives the share);
+        False: they are left out, listed. Default: refolded when the model file records
+        its flown speeds (else left out); True: a file without them is refused.
 
     Returns
     -------
@@ -142,8 +151,12 @@ def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "ba
     model, theta, left_out = model_damping(mf)
     coefs, other = coefficients(model, theta) if model is not None else ([], [])
     left_out += other
-    coefs, safety = made_safe(coefs, policy_of(force, clamp), "gz", source)
     notes: list[str] = []
+    if refold is not False and model is not None:
+        coefs, stood_in, notes = refolded(mf, model, theta, coefs, all_entries(), "gz",
+                                          refold is True)
+        left_out = without(left_out, stood_in)
+    coefs, safety = made_safe(coefs, policy_of(force, clamp), "gz", source)
     damping = merge(((_gz_tag(c), c, -_gz_sign(c.row, c.col, _signed_k(c), frame) * c.value)
                       for c in coefs), notes)
     if any(c.kind == "lin" and c.row == c.col == c.k for c in coefs):

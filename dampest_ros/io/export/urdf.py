@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from dampest_ros.core.identification.model import Model
+from dampest_ros.core.identification.refold import diagonal_entries
 from dampest_ros.core.physics.damping import FloatArray
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError, rigid_body_mass
 from dampest_ros.core.physics.vehicle import Vehicle
@@ -44,7 +45,9 @@ from dampest_ros.io.export.common import (
     num,
     parse_xml,
     policy_of,
+    refolded,
     switches_left_out,
+    without,
     xml_comment,
     xml_float,
 )
@@ -56,7 +59,7 @@ _URDF_QUADRATIC = ("Xuu", "Yvv", "Zww", "Kpp", "Mqq", "Nrr")
 
 def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
                 source: str | None = None, force: bool = False,
-                clamp: bool = False) -> Exported:
+                clamp: bool = False, refold: bool | None = None) -> Exported:
     """The ``<hydrodynamics>`` block (RDML ``hydrodynamics`` / ``auv_controllers`` / ``blue``).
 
     Parameters
@@ -70,6 +73,13 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
     force, clamp : bool
         For coefficients that are not dissipative at every speed: write them as they are
         (``force``) or the nearest dissipative set (``clamp``); the header says which.
+
+    refold : bool, optional
+        Write the static terms the block cannot carry as the coefficients it can that reproduce
+        their force best over the flown envelope
+        (:func:`~dampest_ros.io.export.common.refolded`; the header gives the share);
+        False: they are left out, listed. Default: refolded when the model file records
+        its flown speeds (else left out); True: a file without them is refused.
 
     Returns
     -------
@@ -88,8 +98,12 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
         c.kind == "const" or (c.kind == "abs" and c.k == c.row))]
     left_out += [f"{c.name} = {num(c.value)} (off-diagonal or cross coupling: the block holds "
                  f"diagonal damping only)" for c in coefs if c not in written]
-    written, safety = made_safe(written, policy_of(force, clamp), "urdf", source)
     notes: list[str] = []
+    if refold is not False and model is not None:
+        written, stood_in, notes = refolded(mf, model, theta, written, diagonal_entries(),
+                                            "urdf", refold is True)
+        left_out = without(left_out, stood_in)
+    written, safety = made_safe(written, policy_of(force, clamp), "urdf", source)
     lin = [(_URDF_LINEAR[c.row], c, -c.value) for c in written if c.kind == "const"]
     quad = [(_URDF_QUADRATIC[c.row], c, -c.value) for c in written if c.kind == "abs"]
     left_out += switches_left_out(added_mass_switches(mf, vehicle), "the block")

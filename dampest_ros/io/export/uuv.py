@@ -44,7 +44,9 @@ from dampest_ros.io.export.common import (
     num,
     parse_xml,
     policy_of,
+    refolded,
     switches_left_out,
+    without,
     xml_comment,
     xml_float,
 )
@@ -78,7 +80,7 @@ def _numbers(values: FloatArray) -> str:
 
 def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "base_link",
                source: str | None = None, force: bool = False,
-               clamp: bool = False) -> Exported:
+               clamp: bool = False, refold: bool | None = None) -> Exported:
     """The UUV Simulator ``<plugin>`` block with the model as its HMFossen matrices (FRD).
 
     Parameters
@@ -94,6 +96,13 @@ def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "b
     force, clamp : bool
         For coefficients that are not dissipative at every speed: write them as they are
         (``force``) or the nearest dissipative set (``clamp``); the header says which.
+
+    refold : bool, optional
+        Write the static terms UUV Simulator cannot carry as the coefficients it can that reproduce
+        their force best over the flown envelope
+        (:func:`~dampest_ros.io.export.common.refolded`; the header gives the share);
+        False: they are left out, listed. Default: refolded when the model file records
+        its flown speeds (else left out); True: a file without them is refused.
 
     Returns
     -------
@@ -116,8 +125,14 @@ def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "b
     left_out += [f"{c.name} = {num(c.value)} (UUV Simulator has quadratic damping on the "
                  f"diagonal only (|nu_i| nu_i) and products with u only)"
                  for c in coefs if c not in written]
-    written, safety = made_safe(written, policy_of(force, clamp), "uuv", source)
     notes: list[str] = []
+    if refold is not False and model is not None:
+        entries = [(i, j, -1) for i in range(6) for j in range(6)] + [
+            (i, i, i) for i in range(6)]  # its full linear matrix, its diagonal quadratic
+        written, stood_in, notes = refolded(mf, model, theta, written, entries, "uuv",
+                                            refold is True)
+        left_out = without(left_out, stood_in)
+    written, safety = made_safe(written, policy_of(force, clamp), "uuv", source)
     tags = {"const": "linear_damping", "abs": "quadratic_damping",
             "lin": "linear_damping_forward_speed"}
     mats = {key: np.zeros((6, 6)) for key in tags.values()}
