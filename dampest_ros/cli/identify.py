@@ -207,11 +207,6 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
     check_pooled_options(args)
     t0 = time.perf_counter()
     model, nominal = structure_of(args, vehicle)
-    if not (args.structure or args.terms or args.no_select):
-        print(f"note: the logs are pooled on {vehicle.name}'s preset terms: the default's "
-              "search for terms the preset misses runs on one log (dampest identify LOG "
-              "--out one.yaml), then pool with --structure one.yaml; --no-select says the "
-              "preset is meant", file=sys.stderr)
     prior, prior_std = prior_of(model, nominal, prior_spec(args, vehicle))
     with reduce_all(paths, args, prior, prior_std) as (logs, failed, map_logs):
         failed.update(inconsistent_logs(logs, args.keep_all))
@@ -220,6 +215,11 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
                              speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
         result = pooled_fit(logs, model, vehicle.body, options, prior, prior_std, map_logs,
                             samples)
+    if not (args.structure or args.terms or args.no_select):
+        print(f"note: the logs are pooled on {vehicle.name}'s preset terms: the default's "
+              "search for terms the preset misses runs on one log (dampest identify LOG "
+              "--out one.yaml), then pool with --structure one.yaml; --no-select says the "
+              "preset is meant", file=sys.stderr)
     print(f"{len(logs)} logs pooled ({len(failed)} left out): {len(samples)} samples "
           f"({len(samples) / samples.rate:.0f} s), {result.method}, condition number "
           f"{result.cond:.3g}, {time.perf_counter() - t0:.1f} s")

@@ -14,7 +14,7 @@ worker that holds it) and the sum of the parts' results.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import Any, Protocol
@@ -152,27 +152,48 @@ def robust_pass(samples: Samples, model: DampingModel, body: RigidBody, theta: F
 @dataclass
 class BiasStatistics:
     """The sensor-bias refits' data: per-DOF normal equations of the samples with ν offset
-    by each sensor axis's σ, and without an offset, over the rows :func:`bias_statistics`
-    takes. Unweighted per DOF, so any fit's weights apply, and additive: the statistics of
-    several logs (each its own segments) sum to those of all their samples at once.
+    by each sensor axis's σ, over the rows :func:`bias_statistics` takes, and, when those are
+    not every row, the same without an offset. Unweighted per DOF, so any fit's weights
+    apply, and additive over logs (:func:`pooled_bias`).
 
     Attributes
     ----------
-    A : ndarray, shape (1 + k, 6, p, p)
-        Σ_n Φ_niᵀ Φ_ni per DOF i, first without an offset, then with each of the k offsets.
-    b : ndarray, shape (1 + k, 6, p)
+    A : ndarray, shape (k, 6, p, p)
+        Σ_n Φ_niᵀ Φ_ni per DOF i, with each of the k offsets.
+    b : ndarray, shape (k, 6, p)
         Σ_n Φ_niᵀ y_ni likewise.
-    complete : bool
-        Every row of the samples was taken (no segment was cut to stretches).
+    base : tuple of ndarray, shapes (6, p, p) and (6, p), or None
+        The same without an offset; None when every row was taken (no segment was cut to
+        stretches): the fit's own estimate is then the base the refits differ from.
     """
 
     A: FloatArray
     b: FloatArray
-    complete: bool
+    base: tuple[FloatArray, FloatArray] | None
 
-    def __add__(self, other: BiasStatistics) -> BiasStatistics:
-        return BiasStatistics(self.A + other.A, self.b + other.b,
-                              self.complete and other.complete)
+    def with_base(self, normal: NormalEquations) -> tuple[FloatArray, FloatArray]:
+        """The unoffset part: :attr:`base`, or for statistics of every row, those of
+        ``normal``, the normal equations of the same samples (no guard between folds)."""
+        return self.base if self.base is not None else (normal.A.sum(axis=0),
+                                                        normal.b.sum(axis=0))
+
+
+def pooled_bias(stats: Sequence[BiasStatistics], normals: Sequence[NormalEquations]
+                ) -> BiasStatistics:
+    """The statistics of several logs' samples at once (each log its own segments), from
+    each log's and its normal equations (for the unoffset part of a log taken whole)."""
+    A, b = stats[0].A.copy(), stats[0].b.copy()
+    for other in stats[1:]:
+        A += other.A
+        b += other.b
+    if all(x.base is None for x in stats):
+        return BiasStatistics(A, b, None)
+    parts = [x.with_base(n) for x, n in zip(stats, normals, strict=True)]
+    A0, b0 = parts[0][0].copy(), parts[0][1].copy()
+    for a, c in parts[1:]:
+        A0 += a
+        b0 += c
+    return BiasStatistics(A, b, (A0, b0))
 
 
 def bias_offsets(opts: CovarianceOptions) -> list[FloatArray]:
@@ -207,10 +228,12 @@ def bias_statistics(samples: Samples, model: DampingModel, body: RigidBody,
                     opts: CovarianceOptions, chunk: int = CHUNK) -> BiasStatistics | None:
     """The :class:`BiasStatistics` of ``samples`` (:func:`bias_rows`, low-passed and
     decimated as the fit's normal equations); None when no sensor has a bias."""
-    offsets: list[FloatArray | None] = [None, *bias_offsets(opts)]
-    if len(offsets) == 1:
+    offsets: list[FloatArray | None] = list(bias_offsets(opts))
+    if not offsets:
         return None
     data, complete = bias_rows(samples, opts.bias_stretch)
+    if not complete:
+        offsets.insert(0, None)
     p = model.n_params
     A = np.zeros((len(offsets), 6, p, p))
     b = np.zeros((len(offsets), 6, p))
@@ -221,7 +244,9 @@ def bias_statistics(samples: Samples, model: DampingModel, body: RigidBody,
             # per DOF i: ΦᵢᵀΦᵢ and Φᵢᵀyᵢ, one matrix product each
             A[j] += rows.transpose(0, 2, 1) @ rows
             b[j] += np.einsum("inp,ni->ip", rows, y)
-    return BiasStatistics(A, b, complete)
+    if complete:
+        return BiasStatistics(A, b, None)
+    return BiasStatistics(A[1:], b[1:], (A[0], b[0]))
 
 
 def bias_covariance(stats: BiasStatistics | None, theta: FloatArray, weights: FloatArray,
@@ -234,19 +259,21 @@ def bias_covariance(stats: BiasStatistics | None, theta: FloatArray, weights: Fl
     constant over the record, so the residuals cannot reveal them. The refits estimate the
     directions ``basis`` (shape (p_free, r)) spans (:func:`determined_directions`) with the
     fit's per-DOF ``weights`` (shape (6,)); they are differenced from θ when they took every
-    row, else from the refit of the same rows without an offset. 0 when ``stats`` is None.
+    row (``stats.base`` None), else from the refit of the same rows without an offset. 0
+    when ``stats`` is None.
     """
     p = len(theta)
     cov = np.zeros((p, p))
     if stats is None:
         return cov
-    # Σ_i w_i ΦᵢᵀΦᵢ, Σ_i w_i Φᵢᵀyᵢ of each refit
-    A = np.einsum("i,jipq->jpq", weights, stats.A)
-    b = np.einsum("i,jip->jp", weights, stats.b)
-    refits = [solve_normal(A[j], b[j], free, theta, basis=basis) for j in range(len(A))]
-    base = theta if stats.complete else refits[0]
-    for th in refits[1:]:
-        d = th - base
+    def refit(A: FloatArray, b: FloatArray) -> FloatArray:
+        # the weighted refit: Σ_i w_i ΦᵢᵀΦᵢ θ = Σ_i w_i Φᵢᵀyᵢ
+        return solve_normal(np.einsum("i,ipq->pq", weights, A),
+                            np.einsum("i,ip->p", weights, b), free, theta, basis=basis)
+
+    base = theta if stats.base is None else refit(*stats.base)
+    for A, b in zip(stats.A, stats.b, strict=True):
+        d = refit(A, b) - base
         cov += np.outer(d, d)
     return cov
 

@@ -28,7 +28,11 @@ from numpy.typing import NDArray
 from scipy import special
 
 from dampest_ros.core.identification.batch import Fit, FitOptions, fit
-from dampest_ros.core.identification.covariance import BiasStatistics, bias_statistics
+from dampest_ros.core.identification.covariance import (
+    BiasStatistics,
+    bias_statistics,
+    pooled_bias,
+)
 from dampest_ros.core.identification.regression import NormalEquations, accumulate
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
@@ -139,7 +143,7 @@ def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBo
 
     whole = pooled_samples(logs) if samples is None else samples
     biases = [g.bias for g in logs if g.bias is not None]  # none, or every log's
-    bias = sum(biases[1:], biases[0]) if biases else None
+    bias = pooled_bias(biases, [g.normal for g in logs]) if biases else None
     return fit(whole, model, body, options, prior=prior, prior_std=prior_std,
                normal=pooled_normal([g.normal for g in logs]), map_parts=map_parts, bias=bias)
 

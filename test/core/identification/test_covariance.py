@@ -12,6 +12,7 @@ from dampest_ros.core.identification.covariance import (
     bias_offsets,
     bias_rows,
     bias_statistics,
+    pooled_bias,
 )
 from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import accumulate
@@ -64,11 +65,14 @@ def test_the_statistics_of_two_logs_add_up_to_those_of_both_at_once(vehicle: Veh
     b.segment += 1
     both = Samples.concatenate([a, b])
     sa, sb, sab = (bias_statistics(x, vehicle.damping, vehicle.body, opts) for x in (a, b, both))
-    assert sa is not None and sb is not None and sab is not None
-    assert not sab.complete and len(sab.A) == 1 + 6
-    summed = sa + sb
-    np.testing.assert_allclose(summed.A, sab.A, rtol=1e-12, atol=1e-12 * np.abs(sab.A).max())
-    np.testing.assert_allclose(summed.b, sab.b, rtol=1e-12, atol=1e-12 * np.abs(sab.b).max())
+    assert sa is not None and sb is not None and sab is not None and sab.base is not None
+    assert len(sab.A) == 6
+    normals = [accumulate(x, vehicle.damping, vehicle.body, cutoff=opts.cutoff) for x in (a, b)]
+    summed = pooled_bias([sa, sb], normals)
+    assert summed.base is not None
+    for got, want in ((summed.A, sab.A), (summed.b, sab.b), (summed.base[0], sab.base[0]),
+                      (summed.base[1], sab.base[1])):
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
     assert bias_statistics(a, vehicle.damping, vehicle.body,
                            FitOptions(cutoff=2.0, gyro_bias=0.0, dvl_bias=0.0)) is None
 
@@ -80,7 +84,7 @@ def test_the_bias_covariance_is_that_of_refits_of_offset_data(vehicle: Vehicle) 
     samples = flight(vehicle, 3)
     model, body = vehicle.damping, vehicle.body
     stats = bias_statistics(samples, model, body, opts)
-    assert stats is not None and stats.complete
+    assert stats is not None and stats.base is None  # every row: differenced from θ
     theta = vehicle.theta
     weights = np.array([1.0, 2.0, 0.5, 30.0, 20.0, 40.0])
     free = np.ones(model.n_params, dtype=bool)
@@ -96,3 +100,24 @@ def test_the_bias_covariance_is_that_of_refits_of_offset_data(vehicle: Vehicle) 
         expected += np.outer(d, d)
     assert np.abs(expected).max() > 0 and cov[0, 0] == 0.0
     np.testing.assert_allclose(cov, expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max())
+
+
+def test_a_log_taken_whole_pooled_with_one_cut_to_stretches(vehicle: Vehicle) -> None:
+    """A log cut to stretches (its refits differenced from its unoffset refit) pooled with
+    one taken whole (whose unoffset part is its normal equations'): the statistics of both
+    at once."""
+    opts = FitOptions(cutoff=2.0, bias_stretch=600)
+    a, b = flight(vehicle, 4), flight(vehicle, 5, start=100.0)
+    b.segment += 1
+    short = b.take(np.arange(1500))  # ≤ 3 stretches: taken whole
+    both = Samples.concatenate([a, short])
+    model, body = vehicle.damping, vehicle.body
+    sa, ss, sab = (bias_statistics(x, model, body, opts) for x in (a, short, both))
+    assert sa is not None and ss is not None and sab is not None
+    assert sa.base is not None and ss.base is None and sab.base is not None
+    normals = [accumulate(x, model, body, cutoff=opts.cutoff) for x in (a, short)]
+    summed = pooled_bias([sa, ss], normals)
+    assert summed.base is not None
+    for got, want in ((summed.A, sab.A), (summed.base[0], sab.base[0]),
+                      (summed.base[1], sab.base[1])):
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-10 * np.abs(want).max())
