@@ -28,8 +28,8 @@ roll moment y·Z), so where the heave is already explained its roll gain is paid
 neither twin may pass; together their sum carries the force and their difference the moment,
 as the two elements of a symmetric vehicle do (MuJoCo sled_auv, seed 3: each pontoon's heave
 drag alone lowered BIC nowhere, the pair lowered it by 92 in Z and 101 in K). The pair is one
-step of the path and of its one-standard-error cut; each twin stays or goes on its own
-(:func:`weak_points`).
+step of the path and of its one-standard-error cut, and twins both in the model stay or go
+together (:func:`weak_points`).
 """
 
 from __future__ import annotations
@@ -184,7 +184,9 @@ def select_points(samples: Samples, base: DampingModel, body: RigidBody,
 def weak_points(samples: Samples, model: DampingModel, body: RigidBody, cutoff: float,
                 rules: EntryRules) -> list[str]:
     """The element drags of ``model`` that no longer pass ``rules`` beside its other terms,
-    taken out one at a time, the weakest (least BIC gained in its best DOF) first.
+    taken out one at a time, the weakest (least BIC gained in its best DOF) first; a drag
+    whose mirror image is also in the model is judged with it, the pair going together or
+    not at all (the test charging for two).
 
     Returns
     -------
@@ -200,17 +202,21 @@ def weak_points(samples: Samples, model: DampingModel, body: RigidBody, cutoff: 
     names = model.parameter_names
     cols = list(range(len(names)))
     drags = [names.index(n) for n in point.parameter_names]
+    pairs = mirror_pairs([point_spec(basis) for basis in point.bases])
+    twins = {k for pair in pairs for k in pair}
+    units = [(drags[i], drags[j]) for i, j in pairs] \
+        + [(k,) for n, k in enumerate(drags) if n not in twins]
     removed: list[str] = []
-    while drags:
+    while units:
         rss = _row_rss(ne, A, b, cols)
-        without = {k: _row_rss(ne, A, b, [j for j in cols if j != k]) for k in drags}
-        weak = [k for k in drags if not rules.passed(without[k], rss)]
+        without = {u: _row_rss(ne, A, b, [j for j in cols if j not in u]) for u in units}
+        weak = [u for u in units if not rules.passed(without[u], rss, len(u))]
         if not weak:
             break
-        k = min(weak, key=lambda j: float((without[j] / np.maximum(rss, 1e-300)).max()))
-        cols.remove(k)
-        drags.remove(k)
-        removed.append(names[k])
+        u = min(weak, key=lambda v: float((without[v] / np.maximum(rss, 1e-300)).max()))
+        cols = [j for j in cols if j not in u]
+        units.remove(u)
+        removed += [names[k] for k in u]
     return removed
 
 
