@@ -53,7 +53,7 @@ def documented_translation(vehicle: Vehicle) -> np.ndarray:
 def pure_axis_truth(vehicle: Vehicle) -> np.ndarray:
     """(a_k, b_k) of every axis, shape (2, 6): MuJoCo's wrench at ±s less its added-mass
     Coriolis force, fitted by a s + b s|s| (exact); the translations equal the documented
-    formulas."""
+    formulas when no geom is rotated (frame_rov's camera arm is)."""
     from dampest_ros.core.simulation.mujoco_backend import compile_model
 
     assert vehicle.geometry is not None
@@ -72,7 +72,9 @@ def pure_axis_truth(vehicle: Vehicle) -> np.ndarray:
             f[n] = -(d.qfrc_fluid[k] + coriolis_force(vehicle.body.added_mass, nu)[k])
         out[:, k], *_ = np.linalg.lstsq(X, f, rcond=None)
         np.testing.assert_allclose(X @ out[:, k], f, atol=1e-9 * np.abs(f).max())
-    np.testing.assert_allclose(out[:, :3], documented_translation(vehicle), rtol=1e-9)
+    if not any(any(g.rpy) for g in vehicle.geometry.geoms):
+        # the formulas of documented_translation are those of geoms along the body axes
+        np.testing.assert_allclose(out[:, :3], documented_translation(vehicle), rtol=1e-9)
     return out
 
 
@@ -124,7 +126,7 @@ def identify_coverage(bag: Path, vehicle: str) -> Coverage:
 
 
 @pytest.mark.parametrize("vehicle", ["torpedo_auv", "bluerov2_heavy_mujoco", "box_rov",
-                                     "sled_auv"])
+                                     "sled_auv", "frame_rov"])
 def test_documented_pure_axis_drag_is_mujocos(vehicle: str) -> None:
     """MuJoCo's wrench along each axis is a s + b s|s| to 1e-9, and along u, v, w its a and b
     are the documented ellipsoid formulas (pure_axis_truth asserts both); e.g. the torpedo's

@@ -231,17 +231,32 @@ def test_default_identify_puts_element_drags_at_the_geoms(
     assert np.min(m.extra["heldout_r2"]) >= 0.97, m.extra["heldout_r2"]
 
 
+#: frame_rov's roll and pitch misfit the default's model forms (README, "untuned geometries").
+FRAME_ROV_OPEN = pytest.mark.xfail(strict=True, reason=(
+    "frame_rov: held-out roll .953-.975 and pitch .977-.986 before and after the mirror "
+    "pairs; with MuJoCo's Kutta lift off roll is .9984, with Kutta and Magnus off pitch "
+    ".9976: the floats' lift and the Magnus force at the geoms off the origin have no "
+    "candidate form"))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_default_identify_on_a_geometry_nobody_tuned_on(seed: int, tmp_path: Path) -> None:
-    """box_rov, a flat work-class ROV added after the defaults were set, realistic and
-    noiseless sensors: held-out force R² ≥ 0.995 in every DOF (measured ≥ .9978, roll
-    ≥ .9991 and pitch ≥ .9981; the library alone stopped roll and pitch at .989–.995): the
-    drag of the foam, skids and sled acts on their own velocity v + ω × r, which the element
-    drags at the geoms' positions carry and no library column has."""
+@pytest.mark.parametrize("vehicle", ["box_rov", "sled_auv",
+                                     pytest.param("frame_rov", marks=FRAME_ROV_OPEN)])
+def test_default_identify_on_a_geometry_nobody_tuned_on(vehicle: str, seed: int,
+                                                        tmp_path: Path) -> None:
+    """Geometries added after the defaults were set, realistic and noiseless sensors:
+    held-out force R² ≥ 0.995 in every DOF. box_rov, a flat work-class ROV: measured
+    ≥ .9958 (pitch, seed 3, realistic sensors; roll ≥ .9991; the library alone stopped roll
+    and pitch at .989–.995): the drag of the foam, skids and sled acts on their own velocity
+    v + ω × r, which the element drags at the geoms' positions carry and no library column
+    has.
+    sled_auv, a survey sled on two pontoons: ≥ .9978 (roll ≥ .9990; .99484 on seed 3 before
+    a mirror pair of drags could enter as one step: the pontoons' heave drags at ± 0.18 m).
+    frame_rov, an open-frame ROV on four vertical floats: open (``FRAME_ROV_OPEN``)."""
     for clean in (False, True):
         (tmp_path / str(clean)).mkdir()
-        r2 = select_heldout(tmp_path / str(clean), "box_rov", seed, clean, options=())[1.0][1]
+        r2 = select_heldout(tmp_path / str(clean), vehicle, seed, clean, options=())[1.0][1]
         assert np.all(r2 >= 0.995), (clean, r2)
 
 

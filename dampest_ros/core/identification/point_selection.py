@@ -19,6 +19,17 @@ weak term: a pair of drags at the bow and the stern stands in for a yaw cross-fl
 N ∝ r|v| until the library's own N_rv enters. The library is then searched again without it
 (:func:`.selection.select_terms`): a term that entered only to make up for a drag's side
 effect (the roll moment of a sway drag above the origin) does not outlive the drag.
+
+A drag and its mirror image across the xz plane (:func:`~dampest_ros.core.physics.point_drag.
+mirror_pairs`: pontoons, skids, floats at ± y) are also offered as one step, both entering
+together, each with its own coefficient, the test charging BIC for two (k log n_eff, k = 2).
+Alone, a drag off the centre line ties its moment to its force (a heave drag at y gives the
+roll moment y·Z), so where the heave is already explained its roll gain is paid for in heave and
+neither twin may pass; together their sum carries the force and their difference the moment,
+as the two elements of a symmetric vehicle do (MuJoCo sled_auv, seed 3: each pontoon's heave
+drag alone lowered BIC nowhere, the pair lowered it by 92 in Z and 101 in K). The pair is one
+step of the path and of its one-standard-error cut, and twins both in the model stay or go
+together (:func:`weak_points`).
 """
 
 from __future__ import annotations
@@ -38,7 +49,12 @@ from dampest_ros.core.identification.cv_budget import (
 from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import NormalEquations, accumulate
 from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel
-from dampest_ros.core.physics.point_drag import PointSpec, point_spec, point_term
+from dampest_ros.core.physics.point_drag import (
+    PointSpec,
+    mirror_pairs,
+    point_spec,
+    point_term,
+)
 from dampest_ros.core.physics.rigid_body import RigidBody
 from dampest_ros.core.signals.samples import Samples
 
@@ -55,13 +71,16 @@ class PointSelection:
         The base with the element drags kept (in the order they entered).
     chosen : list of PointSpec
         The element drags kept.
+    steps : int
+        The steps of the path kept (a mirror pair that entered together is one).
     r2 : tuple of two ndarrays, shape (6,)
         Held-out R² per DOF of the base and of ``model`` (the rows fitted together).
     tss : ndarray, shape (6,)
         Σ y² per DOF of the low-passed target (held-out R² = 1 − CV / tss).
     path : list of (str, float, float)
-        The base (``base``), then each candidate as it entered (the kept ones first), with
-        the held-out error Σ_i CV_i / TSS_i after it and its standard error.
+        The base (``base``), then each step as it entered (the kept ones first: a drag, or a
+        mirror pair ``a + b``), with the held-out error Σ_i CV_i / TSS_i after it and its
+        standard error.
     pruned : list of str
         The kept drags taken out once the library terms joined (:func:`weak_points`), the
         library searched again without them.
@@ -69,6 +88,7 @@ class PointSelection:
 
     model: DampingModel
     chosen: list[PointSpec]
+    steps: int
     r2: tuple[FloatArray, FloatArray]
     tss: FloatArray
     path: list[tuple[str, float, float]]
@@ -89,16 +109,18 @@ def with_points(base: DampingModel, points: Sequence[PointSpec]) -> DampingModel
 class EntryRules:
     """The test a candidate passes to enter the path, the library search's BIC test
     (:mod:`.selection`): in at least one DOF it acts in, it lowers BIC by more than
-    ``min_improvement``, with ``n_eff`` independent samples."""
+    ``min_improvement``, with ``n_eff`` independent samples and its number of coefficients
+    (2 for a mirror pair)."""
 
     min_improvement: float
     n_eff: float
 
-    def passed(self, rss_without: FloatArray, rss_with: FloatArray) -> bool:
-        """Whether a DOF's in-sample RSS, shape (6,) each, falls by the test's margin."""
+    def passed(self, rss_without: FloatArray, rss_with: FloatArray, k: int = 1) -> bool:
+        """Whether a DOF's in-sample RSS, shape (6,) each, falls by the test's margin when
+        ``k`` coefficients join."""
         ratio = np.maximum(rss_with, 1e-300) / np.maximum(rss_without, 1e-300)
-        # ΔBIC of the row = n_eff log(RSS_with / RSS_without) + log n_eff
-        dbic = self.n_eff * np.log(ratio) + np.log(self.n_eff)
+        # ΔBIC of the row = n_eff log(RSS_with / RSS_without) + k log n_eff
+        dbic = self.n_eff * np.log(ratio) + k * np.log(self.n_eff)
         return bool(np.any(dbic < -self.min_improvement))
 
 
@@ -116,6 +138,7 @@ def select_points(samples: Samples, base: DampingModel, body: RigidBody,
     body : RigidBody
     candidates : sequence of PointSpec
         Simplest first: among sizes the data cannot tell apart, the path's order decides.
+        Mirror pairs among them are also offered together (module docstring).
     cutoff : float
         Parallel low-pass of the regression (Hz).
     rules : EntryRules
@@ -140,23 +163,30 @@ def select_points(samples: Samples, base: DampingModel, body: RigidBody,
     A = np.einsum("fipq,i->fpq", ne.A, 1.0 / tss)
     b = np.einsum("fip,i->fp", ne.b, 1.0 / tss)
     c = ne.c @ (1.0 / tss)
-    chosen, errors = _path(ne, (A, b, c), base_cols, cand_cols, rules)
+    groups = [(k,) for k in range(len(candidates))] + mirror_pairs(candidates)
+    chosen, errors = _path(ne, (A, b, c), base_cols,
+                           [[cand_cols[k] for k in g] for g in groups], rules)
+    steps = [[candidates[k] for k in groups[g]] for g in chosen]
     path = [(name, float(e.sum()), float(np.sqrt(len(e)) * np.std(e, ddof=1)))
-            for name, e in zip(["base", *(candidates[k].label for k in chosen)], errors,
-                               strict=True)]
+            for name, e in zip(["base", *(" + ".join(s.label for s in st) for st in steps)],
+                               errors, strict=True)]
     # each DOF's held-out errors per fold along the path, shape (K + 1, F, 6)
-    rows = np.array([_row_fold_errors(ne, A, b, [*base_cols, *(cand_cols[k] for k in chosen[:j])])
-                     for j in range(len(chosen) + 1)])
-    # a drag stays while one DOF gains more than its own standard error from it
-    kept = [candidates[k] for k in chosen[:max(one_se_size(rows[:, :, i]) for i in range(6))]]
-    r2 = (1.0 - rows[0].sum(0) / tss, 1.0 - rows[len(kept)].sum(0) / tss)
-    return PointSelection(with_points(base, kept), kept, r2, tss, path)
+    entered = [[cand_cols[k] for g in chosen[:j] for k in groups[g]]
+               for j in range(len(chosen) + 1)]
+    rows = np.array([_row_fold_errors(ne, A, b, [*base_cols, *cols]) for cols in entered])
+    # a step stays while one DOF gains more than its own standard error from it
+    size = max(one_se_size(rows[:, :, i]) for i in range(6))
+    kept = [s for st in steps[:size] for s in st]
+    r2 = (1.0 - rows[0].sum(0) / tss, 1.0 - rows[size].sum(0) / tss)
+    return PointSelection(with_points(base, kept), kept, size, r2, tss, path)
 
 
 def weak_points(samples: Samples, model: DampingModel, body: RigidBody, cutoff: float,
                 rules: EntryRules) -> list[str]:
     """The element drags of ``model`` that no longer pass ``rules`` beside its other terms,
-    taken out one at a time, the weakest (least BIC gained in its best DOF) first.
+    taken out one at a time, the weakest (least BIC gained in its best DOF) first; a drag
+    whose mirror image is also in the model is judged with it, the pair going together or
+    not at all (the test charging for two).
 
     Returns
     -------
@@ -172,25 +202,30 @@ def weak_points(samples: Samples, model: DampingModel, body: RigidBody, cutoff: 
     names = model.parameter_names
     cols = list(range(len(names)))
     drags = [names.index(n) for n in point.parameter_names]
+    pairs = mirror_pairs([point_spec(basis) for basis in point.bases])
+    twins = {k for pair in pairs for k in pair}
+    units = [(drags[i], drags[j]) for i, j in pairs] \
+        + [(k,) for n, k in enumerate(drags) if n not in twins]
     removed: list[str] = []
-    while drags:
+    while units:
         rss = _row_rss(ne, A, b, cols)
-        without = {k: _row_rss(ne, A, b, [j for j in cols if j != k]) for k in drags}
-        weak = [k for k in drags if not rules.passed(without[k], rss)]
+        without = {u: _row_rss(ne, A, b, [j for j in cols if j not in u]) for u in units}
+        weak = [u for u in units if not rules.passed(without[u], rss, len(u))]
         if not weak:
             break
-        k = min(weak, key=lambda j: float((without[j] / np.maximum(rss, 1e-300)).max()))
-        cols.remove(k)
-        drags.remove(k)
-        removed.append(names[k])
+        u = min(weak, key=lambda v: float((without[v] / np.maximum(rss, 1e-300)).max()))
+        cols = [j for j in cols if j not in u]
+        units.remove(u)
+        removed += [names[k] for k in u]
     return removed
 
 
 def _path(ne: NormalEquations, joint: tuple[FloatArray, FloatArray, FloatArray],
-          base_cols: Sequence[int], cand_cols: Sequence[int], rules: EntryRules
+          base_cols: Sequence[int], groups: Sequence[Sequence[int]], rules: EntryRules
           ) -> tuple[list[int], list[FloatArray]]:
-    """The greedy forward path: each step the candidate that passes ``rules`` with the least
-    joint held-out error, while that error falls.
+    """The greedy forward path: each step the group of candidates (a drag, or a mirror pair)
+    that passes ``rules`` with the least joint held-out error, while that error falls; a group
+    with a column already in is no longer offered.
 
     Parameters
     ----------
@@ -198,14 +233,16 @@ def _path(ne: NormalEquations, joint: tuple[FloatArray, FloatArray, FloatArray],
         Per-fold, per-row normal equations of the base's and the candidates' columns.
     joint : tuple of ndarrays, shapes (F, p, p), (F, p), (F,)
         The rows' weighted sum.
-    base_cols, cand_cols : sequence of int
-        The base's columns and each candidate's.
+    base_cols : sequence of int
+        The base's columns.
+    groups : sequence of sequence of int
+        The columns of each step that may be offered.
     rules : EntryRules
 
     Returns
     -------
     chosen : list of int
-        Indices into ``cand_cols``, in the order they entered.
+        Indices into ``groups``, in the order they entered.
     errors : list of ndarray, shape (F,) each
         The joint held-out error per fold of the base, then after each step.
     """
@@ -214,19 +251,19 @@ def _path(ne: NormalEquations, joint: tuple[FloatArray, FloatArray, FloatArray],
     chosen: list[int] = []
     errors = [fold_errors(A, b, c, cols)]
     rss = _row_rss(ne, A, b, cols)
-    pool = list(range(len(cand_cols)))
+    pool = list(range(len(groups)))
     while pool:
-        trials = [(k, fold_errors(A, b, c, [*cols, cand_cols[k]]),
-                   _row_rss(ne, A, b, [*cols, cand_cols[k]])) for k in pool]
-        good = [t for t in trials if rules.passed(rss, t[2])]
+        trials = [(g, fold_errors(A, b, c, [*cols, *groups[g]]),
+                   _row_rss(ne, A, b, [*cols, *groups[g]])) for g in pool]
+        good = [t for t in trials if rules.passed(rss, t[2], len(groups[t[0]]))]
         if not good:
             break
-        k, e, r = min(good, key=lambda t: float(t[1].sum()))
+        g, e, r = min(good, key=lambda t: float(t[1].sum()))
         if e.sum() >= errors[-1].sum():
             break
-        pool.remove(k)
-        chosen.append(k)
-        cols.append(cand_cols[k])
+        chosen.append(g)
+        cols += groups[g]
+        pool = [h for h in pool if not set(groups[h]) & set(groups[g])]
         errors.append(e)
         rss = r
     return chosen, errors

@@ -73,6 +73,13 @@ class PointSpec:
         e = np.eye(3)[self.axis]
         return np.r_[e, np.cross(np.asarray(self.position, dtype=float), e)]
 
+    @property
+    def mirror(self) -> PointSpec:
+        """The same drag at the mirror image of the point across the body's xz plane
+        (y → −y): its twin on the other side of a port–starboard symmetric vehicle."""
+        x, y, z = self.position
+        return PointSpec((x, -y + 0.0, z), self.axis, self.speed)
+
     def basis(self) -> Basis:
         """The parameter's basis: B = w wᵀ with α = ‖v_p‖ or |wᵀν| (module docstring)."""
         w = self.wrench
@@ -154,6 +161,15 @@ def candidate_points(geometry: Geometry | None, length: float) -> list[tuple[flo
         if np.linalg.norm(p) > 0 and p not in out:
             out.append(p)
     return out
+
+
+def mirror_pairs(specs: Sequence[PointSpec]) -> list[tuple[int, int]]:
+    """The indices (i, j), i < j, of the drags in ``specs`` whose mirror images across the
+    xz plane (:attr:`PointSpec.mirror`) are each other: elements off the centre line with a
+    twin on the other side (pontoons, skids, floats at ± y), in the order of ``specs``."""
+    index = {s: k for k, s in enumerate(specs)}
+    return [(i, index[s.mirror]) for i, s in enumerate(specs)
+            if s.position[1] != 0.0 and index.get(s.mirror, -1) > i]
 
 
 def point_library(points: Sequence[Sequence[float]]) -> list[PointSpec]:

@@ -11,6 +11,7 @@ from dampest_ros.core.physics.geometry import Geometry
 from dampest_ros.core.physics.point_drag import (
     PointSpec,
     candidate_points,
+    mirror_pairs,
     point_library,
     point_spec,
     point_term,
@@ -89,3 +90,14 @@ def test_candidate_points_are_the_geoms_off_the_origin_else_a_generic_set() -> N
     assert candidate_points(None, 2.0) == [(1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.5, 0.0),
                                            (0.0, -0.5, 0.0), (0.0, 0.0, 0.5), (0.0, 0.0, -0.5)]
     assert len(point_library(candidate_points(None, 2.0))) == 36
+
+
+def test_mirror_pairs_are_the_twins_across_the_xz_plane() -> None:
+    """Drags at (0.1, ±0.2, 0) along the same axis on the same speed pair up; a drag on the
+    centre line, or at a point without its twin, does not."""
+    specs = point_library([(0.1, 0.2, 0.0), (0.0, 0.0, 0.3), (0.1, -0.2, 0.0), (0.5, 0.4, 0.0)])
+    pairs = mirror_pairs(specs)
+    assert [(specs[i].label, specs[j].label) for i, j in pairs][:2] == [
+        ("drag.u|U|@(0.1,0.2,0)", "drag.u|U|@(0.1,-0.2,0)"),
+        ("drag.v|U|@(0.1,0.2,0)", "drag.v|U|@(0.1,-0.2,0)")]
+    assert len(pairs) == 6
