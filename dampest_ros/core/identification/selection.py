@@ -956,6 +956,46 @@ def _least_squares(samples: Samples, model: DampingModel, body: RigidBody, cutof
     return solve_normal(A, b, np.ones(model.n_params, dtype=bool), np.zeros(model.n_params))
 
 
+@dataclass
+class _FeatureRows:
+    """The low-passed, decimated feature rows of one search's samples, chunk by chunk (the
+    fold of each row and the rows), and their Gram matrix per fold: what does not depend on
+    the target, kept for the next search of the same samples and features."""
+
+    key: tuple[Any, ...]
+    nu: FloatArray
+    t: FloatArray
+    segment: NDArray[np.int64]
+    chunks: list[tuple[NDArray[np.int64], FloatArray]]
+    G: FloatArray
+
+
+#: The feature rows of the last search (:func:`_feature_equations`): a search beside shared
+#: terms runs on the same samples with another target (SHARED_ROUNDS times), and the default
+#: structure searches again once a drag is taken out.
+_LAST_ROWS: list[_FeatureRows] = []
+#: Largest feature rows kept (bytes): a 600 s log's library at 50 Hz is ~45 MB.
+ROWS_KEPT = 96e6
+
+
+def _rows_key(feats: Sequence[tuple[int, Alpha]], mem_rates: FloatArray,
+              mem_dofs: NDArray[np.int64], cutoff: float, fold_of: NDArray[np.int64]
+              ) -> tuple[Any, ...]:
+    """What the feature rows depend on besides the samples' ν, times and segments."""
+    return (list(feats), mem_rates.tolist(), mem_dofs.tolist(), cutoff, fold_of.tobytes())
+
+
+def _feature_rows(samples: Samples, key: tuple[Any, ...]) -> _FeatureRows | None:
+    """The kept feature rows when the last search had these samples (the same ν, times and
+    segments) and ``key`` (:func:`_rows_key`), else None."""
+    if _LAST_ROWS:
+        last = _LAST_ROWS[0]
+        if (last.nu is samples.nu and last.t is samples.t and last.segment is samples.segment
+                and last.key == key):
+            return last
+    return None
+
+
 def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],
                        mem_rates: FloatArray, mem_dofs: NDArray[np.int64], body: RigidBody,
                        folds: int, cutoff: float) -> NormalEquations:
@@ -965,12 +1005,55 @@ def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],
     Column k < m = len(feats) is feature k in every row; column m + s is memory state s
     (ż = −λ_s z + ν_dof), which acts in the row of its DOF only. The same statistics as
     :func:`batch.accumulate` of a model with bases 1 e_colᵀ, at a sixth of the cost and memory.
+    The feature rows and their Gram matrix do not depend on the target: those of the last
+    call are used again when the samples and features are the same (bit for bit the same
+    statistics; only the target's products are formed anew).
 
     Returns
     -------
     NormalEquations
         A (folds, 6, p, p), b (folds, 6, p), c (folds, 6), n (folds,), p = m + len(mem_rates).
     """
+    m = len(feats)
+    p = m + len(mem_rates)
+    # no sample within the low-pass's reach of a fold boundary counts (cv_budget)
+    guard = round(GUARD_PERIODS * samples.rate / cutoff) if cutoff > 0 else 0
+    fold_of = guarded_folds(len(samples), folds, guard)
+    key = _rows_key(feats, mem_rates, mem_dofs, cutoff, fold_of)
+    kept = _feature_rows(samples, key)
+    Gy = np.zeros((folds, p, 6))
+    c = np.zeros((folds, 6))
+    n = np.zeros(folds)
+    if kept is None:
+        kept = _new_feature_rows(samples, feats, mem_rates, mem_dofs, body, folds, cutoff,
+                                 fold_of, key)
+    ys = (y for _, _, y in iter_regression(samples, DampingModel([]), body, cutoff=cutoff,
+                                           decimate=True,
+                                           regressor=lambda nu, z: np.zeros((len(nu), 1, 0))))
+    for (fo, F), y in zip(kept.chunks, ys, strict=True):
+        for f in np.unique(fo[fo >= 0]):
+            k = fo == f
+            # Gᵀy, yᵀy per fold
+            Gy[f] += F[k].T @ y[k]
+            c[f] += np.einsum("ni,ni->i", y[k], y[k])
+            n[f] += int(k.sum())
+    A = np.repeat(kept.G[:, None], 6, axis=1)
+    b = Gy.transpose(0, 2, 1).copy()
+    for s, d in enumerate(mem_dofs):
+        # memory state s acts in row d only
+        other = [i for i in range(6) if i != int(d)]
+        A[:, other, m + s, :] = 0.0
+        A[:, other, :, m + s] = 0.0
+        b[:, other, m + s] = 0.0
+    return NormalEquations(A, b, c, n)
+
+
+def _new_feature_rows(samples: Samples, feats: Sequence[tuple[int, Alpha]],
+                      mem_rates: FloatArray, mem_dofs: NDArray[np.int64], body: RigidBody,
+                      folds: int, cutoff: float, fold_of: NDArray[np.int64],
+                      key: tuple[Any, ...]) -> _FeatureRows:
+    """The feature rows of :func:`_feature_equations` and their Gram matrix per fold, kept
+    (as the only ones) when they take at most :data:`ROWS_KEPT` bytes."""
     m = len(feats)
     cols = np.array([c for c, _ in feats], dtype=np.int64)
     bank = AlphaBank([a for _, a in feats])
@@ -986,33 +1069,22 @@ def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],
             g[:, 0, m:] = z
         return g
 
-    # no sample within the low-pass's reach of a fold boundary counts (cv_budget)
-    guard = round(GUARD_PERIODS * samples.rate / cutoff) if cutoff > 0 else 0
-    fold_of = guarded_folds(len(samples), folds, guard)
     G = np.zeros((folds, p, p))
-    Gy = np.zeros((folds, p, 6))
-    c = np.zeros((folds, 6))
-    n = np.zeros(folds)
-    for rows, F3, y in iter_regression(samples, DampingModel(terms), body, cutoff=cutoff,
+    chunks: list[tuple[NDArray[np.int64], FloatArray]] = []
+    for rows, F3, _ in iter_regression(samples, DampingModel(terms), body, cutoff=cutoff,
                                        decimate=True, regressor=features):
         F = F3[:, 0, :]
         fo = fold_of[rows]
         for f in np.unique(fo[fo >= 0]):
             k = fo == f
-            # GᵀG, Gᵀy, yᵀy per fold
+            # GᵀG per fold
             G[f] += F[k].T @ F[k]
-            Gy[f] += F[k].T @ y[k]
-            c[f] += np.einsum("ni,ni->i", y[k], y[k])
-            n[f] += int(k.sum())
-    A = np.repeat(G[:, None], 6, axis=1)
-    b = Gy.transpose(0, 2, 1).copy()
-    for s, d in enumerate(mem_dofs):
-        # memory state s acts in row d only
-        other = [i for i in range(6) if i != int(d)]
-        A[:, other, m + s, :] = 0.0
-        A[:, other, :, m + s] = 0.0
-        b[:, other, m + s] = 0.0
-    return NormalEquations(A, b, c, n)
+        chunks.append((fo, F))
+    out = _FeatureRows(key, samples.nu, samples.t, samples.segment, chunks, G)
+    _LAST_ROWS.clear()
+    if sum(F.nbytes for _, F in chunks) <= ROWS_KEPT:
+        _LAST_ROWS.append(out)
+    return out
 
 
 def _without(model: DampingModel, names: Sequence[str]) -> DampingModel:

@@ -330,3 +330,29 @@ def test_each_dof_takes_the_terms_of_the_search_that_predicts_it_better(
     assert set(model.parameter_names) == {*base.parameter_names, "Y_vr", truth.label}
     after = held_out_r2(samples, model, body)
     assert np.all(after >= 0.9999), after  # measured ≥ .99999
+
+
+def test_the_feature_rows_are_used_again_for_another_target(outside_law: Samples,
+                                                             body: RigidBody) -> None:
+    """A second search of the same samples with another target (a search beside shared
+    terms, round two) takes the kept feature rows and Gram matrix: the same statistics, bit
+    for bit, as formed afresh; other samples or features form them anew."""
+    from dataclasses import replace
+
+    from dampest_ros.core.identification import selection as sel
+    from dampest_ros.core.physics.terms import library
+
+    feats = [(sp.col, sp.alpha) for sp in library()[:40]]
+    none, dofs = np.zeros(0), np.zeros(0, dtype=np.int64)
+    other = replace(outside_law, tau=outside_law.tau * 0.7 + 1.0)
+    sel._LAST_ROWS.clear()
+    sel._feature_equations(outside_law, feats, none, dofs, body, 5, 2.0)
+    kept = sel._LAST_ROWS[0]
+    again = sel._feature_equations(other, feats, none, dofs, body, 5, 2.0)
+    assert sel._LAST_ROWS[0] is kept  # taken, not formed anew
+    sel._LAST_ROWS.clear()
+    fresh = sel._feature_equations(other, feats, none, dofs, body, 5, 2.0)
+    for name in ("A", "b", "c", "n"):
+        assert np.array_equal(getattr(again, name), getattr(fresh, name)), name
+    sel._feature_equations(other, feats[:30], none, dofs, body, 5, 2.0)
+    assert sel._LAST_ROWS[0] is not kept and len(sel._LAST_ROWS[0].key[0]) == 30
