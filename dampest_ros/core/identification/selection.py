@@ -1025,19 +1025,16 @@ def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],
     c = np.zeros((folds, 6))
     n = np.zeros(folds)
     if kept is None:
-        kept = _new_feature_rows(samples, feats, mem_rates, mem_dofs, body, folds, cutoff,
-                                 fold_of, key)
-    ys = (y for _, _, y in iter_regression(samples, DampingModel([]), body, cutoff=cutoff,
-                                           decimate=True,
-                                           regressor=lambda nu, z: np.zeros((len(nu), 1, 0))))
-    for (fo, F), y in zip(kept.chunks, ys, strict=True):
-        for f in np.unique(fo[fo >= 0]):
-            k = fo == f
-            # Gᵀy, yᵀy per fold
-            Gy[f] += F[k].T @ y[k]
-            c[f] += np.einsum("ni,ni->i", y[k], y[k])
-            n[f] += int(k.sum())
-    A = np.repeat(kept.G[:, None], 6, axis=1)
+        G = _new_feature_rows(samples, feats, mem_rates, mem_dofs, body, folds, cutoff,
+                              fold_of, key, (Gy, c, n))
+    else:
+        G = kept.G
+        ys = (y for _, _, y in iter_regression(
+            samples, DampingModel([]), body, cutoff=cutoff, decimate=True,
+            regressor=lambda nu, z: np.zeros((len(nu), 1, 0))))
+        for (fo, F), y in zip(kept.chunks, ys, strict=True):
+            _target_products(fo, F, y, Gy, c, n)
+    A = np.repeat(G[:, None], 6, axis=1)
     b = Gy.transpose(0, 2, 1).copy()
     for s, d in enumerate(mem_dofs):
         # memory state s acts in row d only
@@ -1048,12 +1045,26 @@ def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],
     return NormalEquations(A, b, c, n)
 
 
+def _target_products(fo: NDArray[np.int64], F: FloatArray, y: FloatArray, Gy: FloatArray,
+                     c: FloatArray, n: FloatArray) -> None:
+    """Add a chunk's Gᵀy, yᵀy and row count to each fold's (in place)."""
+    for f in np.unique(fo[fo >= 0]):
+        k = fo == f
+        # Gᵀy, yᵀy per fold
+        Gy[f] += F[k].T @ y[k]
+        c[f] += np.einsum("ni,ni->i", y[k], y[k])
+        n[f] += int(k.sum())
+
+
 def _new_feature_rows(samples: Samples, feats: Sequence[tuple[int, Alpha]],
                       mem_rates: FloatArray, mem_dofs: NDArray[np.int64], body: RigidBody,
                       folds: int, cutoff: float, fold_of: NDArray[np.int64],
-                      key: tuple[Any, ...]) -> _FeatureRows:
-    """The feature rows of :func:`_feature_equations` and their Gram matrix per fold, kept
-    (as the only ones) when they take at most :data:`ROWS_KEPT` bytes."""
+                      key: tuple[Any, ...], target: tuple[FloatArray, FloatArray, FloatArray]
+                      ) -> FloatArray:
+    """The Gram matrix per fold of :func:`_feature_equations`'s feature rows, the target's
+    products added to ``target`` (Gᵀy, yᵀy, n, in place) on the way; the rows are kept (as
+    the only ones) when they take at most :data:`ROWS_KEPT` bytes, else dropped chunk by
+    chunk (memory flat with the log's length)."""
     m = len(feats)
     cols = np.array([c for c, _ in feats], dtype=np.int64)
     bank = AlphaBank([a for _, a in feats])
@@ -1070,8 +1081,10 @@ def _new_feature_rows(samples: Samples, feats: Sequence[tuple[int, Alpha]],
         return g
 
     G = np.zeros((folds, p, p))
-    chunks: list[tuple[NDArray[np.int64], FloatArray]] = []
-    for rows, F3, _ in iter_regression(samples, DampingModel(terms), body, cutoff=cutoff,
+    chunks: list[tuple[NDArray[np.int64], FloatArray]] | None = []
+    size = 0
+    _LAST_ROWS.clear()
+    for rows, F3, y in iter_regression(samples, DampingModel(terms), body, cutoff=cutoff,
                                        decimate=True, regressor=features):
         F = F3[:, 0, :]
         fo = fold_of[rows]
@@ -1079,12 +1092,14 @@ def _new_feature_rows(samples: Samples, feats: Sequence[tuple[int, Alpha]],
             k = fo == f
             # GᵀG per fold
             G[f] += F[k].T @ F[k]
-        chunks.append((fo, F))
-    out = _FeatureRows(key, samples.nu, samples.t, samples.segment, chunks, G)
-    _LAST_ROWS.clear()
-    if sum(F.nbytes for _, F in chunks) <= ROWS_KEPT:
-        _LAST_ROWS.append(out)
-    return out
+        _target_products(fo, F, y, *target)
+        size += F.nbytes
+        chunks = chunks if chunks is not None and size <= ROWS_KEPT else None
+        if chunks is not None:
+            chunks.append((fo, F))
+    if chunks is not None:
+        _LAST_ROWS.append(_FeatureRows(key, samples.nu, samples.t, samples.segment, chunks, G))
+    return G
 
 
 def _without(model: DampingModel, names: Sequence[str]) -> DampingModel:
