@@ -73,7 +73,6 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
     force, clamp : bool
         For coefficients that are not dissipative at every speed: write them as they are
         (``force``) or the nearest dissipative set (``clamp``); the header says which.
-
     refold : bool, optional
         Write the static terms the block cannot carry as the coefficients it can that reproduce
         their force best over the flown envelope

@@ -96,7 +96,6 @@ def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "b
     force, clamp : bool
         For coefficients that are not dissipative at every speed: write them as they are
         (``force``) or the nearest dissipative set (``clamp``); the header says which.
-
     refold : bool, optional
         Write the static terms UUV Simulator cannot carry as the coefficients it can that reproduce
         their force best over the flown envelope
