@@ -387,8 +387,12 @@ def test_every_node_stops_cleanly_on_sigint_and_sigterm_while_busy(
     codes = {n: children.stop(p, sig=None, timeout=60) for n, p in procs.items()}
     texts = {n: f.read_text() for n, f in logs.items()}
     assert codes == dict.fromkeys(procs, 0), texts
-    bad = {n: t for n, t in texts.items() if "Traceback" in t or "Error" in t}
-    assert not bad, bad  # each offending node's whole output
+    # Fast DDS's own log lines ("[RTPS_TRANSPORT_SHM Error] Failed init_port ...: its
+    # shared-memory port lock timed out with eight participants starting at once on two
+    # cores; it falls back to UDP) are the middleware's, not a failure of the node's
+    bad = {n: [line for line in t.splitlines() if ("Traceback" in line or "Error" in line)
+               and "[RTPS_" not in line] for n, t in texts.items()}
+    assert not any(bad.values()), {n: lines for n, lines in bad.items() if lines}
     assert "closed " in texts["recorder_node"]  # the bag was closed, not left for reindex
 
 
