@@ -2,14 +2,14 @@
 
 The residuals of a damping fit are correlated over seconds (low-passed noise, unmodelled slow
 effects), so the covariance is the sandwich A⁺ (Σ_b s_b s_bᵀ) A⁺ over blocks of samples
-(:func:`robust_pass`); constant sensor biases, which residuals cannot reveal, add the
+(:func:`robust_covariance`); constant sensor biases, which residuals cannot reveal, add the
 covariance of refits with the data offset by each bias (:func:`bias_covariance`).
 
 Both are sums over the samples, so they run where the data are. The refits' data do not
 depend on θ: :class:`BiasStatistics` are formed with the normal equations (a pooled fit's
-are each log's, summed). The sandwich needs the residuals at θ: it is a :class:`Pass`, a
-function applied to every part of the samples (e.g. the logs of a pooled fit, each on the
-worker that holds it) and the sum of the parts' results.
+are each log's, summed). The sandwich needs the residuals at θ: it takes ``map_parts``,
+which applies a function to every part of the samples (e.g. the logs of a pooled fit, each
+on the worker that holds it) and returns the parts' results, which add up to the whole's.
 """
 
 from __future__ import annotations
@@ -39,15 +39,6 @@ MapParts = Callable[[Callable[[Samples, int], Any]], list[Any]]
 def whole(samples: Samples) -> MapParts:
     """The samples as their only part (the :data:`MapParts` of data held in memory)."""
     return lambda fn: [fn(samples, 0)]
-
-
-@dataclass(frozen=True)
-class Pass:
-    """A covariance as a pass over the parts of the samples: ``part(samples, first)`` where
-    each part is held (picklable), ``total(results)`` of the parts' results, in order."""
-
-    part: Callable[[Samples, int], Any]
-    total: Callable[[list[Any]], FloatArray]
 
 
 class CovarianceOptions(Protocol):
@@ -105,7 +96,7 @@ def block_scores(samples: Samples, first: int, model: DampingModel, body: RigidB
                  block: float, t0: float, cutoff: float, chunk: int = CHUNK
                  ) -> tuple[FloatArray, int]:
     """Σ_b s_b s_bᵀ over the blocks of these samples and their number B (a part of
-    :func:`robust_pass`; ``first`` is unused: blocks need only ``t0``)."""
+    :func:`robust_covariance`; ``first`` is unused: blocks need only ``t0``)."""
     block_idx = block_index(samples, block, t0)
     S = np.zeros((int(block_idx.max()) + 1, int(free.sum())))
     for sl, Phi, y in iter_regression(samples, model, body, chunk, cutoff, decimate=True):
@@ -116,10 +107,12 @@ def block_scores(samples: Samples, first: int, model: DampingModel, body: RigidB
     return S.T @ S, len(S)
 
 
-def robust_pass(samples: Samples, model: DampingModel, body: RigidBody, theta: FloatArray,
-                weights: FloatArray, ne: NormalEquations, free: NDArray[np.bool_],
-                basis: FloatArray, opts: CovarianceOptions, chunk: int = CHUNK) -> Pass:
-    """Block sandwich covariance A⁺ (Σ_b s_b s_bᵀ) A⁺ of the free parameters, as a pass.
+def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
+                      theta: FloatArray, weights: FloatArray, ne: NormalEquations,
+                      free: NDArray[np.bool_], basis: FloatArray, opts: CovarianceOptions,
+                      chunk: int = CHUNK, map_parts: MapParts | None = None) -> FloatArray:
+    """Block sandwich covariance A⁺ (Σ_b s_b s_bᵀ) A⁺ of the free parameters (NaN for the
+    others; at least one is free).
 
     A⁺ = T (Tᵀ A T)⁻¹ Tᵀ is the inverse of A over the directions ``basis`` (T, shape
     (p_free, r)) spans, 0 in those the data do not determine (:func:`determined_directions`).
@@ -127,26 +120,23 @@ def robust_pass(samples: Samples, model: DampingModel, body: RigidBody, theta: F
     s_b = Σ_{n ∈ block b} Σ_i w_i Φ_{n,i}ᵀ r_{n,i} is the weighted score of a block of
     :func:`block_length` seconds; summing within blocks makes the estimate robust to
     residuals that are correlated over less than a block (filtered noise, unmodelled slow
-    effects). The blocks' sums are formed part by part; a block never spans two segments,
-    so never two parts. The total is NaN where a parameter is not free.
+    effects). The blocks' sums are formed part by part (``map_parts``, default: all of
+    ``samples`` at once); a block never spans two segments, so never two parts.
     """
     p = model.n_params
-    part = partial(block_scores, model=model, body=body, theta=theta, weights=weights,
-                   free=free, block=block_length(samples, opts, basis.shape[1]),
-                   t0=float(samples.t[0]), cutoff=opts.cutoff, chunk=chunk)
-
-    def total(parts: list[tuple[FloatArray, int]]) -> FloatArray:
-        cov = np.full((p, p), np.nan)
-        A, _, _ = ne.total(weights)
-        Af = A[np.ix_(free, free)]
-        B = sum(b for _, b in parts)
-        # Σ_b s_b s_bᵀ · B/(B − 1), the blocks of all parts
-        meat = sum(m for m, _ in parts) * (B / max(B - 1, 1))
-        Ainv = basis @ linalg.inv(basis.T @ Af @ basis) @ basis.T
-        cov[np.ix_(free, free)] = Ainv @ meat @ Ainv
-        return cov
-
-    return Pass(part, total)
+    cov = np.full((p, p), np.nan)
+    A, _, _ = ne.total(weights)
+    Af = A[np.ix_(free, free)]
+    parts = (map_parts or whole(samples))(partial(
+        block_scores, model=model, body=body, theta=theta, weights=weights, free=free,
+        block=block_length(samples, opts, basis.shape[1]), t0=float(samples.t[0]),
+        cutoff=opts.cutoff, chunk=chunk))
+    B = sum(b for _, b in parts)
+    # Σ_b s_b s_bᵀ · B/(B − 1), the blocks of all parts
+    meat = sum(m for m, _ in parts) * (B / max(B - 1, 1))
+    Ainv = basis @ linalg.inv(basis.T @ Af @ basis) @ basis.T
+    cov[np.ix_(free, free)] = Ainv @ meat @ Ainv
+    return cov
 
 
 @dataclass
@@ -266,6 +256,7 @@ def bias_covariance(stats: BiasStatistics | None, theta: FloatArray, weights: Fl
     cov = np.zeros((p, p))
     if stats is None:
         return cov
+
     def refit(A: FloatArray, b: FloatArray) -> FloatArray:
         # the weighted refit: Σ_i w_i ΦᵢᵀΦᵢ θ = Σ_i w_i Φᵢᵀyᵢ
         return solve_normal(np.einsum("i,ipq->pq", weights, A),
@@ -282,8 +273,8 @@ def covariance(samples: Samples, model: DampingModel, body: RigidBody, theta: Fl
                weights: FloatArray, ne: NormalEquations, free: NDArray[np.bool_],
                basis: FloatArray, opts: CovarianceOptions, bias: BiasStatistics | None,
                chunk: int = CHUNK, map_parts: MapParts | None = None) -> FloatArray:
-    """Covariance of θ̂, shape (p, p): the block-robust one (:func:`robust_pass`, a pass over
-    the parts, ``map_parts``, default: all of ``samples`` at once) plus the sensor-bias
+    """Covariance of θ̂, shape (p, p): the block-robust one (:func:`robust_covariance`, a pass
+    over the parts, ``map_parts``, default: all of ``samples`` at once) plus the sensor-bias
     budget (:func:`bias_covariance` of ``bias``), both in the directions ``basis`` (shape
     (p_free, r)) spans; NaN where no parameter is free.
 
@@ -295,7 +286,7 @@ def covariance(samples: Samples, model: DampingModel, body: RigidBody, theta: Fl
     p = model.n_params
     if not free.any():
         return np.full((p, p), np.nan)
-    robust = robust_pass(samples, model, body, theta, weights, ne, free, basis, opts, chunk)
     # robust + bias: independent errors
-    return (robust.total((map_parts or whole(samples))(robust.part))
+    return (robust_covariance(samples, model, body, theta, weights, ne, free, basis, opts,
+                              chunk, map_parts)
             + bias_covariance(bias, theta, weights, free, basis))
