@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from dampest_ros.core.identification.model import Model
-from dampest_ros.core.identification.refold import Entry, refold
+from dampest_ros.core.identification.refold import Entry
+from dampest_ros.core.identification.refold import refold as refit_onto
 from dampest_ros.core.physics.damping import DampingModel, FloatArray
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
@@ -350,39 +351,43 @@ def made_safe(coefs: Sequence[Coefficient], policy: str, fmt: str,
 REFOLDED = "refold:"
 
 
-def refolded(mf: Model, model: DampingModel, theta: FloatArray,
-             written: Sequence[Coefficient], entries: Sequence[Entry], fmt: str,
-             required: bool = False) -> tuple[list[Coefficient], set[str], list[str]]:
-    """``--refold``: ``written`` with coefficients on the format's ``entries`` that
-    reproduce, over the model's flown envelope, the force of its static parameters the format
-    does not write (:func:`~dampest_ros.core.identification.refold.refold`), each added to
-    the written coefficient of its entry if there is one (the simulator sees the sum, so the
-    dissipativity check and a clamp judge the sum); the names they stand in for; and the
-    header lines that say so, with the share of their force reproduced per DOF.
+def refolded(mf: Model, model: DampingModel | None, theta: FloatArray,
+             written: Sequence[Coefficient], left_out: Sequence[str],
+             entries: Sequence[Entry], fmt: str, refold: bool | None
+             ) -> tuple[list[Coefficient], list[str], list[str]]:
+    """An export's ``refold``: ``written`` with coefficients on the format's ``entries``
+    that reproduce, over the model's flown envelope, the force of its static parameters the
+    format does not write (:func:`~dampest_ros.core.identification.refold.refold`), each
+    added to the written coefficient of its entry if there is one (the simulator sees the
+    sum, so the dissipativity check and a clamp judge the sum); ``left_out`` (lines
+    ``"name = value (why)"``) without those parameters; and the header lines that say so,
+    with the share of their force reproduced per DOF.
 
-    A model file that records no flown speeds (the envelope to refold over) is left as it
-    is, and a line says so, unless ``required``.
+    ``refold`` False leaves everything as it is; None (the default of every export) does the
+    same, with a line saying so, for a model file that records no flown speeds (the
+    envelope to refold over); True refuses such a file.
 
     Raises
     ------
     ConfigError
-        ``required`` and the model file records no flown speeds.
+        ``refold`` True and the model file records no flown speeds.
     """
     placed = {c.name for c in written}
-    which = np.array([b.name not in placed and not b.more and term.kind != "freq"
+    which = np.array([] if model is None else
+                     [b.name not in placed and not b.more and term.kind != "freq"
                       for term in model.terms for b in term.bases], dtype=bool)
-    if not which.any():
-        return list(written), set(), []
+    if refold is False or model is None or not which.any():
+        return list(written), list(left_out), []
     flown = mf.flown
     if flown is None:
-        if required:
+        if refold:
             raise ConfigError("--refold", "the model file records no flown speeds "
                                           "(extra.flown_speeds), the envelope to refold "
                                           "over: identify it again with this version")
-        return list(written), set(), [f"Not refolded: the model file records no flown "
-                                      f"speeds, so the terms {fmt} cannot carry are left out "
-                                      "(listed below)."]
-    r = refold(model, theta, which, flown, entries)
+        return list(written), list(left_out), [
+            f"Not refolded: the model file records no flown speeds, so the terms {fmt} "
+            "cannot carry are left out (listed below)."]
+    r = refit_onto(model, theta, which, flown, entries)
     out = list(written)
     for (i, j, k), v in zip(r.entries, r.values, strict=True):
         kind = "const" if k < 0 else "abs"
@@ -404,12 +409,7 @@ def refolded(mf: Model, model: DampingModel, theta: FloatArray,
              "and 1/10 of that size): an approximation, not an estimate. Share of their force "
              f"reproduced per DOF X Y Z K M N: {share}; RMS of what is missed: "
              + " ".join(f"{x:.3g}" for x in r.rms) + " N, N m."]
-    return out, set(names), lines
-
-
-def without(left_out: Sequence[str], names: set[str]) -> list[str]:
-    """The left-out lines (``"name = value (why)"``) but those of ``names``."""
-    return [line for line in left_out if line.split(" = ", 1)[0] not in names]
+    return out, [line for line in left_out if line.split(" = ", 1)[0] not in names], lines
 
 
 def label(mf: Model, name: str, safety: Safety) -> str:

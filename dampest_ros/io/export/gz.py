@@ -57,7 +57,6 @@ from dampest_ros.io.export.common import (
     parse_xml,
     policy_of,
     refolded,
-    without,
     xml_bool,
     xml_comment,
     xml_float,
@@ -151,11 +150,8 @@ def export_gz(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "ba
     model, theta, left_out = model_damping(mf)
     coefs, other = coefficients(model, theta) if model is not None else ([], [])
     left_out += other
-    notes: list[str] = []
-    if refold is not False and model is not None:
-        coefs, stood_in, notes = refolded(mf, model, theta, coefs, all_entries(), "gz",
-                                          refold is True)
-        left_out = without(left_out, stood_in)
+    coefs, left_out, notes = refolded(mf, model, theta, coefs, left_out, all_entries(), "gz",
+                                      refold)
     coefs, safety = made_safe(coefs, policy_of(force, clamp), "gz", source)
     damping = merge(((_gz_tag(c), c, -_gz_sign(c.row, c.col, _signed_k(c), frame) * c.value)
                       for c in coefs), notes)

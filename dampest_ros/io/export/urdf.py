@@ -47,7 +47,6 @@ from dampest_ros.io.export.common import (
     policy_of,
     refolded,
     switches_left_out,
-    without,
     xml_comment,
     xml_float,
 )
@@ -97,11 +96,8 @@ def export_urdf(mf: Model, vehicle: Vehicle | None = None, *,
         c.kind == "const" or (c.kind == "abs" and c.k == c.row))]
     left_out += [f"{c.name} = {num(c.value)} (off-diagonal or cross coupling: the block holds "
                  f"diagonal damping only)" for c in coefs if c not in written]
-    notes: list[str] = []
-    if refold is not False and model is not None:
-        written, stood_in, notes = refolded(mf, model, theta, written, diagonal_entries(),
-                                            "urdf", refold is True)
-        left_out = without(left_out, stood_in)
+    written, left_out, notes = refolded(mf, model, theta, written, left_out,
+                                        diagonal_entries(), "urdf", refold)
     written, safety = made_safe(written, policy_of(force, clamp), "urdf", source)
     lin = [(_URDF_LINEAR[c.row], c, -c.value) for c in written if c.kind == "const"]
     quad = [(_URDF_QUADRATIC[c.row], c, -c.value) for c in written if c.kind == "abs"]

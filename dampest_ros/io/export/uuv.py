@@ -46,7 +46,6 @@ from dampest_ros.io.export.common import (
     policy_of,
     refolded,
     switches_left_out,
-    without,
     xml_comment,
     xml_float,
 )
@@ -124,13 +123,10 @@ def export_uuv(mf: Model, vehicle: Vehicle | None = None, *, link_name: str = "b
     left_out += [f"{c.name} = {num(c.value)} (UUV Simulator has quadratic damping on the "
                  f"diagonal only (|nu_i| nu_i) and products with u only)"
                  for c in coefs if c not in written]
-    notes: list[str] = []
-    if refold is not False and model is not None:
-        entries = [(i, j, -1) for i in range(6) for j in range(6)] + [
-            (i, i, i) for i in range(6)]  # its full linear matrix, its diagonal quadratic
-        written, stood_in, notes = refolded(mf, model, theta, written, entries, "uuv",
-                                            refold is True)
-        left_out = without(left_out, stood_in)
+    # its full linear matrix, its diagonal quadratic
+    entries = [(i, j, -1) for i in range(6) for j in range(6)] + [(i, i, i) for i in range(6)]
+    written, left_out, notes = refolded(mf, model, theta, written, left_out, entries, "uuv",
+                                        refold)
     written, safety = made_safe(written, policy_of(force, clamp), "uuv", source)
     tags = {"const": "linear_damping", "abs": "quadratic_damping",
             "lin": "linear_damping_forward_speed"}
