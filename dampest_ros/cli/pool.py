@@ -264,7 +264,7 @@ def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray
 
     Yields the statistics of the logs that worked (in the given order), the reason of each
     that failed, and a :data:`~dampest_ros.core.identification.pool.MapLogs` that runs a function on
-    each log on a worker (the pooled fit's passes over the samples).
+    each log on a worker (the pooled fit's pass over the samples), where that log is held.
     """
     work = partial(reduce_log, args=args, prior=prior, prior_std=prior_std)
     with map_logs_on_dask(paths, work, args, "reduced", keep=True) as (client, done, failed,
