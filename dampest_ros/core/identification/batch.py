@@ -11,6 +11,7 @@ AIC/BIC) is closed-form in them; the covariance is block-robust plus the sensor-
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -25,8 +26,15 @@ from dampest_ros.core.identification.covariance import (
     block_count,
     block_length,
     covariance,
+    whole,
 )
-from dampest_ros.core.identification.dissipative import dissipation_points, impose, misfit_report
+from dampest_ros.core.identification.dissipative import (
+    Violations,
+    dissipation_points,
+    impose,
+    misfit_report,
+    violations,
+)
 from dampest_ros.core.identification.model import Model
 from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import (
@@ -582,9 +590,11 @@ def _combinations(W: FloatArray, s: FloatArray, names: list[str], free: NDArray[
 
 def _dissipative(problem: _Problem, model: DampingModel, samples: Samples, theta: FloatArray,
                  cov: FloatArray, w: FloatArray, free: NDArray[np.bool_], T: FloatArray,
-                 chunk: int) -> tuple[FloatArray, dict[str, str], FloatArray]:
+                 chunk: int, map_parts: MapParts | None
+                 ) -> tuple[FloatArray, dict[str, str], FloatArray]:
     """With ``dissipative``, impose νᵀD(ν)ν ≥ 0 where ``theta`` violates it, on every sample
-    and over the flown envelope (:func:`impose`).
+    and over the flown envelope (:func:`impose`); the samples are scanned part by part where
+    ``map_parts`` holds them (default: here, at once).
 
     Returns
     -------
@@ -599,13 +609,25 @@ def _dissipative(problem: _Problem, model: DampingModel, samples: Samples, theta
     power = np.zeros((0, len(theta)))
     if not (problem.opts.dissipative and model.n_params):
         return theta, constrained, power
-    pts, on_data = dissipation_points(model, theta, samples.nu, chunk=chunk)
+
+    def points(th: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+        parts = (map_parts or whole(samples))(partial(_part_violations, model=model, theta=th,
+                                                      chunk=chunk))
+        on_data = (np.concatenate([v[0] for v in parts]), np.concatenate([v[1] for v in parts]))
+        return dissipation_points(model, th, samples.nu, chunk=chunk, on_data=on_data)
+
+    pts, on_data = points(theta)
     if len(pts):
         constrained = misfit_report(model, theta, pts[:1000], on_data[:1000], cov, free)
-        theta, power = impose(
-            theta, pts, model, lambda E: problem.solve(w, free, T, power=E),
-            lambda th: dissipation_points(model, th, samples.nu, chunk=chunk)[0])
+        theta, power = impose(theta, pts, model, lambda E: problem.solve(w, free, T, power=E),
+                              lambda th: points(th)[0])
     return theta, constrained, power
+
+
+def _part_violations(part: Samples, first: int, model: DampingModel, theta: FloatArray,
+                     chunk: int) -> Violations:
+    """:func:`violations` of one part's velocities (a :data:`MapParts` call)."""
+    return violations(model, theta, part.nu, chunk)
 
 
 def _cross_validated_rss(problem: _Problem, w: FloatArray, free: NDArray[np.bool_],
@@ -707,7 +729,7 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     flags.update(_flags(theta, cov, names, parameter_scale(ne, theta), opts,
                         free & np.array([n not in flags for n in names])))
     theta, constrained, power = _dissipative(problem, model, samples, theta, cov, w, free, T,
-                                             chunk)
+                                             chunk, map_parts)
     N = problem.n
     rss = ne.rss(theta)
     return Fit(names=names, theta=theta, cov=cov, sigma=np.sqrt(rss / N), method=opts.method,

@@ -64,8 +64,13 @@ def envelope(nu: FloatArray, scales: Sequence[float] = (1.0, 0.01)) -> FloatArra
     return np.concatenate([s * grid for s in scales])
 
 
+#: Rows where an estimate generates energy, shape (n, 6), and their power νᵀD(ν)ν, shape (n,).
+Violations = tuple[FloatArray, FloatArray]
+
+
 def dissipation_points(model: DampingModel, theta: FloatArray, data: FloatArray,
-                       flown: FloatArray | None = None, chunk: int = CHUNK
+                       flown: FloatArray | None = None, chunk: int = CHUNK,
+                       on_data: Violations | None = None
                        ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """Velocities where ``theta`` generates energy, worst first, shape (n, 6), with whether
     each is a data sample (else an :func:`envelope` grid point), shape (n,).
@@ -84,19 +89,35 @@ def dissipation_points(model: DampingModel, theta: FloatArray, data: FloatArray,
         Velocities whose per-DOF extremes bound the grid (e.g. the (2, 6) min/max).
     chunk : int
         Velocities per evaluation of the regressor.
+    on_data : Violations, optional
+        :func:`violations` of ``data``, found where the data are held (e.g. log by log, on
+        the workers of a pooled fit), in the order of ``data``'s rows.
     """
-    pts, power, on_data = [], [], []
     grid = (_grid_rows(model, flown, chunk) if flown is not None
             else _chunk_rows(model, envelope(data), chunk))
-    for rows, is_data in ((_chunk_rows(model, data, chunk), True), (grid, False)):
-        for nu, g in rows:
-            P = g @ theta
-            bad = P < -1e-9 * (np.abs(g) @ np.abs(theta))
-            pts.append(nu[bad])
-            power.append(P[bad])
-            on_data.append(np.full(int(bad.sum()), is_data))
-    order = np.argsort(np.concatenate(power))
-    return np.concatenate(pts)[order], np.concatenate(on_data)[order]
+    found = [on_data if on_data is not None else violations(model, theta, data, chunk),
+             _violating(grid, theta)]
+    pts, power = np.concatenate([f[0] for f in found]), np.concatenate([f[1] for f in found])
+    order = np.argsort(power)
+    return pts[order], (np.arange(len(power)) < len(found[0][1]))[order]
+
+
+def violations(model: DampingModel, theta: FloatArray, nu: FloatArray, chunk: int = CHUNK
+               ) -> Violations:
+    """The rows of ``nu``, shape (N, 6), where ``theta`` generates energy, in their order."""
+    return _violating(_chunk_rows(model, nu, chunk), theta)
+
+
+def _violating(rows: list[tuple[FloatArray, FloatArray]], theta: FloatArray) -> Violations:
+    """The velocities of ``rows`` (:func:`_chunk_rows`) where νᵀD(ν)ν = gᵀθ < 0 beyond
+    rounding, and that power."""
+    pts, power = [np.zeros((0, 6))], [np.zeros(0)]
+    for nu, g in rows:
+        P = g @ theta
+        bad = P < -1e-9 * (np.abs(g) @ np.abs(theta))
+        pts.append(nu[bad])
+        power.append(P[bad])
+    return np.concatenate(pts), np.concatenate(power)
 
 
 def _chunk_rows(model: DampingModel, nu: FloatArray, chunk: int

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -243,6 +245,31 @@ def test_estimate_is_dissipative_and_the_misfit_is_reported(vehicle: Vehicle) ->
     assert all("structural misfit" in why and "--select" in why
                for why in f.constrained.values())
     assert not f.identified[[f.names.index(n) for n in f.constrained]].any()
+
+
+def test_the_dissipativity_check_scans_the_samples_part_by_part(vehicle: Vehicle) -> None:
+    """The same energy-generating data in three segments, each a part that ``map_parts``
+    holds (a pooled fit's logs): the parts are scanned where they are, in every round of the
+    constraint, and the estimate, its σ and the report are those of the samples at once."""
+    s = exact_samples(vehicle, 60.0)
+    data = with_extra_force(s, -40.0 * s.nu * np.abs(s.nu))
+    third = np.arange(len(data)) * 3 // len(data)
+    data = Samples(data.t, data.nu, data.nu_dot, data.tau, data.euler, data.depth, third)
+    parts = [data.take(third == k) for k in range(3)]
+    firsts = [0, len(parts[0]), len(parts[0]) + len(parts[1])]
+    maps: list[int] = []
+
+    def map_parts(fn: Callable[[Samples, int], Any]) -> list[Any]:
+        maps.append(len(maps))
+        return [fn(part, first) for part, first in zip(parts, firsts, strict=True)]
+
+    options = replace(EXACT, method="wls")
+    split = fit(data, vehicle.damping, vehicle.body, options, map_parts=map_parts)
+    once = fit(data, vehicle.damping, vehicle.body, options)
+    assert split.constrained and split.constrained == once.constrained
+    np.testing.assert_array_equal(split.theta, once.theta)
+    np.testing.assert_allclose(split.std, once.std, rtol=1e-10)
+    assert len(maps) >= 3  # the robust pass, the scan, a scan after each round of constraint
 
 
 def test_dissipative_on_foreign_physics(torpedo: tuple[Vehicle, Samples]) -> None:

@@ -60,8 +60,8 @@ def test_the_pooled_fit_is_the_fit_of_all_samples_at_once(vehicle: Vehicle) -> N
 def test_the_pooled_covariance_is_formed_log_by_log(vehicle: Vehicle) -> None:
     """With the sensor-bias budget on and logs longer than three refit stretches (so each log
     is refitted on three stretches of it), the bias refits' statistics are each log's,
-    summed, the robust covariance's pass runs log by log through map_logs, once, and the σ
-    are those of all samples at once."""
+    summed, the robust covariance's pass and the dissipativity check's scan of the samples run
+    log by log through map_logs, once each, and the σ are those of all samples at once."""
     options = FitOptions(method="wls", cutoff=2.0, bias_stretch=900)
     logs = [log_statistics(f"log{k}", noisy_log(vehicle, k, start=100.0 * k),
                            vehicle.damping, vehicle.body, options) for k in range(4)]
@@ -77,7 +77,7 @@ def test_the_pooled_covariance_is_formed_log_by_log(vehicle: Vehicle) -> None:
     assert all(g.bias is not None and g.bias.base is not None for g in logs)
     np.testing.assert_allclose(pooled.theta, once.theta, rtol=1e-10, atol=0)
     np.testing.assert_allclose(pooled.std, once.std, rtol=1e-10, atol=0)
-    assert visits == [0, 1, 2, 3]  # the robust pass only
+    assert visits == [0, 1, 2, 3] * 2  # the robust pass, the dissipativity scan
     without = fit(pooled_samples(logs), vehicle.damping, vehicle.body,
                   FitOptions(method="wls", cutoff=2.0, gyro_bias=0.0, dvl_bias=0.0))
     assert np.all(once.std >= without.std) and np.any(once.std > 1.01 * without.std)
