@@ -3,7 +3,7 @@ drift of the damping between the logs (the maths: dampest_ros/core/identificatio
 
 Workers read the logs themselves (paths as the workers see them), so nothing but the logs'
 preprocessed samples and statistics travels, once: each log stays on the worker that reduced
-it until the pooled fit's pass over the samples has run there; a log named by URL is copied
+it until the pooled fit's passes over the samples have run there; a log named by URL is copied
 to the worker that reads it (dampest_ros/io/remote.py). By default a LocalCluster of --workers
 processes runs on this machine; --scheduler ADDRESS uses an existing Dask cluster. A log that
 fails is reported with its reason and left out; the rest go on.
@@ -264,7 +264,7 @@ def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray
 
     Yields the statistics of the logs that worked (in the given order), the reason of each
     that failed, and a :data:`~dampest_ros.core.identification.pool.MapLogs` that runs a function on
-    each log on a worker (the pooled fit's pass over the samples), where that log is held.
+    each log on a worker (the pooled fit's passes over the samples), where that log is held.
     """
     work = partial(reduce_log, args=args, prior=prior, prior_std=prior_std)
     with map_logs_on_dask(paths, work, args, "reduced", keep=True) as (client, done, failed,

@@ -5,8 +5,9 @@ add up to those of all their samples at once, A = Σ_b A_b, b = Σ_b b_b, c = Σ
 is therefore preprocessed and reduced on its own (in parallel, anywhere: :class:`LogStatistics`
 is all a worker returns), and the pooled fit solves the summed statistics, the sensor-bias
 refits' included (:class:`~dampest_ros.core.identification.covariance.BiasStatistics`); its
-one second pass, the block-robust covariance's, runs over the logs' samples as segments of one
-set, log by log where each log is held (``map_logs``).
+passes over the samples (the block-robust covariance's, and the scan for samples where the
+estimate generates energy) run over the logs' samples as segments of one set, log by log
+where each log is held (``map_logs``).
 Cross-validation folds of the pooled fit are the k-th fifths of
 every log (:func:`pooled_normal`), so each fold holds some of every trial.
 
@@ -130,9 +131,9 @@ def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBo
 
     θ, its covariance and every per-DOF figure equal those of
     :func:`~dampest_ros.core.identification.batch.fit` on :func:`pooled_samples` to rounding; only
-    the cross-validation folds differ (see :func:`pooled_normal`). The robust covariance's
-    pass over the samples runs log by log through ``map_logs`` (default: here, one after the
-    other). ``samples`` is :func:`pooled_samples` of ``logs`` when the caller has made it
+    the cross-validation folds differ (see :func:`pooled_normal`). The passes over the
+    samples (the robust covariance's, the dissipativity check's scan) run log by log through
+    ``map_logs`` (default: here, one after the other). ``samples`` is :func:`pooled_samples` of ``logs`` when the caller has made it
     already.
     """
     firsts = np.cumsum([0] + [len(g.samples) for g in logs[:-1]]).tolist()
