@@ -72,7 +72,7 @@ def pool(workers: str, *bags: str) -> dict[str, float]:
 
 
 #: Alternated 1- and 2-worker runs of the pooled rows.
-PAIRS = 3
+PAIRS = 5
 
 
 def pool_rows(args: argparse.Namespace, tmp: str) -> list[tuple[str, ...]]:
