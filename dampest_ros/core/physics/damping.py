@@ -147,7 +147,9 @@ class DampingTerm:
         """Project this term's parameters so that the term is dissipative on its own.
 
         Linear term: the symmetric part of D_linear onto the PSD cone. Quadratic, point-drag
-        and residual terms: negative weights of PSD bases to zero. Memory: c_m ≥ 0 (a
+        and residual terms: negative weights of PSD bases to zero (of a single atom: an
+        element's lift or Magnus force, :mod:`.point_lift`, has several, not all PSD, and
+        does no work, so its weight keeps its sign). Memory: c_m ≥ 0 (a
         positive kernel is passive). Cross and added-mass terms have indefinite bases: left
         unchanged; their effect is checked on data with :meth:`DampingModel.dissipation`
         (the ``coriolis`` term does no work at all: its D(ν) is skew).
@@ -181,7 +183,8 @@ class DampingTerm:
                 out = np.where(diag, out, lo * out)
             return out
         if self.kind in ("quadratic", "point", "residual"):
-            psd = np.array([np.linalg.eigvalsh(0.5 * (b.B + b.B.T)).min() >= -1e-12
+            psd = np.array([not b.more
+                            and np.linalg.eigvalsh(0.5 * (b.B + b.B.T)).min() >= -1e-12
                             for b in self.bases])
             theta[psd] = np.maximum(theta[psd], 0.0)
         return theta
