@@ -28,6 +28,7 @@ from dampest_ros.core.identification.selection import (
 )
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.point_drag import PointSpec, candidate_points, point_library
+from dampest_ros.core.physics.point_lift import candidate_lifts
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.samples import Samples
@@ -116,9 +117,14 @@ def misfit_terms(samples: Samples, base: DampingModel, body: RigidBody, cutoff: 
 
 
 def element_drags(vehicle: Vehicle) -> list[PointSpec]:
-    """The candidate element drags of a vehicle: at its geoms off the origin, else at a
-    generic set of points (:func:`~dampest_ros.core.physics.point_drag.candidate_points`)."""
-    return point_library(candidate_points(vehicle.geometry, vehicle.length))
+    """The candidate element forces of a vehicle: drags at its geoms off the origin, else at
+    a generic set of points (:func:`~dampest_ros.core.physics.point_drag.candidate_points`);
+    with a geometry, the lift of each slender geom
+    (:func:`~dampest_ros.core.physics.point_lift.candidate_lifts`) and the Magnus force of
+    each geom off the origin."""
+    points = candidate_points(vehicle.geometry, vehicle.length)
+    return point_library(points, candidate_lifts(vehicle.geometry),
+                         points if vehicle.geometry is not None else [])
 
 
 def with_element_drags(found: Misfit, samples: Samples, base: DampingModel, body: RigidBody,
