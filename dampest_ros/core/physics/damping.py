@@ -254,12 +254,11 @@ class DampingModel:
         self._direct = (len(set(zip(row.tolist(), param.tolist(), strict=True))) == len(row)
                         and not np.isin(dense_params, param).any()
                         and len(np.unique(dense_params)) == len(dense_params))
-        self._static_params = np.unique(self._static_idx)
-        # atom → parameter sum (None: one atom per parameter, the common case)
-        self._atom_sum: FloatArray | None = None
-        if len(self._static_params) < len(self._static_idx):
-            self._atom_sum = (self._static_idx[:, None]
-                              == self._static_params[None, :]).astype(float)
+        # the atoms by their rank in their parameter (its first, second, … atom): within a
+        # rank each parameter has at most one, so a rank's columns are added in one step
+        rank = np.array([k for t in self.terms if t.kind != "freq" for b in t.bases
+                         for k in range(len(b.atoms))], dtype=np.int64)
+        self._ranks = [np.flatnonzero(rank == k) for k in range(int(rank.max(initial=-1)) + 1)]
         freq = self.term("freq")
         self._freq_idx = (np.arange(self._slices["freq"].start, self._slices["freq"].stop)
                           if freq is not None else np.zeros(0, dtype=np.int64))
@@ -358,10 +357,9 @@ class DampingModel:
             if len(self._dense):
                 Bnu[:, :, self._dense] = ((nu @ self._B_flat).reshape(N, 6, -1)
                                           * alpha[:, None, self._dense])
-            if self._atom_sum is None:
-                Phi[:, :, self._static_idx] = Bnu
-            else:
-                Phi[:, :, self._static_params] = Bnu @ self._atom_sum
+            for atoms in self._ranks:
+                # column j = Σ over the parameter's atoms of α B ν
+                Phi[:, :, self._static_idx[atoms]] += Bnu[:, :, atoms]
         if len(self._freq_idx):
             if states is None:
                 raise ValueError("the freq term needs its memory states")
