@@ -218,14 +218,11 @@ def mirror_pairs(specs: Sequence[PointSpec]) -> list[tuple[int, int]]:
 
 
 def point_library(points: Sequence[Sequence[float]],
-                  lifts: Sequence[tuple[tuple[float, float, float], int]] = (),
-                  spinning: Sequence[Sequence[float]] = ()) -> list[PointSpec]:
+                  lifts: Sequence[tuple[tuple[float, float, float], int]] = ()
+                  ) -> list[PointSpec]:
     """The candidate element forces: per point of ``points``, the drags along u, v, w on the
     element's speed and then on its normal speed (6 per point); then the lifts ``lifts``
-    (position and element axis, :func:`~.point_lift.candidate_lifts`) and the Magnus force at
-    each point of ``spinning``."""
+    (position and element axis, :func:`~.point_lift.candidate_lifts`)."""
     where = [(float(p[0]), float(p[1]), float(p[2])) for p in points]
     return [*(PointSpec(p, a, s) for s in SPEEDS for p in where for a in range(3)),
-            *(PointSpec(p, a, force="lift") for p, a in lifts),
-            *(PointSpec((float(p[0]), float(p[1]), float(p[2])), -1, force="magnus")
-              for p in spinning)]
+            *(PointSpec(p, a, force="lift") for p, a in lifts)]

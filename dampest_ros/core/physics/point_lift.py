@@ -18,14 +18,21 @@ length):
   (α ``pspeed`` and ``pshare``, :mod:`.alpha`); the first is the element's drag on its speed,
   the second takes back its part along v_p.
 * Magnus force of a rotating element: the body's rotation carries a circulation round the
-  element, and the flow past it a force F_M = c ω × v_p (c in kg, of either sign; at the
-  origin it is the Coriolis force of a translational added mass, the ``coriolis`` term). Off
-  the origin it adds the force c ω × (ω × r_p) and the moments r_p × F_M. As a parameter:
-  Pᵀ F_M = c Σ_k ω_k Pᵀ [e_k]× P ν, three atoms with α = p, q, r.
+  element, and the flow past it a force F_M = c ω × v_p at r_p (c in kg, of either sign).
+  Its part c ω × v at the origin is the Coriolis force of a translational added mass −c
+  (m_u = m_v = m_w, the ``coriolis`` term), which the vehicle's ``coriolis`` term already
+  carries for all elements together; the parameter is the rest, what moving the element off
+  the origin adds: the force c ω × (ω × r_p) and the moments r_p × F_M,
 
-Power: both forces are perpendicular to v_p, so νᵀ Pᵀ F = v_pᵀ F = 0 whatever c: they move
-energy between the DOFs and take none out (their D(ν) is not positive semi-definite; the lift's
-atoms are, one PSD and one NSD, and sum to a power of zero, the Magnus ones are skew).
+      Pᵀ F_M − [c ω × v; 0] = c Σ_k ω_k (Pᵀ [e_k]× P − E [e_k]× Eᵀ) ν,  E = [I; 0] (6×3),
+
+  three atoms with α = p, q, r (the whole Magnus force as one parameter would repeat the
+  ``coriolis`` term's columns and hide its own lever arm among their collinear directions).
+
+Power: both forces are perpendicular to v_p, so νᵀ Pᵀ F = v_pᵀ F = 0 whatever c (and the
+Magnus part left at the origin, vᵀ (c ω × v), is 0 too): they move energy between the DOFs and
+take none out (their D(ν) is not positive semi-definite; the lift's atoms are, one PSD and one
+NSD, and sum to a power of zero, the Magnus ones are skew).
 :meth:`~dampest_ros.core.physics.damping.DampingTerm.project` leaves their coefficients as
 they are, and the dissipativity constraint (:mod:`dampest_ros.core.identification.dissipative`)
 sees zero power rows for them: neither can make a model generate energy.
@@ -72,13 +79,13 @@ def lift_basis(name: str, position: tuple[float, float, float], axis: int) -> Ba
 
 
 def magnus_basis(name: str, position: tuple[float, float, float]) -> Basis:
-    """The Magnus force of an element at ``position`` (module docstring): atoms
-    (ω_k, Pᵀ [e_k]× P), k = x, y, z."""
-    P = transport(position)
+    """The Magnus force of an element at ``position`` less its part at the origin (module
+    docstring): atoms (ω_k, Pᵀ [e_k]× P − E [e_k]× Eᵀ), k = x, y, z."""
+    P, E = transport(position), transport((0.0, 0.0, 0.0))
     e = np.eye(3)
     # [e_k]× as matrices, shape (3, 3, 3)
     skew = np.cross(e[:, None, :], e[None, :, :]).transpose(0, 2, 1)
-    atoms = [(P.T @ skew[k] @ P, Alpha("lin", 3 + k)) for k in range(3)]
+    atoms = [(P.T @ skew[k] @ P - E.T @ skew[k] @ E, Alpha("lin", 3 + k)) for k in range(3)]
     return Basis(name, atoms[0][0], atoms[0][1], tuple(atoms[1:]))
 
 

@@ -14,15 +14,16 @@ from dampest_ros.core.physics.point_lift import candidate_lifts
 
 def direct(nu: np.ndarray, spec: PointSpec, c: float) -> np.ndarray:
     """The element's force written out, as the wrench [F; r × F], shape (N, 6): lift
-    F = c (e·v_p) (‖v_p‖² e − (e·v_p) v_p) / ‖v_p‖, Magnus F = c ω × v_p, v_p = v + ω × r."""
+    F = c (e·v_p) (‖v_p‖² e − (e·v_p) v_p) / ‖v_p‖, Magnus F = c ω × v_p less c ω × v at the
+    origin, v_p = v + ω × r."""
     r = np.array(spec.position)
     vp = nu[:, :3] + np.cross(nu[:, 3:], r)
     if spec.force == "magnus":
         F = c * np.cross(nu[:, 3:], vp)
-    else:
-        e = np.eye(3)[spec.axis]
-        speed, along = np.linalg.norm(vp, axis=1)[:, None], (vp @ e)[:, None]
-        F = c * along * (speed ** 2 * e - along * vp) / speed
+        return np.c_[F - c * np.cross(nu[:, 3:], nu[:, :3]), np.cross(r, F)]
+    e = np.eye(3)[spec.axis]
+    speed, along = np.linalg.norm(vp, axis=1)[:, None], (vp @ e)[:, None]
+    F = c * along * (speed ** 2 * e - along * vp) / speed
     return np.c_[F, np.cross(r, F)]
 
 
@@ -33,7 +34,7 @@ SPECS = [PointSpec((0.42, -0.32, -0.08), 2, force="lift"),
 
 def test_lift_and_magnus_are_the_forces_at_the_point_and_do_no_work() -> None:
     """The model's force and its regressor equal the written-out wrenches to 1e-12 (a float's
-    lift, a bottle's, a Magnus force); the force is perpendicular to v_p, so the power
+    lift, a bottle's, a Magnus force's lever arm); the force is perpendicular to v_p, so the power
     νᵀD(ν)ν is 0 (to 1e-12 of ‖τ‖‖ν‖) whatever the sign of c, and projecting onto the
     dissipative set leaves negative coefficients as they are."""
     rng = np.random.default_rng(7)
