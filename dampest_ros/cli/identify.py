@@ -420,9 +420,10 @@ def element_drag_table(selection: Selection | None) -> str:
                   for k, (n, e, se) in enumerate(found.path)])
     r2 = table(("dof", "held-out R² base", "with element drags"),
                [(FORCE_NAMES[i], f"{before[i]:.4f}", f"{after[i]:.4f}") for i in range(6)])
-    return (f"element drags (the drag of an element on its own velocity v + ω × r at a point "
-            f"of the body; {len(found.chosen)} kept, {found.steps} of the path's "
-            f"{len(found.path) - 1} steps (a mirror pair, ± y, may enter as one), "
+    return (f"element drags (the drag of an element, or a slender element's lift, on its own "
+            f"velocity v + ω × r at a point of the body; {len(found.chosen)} kept, "
+            f"{found.steps} of the path's {len(found.path) - 1} steps (a mirror pair, ± y, "
+            "may enter as one), "
             "blocked cross-validation and the one-standard-error rule, the six DOFs fitted "
             f"together), searched before the library terms:\n{path}\n{r2}"
             + (f"\ntaken out once the library terms joined (no longer lowering BIC by 10 in "

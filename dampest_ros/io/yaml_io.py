@@ -76,7 +76,7 @@ from dampest_ros.core.identification.model import Model
 from dampest_ros.core.physics.alpha import Alpha
 from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel
 from dampest_ros.core.physics.identity import ARM_KIND, VEHICLE_KIND, Identity, mismatch
-from dampest_ros.core.physics.point_drag import point_spec
+from dampest_ros.core.physics.point_drag import FORCES, point_spec
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 from dampest_ros.core.signals.measurements import FloatArray
@@ -258,9 +258,10 @@ def _terms_params(spec: Mapping[str, Any]) -> dict[str, Any]:
         out["added"] = True
     if spec.get("point"):
         p = spec["point"]
+        # a drag's axis and speed; a lift's axis and "lift"; a Magnus force's −1 and "magnus"
         out["point"] = {"positions": [float(x) for e in p for x in e["position"]],
-                        "axes": [DOF_NAMES.index(e["axis"]) for e in p],
-                        "speeds": [e["speed"] for e in p]}
+                        "axes": [DOF_NAMES.index(e["axis"]) if "axis" in e else -1 for e in p],
+                        "speeds": [e["speed"] if "speed" in e else e["force"] for e in p]}
     if spec.get("residual"):
         out["residual"] = {"modes": [float(v) for m in spec["residual"]["modes"] for v in m]}
     return out
@@ -285,7 +286,9 @@ def _spec_from_params(terms: Mapping[str, Any]) -> dict[str, Any]:
         spec["added"] = {}
     if "point" in terms:
         p = terms["point"]
-        spec["point"] = [{"position": list(r), "axis": DOF_NAMES[int(a)], "speed": str(s)}
+        spec["point"] = [{"position": list(r),
+                          **({"axis": DOF_NAMES[int(a)]} if int(a) >= 0 else {}),
+                          **({"force": str(s)} if s in FORCES[1:] else {"speed": str(s)})}
                          for r, a, s in zip(np.reshape(p["positions"], (-1, 3)).tolist(),
                                             p["axes"], p["speeds"], strict=True)]
     if "residual" in terms:

@@ -84,9 +84,12 @@ def parameter_units(model: DampingModel) -> dict[str, str]:
                 units[name] = _unit_text(dims)
             continue
         if term.kind == "point":
-            # an element's force c ‖v_p‖ v_p,a (its moments follow from the lever arm): N s²/m²
+            # an element's drag or lift c ‖v_p‖ v_p,a (its moments follow from the lever arm):
+            # N s²/m²; its Magnus force c ω × v_p: N s²/(m rad)
             dims = _sub(_sub(_FORCE_DIMS[0], _VEL_DIMS[0]), _VEL_DIMS[0])
-            units.update({n: _unit_text(dims) for n in term.parameter_names})
+            spin = _sub(_sub(_FORCE_DIMS[0], _VEL_DIMS[3]), _VEL_DIMS[0])
+            units.update({n: _unit_text(spin if n.startswith("magnus") else dims)
+                          for n in term.parameter_names})
             continue
         for b in term.bases:
             # [F_row] / ([α] [ν_col]) over every entry of every atom; one unit or "SI"

@@ -32,7 +32,9 @@ FULL_SPEC: dict[str, Any] = {
              {"dof": "u", "rate": 7.0, "c": 1.0}],
     "added": {"added.N_uv": 0.3},
     "point": [{"position": [0.3, 0.0, 0.2], "axis": "w", "value": 12.0},
-              {"position": [0.0, -0.3, 0.21], "axis": "v", "speed": "normal", "value": 7.5}],
+              {"position": [0.0, -0.3, 0.21], "axis": "v", "speed": "normal", "value": 7.5},
+              {"position": [0.42, -0.32, -0.08], "force": "lift", "axis": "w", "value": -37.0},
+              {"position": [0.55, -0.15, 0.12], "force": "magnus", "value": -5.4}],
     "residual": {"modes": [[1, 0, 1, 0, 0, 0], [0, 1, 0, 0, 0, 1], [0, 0, 1, 0, 1, 0]],
                  "values": [4.0, 5.0, 6.0]},
 }

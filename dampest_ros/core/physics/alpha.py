@@ -38,7 +38,9 @@ class Alpha:
     cross-flow share of a body of revolution about the third axis; 0 at rest), ``prod``
     (ν_i ν_j), ``absprod`` (|ν_i ν_j|), ``absproj`` (|wᵀν| for a 6-vector w), ``pspeed``
     (‖v + ω × r‖, the speed through the water of the point r = ``w`` (3 floats, m, FRD) of the
-    body: an element's local speed, m/s).
+    body: an element's local speed, m/s), ``pshare`` (v_p,i² / ‖v_p‖, v_p = v + ω × r at the
+    point r = ``w``, i = 0, 1, 2 a body axis: the share of the element's speed along the axis,
+    weighted by it, m/s; 0 at rest).
     """
 
     kind: str = "one"
@@ -71,6 +73,8 @@ class Alpha:
             return np.abs(nu @ np.asarray(self.w))
         if k == "pspeed":
             return point_speeds(nu, np.array([self.w]))[:, 0]
+        if k == "pshare":
+            return point_shares(nu, np.array([self.w]), np.array([self.i]))[:, 0]
         raise ConfigError("alpha", f"unknown kind {k!r}")
 
     def scale(self, nu_scale: FloatArray) -> float:
@@ -98,7 +102,7 @@ class Alpha:
             return float(s[3:].max())
         if k == "absproj":
             return float(s[np.abs(np.asarray(self.w)) > 0].max())
-        if k == "pspeed":
+        if k in ("pspeed", "pshare"):
             return float(max(s[:3].max(), s[3:].max() * np.linalg.norm(self.w)))
         raise ConfigError("alpha", f"unknown kind {k!r}")
 
@@ -118,6 +122,7 @@ class Alpha:
             "absprod": f"|{n[self.i]}{n[self.j]}|" if self.i >= 0 else "",
             "absproj": "|w'nu|",
             "pspeed": "|v+w x r|",
+            "pshare": f"{n[self.i]}_p^2/|v+w x r|" if self.i >= 0 else "",
         }[self.kind]
 
     @classmethod
@@ -179,13 +184,18 @@ class AlphaBank:
         # the columns of each kind that is not a product ν_i ν_j (with ν_6 ≡ 1)
         self.pnorm, self.area, self.proj = columns("pnorm"), columns("area"), columns("absproj")
         self.norm, self.anorm, self.pspeed = columns("norm"), columns("anorm"), columns("pspeed")
+        self.pshare = columns("pshare")
         self.absolute = columns("abs", "absprod", "absproj")
         self.W = np.array([alphas[k].w for k in self.proj], dtype=float).reshape(-1, 6).T
         self.points = np.array([alphas[k].w for k in self.pspeed], dtype=float).reshape(-1, 3)
+        self.share_points = np.array([alphas[k].w for k in self.pshare],
+                                     dtype=float).reshape(-1, 3)
+        self.share_axes = np.array([alphas[k].i for k in self.pshare], dtype=np.int64)
         # the bank is a list of products (kinds one, lin, abs, prod, absprod) unless it holds
         # a norm, an area, a projection or a point's speed: then one sample goes through
         # __call__ as well
-        special = (self.pnorm, self.area, self.proj, self.norm, self.anorm, self.pspeed)
+        special = (self.pnorm, self.area, self.proj, self.norm, self.anorm, self.pspeed,
+                   self.pshare)
         self._products = None if any(len(k) for k in special) else list(
             zip(self.i.tolist(), self.j.tolist(),
                 np.isin(np.arange(p), self.absolute).tolist(), strict=True))
@@ -208,6 +218,8 @@ class AlphaBank:
             a[:, k] = np.sqrt(np.einsum("ni,ni->n", nu[:, 3:], nu[:, 3:]))[:, None]
         if len(k := self.pspeed):
             a[:, k] = point_speeds(nu, self.points)
+        if len(k := self.pshare):
+            a[:, k] = point_shares(nu, self.share_points, self.share_axes)
         if len(k := self.absolute):
             a[:, k] = np.abs(a[:, k])
         return a
@@ -253,6 +265,37 @@ def point_speeds(nu: FloatArray, points: FloatArray) -> FloatArray:
     ndarray, shape (N, P)
         m/s.
     """
-    # v_p = v + ω × r per sample and point, shape (N, P, 3)
-    vp = nu[:, None, :3] + np.cross(nu[:, None, 3:], points[None, :, :])
+    vp = point_velocities(nu, points)
     return np.sqrt(np.einsum("npi,npi->np", vp, vp))
+
+
+def point_velocities(nu: FloatArray, points: FloatArray) -> FloatArray:
+    """v_p = v + ω × r of each point r of the body, shape (N, P, 3) (m/s, FRD), for ``nu``
+    (N, 6) and ``points`` (P, 3) as in :func:`point_speeds`."""
+    # v_p = v + ω × r per sample and point
+    return nu[:, None, :3] + np.cross(nu[:, None, 3:], points[None, :, :])
+
+
+def point_shares(nu: FloatArray, points: FloatArray, axes: NDArray[np.int64]) -> FloatArray:
+    """v_p,a² / ‖v_p‖ of each point r of the body along its body axis a: the part of the
+    element's speed along a, weighted by it (0 at rest).
+
+    Parameters
+    ----------
+    nu : ndarray, shape (N, 6)
+        Body velocity (m/s, rad/s), FRD.
+    points : ndarray, shape (P, 3)
+        Positions r in the body frame (m), FRD.
+    axes : ndarray of int, shape (P,)
+        The axis a (0, 1, 2: x, y, z) of each point.
+
+    Returns
+    -------
+    ndarray, shape (N, P)
+        m/s.
+    """
+    vp = point_velocities(nu, points)
+    speed = np.sqrt(np.einsum("npi,npi->np", vp, vp))
+    along = vp[:, np.arange(len(axes)), axes]
+    # v_p,a² / ‖v_p‖ (≤ ‖v_p‖, so it goes to 0 with the speed)
+    return np.divide(along ** 2, speed, out=np.zeros_like(speed), where=speed > 0)

@@ -147,7 +147,9 @@ class DampingTerm:
         """Project this term's parameters so that the term is dissipative on its own.
 
         Linear term: the symmetric part of D_linear onto the PSD cone. Quadratic, point-drag
-        and residual terms: negative weights of PSD bases to zero. Memory: c_m ≥ 0 (a
+        and residual terms: negative weights of PSD bases to zero (of a single atom: an
+        element's lift or Magnus force, :mod:`.point_lift`, has several, not all PSD, and
+        does no work, so its weight keeps its sign). Memory: c_m ≥ 0 (a
         positive kernel is passive). Cross and added-mass terms have indefinite bases: left
         unchanged; their effect is checked on data with :meth:`DampingModel.dissipation`
         (the ``coriolis`` term does no work at all: its D(ν) is skew).
@@ -181,7 +183,8 @@ class DampingTerm:
                 out = np.where(diag, out, lo * out)
             return out
         if self.kind in ("quadratic", "point", "residual"):
-            psd = np.array([np.linalg.eigvalsh(0.5 * (b.B + b.B.T)).min() >= -1e-12
+            psd = np.array([not b.more
+                            and np.linalg.eigvalsh(0.5 * (b.B + b.B.T)).min() >= -1e-12
                             for b in self.bases])
             theta[psd] = np.maximum(theta[psd], 0.0)
         return theta
@@ -251,12 +254,11 @@ class DampingModel:
         self._direct = (len(set(zip(row.tolist(), param.tolist(), strict=True))) == len(row)
                         and not np.isin(dense_params, param).any()
                         and len(np.unique(dense_params)) == len(dense_params))
-        self._static_params = np.unique(self._static_idx)
-        # atom → parameter sum (None: one atom per parameter, the common case)
-        self._atom_sum: FloatArray | None = None
-        if len(self._static_params) < len(self._static_idx):
-            self._atom_sum = (self._static_idx[:, None]
-                              == self._static_params[None, :]).astype(float)
+        # the atoms by their rank in their parameter (its first, second, … atom): within a
+        # rank each parameter has at most one, so a rank's columns are added in one step
+        rank = np.array([k for t in self.terms if t.kind != "freq" for b in t.bases
+                         for k in range(len(b.atoms))], dtype=np.int64)
+        self._ranks = [np.flatnonzero(rank == k) for k in range(int(rank.max(initial=-1)) + 1)]
         freq = self.term("freq")
         self._freq_idx = (np.arange(self._slices["freq"].start, self._slices["freq"].stop)
                           if freq is not None else np.zeros(0, dtype=np.int64))
@@ -355,10 +357,9 @@ class DampingModel:
             if len(self._dense):
                 Bnu[:, :, self._dense] = ((nu @ self._B_flat).reshape(N, 6, -1)
                                           * alpha[:, None, self._dense])
-            if self._atom_sum is None:
-                Phi[:, :, self._static_idx] = Bnu
-            else:
-                Phi[:, :, self._static_params] = Bnu @ self._atom_sum
+            for atoms in self._ranks:
+                # column j = Σ over the parameter's atoms of α B ν
+                Phi[:, :, self._static_idx[atoms]] += Bnu[:, :, atoms]
         if len(self._freq_idx):
             if states is None:
                 raise ValueError("the freq term needs its memory states")

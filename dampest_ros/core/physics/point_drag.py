@@ -1,4 +1,5 @@
-"""Drag of an element at a point of the body: the ``point`` damping term and its candidates.
+"""Drag of an element at a point of the body: the ``point`` damping term and its candidates
+(the term also holds the lift and Magnus force of elements, :mod:`.point_lift`).
 
 An appendage, a skid or a float off the body origin meets the water at its own velocity
 v_p = v + ω × r_p (r_p its position, FRD, m), not at the body's. Its quadratic drag along one
@@ -13,6 +14,9 @@ w (force e_a at r_p: force along a, moment r_p × e_a): D(ν)ν = c α(ν) w w�
 two moments its lever arm gives, consistently. Its power νᵀD(ν)ν = c α (wᵀν)² = c α v_p,a²
 is ≥ 0 for c ≥ 0: a non-negative coefficient is dissipative (its basis w wᵀ is positive
 semi-definite, :meth:`DampingTerm.project` clips it at 0).
+
+The ``point`` term's elements (:class:`PointSpec`) are of three forces: ``drag`` (this
+module), ``lift`` and ``magnus`` (:mod:`.point_lift`: across v_p, doing no work).
 
 Candidate points (:func:`candidate_points`): the positions of the vehicle file's geoms that are
 off the origin (the shapes MuJoCo's fluid model applies its drag at); without a geometry, a small
@@ -33,38 +37,52 @@ from numpy.typing import NDArray
 from dampest_ros.core.physics.alpha import Alpha, dof_index
 from dampest_ros.core.physics.damping import Basis, DampingTerm
 from dampest_ros.core.physics.geometry import Geometry
+from dampest_ros.core.physics.point_lift import lift_basis, magnus_basis
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
 
 FloatArray = NDArray[np.float64]
 
 #: The speeds an element's drag may go with: its speed ‖v_p‖ or its normal speed |v_p,a|.
 SPEEDS = ("|U|", "normal")
+#: The forces of an element: drag, lift at an angle of attack, Magnus force (:mod:`.point_lift`).
+FORCES = ("drag", "lift", "magnus")
 
 
 @dataclass(frozen=True)
 class PointSpec:
-    """One element drag coefficient: where, along which axis and on which speed.
+    """One element force coefficient: where, which force, along which axis and on which
+    speed.
 
     Attributes
     ----------
     position : tuple of 3 float
         r_p in the body frame (m, FRD).
     axis : int
-        0, 1, 2: the force along x, y or z (velocity letters u, v, w).
+        0, 1, 2: a drag's force along x, y or z (velocity letters u, v, w), a lift's element
+        axis e; −1 for a Magnus force (it has none).
     speed : str
-        ``|U|`` (‖v_p‖) or ``normal`` (|v_p,a|), :data:`SPEEDS`.
+        A drag's ``|U|`` (‖v_p‖) or ``normal`` (|v_p,a|), :data:`SPEEDS`; ``|U|`` for the
+        other forces.
+    force : str
+        ``drag``, ``lift`` or ``magnus``, :data:`FORCES`.
     """
 
     position: tuple[float, float, float]
     axis: int
     speed: str = "|U|"
+    force: str = "drag"
 
     @property
     def label(self) -> str:
         """The parameter name, e.g. ``drag.w|U|@(0.3,0,0.2)``: drag along w on the element's
-        speed at the point (0.3, 0, 0.2) m (``drag.ww@…``: on its normal speed |w_p|)."""
-        a = DOF_NAMES[self.axis]
+        speed at the point (0.3, 0, 0.2) m (``drag.ww@…``: on its normal speed |w_p|);
+        ``lift.w@…``: the lift of an element along w; ``magnus@…``: the Magnus force."""
         where = ",".join(f"{x:.12g}" for x in self.position)
+        if self.force == "magnus":
+            return f"magnus@({where})"
+        a = DOF_NAMES[self.axis]
+        if self.force == "lift":
+            return f"lift.{a}@({where})"
         return f"drag.{a}{'|U|' if self.speed == '|U|' else a}@({where})"
 
     @property
@@ -78,10 +96,15 @@ class PointSpec:
         """The same drag at the mirror image of the point across the body's xz plane
         (y → −y): its twin on the other side of a port–starboard symmetric vehicle."""
         x, y, z = self.position
-        return PointSpec((x, -y + 0.0, z), self.axis, self.speed)
+        return PointSpec((x, -y + 0.0, z), self.axis, self.speed, self.force)
 
     def basis(self) -> Basis:
-        """The parameter's basis: B = w wᵀ with α = ‖v_p‖ or |wᵀν| (module docstring)."""
+        """The parameter's basis: a drag's B = w wᵀ with α = ‖v_p‖ or |wᵀν| (module
+        docstring), a lift's or Magnus force's atoms (:mod:`.point_lift`)."""
+        if self.force == "lift":
+            return lift_basis(self.label, self.position, self.axis)
+        if self.force == "magnus":
+            return magnus_basis(self.label, self.position)
         w = self.wrench
         alpha = (Alpha("pspeed", w=tuple(map(float, self.position))) if self.speed == "|U|"
                  else Alpha("absproj", w=tuple(map(float, w))))
@@ -89,46 +112,68 @@ class PointSpec:
 
     @classmethod
     def from_dict(cls, d: Any, where: str = "point") -> PointSpec:
-        """From ``{position: [x, y, z], axis: w, speed: '|U|'}`` (speed optional)."""
-        if not isinstance(d, dict) or "position" not in d or "axis" not in d:
+        """From ``{position: [x, y, z], axis: w, speed: '|U|'}`` (a drag, speed optional),
+        ``{position: [x, y, z], force: lift, axis: w}`` or ``{position: [x, y, z], force:
+        magnus}``."""
+        force = str(d.get("force", "drag")) if isinstance(d, dict) else ""
+        if force not in FORCES or "position" not in d or ("axis" not in d
+                                                          and force != "magnus"):
             raise ConfigError(where, "each element is {position: [x, y, z] (m), axis: u, v "
-                                     "or w, speed: '|U|' or normal}")
+                                     "or w, speed: '|U|' or normal} (a drag), {position, "
+                                     "force: lift, axis} or {position, force: magnus}")
         pos = np.asarray(d["position"], dtype=float)
         if pos.shape != (3,) or not np.all(np.isfinite(pos)):
             raise ConfigError(f"{where}.position", f"three finite numbers (m), got {d['position']}")
+        position = (float(pos[0]), float(pos[1]), float(pos[2]))
+        if force == "magnus":
+            return cls(position, -1, force=force)
         axis = dof_index(d["axis"], f"{where}.axis")
         if axis > 2:
-            raise ConfigError(f"{where}.axis", f"{d['axis']!r}: the drag is along u, v or w")
+            raise ConfigError(f"{where}.axis", f"{d['axis']!r}: the {force} is along u, v or w")
+        if force == "lift":
+            return cls(position, axis, force=force)
         speed = str(d.get("speed", "|U|"))
         if speed not in SPEEDS:
             raise ConfigError(f"{where}.speed", f"{speed!r}; use one of {SPEEDS}")
-        return cls((float(pos[0]), float(pos[1]), float(pos[2])), axis, speed)
+        return cls(position, axis, speed)
 
     def to_dict(self) -> dict[str, Any]:
         """The mapping :meth:`from_dict` reads."""
+        if self.force == "magnus":
+            return {"position": list(self.position), "force": self.force}
+        if self.force == "lift":
+            return {"position": list(self.position), "force": self.force,
+                    "axis": DOF_NAMES[self.axis]}
         return {"position": list(self.position), "axis": DOF_NAMES[self.axis],
                 "speed": self.speed}
 
 
 def point_spec(basis: Basis) -> PointSpec:
-    """The element drag a basis of the ``point`` term stands for, read from its name."""
+    """The element force a basis of the ``point`` term stands for, read from its name."""
     found = _LABEL.fullmatch(basis.name)
     if found is None:
-        raise ConfigError("point", f"{basis.name!r} is not an element drag name "
-                                   "(drag.<axis><speed>@(x,y,z))")
-    axis, speed, where = found.groups()
+        raise ConfigError("point", f"{basis.name!r} is not an element force name "
+                                   "(drag.<axis><speed>@(x,y,z), lift.<axis>@(x,y,z) or "
+                                   "magnus@(x,y,z))")
+    axis, speed, lift, where = found.groups()
     x, y, z = (float(v) for v in where.split(","))
+    if lift is not None:
+        return PointSpec((x, y, z), DOF_NAMES.index(lift), force="lift")
+    if axis is None:
+        return PointSpec((x, y, z), -1, force="magnus")
     return PointSpec((x, y, z), DOF_NAMES.index(axis), "|U|" if speed == "|U|" else "normal")
 
 
 #: The parameter names of :attr:`PointSpec.label`.
-_LABEL = re.compile(r"drag\.([uvw])(\|U\||[uvw])@\(([^)]*)\)")
+_LABEL = re.compile(r"(?:drag\.([uvw])(\|U\||[uvw])|lift\.([uvw])|magnus)@\(([^)]*)\)")
 
 
 def point_term(specs: Sequence[PointSpec]) -> DampingTerm:
-    """D_point: the drag of elements at points of the body, one coefficient each."""
-    return DampingTerm("point", "quadratic drag of an element at a point r of the body, on "
-                                "its own velocity v + ω × r (force and moment r × F)",
+    """D_point: the drag, lift and Magnus force of elements at points of the body, one
+    coefficient each."""
+    return DampingTerm("point", "quadratic drag, lift or Magnus force of an element at a "
+                                "point r of the body, on its own velocity v + ω × r (force "
+                                "and moment r × F)",
                        [s.basis() for s in specs])
 
 
@@ -172,8 +217,12 @@ def mirror_pairs(specs: Sequence[PointSpec]) -> list[tuple[int, int]]:
             if s.position[1] != 0.0 and index.get(s.mirror, -1) > i]
 
 
-def point_library(points: Sequence[Sequence[float]]) -> list[PointSpec]:
-    """The candidate element drags at ``points``: per point, along u, v, w, on the element's
-    speed and then on its normal speed (6 per point)."""
-    return [PointSpec((float(p[0]), float(p[1]), float(p[2])), a, s)
-            for s in SPEEDS for p in points for a in range(3)]
+def point_library(points: Sequence[Sequence[float]],
+                  lifts: Sequence[tuple[tuple[float, float, float], int]] = ()
+                  ) -> list[PointSpec]:
+    """The candidate element forces: per point of ``points``, the drags along u, v, w on the
+    element's speed and then on its normal speed (6 per point); then the lifts ``lifts``
+    (position and element axis, :func:`~.point_lift.candidate_lifts`)."""
+    where = [(float(p[0]), float(p[1]), float(p[2])) for p in points]
+    return [*(PointSpec(p, a, s) for s in SPEEDS for p in where for a in range(3)),
+            *(PointSpec(p, a, force="lift") for p, a in lifts)]

@@ -20,6 +20,7 @@ from dampest_ros.core.identification.model import Model
 from dampest_ros.core.identification.refold import Entry
 from dampest_ros.core.identification.refold import refold as refit_onto
 from dampest_ros.core.physics.damping import DampingModel, FloatArray
+from dampest_ros.core.physics.point_drag import point_spec
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, AddedMassTerms, ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle, damping_from_spec
 from dampest_ros.io.yaml_io import SIGN_CONVENTION
@@ -210,9 +211,10 @@ def coefficients(model: DampingModel, theta: FloatArray) -> tuple[list[Coefficie
             nz = np.argwhere(b.B != 0)
             a = b.alpha
             if term.kind == "point":
-                other.append(f"{b.name} = {num(v)} (the drag of an element at a point of the "
-                             "body on its own velocity v + ω × r, one coefficient in a force "
-                             "and its moments: the format has no such term)")
+                other.append(f"{b.name} = {num(v)} (the {point_spec(b).force} of an element "
+                             "at a point of the body on its own velocity v + ω × r, one "
+                             "coefficient in a force and its moments: the format has no such "
+                             "term)")
             elif b.more:
                 other.append(f"{b.name} = {num(v)} (an added-mass correction acting through "
                              "the Coriolis force and Munk moment only, not inertially: the "
