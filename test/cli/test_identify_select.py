@@ -239,9 +239,17 @@ def test_default_identify_puts_element_drags_at_the_geoms(
     assert np.min(m.extra["heldout_r2"]) >= 0.97, m.extra["heldout_r2"]
 
 
+#: winged_auv's surge and yaw misfit the default's model forms (README, "untuned geometries").
+WINGED_AUV_OPEN = pytest.mark.xfail(strict=True, reason=(
+    "winged_auv: held-out surge .9896-.9939 and yaw .9944-.9950 (seeds 1-3, both noise "
+    "levels); with MuJoCo's Kutta lift off every DOF is >= .9965 (seed 1, noiseless): the "
+    "lift of its flat wings has no candidate form that fits it"))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3])
-@pytest.mark.parametrize("vehicle", ["box_rov", "sled_auv", "frame_rov"])
+@pytest.mark.parametrize("vehicle", ["box_rov", "sled_auv", "frame_rov",
+                                     pytest.param("winged_auv", marks=WINGED_AUV_OPEN)])
 def test_default_identify_on_a_geometry_nobody_tuned_on(vehicle: str, seed: int,
                                                         tmp_path: Path) -> None:
     """Geometries added after the defaults were set, realistic and noiseless sensors:
@@ -254,7 +262,9 @@ def test_default_identify_on_a_geometry_nobody_tuned_on(vehicle: str, seed: int,
     a mirror pair of drags could enter as one step: the pontoons' heave drags at ± 0.18 m).
     frame_rov, an open-frame ROV on four vertical floats: ≥ .9953 (roll, seed 2, noiseless;
     roll .953–.975 and pitch .977–.986 before its slender elements' lift was a candidate: a
-    force across their own velocity v + ω × r that does no work)."""
+    force across their own velocity v + ω × r that does no work).
+    winged_auv, a hover AUV with two thin wings, added after the element lift: open
+    (``WINGED_AUV_OPEN``)."""
     for clean in (False, True):
         (tmp_path / str(clean)).mkdir()
         r2 = select_heldout(tmp_path / str(clean), vehicle, seed, clean, options=())[1.0][1]
