@@ -133,8 +133,8 @@ def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBo
     :func:`~dampest_ros.core.identification.batch.fit` on :func:`pooled_samples` to rounding; only
     the cross-validation folds differ (see :func:`pooled_normal`). The passes over the
     samples (the robust covariance's, the dissipativity check's scan) run log by log through
-    ``map_logs`` (default: here, one after the other). ``samples`` is :func:`pooled_samples` of ``logs`` when the caller has made it
-    already.
+    ``map_logs`` (default: here, one after the other). ``samples`` is :func:`pooled_samples`
+    of ``logs`` when the caller has made it already.
     """
     firsts = np.cumsum([0] + [len(g.samples) for g in logs[:-1]]).tolist()
     run = map_logs or (lambda fn: [fn(g, k) for k, g in enumerate(logs)])
