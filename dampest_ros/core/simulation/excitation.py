@@ -489,7 +489,7 @@ def _protocol_b(ticks: int, dt: float, bits: np.random.PCG64, t_end: float,
     derivatives are the heave, roll and pitch rate references)."""
     tau_d = 0.6  # heave: smooth random depth changes whose peak rate is about the range
     specs = ((0.2 * lim[0], (1.0, 4.0), 0.0), (0.9 * lim[1], (1.0, 4.0), 0.2),
-             (0.7 * lim[5], (1.0, 4.0), 0.2), (0.5 * np.e * tau_d * lim[2], (1.5, 4.0), 0.0),
+             (0.7 * lim[5], (1.0, 4.0), 0.2), (0.5 * math.e * tau_d * lim[2], (1.5, 4.0), 0.0),
              (max_angle, (0.8, 2.5), 0.0), (max_angle, (0.8, 2.5), 0.0))
     levels = []
     for amp, hold, lowest in specs:  # in the order the stream's draws were made
