@@ -265,7 +265,11 @@ def point_speeds(nu: FloatArray, points: FloatArray) -> FloatArray:
     ndarray, shape (N, P)
         m/s.
     """
-    vp = point_velocities(nu, points)
+    return _speeds(point_velocities(nu, points))
+
+
+def _speeds(vp: FloatArray) -> FloatArray:
+    """‖v_p‖ of point velocities ``vp``, shape (N, P, 3) → (N, P)."""
     return np.sqrt(np.einsum("npi,npi->np", vp, vp))
 
 
@@ -295,7 +299,7 @@ def point_shares(nu: FloatArray, points: FloatArray, axes: NDArray[np.int64]) ->
         m/s.
     """
     vp = point_velocities(nu, points)
-    speed = np.sqrt(np.einsum("npi,npi->np", vp, vp))
+    speed = _speeds(vp)
     along = vp[:, np.arange(len(axes)), axes]
     # v_p,a² / ‖v_p‖ (≤ ‖v_p‖, so it goes to 0 with the speed)
     return np.divide(along ** 2, speed, out=np.zeros_like(speed), where=speed > 0)
