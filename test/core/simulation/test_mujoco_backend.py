@@ -32,7 +32,7 @@ from dampest_ros.io.yaml_io import load_vehicle
 mujoco = pytest.importorskip("mujoco")
 
 PRESETS = ("bluerov2_heavy_mujoco", "torpedo_auv", "box_rov", "sled_auv", "frame_rov",
-           "winged_auv")
+           "winged_auv", "tooled_rov")
 PRESETS_DIR = Path(__file__).resolve().parents[3] / "config" / "vehicles"
 
 
