@@ -26,6 +26,7 @@ from dampest_ros.core.identification.covariance import (
     block_count,
     block_length,
     covariance,
+    settled_block,
     whole,
 )
 from dampest_ros.core.identification.dissipative import (
@@ -692,13 +693,16 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     prior_std : ndarray, shape (p,), optional
         Prior standard deviations for MAP.
     normal : NormalEquations, optional
-        Precomputed statistics (saves the first pass).
+        Precomputed statistics (saves the first pass); formed here with the robust
+        covariance's blocks when their length is settled
+        (:func:`~dampest_ros.core.identification.covariance.settled_block`).
     chunk : int
         Samples per chunk.
     map_parts : MapParts, optional
-        Runs the robust covariance's pass over the samples part by part where the parts are
-        held (:data:`~dampest_ros.core.identification.covariance.MapParts`; default:
-        ``samples`` at once).
+        Runs the passes over the samples (the dissipativity scan; the robust covariance's
+        when ``normal`` holds no blocks of its length) part by part where the parts are held
+        (:data:`~dampest_ros.core.identification.covariance.MapParts`; default: ``samples``
+        at once).
     bias : BiasStatistics, optional
         Precomputed data of the sensor-bias refits
         (:func:`~dampest_ros.core.identification.covariance.bias_statistics` of ``samples``,
@@ -713,7 +717,8 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     p = len(names)
     if len(samples) < 10 * max(p, 1):
         raise ConfigError("samples", f"{len(samples)} samples are too few for {p} parameters")
-    ne = normal or accumulate(samples, model, body, chunk=chunk, cutoff=opts.cutoff)
+    ne = normal or accumulate(samples, model, body, chunk=chunk, cutoff=opts.cutoff,
+                              block=settled_block(samples, opts, p))
     prior_v = np.zeros(p) if prior is None else np.asarray(prior, dtype=float)
     problem = _Problem(ne, opts, prior_v, prior_std,
                        model.lower_bounds() if opts.method == "bounded" else None)

@@ -7,9 +7,12 @@ covariance of refits with the data offset by each bias (:func:`bias_covariance`)
 
 Both are sums over the samples, so they run where the data are. The refits' data do not
 depend on θ: :class:`BiasStatistics` are formed with the normal equations (a pooled fit's
-are each log's, summed). The sandwich needs the residuals at θ: it takes ``map_parts``,
-which applies a function to every part of the samples (e.g. the logs of a pooled fit, each
-on the worker that holds it) and returns the parts' results, which add up to the whole's.
+are each log's, summed). The sandwich needs each block's score at θ, which the block's own
+normal equations give (:class:`~dampest_ros.core.identification.regression.BlockEquations`):
+they are formed with the fit's when the block length does not depend on the fit's rank
+(:func:`settled_block`), else in a pass that takes ``map_parts``, which applies a function
+to every part of the samples (e.g. the logs of a pooled fit, each on the worker that holds
+it) and returns the parts' results, which add up to the whole's.
 """
 
 from __future__ import annotations
@@ -24,7 +27,13 @@ from numpy.typing import NDArray
 from scipy import linalg
 
 from dampest_ros.core.identification.quadratic import solve_normal
-from dampest_ros.core.identification.regression import NormalEquations, iter_regression
+from dampest_ros.core.identification.regression import (
+    BlockEquations,
+    NormalEquations,
+    accumulate,
+    block_index,
+    iter_regression,
+)
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import RigidBody
 from dampest_ros.core.signals.samples import CHUNK, Samples
@@ -76,14 +85,9 @@ def block_length(samples: Samples, opts: CovarianceOptions, rank: int) -> float:
     return float(max(min(opts.block, span / (2 * rank + 1)), floor))
 
 
-def block_index(samples: Samples, block: float, t0: float | None = None
-                ) -> NDArray[np.int64]:
-    """Index 0..B−1 of the ``block``-second block (within its segment) of every sample;
-    blocks are counted from ``t0`` (s; default: the first sample's time)."""
-    start = samples.t[0] if t0 is None else t0
-    block_of = np.floor((samples.t - start) / block).astype(np.int64)
-    block_of += samples.segment * (int(block_of.max()) + 1)
-    return np.unique(block_of, return_inverse=True)[1].astype(np.int64)
+#: Most floats (B · 6 · p²) the :class:`BlockEquations` formed with the normal equations
+#: may take (32 MB); larger ones are left to a pass over the samples.
+BLOCK_FLOATS = 2 ** 22
 
 
 def block_count(samples: Samples, block: float) -> int:
@@ -91,20 +95,29 @@ def block_count(samples: Samples, block: float) -> int:
     return int(block_index(samples, block).max()) + 1 if len(samples) else 0
 
 
-def block_scores(samples: Samples, first: int, model: DampingModel, body: RigidBody,
-                 theta: FloatArray, weights: FloatArray, free: NDArray[np.bool_],
-                 block: float, t0: float, cutoff: float, chunk: int = CHUNK
-                 ) -> tuple[FloatArray, int]:
-    """Σ_b s_b s_bᵀ over the blocks of these samples and their number B (a part of
-    :func:`robust_covariance`; ``first`` is unused: blocks need only ``t0``)."""
-    block_idx = block_index(samples, block, t0)
-    S = np.zeros((int(block_idx.max()) + 1, int(free.sum())))
-    for sl, Phi, y in iter_regression(samples, model, body, chunk, cutoff, decimate=True):
-        r = y - Phi @ theta
-        # weighted score of each sample: Σ_i w_i Φ_iᵀ r_i
-        g = np.einsum("nip,ni,i->np", Phi[:, :, free], r, weights)
-        np.add.at(S, block_idx[sl], g)
-    return S.T @ S, len(S)
+def settled_block(samples: Samples, opts: CovarianceOptions, p: int) -> float:
+    """The :func:`block_length` a fit of ``p`` parameters has whatever its rank r ≤ p, when
+    its :class:`BlockEquations` are small enough (:data:`BLOCK_FLOATS`) to form with the
+    normal equations (``accumulate(..., block=…)``) and save the robust covariance its pass
+    over the samples; 0 otherwise. The length falls as r grows, so it is settled when r = 1
+    and r = p give the same."""
+    if not (p and len(samples)):
+        return 0.0
+    length = block_length(samples, opts, p)
+    if length != block_length(samples, opts, 1):
+        return 0.0
+    return length if block_count(samples, length) * 6 * p * p <= BLOCK_FLOATS else 0.0
+
+
+def part_blocks(samples: Samples, first: int, model: DampingModel, body: RigidBody,
+                block: float, cutoff: float, chunk: int = CHUNK) -> BlockEquations:
+    """The :class:`BlockEquations` of a part of the samples (a :data:`MapParts` call of
+    :func:`robust_covariance`; ``first`` is unused: blocks start with each segment)."""
+    blocks = accumulate(samples, model, body, folds=1, chunk=chunk, cutoff=cutoff,
+                        block=block).blocks
+    if blocks is None:
+        raise ValueError("a part of the samples without samples")
+    return blocks
 
 
 def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
@@ -118,22 +131,27 @@ def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
     (p_free, r)) spans, 0 in those the data do not determine (:func:`determined_directions`).
 
     s_b = Σ_{n ∈ block b} Σ_i w_i Φ_{n,i}ᵀ r_{n,i} is the weighted score of a block of
-    :func:`block_length` seconds; summing within blocks makes the estimate robust to
-    residuals that are correlated over less than a block (filtered noise, unmodelled slow
-    effects). The blocks' sums are formed part by part (``map_parts``, default: all of
-    ``samples`` at once); a block never spans two segments, so never two parts.
+    :func:`block_length` seconds (:meth:`BlockEquations.scores`); summing within blocks makes
+    the estimate robust to residuals that are correlated over less than a block (filtered
+    noise, unmodelled slow effects). The blocks' normal equations come with ``ne`` when it
+    holds blocks of that length (:func:`settled_block`), else from a pass over the samples
+    part by part (``map_parts``, default: all of ``samples`` at once); a block never spans
+    two segments, so never two parts.
     """
     p = model.n_params
     cov = np.full((p, p), np.nan)
     A, _, _ = ne.total(weights)
     Af = A[np.ix_(free, free)]
-    parts = (map_parts or whole(samples))(partial(
-        block_scores, model=model, body=body, theta=theta, weights=weights, free=free,
-        block=block_length(samples, opts, basis.shape[1]), t0=float(samples.t[0]),
-        cutoff=opts.cutoff, chunk=chunk))
-    B = sum(b for _, b in parts)
-    # Σ_b s_b s_bᵀ · B/(B − 1), the blocks of all parts
-    meat = sum(m for m, _ in parts) * (B / max(B - 1, 1))
+    length = block_length(samples, opts, basis.shape[1])
+    blocks = ne.blocks
+    if blocks is None or blocks.length != length:
+        blocks = BlockEquations.join((map_parts or whole(samples))(partial(
+            part_blocks, model=model, body=body, block=length, cutoff=opts.cutoff,
+            chunk=chunk)))
+    S = blocks.scores(theta, weights, free)
+    B = len(S)
+    # Σ_b s_b s_bᵀ · B/(B − 1)
+    meat = S.T @ S * (B / max(B - 1, 1))
     Ainv = basis @ linalg.inv(basis.T @ Af @ basis) @ basis.T
     cov[np.ix_(free, free)] = Ainv @ meat @ Ainv
     return cov

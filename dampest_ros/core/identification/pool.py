@@ -4,10 +4,13 @@ The batch fit's normal equations are sufficient statistics: the statistics of se
 add up to those of all their samples at once, A = Σ_b A_b, b = Σ_b b_b, c = Σ_b c_b. Each log
 is therefore preprocessed and reduced on its own (in parallel, anywhere: :class:`LogStatistics`
 is all a worker returns), and the pooled fit solves the summed statistics, the sensor-bias
-refits' included (:class:`~dampest_ros.core.identification.covariance.BiasStatistics`); its
-passes over the samples (the block-robust covariance's, and the scan for samples where the
-estimate generates energy) run over the logs' samples as segments of one set, log by log
-where each log is held (``map_logs``).
+refits' included (:class:`~dampest_ros.core.identification.covariance.BiasStatistics`), and
+so do the block-robust covariance's per-block normal equations
+(:class:`~dampest_ros.core.identification.regression.BlockEquations`, each log's blocks
+counted from its own start) when the block length does not depend on the fit's rank. The
+passes over the samples left (the scan for samples where the estimate generates energy, and
+the covariance's when its blocks did not come with the statistics) run over the logs'
+samples as segments of one set, log by log where each log is held (``map_logs``).
 Cross-validation folds of the pooled fit are the k-th fifths of
 every log (:func:`pooled_normal`), so each fold holds some of every trial.
 
@@ -33,8 +36,13 @@ from dampest_ros.core.identification.covariance import (
     BiasStatistics,
     bias_statistics,
     pooled_bias,
+    settled_block,
 )
-from dampest_ros.core.identification.regression import NormalEquations, accumulate
+from dampest_ros.core.identification.regression import (
+    BlockEquations,
+    NormalEquations,
+    accumulate,
+)
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
 from dampest_ros.core.signals.samples import Samples
@@ -85,7 +93,8 @@ def log_statistics(name: str, samples: Samples, model: DampingModel, body: Rigid
         Those of the pooled fit (the same cutoff); the speed range is the log's own.
     prior, prior_std : ndarray, shape (p,), optional
     """
-    ne = accumulate(samples, model, body, cutoff=options.cutoff)
+    ne = accumulate(samples, model, body, cutoff=options.cutoff,
+                    block=settled_block(samples, options, model.n_params))
     bias = bias_statistics(samples, model, body, options)
     own = fit(samples, model, body, options, prior=prior, prior_std=prior_std, normal=ne,
               bias=bias)
@@ -93,17 +102,23 @@ def log_statistics(name: str, samples: Samples, model: DampingModel, body: Rigid
 
 
 def pooled_normal(normals: Sequence[NormalEquations]) -> NormalEquations:
-    """Σ of the logs' statistics, fold by fold: fold k is the k-th fifth of every log."""
+    """Σ of the logs' statistics, fold by fold: fold k is the k-th fifth of every log; the
+    robust covariance's blocks are every log's, in order, when each log has blocks of one
+    length (:func:`~dampest_ros.core.identification.covariance.settled_block`)."""
     if not normals:
         raise ConfigError("logs", "no log to pool")
     shapes = {n.A.shape for n in normals}
     if len(shapes) != 1:
         raise ConfigError("logs", f"statistics of different shapes {sorted(shapes)}: the "
                                   "logs were reduced with different models")
+    blocks = [n.blocks for n in normals]
+    joined = (BlockEquations.join([x for x in blocks if x is not None])
+              if all(x is not None for x in blocks)
+              and len({x.length for x in blocks if x is not None}) == 1 else None)
     return NormalEquations(sum((n.A for n in normals), np.zeros_like(normals[0].A)),
                            sum((n.b for n in normals), np.zeros_like(normals[0].b)),
                            sum((n.c for n in normals), np.zeros_like(normals[0].c)),
-                           sum((n.n for n in normals), np.zeros_like(normals[0].n)))
+                           sum((n.n for n in normals), np.zeros_like(normals[0].n)), joined)
 
 
 def pooled_samples(logs: Sequence[LogStatistics]) -> Samples:
@@ -132,8 +147,9 @@ def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBo
     θ, its covariance and every per-DOF figure equal those of
     :func:`~dampest_ros.core.identification.batch.fit` on :func:`pooled_samples` to rounding; only
     the cross-validation folds differ (see :func:`pooled_normal`). The passes over the
-    samples (the robust covariance's, the dissipativity check's scan) run log by log through
-    ``map_logs`` (default: here, one after the other). ``samples`` is :func:`pooled_samples`
+    samples (the dissipativity check's scan; the robust covariance's when the logs'
+    statistics hold no blocks of its length) run log by log through ``map_logs`` (default:
+    here, one after the other). ``samples`` is :func:`pooled_samples`
     of ``logs`` when the caller has made it already.
     """
     firsts = np.cumsum([0] + [len(g.samples) for g in logs[:-1]]).tolist()

@@ -125,6 +125,51 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
                 yield slice(start, stop), Phi[core], y[core]
 
 
+def block_index(samples: Samples, block: float) -> NDArray[np.int64]:
+    """Index 0..B−1 of the ``block``-second block of every sample, shape (N,); blocks are
+    counted from the first sample of each segment, so a block never spans two segments and
+    a log's blocks are the same whatever logs it is pooled with."""
+    block_of = np.zeros(len(samples), dtype=np.int64)
+    for sl in samples.segments():
+        t = samples.t[sl]
+        block_of[sl] = np.floor((t - t[0]) / block)
+    block_of += samples.segment * (int(block_of.max(initial=0)) + 1)
+    return np.unique(block_of, return_inverse=True)[1].astype(np.int64)
+
+
+@dataclass
+class BlockEquations:
+    """Per-block, per-DOF normal equations: the robust covariance's block scores at any θ
+    and weights (:meth:`scores`) without another pass over the samples.
+
+    Attributes
+    ----------
+    G : ndarray, shape (B, 6, p, p)
+        Σ_{n ∈ b} Φ_niᵀ Φ_ni per block b and DOF i.
+    h : ndarray, shape (B, 6, p)
+        Σ_{n ∈ b} Φ_niᵀ y_ni.
+    length : float
+        Block length (s; :func:`block_index`).
+    """
+
+    G: FloatArray
+    h: FloatArray
+    length: float
+
+    def scores(self, theta: FloatArray, weights: FloatArray, free: NDArray[np.bool_]
+               ) -> FloatArray:
+        """Weighted score of every block over the ``free`` parameters, shape (B, p_free)."""
+        # s_b = Σ_i w_i Φ_biᵀ (y_bi − Φ_bi θ) = Σ_i w_i (h_bi − G_bi θ)
+        s = np.einsum("i,bip->bp", weights, self.h - self.G @ theta)
+        return np.asarray(s[:, free])
+
+    @staticmethod
+    def join(parts: list[BlockEquations]) -> BlockEquations:
+        """The blocks of several parts of the samples (disjoint blocks), in order."""
+        return BlockEquations(np.concatenate([x.G for x in parts]),
+                              np.concatenate([x.h for x in parts]), parts[0].length)
+
+
 @dataclass
 class NormalEquations:
     """Per-fold, per-DOF sufficient statistics of the regression.
@@ -137,12 +182,15 @@ class NormalEquations:
         Σ y².
     n : ndarray, shape (F,)
         Samples per fold.
+    blocks : BlockEquations or None
+        The same per block of the robust covariance, when asked for (:func:`accumulate`).
     """
 
     A: FloatArray
     b: FloatArray
     c: FloatArray
     n: FloatArray
+    blocks: BlockEquations | None = None
 
     def total(self, weights: FloatArray, exclude: int | None = None
               ) -> tuple[FloatArray, FloatArray, float]:
@@ -168,7 +216,8 @@ def fold_index(n: int, folds: int) -> NDArray[np.int64]:
 
 
 def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: int = 5,
-               chunk: int = CHUNK, cutoff: float = 0.0, guard: int = 0) -> NormalEquations:
+               chunk: int = CHUNK, cutoff: float = 0.0, guard: int = 0, block: float = 0.0
+               ) -> NormalEquations:
     """Accumulate :class:`NormalEquations` over contiguous time folds in chunks.
 
     Parameters
@@ -185,6 +234,9 @@ def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: in
     guard : int
         Samples on each side of a boundary between folds that belong to none
         (:func:`cv_budget.guarded_folds`).
+    block : float
+        With ``block`` > 0 (s), also the :class:`BlockEquations` of blocks of that length
+        (every sample, guards included; memory B · 6 · p² floats), from the same products.
     """
     p, N = model.n_params, len(samples)
     fold_of = guarded_folds(N, folds, guard) if guard else fold_index(N, folds)
@@ -192,17 +244,29 @@ def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: in
     b = np.zeros((folds, 6, p))
     c = np.zeros((folds, 6))
     n = np.zeros(folds)
+    block_of = block_index(samples, block) if block > 0 else np.zeros(N, dtype=np.int64)
+    B = int(block_of.max(initial=-1)) + 1 if block > 0 else 0
+    G, h = np.zeros((B, 6, p, p)), np.zeros((B, 6, p))
     for sl, Phi, y in iter_regression(samples, model, body, chunk, cutoff, decimate=True):
-        fo = fold_of[sl]
-        for f in np.unique(fo[fo >= 0]):
-            m = fo == f
+        # a cell: the rows of one fold (−1: a guard) and one block
+        cell = (fold_of[sl] + 1) * max(B, 1) + block_of[sl]
+        for key in np.unique(cell):
+            f, k = divmod(int(key), max(B, 1))
+            if f == 0 and not B:  # a guard, and no blocks asked for
+                continue
+            m = cell == key
             P, Y = Phi[m], y[m]
             # per DOF i: ΦᵢᵀΦᵢ, Φᵢᵀyᵢ, yᵢᵀyᵢ
-            A[f] += np.einsum("nip,niq->ipq", P, P)
-            b[f] += np.einsum("nip,ni->ip", P, Y)
-            c[f] += np.einsum("ni,ni->i", Y, Y)
-            n[f] += len(Y)
-    return NormalEquations(A, b, c, n)
+            gram, moment = np.einsum("nip,niq->ipq", P, P), np.einsum("nip,ni->ip", P, Y)
+            if B:
+                G[k] += gram
+                h[k] += moment
+            if f:
+                A[f - 1] += gram
+                b[f - 1] += moment
+                c[f - 1] += np.einsum("ni,ni->i", Y, Y)
+                n[f - 1] += len(Y)
+    return NormalEquations(A, b, c, n, BlockEquations(G, h, block) if B else None)
 
 
 def information_criteria(rss: FloatArray, n: float, n_eff: float, k: int

@@ -1,4 +1,4 @@
-"""The sensor-bias refits' statistics and covariance
+"""The block-robust covariance and the sensor-bias refits' statistics and covariance
 (dampest_ros.core.identification.covariance)."""
 
 from __future__ import annotations
@@ -6,16 +6,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dampest_ros.core.identification.batch import FitOptions
+from dampest_ros.core.identification.batch import FitOptions, fit
 from dampest_ros.core.identification.covariance import (
     bias_covariance,
     bias_offsets,
     bias_rows,
     bias_statistics,
     pooled_bias,
+    robust_covariance,
+    settled_block,
 )
 from dampest_ros.core.identification.quadratic import solve_normal
-from dampest_ros.core.identification.regression import accumulate
+from dampest_ros.core.identification.regression import accumulate, block_index, iter_regression
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.physics.vehicle import Vehicle
 from dampest_ros.core.signals.samples import Samples
@@ -121,3 +123,78 @@ def test_a_log_taken_whole_pooled_with_one_cut_to_stretches(vehicle: Vehicle) ->
     for got, want in ((summed.A, sab.A), (summed.base[0], sab.base[0]),
                       (summed.base[1], sab.base[1])):
         np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-10 * np.abs(want).max())
+
+
+def two_segments(vehicle: Vehicle) -> Samples:
+    """Two 40 s flights (2000 samples) as the two segments of one log, the second 0.7 s
+    after the first."""
+    a, b = (x.take(np.arange(2000)) for x in (flight(vehicle, 6), flight(vehicle, 7, 40.7)))
+    b.segment += 1
+    return Samples.concatenate([a, b])
+
+
+def test_blocks_start_with_each_segment_whatever_comes_before(vehicle: Vehicle) -> None:
+    """5 s blocks: 8 per 40 s segment, the second segment's first block starts at its first
+    sample (not on the first segment's grid), and a segment's blocks are the same alone."""
+    samples = two_segments(vehicle)
+    idx = block_index(samples, 5.0)
+    first = samples.segment == 0
+    assert idx.max() == 15 and np.all(idx[~first] >= 8)
+    np.testing.assert_array_equal(idx[~first] - 8,
+                                  block_index(samples.take(np.flatnonzero(~first)), 5.0))
+    # 4, 4.5 and 5.02 s into the second segment (44.7, 45.2, 45.72 s: 8, 9, 9 on the first's
+    # grid)
+    np.testing.assert_array_equal(idx[~first][[200, 225, 251]], [8, 8, 9])
+
+
+def test_the_block_equations_give_each_blocks_score_of_the_residuals(vehicle: Vehicle
+                                                                     ) -> None:
+    """s_b = Σ_i w_i (h_bi − G_bi θ) equals Σ_{n ∈ b} Σ_i w_i Φ_niᵀ (y_ni − Φ_ni θ) formed from
+    the regression rows, with a guard between folds (its rows are in no fold, but in a
+    block), to 1e-9 of the largest score."""
+    samples, model, body = two_segments(vehicle), vehicle.damping, vehicle.body
+    ne = accumulate(samples, model, body, cutoff=2.0, guard=50, block=5.0)
+    assert ne.blocks is not None and ne.blocks.G.shape == (16, 6, 12, 12)
+    theta = 1.1 * vehicle.theta
+    weights = np.array([1.0, 2.0, 0.5, 30.0, 20.0, 40.0])
+    free = np.ones(model.n_params, dtype=bool)
+    free[3] = False
+    idx = block_index(samples, 5.0)
+    want = np.zeros((16, 11))
+    for rows, Phi, y in iter_regression(samples, model, body, cutoff=2.0, decimate=True):
+        g = np.einsum("nip,ni,i->np", Phi[:, :, free], y - Phi @ theta, weights)
+        np.add.at(want, idx[rows], g)
+    got = ne.blocks.scores(theta, weights, free)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.abs(want).max())
+    assert ne.n.sum() < sum(len(r) for r, _, _ in iter_regression(
+        samples, model, body, cutoff=2.0, decimate=True))  # the guard's rows: in no fold
+
+
+def test_blocks_with_the_normal_equations_give_the_passs_covariance(vehicle: Vehicle
+                                                                   ) -> None:
+    """Two segments, 2 s blocks (the floor of a 2 Hz low-pass, so settled whatever the
+    rank): the robust covariance from the blocks formed with the normal equations equals
+    the one whose blocks a pass over the samples forms, to 1e-10; a pass is taken only
+    without them."""
+    samples, model, body = two_segments(vehicle), vehicle.damping, vehicle.body
+    opts = FitOptions(cutoff=2.0, block=2.0)
+    assert settled_block(samples, opts, model.n_params) == 2.0
+    assert settled_block(samples, FitOptions(cutoff=2.0), model.n_params) == 0.0
+    with_blocks = accumulate(samples, model, body, cutoff=2.0, block=2.0)
+    without = accumulate(samples, model, body, cutoff=2.0)
+    theta = fit(samples, model, body, opts, normal=without).theta
+    weights, free = np.ones(6), np.ones(model.n_params, dtype=bool)
+    basis = np.eye(model.n_params)
+    passes: list[int] = []
+
+    def counted(fn):  # type: ignore[no-untyped-def]
+        passes.append(1)
+        return [fn(samples, 0)]
+
+    got = robust_covariance(samples, model, body, theta, weights, with_blocks, free, basis,
+                            opts, map_parts=counted)
+    assert not passes
+    want = robust_covariance(samples, model, body, theta, weights, without, free, basis,
+                             opts, map_parts=counted)
+    assert passes == [1]
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-10 * np.abs(want).max())

@@ -57,12 +57,17 @@ def test_the_pooled_fit_is_the_fit_of_all_samples_at_once(vehicle: Vehicle) -> N
     assert pooled.n == once.n == sum(g.fit.n for g in logs)  # decimated samples
 
 
-def test_the_pooled_covariance_is_formed_log_by_log(vehicle: Vehicle) -> None:
+@pytest.mark.parametrize(("block", "passes"), [(10.0, 2), (2.0, 1)])
+def test_the_pooled_covariance_is_formed_log_by_log(vehicle: Vehicle, block: float,
+                                                    passes: int) -> None:
     """With the sensor-bias budget on and logs longer than three refit stretches (so each log
     is refitted on three stretches of it), the bias refits' statistics are each log's,
-    summed, the robust covariance's pass and the dissipativity check's scan of the samples run
-    log by log through map_logs, once each, and the σ are those of all samples at once."""
-    options = FitOptions(method="wls", cutoff=2.0, bias_stretch=900)
+    summed, the dissipativity check's scan of the samples runs log by log through map_logs,
+    and the σ are those of all samples at once. The robust covariance's blocks come with
+    each log's statistics when their length is settled before the fit (2 s blocks, the
+    floor); 10 s blocks are shortened for 60 s logs by the rank, so the covariance takes a
+    pass of its own."""
+    options = FitOptions(method="wls", cutoff=2.0, bias_stretch=900, block=block)
     logs = [log_statistics(f"log{k}", noisy_log(vehicle, k, start=100.0 * k),
                            vehicle.damping, vehicle.body, options) for k in range(4)]
     visits: list[int] = []
@@ -77,9 +82,11 @@ def test_the_pooled_covariance_is_formed_log_by_log(vehicle: Vehicle) -> None:
     assert all(g.bias is not None and g.bias.base is not None for g in logs)
     np.testing.assert_allclose(pooled.theta, once.theta, rtol=1e-10, atol=0)
     np.testing.assert_allclose(pooled.std, once.std, rtol=1e-10, atol=0)
-    assert visits == [0, 1, 2, 3] * 2  # the robust pass, the dissipativity scan
+    assert visits == [0, 1, 2, 3] * passes  # the robust pass, if any; the dissipativity scan
+    assert all((g.normal.blocks is not None) == (passes == 1) for g in logs)
     without = fit(pooled_samples(logs), vehicle.damping, vehicle.body,
-                  FitOptions(method="wls", cutoff=2.0, gyro_bias=0.0, dvl_bias=0.0))
+                  FitOptions(method="wls", cutoff=2.0, gyro_bias=0.0, dvl_bias=0.0,
+                             block=block))
     assert np.all(once.std >= without.std) and np.any(once.std > 1.01 * without.std)
 
 
