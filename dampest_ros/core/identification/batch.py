@@ -27,13 +27,13 @@ from dampest_ros.core.identification.covariance import (
     block_length,
     covariance,
     settled_block,
-    whole,
 )
 from dampest_ros.core.identification.dissipative import (
     Violations,
     dissipation_points,
     impose,
     misfit_report,
+    scan,
     violations,
 )
 from dampest_ros.core.identification.model import Model
@@ -595,7 +595,8 @@ def _dissipative(problem: _Problem, model: DampingModel, samples: Samples, theta
                  ) -> tuple[FloatArray, dict[str, str], FloatArray]:
     """With ``dissipative``, impose νᵀD(ν)ν ≥ 0 where ``theta`` violates it, on every sample
     and over the flown envelope (:func:`impose`); the samples are scanned part by part where
-    ``map_parts`` holds them (default: here, at once).
+    ``map_parts`` holds them (default: here, at once, with their power rows and the grid's
+    formed once for every round).
 
     Returns
     -------
@@ -611,11 +612,12 @@ def _dissipative(problem: _Problem, model: DampingModel, samples: Samples, theta
     if not (problem.opts.dissipative and model.n_params):
         return theta, constrained, power
 
+    scan_data = (scan(model, samples.nu, chunk) if map_parts is None
+                 else partial(_scan_parts, map_parts=map_parts, model=model, chunk=chunk))
+
     def points(th: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
-        parts = (map_parts or whole(samples))(partial(_part_violations, model=model, theta=th,
-                                                      chunk=chunk))
-        on_data = (np.concatenate([v[0] for v in parts]), np.concatenate([v[1] for v in parts]))
-        return dissipation_points(model, th, samples.nu, chunk=chunk, on_data=on_data)
+        # the grid over the envelope of the samples is kept for the next round
+        return dissipation_points(model, th, samples.nu, samples.nu, chunk, scan_data(th))
 
     pts, on_data = points(theta)
     if len(pts):
@@ -623,6 +625,13 @@ def _dissipative(problem: _Problem, model: DampingModel, samples: Samples, theta
         theta, power = impose(theta, pts, model, lambda E: problem.solve(w, free, T, power=E),
                               lambda th: points(th)[0])
     return theta, constrained, power
+
+
+def _scan_parts(theta: FloatArray, map_parts: MapParts, model: DampingModel, chunk: int
+                ) -> Violations:
+    """:func:`violations` of the samples, part by part where ``map_parts`` holds them."""
+    parts = map_parts(partial(_part_violations, model=model, theta=theta, chunk=chunk))
+    return np.concatenate([v[0] for v in parts]), np.concatenate([v[1] for v in parts])
 
 
 def _part_violations(part: Samples, first: int, model: DampingModel, theta: FloatArray,

@@ -13,6 +13,7 @@ forgetting factor of 1 is the same problem. Both check every point of a grid ove
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from functools import partial
 from statistics import NormalDist
 
 import numpy as np
@@ -105,7 +106,14 @@ def dissipation_points(model: DampingModel, theta: FloatArray, data: FloatArray,
 def violations(model: DampingModel, theta: FloatArray, nu: FloatArray, chunk: int = CHUNK
                ) -> Violations:
     """The rows of ``nu``, shape (N, 6), where ``theta`` generates energy, in their order."""
-    return _violating(_chunk_rows(model, nu, chunk), theta)
+    return scan(model, nu, chunk)(theta)
+
+
+def scan(model: DampingModel, nu: FloatArray, chunk: int = CHUNK
+         ) -> Callable[[FloatArray], Violations]:
+    """:func:`violations` of the rows of ``nu``, shape (N, 6), at any θ, their power rows
+    g(ν) formed once: the rounds of :func:`impose` scan the same velocities."""
+    return partial(_violating, _chunk_rows(model, nu, chunk))
 
 
 def _violating(rows: list[tuple[FloatArray, FloatArray]], theta: FloatArray) -> Violations:
