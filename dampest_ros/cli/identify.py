@@ -420,7 +420,7 @@ def element_drag_table(selection: Selection | None) -> str:
                   for k, (n, e, se) in enumerate(found.path)])
     r2 = table(("dof", "held-out R² base", "with element drags"),
                [(FORCE_NAMES[i], f"{before[i]:.4f}", f"{after[i]:.4f}") for i in range(6)])
-    return (f"element drags (the drag of an element, or a slender element's lift, on its own "
+    return (f"element drags (the drag of an element, or its lift, on its own "
             f"velocity v + ω × r at a point of the body; {len(found.chosen)} kept, "
             f"{found.steps} of the path's {len(found.path) - 1} steps (a mirror pair, ± y, "
             "may enter as one), "

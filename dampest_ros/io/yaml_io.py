@@ -258,7 +258,8 @@ def _terms_params(spec: Mapping[str, Any]) -> dict[str, Any]:
         out["added"] = True
     if spec.get("point"):
         p = spec["point"]
-        # a drag's axis and speed; a lift's axis and "lift"; a Magnus force's −1 and "magnus"
+        # a drag's axis and speed; an area drag's or lift's axis and "area" or "lift"; a Magnus
+        # force's −1 and "magnus"
         out["point"] = {"positions": [float(x) for e in p for x in e["position"]],
                         "axes": [DOF_NAMES.index(e["axis"]) if "axis" in e else -1 for e in p],
                         "speeds": [e["speed"] if "speed" in e else e["force"] for e in p]}

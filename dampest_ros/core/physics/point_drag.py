@@ -7,6 +7,8 @@ body axis a (unit vector e_a) is a force at r_p,
 
     F_p = −c ‖v_p‖ v_p,a e_a       (``speed`` ``|U|``: drag on the element's speed)
     F_p = −c |v_p,a| v_p,a e_a     (``speed`` ``|a|``: a strip's normal drag on its normal speed)
+    F_p = −c |v_p,a| v_p           (``area``: a flat element's drag along its own velocity on
+                                    the area it shows the flow, normal e_a)
 
 with v_p,a = e_aᵀ v_p = wᵀν, w = [e_a; r_p × e_a] (6,), and it acts on the body as the wrench
 w (force e_a at r_p: force along a, moment r_p × e_a): D(ν)ν = c α(ν) w wᵀ ν, α = ‖v_p‖ or
@@ -15,8 +17,14 @@ two moments its lever arm gives, consistently. Its power νᵀD(ν)ν = c α (w�
 is ≥ 0 for c ≥ 0: a non-negative coefficient is dissipative (its basis w wᵀ is positive
 semi-definite, :meth:`DampingTerm.project` clips it at 0).
 
-The ``point`` term's elements (:class:`PointSpec`) are of three forces: ``drag`` (this
-module), ``lift`` and ``magnus`` (:mod:`.point_lift`: across v_p, doing no work).
+A flat element (a plate, a wing, a fin with normal e_a) shows a flow v_p the area A |cos β|,
+β the angle between v_p and its normal: its pressure drag along v_p is c ‖v_p‖ v_p |cos β| =
+c |v_p,a| v_p, on the body D(ν)ν = c |wᵀν| PᵀP ν (P = [I, −[r_p]×], v_p = P ν), power
+c |v_p,a| ‖v_p‖² ≥ 0 for c ≥ 0 (PᵀP is positive semi-definite). Neither drag along a body
+axis has that form: it acts along v_p with a size set by the normal speed.
+
+The ``point`` term's elements (:class:`PointSpec`) are of four forces: ``drag`` and ``area``
+(this module), ``lift`` and ``magnus`` (:mod:`.point_lift`: across v_p, doing no work).
 
 Candidate points (:func:`candidate_points`): the positions of the vehicle file's geoms that are
 off the origin (the shapes MuJoCo's fluid model applies its drag at); without a geometry, a small
@@ -37,15 +45,16 @@ from numpy.typing import NDArray
 from dampest_ros.core.physics.alpha import Alpha, dof_index
 from dampest_ros.core.physics.damping import Basis, DampingTerm
 from dampest_ros.core.physics.geometry import Geometry
-from dampest_ros.core.physics.point_lift import lift_basis, magnus_basis
+from dampest_ros.core.physics.point_lift import lift_basis, magnus_basis, transport
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError
 
 FloatArray = NDArray[np.float64]
 
 #: The speeds an element's drag may go with: its speed ‖v_p‖ or its normal speed |v_p,a|.
 SPEEDS = ("|U|", "normal")
-#: The forces of an element: drag, lift at an angle of attack, Magnus force (:mod:`.point_lift`).
-FORCES = ("drag", "lift", "magnus")
+#: The forces of an element: drag, a flat element's drag on its projected area, lift at an
+#: angle of attack, Magnus force (:mod:`.point_lift`).
+FORCES = ("drag", "area", "lift", "magnus")
 
 
 @dataclass(frozen=True)
@@ -58,13 +67,13 @@ class PointSpec:
     position : tuple of 3 float
         r_p in the body frame (m, FRD).
     axis : int
-        0, 1, 2: a drag's force along x, y or z (velocity letters u, v, w), a lift's element
-        axis e; −1 for a Magnus force (it has none).
+        0, 1, 2: a drag's force along x, y or z (velocity letters u, v, w), a flat element's
+        normal (``area``), a lift's element axis e; −1 for a Magnus force (it has none).
     speed : str
         A drag's ``|U|`` (‖v_p‖) or ``normal`` (|v_p,a|), :data:`SPEEDS`; ``|U|`` for the
         other forces.
     force : str
-        ``drag``, ``lift`` or ``magnus``, :data:`FORCES`.
+        ``drag``, ``area``, ``lift`` or ``magnus``, :data:`FORCES`.
     """
 
     position: tuple[float, float, float]
@@ -76,13 +85,14 @@ class PointSpec:
     def label(self) -> str:
         """The parameter name, e.g. ``drag.w|U|@(0.3,0,0.2)``: drag along w on the element's
         speed at the point (0.3, 0, 0.2) m (``drag.ww@…``: on its normal speed |w_p|);
+        ``area.w@…``: the drag of a flat element with normal w on its projected area;
         ``lift.w@…``: the lift of an element along w; ``magnus@…``: the Magnus force."""
         where = ",".join(f"{x:.12g}" for x in self.position)
         if self.force == "magnus":
             return f"magnus@({where})"
         a = DOF_NAMES[self.axis]
-        if self.force == "lift":
-            return f"lift.{a}@({where})"
+        if self.force in ("area", "lift"):
+            return f"{self.force}.{a}@({where})"
         return f"drag.{a}{'|U|' if self.speed == '|U|' else a}@({where})"
 
     @property
@@ -99,13 +109,17 @@ class PointSpec:
         return PointSpec((x, -y + 0.0, z), self.axis, self.speed, self.force)
 
     def basis(self) -> Basis:
-        """The parameter's basis: a drag's B = w wᵀ with α = ‖v_p‖ or |wᵀν| (module
-        docstring), a lift's or Magnus force's atoms (:mod:`.point_lift`)."""
+        """The parameter's basis: a drag's B = w wᵀ with α = ‖v_p‖ or |wᵀν|, a flat
+        element's B = PᵀP with α = |wᵀν| (module docstring), a lift's or Magnus force's atoms
+        (:mod:`.point_lift`)."""
         if self.force == "lift":
             return lift_basis(self.label, self.position, self.axis)
         if self.force == "magnus":
             return magnus_basis(self.label, self.position)
         w = self.wrench
+        if self.force == "area":
+            P = transport(self.position)
+            return Basis(self.label, P.T @ P, Alpha("absproj", w=tuple(map(float, w))))
         alpha = (Alpha("pspeed", w=tuple(map(float, self.position))) if self.speed == "|U|"
                  else Alpha("absproj", w=tuple(map(float, w))))
         return Basis(self.label, np.outer(w, w), alpha)
@@ -113,14 +127,15 @@ class PointSpec:
     @classmethod
     def from_dict(cls, d: Any, where: str = "point") -> PointSpec:
         """From ``{position: [x, y, z], axis: w, speed: '|U|'}`` (a drag, speed optional),
-        ``{position: [x, y, z], force: lift, axis: w}`` or ``{position: [x, y, z], force:
-        magnus}``."""
+        ``{position: [x, y, z], force: area (or lift), axis: w}`` or ``{position: [x, y, z],
+        force: magnus}``."""
         force = str(d.get("force", "drag")) if isinstance(d, dict) else ""
         if force not in FORCES or "position" not in d or ("axis" not in d
                                                           and force != "magnus"):
             raise ConfigError(where, "each element is {position: [x, y, z] (m), axis: u, v "
                                      "or w, speed: '|U|' or normal} (a drag), {position, "
-                                     "force: lift, axis} or {position, force: magnus}")
+                                     "force: area or lift, axis} or {position, force: "
+                                     "magnus}")
         pos = np.asarray(d["position"], dtype=float)
         if pos.shape != (3,) or not np.all(np.isfinite(pos)):
             raise ConfigError(f"{where}.position", f"three finite numbers (m), got {d['position']}")
@@ -130,7 +145,7 @@ class PointSpec:
         axis = dof_index(d["axis"], f"{where}.axis")
         if axis > 2:
             raise ConfigError(f"{where}.axis", f"{d['axis']!r}: the {force} is along u, v or w")
-        if force == "lift":
+        if force in ("area", "lift"):
             return cls(position, axis, force=force)
         speed = str(d.get("speed", "|U|"))
         if speed not in SPEEDS:
@@ -141,7 +156,7 @@ class PointSpec:
         """The mapping :meth:`from_dict` reads."""
         if self.force == "magnus":
             return {"position": list(self.position), "force": self.force}
-        if self.force == "lift":
+        if self.force in ("area", "lift"):
             return {"position": list(self.position), "force": self.force,
                     "axis": DOF_NAMES[self.axis]}
         return {"position": list(self.position), "axis": DOF_NAMES[self.axis],
@@ -153,19 +168,20 @@ def point_spec(basis: Basis) -> PointSpec:
     found = _LABEL.fullmatch(basis.name)
     if found is None:
         raise ConfigError("point", f"{basis.name!r} is not an element force name "
-                                   "(drag.<axis><speed>@(x,y,z), lift.<axis>@(x,y,z) or "
-                                   "magnus@(x,y,z))")
-    axis, speed, lift, where = found.groups()
+                                   "(drag.<axis><speed>@(x,y,z), area.<axis>@(x,y,z), "
+                                   "lift.<axis>@(x,y,z) or magnus@(x,y,z))")
+    axis, speed, force, normal, where = found.groups()
     x, y, z = (float(v) for v in where.split(","))
-    if lift is not None:
-        return PointSpec((x, y, z), DOF_NAMES.index(lift), force="lift")
+    if force is not None:
+        return PointSpec((x, y, z), DOF_NAMES.index(normal), force=force)
     if axis is None:
         return PointSpec((x, y, z), -1, force="magnus")
     return PointSpec((x, y, z), DOF_NAMES.index(axis), "|U|" if speed == "|U|" else "normal")
 
 
 #: The parameter names of :attr:`PointSpec.label`.
-_LABEL = re.compile(r"(?:drag\.([uvw])(\|U\||[uvw])|lift\.([uvw])|magnus)@\(([^)]*)\)")
+_LABEL = re.compile(
+    r"(?:drag\.([uvw])(\|U\||[uvw])|(area|lift)\.([uvw])|magnus)@\(([^)]*)\)")
 
 
 def point_term(specs: Sequence[PointSpec]) -> DampingTerm:
@@ -218,11 +234,14 @@ def mirror_pairs(specs: Sequence[PointSpec]) -> list[tuple[int, int]]:
 
 
 def point_library(points: Sequence[Sequence[float]],
-                  lifts: Sequence[tuple[tuple[float, float, float], int]] = ()
+                  lifts: Sequence[tuple[tuple[float, float, float], int, bool]] = ()
                   ) -> list[PointSpec]:
     """The candidate element forces: per point of ``points``, the drags along u, v, w on the
     element's speed and then on its normal speed (6 per point); then the lifts ``lifts``
-    (position and element axis, :func:`~.point_lift.candidate_lifts`)."""
+    (position, element axis and whether the element is flat,
+    :func:`~.point_lift.candidate_lifts`), each flat element's followed by its drag on its
+    projected area."""
     where = [(float(p[0]), float(p[1]), float(p[2])) for p in points]
     return [*(PointSpec(p, a, s) for s in SPEEDS for p in where for a in range(3)),
-            *(PointSpec(p, a, force="lift") for p, a in lifts)]
+            *(PointSpec(p, a, force=f) for p, a, flat in lifts
+              for f in (("lift", "area") if flat else ("lift",)))]

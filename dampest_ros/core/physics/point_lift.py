@@ -37,13 +37,15 @@ NSD, and sum to a power of zero, the Magnus ones are skew).
 they are, and the dissipativity constraint (:mod:`dampest_ros.core.identification.dissipative`)
 sees zero power rows for them: neither can make a model generate energy.
 
-Candidates (:func:`candidate_lifts`): the slender elements of the geometry (a float, a strut,
-a bottle: semi-axes a ≤ b ≤ c with c/b > b/a) lift about their long axis, turned into the body
-frame by the geom's orientation and taken as the body axis nearest to it. A flat element (a
-plate, a foam block: b/a ≥ c/b) is not offered one: its force at any angle of attack is along
-its normal, lift and drag together, which its drag on its normal speed (``drag.ww``,
-:mod:`.point_drag`) already is; a sphere turns no flow. Without a geometry no lift is
-offered: lift needs a shape.
+Candidates (:func:`candidate_lifts`): the elements of the geometry lift about an axis turned
+into the body frame by the geom's orientation and taken as the body axis nearest to it: a
+slender element (a float, a strut, a bottle: semi-axes a ≤ b ≤ c with c/b > b/a) about its
+long axis, a flat one (a wing, a fin, a plate: b/a ≥ c/b) about its normal (the plate's
+circulation is across the flow and its normal, so its lift has the same form with e its
+normal: MuJoCo's Kutta lift of a thin ellipsoid, semi-axes r_1, r_2 in its plane, is this force
+with c = C_K ρ π r_1 r_2, up to the flow within a few degrees of its plane). A flat element
+also drags on the area it shows the flow (``area``, :mod:`.point_drag`). A sphere turns no
+flow. Without a geometry no lift is offered: lift needs a shape.
 """
 
 from __future__ import annotations
@@ -89,10 +91,11 @@ def magnus_basis(name: str, position: tuple[float, float, float]) -> Basis:
     return Basis(name, atoms[0][0], atoms[0][1], tuple(atoms[1:]))
 
 
-def candidate_lifts(geometry: Geometry | None) -> list[tuple[tuple[float, float, float], int]]:
+def candidate_lifts(geometry: Geometry | None
+                    ) -> list[tuple[tuple[float, float, float], int, bool]]:
     """The lifts the elements of the vehicle's geometry may have (module docstring): per
-    slender geom off the origin, its position and the body axis nearest its long axis, in file
-    order.
+    geom off the origin but a sphere, its position, the body axis nearest its long axis (a
+    slender geom) or its normal (a flat one) and whether it is flat, in file order.
 
     Parameters
     ----------
@@ -101,19 +104,21 @@ def candidate_lifts(geometry: Geometry | None) -> list[tuple[tuple[float, float,
 
     Returns
     -------
-    list of (tuple of 3 float, int)
-        Position (m, FRD) and axis (0, 1, 2: u, v, w).
+    list of (tuple of 3 float, int, bool)
+        Position (m, FRD), axis (0, 1, 2: u, v, w) and flat.
     """
-    out: list[tuple[tuple[float, float, float], int]] = []
+    out: list[tuple[tuple[float, float, float], int, bool]] = []
     for g in geometry.geoms if geometry is not None else ():
         a, b, c = sorted(g.size)
         where = (float(g.position[0]), float(g.position[1]), float(g.position[2]))
-        # slender: c/b > b/a
-        if not np.linalg.norm(where) > 0 or not c * a > b * b:
+        if not np.linalg.norm(where) > 0 or a == c:
             continue
-        # the long axis in the body frame: the geom's rotation of its own axis
-        long = matrix_from_euler(np.asarray(g.rpy))[:, int(np.argmax(g.size))]
-        axis = int(np.argmax(np.abs(long)))
-        if (where, axis) not in out:
-            out.append((where, axis))
+        # slender (c/b > b/a): its long axis; flat: its normal, the shortest; in the body
+        # frame: the geom's rotation of its own axis
+        flat = not c * a > b * b
+        own = matrix_from_euler(np.asarray(g.rpy))[:, int(np.argmin(g.size) if flat
+                                                          else np.argmax(g.size))]
+        lift = (where, int(np.argmax(np.abs(own))), flat)
+        if lift not in out:
+            out.append(lift)
     return out

@@ -101,3 +101,27 @@ def test_mirror_pairs_are_the_twins_across_the_xz_plane() -> None:
         ("drag.u|U|@(0.1,0.2,0)", "drag.u|U|@(0.1,-0.2,0)"),
         ("drag.v|U|@(0.1,0.2,0)", "drag.v|U|@(0.1,-0.2,0)")]
     assert len(pairs) == 6
+
+
+def test_a_flat_elements_area_drag_is_along_its_velocity_on_its_normal_speed() -> None:
+    """area.w at (0.05, 0.4, −0.02) m, c = 60 N s²/m²: the force c |v_p,w| v_p along the
+    element's own velocity and its moment r × F (to 1e-12), power c |v_p,w| ‖v_p‖² ≥ 0, a
+    negative coefficient clipped at 0; surging edge-on it has no drag, at 45° in the xz plane
+    (u = w = 0.5 m/s) it is 60 · 0.5 · (0.5, 0, 0.5) = (15, 0, 15) N."""
+    rng = np.random.default_rng(11)
+    spec = PointSpec((0.05, 0.4, -0.02), 2, force="area")
+    model = DampingModel([point_term([spec])])
+    nu = rng.normal(size=(300, 6)) * np.array([0.5, 0.4, 0.3, 0.6, 0.5, 0.4])
+    r = np.array(spec.position)
+    vp = nu[:, :3] + np.cross(nu[:, 3:], r)
+    F = 60.0 * np.abs(vp[:, 2:]) * vp
+    np.testing.assert_allclose(model.force(nu, np.array([60.0])), np.c_[F, np.cross(r, F)],
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(model.dissipation(nu, np.array([60.0])),
+                               60.0 * np.abs(vp[:, 2]) * (vp ** 2).sum(1), rtol=1e-12)
+    assert model.terms[0].project(np.array([-60.0]))[0] == 0.0
+    f = model.force(np.array([[1.0, 0, 0, 0, 0, 0], [0.5, 0, 0.5, 0, 0, 0]]), np.array([60.0]))
+    np.testing.assert_allclose(f[:, :3], [[0.0, 0.0, 0.0], [15.0, 0.0, 15.0]], atol=1e-12)
+    assert spec.label == "area.w@(0.05,0.4,-0.02)"
+    assert point_spec(spec.basis()) == spec and PointSpec.from_dict(spec.to_dict()) == spec
+    assert spec.mirror.mirror == spec and spec.mirror.force == "area"

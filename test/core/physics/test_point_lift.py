@@ -8,7 +8,7 @@ import numpy as np
 
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.geometry import Geometry
-from dampest_ros.core.physics.point_drag import PointSpec, point_spec, point_term
+from dampest_ros.core.physics.point_drag import PointSpec, point_library, point_spec, point_term
 from dampest_ros.core.physics.point_lift import candidate_lifts
 
 
@@ -65,18 +65,60 @@ def test_names_and_model_file_entries_read_back() -> None:
                                         "magnus@(0.55,-0.15,0.12)"]
 
 
-def test_candidate_lifts_are_the_slender_geoms_along_their_long_axis() -> None:
+def mujoco_kutta(vp: np.ndarray, size: np.ndarray, rho: float = 1000.0) -> np.ndarray:
+    """MuJoCo's Kutta lift of an ellipsoid with semi-axes ``size`` along the body axes at
+    velocity ``vp`` (N, 3), written out from its documentation (computation/fluid.rst):
+    f = C_K ρ A_proj (v̂·n̂) (n̂ × v) × v, n = (r_y r_z / r_x v_x, r_z r_x / r_y v_y,
+    r_x r_y / r_z v_z), C_K = 1, A_proj = π √(Σ (r_j r_k)⁴ v_i² / Σ (r_j r_k)² v_i²)."""
+    rx, ry, rz = size
+    pair = np.array([ry * rz, rz * rx, rx * ry])
+    area = np.pi * np.sqrt((pair ** 4 * vp ** 2).sum(1) / (pair ** 2 * vp ** 2).sum(1))
+    n = vp * np.array([ry * rz / rx, rz * rx / ry, rx * ry / rz])
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    cos = (n * vp).sum(1) / np.linalg.norm(vp, axis=1)
+    return (rho * area * cos)[:, None] * np.cross(np.cross(n, vp), vp)
+
+
+def test_a_thin_plates_lift_along_its_normal_is_mujocos_kutta_lift() -> None:
+    """A wing (semi-axes 0.13, 0.3, 0.012 m) at (0.05, 0.4, −0.02) m in MuJoCo's fluid model:
+    its Kutta lift (the force on the body, −D(ν)ν) is the lift along its normal w with
+    c = ρ π r_x r_y = 122.5 N s²/m² (fitted: 122.9, the rest 0.8 % of its size) on flows at
+    least 20° off the wing's plane (closer, MuJoCo's normal turns towards the flow)."""
+    rng = np.random.default_rng(3)
+    spec = PointSpec((0.05, 0.4, -0.02), 2, force="lift")
+    nu = rng.normal(size=(4000, 6)) * np.array([0.6, 0.4, 0.3, 0.4, 0.3, 0.3])
+    vp = nu[:, :3] + np.cross(nu[:, 3:], np.array(spec.position))
+    nu = nu[np.abs(vp[:, 2]) > np.sin(np.radians(20.0)) * np.linalg.norm(vp, axis=1)]
+    vp = nu[:, :3] + np.cross(nu[:, 3:], np.array(spec.position))
+    f = mujoco_kutta(vp, np.array([0.13, 0.3, 0.012]))
+    truth = -np.c_[f, np.cross(np.array(spec.position), f)]
+    column = DampingModel([point_term([spec])]).regressor(nu)[:, :, 0]
+    c = float((column * truth).sum() / (column * column).sum())
+    assert abs(c / (1000.0 * np.pi * 0.13 * 0.3) - 1.0) < 0.005, c
+    assert np.linalg.norm(truth - c * column) < 0.01 * np.linalg.norm(truth)
+
+
+def test_candidate_lifts_are_slender_geoms_along_their_long_axis_flat_ones_their_normal(
+        ) -> None:
     """frame_rov's shapes: a vertical float lifts along w, a bottle along u, a camera arm
-    pitched 0.3 rad along u (its long axis nearest); a flat foam block, a sphere and a geom
-    at the origin are not offered."""
+    pitched 0.3 rad along u (its long axis nearest); a flat foam block along its normal w and
+    a wing rolled 0.1 rad along its normal nearest, w, both flat; a sphere and a geom at the
+    origin are not offered."""
     geometry = Geometry.from_dict({"geoms": [
         {"name": "float", "size": [0.08, 0.08, 0.2], "position": [0.42, -0.32, -0.08]},
         {"name": "bottle", "size": [0.3, 0.09, 0.09], "position": [0.0, 0.0, -0.05]},
         {"name": "arm", "size": [0.1, 0.035, 0.035], "position": [0.55, -0.15, 0.12],
          "rpy": [0.0, 0.3, 0.0]},
         {"name": "foam", "size": [0.45, 0.35, 0.06], "position": [0.0, 0.0, -0.22]},
+        {"name": "wing", "size": [0.13, 0.3, 0.012], "position": [0.05, 0.4, -0.02],
+         "rpy": [0.1, 0.0, 0.0]},
         {"name": "ball", "size": [0.1, 0.1, 0.1], "position": [0.3, 0.0, 0.0]},
         {"name": "hull", "size": [0.8, 0.1, 0.1]}]})
-    assert candidate_lifts(geometry) == [((0.42, -0.32, -0.08), 2), ((0.0, 0.0, -0.05), 0),
-                                         ((0.55, -0.15, 0.12), 0)]
+    assert candidate_lifts(geometry) == [
+        ((0.42, -0.32, -0.08), 2, False), ((0.0, 0.0, -0.05), 0, False),
+        ((0.55, -0.15, 0.12), 0, False), ((0.0, 0.0, -0.22), 2, True),
+        ((0.05, 0.4, -0.02), 2, True)]
+    assert [s.label for s in point_library([], candidate_lifts(geometry))[-4:]] == [
+        "lift.w@(0,0,-0.22)", "area.w@(0,0,-0.22)", "lift.w@(0.05,0.4,-0.02)",
+        "area.w@(0.05,0.4,-0.02)"]
     assert candidate_lifts(None) == []
