@@ -126,7 +126,7 @@ def identify_coverage(bag: Path, vehicle: str) -> Coverage:
 
 
 @pytest.mark.parametrize("vehicle", ["torpedo_auv", "bluerov2_heavy_mujoco", "box_rov",
-                                     "sled_auv", "frame_rov", "winged_auv"])
+                                     "sled_auv", "frame_rov", "winged_auv", "tooled_rov"])
 def test_documented_pure_axis_drag_is_mujocos(vehicle: str) -> None:
     """MuJoCo's wrench along each axis is a s + b s|s| to 1e-9, and along u, v, w its a and b
     are the documented ellipsoid formulas (pure_axis_truth asserts both); e.g. the torpedo's

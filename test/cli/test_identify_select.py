@@ -252,9 +252,19 @@ WINGED_AUV_S3_OPEN = pytest.mark.xfail(strict=True, reason=(
     "rounded to the body axis, leave part of it"))
 
 
+#: tooled_rov (made after the flat elements' forces, identified by nobody before this test's
+#: first run) misses in roll and pitch on seeds 2 and 3 (README, "untuned geometries").
+TOOLED_ROV_OPEN = pytest.mark.xfail(strict=True, reason=(
+    "tooled_rov seeds 2-3: held-out pitch .9931-.9948 and roll .9946-.9960, realistic and "
+    "noiseless (seed 1 >= .9961); not yet explained (a candidate cause, not checked: its "
+    "boom, manipulator housing and canister are rotated about three axes, which the element "
+    "forces round to the nearest body axis)"))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3])
-@pytest.mark.parametrize("vehicle", ["box_rov", "sled_auv", "frame_rov", "winged_auv"])
+@pytest.mark.parametrize("vehicle", ["box_rov", "sled_auv", "frame_rov", "winged_auv",
+                                     "tooled_rov"])
 def test_default_identify_on_a_geometry_nobody_tuned_on(vehicle: str, seed: int,
                                                         tmp_path: Path,
                                                         request: pytest.FixtureRequest) -> None:
@@ -273,9 +283,15 @@ def test_default_identify_on_a_geometry_nobody_tuned_on(vehicle: str, seed: int,
     winged_auv, a hover AUV with two thin wings, added after the element lift: ≥ .9962 on
     seeds 1–2 and seed 3 noiseless (surge .9889–.9929, yaw .9937–.9957 before flat elements
     were offered their lift along the normal and their drag on the projected area); seed 3
-    with realistic noise is open (``WINGED_AUV_S3_OPEN``)."""
+    with realistic noise is open (``WINGED_AUV_S3_OPEN``).
+    tooled_rov, an inspection ROV with no plane of symmetry (a boom, a canister and a
+    manipulator housing rotated about three axes), made after the flat elements' forces and
+    never identified before: ≥ .9961 on seed 1 (pitch); seeds 2–3 open (``TOOLED_ROV_OPEN``;
+    on the tree before the flat elements' forces pitch was .9840–.9957)."""
     if (vehicle, seed) == ("winged_auv", 3):
         request.applymarker(WINGED_AUV_S3_OPEN)
+    if vehicle == "tooled_rov" and seed > 1:
+        request.applymarker(TOOLED_ROV_OPEN)
     for clean in (False, True):
         (tmp_path / str(clean)).mkdir()
         r2 = select_heldout(tmp_path / str(clean), vehicle, seed, clean, options=())[1.0][1]
