@@ -111,10 +111,9 @@ def pooled_normal(normals: Sequence[NormalEquations]) -> NormalEquations:
     if len(shapes) != 1:
         raise ConfigError("logs", f"statistics of different shapes {sorted(shapes)}: the "
                                   "logs were reduced with different models")
-    blocks = [n.blocks for n in normals]
-    joined = (BlockEquations.join([x for x in blocks if x is not None])
-              if all(x is not None for x in blocks)
-              and len({x.length for x in blocks if x is not None}) == 1 else None)
+    blocks = [n.blocks for n in normals if n.blocks is not None]
+    joined = (BlockEquations.join(blocks) if len(blocks) == len(normals)
+              and len({x.length for x in blocks}) == 1 else None)
     return NormalEquations(sum((n.A for n in normals), np.zeros_like(normals[0].A)),
                            sum((n.b for n in normals), np.zeros_like(normals[0].b)),
                            sum((n.c for n in normals), np.zeros_like(normals[0].c)),

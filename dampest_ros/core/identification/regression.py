@@ -247,11 +247,12 @@ def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: in
     block_of = block_index(samples, block) if block > 0 else np.zeros(N, dtype=np.int64)
     B = int(block_of.max(initial=-1)) + 1 if block > 0 else 0
     G, h = np.zeros((B, 6, p, p)), np.zeros((B, 6, p))
+    width = max(B, 1)  # cells per fold
     for sl, Phi, y in iter_regression(samples, model, body, chunk, cutoff, decimate=True):
         # a cell: the rows of one fold (−1: a guard) and one block
-        cell = (fold_of[sl] + 1) * max(B, 1) + block_of[sl]
+        cell = (fold_of[sl] + 1) * width + block_of[sl]
         for key in np.unique(cell):
-            f, k = divmod(int(key), max(B, 1))
+            f, k = divmod(int(key), width)
             if f == 0 and not B:  # a guard, and no blocks asked for
                 continue
             m = cell == key
