@@ -28,6 +28,7 @@ from dampest_ros.cli.pool import (
     log_table,
     plot_drift,
     reduce_all,
+    samples_of,
 )
 from dampest_ros.core.identification.batch import Fit, FitOptions
 from dampest_ros.core.identification.misfit import (
@@ -39,8 +40,8 @@ from dampest_ros.core.identification.pool import (
     LogStatistics,
     consistency,
     drift,
+    pooled_extent,
     pooled_fit,
-    pooled_samples,
 )
 from dampest_ros.core.identification.selection import (
     MIN_ERR,
@@ -210,18 +211,20 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
     prior, prior_std = prior_of(model, nominal, prior_spec(args, vehicle))
     with reduce_all(paths, args, prior, prior_std) as (logs, failed, map_logs):
         failed.update(inconsistent_logs(logs, args.keep_all))
-        samples = pooled_samples(logs)
+        extent = pooled_extent(logs, map_logs)
         options = FitOptions(method=args.method, cutoff=args.cutoff,
-                             speed_range=tuple(speed_limits(vehicle, tau_measured=samples.tau)))
-        result = pooled_fit(logs, model, vehicle.body, options, prior, prior_std, map_logs,
-                            samples)
+                             speed_range=tuple(speed_limits(vehicle, force=extent.force)))
+        result = pooled_fit(logs, model, vehicle.body, options, map_logs, prior, prior_std,
+                            extent)
+        # the samples come here for the report only
+        samples = Samples.concatenate(map_logs(samples_of)) if args.report else None
     if not (args.structure or args.terms or args.no_select):
         print(f"note: the logs are pooled on {vehicle.name}'s preset terms: the default's "
               "search for terms the preset misses runs on one log (dampest identify LOG "
               "--out one.yaml), then pool with --structure one.yaml; --no-select says the "
               "preset is meant", file=sys.stderr)
-    print(f"{len(logs)} logs pooled ({len(failed)} left out): {len(samples)} samples "
-          f"({len(samples) / samples.rate:.0f} s), {result.method}, condition number "
+    print(f"{len(logs)} logs pooled ({len(failed)} left out): {extent.n} samples "
+          f"({extent.duration:.0f} s), {result.method}, condition number "
           f"{result.cond:.3g}, {time.perf_counter() - t0:.1f} s")
     print(report_table(result, prior))
     print()
@@ -249,9 +252,9 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
             print(f"wrote {args.drift_plot}")
     if args.out:
         write_model(Path(args.out), result, model, vehicle, source=", ".join(paths),
-                    flown=samples.nu, more=more)
+                    flown=extent.flown, more=more)
         print(f"wrote {args.out}")
-    if args.report:
+    if samples is not None:
         from dampest_ros.report.identify import write_report  # matplotlib: only for a report
         page = write_report(args.report, samples, model, vehicle.body, result, prior=prior,
                             title=f"Damping of {vehicle.name}, {len(logs)} logs pooled",

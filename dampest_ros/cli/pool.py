@@ -2,11 +2,11 @@
 drift of the damping between the logs (the maths: dampest_ros/core/identification/pool.py).
 
 Workers read the logs themselves (paths as the workers see them), so nothing but the logs'
-preprocessed samples and statistics travels, once: each log stays on the worker that reduced
-it until the pooled fit's passes over the samples have run there; a log named by URL is copied
-to the worker that reads it (dampest_ros/io/remote.py). By default a LocalCluster of --workers
-processes runs on this machine; --scheduler ADDRESS uses an existing Dask cluster. A log that
-fails is reported with its reason and left out; the rest go on.
+statistics travels: each log's samples stay on the worker that reduced them until the pooled
+fit's passes over them have run there (only --report brings them here); a log named by URL is
+copied to the worker that reads it (dampest_ros/io/remote.py). By default a LocalCluster of
+--workers processes runs on this machine; --scheduler ADDRESS uses an existing Dask cluster.
+A log that fails is reported with its reason and left out; the rest go on.
 """
 
 from __future__ import annotations
@@ -31,6 +31,8 @@ from dampest_ros.cli.main import expected
 from dampest_ros.core.identification.batch import Fit, FitOptions
 from dampest_ros.core.identification.pool import Drift, LogStatistics, MapLogs, log_statistics
 from dampest_ros.core.physics.rigid_body import ConfigError
+from dampest_ros.core.signals.extent import Extent
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.io.remote import glob_url, in_memory, is_url, local_log, local_name
 from dampest_ros.io.yaml_io import load_vehicle
@@ -107,16 +109,17 @@ def guarded(work: Callable[[str], Any], path: str, debug: bool) -> tuple[Any, st
 
 
 def reduce_log(path: str, args: argparse.Namespace, prior: np.ndarray | None,
-               prior_std: np.ndarray | None) -> LogStatistics:
+               prior_std: np.ndarray | None) -> tuple[Samples, LogStatistics]:
     """Preprocess one log (a path, or a URL copied here first) and reduce it (runs on a
-    worker)."""
+    worker): its samples, which stay there, and their statistics, which travel."""
     vehicle = load_vehicle(args.vehicle)
     model, _ = structure_of(args, vehicle)
     with local_log(path) as local:
         samples = cut(load_samples(local, vehicle, args), args)
     options = FitOptions(method=args.method, cutoff=args.cutoff, speed_range=tuple(
-        speed_limits(vehicle, tau_measured=samples.tau)))
-    return log_statistics(path, samples, model, vehicle.body, options, prior, prior_std)
+        speed_limits(vehicle, force=Extent.of(samples).force)))
+    return samples, log_statistics(path, samples, model, vehicle.body, options, prior,
+                                   prior_std)
 
 
 #: How to get what pooling needs: the 'pool' extra of setup.py (Dask has no rosdep key).
@@ -201,18 +204,25 @@ def local_cluster(workers: int, processes: bool = True) -> Any:
                             preload=[__name__] if processes else [])
 
 
+def sent(reduced: tuple[Any, str, str], send: Callable[[Any], Any]) -> tuple[Any, str, str]:
+    """:func:`guarded`'s result with ``send`` of its work's result (None stays None): what
+    of a kept result travels (run where the result is)."""
+    result, notes, why = reduced
+    return (None if result is None else send(result)), notes, why
+
+
 @contextlib.contextmanager
 def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: argparse.Namespace,
-                     verb: str = "read", keep: bool = False
+                     verb: str = "read", keep: Callable[[Any], Any] | None = None
                      ) -> Iterator[tuple[Any, dict[str, Any], dict[str, str], dict[str, Any]]]:
     """Run ``work(path)`` for every log on Dask (--workers, --scheduler), with a progress line
     on stderr and each log's notes prefixed by its path.
 
     Yields the client, the result of each log that worked, in the given order, the reason
-    of each that failed, and, when ``keep``, each worked log's future: its result stays on
-    the worker that made it until the block ends (to run more work there, where it is held).
-    Otherwise the workers keep nothing: their memory does not grow with the number of logs.
-    The cluster lives until the block ends.
+    of each that failed, and, with ``keep``, each worked log's future: its result stays on
+    the worker that made it until the block ends (to run more work there, where it is held),
+    and only ``keep`` of it is sent here. Otherwise the workers keep nothing: their memory
+    does not grow with the number of logs. The cluster lives until the block ends.
     """
     need_dask()
     from dask.distributed import as_completed
@@ -221,7 +231,12 @@ def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: arg
     failed: dict[str, str] = {}
     held: dict[str, Any] = {}
     try:
-        futures = {client.submit(guarded, work, p, args.debug, pure=False): p for p in paths}
+        made = {p: client.submit(guarded, work, p, args.debug, pure=False) for p in paths}
+        # with keep, what is sent is made where the result is, which stays there
+        futures = {(client.submit(sent, f, keep, pure=False) if keep else f): p
+                   for p, f in made.items()}
+        if not keep:
+            made.clear()  # each result is forgotten once it is here
         for k, future in enumerate(as_completed(futures), 1):
             path = futures.pop(future)  # the worker may forget the result once it is here
             result, notes, why = future.result()
@@ -232,7 +247,7 @@ def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: arg
             else:
                 done[path] = result
                 if keep:
-                    held[path] = future
+                    held[path] = made[path]
             sys.stderr.write(f"\rlogs [{'#' * (25 * k // len(paths)):25s}] {k}/{len(paths)}"
                              f" {verb}, {len(failed)} failed")
             sys.stderr.flush()
@@ -241,6 +256,7 @@ def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: arg
             print(f"left out: {path}: {why}", file=sys.stderr)
         if not done:
             raise ConfigError("INPUT", "none of the logs could be read (reasons above)")
+        made.clear()  # the held futures keep their results on the workers, no other
         yield client, {p: done[p] for p in paths if p in done}, failed, held
     finally:
         cluster = getattr(client, "cluster", None)
@@ -249,11 +265,21 @@ def map_logs_on_dask(paths: Sequence[str], work: Callable[[str], Any], args: arg
             cluster.close()
 
 
-def on_reduced(reduced: tuple[LogStatistics, str, str], k: int,
-               fn: Callable[[LogStatistics, int], Any]) -> Any:
-    """``fn(log, k)`` on the worker holding ``reduced``, :func:`guarded`'s result of
+def on_reduced(reduced: tuple[tuple[Samples, LogStatistics], str, str], k: int,
+               fn: Callable[[Samples, int], Any]) -> Any:
+    """``fn(samples, k)`` on the worker holding ``reduced``, :func:`guarded`'s result of
     :func:`reduce_log` for log k."""
-    return fn(reduced[0], k)
+    return fn(reduced[0][0], k)
+
+
+def samples_of(samples: Samples, k: int) -> Samples:
+    """A log's samples themselves (the :data:`MapLogs` call that brings them here)."""
+    return samples
+
+
+def statistics_of(reduced: tuple[Samples, LogStatistics]) -> LogStatistics:
+    """What of :func:`reduce_log`'s result is sent: the statistics."""
+    return reduced[1]
 
 
 @contextlib.contextmanager
@@ -263,15 +289,16 @@ def reduce_all(paths: Sequence[str], args: argparse.Namespace, prior: np.ndarray
     """Map :func:`reduce_log` over the logs on Dask (:func:`map_logs_on_dask`).
 
     Yields the statistics of the logs that worked (in the given order), the reason of each
-    that failed, and a :data:`~dampest_ros.core.identification.pool.MapLogs` that runs a function on
-    each log on a worker (the pooled fit's passes over the samples), where that log is held.
+    that failed, and a :data:`~dampest_ros.core.identification.pool.MapLogs` that runs a
+    function on the samples of each log in that list (which may shrink) on the worker that
+    holds them (the pooled fit's passes over the samples).
     """
     work = partial(reduce_log, args=args, prior=prior, prior_std=prior_std)
-    with map_logs_on_dask(paths, work, args, "reduced", keep=True) as (client, done, failed,
-                                                                        held):
+    with map_logs_on_dask(paths, work, args, "reduced", keep=statistics_of) as (
+            client, done, failed, held):
         logs: list[LogStatistics] = list(done.values())
 
-        def map_logs(fn: Callable[[LogStatistics, int], Any]) -> list[Any]:
+        def map_logs(fn: Callable[[Samples, int], Any]) -> list[Any]:
             # each call on the worker that reduced the log and holds it: no log travels again
             return list(client.gather([client.submit(on_reduced, held[g.name], k, fn,
                                                      pure=False)

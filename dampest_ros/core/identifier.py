@@ -34,6 +34,7 @@ from dampest_ros.core.online.sample import OnlineSample
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.extent import Extent
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.excitation import speed_limits
 
@@ -132,8 +133,8 @@ class DampingIdentifier:
             model = self.structure
             nominal = nominal_of(model, self.vehicle.damping, self.vehicle.theta)
         options = FitOptions(method=self.method, cutoff=self.cutoff,
-                             speed_range=tuple(speed_limits(self.vehicle,
-                                                            tau_measured=samples.tau)),
+                             speed_range=tuple(speed_limits(
+                                 self.vehicle, force=Extent.of(samples).force)),
                              **self.fit_options)
         mean, std = (nominal, None) if self.prior is None else prior_arrays(model, nominal,
                                                                              self.prior)

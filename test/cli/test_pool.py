@@ -15,6 +15,7 @@ from dampest_ros.cli.inputs import load_samples
 from dampest_ros.cli.main import main
 from dampest_ros.cli.pool import expand_inputs
 from dampest_ros.core.identification.batch import FitOptions, fit
+from dampest_ros.core.signals.extent import Extent
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.excitation import speed_limits
 from dampest_ros.io.yaml_io import load_model, load_vehicle
@@ -131,8 +132,8 @@ def test_five_bags_pool_exactly_skip_a_corrupt_one_and_show_a_20_percent_drift(
     add_arguments(p)
     args = p.parse_args([*bags, "--vehicle", "bluerov2_heavy"])
     once = Samples.concatenate([load_samples(b, vehicle, args) for b in bags])
-    f = fit(once, vehicle.damping, vehicle.body, FitOptions(
-        cutoff=args.cutoff, speed_range=tuple(speed_limits(vehicle, tau_measured=once.tau))))
+    f = fit(once, vehicle.damping, vehicle.body, FitOptions(cutoff=args.cutoff, speed_range=tuple(
+        speed_limits(vehicle, force=Extent.of(once).force))))
     np.testing.assert_allclose(model.theta, f.theta, rtol=1e-10, atol=0)
     np.testing.assert_allclose(model.theta_std, f.std, rtol=1e-10, atol=0)
     # the same damping in every bag: no change reported

@@ -10,6 +10,7 @@ AIC/BIC) is closed-form in them; the covariance is block-robust plus the sensor-
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -27,6 +28,7 @@ from dampest_ros.core.identification.covariance import (
     block_length,
     covariance,
     settled_block,
+    whole,
 )
 from dampest_ros.core.identification.dissipative import (
     Violations,
@@ -46,6 +48,7 @@ from dampest_ros.core.identification.regression import (
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.identity import Identity
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, ConfigError, RigidBody
+from dampest_ros.core.signals.extent import Extent
 from dampest_ros.core.signals.samples import CHUNK, Samples
 
 FloatArray = NDArray[np.float64]
@@ -395,7 +398,7 @@ def _flags(theta: FloatArray, cov: FloatArray, names: list[str], scale: FloatArr
             if candidates[j] and half[j] > opts.max_rel_halfwidth * scale[j]}
 
 
-def speed_coverage_flags(model: DampingModel, samples: Samples, speed_range: FloatArray,
+def speed_coverage_flags(model: DampingModel, speed: FloatArray, speed_range: FloatArray,
                          min_share: float = 0.15) -> dict[str, str]:
     """Quadratic coefficients of DOFs whose speed range the data do not cover.
 
@@ -405,20 +408,20 @@ def speed_coverage_flags(model: DampingModel, samples: Samples, speed_range: Flo
 
     Parameters
     ----------
+    speed : ndarray, shape (6,)
+        The 99th percentile of |ν_i| in the data (m/s, rad/s; :class:`Extent`'s ``speed``).
     speed_range : ndarray, shape (6,)
         Speeds the vehicle reaches (e.g. at half thrust), m/s and rad/s.
     """
     quad = model.term("quadratic")
-    if quad is None or len(samples) == 0:
+    if quad is None:
         return {}
-    # column by column: no copy of the whole (n, 6) velocity array on long logs
-    flown = np.array([np.percentile(np.abs(samples.nu[:, i]), 99) for i in range(6)])
     flags = {}
     for name, b in zip(quad.parameter_names, quad.bases, strict=True):
         i = int(np.argmax(np.abs(np.diag(b.B))))
-        if flown[i] < min_share * speed_range[i]:
-            flags[name] = (f"low speed only: |{DOF_NAMES[i]}| ≤ {flown[i]:.3g} in these data, "
-                           f"{flown[i] / speed_range[i]:.0%} of the {speed_range[i]:.3g} the "
+        if speed[i] < min_share * speed_range[i]:
+            flags[name] = (f"low speed only: |{DOF_NAMES[i]}| ≤ {speed[i]:.3g} in these data, "
+                           f"{speed[i] / speed_range[i]:.0%} of the {speed_range[i]:.3g} the "
                            f"vehicle reaches; fly faster in {DOF_NAMES[i]} to identify it")
     return flags
 
@@ -543,7 +546,7 @@ def _reweighted(problem: _Problem, live: NDArray[np.bool_]) -> FloatArray:
     return w
 
 
-def _free(model: DampingModel, samples: Samples, opts: FitOptions, live: NDArray[np.bool_],
+def _free(model: DampingModel, extent: Extent, opts: FitOptions, live: NDArray[np.bool_],
           prior: FloatArray, flags: dict[str, str]) -> NDArray[np.bool_]:
     """The parameters the fit estimates, shape (p,): excited (``live``) and, with
     ``opts.speed_range``, not quadratic terms of a DOF flown too slowly
@@ -554,7 +557,7 @@ def _free(model: DampingModel, samples: Samples, opts: FitOptions, live: NDArray
     """
     names = model.parameter_names
     if opts.speed_range is not None:
-        flags.update(speed_coverage_flags(model, samples, np.asarray(opts.speed_range)))
+        flags.update(speed_coverage_flags(model, extent.speed, np.asarray(opts.speed_range)))
     free = live & np.array([n not in flags for n in names])
     for j in np.flatnonzero(~free):
         flags[names[j]] = f"held at prior {prior[j]:.4g} ({flags[names[j]]})"
@@ -589,14 +592,14 @@ def _combinations(W: FloatArray, s: FloatArray, names: list[str], free: NDArray[
     return combos
 
 
-def _dissipative(problem: _Problem, model: DampingModel, samples: Samples, theta: FloatArray,
+def _dissipative(problem: _Problem, model: DampingModel, flown: FloatArray,
+                 scan_data: Callable[[FloatArray], Violations], theta: FloatArray,
                  cov: FloatArray, w: FloatArray, free: NDArray[np.bool_], T: FloatArray,
-                 chunk: int, map_parts: MapParts | None
-                 ) -> tuple[FloatArray, dict[str, str], FloatArray]:
+                 chunk: int) -> tuple[FloatArray, dict[str, str], FloatArray]:
     """With ``dissipative``, impose νᵀD(ν)ν ≥ 0 where ``theta`` violates it, on every sample
-    and over the flown envelope (:func:`impose`); the samples are scanned part by part where
-    ``map_parts`` holds them (default: here, at once, with their power rows and the grid's
-    formed once for every round).
+    (``scan_data(θ)``: :func:`violations` of the samples) and over the envelope ``flown``
+    (shape (2, 6): the samples' smallest and largest ν; the grid's power rows formed once
+    for every round) (:func:`impose`).
 
     Returns
     -------
@@ -612,12 +615,9 @@ def _dissipative(problem: _Problem, model: DampingModel, samples: Samples, theta
     if not (problem.opts.dissipative and model.n_params):
         return theta, constrained, power
 
-    scan_data = (scan(model, samples.nu, chunk) if map_parts is None
-                 else partial(_scan_parts, map_parts=map_parts, model=model, chunk=chunk))
-
     def points(th: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
         # the grid over the envelope of the samples is kept for the next round
-        return dissipation_points(model, th, samples.nu, samples.nu, chunk, scan_data(th))
+        return dissipation_points(model, th, np.zeros((0, 6)), flown, chunk, scan_data(th))
 
     pts, on_data = points(theta)
     if len(pts):
@@ -661,18 +661,17 @@ def _scaled_condition(ne: NormalEquations, free: NDArray[np.bool_]) -> float:
     return float(max(ev) / max(min(ev), 1e-300))
 
 
-def _effective_samples(samples: Samples, n: int, cutoff: float) -> float:
+def _effective_samples(extent: Extent, n: int, cutoff: float) -> float:
     """n_eff = 2 · cutoff · T of AIC/BIC (T the duration, s; ``cutoff`` in Hz), at most the
     sample count ``n``; ``n`` without a low-pass."""
-    duration = len(samples) / samples.rate if samples.rate else float(n)
+    duration = extent.duration if extent.rate else float(n)
     return min(float(n), 2 * cutoff * duration) if cutoff > 0 else float(n)
 
 
 def fit(samples: Samples, model: DampingModel, body: RigidBody,
         options: FitOptions | None = None, prior: FloatArray | None = None,
         prior_std: FloatArray | None = None, normal: NormalEquations | None = None,
-        chunk: int = CHUNK, map_parts: MapParts | None = None,
-        bias: BiasStatistics | None = None) -> Fit:
+        chunk: int = CHUNK, bias: BiasStatistics | None = None) -> Fit:
     """Identify θ from samples.
 
     1. Per-DOF weights 1/σ_i² from the residuals (``wls``), σ_i floored at
@@ -707,11 +706,6 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
         (:func:`~dampest_ros.core.identification.covariance.settled_block`).
     chunk : int
         Samples per chunk.
-    map_parts : MapParts, optional
-        Runs the passes over the samples (the dissipativity scan; the robust covariance's
-        when ``normal`` holds no blocks of its length) part by part where the parts are held
-        (:data:`~dampest_ros.core.identification.covariance.MapParts`; default: ``samples``
-        at once).
     bias : BiasStatistics, optional
         Precomputed data of the sensor-bias refits
         (:func:`~dampest_ros.core.identification.covariance.bias_statistics` of ``samples``,
@@ -722,33 +716,80 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     Fit
     """
     opts = options or FitOptions()
-    names = model.parameter_names
-    p = len(names)
-    if len(samples) < 10 * max(p, 1):
-        raise ConfigError("samples", f"{len(samples)} samples are too few for {p} parameters")
+    _enough(len(samples), model.n_params)
+    extent = Extent.of(samples)
     ne = normal or accumulate(samples, model, body, chunk=chunk, cutoff=opts.cutoff,
-                              block=settled_block(samples, opts, p))
-    prior_v = np.zeros(p) if prior is None else np.asarray(prior, dtype=float)
-    problem = _Problem(ne, opts, prior_v, prior_std,
-                       model.lower_bounds() if opts.method == "bounded" else None)
-    live, flags = _excited(ne, names)
-    w = _reweighted(problem, live)
-    free = _free(model, samples, opts, live, prior_v, flags)
-    T, W, s = determined_directions(ne.total(w)[0], free, opts.max_vif)
-    theta = problem.solve(w, free, T)
+                              block=settled_block(extent, opts, model.n_params))
     if bias is None:
         bias = bias_statistics(samples, model, body, opts, chunk)
-    cov = covariance(samples, model, body, theta, w, ne, free, T, opts, bias, chunk, map_parts)
+    return fit_statistics(extent, ne, bias, whole(samples), model, body, opts, prior,
+                          prior_std, scan(model, samples.nu, chunk), chunk)
+
+
+def _enough(n: int, p: int) -> None:
+    """Refuse fewer than ten samples per parameter (ConfigError)."""
+    if n < 10 * max(p, 1):
+        raise ConfigError("samples", f"{n} samples are too few for {p} parameters")
+
+
+def fit_statistics(extent: Extent, normal: NormalEquations, bias: BiasStatistics | None,
+                   map_parts: MapParts, model: DampingModel, body: RigidBody,
+                   options: FitOptions | None = None, prior: FloatArray | None = None,
+                   prior_std: FloatArray | None = None,
+                   scan_data: Callable[[FloatArray], Violations] | None = None,
+                   chunk: int = CHUNK) -> Fit:
+    """:func:`fit` of samples that are not here: from their extent and statistics, with the
+    passes over them run part by part where the parts are held (a pooled fit's logs, each
+    on its worker).
+
+    Parameters
+    ----------
+    extent : Extent
+        That of the samples (:meth:`Extent.of`, or joined over the parts).
+    normal : NormalEquations
+        Their statistics (:func:`accumulate`).
+    bias : BiasStatistics or None
+        Those of the sensor-bias refits (None: the options give no sensor a bias).
+    map_parts : MapParts
+        Runs a function on every part of the samples where it is held
+        (:data:`~dampest_ros.core.identification.covariance.MapParts`): the robust
+        covariance's pass when ``normal`` holds no blocks of its length, and the
+        dissipativity scan but for ``scan_data``.
+    model, body, options, prior, prior_std
+        As for :func:`fit`.
+    scan_data : callable, optional
+        θ → :func:`violations` of all the samples (default: part by part through
+        ``map_parts``).
+    chunk : int
+        Samples per chunk.
+    """
+    opts = options or FitOptions()
+    names = model.parameter_names
+    p = len(names)
+    _enough(extent.n, p)
+    prior_v = np.zeros(p) if prior is None else np.asarray(prior, dtype=float)
+    problem = _Problem(normal, opts, prior_v, prior_std,
+                       model.lower_bounds() if opts.method == "bounded" else None)
+    live, flags = _excited(normal, names)
+    w = _reweighted(problem, live)
+    free = _free(model, extent, opts, live, prior_v, flags)
+    T, W, s = determined_directions(normal.total(w)[0], free, opts.max_vif)
+    theta = problem.solve(w, free, T)
+    cov = covariance(extent, model, body, theta, w, normal, free, T, opts, bias, map_parts,
+                     chunk)
     combos = _combinations(W, s, names, free, theta, cov, flags)
-    flags.update(_flags(theta, cov, names, parameter_scale(ne, theta), opts,
+    flags.update(_flags(theta, cov, names, parameter_scale(normal, theta), opts,
                         free & np.array([n not in flags for n in names])))
-    theta, constrained, power = _dissipative(problem, model, samples, theta, cov, w, free, T,
-                                             chunk, map_parts)
+    theta, constrained, power = _dissipative(
+        problem, model, extent.flown,
+        scan_data or partial(_scan_parts, map_parts=map_parts, model=model, chunk=chunk),
+        theta, cov, w, free, T, chunk)
     N = problem.n
-    rss = ne.rss(theta)
+    rss = normal.rss(theta)
     return Fit(names=names, theta=theta, cov=cov, sigma=np.sqrt(rss / N), method=opts.method,
-               n=N, rss=rss, tss=total_sum_of_squares(ne), cond=_scaled_condition(ne, free),
+               n=N, rss=rss, tss=total_sum_of_squares(normal),
+               cond=_scaled_condition(normal, free),
                flags=flags, cv_rmse=np.sqrt(_cross_validated_rss(problem, w, free, T, power) / N),
-               n_eff=_effective_samples(samples, N, opts.cutoff),
-               blocks=block_count(samples, block_length(samples, opts, T.shape[1])),
+               n_eff=_effective_samples(extent, N, opts.cutoff),
+               blocks=block_count(extent, block_length(extent, opts, T.shape[1])),
                held=~free, combinations=combos, constrained=constrained, rank=T.shape[1])

@@ -31,11 +31,11 @@ from dampest_ros.core.identification.regression import (
     BlockEquations,
     NormalEquations,
     accumulate,
-    block_index,
     iter_regression,
 )
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import RigidBody
+from dampest_ros.core.signals.extent import Extent
 from dampest_ros.core.signals.samples import CHUNK, Samples
 
 FloatArray = NDArray[np.float64]
@@ -70,7 +70,7 @@ class CovarianceOptions(Protocol):
     def bias_stretch(self) -> int: ...  # samples per stretch of the bias refits
 
 
-def block_length(samples: Samples, opts: CovarianceOptions, rank: int) -> float:
+def block_length(extent: Extent, opts: CovarianceOptions, rank: int) -> float:
     """Length (s) of the robust covariance's blocks: ``opts.block``, shorter when the samples
     span fewer than 2 r + 1 of them, but never below two periods of the low-pass (``4 /
     cutoff``; 10 samples without one), over which filtered residuals stay correlated.
@@ -79,9 +79,9 @@ def block_length(samples: Samples, opts: CovarianceOptions, rank: int) -> float:
     estimated directions r some directions get no variance at all (a 60 s log in 10 s blocks
     has 7 blocks for 12 parameters, and a σ six times too small on one of them).
     """
-    span = sum(float(samples.t[sl][-1] - samples.t[sl][0]) + 1.0 / samples.rate
-               for sl in samples.segments()) if len(samples) > 1 else 0.0
-    floor = 4.0 / opts.cutoff if opts.cutoff > 0 else 10.0 / max(samples.rate, 1e-300)
+    span = sum(float(last - first) + 1.0 / extent.rate
+               for first, last in extent.spans) if extent.n > 1 else 0.0
+    floor = 4.0 / opts.cutoff if opts.cutoff > 0 else 10.0 / max(extent.rate, 1e-300)
     return float(max(min(opts.block, span / (2 * rank + 1)), floor))
 
 
@@ -90,23 +90,25 @@ def block_length(samples: Samples, opts: CovarianceOptions, rank: int) -> float:
 BLOCK_FLOATS = 2 ** 22
 
 
-def block_count(samples: Samples, block: float) -> int:
-    """Number of blocks B of the robust covariance."""
-    return int(block_index(samples, block).max()) + 1 if len(samples) else 0
+def block_count(extent: Extent, block: float) -> int:
+    """Number of blocks B of the robust covariance (:func:`block_index`'s): those each
+    segment begins, every one holding samples (a block is longer than two periods of the
+    low-pass, so longer than a sample interval)."""
+    return sum(int(np.floor((last - first) / block)) + 1 for first, last in extent.spans)
 
 
-def settled_block(samples: Samples, opts: CovarianceOptions, p: int) -> float:
+def settled_block(extent: Extent, opts: CovarianceOptions, p: int) -> float:
     """The :func:`block_length` a fit of ``p`` parameters has whatever its rank r ≤ p, when
     its :class:`BlockEquations` are small enough (:data:`BLOCK_FLOATS`) to form with the
     normal equations (``accumulate(..., block=…)``) and save the robust covariance its pass
     over the samples; 0 otherwise. The length falls as r grows, so it is settled when r = 1
     and r = p give the same."""
-    if not (p and len(samples)):
+    if not (p and extent.n):
         return 0.0
-    length = block_length(samples, opts, p)
-    if length != block_length(samples, opts, 1):
+    length = block_length(extent, opts, p)
+    if length != block_length(extent, opts, 1):
         return 0.0
-    return length if block_count(samples, length) * 6 * p * p <= BLOCK_FLOATS else 0.0
+    return length if block_count(extent, length) * 6 * p * p <= BLOCK_FLOATS else 0.0
 
 
 def part_blocks(samples: Samples, first: int, model: DampingModel, body: RigidBody,
@@ -120,10 +122,10 @@ def part_blocks(samples: Samples, first: int, model: DampingModel, body: RigidBo
     return blocks
 
 
-def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
+def robust_covariance(extent: Extent, model: DampingModel, body: RigidBody,
                       theta: FloatArray, weights: FloatArray, ne: NormalEquations,
                       free: NDArray[np.bool_], basis: FloatArray, opts: CovarianceOptions,
-                      chunk: int = CHUNK, map_parts: MapParts | None = None) -> FloatArray:
+                      map_parts: MapParts, chunk: int = CHUNK) -> FloatArray:
     """Block sandwich covariance A⁺ (Σ_b s_b s_bᵀ) A⁺ of the free parameters (NaN for the
     others; at least one is free).
 
@@ -135,17 +137,17 @@ def robust_covariance(samples: Samples, model: DampingModel, body: RigidBody,
     the estimate robust to residuals that are correlated over less than a block (filtered
     noise, unmodelled slow effects). The blocks' normal equations come with ``ne`` when it
     holds blocks of that length (:func:`settled_block`), else from a pass over the samples
-    part by part (``map_parts``, default: all of ``samples`` at once); a block never spans
-    two segments, so never two parts.
+    (of ``extent``) part by part (``map_parts``; :func:`whole` for samples in memory); a
+    block never spans two segments, so never two parts.
     """
     p = model.n_params
     cov = np.full((p, p), np.nan)
     A, _, _ = ne.total(weights)
     Af = A[np.ix_(free, free)]
-    length = block_length(samples, opts, basis.shape[1])
+    length = block_length(extent, opts, basis.shape[1])
     blocks = ne.blocks
     if blocks is None or blocks.length != length:
-        blocks = BlockEquations.join((map_parts or whole(samples))(partial(
+        blocks = BlockEquations.join(map_parts(partial(
             part_blocks, model=model, body=body, block=length, cutoff=opts.cutoff,
             chunk=chunk)))
     S = blocks.scores(theta, weights, free)
@@ -287,14 +289,14 @@ def bias_covariance(stats: BiasStatistics | None, theta: FloatArray, weights: Fl
     return cov
 
 
-def covariance(samples: Samples, model: DampingModel, body: RigidBody, theta: FloatArray,
+def covariance(extent: Extent, model: DampingModel, body: RigidBody, theta: FloatArray,
                weights: FloatArray, ne: NormalEquations, free: NDArray[np.bool_],
                basis: FloatArray, opts: CovarianceOptions, bias: BiasStatistics | None,
-               chunk: int = CHUNK, map_parts: MapParts | None = None) -> FloatArray:
-    """Covariance of θ̂, shape (p, p): the block-robust one (:func:`robust_covariance`, a pass
-    over the parts, ``map_parts``, default: all of ``samples`` at once) plus the sensor-bias
-    budget (:func:`bias_covariance` of ``bias``), both in the directions ``basis`` (shape
-    (p_free, r)) spans; NaN where no parameter is free.
+               map_parts: MapParts, chunk: int = CHUNK) -> FloatArray:
+    """Covariance of θ̂, shape (p, p): the block-robust one (:func:`robust_covariance`; its
+    pass over the samples of ``extent``, when it takes one, part by part: ``map_parts``) plus
+    the sensor-bias budget (:func:`bias_covariance` of ``bias``), both in the directions
+    ``basis`` (shape (p_free, r)) spans; NaN where no parameter is free.
 
     Parameters
     ----------
@@ -305,6 +307,6 @@ def covariance(samples: Samples, model: DampingModel, body: RigidBody, theta: Fl
     if not free.any():
         return np.full((p, p), np.nan)
     # robust + bias: independent errors
-    return (robust_covariance(samples, model, body, theta, weights, ne, free, basis, opts,
-                              chunk, map_parts)
+    return (robust_covariance(extent, model, body, theta, weights, ne, free, basis, opts,
+                              map_parts, chunk)
             + bias_covariance(bias, theta, weights, free, basis))

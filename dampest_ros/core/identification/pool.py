@@ -3,14 +3,17 @@
 The batch fit's normal equations are sufficient statistics: the statistics of several logs
 add up to those of all their samples at once, A = Σ_b A_b, b = Σ_b b_b, c = Σ_b c_b. Each log
 is therefore preprocessed and reduced on its own (in parallel, anywhere: :class:`LogStatistics`
-is all a worker returns), and the pooled fit solves the summed statistics, the sensor-bias
+is all a worker sends; the samples stay where they were read), and the pooled fit solves the
+summed statistics, the sensor-bias
 refits' included (:class:`~dampest_ros.core.identification.covariance.BiasStatistics`), and
 so do the block-robust covariance's per-block normal equations
 (:class:`~dampest_ros.core.identification.regression.BlockEquations`, each log's blocks
 counted from its own start) when the block length does not depend on the fit's rank. The
 passes over the samples left (the scan for samples where the estimate generates energy, and
 the covariance's when its blocks did not come with the statistics) run over the logs'
-samples as segments of one set, log by log where each log is held (``map_logs``).
+samples as segments of one set, log by log where each log is held (``map_logs``), and so
+does the one that joins their :class:`~dampest_ros.core.signals.extent.Extent` (the pooled
+percentiles of |ν| and |τ| from each log's largest values).
 Cross-validation folds of the pooled fit are the k-th fifths of
 every log (:func:`pooled_normal`), so each fold holds some of every trial.
 
@@ -31,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import special
 
-from dampest_ros.core.identification.batch import Fit, FitOptions, fit
+from dampest_ros.core.identification.batch import Fit, FitOptions, fit, fit_statistics
 from dampest_ros.core.identification.covariance import (
     BiasStatistics,
     bias_statistics,
@@ -45,6 +48,7 @@ from dampest_ros.core.identification.regression import (
 )
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import ConfigError, RigidBody
+from dampest_ros.core.signals.extent import Extent, largest, top_count
 from dampest_ros.core.signals.samples import Samples
 
 FloatArray = NDArray[np.float64]
@@ -60,8 +64,8 @@ class LogStatistics:
         The log (path or URL), for reports.
     start : float
         Time of its first sample (s; the log's own clock, e.g. UNIX time for a recorded bag).
-    samples : Samples
-        Its preprocessed samples.
+    extent : Extent
+        Its samples' (which stay where they were read).
     normal : NormalEquations
         Their statistics (:func:`~dampest_ros.core.identification.batch.accumulate`, 5 folds).
     bias : BiasStatistics or None
@@ -72,7 +76,7 @@ class LogStatistics:
 
     name: str
     start: float
-    samples: Samples
+    extent: Extent
     normal: NormalEquations
     bias: BiasStatistics | None
     fit: Fit
@@ -93,12 +97,13 @@ def log_statistics(name: str, samples: Samples, model: DampingModel, body: Rigid
         Those of the pooled fit (the same cutoff); the speed range is the log's own.
     prior, prior_std : ndarray, shape (p,), optional
     """
+    extent = Extent.of(samples)
     ne = accumulate(samples, model, body, cutoff=options.cutoff,
-                    block=settled_block(samples, options, model.n_params))
+                    block=settled_block(extent, options, model.n_params))
     bias = bias_statistics(samples, model, body, options)
     own = fit(samples, model, body, options, prior=prior, prior_std=prior_std, normal=ne,
               bias=bias)
-    return LogStatistics(name, float(samples.t[0]), samples, ne, bias, own)
+    return LogStatistics(name, float(samples.t[0]), extent, ne, bias, own)
 
 
 def pooled_normal(normals: Sequence[NormalEquations]) -> NormalEquations:
@@ -120,48 +125,61 @@ def pooled_normal(normals: Sequence[NormalEquations]) -> NormalEquations:
                            sum((n.n for n in normals), np.zeros_like(normals[0].n)), joined)
 
 
-def pooled_samples(logs: Sequence[LogStatistics]) -> Samples:
-    """The logs' samples as one set, one segment (or more) per log, in the given order."""
-    return Samples.concatenate([g.samples for g in logs])
+#: ``map_logs(fn)`` returns ``[fn(samples, k), ...]`` for the samples of log k = 0, 1, … of a
+#: pooled fit, each call where those samples are held (a Dask worker, or here:
+#: :func:`map_here`).
+MapLogs = Callable[[Callable[[Samples, int], Any]], list[Any]]
 
 
-#: ``map_logs(fn)`` returns ``[fn(log, k), ...]`` for log k = 0, 1, … of a pooled fit, each
-#: call where that log's :class:`LogStatistics` is held (a Dask worker, or here).
-MapLogs = Callable[[Callable[[LogStatistics, int], Any]], list[Any]]
+def map_here(samples: Sequence[Samples]) -> MapLogs:
+    """The :data:`MapLogs` of logs' samples held here, in order."""
+    return lambda fn: [fn(part, k) for k, part in enumerate(samples)]
 
 
-def on_samples(log: LogStatistics, k: int, fn: Callable[[Samples, int], Any],
-               firsts: Sequence[int]) -> Any:
+def _largest(samples: Samples, k: int, count: int) -> FloatArray:
+    """:func:`~dampest_ros.core.signals.extent.largest` ``count`` of a log (a
+    :data:`MapLogs` call)."""
+    return largest(samples, count)
+
+
+def pooled_extent(logs: Sequence[LogStatistics], map_logs: MapLogs) -> Extent:
+    """The :class:`~dampest_ros.core.signals.extent.Extent` of the logs' samples put
+    together, from their own and their largest |ν| and |τ| (one small pass, log by log where
+    each is held)."""
+    count = top_count(sum(g.extent.n for g in logs))
+    return Extent.join([g.extent for g in logs], map_logs(partial(_largest, count=count)))
+
+
+def _on_part(samples: Samples, k: int, fn: Callable[[Samples, int], Any], firsts: Sequence[int]
+             ) -> Any:
     """``fn`` on log k's samples, told where they begin in the pooled set (a
     :data:`~dampest_ros.core.identification.covariance.MapParts` call, run where the log is)."""
-    return fn(log.samples, firsts[k])
+    return fn(samples, firsts[k])
 
 
 def pooled_fit(logs: Sequence[LogStatistics], model: DampingModel, body: RigidBody,
-               options: FitOptions, prior: FloatArray | None = None,
-               prior_std: FloatArray | None = None, map_logs: MapLogs | None = None,
-               samples: Samples | None = None) -> Fit:
+               options: FitOptions, map_logs: MapLogs, prior: FloatArray | None = None,
+               prior_std: FloatArray | None = None, extent: Extent | None = None) -> Fit:
     """The fit of all the logs' samples at once, from their summed statistics (the reduce).
 
     θ, its covariance and every per-DOF figure equal those of
-    :func:`~dampest_ros.core.identification.batch.fit` on :func:`pooled_samples` to rounding; only
-    the cross-validation folds differ (see :func:`pooled_normal`). The passes over the
-    samples (the dissipativity check's scan; the robust covariance's when the logs'
-    statistics hold no blocks of its length) run log by log through ``map_logs`` (default:
-    here, one after the other). ``samples`` is :func:`pooled_samples`
-    of ``logs`` when the caller has made it already.
+    :func:`~dampest_ros.core.identification.batch.fit` on the logs' samples put together
+    (:meth:`Samples.concatenate`) to rounding; only the cross-validation folds differ (see
+    :func:`pooled_normal`). The passes over the samples (the dissipativity check's scan; the
+    robust covariance's when the logs' statistics hold no blocks of its length; the pooled
+    extent's) run log by log through ``map_logs``. ``extent`` is :func:`pooled_extent`
+    when the caller has made it already.
     """
-    firsts = np.cumsum([0] + [len(g.samples) for g in logs[:-1]]).tolist()
-    run = map_logs or (lambda fn: [fn(g, k) for k, g in enumerate(logs)])
+    firsts = np.cumsum([0] + [g.extent.n for g in logs[:-1]]).tolist()
 
     def map_parts(fn: Callable[[Samples, int], Any]) -> list[Any]:
-        return run(partial(on_samples, fn=fn, firsts=firsts))
+        return map_logs(partial(_on_part, fn=fn, firsts=firsts))
 
-    whole = pooled_samples(logs) if samples is None else samples
     biases = [g.bias for g in logs if g.bias is not None]  # none, or every log's
     bias = pooled_bias(biases, [g.normal for g in logs]) if biases else None
-    return fit(whole, model, body, options, prior=prior, prior_std=prior_std,
-               normal=pooled_normal([g.normal for g in logs]), map_parts=map_parts, bias=bias)
+    return fit_statistics(extent or pooled_extent(logs, map_logs),
+                          pooled_normal([g.normal for g in logs]), bias, map_parts, model, body,
+                          options, prior, prior_std)
 
 
 @dataclass

@@ -218,30 +218,29 @@ class Vehicle:
                               "units) to its file" + (f", or {instead}" if instead else ""))
         return self.thrusters
 
-    def wrench_scale(self, tau: FloatArray | None = None) -> FloatArray:
+    def wrench_scale(self, force: FloatArray | None = None) -> FloatArray:
         """The largest generalised force per DOF, shape (6,) (N, N·m): the thrusters'
-        :attr:`~dampest_ros.core.physics.thrusters.Thrusters.max_wrench`, or without thrusters that
-        of the measured τ (:func:`measured_wrench_scale`).
+        :attr:`~dampest_ros.core.physics.thrusters.Thrusters.max_wrench`, or without thrusters
+        the largest the data show (:func:`wrench_scale_of` ``force``).
 
         Parameters
         ----------
-        tau : ndarray, shape (n, 6), optional
-            Measured τ (FRD); needed when the vehicle has no thrusters.
+        force : ndarray, shape (6,), optional
+            The 99th percentile of the measured |τ_i| per DOF (FRD, N and N·m; an
+            :class:`~dampest_ros.core.signals.extent.Extent`'s ``force``); needed when the
+            vehicle has no thrusters.
         """
         if self.thrusters is not None:
             return np.asarray(self.thrusters.max_wrench, dtype=float)
-        if tau is None:
+        if force is None:
             raise ConfigError("thrusters", f"vehicle {self.name!r} has no thrusters and no "
                                            "measured τ was given for the force scale")
-        return measured_wrench_scale(tau)
+        return wrench_scale_of(force)
 
 
 def measured_wrench_scale(tau: FloatArray, percentile: float = 99.0) -> FloatArray:
-    """The largest generalised force per DOF that the data show, shape (6,) (N, N·m).
-
-    The ``percentile`` of |τ_i| per DOF (robust to single spikes). A DOF the data never push
-    (τ_i ≡ 0) takes 1 % of the largest value of its group (forces X, Y, Z or moments K, M,
-    N), or 1 when the whole group is zero, so that the scale is never zero.
+    """The largest generalised force per DOF that the data show, shape (6,) (N, N·m):
+    :func:`wrench_scale_of` the ``percentile`` of |τ_i| per DOF (robust to single spikes).
 
     Parameters
     ----------
@@ -253,11 +252,19 @@ def measured_wrench_scale(tau: FloatArray, percentile: float = 99.0) -> FloatArr
     tau = tau[np.all(np.isfinite(tau), axis=1)]
     if len(tau) == 0:
         raise ConfigError("tau", "no finite measured generalised force to scale with")
-    s = np.percentile(np.abs(tau), percentile, axis=0)
+    return wrench_scale_of(np.percentile(np.abs(tau), percentile, axis=0))
+
+
+def wrench_scale_of(force: FloatArray) -> FloatArray:
+    """The force scale per DOF from the largest |τ_i| the data show, shape (6,) → (6,)
+    (N, N·m): a DOF the data never push (below 1e-6 of its group's largest, forces X, Y, Z
+    or moments K, M, N) takes 1 % of that largest, or 1 when the whole group is zero, so
+    that the scale is never zero."""
+    s = np.array(force, dtype=float)
     for g in (slice(0, 3), slice(3, 6)):
         top = float(s[g].max())
         s[g] = np.where(s[g] > 1e-6 * top, s[g], 0.01 * top if top > 0 else 1.0)
-    return np.asarray(s, dtype=float)
+    return s
 
 
 def nondim_scales(v_ref: float, L_ref: float, rho: float) -> tuple[FloatArray, FloatArray]:

@@ -222,7 +222,7 @@ class ProtocolStream:
 
 
 def speed_limits(vehicle: Vehicle, fraction: float = 0.5,
-                 tau_measured: FloatArray | None = None) -> FloatArray:
+                 force: FloatArray | None = None) -> FloatArray:
     """Steady speed per DOF reached with ``fraction`` of the largest thrust, shape (6,).
 
     Solves D(ν)ν = fraction · τ_max along each axis by bisection on the nominal model.
@@ -231,8 +231,10 @@ def speed_limits(vehicle: Vehicle, fraction: float = 0.5,
     ----------
     vehicle : Vehicle
     fraction : float
-    tau_measured : ndarray, shape (n, 6), optional
-        Measured τ (N, N·m); gives τ_max for a vehicle without thrusters
+    force : ndarray, shape (6,), optional
+        The 99th percentile of the measured |τ_i| (N, N·m; an
+        :class:`~dampest_ros.core.signals.extent.Extent`'s ``force``): gives τ_max for a
+        vehicle without thrusters
         (:meth:`~dampest_ros.core.physics.vehicle.Vehicle.wrench_scale`).
 
     Returns
@@ -240,7 +242,7 @@ def speed_limits(vehicle: Vehicle, fraction: float = 0.5,
     ndarray, shape (6,)
         m/s and rad/s.
     """
-    tau = fraction * vehicle.wrench_scale(tau_measured)
+    tau = fraction * vehicle.wrench_scale(force)
     out = np.empty(6)
     for i in range(6):
         lo, hi = 0.0, 20.0

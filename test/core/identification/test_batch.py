@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from dampest_ros.core.identification.batch import FitOptions, fit
+from dampest_ros.core.identification.batch import FitOptions, fit, fit_statistics
+from dampest_ros.core.identification.covariance import bias_statistics
 from dampest_ros.core.identification.dissipative import envelope
 from dampest_ros.core.identification.regression import accumulate, iter_regression
 from dampest_ros.core.online.estimator import restrict
@@ -18,6 +19,7 @@ from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.physics.terms import CrossSpec, cross_term
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.extent import Extent
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.simulate import run
@@ -249,8 +251,9 @@ def test_estimate_is_dissipative_and_the_misfit_is_reported(vehicle: Vehicle) ->
 
 def test_the_dissipativity_check_scans_the_samples_part_by_part(vehicle: Vehicle) -> None:
     """The same energy-generating data in three segments, each a part that ``map_parts``
-    holds (a pooled fit's logs): the parts are scanned where they are, in every round of the
-    constraint, and the estimate, its σ and the report are those of the samples at once."""
+    holds (a pooled fit's logs), fitted from their extent and statistics: the parts are
+    scanned where they are, in every round of the constraint, and the estimate, its σ and
+    the report are those of the samples at once."""
     s = exact_samples(vehicle, 60.0)
     data = with_extra_force(s, -40.0 * s.nu * np.abs(s.nu))
     third = np.arange(len(data)) * 3 // len(data)
@@ -264,8 +267,11 @@ def test_the_dissipativity_check_scans_the_samples_part_by_part(vehicle: Vehicle
         return [fn(part, first) for part, first in zip(parts, firsts, strict=True)]
 
     options = replace(EXACT, method="wls")
-    split = fit(data, vehicle.damping, vehicle.body, options, map_parts=map_parts)
-    once = fit(data, vehicle.damping, vehicle.body, options)
+    model, body = vehicle.damping, vehicle.body
+    split = fit_statistics(Extent.of(data), accumulate(data, model, body, cutoff=options.cutoff),
+                           bias_statistics(data, model, body, options), map_parts, model, body,
+                           options)
+    once = fit(data, model, body, options)
     assert split.constrained and split.constrained == once.constrained
     np.testing.assert_array_equal(split.theta, once.theta)
     np.testing.assert_allclose(split.std, once.std, rtol=1e-10)

@@ -12,6 +12,7 @@ from dampest_ros.core.identification.covariance import (
     bias_offsets,
     bias_rows,
     bias_statistics,
+    block_count,
     pooled_bias,
     robust_covariance,
     settled_block,
@@ -20,6 +21,7 @@ from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import accumulate, block_index, iter_regression
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.extent import Extent
 from dampest_ros.core.signals.samples import Samples
 from dampest_ros.core.simulation.excitation import make_excitation
 from dampest_ros.core.simulation.simulate import run
@@ -135,11 +137,13 @@ def two_segments(vehicle: Vehicle) -> Samples:
 
 def test_blocks_start_with_each_segment_whatever_comes_before(vehicle: Vehicle) -> None:
     """5 s blocks: 8 per 40 s segment, the second segment's first block starts at its first
-    sample (not on the first segment's grid), and a segment's blocks are the same alone."""
+    sample (not on the first segment's grid), and a segment's blocks are the same alone;
+    their count from the samples' extent is the same."""
     samples = two_segments(vehicle)
     idx = block_index(samples, 5.0)
     first = samples.segment == 0
     assert idx.max() == 15 and np.all(idx[~first] >= 8)
+    assert block_count(Extent.of(samples), 5.0) == 16
     np.testing.assert_array_equal(idx[~first] - 8,
                                   block_index(samples.take(np.flatnonzero(~first)), 5.0))
     # 4, 4.5 and 5.02 s into the second segment (44.7, 45.2, 45.72 s: 8, 9, 9 on the first's
@@ -178,8 +182,9 @@ def test_blocks_with_the_normal_equations_give_the_passs_covariance(vehicle: Veh
     without them."""
     samples, model, body = two_segments(vehicle), vehicle.damping, vehicle.body
     opts = FitOptions(cutoff=2.0, block=2.0)
-    assert settled_block(samples, opts, model.n_params) == 2.0
-    assert settled_block(samples, FitOptions(cutoff=2.0), model.n_params) == 0.0
+    extent = Extent.of(samples)
+    assert settled_block(extent, opts, model.n_params) == 2.0
+    assert settled_block(extent, FitOptions(cutoff=2.0), model.n_params) == 0.0
     with_blocks = accumulate(samples, model, body, cutoff=2.0, block=2.0)
     without = accumulate(samples, model, body, cutoff=2.0)
     theta = fit(samples, model, body, opts, normal=without).theta
@@ -191,10 +196,10 @@ def test_blocks_with_the_normal_equations_give_the_passs_covariance(vehicle: Veh
         passes.append(1)
         return [fn(samples, 0)]
 
-    got = robust_covariance(samples, model, body, theta, weights, with_blocks, free, basis,
-                            opts, map_parts=counted)
+    got = robust_covariance(extent, model, body, theta, weights, with_blocks, free, basis,
+                            opts, counted)
     assert not passes
-    want = robust_covariance(samples, model, body, theta, weights, without, free, basis,
-                             opts, map_parts=counted)
+    want = robust_covariance(extent, model, body, theta, weights, without, free, basis,
+                             opts, counted)
     assert passes == [1]
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-10 * np.abs(want).max())

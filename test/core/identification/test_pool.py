@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -11,11 +10,11 @@ import pytest
 
 from dampest_ros.core.identification.batch import FitOptions, fit
 from dampest_ros.core.identification.pool import (
-    LogStatistics,
+    MapLogs,
     drift,
     log_statistics,
+    map_here,
     pooled_fit,
-    pooled_samples,
 )
 from dampest_ros.core.physics.frames import euler_from_matrix, quat_to_matrix
 from dampest_ros.core.physics.vehicle import Vehicle
@@ -47,44 +46,50 @@ def noisy_log(vehicle: Vehicle, seed: int, scale: float = 1.0, start: float = 0.
 
 
 def test_the_pooled_fit_is_the_fit_of_all_samples_at_once(vehicle: Vehicle) -> None:
-    logs = [log_statistics(f"log{k}", noisy_log(vehicle, k, start=100.0 * k),
-                           vehicle.damping, vehicle.body, OPTIONS) for k in range(3)]
-    pooled = pooled_fit(logs, vehicle.damping, vehicle.body, OPTIONS)
-    once = fit(pooled_samples(logs), vehicle.damping, vehicle.body, OPTIONS)
+    samples = [noisy_log(vehicle, k, start=100.0 * k) for k in range(3)]
+    logs = [log_statistics(f"log{k}", s, vehicle.damping, vehicle.body, OPTIONS)
+            for k, s in enumerate(samples)]
+    pooled = pooled_fit(logs, vehicle.damping, vehicle.body, OPTIONS, map_here(samples))
+    once = fit(Samples.concatenate(samples), vehicle.damping, vehicle.body, OPTIONS)
     np.testing.assert_allclose(pooled.theta, once.theta, rtol=1e-10, atol=0)
     np.testing.assert_allclose(pooled.std, once.std, rtol=1e-10, atol=0)
     np.testing.assert_allclose(pooled.r2, once.r2, rtol=1e-12)
     assert pooled.n == once.n == sum(g.fit.n for g in logs)  # decimated samples
 
 
-@pytest.mark.parametrize(("block", "passes"), [(10.0, 2), (2.0, 1)])
+@pytest.mark.parametrize(("block", "passes"), [(10.0, 3), (2.0, 2)])
 def test_the_pooled_covariance_is_formed_log_by_log(vehicle: Vehicle, block: float,
                                                     passes: int) -> None:
     """With the sensor-bias budget on and logs longer than three refit stretches (so each log
     is refitted on three stretches of it), the bias refits' statistics are each log's,
-    summed, the dissipativity check's scan of the samples runs log by log through map_logs,
-    and the σ are those of all samples at once. The robust covariance's blocks come with
-    each log's statistics when their length is settled before the fit (2 s blocks, the
-    floor); 10 s blocks are shortened for 60 s logs by the rank, so the covariance takes a
-    pass of its own."""
+    summed, the pooled extent and the dissipativity check's scan of the samples run log by
+    log through map_logs, and the σ are those of all samples at once. The robust
+    covariance's blocks come with each log's statistics when their length is settled before
+    the fit (2 s blocks, the floor); 10 s blocks are shortened for 60 s logs by the rank, so
+    the covariance takes a pass of its own."""
     options = FitOptions(method="wls", cutoff=2.0, bias_stretch=900, block=block)
-    logs = [log_statistics(f"log{k}", noisy_log(vehicle, k, start=100.0 * k),
-                           vehicle.damping, vehicle.body, options) for k in range(4)]
+    samples = [noisy_log(vehicle, k, start=100.0 * k) for k in range(4)]
+    logs = [log_statistics(f"log{k}", s, vehicle.damping, vehicle.body, options)
+            for k, s in enumerate(samples)]
     visits: list[int] = []
+    here = map_here(samples)
 
-    def map_logs(fn: Callable[[LogStatistics, int], Any]) -> list[Any]:
+    def map_logs(fn: Any) -> list[Any]:
         visits.extend(range(len(logs)))
-        return [fn(g, k) for k, g in enumerate(logs)]
+        return here(fn)
 
-    pooled = pooled_fit(logs, vehicle.damping, vehicle.body, options, map_logs=map_logs)
-    once = fit(pooled_samples(logs), vehicle.damping, vehicle.body, options)
-    assert all(len(g.samples) > 3 * options.bias_stretch for g in logs)
+    counted: MapLogs = map_logs
+    pooled = pooled_fit(logs, vehicle.damping, vehicle.body, options, counted)
+    whole = Samples.concatenate(samples)
+    once = fit(whole, vehicle.damping, vehicle.body, options)
+    assert all(len(s) > 3 * options.bias_stretch for s in samples)
     assert all(g.bias is not None and g.bias.base is not None for g in logs)
     np.testing.assert_allclose(pooled.theta, once.theta, rtol=1e-10, atol=0)
     np.testing.assert_allclose(pooled.std, once.std, rtol=1e-10, atol=0)
-    assert visits == [0, 1, 2, 3] * passes  # the robust pass, if any; the dissipativity scan
-    assert all((g.normal.blocks is not None) == (passes == 1) for g in logs)
-    without = fit(pooled_samples(logs), vehicle.damping, vehicle.body,
+    # the extent's; the robust pass, if any; the dissipativity scan
+    assert visits == [0, 1, 2, 3] * passes
+    assert all((g.normal.blocks is not None) == (passes == 2) for g in logs)
+    without = fit(whole, vehicle.damping, vehicle.body,
                   FitOptions(method="wls", cutoff=2.0, gyro_bias=0.0, dvl_bias=0.0,
                              block=block))
     assert np.all(once.std >= without.std) and np.any(once.std > 1.01 * without.std)

@@ -21,6 +21,7 @@ from dampest_ros.core.online.sample import OnlineConfig, OnlineSample, to_sample
 from dampest_ros.core.physics.damping import filter_memory
 from dampest_ros.core.physics.rigid_body import ConfigError
 from dampest_ros.core.physics.vehicle import Vehicle
+from dampest_ros.core.signals.extent import Extent
 from dampest_ros.core.signals.measurements import Recording, TwistSeries
 from dampest_ros.core.signals.preprocess import PreprocessConfig, from_window_means, preprocess
 from dampest_ros.core.simulation.effects import Effects
@@ -473,7 +474,7 @@ def rls_against_batch(vehicle: Vehicle, samples: list[OnlineSample]
     est.process(force=True)
     s = to_samples(est.samples_log, 50.0)
     f = fit(s, est.model, vehicle.body, FitOptions(
-        speed_range=tuple(speed_limits(vehicle, tau_measured=s.tau))), prior=est.nominal)
+        speed_range=tuple(speed_limits(vehicle, force=Extent.of(s).force))), prior=est.nominal)
     assert f.identified.sum() >= 6  # at least a coefficient per DOF to compare
     z = (est.theta - f.theta) / f.std
     for n, a, b, sd, zz, ok in zip(est.names, est.theta, f.theta, f.std, z, f.identified,
