@@ -3,8 +3,9 @@
 On a shared machine the wall-clock ratio of the two runs says more about the other load than
 about the pooling, so the rows also give the 2-worker run's speed-up bound from CPU times:
 (S + Σ jobs) / (S + Σ_maps max_w Σ jobs of worker w), S the CPU time of the thread that runs
-``dampest identify`` (the serial part, and the sending and receiving of the logs), a job a
-log's reduction or its part of one pass of the pooled fit (CPU time on its worker), and each
+``dampest identify`` (the serial part, and the receiving of the logs' statistics), a job a
+log's reduction (with the picking of what of it is sent) or its part of one pass of the
+pooled fit (CPU time on its worker), and each
 map (the reduction, every pass) a barrier; and the same with the 1-worker run's S + Σ jobs
 above the line, which also counts what each worker repeats (what it imports, say). CPU times
 hardly depend on the other load; the scheduler's event loop, in the same process, is left out
@@ -24,14 +25,14 @@ from dampest_ros.bench.runner import VEHICLE, child
 def maps(jobs: dict[str, list[tuple[str, float, float]]], logs: int
          ) -> list[dict[str, float]]:
     """The jobs' CPU (s) per map and worker, from each worker's (name, start, CPU) of its
-    jobs: the reductions, then the passes of the pooled fit (``logs`` jobs each, in start
-    order: every log reduced)."""
+    jobs: the reductions (and the picking of what of each is sent), then the passes of the
+    pooled fit (``logs`` jobs each, in start order: every log reduced)."""
     timed = sorted((start, name, w, cpu) for w, js in jobs.items() for name, start, cpu in js)
     reduce: dict[str, float] = defaultdict(float)
     passes: list[dict[str, float]] = []
     in_passes = 0
     for _, name, w, cpu in timed:
-        if name == "guarded":  # a log's reduction (cli/pool.py)
+        if name in ("guarded", "sent"):  # a log's reduction, what is sent (cli/pool.py)
             reduce[w] += cpu
             continue
         if in_passes % logs == 0:
