@@ -251,8 +251,8 @@ TOOLED_ROV_OPEN = pytest.mark.xfail(strict=True, reason=(
     "tooled_rov seeds 1 and 3: held-out pitch .9932 (seed 1 noiseless, seed 3 realistic) "
     "since the rotated geoms' element forces act along their own axes (before, along the "
     "nearest body axis: seeds 2-3 missed, pitch .9931-.9948); the library search beside the "
-    "element forces adds 2-3 pitch terms, each under its 5 % share of the row's residual "
-    "(with 2 %: pitch .9962 and .9973)"))
+    "element forces adds 2-3 pitch terms (13 on seed 1 before); with the share of the row's "
+    "residual a term must remove at 2 % instead of 5 %: pitch .9962 and .9973"))
 
 
 #: frame_rov's roll and pitch on seed 3 since its pitched camera arm's element forces act
