@@ -4,7 +4,7 @@
 A direction is a body axis 0, 1, 2 (x, y, z: velocity letters u, v, w) or any other unit vector
 e, the axis of an element the vehicle file rotates (MuJoCo's fluid forces on a geom act along
 the geom's own axes, the columns of its rotation). Off the body axes it is kept to
-:data:`DIGITS` decimals, so that its name (``e(0.8019,0.4888,0.3429)``) is the direction
+:data:`DIGITS` decimals, so that its name (``e(0.8008,0.491,0.3429)``) is the direction
 itself; an element's forces do not change with the sign of e (each is even in e), so the sign
 is fixed: the largest component positive.
 """

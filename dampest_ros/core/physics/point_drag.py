@@ -26,7 +26,7 @@ c |v_p,e| ‖v_p‖² ≥ 0 for c ≥ 0 (PᵀP is positive semi-definite). Neith
 direction has that form: it acts along v_p with a size set by the normal speed.
 
 A direction (:mod:`.directions`) is a body axis 0, 1, 2 (u, v, w in the names) or any other
-unit vector, named by its components, e.g. ``lift.e(0.8019,0.4888,0.3429)@(0.44,0.21,-0.04)``.
+unit vector, named by its components, e.g. ``lift.e(0.8008,0.491,0.3429)@(0.44,0.21,-0.04)``.
 
 The ``point`` term's elements (:class:`PointSpec`) are of four forces: ``drag`` and ``area``
 (this module), ``lift`` and ``magnus`` (:mod:`.point_lift`: across v_p, doing no work).
