@@ -259,10 +259,14 @@ def _terms_params(spec: Mapping[str, Any]) -> dict[str, Any]:
     if spec.get("point"):
         p = spec["point"]
         # a drag's axis and speed; an area drag's or lift's axis and "area" or "lift"; a Magnus
-        # force's −1 and "magnus"
+        # force's −1 and "magnus"; an axis off the body axes is 3, its direction in directions
         out["point"] = {"positions": [float(x) for e in p for x in e["position"]],
-                        "axes": [DOF_NAMES.index(e["axis"]) if "axis" in e else -1 for e in p],
+                        "axes": [DOF_NAMES.index(a) if isinstance(a, str) else -1 if a is None
+                                 else 3 for a in (e.get("axis") for e in p)],
                         "speeds": [e["speed"] if "speed" in e else e["force"] for e in p]}
+        if directions := [float(x) for e in p if isinstance(e.get("axis"), list)
+                          for x in e["axis"]]:
+            out["point"]["directions"] = directions
     if spec.get("residual"):
         out["residual"] = {"modes": [float(v) for m in spec["residual"]["modes"] for v in m]}
     return out
@@ -287,8 +291,11 @@ def _spec_from_params(terms: Mapping[str, Any]) -> dict[str, Any]:
         spec["added"] = {}
     if "point" in terms:
         p = terms["point"]
+        # the directions of the axes 3, in order
+        directions = iter(np.reshape(p.get("directions", []), (-1, 3)).tolist())
         spec["point"] = [{"position": list(r),
-                          **({"axis": DOF_NAMES[int(a)]} if int(a) >= 0 else {}),
+                          **({"axis": DOF_NAMES[int(a)]} if 0 <= int(a) < 3 else
+                             {"axis": next(directions)} if int(a) == 3 else {}),
                           **({"force": str(s)} if s in FORCES[1:] else {"speed": str(s)})}
                          for r, a, s in zip(np.reshape(p["positions"], (-1, 3)).tolist(),
                                             p["axes"], p["speeds"], strict=True)]
@@ -583,6 +590,11 @@ def _model_from_mapping(model: Mapping[str, Any]) -> Model:
     axes = _entry(model, "terms.point.axes")
     if axes is not None:
         _same_length(model, ("terms.point.positions",), 3 * len(axes), "3 × terms.point.axes")
+        turned = 3 * list(axes).count(3)
+        if turned and _entry(model, "terms.point.directions") is None:
+            raise ConfigError("model.terms.point.directions", f"missing: give {turned} numbers, "
+                                                              "3 per terms.point.axes 3")
+        _same_length(model, ("terms.point.directions",), turned, "3 × the terms.point.axes 3")
     modes = _entry(model, "terms.residual.modes")
     if modes is not None and len(modes) % 6:
         raise ConfigError("model.terms.residual.modes", f"has {len(modes)} numbers; give 6 "

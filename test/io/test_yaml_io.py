@@ -33,6 +33,9 @@ FULL_SPEC: dict[str, Any] = {
     "added": {"added.N_uv": 0.3},
     "point": [{"position": [0.3, 0.0, 0.2], "axis": "w", "value": 12.0},
               {"position": [0.0, -0.3, 0.21], "axis": "v", "speed": "normal", "value": 7.5},
+              {"position": [0.44, 0.21, -0.04], "axis": [0.6, 0.8, 0.0], "value": 3.0},
+              {"position": [0.05, 0.4, -0.02], "force": "area", "axis": [0, -0.1, 1],
+               "value": 20.0},
               {"position": [0.42, -0.32, -0.08], "force": "lift", "axis": "w", "value": -37.0},
               {"position": [0.55, -0.15, 0.12], "force": "magnus", "value": -5.4}],
     "residual": {"modes": [[1, 0, 1, 0, 0, 0], [0, 1, 0, 0, 0, 1], [0, 0, 1, 0, 1, 0]],
@@ -391,4 +394,28 @@ def test_vehicle_file_typo_in_zeroed_entries_is_one_line_naming_the_place(
         tmp_path: Path, line: str, match: str) -> None:
     with pytest.raises(ConfigError, match=match) as info:
         yaml_io.load_vehicle(_vehicle_with(tmp_path, line))
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(("axis", "error"), [
+    ("[0.6, 0.8, 0.0]", None), ("[3, 4, 0]", None),
+    ("[0, 0, 0]", r"vehicle\.yaml:\d+: damping\.point\[0\]\.axis: \[0, 0, 0\]: a direction "
+                  r"is three finite numbers, not all zero"),
+    ("[.nan, 1, 0]", r"damping\.point\[0\]\.axis: .*three finite numbers"),
+    ("[1, 0]", r"vehicle\.yaml:\d+: .*damping\.point\[0\]\.axis"),
+])
+def test_vehicle_file_element_along_a_direction(tmp_path: Path, axis: str,
+                                                error: str | None) -> None:
+    """An element of a vehicle file's damping may lie along a direction [e_x, e_y, e_z]
+    (normalised); a zero, non-finite or short one is one line naming the place."""
+    text = yaml_io.vehicle_path("tooled_rov").read_text()
+    path = tmp_path / "vehicle.yaml"
+    path.write_text(text.replace("\n  coriolis:", "\n  point: [{position: [0.44, 0.21, -0.04], "
+                                 f"force: lift, axis: {axis}, value: -3.0}}]\n  coriolis:"))
+    if error is None:
+        v = yaml_io.load_vehicle(path)
+        assert "lift.e(0.6,0.8,0)@(0.44,0.21,-0.04)" in v.damping.parameter_names
+        return
+    with pytest.raises(ConfigError, match=error) as info:
+        yaml_io.load_vehicle(path)
     assert "\n" not in str(info.value)

@@ -117,8 +117,9 @@ def misfit_terms(samples: Samples, base: DampingModel, body: RigidBody, cutoff: 
 
 
 def element_drags(vehicle: Vehicle) -> list[PointSpec]:
-    """The candidate element forces of a vehicle: drags at its geoms off the origin, else at
-    a generic set of points (:func:`~dampest_ros.core.physics.point_drag.candidate_points`),
+    """The candidate element forces of a vehicle: drags at its geoms off the origin, along
+    each geom's own axes (the body axes unless the file rotates it), else at a generic set of
+    points along the body axes (:func:`~dampest_ros.core.physics.point_drag.candidate_points`),
     and with a geometry the lift of each slender geom about its long axis and of each flat
     one about its normal, with a flat one's drag on its projected area
     (:func:`~dampest_ros.core.physics.point_lift.candidate_lifts`).

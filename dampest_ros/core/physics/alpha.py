@@ -38,9 +38,9 @@ class Alpha:
     cross-flow share of a body of revolution about the third axis; 0 at rest), ``prod``
     (ν_i ν_j), ``absprod`` (|ν_i ν_j|), ``absproj`` (|wᵀν| for a 6-vector w), ``pspeed``
     (‖v + ω × r‖, the speed through the water of the point r = ``w`` (3 floats, m, FRD) of the
-    body: an element's local speed, m/s), ``pshare`` (v_p,i² / ‖v_p‖, v_p = v + ω × r at the
-    point r = ``w``, i = 0, 1, 2 a body axis: the share of the element's speed along the axis,
-    weighted by it, m/s; 0 at rest).
+    body: an element's local speed, m/s), ``pshare`` ((eᵀv_p)² / ‖v_p‖, v_p = v + ω × r at the
+    point r = ``w[:3]``, e = ``w[3:]`` a unit direction in the body frame: the share of the
+    element's speed along e, weighted by it, m/s; 0 at rest).
     """
 
     kind: str = "one"
@@ -74,7 +74,7 @@ class Alpha:
         if k == "pspeed":
             return point_speeds(nu, np.array([self.w]))[:, 0]
         if k == "pshare":
-            return point_shares(nu, np.array([self.w]), np.array([self.i]))[:, 0]
+            return point_shares(nu, np.array([self.w[:3]]), np.array([self.w[3:]]))[:, 0]
         raise ConfigError("alpha", f"unknown kind {k!r}")
 
     def scale(self, nu_scale: FloatArray) -> float:
@@ -103,7 +103,7 @@ class Alpha:
         if k == "absproj":
             return float(s[np.abs(np.asarray(self.w)) > 0].max())
         if k in ("pspeed", "pshare"):
-            return float(max(s[:3].max(), s[3:].max() * np.linalg.norm(self.w)))
+            return float(max(s[:3].max(), s[3:].max() * np.linalg.norm(self.w[:3])))
         raise ConfigError("alpha", f"unknown kind {k!r}")
 
     def label(self) -> str:
@@ -122,7 +122,7 @@ class Alpha:
             "absprod": f"|{n[self.i]}{n[self.j]}|" if self.i >= 0 else "",
             "absproj": "|w'nu|",
             "pspeed": "|v+w x r|",
-            "pshare": f"{n[self.i]}_p^2/|v+w x r|" if self.i >= 0 else "",
+            "pshare": "e_p^2/|v+w x r|",
         }[self.kind]
 
     @classmethod
@@ -188,9 +188,8 @@ class AlphaBank:
         self.absolute = columns("abs", "absprod", "absproj")
         self.W = np.array([alphas[k].w for k in self.proj], dtype=float).reshape(-1, 6).T
         self.points = np.array([alphas[k].w for k in self.pspeed], dtype=float).reshape(-1, 3)
-        self.share_points = np.array([alphas[k].w for k in self.pshare],
-                                     dtype=float).reshape(-1, 3)
-        self.share_axes = np.array([alphas[k].i for k in self.pshare], dtype=np.int64)
+        shares = np.array([alphas[k].w for k in self.pshare], dtype=float).reshape(-1, 6)
+        self.share_points, self.share_directions = shares[:, :3], shares[:, 3:]
         # the bank is a list of products (kinds one, lin, abs, prod, absprod) unless it holds
         # a norm, an area, a projection or a point's speed: then one sample goes through
         # __call__ as well
@@ -219,7 +218,7 @@ class AlphaBank:
         if len(k := self.pspeed):
             a[:, k] = point_speeds(nu, self.points)
         if len(k := self.pshare):
-            a[:, k] = point_shares(nu, self.share_points, self.share_axes)
+            a[:, k] = point_shares(nu, self.share_points, self.share_directions)
         if len(k := self.absolute):
             a[:, k] = np.abs(a[:, k])
         return a
@@ -280,9 +279,9 @@ def point_velocities(nu: FloatArray, points: FloatArray) -> FloatArray:
     return nu[:, None, :3] + np.cross(nu[:, None, 3:], points[None, :, :])
 
 
-def point_shares(nu: FloatArray, points: FloatArray, axes: NDArray[np.int64]) -> FloatArray:
-    """v_p,a² / ‖v_p‖ of each point r of the body along its body axis a: the part of the
-    element's speed along a, weighted by it (0 at rest).
+def point_shares(nu: FloatArray, points: FloatArray, directions: FloatArray) -> FloatArray:
+    """(eᵀv_p)² / ‖v_p‖ of each point r of the body along its direction e: the part of the
+    element's speed along e, weighted by it (0 at rest).
 
     Parameters
     ----------
@@ -290,8 +289,8 @@ def point_shares(nu: FloatArray, points: FloatArray, axes: NDArray[np.int64]) ->
         Body velocity (m/s, rad/s), FRD.
     points : ndarray, shape (P, 3)
         Positions r in the body frame (m), FRD.
-    axes : ndarray of int, shape (P,)
-        The axis a (0, 1, 2: x, y, z) of each point.
+    directions : ndarray, shape (P, 3)
+        The unit direction e of each point in the body frame (a body axis or any other).
 
     Returns
     -------
@@ -300,6 +299,7 @@ def point_shares(nu: FloatArray, points: FloatArray, axes: NDArray[np.int64]) ->
     """
     vp = point_velocities(nu, points)
     speed = _speeds(vp)
-    along = vp[:, np.arange(len(axes)), axes]
-    # v_p,a² / ‖v_p‖ (≤ ‖v_p‖, so it goes to 0 with the speed)
+    # eᵀv_p per sample and point (exactly v_p,a for a body axis e_a)
+    along = np.einsum("npi,pi->np", vp, directions)
+    # (eᵀv_p)² / ‖v_p‖ (≤ ‖v_p‖, so it goes to 0 with the speed)
     return np.divide(along ** 2, speed, out=np.zeros_like(speed), where=speed > 0)

@@ -6,7 +6,7 @@ drag (:mod:`.point_drag`, along v_p or its body axis), a body in a flow feels fo
 v_p, from the circulation the flow takes around it (Kutta–Joukowski: force ρ Γ × v per unit
 length):
 
-* lift of an element at an angle of attack. A slender element along a body axis e (a float's
+* lift of an element at an angle of attack. A slender element along a direction e (a float's
   long axis, a strut), or a plate with normal e, turns the flow that meets it obliquely; the
   force is the cross-flow part of its normal force,
 
@@ -37,9 +37,10 @@ NSD, and sum to a power of zero, the Magnus ones are skew).
 they are, and the dissipativity constraint (:mod:`dampest_ros.core.identification.dissipative`)
 sees zero power rows for them: neither can make a model generate energy.
 
-Candidates (:func:`candidate_lifts`): the elements of the geometry lift about an axis turned
-into the body frame by the geom's orientation and taken as the body axis nearest to it: a
-slender element (a float, a strut, a bottle: semi-axes a ≤ b ≤ c with c/b > b/a) about its
+Candidates (:func:`candidate_lifts`): the elements of the geometry lift about their own axis,
+turned into the body frame by the geom's orientation (a body axis unless the file rotates the
+geom, :mod:`.directions`; MuJoCo's forces on a geom act along its own axes): a slender
+element (a float, a strut, a bottle: semi-axes a ≤ b ≤ c with c/b > b/a) about its
 long axis, a flat one (a wing, a fin, a plate: b/a ≥ c/b) about its normal (the plate's
 circulation is across the flow and its normal, so its lift has the same form with e its
 normal: MuJoCo's Kutta lift of a thin ellipsoid, semi-axes r_1, r_2 in its plane, is this force
@@ -55,7 +56,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.physics.alpha import Alpha
 from dampest_ros.core.physics.damping import Basis
-from dampest_ros.core.physics.frames import matrix_from_euler
+from dampest_ros.core.physics.directions import Direction, geom_axes
 from dampest_ros.core.physics.geometry import Geometry
 
 FloatArray = NDArray[np.float64]
@@ -70,14 +71,16 @@ def transport(position: tuple[float, float, float]) -> FloatArray:
     return np.hstack([np.eye(3), -cross])
 
 
-def lift_basis(name: str, position: tuple[float, float, float], axis: int) -> Basis:
-    """The lift of an element along body axis ``axis`` (0, 1, 2) at ``position`` (module
-    docstring): atoms (‖v_p‖, w wᵀ) and (v_p,a² / ‖v_p‖, −PᵀP), w = Pᵀ e_a."""
+def lift_basis(name: str, position: tuple[float, float, float], e: FloatArray) -> Basis:
+    """The lift of an element along the unit direction ``e`` (shape (3,), body frame) at
+    ``position`` (module docstring): atoms (‖v_p‖, w wᵀ) and ((eᵀv_p)² / ‖v_p‖, −PᵀP),
+    w = Pᵀ e."""
     P = transport(position)
-    w = P[axis]
+    # w = Pᵀ e = [e; r × e], the wrench of a unit force along e at r
+    w = P.T @ e
     where = tuple(map(float, position))
     return Basis(name, np.outer(w, w), Alpha("pspeed", w=where),
-                 ((-P.T @ P, Alpha("pshare", i=axis, w=where)),))
+                 ((-P.T @ P, Alpha("pshare", w=(*where, *map(float, e)))),))
 
 
 def magnus_basis(name: str, position: tuple[float, float, float]) -> Basis:
@@ -92,10 +95,10 @@ def magnus_basis(name: str, position: tuple[float, float, float]) -> Basis:
 
 
 def candidate_lifts(geometry: Geometry | None
-                    ) -> list[tuple[tuple[float, float, float], int, bool]]:
+                    ) -> list[tuple[tuple[float, float, float], Direction, bool]]:
     """The lifts the elements of the vehicle's geometry may have (module docstring): per
-    geom off the origin but a sphere, its position, the body axis nearest its long axis (a
-    slender geom) or its normal (a flat one) and whether it is flat, in file order.
+    geom off the origin but a sphere, its position, its long axis (a slender geom) or its
+    normal (a flat one) in the body frame and whether it is flat, in file order.
 
     Parameters
     ----------
@@ -104,10 +107,11 @@ def candidate_lifts(geometry: Geometry | None
 
     Returns
     -------
-    list of (tuple of 3 float, int, bool)
-        Position (m, FRD), axis (0, 1, 2: u, v, w) and flat.
+    list of (tuple of 3 float, Direction, bool)
+        Position (m, FRD), axis (:data:`~.directions.Direction`: 0, 1, 2 for u, v, w when
+        the geom is not rotated) and flat.
     """
-    out: list[tuple[tuple[float, float, float], int, bool]] = []
+    out: list[tuple[tuple[float, float, float], Direction, bool]] = []
     for g in geometry.geoms if geometry is not None else ():
         a, b, c = sorted(g.size)
         where = (float(g.position[0]), float(g.position[1]), float(g.position[2]))
@@ -116,9 +120,8 @@ def candidate_lifts(geometry: Geometry | None
         # slender (c/b > b/a): its long axis; flat: its normal, the shortest; in the body
         # frame: the geom's rotation of its own axis
         flat = not c * a > b * b
-        own = matrix_from_euler(np.asarray(g.rpy))[:, int(np.argmin(g.size) if flat
-                                                          else np.argmax(g.size))]
-        lift = (where, int(np.argmax(np.abs(own))), flat)
+        own = geom_axes(g.rpy)[int(np.argmin(g.size) if flat else np.argmax(g.size))]
+        lift = (where, own, flat)
         if lift not in out:
             out.append(lift)
     return out

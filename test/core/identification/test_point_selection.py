@@ -9,6 +9,7 @@ from dampest_ros.core.identification.point_selection import EntryRules, select_p
 from dampest_ros.core.identification.regression import accumulate
 from dampest_ros.core.identification.selection import select_terms
 from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.directions import BODY_AXES
 from dampest_ros.core.physics.point_drag import PointSpec, point_library, point_term
 from dampest_ros.core.physics.terms import CrossSpec, cross_term, linear_term, quadratic_term
 from dampest_ros.io.yaml_io import load_vehicle
@@ -32,7 +33,7 @@ def test_the_drag_at_its_point_is_found_first_and_alone() -> None:
     law = base.force(nu, base_theta) \
         + DampingModel([point_term([TRUTH])]).force(nu, np.array([60.0]))
     samples = synthetic(body, nu, law, 0.01, seed=3)
-    found = select_points(samples, base, body, point_library(POINTS), 2.0,
+    found = select_points(samples, base, body, point_library([(p, BODY_AXES) for p in POINTS]), 2.0,
                           EntryRules(10.0, 2.0 * 2.0 * 120.0))
     assert found.chosen == [TRUTH]
     before, after = found.r2
@@ -58,7 +59,8 @@ def test_a_term_that_made_up_for_a_pruned_drag_goes_with_it() -> None:
         {"row": "Y", "col": "v", "alpha": "|r|"})])])
     law = base.force(nu, base_theta) + coupling.force(nu, np.array([60.0]))
     samples = synthetic(body, nu, law, 0.02, seed=3)
-    points = [(0.0, 0.625, 0.0), (0.0, -0.625, 0.0), (0.0, 0.0, 0.625), (0.0, 0.0, -0.625)]
+    points = [((0.0, 0.625, 0.0), BODY_AXES), ((0.0, -0.625, 0.0), BODY_AXES),
+              ((0.0, 0.0, 0.625), BODY_AXES), ((0.0, 0.0, -0.625), BODY_AXES)]
     sel = select_terms(samples, base, body, memory_dofs=(), points=point_library(points))
     assert sel.points is not None
     assert sorted(sel.points.pruned) == ["drag.v|U|@(0,-0.625,0)", "drag.v|U|@(0,0.625,0)"]
@@ -87,7 +89,8 @@ def test_a_mirror_pair_enters_together_where_neither_twin_passes_alone() -> None
     law = base.force(nu, base_theta) \
         + DampingModel([point_term(truth)]).force(nu, np.array([60.0, 60.0, 150.0]))
     samples = synthetic(body, nu, law, 0.02, seed=3)
-    found = select_points(samples, base, body, point_library([hull, port, stbd]), 2.0,
+    found = select_points(samples, base, body,
+                          point_library([(p, BODY_AXES) for p in (hull, port, stbd)]), 2.0,
                           EntryRules(10.0, 2.0 * 2.0 * 120.0))
     assert found.chosen == truth and found.steps == 2
     assert found.path[1][0] == "drag.w|U|@(0,-0.3,0.05) + drag.w|U|@(0,0.3,0.05)"

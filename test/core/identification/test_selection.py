@@ -309,6 +309,7 @@ def test_each_dof_takes_the_terms_of_the_search_that_predicts_it_better(
     model keeps the drag and Y_vr (nothing else) and reaches ≥ 0.9999 in every DOF (fit on
     70 %, scored on the last 30 %)."""
     from dampest_ros.core.identification.selection import row_by_row
+    from dampest_ros.core.physics.directions import BODY_AXES
     from dampest_ros.core.physics.point_drag import PointSpec, point_library, point_term
 
     rng = np.random.default_rng(4)
@@ -322,7 +323,8 @@ def test_each_dof_takes_the_terms_of_the_search_that_predicts_it_better(
     samples = synthetic(body, nu, law, 0.01, seed=5)
     alone = select_terms(samples, base, body, memory_dofs=(), keep_base=True)
     drags = select_terms(samples, base, body, memory_dofs=(), keep_base=True,
-                         points=point_library([(0.3, 0.0, 0.2), (-0.2, 0.1, -0.1)]))
+                         points=point_library([((0.3, 0.0, 0.2), BODY_AXES),
+                                                ((-0.2, 0.1, -0.1), BODY_AXES)]))
     before = held_out_r2(samples, alone.model, body)
     assert before[2] < 0.998 and before[4] < 0.991, before  # measured .9973, .9906
     model, taken = row_by_row(alone, drags, base, range(6))

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.directions import BODY_AXES, direction, geom_axes
 from dampest_ros.core.physics.geometry import Geometry
 from dampest_ros.core.physics.point_drag import (
     PointSpec,
@@ -35,7 +36,8 @@ def test_columns_are_the_force_at_the_point_and_its_moment() -> None:
     moment r × F), both speeds; the model's force, the regressor and the written-out wrench
     agree to 1e-12, and the power is c s v_p,a² ≥ 0."""
     rng = np.random.default_rng(5)
-    specs = point_library([(0.3, 0.0, 0.2), (0.0, -0.3, 0.21), (-0.45, 0.1, -0.22)])
+    specs = point_library([(p, BODY_AXES) for p in
+                           ((0.3, 0.0, 0.2), (0.0, -0.3, 0.21), (-0.45, 0.1, -0.22))])
     model = DampingModel([point_term(specs)])
     nu = rng.normal(size=(300, 6)) * np.array([0.5, 0.4, 0.3, 0.6, 0.5, 0.4])
     theta = rng.uniform(5.0, 50.0, len(specs))
@@ -68,12 +70,12 @@ def test_one_coefficient_acts_in_the_force_and_both_lever_moments() -> None:
 
 
 def test_names_read_back_and_bad_entries_name_the_field() -> None:
-    for spec in point_library([(0.3, -0.125, 0.2)]):
+    for spec in point_library([((0.3, -0.125, 0.2), BODY_AXES)]):
         assert point_spec(spec.basis()) == spec
         assert PointSpec.from_dict(spec.to_dict()) == spec
     assert PointSpec((0.3, 0.0, 0.2), 2).label == "drag.w|U|@(0.3,0,0.2)"
     assert PointSpec((0.3, 0.0, 0.2), 2, "normal").label == "drag.ww@(0.3,0,0.2)"
-    with pytest.raises(ConfigError, match=r"damping\.point\[0\]\.axis.*along u, v or w"):
+    with pytest.raises(ConfigError, match=r"damping\.point\[0\]\.axis.*along u, v, w or a dir"):
         PointSpec.from_dict({"position": [0, 0, 1], "axis": "q"}, "damping.point[0]")
     with pytest.raises(ConfigError, match=r"point\.speed"):
         PointSpec.from_dict({"position": [0, 0, 1], "axis": "w", "speed": "fast"})
@@ -81,21 +83,70 @@ def test_names_read_back_and_bad_entries_name_the_field() -> None:
         PointSpec.from_dict({"position": [0, 1], "axis": "w"})
 
 
+def test_directions_off_the_body_axes_read_back() -> None:
+    """An element along a direction off the body axes: its name carries the direction (4
+    decimals, the largest component positive), reads back exactly, its file entry too; a
+    direction that is a body axis is that axis (the same name and numbers as today); a zero or
+    non-finite direction is refused naming the field."""
+    e = direction((-0.6, -0.8, 0.0))
+    assert e == (0.6, 0.8, 0.0) and direction((0.0, 2.0, 1e-12)) == 1
+    assert direction(np.array([0.8008, 0.491, 0.3429])) == (0.8008, 0.491, 0.3429)
+    where = (0.44, 0.21, -0.04)
+    assert PointSpec(where, e, force="lift").label == "lift.e(0.6,0.8,0)@(0.44,0.21,-0.04)"
+    assert PointSpec(where, e, "normal").label == "drag.e(0.6,0.8,0)e@(0.44,0.21,-0.04)"
+    for spec in point_library([(where, geom_axes((0.3, -0.35, 0.55)))],
+                              [(where, geom_axes((0.3, -0.35, 0.55))[0], True)]):
+        assert not isinstance(spec.axis, int)
+        assert point_spec(spec.basis()) == spec
+        assert PointSpec.from_dict(spec.to_dict()) == spec
+        assert spec.mirror.mirror == spec
+    assert PointSpec.from_dict({"position": [0, 0, 1], "axis": [0, 0, -3]}) == \
+        PointSpec((0.0, 0.0, 1.0), 2)
+    assert PointSpec.from_dict({"position": [0, 0, 1], "axis": [3, 4, 0], "force": "area"}) \
+        == PointSpec((0.0, 0.0, 1.0), (0.6, 0.8, 0.0), force="area")
+    for bad in ([0, 0, 0], [1, 2], [1, float("nan"), 0], ["u", 0, 0]):
+        with pytest.raises(ConfigError, match=r"damping\.point\[0\]\.axis.*three finite"):
+            PointSpec.from_dict({"position": [0, 0, 1], "axis": bad}, "damping.point[0]")
+
+
+def test_a_force_along_a_direction_is_its_rotation_of_the_body_axis_force() -> None:
+    """The drag, area drag and lift of an element along a unit direction e are those of a
+    body-axis element of a vehicle turned so that its axis is e: with a rotation R taking
+    e_x to e = (0.6, 0.8, 0) and r to R r, the force at ν equals R applied to the body-axis
+    force at the turned velocity Rᵀ ν (force and moment)."""
+    rng = np.random.default_rng(8)
+    R = np.array([[0.6, -0.8, 0.0], [0.8, 0.6, 0.0], [0.0, 0.0, 1.0]])
+    r = np.array([0.2, -0.1, 0.3])
+    where = tuple(map(float, R @ r))
+    nu = rng.normal(0.0, 0.4, (50, 6))
+    turned = np.hstack([nu[:, :3] @ R, nu[:, 3:] @ R])  # Rᵀ ν per sample
+    for speed, force in (("|U|", "drag"), ("normal", "drag"), ("|U|", "area"),
+                         ("|U|", "lift")):
+        there = DampingModel([point_term([PointSpec(where, (0.6, 0.8, 0.0), speed, force)])])
+        axis = DampingModel([point_term([PointSpec((0.2, -0.1, 0.3), 0, speed, force)])])
+        f = axis.force(turned, np.array([7.0]))
+        np.testing.assert_allclose(there.force(nu, np.array([7.0])),
+                                   np.hstack([f[:, :3] @ R.T, f[:, 3:] @ R.T]), atol=1e-9)
+
+
 def test_candidate_points_are_the_geoms_off_the_origin_else_a_generic_set() -> None:
     geometry = Geometry.from_dict({"geoms": [
         {"size": [0.5, 0.4, 0.2]}, {"size": [0.1, 0.1, 0.1], "position": [0.3, 0.0, 0.2]},
         {"size": [0.1, 0.1, 0.1], "position": [0.3, 0.0, 0.2]},
         {"size": [0.1, 0.1, 0.1], "position": [0.0, -0.3, 0.2]}]})
-    assert candidate_points(geometry, 1.0) == [(0.3, 0.0, 0.2), (0.0, -0.3, 0.2)]
-    assert candidate_points(None, 2.0) == [(1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.5, 0.0),
-                                           (0.0, -0.5, 0.0), (0.0, 0.0, 0.5), (0.0, 0.0, -0.5)]
+    assert candidate_points(geometry, 1.0) == [((0.3, 0.0, 0.2), BODY_AXES),
+                                               ((0.0, -0.3, 0.2), BODY_AXES)]
+    assert candidate_points(None, 2.0) == [
+        (p, BODY_AXES) for p in ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.5, 0.0),
+                                 (0.0, -0.5, 0.0), (0.0, 0.0, 0.5), (0.0, 0.0, -0.5))]
     assert len(point_library(candidate_points(None, 2.0))) == 36
 
 
 def test_mirror_pairs_are_the_twins_across_the_xz_plane() -> None:
     """Drags at (0.1, ±0.2, 0) along the same axis on the same speed pair up; a drag on the
     centre line, or at a point without its twin, does not."""
-    specs = point_library([(0.1, 0.2, 0.0), (0.0, 0.0, 0.3), (0.1, -0.2, 0.0), (0.5, 0.4, 0.0)])
+    specs = point_library([(p, BODY_AXES) for p in
+                           ((0.1, 0.2, 0.0), (0.0, 0.0, 0.3), (0.1, -0.2, 0.0), (0.5, 0.4, 0.0))])
     pairs = mirror_pairs(specs)
     assert [(specs[i].label, specs[j].label) for i, j in pairs][:2] == [
         ("drag.u|U|@(0.1,0.2,0)", "drag.u|U|@(0.1,-0.2,0)"),

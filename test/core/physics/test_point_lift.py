@@ -101,9 +101,9 @@ def test_a_thin_plates_lift_along_its_normal_is_mujocos_kutta_lift() -> None:
 def test_candidate_lifts_are_slender_geoms_along_their_long_axis_flat_ones_their_normal(
         ) -> None:
     """frame_rov's shapes: a vertical float lifts along w, a bottle along u, a camera arm
-    pitched 0.3 rad along u (its long axis nearest); a flat foam block along its normal w and
-    a wing rolled 0.1 rad along its normal nearest, w, both flat; a sphere and a geom at the
-    origin are not offered."""
+    pitched 0.3 rad along its own long axis (cos 0.3, 0, −sin 0.3); a flat foam block along its
+    normal w and a wing rolled 0.1 rad along its own normal (0, −sin 0.1, cos 0.1), both flat;
+    a sphere and a geom at the origin are not offered."""
     geometry = Geometry.from_dict({"geoms": [
         {"name": "float", "size": [0.08, 0.08, 0.2], "position": [0.42, -0.32, -0.08]},
         {"name": "bottle", "size": [0.3, 0.09, 0.09], "position": [0.0, 0.0, -0.05]},
@@ -116,9 +116,9 @@ def test_candidate_lifts_are_slender_geoms_along_their_long_axis_flat_ones_their
         {"name": "hull", "size": [0.8, 0.1, 0.1]}]})
     assert candidate_lifts(geometry) == [
         ((0.42, -0.32, -0.08), 2, False), ((0.0, 0.0, -0.05), 0, False),
-        ((0.55, -0.15, 0.12), 0, False), ((0.0, 0.0, -0.22), 2, True),
-        ((0.05, 0.4, -0.02), 2, True)]
+        ((0.55, -0.15, 0.12), (0.9553, 0.0, -0.2955), False), ((0.0, 0.0, -0.22), 2, True),
+        ((0.05, 0.4, -0.02), (0.0, -0.0998, 0.995), True)]
     assert [s.label for s in point_library([], candidate_lifts(geometry))[-4:]] == [
-        "lift.w@(0,0,-0.22)", "area.w@(0,0,-0.22)", "lift.w@(0.05,0.4,-0.02)",
-        "area.w@(0.05,0.4,-0.02)"]
+        "lift.w@(0,0,-0.22)", "area.w@(0,0,-0.22)", "lift.e(0,-0.0998,0.995)@(0.05,0.4,-0.02)",
+        "area.e(0,-0.0998,0.995)@(0.05,0.4,-0.02)"]
     assert candidate_lifts(None) == []
