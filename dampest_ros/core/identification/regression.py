@@ -48,39 +48,16 @@ def memory_states(samples: Samples, model: DampingModel) -> FloatArray:
     return out
 
 
-def low_pass_live(Phi: FloatArray, rate: float, cutoff: float) -> FloatArray:
-    """:func:`zero_phase` of the entries of Φ that are not zero throughout; a zero column
-    filters to zero, and a single-entry coefficient fills one force row of six, so most are.
+def iter_entries(samples: Samples, model: DampingModel, body: RigidBody,
+                 chunk: int = CHUNK, cutoff: float = 0.0, margin: float = 5.0,
+                 offset: FloatArray | None = None, decimate: bool = False,
+                 entries: Callable[[FloatArray, FloatArray | None], FloatArray] | None = None
+                 ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
+    """Yield (rows, X (n, L), y (n, 6)) over chunks of at most ``chunk`` samples, X the
+    entries of Φ its model's pattern names (:meth:`DampingModel.regressor_entries`): what
+    :func:`iter_regression` yields, without Φ's zeros.
 
-    Parameters
-    ----------
-    Phi : ndarray, shape (n, ...)
-        Time on axis 0.
-    rate, cutoff : float
-        Sample rate and low-pass cutoff (Hz).
-
-    Returns
-    -------
-    ndarray, shape of Phi
-    """
-    flat = Phi.reshape(len(Phi), -1)
-    live = np.flatnonzero(np.any(flat != 0.0, axis=0))
-    if len(live) == flat.shape[1]:  # e.g. library features: no copy in and out
-        return zero_phase(Phi, rate, cutoff)
-    out = np.zeros_like(flat)
-    out[:, live] = zero_phase(flat[:, live], rate, cutoff)
-    return out.reshape(Phi.shape)
-
-
-def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
-                    chunk: int = CHUNK, cutoff: float = 0.0, margin: float = 5.0,
-                    offset: FloatArray | None = None, decimate: bool = False,
-                    regressor: Callable[[FloatArray, FloatArray | None], FloatArray] | None
-                    = None
-                    ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
-    """Yield (rows, Φ (n, 6, p), y (n, 6)) over chunks of at most ``chunk`` samples.
-
-    With ``cutoff`` > 0 both y and every column of Φ are low-passed (zero phase) along time
+    With ``cutoff`` > 0 both y and every column of X are low-passed (zero phase) along time
     within each segment: "parallel filtering". Since θ is constant, LP(y) = LP(Φ) θ holds
     exactly however nonlinear Φ is, whereas filtering ν before forming |ν|ν does not. Chunks
     are filtered with ``margin`` seconds of neighbouring data on both sides, so memory stays
@@ -88,8 +65,8 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
 
     ``offset`` (6,) is added to ν first: the data as a sensor bias would have made them.
 
-    ``regressor(ν, z)`` replaces ``model.regressor`` (the model still gives the memory states
-    z): any array with time on axis 0, e.g. (n, 1, m) features shared by every row.
+    ``entries(ν, z)`` replaces ``model.regressor_entries`` (the model still gives the memory
+    states z): any columns, shape (n, L), e.g. features shared by every row.
 
     With ``decimate`` (and ``cutoff`` > 0) only every k-th sample is yielded, k the largest
     step that keeps four samples per period of the cutoff: the low-passed signals carry no
@@ -110,19 +87,30 @@ def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
             stop = min(start + chunk, s1)
             a, b = max(s0, start - pad), min(s1, stop + pad)
             ext = slice(a, b)
-            Phi = (regressor or model.regressor)(samples.nu[ext], z[ext] if has_z else None)
+            X = (entries or model.regressor_entries)(samples.nu[ext], z[ext] if has_z else None)
             y = target(samples, body, ext)
             if cutoff > 0:
-                Phi = low_pass_live(Phi, samples.rate, cutoff)
+                X = zero_phase(X, samples.rate, cutoff)
                 y = zero_phase(y, samples.rate, cutoff)
             if step > 1:
                 # every k-th sample counted from the segment's first: a segment gives the
                 # same rows whatever comes before it (a log pooled with others included)
                 rows = np.arange(start + (s0 - start) % step, stop, step)
-                yield rows, Phi[rows - a], y[rows - a]
+                yield rows, X[rows - a], y[rows - a]
             else:
                 core = slice(start - a, stop - a)
-                yield slice(start, stop), Phi[core], y[core]
+                yield slice(start, stop), X[core], y[core]
+
+
+def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
+                    chunk: int = CHUNK, cutoff: float = 0.0, margin: float = 5.0,
+                    offset: FloatArray | None = None, decimate: bool = False
+                    ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
+    """Yield (rows, Φ (n, 6, p), y (n, 6)) over chunks of at most ``chunk`` samples: the
+    entries of :func:`iter_entries` (the same arguments) in their places of Φ."""
+    for rows, X, y in iter_entries(samples, model, body, chunk, cutoff, margin, offset,
+                                   decimate):
+        yield rows, model.scatter(X), y
 
 
 def block_index(samples: Samples, block: float) -> NDArray[np.int64]:
@@ -248,7 +236,12 @@ def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: in
     B = int(block_of.max(initial=-1)) + 1 if block > 0 else 0
     G, h = np.zeros((B, 6, p, p)), np.zeros((B, 6, p))
     width = max(B, 1)  # cells per fold
-    for sl, Phi, y in iter_regression(samples, model, body, chunk, cutoff, decimate=True):
+    # each row's entries of Φ (a slice of the row-major pattern) and their parameters
+    rows, params = model.pattern
+    bounds = np.searchsorted(rows, np.arange(7))
+    per_row = [(i, slice(bounds[i], bounds[i + 1]), params[bounds[i]:bounds[i + 1]])
+               for i in range(6) if bounds[i + 1] > bounds[i]]
+    for sl, X, y in iter_entries(samples, model, body, chunk, cutoff, decimate=True):
         # a cell: the rows of one fold (−1: a guard) and one block
         cell = (fold_of[sl] + 1) * width + block_of[sl]
         for key in np.unique(cell):
@@ -256,15 +249,21 @@ def accumulate(samples: Samples, model: DampingModel, body: RigidBody, folds: in
             if f == 0 and not B:  # a guard, and no blocks asked for
                 continue
             m = cell == key
-            P, Y = Phi[m], y[m]
-            # per DOF i: ΦᵢᵀΦᵢ, Φᵢᵀyᵢ, yᵢᵀyᵢ
-            gram, moment = np.einsum("nip,niq->ipq", P, P), np.einsum("nip,ni->ip", P, Y)
-            if B:
-                G[k] += gram
-                h[k] += moment
+            P, Y = X[m], y[m]
+            for i, entries, cols in per_row:
+                # per DOF i, over its entries: ΦᵢᵀΦᵢ, Φᵢᵀyᵢ (einsum sums each product over the
+                # samples in their order, as over all of Φ: the same statistics to the bit)
+                gram = np.einsum("np,nq->pq", P[:, entries], P[:, entries])
+                moment = np.einsum("np,n->p", P[:, entries], Y[:, i])
+                square = np.ix_(cols, cols)
+                if B:
+                    G[k, i][square] += gram
+                    h[k, i, cols] += moment
+                if f:
+                    A[f - 1, i][square] += gram
+                    b[f - 1, i, cols] += moment
             if f:
-                A[f - 1] += gram
-                b[f - 1] += moment
+                # yᵢᵀyᵢ
                 c[f - 1] += np.einsum("ni,ni->i", Y, Y)
                 n[f - 1] += len(Y)
     return NormalEquations(A, b, c, n, BlockEquations(G, h, block) if B else None)

@@ -59,7 +59,7 @@ from dampest_ros.core.identification.regression import (
     NormalEquations,
     accumulate,
     information_criteria,
-    iter_regression,
+    iter_entries,
     total_sum_of_squares,
 )
 from dampest_ros.core.physics.alpha import Alpha, AlphaBank
@@ -1029,9 +1029,8 @@ def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],
                               fold_of, key, (Gy, c, n))
     else:
         G = kept.G
-        ys = (y for _, _, y in iter_regression(
-            samples, DampingModel([]), body, cutoff=cutoff, decimate=True,
-            regressor=lambda nu, z: np.zeros((len(nu), 1, 0))))
+        ys = (y for _, _, y in iter_entries(samples, DampingModel([]), body, cutoff=cutoff,
+                                            decimate=True))
         for (fo, F), y in zip(kept.chunks, ys, strict=True):
             _target_products(fo, F, y, Gy, c, n)
     A = np.repeat(G[:, None], 6, axis=1)
@@ -1073,20 +1072,19 @@ def _new_feature_rows(samples: Samples, feats: Sequence[tuple[int, Alpha]],
     p = m + len(mem_rates)
 
     def features(nu: FloatArray, z: FloatArray | None) -> FloatArray:
-        g = np.empty((len(nu), 1, p))
+        g = np.empty((len(nu), p))
         # g_k = α_k(ν) ν_col(k)
-        g[:, 0, :m] = bank(nu) * nu[:, cols]
+        g[:, :m] = bank(nu) * nu[:, cols]
         if z is not None:
-            g[:, 0, m:] = z
+            g[:, m:] = z
         return g
 
     G = np.zeros((folds, p, p))
     chunks: list[tuple[NDArray[np.int64], FloatArray]] | None = []
     size = 0
     _LAST_ROWS.clear()
-    for rows, F3, y in iter_regression(samples, DampingModel(terms), body, cutoff=cutoff,
-                                       decimate=True, regressor=features):
-        F = F3[:, 0, :]
+    for rows, F, y in iter_entries(samples, DampingModel(terms), body, cutoff=cutoff,
+                                   decimate=True, entries=features):
         fo = fold_of[rows]
         for f in np.unique(fo[fo >= 0]):
             k = fo == f
