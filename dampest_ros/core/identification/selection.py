@@ -286,15 +286,17 @@ def _trials(G: FloatArray, bv: FloatArray, S: Sequence[int] | NDArray[np.int64],
     ok : ndarray of bool, shape (|C|,)
     """
     Sx = np.asarray(S, dtype=np.int64)
-    gcc = np.diag(G)[C]
+    g = np.diag(G)
+    gcc = g[C]
     if len(Sx):
-        d = 1.0 / np.sqrt(np.maximum(np.diag(G)[Sx], 1e-300))
-        Gss = G[np.ix_(Sx, Sx)] * np.outer(d, d)
-        rhs = np.column_stack([G[np.ix_(Sx, C)], bv[Sx]]) * d[:, None]
+        d = 1.0 / np.sqrt(np.maximum(g[Sx], 1e-300))
+        Gsc = G[Sx[:, None], C]
+        Gss = G[Sx[:, None], Sx] * np.outer(d, d)
+        rhs = np.column_stack([Gsc, bv[Sx]]) * d[:, None]
         sol = np.linalg.lstsq(Gss, rhs, rcond=1e-13)[0] * d[:, None]
         X, beta = sol[:, :-1], sol[:, -1]
-        den = gcc - np.einsum("kc,kc->c", G[np.ix_(Sx, C)], X)
-        num = bv[C] - G[np.ix_(C, Sx)] @ beta
+        den = gcc - np.einsum("kc,kc->c", Gsc, X)
+        num = bv[C] - G[C[:, None], Sx] @ beta
     else:
         X, beta = np.zeros((0, len(C))), np.zeros(0)
         den, num = gcc.copy(), bv[C].copy()
@@ -328,6 +330,12 @@ def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
         The coefficient of c in the fit of S ∪ {c} on all folds.
     """
     Sx = np.asarray(S, dtype=np.int64)
+    if 2 * (len(Sx) + len(C)) < A.shape[1]:
+        # the rows and columns of S and C alone (S first), when they are few: every sum and
+        # product below is of theirs
+        U = np.r_[Sx, C]
+        A, b = A[:, U[:, None], U], b[:, U]
+        Sx, C = np.arange(len(Sx)), np.arange(len(Sx), len(U))
     G, bv = A.sum(0), b.sum(0)
     _, coef, gain, ok = _trials(G, bv, Sx, C, tol)
     cv_C = np.zeros(len(C))
@@ -335,8 +343,8 @@ def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
         th_S, th_c, _, okf = _trials(G - A[f], bv - b[f], Sx, C, tol)
         Af, bf = A[f], b[f]
         # ‖y − Φθ‖² on fold f = c − 2 bᵀθ + θᵀAθ, θ = (θ_S, θ_c) for each candidate
-        quad_S = np.einsum("kc,kl,lc->c", th_S, Af[np.ix_(Sx, Sx)], th_S)
-        cross = np.einsum("ck,kc->c", Af[np.ix_(C, Sx)], th_S)
+        quad_S = np.einsum("kc,kl,lc->c", th_S, Af[Sx[:, None], Sx], th_S)
+        cross = np.einsum("ck,kc->c", Af[C[:, None], Sx], th_S)
         cv_C += (c[f] - 2.0 * (bf[Sx] @ th_S + bf[C] * th_c) + quad_S
                  + 2.0 * th_c * cross + th_c ** 2 * np.diag(Af)[C])
         cv_C[~okf] = np.inf
@@ -759,6 +767,10 @@ class _Stepwise:
         self.keep_always = {(r, f) for r, f, _ in base_cols
                             if f >= m or zero[f] or rules.keep_base}
         self.from_base = {(r, f) for r, f, _ in base_cols}
+        # :meth:`_held_out` by (row, S, C): each backward step asks again for the removals of
+        # the rows no step has changed since the last one
+        self._tried: dict[tuple[int, tuple[int, ...], tuple[int, ...]],
+                          tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = {}
         tss = total_sum_of_squares(ne)
         self.rss = np.array([tss[i] - _fit_row(ne, i, self.chosen[i]) for i in range(6)])
         self.tss = np.maximum(tss, 1e-300)
@@ -797,10 +809,14 @@ class _Stepwise:
 
     def _held_out(self, i: int, S: Sequence[int], C: Sequence[int]
                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """:func:`_held_out` of row ``i``: the columns S, and S plus each one of C."""
-        ne = self.ne
-        return _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], S, np.array(C, dtype=np.int64),
-                         self.rules.tol)
+        """:func:`_held_out` of row ``i``: the columns S, and S plus each one of C (each
+        (row, S, C) computed once)."""
+        key = (i, tuple(S), tuple(C))
+        if key not in self._tried:
+            ne = self.ne
+            self._tried[key] = _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], S,
+                                         np.array(C, dtype=np.int64), self.rules.tol)
+        return self._tried[key]
 
     def _criteria(self) -> tuple[float, float]:
         """(BIC, AIC) of the model now (dimensionless)."""
