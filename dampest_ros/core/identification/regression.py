@@ -11,13 +11,14 @@ logs add up (:mod:`dampest_ros.core.identification.pool`).
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from dampest_ros.core.identification.cv_budget import guarded_folds
-from dampest_ros.core.physics.damping import DampingModel
+from dampest_ros.core.physics.alpha import Alpha
+from dampest_ros.core.physics.damping import Basis, DampingModel, DampingTerm
 from dampest_ros.core.physics.frames import matrix_from_euler
 from dampest_ros.core.physics.rigid_body import RigidBody
 from dampest_ros.core.signals.preprocess import zero_phase
@@ -73,21 +74,42 @@ def iter_entries(samples: Samples, model: DampingModel, body: RigidBody,
     more information than that, and the normal equations cost k times less. Rows are then
     global sample indices, every k-th from each segment's first (the same whatever the
     chunking and whatever segments precede).
+
+    A static model's entries are kept per parameter for the next pass over the same ν
+    (:class:`_KeptEntries`): a parameter's entries are the same whatever model holds it.
     """
+    settings = (chunk, cutoff, margin, decimate)
     if offset is not None:
         samples = Samples(samples.t, samples.nu + offset, samples.nu_dot, samples.tau,
                           samples.euler, samples.depth, samples.segment)
+    elif entries is None and not len(model.memory_rates):
+        kept = _kept_entries(samples, settings)
+        if kept.fits(model):
+            yield from kept.entries(samples, model, body)
+            return
     z = memory_states(samples, model)
     has_z = z.shape[1] > 0
+
+    def columns(ext: slice) -> FloatArray:
+        return (entries or model.regressor_entries)(samples.nu[ext], z[ext] if has_z else None)
+
+    yield from _chunks(samples, body, columns, *settings)
+
+
+def _chunks(samples: Samples, body: RigidBody, columns: Callable[[slice], FloatArray],
+            chunk: int, cutoff: float, margin: float, decimate: bool
+            ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
+    """:func:`iter_entries` of the ``columns`` of each extended chunk (a slice of the samples;
+    shape (n, L))."""
     pad = round(margin * samples.rate) if cutoff > 0 else 0
-    step = max(1, int(samples.rate / (4.0 * cutoff))) if decimate and cutoff > 0 else 1
+    step = _step(samples, cutoff, decimate)
     for seg in samples.segments():
         s0, s1 = seg.start or 0, seg.stop or 0
         for start in range(s0, s1, chunk):
             stop = min(start + chunk, s1)
             a, b = max(s0, start - pad), min(s1, stop + pad)
             ext = slice(a, b)
-            X = (entries or model.regressor_entries)(samples.nu[ext], z[ext] if has_z else None)
+            X = columns(ext)
             y = target(samples, body, ext)
             if cutoff > 0:
                 X = zero_phase(X, samples.rate, cutoff)
@@ -100,6 +122,141 @@ def iter_entries(samples: Samples, model: DampingModel, body: RigidBody,
             else:
                 core = slice(start - a, stop - a)
                 yield slice(start, stop), X[core], y[core]
+
+
+#: Most bytes of entries :class:`_KeptEntries` holds: a 600 s log's at 50 Hz, decimated for
+#: a 2 Hz cutoff, take 38 kB per entry.
+ENTRIES_KEPT = 96e6
+
+
+def _step(samples: Samples, cutoff: float, decimate: bool) -> int:
+    """The decimation step of :func:`iter_entries`: four samples per period of the cutoff."""
+    return max(1, int(samples.rate / (4.0 * cutoff))) if decimate and cutoff > 0 else 1
+
+
+def _static_bases(model: DampingModel) -> list[Basis]:
+    """The bases of the static parameters, in θ order."""
+    return [b for t in model.terms if t.kind != "freq" for b in t.bases]
+
+
+def _proj_count(bases: list[Basis]) -> int:
+    """How many |wᵀν| α the bases' atoms have (the columns of one matrix product in their
+    :class:`AlphaBank`)."""
+    return sum(alpha.kind == "absproj" for b in bases for _, alpha in b.atoms)
+
+
+#: What a parameter's entries of Φ are a function of ν of: its atoms (B, α), and whether its
+#: model has a single |wᵀν| α (:func:`_proj_count`): a matrix product of one column goes to
+#: BLAS's matrix-vector routine, whose sums round otherwise than the matrix-matrix one's.
+_Key = tuple[tuple[tuple[bytes, Alpha], ...], bool]
+
+
+@dataclass
+class _KeptEntries:
+    """The low-passed entries of Φ of the parameters of the last passes over one ν (the same
+    t, segments and chunking), chunk by chunk: the structure searches and the fit form the
+    normal equations of models that share most of their parameters, on the same samples.
+
+    A parameter's entries are computed alike whatever model holds it (products and sums of
+    its own atoms; the α of each, :class:`AlphaBank`, and the low-pass act column by column,
+    a matrix product of several columns too), so they are those a pass over the model would
+    give, to the bit.
+
+    Attributes
+    ----------
+    rows : int
+        Rows each entry has over all chunks.
+    columns : dict
+        :data:`_Key` of a parameter → its entries per chunk, shape (n, r) each, r the rows of
+        Φ it fills (in order).
+    size : int
+        Bytes held.
+    """
+
+    nu: FloatArray
+    t: FloatArray
+    segment: NDArray[np.int64]
+    settings: tuple[int, float, float, bool]
+    rows: int
+    columns: dict[_Key, list[FloatArray]] = field(default_factory=dict)
+    size: int = 0
+
+    def keys(self, model: DampingModel) -> list[_Key]:
+        """The :data:`_Key` of each static parameter of ``model``, in θ order."""
+        bases = _static_bases(model)
+        alone = _proj_count(bases) == 1
+        return [(tuple((B.tobytes(), alpha) for B, alpha in b.atoms), alone) for b in bases]
+
+    def fits(self, model: DampingModel) -> bool:
+        """Whether the entries of the static ``model`` that are not kept fit in
+        :data:`ENTRIES_KEPT`."""
+        fill = np.bincount(model.pattern[1], minlength=model.n_params)
+        new = sum(int(fill[j]) for j, k in enumerate(self.keys(model)) if k not in self.columns)
+        return self.size + 8 * self.rows * new <= ENTRIES_KEPT
+
+    def entries(self, samples: Samples, model: DampingModel, body: RigidBody
+                ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
+        """:func:`iter_entries` of the static ``model`` on ``samples`` (whose ν these are), the
+        entries of its parameters that are not kept computed (in a model of those alone) and
+        kept."""
+        keys = self.keys(model)
+        missing: dict[_Key, Basis] = {}
+        for k, b in zip(keys, _static_bases(model), strict=True):
+            if k not in self.columns:
+                missing.setdefault(k, b)
+        new = self._new_model(model, list(missing.values()))
+        for k in missing:
+            self.columns[k] = []
+        # each model's entries parameter by parameter (a stable sort of the row-major pattern
+        # by parameter), and back
+        by_new = np.argsort(new.pattern[1], kind="stable")
+        cuts = np.searchsorted(new.pattern[1][by_new], np.arange(new.n_params + 1))
+        index = [new.parameter_names.index(b.name) for b in missing.values()]
+        back = np.argsort(np.argsort(model.pattern[1], kind="stable"))
+        chunks = _chunks(samples, body, lambda ext: new.regressor_entries(samples.nu[ext]),
+                         *self.settings)
+        done = False
+        try:
+            for c, (rows, X, y) in enumerate(chunks):
+                for j, k in zip(index, missing, strict=True):
+                    self.columns[k].append(X[:, by_new[cuts[j]:cuts[j + 1]]])
+                    self.size += self.columns[k][c].nbytes
+                by_parameter = [self.columns[k][c] for k in keys]
+                yield rows, np.concatenate([X[:, :0], *by_parameter], axis=1)[:, back], y
+            done = True
+        finally:
+            if not done:  # a pass left before its end: its new entries are not whole
+                for k in missing:
+                    self.size -= sum(x.nbytes for x in self.columns.pop(k))
+
+    @staticmethod
+    def _new_model(model: DampingModel, bases: list[Basis]) -> DampingModel:
+        """The static model of ``bases`` (of ``model``), their |wᵀν| α formed as in
+        ``model``: one of its others joins a single one when it has several."""
+        ids = {id(b) for b in bases}
+        proj = [b for b in _static_bases(model) if _proj_count([b])]
+        if _proj_count(bases) == 1 and _proj_count(proj) > 1:
+            ids.add(next(id(b) for b in proj if id(b) not in ids))
+        return DampingModel([DampingTerm(t.kind, t.meaning, kept) for t in model.terms
+                             if (kept := [b for b in t.bases if id(b) in ids])])
+
+
+#: The entries kept of the last ν (:func:`_kept_entries`).
+_KEPT: list[_KeptEntries] = []
+
+
+def _kept_entries(samples: Samples, settings: tuple[int, float, float, bool]) -> _KeptEntries:
+    """The entries kept of ``samples``' ν (the same arrays) for these settings of
+    :func:`iter_entries` (chunk, cutoff, margin, decimate); none kept (of other ν
+    forgotten) if they are new."""
+    if _KEPT and (_KEPT[0].nu is samples.nu and _KEPT[0].t is samples.t
+                  and _KEPT[0].segment is samples.segment and _KEPT[0].settings == settings):
+        return _KEPT[0]
+    step = _step(samples, settings[1], settings[3])
+    # every step-th sample of each segment, from its first
+    rows = sum(-(-((sl.stop or 0) - (sl.start or 0)) // step) for sl in samples.segments())
+    _KEPT[:] = [_KeptEntries(samples.nu, samples.t, samples.segment, settings, rows)]
+    return _KEPT[0]
 
 
 def iter_regression(samples: Samples, model: DampingModel, body: RigidBody,
