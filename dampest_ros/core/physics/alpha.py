@@ -202,12 +202,13 @@ class AlphaBank:
 
     def __call__(self, nu: FloatArray) -> FloatArray:
         """α for samples ``nu`` (N, 6); returns (N, p)."""
-        aug = np.concatenate([nu, np.ones((nu.shape[0], 1))], axis=1)
-        # products ν_i ν_j with ν_6 ≡ 1 cover the kinds one, lin and prod; the other kinds
-        # overwrite their own columns only
-        a = aug[:, self.i] * aug[:, self.j]
+        # ν by component (rows), ν_6 ≡ 1 appended: a column of α is a product of two rows, and
+        # α is formed column by column (Fortran order), each kind writing its own columns
+        aug = np.concatenate([nu.T, np.ones((1, nu.shape[0]))])
+        # products ν_i ν_j cover the kinds one, lin and prod; the other kinds overwrite
+        a = (aug[self.i] * aug[self.j]).T
         if len(k := self.pnorm):
-            a[:, k] = np.hypot(aug[:, self.i[k]], aug[:, self.j[k]])
+            a[:, k] = np.hypot(aug[self.i[k]], aug[self.j[k]]).T
         if len(k := self.area):
             a[:, k] = _area(nu, self.i[k], self.j[k])
         if len(k := self.proj):
@@ -222,7 +223,7 @@ class AlphaBank:
             a[:, k] = point_shares(nu, self.share_points, self.share_axes)
         if len(k := self.absolute):
             a[:, k] = np.abs(a[:, k])
-        return a
+        return np.ascontiguousarray(a)
 
     def one(self, nu: list[float]) -> FloatArray:
         """α for one sample ``nu`` (6 floats); shape (p,), the same numbers as ``__call__``.
