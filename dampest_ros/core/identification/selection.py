@@ -307,9 +307,9 @@ def _trials(G: FloatArray, bv: FloatArray, S: Sequence[int] | NDArray[np.int64],
 
 
 def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
-              C: NDArray[np.int64], tol: float
-              ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Blocked cross-validation of S and of S ∪ {c} for every c ∈ C in one row.
+              C: NDArray[np.int64], tol: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Blocked cross-validation of S ∪ {c} for every c ∈ C in one row (that of S:
+    :func:`cv_budget.fold_errors`).
 
     Parameters
     ----------
@@ -320,10 +320,8 @@ def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
 
     Returns
     -------
-    cv_S : float array, shape ()
-        Σ over folds of the held-out RSS of S, each fold predicted from the others.
     cv_C : ndarray, shape (|C|,)
-        The same for S ∪ {c}.
+        Σ over folds of the held-out RSS of S ∪ {c}, each fold predicted from the others.
     gain : ndarray, shape (|C|,)
         In-sample RSS(S) − RSS(S ∪ {c}) on all folds (``ok`` folded in: 0 if collinear).
     coef : ndarray, shape (|C|,)
@@ -348,7 +346,7 @@ def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
         cv_C += (c[f] - 2.0 * (bf[Sx] @ th_S + bf[C] * th_c) + quad_S
                  + 2.0 * th_c * cross + th_c ** 2 * np.diag(Af)[C])
         cv_C[~okf] = np.inf
-    return fold_errors(A, b, c, Sx).sum(), np.where(ok, cv_C, np.inf), gain, coef
+    return np.where(ok, cv_C, np.inf), gain, coef
 
 
 def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
@@ -770,7 +768,8 @@ class _Stepwise:
         # :meth:`_held_out` by (row, S, C): each backward step asks again for the removals of
         # the rows no step has changed since the last one
         self._tried: dict[tuple[int, tuple[int, ...], tuple[int, ...]],
-                          tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = {}
+                          tuple[FloatArray, FloatArray, FloatArray]] = {}
+        self._errors: dict[tuple[int, tuple[int, ...]], FloatArray] = {}
         tss = total_sum_of_squares(ne)
         self.rss = np.array([tss[i] - _fit_row(ne, i, self.chosen[i]) for i in range(6)])
         self.tss = np.maximum(tss, 1e-300)
@@ -792,14 +791,13 @@ class _Stepwise:
         """In each row, take out the searched terms beyond the one-standard-error size of the
         cross-validation curve along the order they entered (:func:`cv_budget.one_se_size`),
         the last first."""
-        ne = self.ne
         for i in range(6):
             added = [f for f in self.chosen[i] if (i, f) not in self.from_base]
             if not added:
                 continue
             kept = [f for f in self.chosen[i] if (i, f) in self.from_base]
-            errors = np.array([fold_errors(ne.A[:, i], ne.b[:, i], ne.c[:, i],
-                                           kept + added[:k]) for k in range(len(added) + 1)])
+            errors = np.array([self._fold_errors(i, kept + added[:k])
+                               for k in range(len(added) + 1)])
             for f in reversed(added[one_se_size(errors):]):
                 self._remove(self._removal(i, f))
 
@@ -809,14 +807,24 @@ class _Stepwise:
 
     def _held_out(self, i: int, S: Sequence[int], C: Sequence[int]
                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """:func:`_held_out` of row ``i``: the columns S, and S plus each one of C (each
-        (row, S, C) computed once)."""
+        """Row ``i``'s held-out RSS of the columns S, and :func:`_held_out` of S plus each one
+        of C (each (row, S, C) computed once)."""
         key = (i, tuple(S), tuple(C))
         if key not in self._tried:
             ne = self.ne
             self._tried[key] = _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], S,
                                          np.array(C, dtype=np.int64), self.rules.tol)
-        return self._tried[key]
+        return (self._fold_errors(i, S).sum(), *self._tried[key])
+
+    def _fold_errors(self, i: int, S: Sequence[int]) -> FloatArray:
+        """:func:`cv_budget.fold_errors` of the columns S in row ``i``, shape (F,) (each
+        (row, S) computed once: the trials of a removal and of the next addition share S,
+        and the one-standard-error rule walks the path again)."""
+        key = (i, tuple(S))
+        if key not in self._errors:
+            ne = self.ne
+            self._errors[key] = fold_errors(ne.A[:, i], ne.b[:, i], ne.c[:, i], S)
+        return self._errors[key]
 
     def _criteria(self) -> tuple[float, float]:
         """(BIC, AIC) of the model now (dimensionless)."""
