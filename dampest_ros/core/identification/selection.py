@@ -267,10 +267,45 @@ def _single_entry(b: Basis) -> tuple[int, int]:
     return int(nz[0][0]), int(nz[0][1])
 
 
-def _trials(G: FloatArray, bv: FloatArray, S: Sequence[int] | NDArray[np.int64],
-            C: NDArray[np.int64],
-            tol: float) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
-    """Least squares on the columns S plus each one candidate c ∈ C, for all c at once.
+class _Blocks(NamedTuple):
+    """The blocks of one row's normal equations (ΦᵀΦ, Φᵀy) that a trial of the columns S plus
+    each one of C reads, with any leading axes (e.g. folds).
+
+    Attributes
+    ----------
+    ss, sc, cs : ndarrays, shapes (..., |S|, |S|), (..., |S|, |C|), (..., |C|, |S|)
+    cc : ndarray, shape (..., |C|)
+        The diagonal of the C block.
+    bs, bc : ndarrays, shapes (..., |S|), (..., |C|)
+    """
+
+    ss: FloatArray
+    sc: FloatArray
+    cs: FloatArray
+    cc: FloatArray
+    bs: FloatArray
+    bc: FloatArray
+
+    @staticmethod
+    def of(A: FloatArray, b: FloatArray, S: NDArray[np.int64], C: NDArray[np.int64]
+           ) -> _Blocks:
+        """The blocks of ``A`` (..., m, m) and ``b`` (..., m)."""
+        return _Blocks(A[..., S[:, None], S], A[..., S[:, None], C], A[..., C[:, None], S],
+                       A[..., C, C], b[..., S], b[..., C])
+
+    def total(self) -> _Blocks:
+        """The sum over the first axis (the folds)."""
+        return _Blocks(*(x.sum(0) for x in self))
+
+    def __sub__(self, other: tuple[FloatArray, ...]) -> _Blocks:
+        """Block by block difference."""
+        return _Blocks(*(x - y for x, y in zip(self, other, strict=True)))
+
+
+def _trials(G: _Blocks, tol: float
+            ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """Least squares on the columns S plus each one candidate c ∈ C, for all c at once, from
+    the blocks ``G`` of their normal equations.
 
     With the fit β = G_SS⁻¹ b_S on S, adding c gives (bordered normal equations)
     θ_c = (b_c − G_cS β) / d_c and θ_S = β − G_SS⁻¹ G_Sc θ_c, d_c = G_cc − G_cS G_SS⁻¹ G_Sc
@@ -285,21 +320,18 @@ def _trials(G: FloatArray, bv: FloatArray, S: Sequence[int] | NDArray[np.int64],
         RSS(S) − RSS(S ∪ {c}).
     ok : ndarray of bool, shape (|C|,)
     """
-    Sx = np.asarray(S, dtype=np.int64)
-    g = np.diag(G)
-    gcc = g[C]
-    if len(Sx):
-        d = 1.0 / np.sqrt(np.maximum(g[Sx], 1e-300))
-        Gsc = G[Sx[:, None], C]
-        Gss = G[Sx[:, None], Sx] * np.outer(d, d)
-        rhs = np.column_stack([Gsc, bv[Sx]]) * d[:, None]
+    gcc = G.cc
+    if len(G.ss):
+        d = 1.0 / np.sqrt(np.maximum(np.diag(G.ss), 1e-300))
+        Gss = G.ss * np.outer(d, d)
+        rhs = np.column_stack([G.sc, G.bs]) * d[:, None]
         sol = np.linalg.lstsq(Gss, rhs, rcond=1e-13)[0] * d[:, None]
         X, beta = sol[:, :-1], sol[:, -1]
-        den = gcc - np.einsum("kc,kc->c", Gsc, X)
-        num = bv[C] - G[C[:, None], Sx] @ beta
+        den = gcc - np.einsum("kc,kc->c", G.sc, X)
+        num = G.bc - G.cs @ beta
     else:
-        X, beta = np.zeros((0, len(C))), np.zeros(0)
-        den, num = gcc.copy(), bv[C].copy()
+        X, beta = np.zeros((0, len(gcc))), np.zeros(0)
+        den, num = gcc.copy(), G.bc.copy()
     ok = den > tol * np.maximum(gcc, 1e-300)
     th_c = np.where(ok, num / np.where(ok, den, 1.0), 0.0)
     th_S = beta[:, None] - X * th_c[None, :]
@@ -327,24 +359,22 @@ def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
     coef : ndarray, shape (|C|,)
         The coefficient of c in the fit of S ∪ {c} on all folds.
     """
-    Sx = np.asarray(S, dtype=np.int64)
-    if 2 * (len(Sx) + len(C)) < A.shape[1]:
-        # the rows and columns of S and C alone (S first), when they are few: every sum and
-        # product below is of theirs
-        U = np.r_[Sx, C]
-        A, b = A[:, U[:, None], U], b[:, U]
-        Sx, C = np.arange(len(Sx)), np.arange(len(Sx), len(U))
-    G, bv = A.sum(0), b.sum(0)
-    _, coef, gain, ok = _trials(G, bv, Sx, C, tol)
+    # every product below is of the blocks of S and C: per fold, over all folds, and over
+    # all folds but each
+    folds = _Blocks.of(A, b, np.asarray(S, dtype=np.int64), C)
+    G = folds.total()
+    _, coef, gain, ok = _trials(G, tol)
     cv_C = np.zeros(len(C))
     for f in range(len(c)):
-        th_S, th_c, _, okf = _trials(G - A[f], bv - b[f], Sx, C, tol)
-        Af, bf = A[f], b[f]
+        # fold f's blocks as arrays of their own: a product over a view that starts inside
+        # an array can round otherwise (BLAS and einsum peel an unaligned start)
+        Af = _Blocks(*(x[f].copy() for x in folds))
+        th_S, th_c, _, okf = _trials(G - Af, tol)
         # ‖y − Φθ‖² on fold f = c − 2 bᵀθ + θᵀAθ, θ = (θ_S, θ_c) for each candidate
-        quad_S = np.einsum("kc,kl,lc->c", th_S, Af[Sx[:, None], Sx], th_S)
-        cross = np.einsum("ck,kc->c", Af[C[:, None], Sx], th_S)
-        cv_C += (c[f] - 2.0 * (bf[Sx] @ th_S + bf[C] * th_c) + quad_S
-                 + 2.0 * th_c * cross + th_c ** 2 * np.diag(Af)[C])
+        quad_S = np.einsum("kc,kl,lc->c", th_S, Af.ss, th_S)
+        cross = np.einsum("ck,kc->c", Af.cs, th_S)
+        cv_C += (c[f] - 2.0 * (Af.bs @ th_S + Af.bc * th_c) + quad_S
+                 + 2.0 * th_c * cross + th_c ** 2 * Af.cc)
         cv_C[~okf] = np.inf
     return np.where(ok, cv_C, np.inf), gain, coef
 
