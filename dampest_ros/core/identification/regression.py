@@ -76,13 +76,20 @@ def iter_entries(samples: Samples, model: DampingModel, body: RigidBody,
     chunking and whatever segments precede).
 
     A static model's entries are kept per parameter for the next pass over the same ν
-    (:class:`_KeptEntries`): a parameter's entries are the same whatever model holds it.
+    (:class:`_KeptEntries`): a parameter's entries are the same whatever model holds it. A
+    pass with one component of ν offset takes those of the parameters that do not read it.
     """
     settings = (chunk, cutoff, margin, decimate)
+    static = entries is None and not len(model.memory_rates)
     if offset is not None:
-        samples = Samples(samples.t, samples.nu + offset, samples.nu_dot, samples.tau,
+        shifted = Samples(samples.t, samples.nu + offset, samples.nu_dot, samples.tau,
                           samples.euler, samples.depth, samples.segment)
-    elif entries is None and not len(model.memory_rates):
+        axis = np.flatnonzero(offset)
+        if static and len(axis) == 1 and _KEPT and _KEPT[0].holds(samples, settings):
+            yield from _KEPT[0].entries(shifted, model, body, int(axis[0]))
+            return
+        samples = shifted
+    elif static:
         kept = _kept_entries(samples, settings)
         if kept.fits(model):
             yield from kept.entries(samples, model, body)
@@ -194,18 +201,30 @@ class _KeptEntries:
         new = sum(int(fill[j]) for j, k in enumerate(self.keys(model)) if k not in self.columns)
         return self.size + 8 * self.rows * new <= ENTRIES_KEPT
 
-    def entries(self, samples: Samples, model: DampingModel, body: RigidBody
+    def holds(self, samples: Samples, settings: tuple[int, float, float, bool]) -> bool:
+        """Whether these are the entries of ``samples``' ν (the same arrays) for these
+        settings of :func:`iter_entries` (chunk, cutoff, margin, decimate)."""
+        return (self.nu is samples.nu and self.t is samples.t
+                and self.segment is samples.segment and self.settings == settings)
+
+    def entries(self, samples: Samples, model: DampingModel, body: RigidBody,
+                shifted: int | None = None
                 ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
-        """:func:`iter_entries` of the static ``model`` on ``samples`` (whose ν these are), the
-        entries of its parameters that are not kept computed (in a model of those alone) and
-        kept."""
+        """:func:`iter_entries` of the static ``model`` on ``samples``, the entries of its
+        parameters that are not kept computed (in a model of those alone) and kept.
+
+        ``samples`` hold the ν of these entries, or with one component, ``shifted``, offset:
+        then the parameters whose column does not read it (:attr:`Basis.reads`) take their
+        kept entries (ν's other components are the same numbers) and the others are computed
+        and not kept."""
         keys = self.keys(model)
         missing: dict[_Key, Basis] = {}
         for k, b in zip(keys, _static_bases(model), strict=True):
-            if k not in self.columns:
+            if k not in self.columns or shifted in b.reads:
                 missing.setdefault(k, b)
         new = self._new_model(model, list(missing.values()))
-        for k in missing:
+        keep = {} if shifted is not None else missing
+        for k in keep:
             self.columns[k] = []
         # each model's entries parameter by parameter (a stable sort of the row-major pattern
         # by parameter), and back
@@ -218,15 +237,17 @@ class _KeptEntries:
         done = False
         try:
             for c, (rows, X, y) in enumerate(chunks):
-                for j, k in zip(index, missing, strict=True):
-                    self.columns[k].append(X[:, by_new[cuts[j]:cuts[j + 1]]])
-                    self.size += self.columns[k][c].nbytes
-                by_parameter = [self.columns[k][c] for k in keys]
+                fresh = {k: X[:, by_new[cuts[j]:cuts[j + 1]]]
+                         for j, k in zip(index, missing, strict=True)}
+                for k in keep:
+                    self.columns[k].append(fresh[k])
+                    self.size += fresh[k].nbytes
+                by_parameter = [fresh[k] if k in fresh else self.columns[k][c] for k in keys]
                 yield rows, np.concatenate([X[:, :0], *by_parameter], axis=1)[:, back], y
             done = True
         finally:
             if not done:  # a pass left before its end: its new entries are not whole
-                for k in missing:
+                for k in keep:
                     self.size -= sum(x.nbytes for x in self.columns.pop(k))
 
     @staticmethod
@@ -249,8 +270,7 @@ def _kept_entries(samples: Samples, settings: tuple[int, float, float, bool]) ->
     """The entries kept of ``samples``' ν (the same arrays) for these settings of
     :func:`iter_entries` (chunk, cutoff, margin, decimate); none kept (of other ν
     forgotten) if they are new."""
-    if _KEPT and (_KEPT[0].nu is samples.nu and _KEPT[0].t is samples.t
-                  and _KEPT[0].segment is samples.segment and _KEPT[0].settings == settings):
+    if _KEPT and _KEPT[0].holds(samples, settings):
         return _KEPT[0]
     step = _step(samples, settings[1], settings[3])
     # every step-th sample of each segment, from its first

@@ -77,6 +77,28 @@ class Alpha:
             return point_shares(nu, np.array([self.w]), np.array([self.i]))[:, 0]
         raise ConfigError("alpha", f"unknown kind {k!r}")
 
+    @property
+    def reads(self) -> frozenset[int]:
+        """The components of ν (0..5) α is a function of."""
+        k = self.kind
+        if k in ("abs", "lin"):
+            return frozenset([self.i])
+        if k in ("prod", "absprod", "pnorm"):
+            return frozenset([self.i, self.j])
+        if k == "area":
+            # ν_i² (+ ν_j²) over the norm of ν_i's group
+            return frozenset([*range(3 * (self.i >= 3), 3 * (self.i >= 3) + 3), self.i,
+                              *([self.j] if 0 <= self.j < 6 else [])])
+        if k == "norm":
+            return frozenset(range(3))
+        if k == "anorm":
+            return frozenset(range(3, 6))
+        if k == "absproj":
+            return frozenset(int(i) for i in np.flatnonzero(np.asarray(self.w)))
+        if k in ("pspeed", "pshare"):
+            return frozenset(range(6))  # v + ω × r
+        return frozenset()
+
     def scale(self, nu_scale: FloatArray) -> float:
         """Factor c with α(ν_s ⊙ ν') = c α(ν') for velocity scales ν_s, shape (6,).
 

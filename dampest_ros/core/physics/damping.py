@@ -51,6 +51,13 @@ class Basis:
         """Every (B, α) pair of the parameter, the first one first."""
         return [(self.B, self.alpha), *self.more]
 
+    @property
+    def reads(self) -> frozenset[int]:
+        """The components of ν (0..5) its column α(ν) B ν (+ …) is a function of: those a
+        B_k multiplies and those an α_k reads."""
+        return frozenset(int(j) for B, alpha in self.atoms
+                         for j in [*np.flatnonzero(np.any(B != 0, axis=0)), *alpha.reads])
+
 
 def unit(i: int, j: int) -> FloatArray:
     """The basis matrix with a single 1 at row i, column j, shape (6, 6)."""
