@@ -253,9 +253,10 @@ def _path(ne: NormalEquations, joint: tuple[FloatArray, FloatArray, FloatArray],
     rss = _row_rss(ne, A, b, cols)
     pool = list(range(len(groups)))
     while pool:
-        trials = [(g, fold_errors(A, b, c, [*cols, *groups[g]]),
-                   _row_rss(ne, A, b, [*cols, *groups[g]])) for g in pool]
-        good = [t for t in trials if rules.passed(rss, t[2], len(groups[t[0]]))]
+        fits = [(g, _row_rss(ne, A, b, [*cols, *groups[g]])) for g in pool]
+        # the held-out errors of those that pass the entry test alone
+        good = [(g, fold_errors(A, b, c, [*cols, *groups[g]]), r) for g, r in fits
+                if rules.passed(rss, r, len(groups[g]))]
         if not good:
             break
         g, e, r = min(good, key=lambda t: float(t[1].sum()))
