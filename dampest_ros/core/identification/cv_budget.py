@@ -65,9 +65,9 @@ def fold_fits(A: FloatArray, b: FloatArray, cols: Sequence[int] | NDArray[np.int
     ndarray, shape (F, len(cols))
     """
     S = np.asarray(cols, dtype=np.int64)
-    G, bv = A.sum(0)[np.ix_(S, S)], b.sum(0)[S]
-    return np.array([_fit(G - A[f][np.ix_(S, S)], bv - b[f][S]) for f in range(len(A))]
-                    ).reshape(len(A), len(S))
+    A, b = A[:, S[:, None], S], b[:, S]
+    G, bv = A.sum(0), b.sum(0)
+    return np.array([_fit(G - A[f], bv - b[f]) for f in range(len(A))]).reshape(len(A), len(S))
 
 
 def fold_errors(A: FloatArray, b: FloatArray, c: FloatArray, cols: Sequence[int] | NDArray[np.int64]
@@ -93,7 +93,7 @@ def fold_errors(A: FloatArray, b: FloatArray, c: FloatArray, cols: Sequence[int]
     if not len(S):
         return out
     for f, theta in enumerate(fold_fits(A, b, S)):
-        Af, bf = A[f][np.ix_(S, S)], b[f][S]
+        Af, bf = A[f][S[:, None], S], b[f][S]
         # ‖y − Φθ‖² on fold f = c − 2 bᵀθ + θᵀAθ
         out[f] = c[f] - 2.0 * bf @ theta + theta @ Af @ theta
     return out

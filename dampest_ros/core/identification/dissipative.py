@@ -40,8 +40,14 @@ def power_rows(model: DampingModel, nu: FloatArray) -> FloatArray:
         Velocities (m/s, rad/s).
     """
     z = np.zeros((len(nu), len(model.memory_rates)))
-    # Σ_i ν_i (Φ(ν)θ)_i = (Φ(ν)ᵀν)ᵀθ
-    return np.einsum("nip,ni->np", model.regressor(nu, z if z.shape[1] else None), nu)
+    X = model.regressor_entries(nu, z if z.shape[1] else None)
+    rows, params = model.pattern
+    g = np.zeros((len(nu), model.n_params))
+    for i in range(6):
+        # Σ_i ν_i (Φ(ν)θ)_i = (Φ(ν)ᵀν)ᵀθ, over the entries of Φ's row i (a row-major slice)
+        entries = slice(*np.searchsorted(rows, [i, i + 1]))
+        g[:, params[entries]] += X[:, entries] * nu[:, i:i + 1]
+    return g
 
 
 def envelope(nu: FloatArray, scales: Sequence[float] = (1.0, 0.01)) -> FloatArray:

@@ -253,9 +253,10 @@ def _path(ne: NormalEquations, joint: tuple[FloatArray, FloatArray, FloatArray],
     rss = _row_rss(ne, A, b, cols)
     pool = list(range(len(groups)))
     while pool:
-        trials = [(g, fold_errors(A, b, c, [*cols, *groups[g]]),
-                   _row_rss(ne, A, b, [*cols, *groups[g]])) for g in pool]
-        good = [t for t in trials if rules.passed(rss, t[2], len(groups[t[0]]))]
+        fits = [(g, _row_rss(ne, A, b, [*cols, *groups[g]])) for g in pool]
+        # the held-out errors of those that pass the entry test alone
+        good = [(g, fold_errors(A, b, c, [*cols, *groups[g]]), r) for g, r in fits
+                if rules.passed(rss, r, len(groups[g]))]
         if not good:
             break
         g, e, r = min(good, key=lambda t: float(t[1].sum()))
@@ -274,9 +275,10 @@ def _row_rss(ne: NormalEquations, A: FloatArray, b: FloatArray, cols: Sequence[i
     """In-sample residual sum of squares per row of the joint fit on ``cols`` over all folds,
     shape (6,)."""
     S = np.asarray(cols, dtype=np.int64)
-    theta = solve_normal(A.sum(0)[np.ix_(S, S)], b.sum(0)[S], np.ones(len(S), dtype=bool),
+    # the columns S of each fold's equations, then their sums over the folds
+    theta = solve_normal(A[:, S[:, None], S].sum(0), b[:, S].sum(0), np.ones(len(S), dtype=bool),
                          np.zeros(len(S)))
-    G, bv = ne.A.sum(0)[:, S][:, :, S], ne.b.sum(0)[:, S]
+    G, bv = ne.A[:, :, S[:, None], S].sum(0), ne.b[:, :, S].sum(0)
     # ‖y_i − Φ_i θ‖² = c_i − 2 b_iᵀθ + θᵀA_iθ, every row i
     return np.asarray(ne.c.sum(0) - 2.0 * bv @ theta + np.einsum("p,ipq,q->i", theta, G, theta))
 

@@ -59,7 +59,7 @@ from dampest_ros.core.identification.regression import (
     NormalEquations,
     accumulate,
     information_criteria,
-    iter_regression,
+    iter_entries,
     total_sum_of_squares,
 )
 from dampest_ros.core.physics.alpha import Alpha, AlphaBank
@@ -267,10 +267,45 @@ def _single_entry(b: Basis) -> tuple[int, int]:
     return int(nz[0][0]), int(nz[0][1])
 
 
-def _trials(G: FloatArray, bv: FloatArray, S: Sequence[int] | NDArray[np.int64],
-            C: NDArray[np.int64],
-            tol: float) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
-    """Least squares on the columns S plus each one candidate c ∈ C, for all c at once.
+class _Blocks(NamedTuple):
+    """The blocks of one row's normal equations (ΦᵀΦ, Φᵀy) that a trial of the columns S plus
+    each one of C reads, with any leading axes (e.g. folds).
+
+    Attributes
+    ----------
+    ss, sc, cs : ndarrays, shapes (..., |S|, |S|), (..., |S|, |C|), (..., |C|, |S|)
+    cc : ndarray, shape (..., |C|)
+        The diagonal of the C block.
+    bs, bc : ndarrays, shapes (..., |S|), (..., |C|)
+    """
+
+    ss: FloatArray
+    sc: FloatArray
+    cs: FloatArray
+    cc: FloatArray
+    bs: FloatArray
+    bc: FloatArray
+
+    @staticmethod
+    def of(A: FloatArray, b: FloatArray, S: NDArray[np.int64], C: NDArray[np.int64]
+           ) -> _Blocks:
+        """The blocks of ``A`` (..., m, m) and ``b`` (..., m)."""
+        return _Blocks(A[..., S[:, None], S], A[..., S[:, None], C], A[..., C[:, None], S],
+                       A[..., C, C], b[..., S], b[..., C])
+
+    def total(self) -> _Blocks:
+        """The sum over the first axis (the folds)."""
+        return _Blocks(*(x.sum(0) for x in self))
+
+    def __sub__(self, other: tuple[FloatArray, ...]) -> _Blocks:
+        """Block by block difference."""
+        return _Blocks(*(x - y for x, y in zip(self, other, strict=True)))
+
+
+def _trials(G: _Blocks, tol: float
+            ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """Least squares on the columns S plus each one candidate c ∈ C, for all c at once, from
+    the blocks ``G`` of their normal equations.
 
     With the fit β = G_SS⁻¹ b_S on S, adding c gives (bordered normal equations)
     θ_c = (b_c − G_cS β) / d_c and θ_S = β − G_SS⁻¹ G_Sc θ_c, d_c = G_cc − G_cS G_SS⁻¹ G_Sc
@@ -285,19 +320,18 @@ def _trials(G: FloatArray, bv: FloatArray, S: Sequence[int] | NDArray[np.int64],
         RSS(S) − RSS(S ∪ {c}).
     ok : ndarray of bool, shape (|C|,)
     """
-    Sx = np.asarray(S, dtype=np.int64)
-    gcc = np.diag(G)[C]
-    if len(Sx):
-        d = 1.0 / np.sqrt(np.maximum(np.diag(G)[Sx], 1e-300))
-        Gss = G[np.ix_(Sx, Sx)] * np.outer(d, d)
-        rhs = np.column_stack([G[np.ix_(Sx, C)], bv[Sx]]) * d[:, None]
+    gcc = G.cc
+    if len(G.ss):
+        d = 1.0 / np.sqrt(np.maximum(np.diag(G.ss), 1e-300))
+        Gss = G.ss * np.outer(d, d)
+        rhs = np.column_stack([G.sc, G.bs]) * d[:, None]
         sol = np.linalg.lstsq(Gss, rhs, rcond=1e-13)[0] * d[:, None]
         X, beta = sol[:, :-1], sol[:, -1]
-        den = gcc - np.einsum("kc,kc->c", G[np.ix_(Sx, C)], X)
-        num = bv[C] - G[np.ix_(C, Sx)] @ beta
+        den = gcc - np.einsum("kc,kc->c", G.sc, X)
+        num = G.bc - G.cs @ beta
     else:
-        X, beta = np.zeros((0, len(C))), np.zeros(0)
-        den, num = gcc.copy(), bv[C].copy()
+        X, beta = np.zeros((0, len(gcc))), np.zeros(0)
+        den, num = gcc.copy(), G.bc.copy()
     ok = den > tol * np.maximum(gcc, 1e-300)
     th_c = np.where(ok, num / np.where(ok, den, 1.0), 0.0)
     th_S = beta[:, None] - X * th_c[None, :]
@@ -305,9 +339,9 @@ def _trials(G: FloatArray, bv: FloatArray, S: Sequence[int] | NDArray[np.int64],
 
 
 def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
-              C: NDArray[np.int64], tol: float
-              ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Blocked cross-validation of S and of S ∪ {c} for every c ∈ C in one row.
+              C: NDArray[np.int64], tol: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Blocked cross-validation of S ∪ {c} for every c ∈ C in one row (that of S:
+    :func:`cv_budget.fold_errors`).
 
     Parameters
     ----------
@@ -318,29 +352,31 @@ def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
 
     Returns
     -------
-    cv_S : float array, shape ()
-        Σ over folds of the held-out RSS of S, each fold predicted from the others.
     cv_C : ndarray, shape (|C|,)
-        The same for S ∪ {c}.
+        Σ over folds of the held-out RSS of S ∪ {c}, each fold predicted from the others.
     gain : ndarray, shape (|C|,)
         In-sample RSS(S) − RSS(S ∪ {c}) on all folds (``ok`` folded in: 0 if collinear).
     coef : ndarray, shape (|C|,)
         The coefficient of c in the fit of S ∪ {c} on all folds.
     """
-    Sx = np.asarray(S, dtype=np.int64)
-    G, bv = A.sum(0), b.sum(0)
-    _, coef, gain, ok = _trials(G, bv, Sx, C, tol)
+    # every product below is of the blocks of S and C: per fold, over all folds, and over
+    # all folds but each
+    folds = _Blocks.of(A, b, np.asarray(S, dtype=np.int64), C)
+    G = folds.total()
+    _, coef, gain, ok = _trials(G, tol)
     cv_C = np.zeros(len(C))
     for f in range(len(c)):
-        th_S, th_c, _, okf = _trials(G - A[f], bv - b[f], Sx, C, tol)
-        Af, bf = A[f], b[f]
+        # fold f's blocks as arrays of their own: a product over a view that starts inside
+        # an array can round otherwise (BLAS and einsum peel an unaligned start)
+        Af = _Blocks(*(x[f].copy() for x in folds))
+        th_S, th_c, _, okf = _trials(G - Af, tol)
         # ‖y − Φθ‖² on fold f = c − 2 bᵀθ + θᵀAθ, θ = (θ_S, θ_c) for each candidate
-        quad_S = np.einsum("kc,kl,lc->c", th_S, Af[np.ix_(Sx, Sx)], th_S)
-        cross = np.einsum("ck,kc->c", Af[np.ix_(C, Sx)], th_S)
-        cv_C += (c[f] - 2.0 * (bf[Sx] @ th_S + bf[C] * th_c) + quad_S
-                 + 2.0 * th_c * cross + th_c ** 2 * np.diag(Af)[C])
+        quad_S = np.einsum("kc,kl,lc->c", th_S, Af.ss, th_S)
+        cross = np.einsum("ck,kc->c", Af.cs, th_S)
+        cv_C += (c[f] - 2.0 * (Af.bs @ th_S + Af.bc * th_c) + quad_S
+                 + 2.0 * th_c * cross + th_c ** 2 * Af.cc)
         cv_C[~okf] = np.inf
-    return fold_errors(A, b, c, Sx).sum(), np.where(ok, cv_C, np.inf), gain, coef
+    return np.where(ok, cv_C, np.inf), gain, coef
 
 
 def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
@@ -759,6 +795,11 @@ class _Stepwise:
         self.keep_always = {(r, f) for r, f, _ in base_cols
                             if f >= m or zero[f] or rules.keep_base}
         self.from_base = {(r, f) for r, f, _ in base_cols}
+        # :meth:`_held_out` by (row, S, C): each backward step asks again for the removals of
+        # the rows no step has changed since the last one
+        self._tried: dict[tuple[int, tuple[int, ...], tuple[int, ...]],
+                          tuple[FloatArray, FloatArray, FloatArray]] = {}
+        self._errors: dict[tuple[int, tuple[int, ...]], FloatArray] = {}
         tss = total_sum_of_squares(ne)
         self.rss = np.array([tss[i] - _fit_row(ne, i, self.chosen[i]) for i in range(6)])
         self.tss = np.maximum(tss, 1e-300)
@@ -780,14 +821,13 @@ class _Stepwise:
         """In each row, take out the searched terms beyond the one-standard-error size of the
         cross-validation curve along the order they entered (:func:`cv_budget.one_se_size`),
         the last first."""
-        ne = self.ne
         for i in range(6):
             added = [f for f in self.chosen[i] if (i, f) not in self.from_base]
             if not added:
                 continue
             kept = [f for f in self.chosen[i] if (i, f) in self.from_base]
-            errors = np.array([fold_errors(ne.A[:, i], ne.b[:, i], ne.c[:, i],
-                                           kept + added[:k]) for k in range(len(added) + 1)])
+            errors = np.array([self._fold_errors(i, kept + added[:k])
+                               for k in range(len(added) + 1)])
             for f in reversed(added[one_se_size(errors):]):
                 self._remove(self._removal(i, f))
 
@@ -797,10 +837,24 @@ class _Stepwise:
 
     def _held_out(self, i: int, S: Sequence[int], C: Sequence[int]
                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """:func:`_held_out` of row ``i``: the columns S, and S plus each one of C."""
-        ne = self.ne
-        return _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], S, np.array(C, dtype=np.int64),
-                         self.rules.tol)
+        """Row ``i``'s held-out RSS of the columns S, and :func:`_held_out` of S plus each one
+        of C (each (row, S, C) computed once)."""
+        key = (i, tuple(S), tuple(C))
+        if key not in self._tried:
+            ne = self.ne
+            self._tried[key] = _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], S,
+                                         np.array(C, dtype=np.int64), self.rules.tol)
+        return (self._fold_errors(i, S).sum(), *self._tried[key])
+
+    def _fold_errors(self, i: int, S: Sequence[int]) -> FloatArray:
+        """:func:`cv_budget.fold_errors` of the columns S in row ``i``, shape (F,) (each
+        (row, S) computed once: the trials of a removal and of the next addition share S,
+        and the one-standard-error rule walks the path again)."""
+        key = (i, tuple(S))
+        if key not in self._errors:
+            ne = self.ne
+            self._errors[key] = fold_errors(ne.A[:, i], ne.b[:, i], ne.c[:, i], S)
+        return self._errors[key]
 
     def _criteria(self) -> tuple[float, float]:
         """(BIC, AIC) of the model now (dimensionless)."""
@@ -1029,9 +1083,8 @@ def _feature_equations(samples: Samples, feats: Sequence[tuple[int, Alpha]],
                               fold_of, key, (Gy, c, n))
     else:
         G = kept.G
-        ys = (y for _, _, y in iter_regression(
-            samples, DampingModel([]), body, cutoff=cutoff, decimate=True,
-            regressor=lambda nu, z: np.zeros((len(nu), 1, 0))))
+        ys = (y for _, _, y in iter_entries(samples, DampingModel([]), body, cutoff=cutoff,
+                                            decimate=True))
         for (fo, F), y in zip(kept.chunks, ys, strict=True):
             _target_products(fo, F, y, Gy, c, n)
     A = np.repeat(G[:, None], 6, axis=1)
@@ -1073,20 +1126,19 @@ def _new_feature_rows(samples: Samples, feats: Sequence[tuple[int, Alpha]],
     p = m + len(mem_rates)
 
     def features(nu: FloatArray, z: FloatArray | None) -> FloatArray:
-        g = np.empty((len(nu), 1, p))
+        g = np.empty((len(nu), p))
         # g_k = α_k(ν) ν_col(k)
-        g[:, 0, :m] = bank(nu) * nu[:, cols]
+        g[:, :m] = bank(nu) * nu[:, cols]
         if z is not None:
-            g[:, 0, m:] = z
+            g[:, m:] = z
         return g
 
     G = np.zeros((folds, p, p))
     chunks: list[tuple[NDArray[np.int64], FloatArray]] | None = []
     size = 0
     _LAST_ROWS.clear()
-    for rows, F3, y in iter_regression(samples, DampingModel(terms), body, cutoff=cutoff,
-                                       decimate=True, regressor=features):
-        F = F3[:, 0, :]
+    for rows, F, y in iter_entries(samples, DampingModel(terms), body, cutoff=cutoff,
+                                   decimate=True, entries=features):
         fo = fold_of[rows]
         for f in np.unique(fo[fo >= 0]):
             k = fo == f

@@ -77,6 +77,28 @@ class Alpha:
             return point_shares(nu, np.array([self.w[:3]]), np.array([self.w[3:]]))[:, 0]
         raise ConfigError("alpha", f"unknown kind {k!r}")
 
+    @property
+    def reads(self) -> frozenset[int]:
+        """The components of ν (0..5) α is a function of."""
+        k = self.kind
+        if k in ("abs", "lin"):
+            return frozenset([self.i])
+        if k in ("prod", "absprod", "pnorm"):
+            return frozenset([self.i, self.j])
+        if k == "area":
+            # ν_i² (+ ν_j²) over the norm of ν_i's group
+            return frozenset([*range(3 * (self.i >= 3), 3 * (self.i >= 3) + 3), self.i,
+                              *([self.j] if 0 <= self.j < 6 else [])])
+        if k == "norm":
+            return frozenset(range(3))
+        if k == "anorm":
+            return frozenset(range(3, 6))
+        if k == "absproj":
+            return frozenset(int(i) for i in np.flatnonzero(np.asarray(self.w)))
+        if k in ("pspeed", "pshare"):
+            return frozenset(range(6))  # v + ω × r
+        return frozenset()
+
     def scale(self, nu_scale: FloatArray) -> float:
         """Factor c with α(ν_s ⊙ ν') = c α(ν') for velocity scales ν_s, shape (6,).
 
@@ -201,12 +223,13 @@ class AlphaBank:
 
     def __call__(self, nu: FloatArray) -> FloatArray:
         """α for samples ``nu`` (N, 6); returns (N, p)."""
-        aug = np.concatenate([nu, np.ones((nu.shape[0], 1))], axis=1)
-        # products ν_i ν_j with ν_6 ≡ 1 cover the kinds one, lin and prod; the other kinds
-        # overwrite their own columns only
-        a = aug[:, self.i] * aug[:, self.j]
+        # ν by component (rows), ν_6 ≡ 1 appended: a column of α is a product of two rows, and
+        # α is formed column by column (Fortran order), each kind writing its own columns
+        aug = np.concatenate([nu.T, np.ones((1, nu.shape[0]))])
+        # products ν_i ν_j cover the kinds one, lin and prod; the other kinds overwrite
+        a = (aug[self.i] * aug[self.j]).T
         if len(k := self.pnorm):
-            a[:, k] = np.hypot(aug[:, self.i[k]], aug[:, self.j[k]])
+            a[:, k] = np.hypot(aug[self.i[k]], aug[self.j[k]]).T
         if len(k := self.area):
             a[:, k] = _area(nu, self.i[k], self.j[k])
         if len(k := self.proj):
@@ -221,7 +244,7 @@ class AlphaBank:
             a[:, k] = point_shares(nu, self.share_points, self.share_directions)
         if len(k := self.absolute):
             a[:, k] = np.abs(a[:, k])
-        return a
+        return np.ascontiguousarray(a)
 
     def one(self, nu: list[float]) -> FloatArray:
         """α for one sample ``nu`` (6 floats); shape (p,), the same numbers as ``__call__``.

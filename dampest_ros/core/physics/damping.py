@@ -51,6 +51,13 @@ class Basis:
         """Every (B, α) pair of the parameter, the first one first."""
         return [(self.B, self.alpha), *self.more]
 
+    @property
+    def reads(self) -> frozenset[int]:
+        """The components of ν (0..5) its column α(ν) B ν (+ …) is a function of: those a
+        B_k multiplies and those an α_k reads."""
+        return frozenset(int(j) for B, alpha in self.atoms
+                         for j in [*np.flatnonzero(np.any(B != 0, axis=0)), *alpha.reads])
+
 
 def unit(i: int, j: int) -> FloatArray:
     """The basis matrix with a single 1 at row i, column j, shape (6, 6)."""
@@ -246,22 +253,29 @@ class DampingModel:
         sparse = np.isin(np.arange(len(self._Bs)), self._dense, invert=True)
         atom, row, col = np.nonzero(self._Bs * sparse[:, None, None])
         self._entries = (atom, row, col, self._Bs[atom, row, col])
-        # each sparse entry written straight into its parameter's column when no two entries
-        # (of a parameter's several atoms) share a row and a parameter, and no matrix-product
-        # atom shares its parameter: then no atom sum is needed
-        param = self._static_idx[atom]
-        dense_params = self._static_idx[self._dense]
-        self._direct = (len(set(zip(row.tolist(), param.tolist(), strict=True))) == len(row)
-                        and not np.isin(dense_params, param).any()
-                        and len(np.unique(dense_params)) == len(dense_params))
-        # the atoms by their rank in their parameter (its first, second, … atom): within a
-        # rank each parameter has at most one, so a rank's columns are added in one step
-        rank = np.array([k for t in self.terms if t.kind != "freq" for b in t.bases
-                         for k in range(len(b.atoms))], dtype=np.int64)
-        self._ranks = [np.flatnonzero(rank == k) for k in range(int(rank.max(initial=-1)) + 1)]
         freq = self.term("freq")
         self._freq_idx = (np.arange(self._slices["freq"].start, self._slices["freq"].stop)
                           if freq is not None else np.zeros(0, dtype=np.int64))
+        # the entries of Φ that are not zero for every ν, (row, parameter) row-major, and per
+        # rank of atom in its parameter (its first, second, … atom) which products add into
+        # which entry: within a rank a parameter has at most one atom, so its products go to
+        # distinct entries. Products: the sparse entries, then the rows B_j fills of each
+        # matrix-product atom (column a · k_dense + k of (B_j ν)_a for every a and k)
+        p = max(self.n_params, 1)
+        d_atom, d_row = np.nonzero(np.count_nonzero(self._Bs[self._dense], axis=2))
+        self._dense_cols = d_row * len(self._dense) + d_atom
+        rank = np.array([k for t in self.terms if t.kind != "freq" for b in t.bases
+                         for k in range(len(b.atoms))], dtype=np.int64)
+        product_rank = np.r_[rank[atom], rank[self._dense[d_atom]]]
+        flat = np.r_[row * p + self._static_idx[atom],
+                     d_row * p + self._static_idx[self._dense[d_atom]]].astype(np.int64)
+        memory = (self.memory_dofs * p + self._freq_idx).astype(np.int64)
+        live = np.unique(np.r_[flat, memory])
+        self._live_rows, self._live_params = live // p, live % p
+        self._adds = [(np.flatnonzero(product_rank == k),
+                       np.searchsorted(live, flat[product_rank == k]))
+                      for k in range(int(product_rank.max(initial=-1)) + 1)]
+        self._memory_entries = np.searchsorted(live, memory)
 
     @property
     def parameter_names(self) -> list[str]:
@@ -337,34 +351,52 @@ class DampingModel:
         -------
         ndarray, shape (N, 6, p)
         """
+        return self.scatter(self.regressor_entries(nu, states))
+
+    @property
+    def pattern(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Row (force, 0..5) and parameter of each entry of Φ that is not zero for every ν,
+        shape (L,) each, row-major: what :meth:`regressor_entries` gives."""
+        return self._live_rows, self._live_params
+
+    def regressor_entries(self, nu: FloatArray, states: FloatArray | None = None
+                          ) -> FloatArray:
+        """The entries of :meth:`regressor` that its :attr:`pattern` names, shape (N, L):
+        Φ without the zeros (a single-entry coefficient fills one force row of six).
+
+        Parameters
+        ----------
+        nu : ndarray, shape (N, 6)
+            Velocity relative to the water, FRD (m/s, rad/s).
+        states : ndarray, shape (N, n_states), optional
+            Memory states; required when the model has a ``freq`` term.
+        """
         nu = np.atleast_2d(np.asarray(nu, dtype=float))
         N = nu.shape[0]
-        Phi = np.zeros((N, 6, self.n_params))
-        if len(self._static_idx) and self._direct:
-            # column j: α_j(ν) B_j ν, each entry (or matrix-product atom) in its own place
-            atom, row, col, value = self._entries
+        X = np.zeros((N, len(self._live_rows)))
+        if len(self._static_idx):
+            atom, _, col, value = self._entries
             alpha = self._bank(nu)
-            Phi[:, row, self._static_idx[atom]] = nu[:, col] * value * alpha[:, atom]
+            # (B_j ν)_a α_j(ν): a sparse entry's one product, a matrix-product atom's rows
+            products = nu[:, col] * value * alpha[:, atom]
             if len(self._dense):
-                Phi[:, :, self._static_idx[self._dense]] = (
-                    (nu @ self._B_flat).reshape(N, 6, -1) * alpha[:, None, self._dense])
-        elif len(self._static_idx):
-            # column j: α_j(ν) B_j ν (summed over the parameter's atoms)
-            atom, row, col, value = self._entries
-            alpha = self._bank(nu)
-            Bnu = np.zeros((N, 6, len(self._static_idx)))
-            Bnu[:, row, atom] = nu[:, col] * value * alpha[:, atom]
-            if len(self._dense):
-                Bnu[:, :, self._dense] = ((nu @ self._B_flat).reshape(N, 6, -1)
-                                          * alpha[:, None, self._dense])
-            for atoms in self._ranks:
+                dense = ((nu @ self._B_flat).reshape(N, 6, -1)
+                         * alpha[:, None, self._dense]).reshape(N, -1)
+                products = np.concatenate([products, dense[:, self._dense_cols]], axis=1)
+            for take, put in self._adds:
                 # column j = Σ over the parameter's atoms of α B ν
-                Phi[:, :, self._static_idx[atoms]] += Bnu[:, :, atoms]
+                X[:, put] += products[:, take]
         if len(self._freq_idx):
             if states is None:
                 raise ValueError("the freq term needs its memory states")
             # column m: e_{dof_m} z_m
-            Phi[:, self.memory_dofs, self._freq_idx] = states
+            X[:, self._memory_entries] = states
+        return X
+
+    def scatter(self, entries: FloatArray) -> FloatArray:
+        """Φ, shape (N, 6, p), from its :attr:`pattern`'s entries, shape (N, L)."""
+        Phi = np.zeros((len(entries), 6, self.n_params))
+        Phi[:, self._live_rows, self._live_params] = entries
         return Phi
 
     def force(self, nu: FloatArray, theta: FloatArray,

@@ -231,10 +231,12 @@ def zero_phase_many(x: FloatArray, rate: float, cutoff: float, derivatives: tupl
     shape = (len(f),) + (1,) * (x.ndim - 1)
     X = sp_fft.rfft(ext, axis=0)
     out = []
-    for derivative in derivatives:
-        # times i2πf for the derivative
+    for k, derivative in enumerate(derivatives):
+        # times i2πf for the derivative (in place, on a copy of X but for the last)
         Hd = H * (2j * np.pi * f) if derivative else H
-        y = sp_fft.irfft(X * Hd.reshape(shape), n=size, axis=0)
+        Y = X if k == len(derivatives) - 1 else X.copy()
+        Y *= Hd.reshape(shape)
+        y = sp_fft.irfft(Y, n=size, axis=0, overwrite_x=True)
         out.append(np.asarray(y[:n], dtype=float))
     return out
 
