@@ -9,6 +9,7 @@ import pytest
 from dampest_ros.core.identification.regression import accumulate, iter_entries
 from dampest_ros.core.physics.alpha import Alpha
 from dampest_ros.core.physics.damping import Basis, DampingModel, DampingTerm, unit
+from dampest_ros.core.physics.directions import BODY_AXES
 from dampest_ros.core.physics.point_drag import point_library, point_term
 from dampest_ros.core.physics.point_lift import lift_basis, magnus_basis
 from dampest_ros.core.physics.terms import (
@@ -34,7 +35,7 @@ def test_entries_kept_between_passes_are_a_fresh_passs_to_the_bit() -> None:
     nu = smooth(rng, int(60 * RATE), np.array([0.3, 0.2, 0.2, 0.3, 0.3, 0.3]), 0.5)
     base = [linear_term(), quadratic_term(), coriolis_term()]
     samples = synthetic(body, nu, DampingModel(base[:2]).force(nu, np.ones(12)), 0.01, seed=1)
-    drags = point_library([(0.3, 0.0, 0.2), (0.0, -0.3, 0.21)])
+    drags = point_library([((0.3, 0.0, 0.2), BODY_AXES), ((0.0, -0.3, 0.21), BODY_AXES)])
     names = DampingModel(base).parameter_names
     cross = [sp for sp in library() if sp.label not in names][::25]
 
@@ -64,12 +65,12 @@ def test_entries_kept_between_passes_are_a_fresh_passs_to_the_bit() -> None:
 KINDS = [Alpha("one"), Alpha("abs", 5), Alpha("lin", 1), Alpha("prod", 0, 4),
          Alpha("absprod", 2, 3), Alpha("norm"), Alpha("anorm"), Alpha("pnorm", 1, 2),
          Alpha("area", 4), Alpha("area", 1, 2), Alpha("absproj", w=(0.6, 0, 0.8, 0, 0, 0)),
-         Alpha("pspeed", w=(0.3, 0.0, 0.2)), Alpha("pshare", 1, w=(0.3, 0.0, 0.2))]
+         Alpha("pspeed", w=(0.3, 0.0, 0.2)), Alpha("pshare", w=(0.3, 0.0, 0.2, 0.0, 1.0, 0.0))]
 
 
 @pytest.mark.parametrize("basis", [Basis(f"b{k}", unit(k % 6, (2 * k + 1) % 6), a)
                                    for k, a in enumerate(KINDS)]
-                         + [lift_basis("lift", (0.3, 0.1, 0.2), 0),
+                         + [lift_basis("lift", (0.3, 0.1, 0.2), np.eye(3)[0]),
                             magnus_basis("magnus", (0.3, 0.1, 0.2))]
                          + list(coriolis_term().bases), ids=lambda b: b.name)
 def test_a_column_reads_the_components_of_nu_it_says(basis: Basis) -> None:
