@@ -121,6 +121,9 @@ def _chunks(samples: Samples, body: RigidBody, columns: Callable[[slice], FloatA
             if cutoff > 0:
                 X = zero_phase(X, samples.rate, cutoff)
                 y = zero_phase(y, samples.rate, cutoff)
+            # sample by sample in memory (as the low-pass gives them), whatever ``columns``
+            # gave: the sums over samples below run in one order
+            X = np.ascontiguousarray(X)
             if step > 1:
                 # every k-th sample counted from the segment's first: a segment gives the
                 # same rows whatever comes before it (a log pooled with others included)
