@@ -10,7 +10,7 @@ logs add up (:mod:`dampest_ros.core.identification.pool`).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -104,10 +104,10 @@ def iter_entries(samples: Samples, model: DampingModel, body: RigidBody,
 
 
 def _chunks(samples: Samples, body: RigidBody, columns: Callable[[slice], FloatArray],
-            chunk: int, cutoff: float, margin: float, decimate: bool
+            chunk: int, cutoff: float, margin: float, decimate: bool, targets: bool = True
             ) -> Iterator[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]]:
     """:func:`iter_entries` of the ``columns`` of each extended chunk (a slice of the samples;
-    shape (n, L))."""
+    shape (n, L)); without ``targets``, y of shape (n, 0)."""
     pad = round(margin * samples.rate) if cutoff > 0 else 0
     step = _step(samples, cutoff, decimate)
     for seg in samples.segments():
@@ -117,10 +117,13 @@ def _chunks(samples: Samples, body: RigidBody, columns: Callable[[slice], FloatA
             a, b = max(s0, start - pad), min(s1, stop + pad)
             ext = slice(a, b)
             X = columns(ext)
-            y = target(samples, body, ext)
+            y = target(samples, body, ext) if targets else np.zeros((b - a, 0))
             if cutoff > 0:
                 X = zero_phase(X, samples.rate, cutoff)
                 y = zero_phase(y, samples.rate, cutoff)
+            # sample by sample in memory (as the low-pass gives them), whatever ``columns``
+            # gave: the sums over samples below run in one order
+            X = np.ascontiguousarray(X)
             if step > 1:
                 # every k-th sample counted from the segment's first: a segment gives the
                 # same rows whatever comes before it (a log pooled with others included)
@@ -178,6 +181,9 @@ class _KeptEntries:
         Φ it fills (in order).
     size : int
         Bytes held.
+    target : tuple
+        τ, ν̇, attitude and body of the last pass's samples (the same objects), whose
+        low-passed target y per chunk ``y`` is (with each chunk's rows, ``chunk_rows``).
     """
 
     nu: FloatArray
@@ -187,6 +193,9 @@ class _KeptEntries:
     rows: int
     columns: dict[_Key, list[FloatArray]] = field(default_factory=dict)
     size: int = 0
+    target: tuple[object, ...] = ()
+    y: list[FloatArray] = field(default_factory=list)
+    chunk_rows: list[slice | NDArray[np.int64]] = field(default_factory=list)
 
     def keys(self, model: DampingModel) -> list[_Key]:
         """The :data:`_Key` of each static parameter of ``model``, in θ order."""
@@ -226,15 +235,22 @@ class _KeptEntries:
         keep = {} if shifted is not None else missing
         for k in keep:
             self.columns[k] = []
+        # the target of the last pass's samples is these samples' (τ, ν̇, attitude, body)
+        sources = (samples.tau, samples.nu_dot, samples.euler, body)
+        known = shifted is None and len(self.target) == 4 and all(
+            a is b for a, b in zip(self.target, sources, strict=True))
         # each model's entries parameter by parameter (a stable sort of the row-major pattern
         # by parameter), and back
         by_new = np.argsort(new.pattern[1], kind="stable")
         cuts = np.searchsorted(new.pattern[1][by_new], np.arange(new.n_params + 1))
         index = [new.parameter_names.index(b.name) for b in missing.values()]
         back = np.argsort(np.argsort(model.pattern[1], kind="stable"))
-        chunks = _chunks(samples, body, lambda ext: new.regressor_entries(samples.nu[ext]),
-                         *self.settings)
-        done = False
+        chunks: Iterable[tuple[slice | NDArray[np.int64], FloatArray, FloatArray]] = (
+            zip(self.chunk_rows, (np.zeros((len(y), 0)) for y in self.y), self.y, strict=True)
+            if known and not missing else
+            _chunks(samples, body, lambda ext: new.regressor_entries(samples.nu[ext]),
+                    *self.settings, targets=not known))
+        done, ys, chunk_rows = False, [], []
         try:
             for c, (rows, X, y) in enumerate(chunks):
                 fresh = {k: X[:, by_new[cuts[j]:cuts[j + 1]]]
@@ -242,9 +258,13 @@ class _KeptEntries:
                 for k in keep:
                     self.columns[k].append(fresh[k])
                     self.size += fresh[k].nbytes
+                ys.append(self.y[c] if known else y)
+                chunk_rows.append(rows)
                 by_parameter = [fresh[k] if k in fresh else self.columns[k][c] for k in keys]
-                yield rows, np.concatenate([X[:, :0], *by_parameter], axis=1)[:, back], y
+                yield rows, np.concatenate([X[:, :0], *by_parameter], axis=1)[:, back], ys[c]
             done = True
+            if shifted is None:
+                self.target, self.y, self.chunk_rows = sources, ys, chunk_rows
         finally:
             if not done:  # a pass left before its end: its new entries are not whole
                 for k in keep:

@@ -795,11 +795,11 @@ class _Stepwise:
         self.keep_always = {(r, f) for r, f, _ in base_cols
                             if f >= m or zero[f] or rules.keep_base}
         self.from_base = {(r, f) for r, f, _ in base_cols}
-        # :meth:`_held_out` by (row, S, C): each backward step asks again for the removals of
-        # the rows no step has changed since the last one
-        self._tried: dict[tuple[int, tuple[int, ...], tuple[int, ...]],
-                          tuple[FloatArray, FloatArray, FloatArray]] = {}
+        # the held-out errors of column sets and the in-sample fits of removals, each computed
+        # once: each backward step asks again for the removals of the rows no step has
+        # changed since the last one, and a removal's column set is the next addition's S
         self._errors: dict[tuple[int, tuple[int, ...]], FloatArray] = {}
+        self._fits: dict[tuple[int, tuple[int, ...], int], tuple[float, float]] = {}
         tss = total_sum_of_squares(ne)
         self.rss = np.array([tss[i] - _fit_row(ne, i, self.chosen[i]) for i in range(6)])
         self.tss = np.maximum(tss, 1e-300)
@@ -838,18 +838,27 @@ class _Stepwise:
     def _held_out(self, i: int, S: Sequence[int], C: Sequence[int]
                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Row ``i``'s held-out RSS of the columns S, and :func:`_held_out` of S plus each one
-        of C (each (row, S, C) computed once)."""
-        key = (i, tuple(S), tuple(C))
-        if key not in self._tried:
+        of C."""
+        ne = self.ne
+        return (self._fold_errors(i, S).sum(),
+                *_held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], S, np.array(C, dtype=np.int64),
+                           self.rules.tol))
+
+    def _in_sample(self, i: int, S: Sequence[int], col: int) -> tuple[float, float]:
+        """Row ``i``'s in-sample RSS(S) − RSS(S ∪ {col}) and the coefficient of ``col``
+        (:func:`_trials` on all folds)."""
+        key = (i, tuple(S), col)
+        if key not in self._fits:
             ne = self.ne
-            self._tried[key] = _held_out(ne.A[:, i], ne.b[:, i], ne.c[:, i], S,
-                                         np.array(C, dtype=np.int64), self.rules.tol)
-        return (self._fold_errors(i, S).sum(), *self._tried[key])
+            G = _Blocks.of(ne.A[:, i], ne.b[:, i], np.asarray(S, dtype=np.int64),
+                           np.array([col])).total()
+            _, coef, gain, _ = _trials(G, self.rules.tol)
+            self._fits[key] = float(gain[0]), float(coef[0])
+        return self._fits[key]
 
     def _fold_errors(self, i: int, S: Sequence[int]) -> FloatArray:
-        """:func:`cv_budget.fold_errors` of the columns S in row ``i``, shape (F,) (each
-        (row, S) computed once: the trials of a removal and of the next addition share S,
-        and the one-standard-error rule walks the path again)."""
+        """:func:`cv_budget.fold_errors` of the columns S in row ``i``, shape (F,) (the
+        one-standard-error rule walks the path again)."""
         key = (i, tuple(S))
         if key not in self._errors:
             ne = self.ne
@@ -910,14 +919,15 @@ class _Stepwise:
         no longer passes the test it entered by, a base one (unless ``strict_base``) when its
         removal lowers BIC."""
         rest = [c for c in self.chosen[i] if c != col]
-        cv_wo, _, gain, coef = self._held_out(i, rest, [col])
-        rss_wo = self.rss[i] + float(gain[0])
+        gain, coef = self._in_sample(i, rest, col)
+        cv_wo = self._fold_errors(i, rest).sum()
+        rss_wo = self.rss[i] + gain
         dbic = float(self._delta_bic(self.rss[i], rss_wo))
         if (i, col) in self.from_base and not self.rules.strict_base:
             weak = dbic > 0.0
         else:
             weak = not self.rules.qualifies(dbic, rss_wo - self.rss[i], rss_wo, self.cv[i],
-                                            float(cv_wo), col < self.m or float(coef[0]) > 0)
+                                            float(cv_wo), col < self.m or coef > 0)
         # held-out R² lost: (CV without − CV with) / TSS
         loss = (float(cv_wo) - self.cv[i]) / self.tss[i]
         return _Removal(i, col, rss_wo, float(cv_wo), dbic, loss, weak)

@@ -223,6 +223,10 @@ class AlphaBank:
 
     def __call__(self, nu: FloatArray) -> FloatArray:
         """α for samples ``nu`` (N, 6); returns (N, p)."""
+        return np.ascontiguousarray(self.rows(nu).T)
+
+    def rows(self, nu: FloatArray) -> FloatArray:
+        """α for samples ``nu`` (N, 6) by function: shape (p, N), α_k(ν) in row k."""
         # ν by component (rows), ν_6 ≡ 1 appended: a column of α is a product of two rows, and
         # α is formed column by column (Fortran order), each kind writing its own columns
         aug = np.concatenate([nu.T, np.ones((1, nu.shape[0]))])
@@ -244,7 +248,7 @@ class AlphaBank:
             a[:, k] = point_shares(nu, self.share_points, self.share_directions)
         if len(k := self.absolute):
             a[:, k] = np.abs(a[:, k])
-        return np.ascontiguousarray(a)
+        return np.asarray(a.T)
 
     def one(self, nu: list[float]) -> FloatArray:
         """α for one sample ``nu`` (6 floats); shape (p,), the same numbers as ``__call__``.

@@ -361,8 +361,9 @@ class DampingModel:
 
     def regressor_entries(self, nu: FloatArray, states: FloatArray | None = None
                           ) -> FloatArray:
-        """The entries of :meth:`regressor` that its :attr:`pattern` names, shape (N, L):
-        Φ without the zeros (a single-entry coefficient fills one force row of six).
+        """The entries of :meth:`regressor` that its :attr:`pattern` names, shape (N, L),
+        entry by entry in memory (Fortran order): Φ without the zeros (a single-entry
+        coefficient fills one force row of six).
 
         Parameters
         ----------
@@ -373,25 +374,26 @@ class DampingModel:
         """
         nu = np.atleast_2d(np.asarray(nu, dtype=float))
         N = nu.shape[0]
-        X = np.zeros((N, len(self._live_rows)))
+        # formed entry by entry (rows of X), from ν and α by component and function
+        X = np.zeros((len(self._live_rows), N))
         if len(self._static_idx):
             atom, _, col, value = self._entries
-            alpha = self._bank(nu)
+            alpha = self._bank.rows(nu)
             # (B_j ν)_a α_j(ν): a sparse entry's one product, a matrix-product atom's rows
-            products = nu[:, col] * value * alpha[:, atom]
+            products = np.ascontiguousarray(nu.T)[col] * value[:, None] * alpha[atom]
             if len(self._dense):
                 dense = ((nu @ self._B_flat).reshape(N, 6, -1)
-                         * alpha[:, None, self._dense]).reshape(N, -1)
-                products = np.concatenate([products, dense[:, self._dense_cols]], axis=1)
+                         * alpha[self._dense].T[:, None, :]).reshape(N, -1)
+                products = np.concatenate([products, dense[:, self._dense_cols].T])
             for take, put in self._adds:
-                # column j = Σ over the parameter's atoms of α B ν
-                X[:, put] += products[:, take]
+                # entry (a, j) = Σ over the parameter's atoms of α B ν
+                X[put] += products[take]
         if len(self._freq_idx):
             if states is None:
                 raise ValueError("the freq term needs its memory states")
             # column m: e_{dof_m} z_m
-            X[:, self._memory_entries] = states
-        return X
+            X[self._memory_entries] = states.T
+        return np.asarray(X.T)
 
     def scatter(self, entries: FloatArray) -> FloatArray:
         """Φ, shape (N, 6, p), from its :attr:`pattern`'s entries, shape (N, L)."""
