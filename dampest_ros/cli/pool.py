@@ -116,10 +116,11 @@ def reduce_log(path: str, args: argparse.Namespace, prior: np.ndarray | None,
     model, _ = structure_of(args, vehicle)
     with local_log(path) as local:
         samples = cut(load_samples(local, vehicle, args), args)
+    extent = Extent.of(samples)
     options = FitOptions(method=args.method, cutoff=args.cutoff, speed_range=tuple(
-        speed_limits(vehicle, force=Extent.of(samples).force)))
+        speed_limits(vehicle, force=extent.force)))
     return samples, log_statistics(path, samples, model, vehicle.body, options, prior,
-                                   prior_std)
+                                   prior_std, extent)
 
 
 #: How to get what pooling needs: the 'pool' extra of setup.py (Dask has no rosdep key).

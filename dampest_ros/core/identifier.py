@@ -132,13 +132,14 @@ class DampingIdentifier:
         else:
             model = self.structure
             nominal = nominal_of(model, self.vehicle.damping, self.vehicle.theta)
+        extent = Extent.of(samples)
         options = FitOptions(method=self.method, cutoff=self.cutoff,
-                             speed_range=tuple(speed_limits(
-                                 self.vehicle, force=Extent.of(samples).force)),
+                             speed_range=tuple(speed_limits(self.vehicle, force=extent.force)),
                              **self.fit_options)
         mean, std = (nominal, None) if self.prior is None else prior_arrays(model, nominal,
                                                                              self.prior)
-        self.fit_ = fit(samples, model, self.vehicle.body, options, prior=mean, prior_std=std)
+        self.fit_ = fit(samples, model, self.vehicle.body, options, prior=mean, prior_std=std,
+                        extent=extent)
         self.estimator_ = None
         self.model_ = self.fit_.to_model(model, self.vehicle.body,
                                          identity=self.vehicle.identity)

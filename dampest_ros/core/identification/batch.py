@@ -671,7 +671,8 @@ def _effective_samples(extent: Extent, n: int, cutoff: float) -> float:
 def fit(samples: Samples, model: DampingModel, body: RigidBody,
         options: FitOptions | None = None, prior: FloatArray | None = None,
         prior_std: FloatArray | None = None, normal: NormalEquations | None = None,
-        chunk: int = CHUNK, bias: BiasStatistics | None = None) -> Fit:
+        chunk: int = CHUNK, bias: BiasStatistics | None = None,
+        extent: Extent | None = None) -> Fit:
     """Identify θ from samples.
 
     1. Per-DOF weights 1/σ_i² from the residuals (``wls``), σ_i floored at
@@ -710,6 +711,8 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
         Precomputed data of the sensor-bias refits
         (:func:`~dampest_ros.core.identification.covariance.bias_statistics` of ``samples``,
         formed here when not given and the options give a sensor a bias).
+    extent : Extent, optional
+        :meth:`Extent.of` ``samples`` (formed here when not given).
 
     Returns
     -------
@@ -717,7 +720,7 @@ def fit(samples: Samples, model: DampingModel, body: RigidBody,
     """
     opts = options or FitOptions()
     _enough(len(samples), model.n_params)
-    extent = Extent.of(samples)
+    extent = extent or Extent.of(samples)
     ne = normal or accumulate(samples, model, body, chunk=chunk, cutoff=opts.cutoff,
                               block=settled_block(extent, opts, model.n_params))
     if bias is None:

@@ -84,7 +84,8 @@ class LogStatistics:
 
 def log_statistics(name: str, samples: Samples, model: DampingModel, body: RigidBody,
                    options: FitOptions, prior: FloatArray | None = None,
-                   prior_std: FloatArray | None = None) -> LogStatistics:
+                   prior_std: FloatArray | None = None, extent: Extent | None = None
+                   ) -> LogStatistics:
     """Reduce one log: its normal equations and its own fit (the map step).
 
     Parameters
@@ -96,13 +97,16 @@ def log_statistics(name: str, samples: Samples, model: DampingModel, body: Rigid
     options : FitOptions
         Those of the pooled fit (the same cutoff); the speed range is the log's own.
     prior, prior_std : ndarray, shape (p,), optional
+    extent : Extent, optional
+        :meth:`~dampest_ros.core.signals.extent.Extent.of` ``samples`` (formed here when
+        not given).
     """
-    extent = Extent.of(samples)
+    extent = extent or Extent.of(samples)
     ne = accumulate(samples, model, body, cutoff=options.cutoff,
                     block=settled_block(extent, options, model.n_params))
     bias = bias_statistics(samples, model, body, options)
     own = fit(samples, model, body, options, prior=prior, prior_std=prior_std, normal=ne,
-              bias=bias)
+              bias=bias, extent=extent)
     return LogStatistics(name, float(samples.t[0]), extent, ne, bias, own)
 
 

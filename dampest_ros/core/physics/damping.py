@@ -338,19 +338,8 @@ class DampingModel:
     # regression ---------------------------------------------------------------------------
 
     def regressor(self, nu: FloatArray, states: FloatArray | None = None) -> FloatArray:
-        """Φ(ν) such that D(ν)ν (+ memory force) = Φ θ.
-
-        Parameters
-        ----------
-        nu : ndarray, shape (N, 6)
-            Velocity relative to the water, FRD (m/s, rad/s).
-        states : ndarray, shape (N, n_states), optional
-            Memory states; required when the model has a ``freq`` term.
-
-        Returns
-        -------
-        ndarray, shape (N, 6, p)
-        """
+        """Φ(ν) such that D(ν)ν (+ memory force) = Φ θ, shape (N, 6, p): :meth:`scatter` of
+        :meth:`regressor_entries` (the same parameters)."""
         return self.scatter(self.regressor_entries(nu, states))
 
     @property
