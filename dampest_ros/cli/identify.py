@@ -45,6 +45,7 @@ from dampest_ros.core.identification.pool import (
 )
 from dampest_ros.core.identification.selection import (
     MIN_ERR,
+    MIN_ERR_BESIDE_ELEMENTS,
     Selection,
     select_terms,
 )
@@ -405,7 +406,8 @@ def selection_table(selection: Selection) -> str:
             "\n".join(f"  {', '.join(names)}: {why}" for why, names in groups.items())
     return ("term selection (stepwise over the damping library; a term must raise the "
             f"held-out R² of 5 contiguous time folds, lower BIC by 10 and remove ≥ {MIN_ERR:.0%} "
-            "of its DOF's residual; − marks a removal):\n"
+            f"of its DOF's residual ({MIN_ERR_BESIDE_ELEMENTS:.0%} beside element forces); − marks "
+            "a removal):\n"
             + table(("model", "params", "BIC", "AIC", "error reduction"), rows) + rates
             + "\n" + r2 + dropped + "".join("\n" + ev.describe() for ev in selection.memory)
             + "\n")

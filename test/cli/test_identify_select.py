@@ -182,28 +182,16 @@ def select_heldout(tmp_path: Path, vehicle: str, seed: int, clean: bool = False,
     return runs
 
 
-#: --select on the torpedo's noiseless seeds 1 and 2: surge .9883 and .9890 since its flat fins
-#: are offered their lift and area drag (before: .9988 and .9977, while seed 3 was .9866 and is
-#: now .9985; the bound is 0.99). Offered the lift alone, seed 1 is .9869, the area drag alone
-#: .9884: the search on the drags alone keeps fewer surge terms beside them (the default, which
-#: takes each DOF's better search, is ≥ .9985 on all three). Not yet explained.
-TORPEDO_SELECT_CLEAN = pytest.mark.xfail(strict=True, reason=(
-    "--select's surge on the torpedo's noiseless seeds 1 and 2 is .9883 and .9890 < 0.99 with "
-    "the fins' lift and area drag offered, not yet explained"))
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("clean", [False, True], ids=["noisy", "clean"])
 @pytest.mark.parametrize("seed", [1, 2, 3])
 @pytest.mark.parametrize("vehicle", ["torpedo_auv", "bluerov2_heavy_mujoco"])
-def test_mujoco_plant_held_out_r2(vehicle: str, seed: int, clean: bool, tmp_path: Path,
-                                  request: pytest.FixtureRequest) -> None:
+def test_mujoco_plant_held_out_r2(vehicle: str, seed: int, clean: bool, tmp_path: Path
+                                  ) -> None:
     """Physics we did not write (MuJoCo's ellipsoid fluid model, the faithful vehicle
     description with its Magnus lift as the coriolis term): held-out force R² ≥ 0.99 in every
     DOF, both presets, seeds 1–3, realistic and noiseless sensors, with as many terms as the
     one-standard-error rule keeps (no cap; under the old 25-term cap the ROV's roll was .986)."""
-    if vehicle == "torpedo_auv" and seed in (1, 2) and clean:
-        request.applymarker(TORPEDO_SELECT_CLEAN)
     r2 = select_heldout(tmp_path, vehicle, seed, clean)[1.0][1]
     assert np.all(r2 >= 0.99), r2
 
@@ -244,59 +232,33 @@ def test_default_identify_puts_element_drags_at_the_geoms(
     assert np.min(m.extra["heldout_r2"]) >= 0.97, m.extra["heldout_r2"]
 
 
-#: tooled_rov (made after the flat elements' forces, identified by nobody before this test's
-#: first run) misses in pitch on seed 1 noiseless and seed 3 realistic (README, "untuned
-#: geometries").
-TOOLED_ROV_OPEN = pytest.mark.xfail(strict=True, reason=(
-    "tooled_rov seeds 1 and 3: held-out pitch .9932 (seed 1 noiseless, seed 3 realistic) "
-    "since the rotated geoms' element forces act along their own axes (before, along the "
-    "nearest body axis: seeds 2-3 missed, pitch .9931-.9948); the library search beside the "
-    "element forces adds 2-3 pitch terms (13 on seed 1 before); with the share of the row's "
-    "residual a term must remove at 2 % instead of 5 %: pitch .9962 and .9973"))
-
-
-#: frame_rov's roll and pitch on seed 3 since its pitched camera arm's element forces act
-#: along the arm's own axes (README, "untuned geometries").
-FRAME_ROV_S3_OPEN = pytest.mark.xfail(strict=True, reason=(
-    "frame_rov seed 3: held-out pitch .9946 and roll .9951 with realistic noise, roll .9948 "
-    "noiseless (.9955-.9959 while the camera arm's forces were along the nearest body axis); "
-    "with the library search's 5 % share rule at 2 % roll .9961, pitch .9960 (noiseless)"))
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3])
 @pytest.mark.parametrize("vehicle", ["box_rov", "sled_auv", "frame_rov", "winged_auv",
                                      "tooled_rov"])
 def test_default_identify_on_a_geometry_nobody_tuned_on(vehicle: str, seed: int,
-                                                        tmp_path: Path,
-                                                        request: pytest.FixtureRequest) -> None:
+                                                        tmp_path: Path) -> None:
     """Geometries added after the defaults were set, realistic and noiseless sensors:
-    held-out force R² ≥ 0.995 in every DOF. box_rov, a flat work-class ROV: measured
-    ≥ .9965 (pitch, seed 1, realistic sensors; .9976 before its flat geoms' lift and area
-    drag; roll ≥ .9991; the library alone stopped roll and pitch at .989–.995): the drag of
-    the foam, skids and sled acts on their own velocity v + ω × r, which the element drags at
-    the geoms' positions carry and no library column has.
-    sled_auv, a survey sled on two pontoons: ≥ .9974 (surge, seed 3, realistic; roll ≥ .9997;
-    .99484 on seed 3 before a mirror pair of drags could enter as one step: the pontoons'
-    heave drags at ± 0.18 m).
-    frame_rov, an open-frame ROV on four vertical floats: ≥ .9956 on seeds 1–2 (roll, seed 2,
-    realistic; roll .953–.975 and pitch .977–.986 before its slender elements' lift was a
-    candidate: a force across their own velocity v + ω × r that does no work); seed 3 open
-    since its pitched camera arm's forces act along the arm's own axes (``FRAME_ROV_S3_OPEN``;
-    ≥ .9955 before).
-    winged_auv, a hover AUV with two thin wings, added after the element lift: ≥ .9960 (surge,
-    seed 3, realistic; .9944 while the wings' forces were along the body axis nearest their
-    0.1 rad dihedral; surge .9889–.9929, yaw .9937–.9957 before flat elements were offered
+    held-out force R² ≥ 0.995 in every DOF. Measured with the library's entry share beside element
+    forces at 2 % (``selection.MIN_ERR_BESIDE_ELEMENTS``; at 5 % tooled_rov seeds 1 and 3 and
+    frame_rov seed 3 missed, pitch .9932 and roll .9948).
+    box_rov, a flat work-class ROV: ≥ .9965 (pitch, seed 1, realistic sensors; the library
+    alone stopped roll and pitch at .989–.995): the drag of the foam, skids and sled acts on
+    their own velocity v + ω × r, which the element drags at the geoms' positions carry and
+    no library column has.
+    sled_auv, a survey sled on two pontoons: ≥ .9987 (surge, seed 1, realistic; .99484 on
+    seed 3 before a mirror pair of drags could enter as one step: the pontoons' heave drags
+    at ± 0.18 m).
+    frame_rov, an open-frame ROV on four vertical floats and a pitched camera arm: ≥ .9955
+    (roll, seed 3, realistic; roll .953–.975 and pitch .977–.986 before its slender elements'
+    lift was a candidate: a force across their own velocity v + ω × r that does no work).
+    winged_auv, a hover AUV with two thin wings, added after the element lift: ≥ .9966 (surge,
+    seed 3, realistic; surge .9889–.9929, yaw .9937–.9957 before flat elements were offered
     their lift along the normal and their drag on the projected area).
     tooled_rov, an inspection ROV with no plane of symmetry (a boom, a canister and a
     manipulator housing rotated about three axes), made after the flat elements' forces and
-    never identified before: ≥ .9958 on seed 2 (roll) since the rotated geoms' forces act
-    along their own axes (pitch .9931–.9942 before); seeds 1 and 3 open (``TOOLED_ROV_OPEN``;
-    on the tree before the flat elements' forces pitch was .9840–.9957)."""
-    if (vehicle, seed) == ("frame_rov", 3):
-        request.applymarker(FRAME_ROV_S3_OPEN)
-    if vehicle == "tooled_rov" and seed != 2:
-        request.applymarker(TOOLED_ROV_OPEN)
+    never identified before: ≥ .9957 (roll, seed 3, realistic; pitch .9931–.9942 while the
+    rotated geoms' forces acted along the nearest body axis)."""
     for clean in (False, True):
         (tmp_path / str(clean)).mkdir()
         r2 = select_heldout(tmp_path / str(clean), vehicle, seed, clean, options=())[1.0][1]
