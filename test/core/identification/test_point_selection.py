@@ -3,15 +3,21 @@ known drag at a point of the body."""
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Any
 
+import numpy as np
+import pytest
+
+from dampest_ros.core.identification import selection
 from dampest_ros.core.identification.point_selection import EntryRules, select_points
 from dampest_ros.core.identification.regression import accumulate
 from dampest_ros.core.identification.selection import select_terms
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.directions import BODY_AXES
 from dampest_ros.core.physics.point_drag import PointSpec, point_library, point_term
+from dampest_ros.core.physics.rigid_body import RigidBody
 from dampest_ros.core.physics.terms import CrossSpec, cross_term, linear_term, quadratic_term
+from dampest_ros.core.signals.samples import Samples
 from dampest_ros.io.yaml_io import load_vehicle
 from test.core.identification.test_selection import RATE, smooth, synthetic
 
@@ -101,3 +107,37 @@ def test_a_mirror_pair_enters_together_where_neither_twin_passes_alone() -> None
     theta = np.linalg.solve(A, b)[-3:]
     np.testing.assert_allclose(theta, [60.0, 60.0, 150.0], rtol=0.02)
 
+
+
+def test_the_library_search_beside_kept_element_forces_takes_the_lower_entry_share(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The data of the first test (a heave drag at a point, found and kept): the library
+    search beside it takes ``MIN_ERR_BESIDE_ELEMENTS`` (2 %); without candidate points, or
+    when none is kept, ``MIN_ERR`` (5 %)."""
+    body = load_vehicle("bluerov2_heavy").body
+    rng = np.random.default_rng(11)
+    nu = smooth(rng, int(120 * RATE), np.array([0.3, 0.2, 0.2, 0.3, 0.3, 0.3]), 0.5)
+    base = DampingModel([linear_term(), quadratic_term()])
+    base_theta = np.r_[[10.0, 12.0, 15.0, 1.0, 1.0, 1.0], [40.0, 50.0, 60.0, 2.0, 2.0, 2.0]]
+    law = base.force(nu, base_theta) \
+        + DampingModel([point_term([TRUTH])]).force(nu, np.array([60.0]))
+    samples = synthetic(body, nu, law, 0.01, seed=3)
+    shares: list[float] = []
+    search = selection._search_beside_shared
+
+    def spy(samples: Samples, base: DampingModel, body: RigidBody, options: dict[str, Any]
+            ) -> selection.Selection:
+        shares.append(options["min_err"])
+        return search(samples, base, body, options)
+
+    monkeypatch.setattr(selection, "_search_beside_shared", spy)
+    sel = select_terms(samples, base, body, memory_dofs=(),
+                       points=point_library([(p, BODY_AXES) for p in POINTS]))
+    assert sel.points is not None and sel.points.chosen == [TRUTH]
+    assert shares == [selection.MIN_ERR_BESIDE_ELEMENTS] == [0.02]
+    shares.clear()
+    select_terms(samples, base, body, memory_dofs=())
+    # far from the truth's point, nothing is kept
+    select_terms(samples, base, body, memory_dofs=(),
+                 points=point_library([((-0.5, 0.0, -0.4), (BODY_AXES[0],))]))
+    assert shares == [selection.MIN_ERR] * 2 == [0.05] * 2
