@@ -449,7 +449,8 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         Those that no longer pass their entry test beside the library terms go
         (:func:`point_selection.weak_points`), and the library is searched again without
         them, until none goes: a term that entered to make up for a drag's force in another
-        row is tested without the drag.
+        row is tested without the drag. That search estimates the shared force with the
+        terms the last search chose (without the drags gone) and runs once.
     min_err_beside : float
         ``min_err`` of the library search when the base holds element forces (a ``point``
         term: those of ``points`` the data kept, or the base's own;
@@ -473,10 +474,11 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         "exchange": exchange, "keep_base": keep_base}
     rules = EntryRules(min_improvement, _n_eff(samples, cutoff))
 
-    def search(base: DampingModel) -> Selection:
+    def search(base: DampingModel, start: DampingModel | None = None) -> Selection:
         # beside element forces, the lower entry share
         share = min_err_beside if base.term("point") is not None else min_err
-        return _search_beside_shared(samples, base, body, {**options, "min_err": share})
+        return _search_beside_shared(samples, base, body, {**options, "min_err": share},
+                                     start)
 
     found = select_points(samples, base, body, points, cutoff, rules, folds) if points else None
     if found is not None:
@@ -490,24 +492,27 @@ def select_terms(samples: Samples, base: DampingModel, body: RigidBody,
         # the library again without them: the terms that made up for them go too
         pruned += removed
         base = _without(base, removed)
-        selection = search(base)
+        # the shared terms' force first estimated with the terms the last search chose
+        selection = search(base, _without(selection.model, removed))
     if found is not None:
         found = replace(found, pruned=pruned)
     return replace(selection, points=found)
 
 
 def _search_beside_shared(samples: Samples, base: DampingModel, body: RigidBody,
-                          options: dict[str, Any]) -> Selection:
+                          options: dict[str, Any], start: DampingModel | None = None
+                          ) -> Selection:
     """:func:`_search` on top of ``base`` (``options`` its keywords): its terms acting in
     several rows (the ``coriolis`` and ``point`` terms) stay, the search runs on the target
     less their force, estimated with the base, then with the terms the previous search chose
-    (:data:`SHARED_ROUNDS` searches)."""
+    (:data:`SHARED_ROUNDS` searches); with a ``start`` (``base`` and the terms an earlier
+    search chose), estimated with it and searched once."""
     shared = [t for t in base.terms if any(b.more for b in t.bases) or t.kind == "point"]
     if not shared:
         return _search(samples, base, body, (), **options)
     single = DampingModel([t for t in base.terms if t not in shared])
-    model = base
-    for _ in range(SHARED_ROUNDS):
+    model = base if start is None else start
+    for _ in range(SHARED_ROUNDS if start is None else 1):
         theta = _least_squares(samples, model, body, options["cutoff"])
         values = dict(zip(model.parameter_names, theta, strict=True))
         part = DampingModel(shared)

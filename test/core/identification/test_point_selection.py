@@ -125,10 +125,10 @@ def test_the_library_search_beside_kept_element_forces_takes_the_lower_entry_sha
     shares: list[float] = []
     search = selection._search_beside_shared
 
-    def spy(samples: Samples, base: DampingModel, body: RigidBody, options: dict[str, Any]
-            ) -> selection.Selection:
+    def spy(samples: Samples, base: DampingModel, body: RigidBody, options: dict[str, Any],
+            start: DampingModel | None) -> selection.Selection:
         shares.append(options["min_err"])
-        return search(samples, base, body, options)
+        return search(samples, base, body, options, start)
 
     monkeypatch.setattr(selection, "_search_beside_shared", spy)
     sel = select_terms(samples, base, body, memory_dofs=(),
