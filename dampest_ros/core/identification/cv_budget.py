@@ -42,10 +42,33 @@ def guarded_folds(n: int, folds: int, guard: int) -> NDArray[np.int64]:
     return fold.astype(np.int64)
 
 
-def _fit(G: FloatArray, bv: FloatArray) -> FloatArray:
-    """Least squares θ = G⁻¹ b of column-scaled normal equations (minimum norm if singular)."""
-    d = 1.0 / np.sqrt(np.maximum(np.diag(G), 1e-300))
-    return np.asarray(np.linalg.lstsq(G * np.outer(d, d), bv * d, rcond=1e-13)[0] * d)
+def scaled_lstsq(G: FloatArray, B: FloatArray, rcond: float = 1e-13) -> FloatArray:
+    """Minimum-norm least squares of symmetric positive semi-definite normal equations
+    G x = B, several at once, each column-scaled to a unit diagonal first.
+
+    Parameters
+    ----------
+    G : ndarray, shape (..., k, k)
+    B : ndarray, shape (..., k) or (..., k, m)
+    rcond : float
+        Eigenvalues of the scaled G at most ``rcond`` times its largest count as zero (as
+        the singular values of ``numpy.linalg.lstsq``; a zero column gives a zero entry).
+
+    Returns
+    -------
+    ndarray, shape of B
+    """
+    vector = B.ndim == G.ndim - 1
+    Bm = B[..., None] if vector else B
+    d = 1.0 / np.sqrt(np.maximum(np.diagonal(G, axis1=-2, axis2=-1), 1e-300))
+    # D G D y = D B, x = D y: the scaled matrix has a unit diagonal (or a zero one)
+    w, V = np.linalg.eigh(G * d[..., :, None] * d[..., None, :])
+    keep = np.abs(w) > rcond * np.abs(w).max(axis=-1, initial=0.0, keepdims=True)
+    inv = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
+    # y = V Λ⁺ Vᵀ D B
+    y = V @ (inv[..., :, None] * (np.swapaxes(V, -1, -2) @ (Bm * d[..., :, None])))
+    x = y * d[..., :, None]
+    return x[..., 0] if vector else x
 
 
 def fold_fits(A: FloatArray, b: FloatArray, cols: Sequence[int] | NDArray[np.int64]
@@ -66,8 +89,8 @@ def fold_fits(A: FloatArray, b: FloatArray, cols: Sequence[int] | NDArray[np.int
     """
     S = np.asarray(cols, dtype=np.int64)
     A, b = A[:, S[:, None], S], b[:, S]
-    G, bv = A.sum(0), b.sum(0)
-    return np.array([_fit(G - A[f], bv - b[f]) for f in range(len(A))]).reshape(len(A), len(S))
+    # all folds but f: the sum less fold f
+    return scaled_lstsq(A.sum(0) - A, b.sum(0) - b)
 
 
 def fold_errors(A: FloatArray, b: FloatArray, c: FloatArray, cols: Sequence[int] | NDArray[np.int64]
@@ -89,14 +112,13 @@ def fold_errors(A: FloatArray, b: FloatArray, c: FloatArray, cols: Sequence[int]
         ‖y_f − Φ_f θ_{−f}‖² (N² or N²m²).
     """
     S = np.asarray(cols, dtype=np.int64)
-    out = np.array(c, dtype=float)
     if not len(S):
-        return out
-    for f, theta in enumerate(fold_fits(A, b, S)):
-        Af, bf = A[f][S[:, None], S], b[f][S]
-        # ‖y − Φθ‖² on fold f = c − 2 bᵀθ + θᵀAθ
-        out[f] = c[f] - 2.0 * bf @ theta + theta @ Af @ theta
-    return out
+        return np.array(c, dtype=float)
+    theta = fold_fits(A, b, S)
+    Af, bf = A[:, S[:, None], S], b[:, S]
+    # ‖y − Φθ‖² on fold f = c − 2 bᵀθ + θᵀAθ
+    return np.asarray(c - 2.0 * np.einsum("fk,fk->f", bf, theta)
+                      + np.einsum("fk,fkl,fl->f", theta, Af, theta))
 
 
 def one_se_size(errors: FloatArray) -> int:

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,8 +46,8 @@ from dampest_ros.core.identification.cv_budget import (
     fold_errors,
     fold_fits,
     one_se_size,
+    scaled_lstsq,
 )
-from dampest_ros.core.identification.quadratic import solve_normal
 from dampest_ros.core.identification.regression import NormalEquations, accumulate
 from dampest_ros.core.physics.damping import TERM_KINDS, DampingModel
 from dampest_ros.core.physics.point_drag import (
@@ -207,9 +208,10 @@ def weak_points(samples: Samples, model: DampingModel, body: RigidBody, cutoff: 
     units = [(drags[i], drags[j]) for i, j in pairs] \
         + [(k,) for n, k in enumerate(drags) if n not in twins]
     removed: list[str] = []
+    tot = _Totals.of(ne, A, b)
     while units:
-        rss = _row_rss(ne, A, b, cols)
-        without = {u: _row_rss(ne, A, b, [j for j in cols if j not in u]) for u in units}
+        rss = _row_rss(tot, cols)
+        without = {u: _row_rss(tot, [j for j in cols if j not in u]) for u in units}
         weak = [u for u in units if not rules.passed(without[u], rss, len(u))]
         if not weak:
             break
@@ -250,10 +252,11 @@ def _path(ne: NormalEquations, joint: tuple[FloatArray, FloatArray, FloatArray],
     cols = list(base_cols)
     chosen: list[int] = []
     errors = [fold_errors(A, b, c, cols)]
-    rss = _row_rss(ne, A, b, cols)
+    tot = _Totals.of(ne, A, b)
+    rss = _row_rss(tot, cols)
     pool = list(range(len(groups)))
     while pool:
-        fits = [(g, _row_rss(ne, A, b, [*cols, *groups[g]])) for g in pool]
+        fits = [(g, _row_rss(tot, [*cols, *groups[g]])) for g in pool]
         # the held-out errors of those that pass the entry test alone
         good = [(g, fold_errors(A, b, c, [*cols, *groups[g]]), r) for g, r in fits
                 if rules.passed(rss, r, len(groups[g]))]
@@ -270,17 +273,30 @@ def _path(ne: NormalEquations, joint: tuple[FloatArray, FloatArray, FloatArray],
     return chosen, errors
 
 
-def _row_rss(ne: NormalEquations, A: FloatArray, b: FloatArray, cols: Sequence[int]
-             ) -> FloatArray:
+class _Totals(NamedTuple):
+    """The normal equations summed over the folds: the rows' weighted sum (``A`` (p, p),
+    ``b`` (p,)) and each row's (``rows_A`` (6, p, p), ``rows_b`` (6, p), ``rows_c`` (6,))."""
+
+    A: FloatArray
+    b: FloatArray
+    rows_A: FloatArray
+    rows_b: FloatArray
+    rows_c: FloatArray
+
+    @staticmethod
+    def of(ne: NormalEquations, A: FloatArray, b: FloatArray) -> _Totals:
+        """The sums over the folds of ``ne`` and of the weighted sum ``A``, ``b``."""
+        return _Totals(A.sum(0), b.sum(0), ne.A.sum(0), ne.b.sum(0), ne.c.sum(0))
+
+
+def _row_rss(tot: _Totals, cols: Sequence[int]) -> FloatArray:
     """In-sample residual sum of squares per row of the joint fit on ``cols`` over all folds,
     shape (6,)."""
     S = np.asarray(cols, dtype=np.int64)
-    # the columns S of each fold's equations, then their sums over the folds
-    theta = solve_normal(A[:, S[:, None], S].sum(0), b[:, S].sum(0), np.ones(len(S), dtype=bool),
-                         np.zeros(len(S)))
-    G, bv = ne.A[:, :, S[:, None], S].sum(0), ne.b[:, :, S].sum(0)
+    theta = scaled_lstsq(tot.A[S[:, None], S], tot.b[S])
+    G, bv = tot.rows_A[:, S[:, None], S], tot.rows_b[:, S]
     # ‖y_i − Φ_i θ‖² = c_i − 2 b_iᵀθ + θᵀA_iθ, every row i
-    return np.asarray(ne.c.sum(0) - 2.0 * bv @ theta + np.einsum("p,ipq,q->i", theta, G, theta))
+    return np.asarray(tot.rows_c - 2.0 * bv @ theta + np.einsum("p,ipq,q->i", theta, G, theta))
 
 
 def _row_fold_errors(ne: NormalEquations, A: FloatArray, b: FloatArray, cols: Sequence[int]

@@ -46,6 +46,7 @@ from dampest_ros.core.identification.cv_budget import (
     fold_errors,
     guarded_folds,
     one_se_size,
+    scaled_lstsq,
 )
 from dampest_ros.core.identification.memory_rates import MemoryEvidence, memory_evidence
 from dampest_ros.core.identification.point_selection import (
@@ -316,7 +317,8 @@ class _Blocks(NamedTuple):
 def _trials(G: _Blocks, tol: float
             ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
     """Least squares on the columns S plus each one candidate c ∈ C, for all c at once, from
-    the blocks ``G`` of their normal equations.
+    the blocks ``G`` of their normal equations (of one system, or of several along a leading
+    axis: each array below then has it too).
 
     With the fit β = G_SS⁻¹ b_S on S, adding c gives (bordered normal equations)
     θ_c = (b_c − G_cS β) / d_c and θ_S = β − G_SS⁻¹ G_Sc θ_c, d_c = G_cc − G_cS G_SS⁻¹ G_Sc
@@ -332,20 +334,17 @@ def _trials(G: _Blocks, tol: float
     ok : ndarray of bool, shape (|C|,)
     """
     gcc = G.cc
-    if len(G.ss):
-        d = 1.0 / np.sqrt(np.maximum(np.diag(G.ss), 1e-300))
-        Gss = G.ss * np.outer(d, d)
-        rhs = np.column_stack([G.sc, G.bs]) * d[:, None]
-        sol = np.linalg.lstsq(Gss, rhs, rcond=1e-13)[0] * d[:, None]
-        X, beta = sol[:, :-1], sol[:, -1]
-        den = gcc - np.einsum("kc,kc->c", G.sc, X)
-        num = G.bc - G.cs @ beta
+    if G.ss.shape[-1]:
+        sol = scaled_lstsq(G.ss, np.concatenate([G.sc, G.bs[..., None]], axis=-1))
+        X, beta = sol[..., :-1], sol[..., -1]
+        den = gcc - np.einsum("...kc,...kc->...c", G.sc, X)
+        num = G.bc - np.einsum("...ck,...k->...c", G.cs, beta)
     else:
-        X, beta = np.zeros((0, len(gcc))), np.zeros(0)
+        X, beta = np.zeros((*gcc.shape[:-1], 0, gcc.shape[-1])), np.zeros((*gcc.shape[:-1], 0))
         den, num = gcc.copy(), G.bc.copy()
     ok = den > tol * np.maximum(gcc, 1e-300)
     th_c = np.where(ok, num / np.where(ok, den, 1.0), 0.0)
-    th_S = beta[:, None] - X * th_c[None, :]
+    th_S = beta[..., :, None] - X * th_c[..., None, :]
     return th_S, th_c, np.where(ok, num * th_c, 0.0), ok
 
 
@@ -371,23 +370,18 @@ def _held_out(A: FloatArray, b: FloatArray, c: FloatArray, S: Sequence[int],
         The coefficient of c in the fit of S ∪ {c} on all folds.
     """
     # every product below is of the blocks of S and C: per fold, over all folds, and over
-    # all folds but each
+    # all folds but each (all folds at once along the first axis)
     folds = _Blocks.of(A, b, np.asarray(S, dtype=np.int64), C)
     G = folds.total()
     _, coef, gain, ok = _trials(G, tol)
-    cv_C = np.zeros(len(C))
-    for f in range(len(c)):
-        # fold f's blocks as arrays of their own: a product over a view that starts inside
-        # an array can round otherwise (BLAS and einsum peel an unaligned start)
-        Af = _Blocks(*(x[f].copy() for x in folds))
-        th_S, th_c, _, okf = _trials(G - Af, tol)
-        # ‖y − Φθ‖² on fold f = c − 2 bᵀθ + θᵀAθ, θ = (θ_S, θ_c) for each candidate
-        quad_S = np.einsum("kc,kl,lc->c", th_S, Af.ss, th_S)
-        cross = np.einsum("ck,kc->c", Af.cs, th_S)
-        cv_C += (c[f] - 2.0 * (Af.bs @ th_S + Af.bc * th_c) + quad_S
-                 + 2.0 * th_c * cross + th_c ** 2 * Af.cc)
-        cv_C[~okf] = np.inf
-    return np.where(ok, cv_C, np.inf), gain, coef
+    th_S, th_c, _, okf = _trials(G - folds, tol)
+    # ‖y − Φθ‖² on fold f = c − 2 bᵀθ + θᵀAθ, θ = (θ_S, θ_c) for each candidate
+    quad_S = np.einsum("fkc,fkl,flc->fc", th_S, folds.ss, th_S)
+    cross = np.einsum("fck,fkc->fc", folds.cs, th_S)
+    cv = (c[:, None] - 2.0 * (np.einsum("fk,fkc->fc", folds.bs, th_S) + folds.bc * th_c)
+          + quad_S + 2.0 * th_c * cross + th_c ** 2 * folds.cc)
+    # a candidate collinear with S on some fold's complement is not judged
+    return np.where(ok & okf.all(axis=0), cv.sum(axis=0), np.inf), gain, coef
 
 
 def select_terms(samples: Samples, base: DampingModel, body: RigidBody,

@@ -88,9 +88,9 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.online.sample import DEFAULT_TOPICS, OnlineConfig, OnlineSample, topic_roles
 from dampest_ros.core.physics import frames
+from dampest_ros.core.physics.frames import cross
 from dampest_ros.core.physics.mounting import (
     Mounting,
-    cross,
     depth_offset,
     dvl_to_body,
     frame_id_note,

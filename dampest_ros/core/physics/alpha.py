@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from dampest_ros.core.physics.frames import cross
 from dampest_ros.core.physics.rigid_body import DOF_NAMES, FORCE_NAMES, ConfigError
 
 FloatArray = NDArray[np.float64]
@@ -303,7 +304,7 @@ def point_velocities(nu: FloatArray, points: FloatArray) -> FloatArray:
     """v_p = v + ω × r of each point r of the body, shape (N, P, 3) (m/s, FRD), for ``nu``
     (N, 6) and ``points`` (P, 3) as in :func:`point_speeds`."""
     # v_p = v + ω × r per sample and point
-    return nu[:, None, :3] + np.cross(nu[:, None, 3:], points[None, :, :])
+    return nu[:, None, :3] + cross(nu[:, None, 3:], points[None, :, :])
 
 
 def point_shares(nu: FloatArray, points: FloatArray, directions: FloatArray) -> FloatArray:

@@ -279,3 +279,18 @@ def body_rates(q: FloatArray, q_dot: FloatArray) -> FloatArray:
     # q̇ = ½ q ⊗ [0, ω_body]  ⇒  ω_body = 2 vec(q* ⊗ q̇) / |q|² (|q| = 1 up to interpolation)
     w = quat_mul(conj, q_dot)[:, 1:]
     return np.asarray(2.0 * w / np.sum(q * q, axis=1, keepdims=True), dtype=float)
+
+
+def cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """a × b over the last axis (shapes (..., 3), broadcast): np.cross (the same products and
+    differences, so the same bits) without its ~20 µs of overhead per call, which the online
+    preprocessing pays per message and the regressors per chunk."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.ndim == 1 and b.ndim == 1:  # one vector each: Python floats are faster still
+        (a1, a2, a3), (b1, b2, b3) = a.tolist(), b.tolist()
+        # (a₂b₃ − a₃b₂, a₃b₁ − a₁b₃, a₁b₂ − a₂b₁)
+        return np.array([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1])
+    # the same, per row
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)

@@ -15,6 +15,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dampest_ros.core.physics.frames import cross
+
 FloatArray = NDArray[np.float64]
 
 DOF_NAMES = ("u", "v", "w", "p", "q", "r")
@@ -114,7 +116,7 @@ def munk_moment(M_A: FloatArray, nu: FloatArray) -> FloatArray:
     nu = np.asarray(nu, dtype=float)
     out = np.zeros_like(nu)
     # v × (M_A11 v), on the moment rows only
-    out[..., 3:] = np.cross(nu[..., :3], nu[..., :3] @ M_A[:3, :3].T)
+    out[..., 3:] = cross(nu[..., :3], nu[..., :3] @ M_A[:3, :3].T)
     return out
 
 
@@ -133,8 +135,8 @@ def coriolis_force(M: FloatArray, nu: FloatArray) -> FloatArray:
     nu = np.asarray(nu, dtype=float)
     a = nu @ M.T
     out = np.empty_like(a)
-    out[..., :3] = np.cross(nu[..., 3:], a[..., :3])
-    out[..., 3:] = np.cross(nu[..., :3], a[..., :3]) + np.cross(nu[..., 3:], a[..., 3:])
+    out[..., :3] = cross(nu[..., 3:], a[..., :3])
+    out[..., 3:] = cross(nu[..., :3], a[..., :3]) + cross(nu[..., 3:], a[..., 3:])
     return out
 
 
