@@ -52,7 +52,8 @@ def scaled_lstsq(G: FloatArray, B: FloatArray, rcond: float = 1e-13) -> FloatArr
     B : ndarray, shape (..., k) or (..., k, m)
     rcond : float
         Eigenvalues of the scaled G at most ``rcond`` times its largest count as zero (as
-        the singular values of ``numpy.linalg.lstsq``; a zero column gives a zero entry).
+        the singular values of ``numpy.linalg.lstsq``). A column with a zero diagonal (the
+        data leave it at zero) gets a zero entry.
 
     Returns
     -------
@@ -60,7 +61,9 @@ def scaled_lstsq(G: FloatArray, B: FloatArray, rcond: float = 1e-13) -> FloatArr
     """
     vector = B.ndim == G.ndim - 1
     Bm = B[..., None] if vector else B
-    d = 1.0 / np.sqrt(np.maximum(np.diagonal(G, axis1=-2, axis2=-1), 1e-300))
+    g = np.diagonal(G, axis1=-2, axis2=-1)
+    # D = diag(1/√G_jj), 0 for a column the data leave at zero (its entry is then 0)
+    d = np.divide(1.0, np.sqrt(np.maximum(g, 0.0)), out=np.zeros(g.shape), where=g > 0)
     # D G D y = D B, x = D y: the scaled matrix has a unit diagonal (or a zero one)
     w, V = np.linalg.eigh(G * d[..., :, None] * d[..., None, :])
     keep = np.abs(w) > rcond * np.abs(w).max(axis=-1, initial=0.0, keepdims=True)

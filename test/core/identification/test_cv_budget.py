@@ -6,7 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dampest_ros.core.identification.cv_budget import fold_errors, guarded_folds, one_se_size
+from dampest_ros.core.identification.cv_budget import (
+    fold_errors,
+    guarded_folds,
+    one_se_size,
+    scaled_lstsq,
+)
 from dampest_ros.core.identification.selection import select_terms
 from dampest_ros.core.physics.damping import DampingModel
 from dampest_ros.core.physics.rigid_body import RigidBody
@@ -88,3 +93,27 @@ def test_uncapped_selection_keeps_the_base_and_adds_exactly_the_true_terms() -> 
         assert {i: v for i, v in added.items() if v} == {2: ["Z_uxw"], 3: ["K_pW"],
                                                           5: ["N_rv"]}, seed
         assert set(base.parameter_names) <= set(sel.model.parameter_names)
+
+
+def test_scaled_lstsq_is_numpys_minimum_norm_least_squares_many_at_once() -> None:
+    """Stacked normal equations of random designs (columns scaled 1e-3…1e3): the same
+    solutions as numpy.linalg.lstsq of each column-scaled system to 1e-10; a zero column
+    gets a zero entry and a repeated one the minimum-norm split; vector and matrix right
+    sides agree."""
+    rng = np.random.default_rng(4)
+    X = rng.normal(size=(5, 200, 6)) * np.logspace(-3, 3, 6)
+    X[3, :, 2] = 0.0  # a column the data leave at zero
+    X[4, :, 5] = X[4, :, 4]  # two equal columns
+    y = rng.normal(size=(5, 200, 2))
+    G, B = np.swapaxes(X, 1, 2) @ X, np.swapaxes(X, 1, 2) @ y
+    x = scaled_lstsq(G, B)
+    for k in range(5):
+        live = np.diag(G[k]) > 0
+        d = 1.0 / np.sqrt(np.diag(G[k])[live])
+        want = np.zeros((6, 2))
+        want[live] = np.linalg.lstsq(G[k][np.ix_(live, live)] * np.outer(d, d),
+                                     B[k][live] * d[:, None], rcond=1e-13)[0] * d[:, None]
+        np.testing.assert_allclose(x[k], want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+    assert np.all(x[3, 2] == 0.0)
+    np.testing.assert_allclose(x[4, 4], x[4, 5], rtol=1e-10)
+    np.testing.assert_allclose(scaled_lstsq(G, B[..., 0]), x[..., 0], rtol=1e-12, atol=1e-15)
