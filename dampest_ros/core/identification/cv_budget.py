@@ -27,6 +27,21 @@ FloatArray = NDArray[np.float64]
 GUARD_PERIODS = 2.0
 
 
+#: Held-out errors of two candidates closer than this (relative) are a tie, taken by the order
+#: of the candidates (row, then library order; an element drag before its mirror pair):
+#: candidates that explain the same part of the data (columns equal given the terms already
+#: in, or a column the data leave at zero) score equal up to rounding, and rounding must not
+#: decide the structure (a log read from a bag and from its CSV export differ by 1e-11 and chose
+#: different terms).
+TIE_RTOL = 1e-9
+
+
+def first_best(score: FloatArray) -> int:
+    """The first index whose ``score`` is within :data:`TIE_RTOL` of the smallest."""
+    low = float(score.min())
+    return int(np.flatnonzero(score <= low + TIE_RTOL * abs(low))[0])
+
+
 def guarded_folds(n: int, folds: int, guard: int) -> NDArray[np.int64]:
     """The contiguous time fold (0..folds−1) of each of n samples, −1 for the ``guard``
     samples on each side of a boundary between two folds, shape (n,)."""

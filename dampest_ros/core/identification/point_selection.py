@@ -43,6 +43,7 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.identification.cv_budget import (
     GUARD_PERIODS,
+    first_best,
     fold_errors,
     fold_fits,
     one_se_size,
@@ -262,7 +263,8 @@ def _path(ne: NormalEquations, joint: tuple[FloatArray, FloatArray, FloatArray],
                 if rules.passed(rss, r, len(groups[g]))]
         if not good:
             break
-        g, e, r = min(good, key=lambda t: float(t[1].sum()))
+        # the least joint held-out error, a tie (rounding) to the first offered
+        g, e, r = good[first_best(np.array([float(t[1].sum()) for t in good]))]
         if e.sum() >= errors[-1].sum():
             break
         chosen.append(g)

@@ -43,6 +43,8 @@ from numpy.typing import NDArray
 
 from dampest_ros.core.identification.cv_budget import (
     GUARD_PERIODS,
+    TIE_RTOL,
+    first_best,
     fold_errors,
     guarded_folds,
     one_se_size,
@@ -213,20 +215,6 @@ def row_by_row(without: Selection, drags: Selection, base: DampingModel, rows: S
 #: Searches of :func:`select_terms` when the base has terms acting in several rows: their
 #: force is estimated with the base, then with the terms the previous search chose.
 SHARED_ROUNDS = 2
-
-
-#: Scores of two candidates closer than this (relative) are a tie, taken by the order of the
-#: candidates (row, then library order): candidates that explain the same part of the data
-#: (columns equal given the terms already in) score equal up to rounding, and rounding must not
-#: decide the structure (a log read from a bag and from its CSV export differ by 1e-11 and chose
-#: different terms).
-TIE_RTOL = 1e-9
-
-
-def _first_best(score: FloatArray) -> int:
-    """The first index whose ``score`` is within :data:`TIE_RTOL` of the smallest."""
-    low = float(score.min())
-    return int(np.flatnonzero(score <= low + TIE_RTOL * abs(low))[0])
 
 
 #: Share of its row's residual a term must remove to enter the path (and to stay in it). The
@@ -920,7 +908,7 @@ class _Stepwise:
             if good.any():
                 # score: change of the row's held-out unexplained share, (CV_c − CV_i) / TSS_i
                 score = np.where(good, (cv_c - self.cv[i]) / self.tss[i], np.inf)
-                j = _first_best(score)
+                j = first_best(score)
                 if best is None or score[j] < best[0] - TIE_RTOL * abs(best[0]):
                     best = (float(score[j]), i, j)
         return best
