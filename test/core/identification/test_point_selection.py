@@ -26,11 +26,9 @@ TRUTH = PointSpec((0.3, 0.0, 0.2), 2)
 POINTS = [(0.3, 0.0, 0.2), (0.0, -0.3, 0.21), (-0.2, 0.1, -0.1)]
 
 
-def test_the_drag_at_its_point_is_found_first_and_alone() -> None:
-    """Linear + quadratic drag and a heave drag of 60 N s²/m² at (0.3, 0, 0.2) m (heave and
-    pitch), 120 s, 1 % noise, seeded: of 18 candidates at three points the search keeps the
-    true one only, which lifts the held-out R² of Z and M from below 0.99 to above 0.999; its
-    least-squares coefficient is within 2 % of 60."""
+def drag_at_a_point() -> tuple[RigidBody, DampingModel, Samples]:
+    """Body, base (linear + quadratic) and 120 s of samples, 1 % noise, seeded, of the base
+    plus a heave drag of 60 N s²/m² at :data:`TRUTH`."""
     body = load_vehicle("bluerov2_heavy").body
     rng = np.random.default_rng(11)
     nu = smooth(rng, int(120 * RATE), np.array([0.3, 0.2, 0.2, 0.3, 0.3, 0.3]), 0.5)
@@ -39,6 +37,15 @@ def test_the_drag_at_its_point_is_found_first_and_alone() -> None:
     law = base.force(nu, base_theta) \
         + DampingModel([point_term([TRUTH])]).force(nu, np.array([60.0]))
     samples = synthetic(body, nu, law, 0.01, seed=3)
+    return body, base, samples
+
+
+def test_the_drag_at_its_point_is_found_first_and_alone() -> None:
+    """Linear + quadratic drag and a heave drag of 60 N s²/m² at (0.3, 0, 0.2) m (heave and
+    pitch), 120 s, 1 % noise, seeded: of 18 candidates at three points the search keeps the
+    true one only, which lifts the held-out R² of Z and M from below 0.99 to above 0.999; its
+    least-squares coefficient is within 2 % of 60."""
+    body, base, samples = drag_at_a_point()
     found = select_points(samples, base, body, point_library([(p, BODY_AXES) for p in POINTS]), 2.0,
                           EntryRules(10.0, 2.0 * 2.0 * 120.0))
     assert found.chosen == [TRUTH]
@@ -114,14 +121,7 @@ def test_the_library_search_beside_kept_element_forces_takes_the_lower_entry_sha
     """The data of the first test (a heave drag at a point, found and kept): the library
     search beside it takes ``MIN_ERR_BESIDE_ELEMENTS`` (2 %); without candidate points, or
     when none is kept, ``MIN_ERR`` (5 %)."""
-    body = load_vehicle("bluerov2_heavy").body
-    rng = np.random.default_rng(11)
-    nu = smooth(rng, int(120 * RATE), np.array([0.3, 0.2, 0.2, 0.3, 0.3, 0.3]), 0.5)
-    base = DampingModel([linear_term(), quadratic_term()])
-    base_theta = np.r_[[10.0, 12.0, 15.0, 1.0, 1.0, 1.0], [40.0, 50.0, 60.0, 2.0, 2.0, 2.0]]
-    law = base.force(nu, base_theta) \
-        + DampingModel([point_term([TRUTH])]).force(nu, np.array([60.0]))
-    samples = synthetic(body, nu, law, 0.01, seed=3)
+    body, base, samples = drag_at_a_point()
     shares: list[float] = []
     search = selection._search_beside_shared
 
