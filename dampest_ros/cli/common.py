@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
 #: Excitation protocols of the simulator (dampest_ros.core.simulation.excitation.PROTOCOLS, which a
 #: test checks this against; not imported here, it pulls in scipy).
-PROTOCOLS = ("A", "B", "C", "fourier", "optimal")
+PROTOCOLS = ("A", "B", "C", "axes", "fourier", "optimal")
 
 #: Width the plain-text descriptions are wrapped to.
 WIDTH = 88
@@ -137,7 +137,9 @@ def add_protocol_option(p: argparse.ArgumentParser) -> None:
     """--protocol: the excitation the simulator flies."""
     p.add_argument("--protocol", choices=PROTOCOLS, default="B",
                    help="excitation: A low-speed steps and sines; B ramped surge and PRBS on "
-                        "all DOFs; C multisine 0.1-10 Hz; fourier Fourier-series "
+                        "all DOFs; C multisine 0.1-10 Hz; axes one DOF at a time over its "
+                        "whole range (the pure-axis coefficients measured, and checked, "
+                        "rather than extrapolated); fourier Fourier-series "
                         "trajectories; optimal Fourier-series references optimised for the "
                         "damping regressor's condition number within the speed and thrust "
                         "limits (designed at start, ~20 s; better conditioned than B, but B "

@@ -30,6 +30,7 @@ from dampest_ros.cli.pool import (
     reduce_all,
     samples_of,
 )
+from dampest_ros.core.identification.axis_check import CONE
 from dampest_ros.core.identification.batch import Fit, FitOptions
 from dampest_ros.core.identification.misfit import (
     element_drags,
@@ -96,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"identified combination: {combination}")
     for name, why in result.constrained.items():
         print(f"constrained: {name}: {why}")
+    print()
+    print(axis_text(result))
     if held is not None and scores is not None:
         print()
         print(heldout_text(held, scores))
@@ -236,6 +239,8 @@ def run_pooled(args: argparse.Namespace, vehicle: Vehicle, paths: list[str]) -> 
         print(f"not identified: {name}: {why}")
     for name, why in result.constrained.items():
         print(f"constrained: {name}: {why}")
+    print()
+    print(axis_text(result))
     more: dict[str, Any] = {"logs": [g.name for g in logs],
                             "logs_left_out": list(failed) or ["none"]}
     if len(logs) > 1:
@@ -541,6 +546,52 @@ def report_table(result: Fit, prior: np.ndarray,
                  rows)
 
 
+def axis_text(result: Fit) -> str:
+    """The pure-axis check (:mod:`~dampest_ros.core.identification.axis_check`) per DOF: the
+    law a s + b s|s| of the samples along the axis against the model's, the Birge ratio and
+    the σ scale it set, or that the DOF was not flown along its axis."""
+    axes = result.axes
+    if axes is None:
+        return "pure-axis check: not run"
+    rows: list[tuple[str | float, ...]] = []
+    for k in range(6):
+        if not axes.flown[k]:
+            rows.append((DOF_NAMES[k], int(axes.n[k]), "", "", "", "", "",
+                         "not flown: extrapolated"))
+            continue
+        rows.append((DOF_NAMES[k], int(axes.n[k]), *(float(x) for x in axes.measured[k]),
+                     *(float(x) for x in axes.modelled[k]), float(axes.ratio[k]),
+                     f"σ × {axes.scale[k]:.2g}" if axes.scale[k] > 1 else "agrees"))
+    lines = [f"pure-axis check: the damping along each axis, a s + b s|s|, from the samples "
+             f"flown along it (other DOFs within {CONE:.0%} of its speed share) against "
+             "the model's on the same samples; where they differ beyond σ (Birge ratio R > 1) "
+             "the σ of that row's parameters is scaled by R",
+             table(("dof", "samples", "a data", "b data", "a model", "b model", "R", "σ"),
+                   rows)]
+    if not axes.flown.any():
+        lines.append("no DOF was flown along its axis: the pure-axis coefficients (X_u, "
+                     "X_u|u|, ...) are extrapolated from mixed motion, and σ holds the noise "
+                     "only; fly pure-axis legs (dampest simulate --protocol axes shows them) "
+                     "to measure and check them")
+    return "\n".join(lines)
+
+
+def axis_record(result: Fit) -> dict[str, Any]:
+    """The pure-axis check for the model file: per DOF name, samples, the two laws and R
+    (or ``not flown``)."""
+    axes = result.axes
+    if axes is None:
+        return {}
+    return {"axis_check": {
+        DOF_NAMES[k]: ({"samples": int(axes.n[k]),
+                        "data_ab": [float(x) for x in axes.measured[k]],
+                        "model_ab": [float(x) for x in axes.modelled[k]],
+                        "birge_ratio": float(axes.ratio[k]),
+                        "sigma_scale": float(axes.scale[k])}
+                       if axes.flown[k] else f"not flown ({int(axes.n[k])} samples)")
+        for k in range(6)}}
+
+
 def heldout_note(held: Samples) -> str:
     """What was held out, in words."""
     return (f"the last {held.t[-1] - held.t[0]:.1f} s of the log ({len(held)} samples), not "
@@ -568,7 +619,7 @@ def write_model(path: Path, result: Fit, model: DampingModel, vehicle: Vehicle,
     the envelope exports check dissipativity on), with a held-out part, its per-DOF R² and
     RMSE (``heldout_r2``, ``heldout_rmse``) and the coefficients of the DOFs whose held-out
     R² is below 0 (``not_predictive``), and ``more`` entries (e.g. the logs pooled)."""
-    more = {**(more or {}), "source": source}
+    more = {**(more or {}), **axis_record(result), "source": source}
     if heldout is not None:
         more["heldout_r2"] = [float(x) for x in heldout["nse"]]
         more["heldout_rmse"] = [float(x) for x in heldout["rmse"]]

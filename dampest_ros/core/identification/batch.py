@@ -20,6 +20,12 @@ from numpy.typing import NDArray
 from scipy import linalg, special
 from scipy.sparse import csgraph
 
+from dampest_ros.core.identification.axis_check import (
+    AxisCheck,
+    AxisStatistics,
+    axis_check,
+    axis_statistics,
+)
 from dampest_ros.core.identification.covariance import (
     BiasStatistics,
     MapParts,
@@ -111,7 +117,9 @@ class Fit:
         dissipativity allows.
     cov : ndarray, shape (p, p)
         Covariance (block-robust) of the unconstrained estimate in the directions the data
-        determine; NaN rows/columns for held parameters.
+        determine, the parameters of a row whose pure-axis law the samples along that axis
+        contradict scaled by its Birge ratio (``axes``); NaN rows/columns for held
+        parameters.
     sigma : ndarray, shape (6,)
         Residual standard deviation per DOF (N, N·m).
     flags : dict of str to str
@@ -125,6 +133,9 @@ class Fit:
         value); a structural misfit when the unconstrained estimate violated it.
     rank : int
         Number of directions of θ the data determine (the free parameters of AIC/BIC).
+    axes : AxisCheck, optional
+        The model's damping along each axis against the samples flown along it
+        (:mod:`~dampest_ros.core.identification.axis_check`).
     """
 
     names: list[str]
@@ -144,6 +155,7 @@ class Fit:
     combinations: list[Combination] = field(default_factory=list)
     constrained: dict[str, str] = field(default_factory=dict)
     rank: int = 0
+    axes: AxisCheck | None = None
 
     @property
     def identified(self) -> NDArray[np.bool_]:
@@ -640,6 +652,12 @@ def _part_violations(part: Samples, first: int, model: DampingModel, theta: Floa
     return violations(model, theta, part.nu, chunk)
 
 
+def _part_axis_statistics(part: Samples, first: int, model: DampingModel, body: RigidBody,
+                          cutoff: float, limits: FloatArray, chunk: int) -> AxisStatistics:
+    """:func:`axis_statistics` of a part of the samples (a :data:`MapParts` call)."""
+    return axis_statistics(part, model, body, cutoff, limits, chunk)
+
+
 def _cross_validated_rss(problem: _Problem, w: FloatArray, free: NDArray[np.bool_],
                          T: FloatArray, power: FloatArray) -> FloatArray:
     """Held-out residual sum of squares per DOF, shape (6,) (N², (N·m)²): each fold scored
@@ -789,7 +807,12 @@ def fit_statistics(extent: Extent, normal: NormalEquations, bias: BiasStatistics
         theta, cov, w, free, T, chunk)
     N = problem.n
     rss = normal.rss(theta)
-    return Fit(names=names, theta=theta, cov=cov, sigma=np.sqrt(rss / N), method=opts.method,
+    limits = np.asarray(opts.speed_range if opts.speed_range is not None else extent.speed)
+    axes = axis_check(AxisStatistics.join(map_parts(partial(
+        _part_axis_statistics, model=model, body=body, cutoff=opts.cutoff,
+        limits=np.maximum(limits, 1e-9), chunk=chunk))), theta, cov)
+    return Fit(names=names, theta=theta, cov=axes.scaled(cov, model), axes=axes,
+               sigma=np.sqrt(rss / N), method=opts.method,
                n=N, rss=rss, tss=total_sum_of_squares(normal),
                cond=_scaled_condition(normal, free),
                flags=flags, cv_rmse=np.sqrt(_cross_validated_rss(problem, w, free, T, power) / N),

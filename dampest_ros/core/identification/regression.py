@@ -109,7 +109,7 @@ def _chunks(samples: Samples, body: RigidBody, columns: Callable[[slice], FloatA
     """:func:`iter_entries` of the ``columns`` of each extended chunk (a slice of the samples;
     shape (n, L)); without ``targets``, y of shape (n, 0)."""
     pad = round(margin * samples.rate) if cutoff > 0 else 0
-    step = _step(samples, cutoff, decimate)
+    step = decimation_step(samples, cutoff, decimate)
     for seg in samples.segments():
         s0, s1 = seg.start or 0, seg.stop or 0
         for start in range(s0, s1, chunk):
@@ -139,7 +139,7 @@ def _chunks(samples: Samples, body: RigidBody, columns: Callable[[slice], FloatA
 ENTRIES_KEPT = 96e6
 
 
-def _step(samples: Samples, cutoff: float, decimate: bool) -> int:
+def decimation_step(samples: Samples, cutoff: float, decimate: bool) -> int:
     """The decimation step of :func:`iter_entries`: four samples per period of the cutoff."""
     return max(1, int(samples.rate / (4.0 * cutoff))) if decimate and cutoff > 0 else 1
 
@@ -292,7 +292,7 @@ def _kept_entries(samples: Samples, settings: tuple[int, float, float, bool]) ->
     forgotten) if they are new."""
     if _KEPT and _KEPT[0].holds(samples, settings):
         return _KEPT[0]
-    step = _step(samples, settings[1], settings[3])
+    step = decimation_step(samples, settings[1], settings[3])
     # every step-th sample of each segment, from its first
     rows = sum(-(-((sl.stop or 0) - (sl.start or 0)) // step) for sl in samples.segments())
     _KEPT[:] = [_KeptEntries(samples.nu, samples.t, samples.segment, settings, rows)]

@@ -14,6 +14,10 @@ block. The offline simulation and the simulator node fly the same :class:`Protoc
   random roll, pitch and depth manoeuvres, so one run excites all six DOFs over their range.
 - ``C``: multisine wrench 0.1–10 Hz on all six DOFs (frequency response, fluid memory), with
   a slow controller holding the mean.
+- ``axes``: one DOF at a time over its whole range, every other velocity held at zero:
+  square waves of rising amplitude (20 … 100 % of the range) in surge, sway, heave and yaw
+  rate, sines of rising rate in roll and pitch. The damping along each axis (Fossen's
+  pure-axis coefficients X_u, X_u|u|, …) is then flown, not extrapolated from mixed motion.
 - ``fourier``: finite-Fourier-series velocity trajectories (period 50 s, 5 harmonics).
 - ``optimal``: finite-Fourier-series velocity, roll, pitch and depth references (period
   10 s, 5 harmonics up to 0.5 Hz) whose coefficients are optimised for the condition number
@@ -45,7 +49,7 @@ from dampest_ros.core.simulation.vehicle_design import (
 
 FloatArray = NDArray[np.float64]
 
-PROTOCOLS = ("A", "B", "C", "fourier", "optimal")
+PROTOCOLS = ("A", "B", "C", "axes", "fourier", "optimal")
 #: What the simulator node flies: the protocols and station keeping.
 LIVE_PROTOCOLS = (*PROTOCOLS, "hover")
 #: Control ticks per generated block (4096 ticks × 16 numbers × 8 B = 512 kB).
@@ -398,7 +402,7 @@ def protocol(name: str, vehicle: Vehicle, duration: float, seed: int = 0,
 
     Parameters
     ----------
-    name : {'A', 'B', 'C', 'fourier', 'optimal', 'hover'}
+    name : {'A', 'B', 'C', 'axes', 'fourier', 'optimal', 'hover'}
     vehicle : Vehicle
         Nominal vehicle: its thrust limits and damping set the speed range.
     duration : float
@@ -444,6 +448,10 @@ def protocol(name: str, vehicle: Vehicle, duration: float, seed: int = 0,
                                                   max_angle, depth), cols=(2, 3, 4))
     if name == "C":
         return _protocol_c(vehicle, rng, ticks, dt, depth, amplitude)
+    if name == "axes":
+        return ProtocolStream(name, ticks, dt, np.full(6, 3.0),
+                              lambda: _protocol_axes(ticks, dt, duration, lim, max_angle,
+                                                     depth), cols=(2, 3, 4))
     if name == "fourier":
         return _protocol_fourier(rng, ticks, dt, lim, max_angle, depth)
     design = design_vehicle(vehicle, vehicle_limits(vehicle, lim, max_angle), seed=seed)
@@ -516,6 +524,51 @@ def _protocol_b(ticks: int, dt: float, bits: np.random.PCG64, t_end: float,
             raw.attitude_ref[:, j] = smooth_angles[j](levels[4 + j](t))
             raw.grad[:, 1 + j] = raw.attitude_ref[:, j]
         raw.nu_ref[:, [0, 1, 5]] = smooth_steps(raw.nu_ref[:, [0, 1, 5]])
+        yield raw
+
+
+#: Amplitudes of the axes protocol's legs (share of the DOF's range), flown in this order.
+AXIS_LEVELS = (0.2, 0.4, 0.6, 0.8, 1.0)
+
+
+def _protocol_axes(ticks: int, dt: float, duration: float, lim: FloatArray,
+                   max_angle: float, depth: float) -> Iterator[_Raw]:
+    """ProtocolStream axes block by block: a leg per DOF (surge, sway, heave, yaw, roll,
+    pitch), each a sixth of the run. Translations and yaw rate: +a, −a square waves held
+    for equal times, a rising through :data:`AXIS_LEVELS` of the range, band-limited
+    (0.3 s); the depth reference is the running integral of the heave (it returns after
+    every pair). Roll and pitch: attitude sines of amplitude ``max_angle`` whose peak rate
+    rises through the same shares of the range (at most 0.5 Hz), with continuous phase
+    (the rates are the derivatives of the angles)."""
+    order = (0, 1, 2, 5, 3, 4)
+    seg = duration / len(order)
+    hold = seg / (2 * len(AXIS_LEVELS))
+    share = np.asarray(AXIS_LEVELS)
+    signed = np.repeat(share, 2) * np.tile([1.0, -1.0], len(share))
+    smooth = _Smooth(dt, 0.3)
+    dive, phase = 0.0, np.zeros(2)
+    for t in _grid(ticks, dt):
+        raw = _zeros(t, depth, 3)
+        leg = np.minimum((t // seg).astype(int), len(order) - 1)
+        step = np.minimum(((t - leg * seg) // hold).astype(int), len(signed) - 1)
+        dof = np.asarray(order)[leg]
+        for i in (0, 1, 2, 5):
+            raw.nu_ref[:, i] = np.where(dof == i, lim[i] * signed[step], 0.0)
+        raw.nu_ref[:, [0, 1, 2, 5]] = smooth(raw.nu_ref[:, [0, 1, 2, 5]])
+        # depth = depth_0 + ∫ w dt: the running sum continued from the last block's
+        # (the same additions, in the same order, as one sum over the whole run)
+        dive_t = np.cumsum(np.concatenate([[dive], raw.nu_ref[:, 2] * dt]))[1:]
+        dive = float(dive_t[-1])
+        raw.depth_ref += dive_t
+        raw.grad[:, 0] = dive_t
+        for j, i in enumerate((3, 4)):
+            # φ = A sin Φ, Φ = ∫ ω dt with A ω = share · range on the DOF's own leg
+            omega = np.where(dof == i, np.minimum(share[step // 2] * lim[i] / max_angle,
+                                                  np.pi), 0.0)
+            phase_t = np.cumsum(np.concatenate([[phase[j]], omega * dt]))[1:]
+            phase[j] = phase_t[-1]
+            raw.attitude_ref[:, j] = max_angle * np.sin(phase_t)
+            raw.grad[:, 1 + j] = raw.attitude_ref[:, j]
         yield raw
 
 

@@ -57,13 +57,13 @@ def test_the_pooled_fit_is_the_fit_of_all_samples_at_once(vehicle: Vehicle) -> N
     assert pooled.n == once.n == sum(g.fit.n for g in logs)  # decimated samples
 
 
-@pytest.mark.parametrize(("block", "passes"), [(10.0, 3), (2.0, 2)])
+@pytest.mark.parametrize(("block", "passes"), [(10.0, 4), (2.0, 3)])
 def test_the_pooled_covariance_is_formed_log_by_log(vehicle: Vehicle, block: float,
                                                     passes: int) -> None:
     """With the sensor-bias budget on and logs longer than three refit stretches (so each log
     is refitted on three stretches of it), the bias refits' statistics are each log's,
-    summed, the pooled extent and the dissipativity check's scan of the samples run log by
-    log through map_logs, and the σ are those of all samples at once. The robust
+    summed, the pooled extent, the dissipativity check's scan of the samples and the
+    pure-axis check's sums run log by log through map_logs, and the σ are those of all samples at once. The robust
     covariance's blocks come with each log's statistics when their length is settled before
     the fit (2 s blocks, the floor); 10 s blocks are shortened for 60 s logs by the rank, so
     the covariance takes a pass of its own."""
@@ -86,9 +86,9 @@ def test_the_pooled_covariance_is_formed_log_by_log(vehicle: Vehicle, block: flo
     assert all(g.bias is not None and g.bias.base is not None for g in logs)
     np.testing.assert_allclose(pooled.theta, once.theta, rtol=1e-10, atol=0)
     np.testing.assert_allclose(pooled.std, once.std, rtol=1e-10, atol=0)
-    # the extent's; the robust pass, if any; the dissipativity scan
+    # the extent's; the robust pass, if any; the dissipativity scan; the pure-axis check
     assert visits == [0, 1, 2, 3] * passes
-    assert all((g.normal.blocks is not None) == (passes == 2) for g in logs)
+    assert all((g.normal.blocks is not None) == (passes == 3) for g in logs)
     without = fit(whole, vehicle.damping, vehicle.body,
                   FitOptions(method="wls", cutoff=2.0, gyro_bias=0.0, dvl_bias=0.0,
                              block=block))

@@ -71,7 +71,7 @@ def test_prbs_levels_are_the_draws_of_one_stream() -> None:
         assert len(np.unique(got)) > 10
 
 
-@pytest.mark.parametrize("name", ["A", "B", "C", "fourier"])
+@pytest.mark.parametrize("name", ["A", "B", "C", "axes", "fourier"])
 def test_blocks_of_any_size_give_the_same_protocol(vehicle: Vehicle, name: str,
                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     """Blocks of 4096 ticks (and chunks of 4096 draws) or of 7 ticks (6 draws) concatenate
@@ -84,6 +84,27 @@ def test_blocks_of_any_size_give_the_same_protocol(vehicle: Vehicle, name: str,
     for f in FIELDS:
         np.testing.assert_array_equal(getattr(small, f), getattr(whole, f), err_msg=f)
     assert np.abs(whole.nu_ref).max() + np.abs(whole.tau_ff).max() > 0.1
+
+
+def test_axes_legs_fly_one_dof_at_a_time_over_its_range(vehicle: Vehicle) -> None:
+    """Protocol axes: in each sixth of the run only its DOF's reference moves (but for the
+    band-limited tail of the last leg's wave and the sample where a rate's derivative
+    straddles two legs), up to the range (translations, yaw) or with the angle's peak rate at
+    the range (at most 0.5 Hz); the depth comes back after the heave leg."""
+    lim = excitation.speed_limits(vehicle)
+    e = protocol("axes", vehicle, 600.0, seed=1).sample()
+    rate = np.c_[e.nu_ref[:, [0, 1, 2, 5]], e.nu_ref[:, 3:5]]
+    cols = (0, 1, 2, 3, 4, 5)  # u v w r p q in rate's columns
+    peaks = np.array([lim[0], lim[1], lim[2], lim[5],
+                      min(lim[3], np.deg2rad(25) * np.pi), min(lim[4], np.deg2rad(25) * np.pi)])
+    for leg, col in enumerate(cols):
+        m = (e.t >= 100 * leg + 5.0) & (e.t < 100 * (leg + 1) - 1.0)
+        moving = np.abs(rate[m]).max(axis=0)
+        np.testing.assert_allclose(moving[col], peaks[col], rtol=0.02)
+        assert np.all(np.delete(moving, col) < 1e-4 * lim.max()), (leg, moving)
+    heave_over = np.searchsorted(e.t, 310.0)
+    assert e.depth_ref.max() > 5.0 + 0.5 * 100 / 10 * lim[2]  # the last level's dive
+    assert abs(e.depth_ref[heave_over] - 5.0) < 1e-3 * lim[2]
 
 
 def test_tick_reading_is_the_sampled_protocol(vehicle: Vehicle) -> None:
