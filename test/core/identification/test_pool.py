@@ -63,10 +63,10 @@ def test_the_pooled_covariance_is_formed_log_by_log(vehicle: Vehicle, block: flo
     """With the sensor-bias budget on and logs longer than three refit stretches (so each log
     is refitted on three stretches of it), the bias refits' statistics are each log's,
     summed, the pooled extent, the dissipativity check's scan of the samples and the
-    pure-axis check's sums run log by log through map_logs, and the σ are those of all samples at once. The robust
-    covariance's blocks come with each log's statistics when their length is settled before
-    the fit (2 s blocks, the floor); 10 s blocks are shortened for 60 s logs by the rank, so
-    the covariance takes a pass of its own."""
+    pure-axis check's sums run log by log through map_logs, and the σ are those of all
+    samples at once. The robust covariance's blocks come with each log's statistics when
+    their length is settled before the fit (2 s blocks, the floor); 10 s blocks are
+    shortened for 60 s logs by the rank, so the covariance takes a pass of its own."""
     options = FitOptions(method="wls", cutoff=2.0, bias_stretch=900, block=block)
     samples = [noisy_log(vehicle, k, start=100.0 * k) for k in range(4)]
     logs = [log_statistics(f"log{k}", s, vehicle.damping, vehicle.body, options)
