@@ -553,6 +553,11 @@ def axis_text(result: Fit) -> str:
     axes = result.axes
     if axes is None:
         return "pure-axis check: not run"
+    if not axes.flown.any():
+        return ("pure-axis check: no DOF was flown along its axis, so the pure-axis "
+                "coefficients (X_u, X_u|u|, ...) are extrapolated from mixed motion and σ "
+                "holds the noise only, not the model form's error there; fly pure-axis legs "
+                "(dampest simulate --protocol axes shows them) to measure and check them")
     rows: list[tuple[str | float, ...]] = []
     for k in range(6):
         if not axes.flown[k]:
@@ -562,18 +567,12 @@ def axis_text(result: Fit) -> str:
         rows.append((DOF_NAMES[k], int(axes.n[k]), *(float(x) for x in axes.measured[k]),
                      *(float(x) for x in axes.modelled[k]), float(axes.ratio[k]),
                      f"σ × {axes.scale[k]:.2g}" if axes.scale[k] > 1 else "agrees"))
-    lines = [f"pure-axis check: the damping along each axis, a s + b s|s|, from the samples "
-             f"flown along it (other DOFs within {CONE:.0%} of its speed share) against "
-             "the model's on the same samples; where they differ beyond σ (Birge ratio R > 1) "
-             "the σ of that row's parameters is scaled by R",
-             table(("dof", "samples", "a data", "b data", "a model", "b model", "R", "σ"),
-                   rows)]
-    if not axes.flown.any():
-        lines.append("no DOF was flown along its axis: the pure-axis coefficients (X_u, "
-                     "X_u|u|, ...) are extrapolated from mixed motion, and σ holds the noise "
-                     "only; fly pure-axis legs (dampest simulate --protocol axes shows them) "
-                     "to measure and check them")
-    return "\n".join(lines)
+    head = (f"pure-axis check: the damping along each axis, a s + b s|s|, from the samples "
+            f"flown along it (other DOFs within {CONE:.0%} of its speed share) against the "
+            "model's on the same samples; where they differ beyond σ (Birge ratio R > 1) the "
+            "σ of that row's parameters is scaled by R")
+    return "\n".join([head, table(("dof", "samples", "a data", "b data", "a model",
+                                    "b model", "R", "σ"), rows)])
 
 
 def axis_record(result: Fit) -> dict[str, Any]:

@@ -472,3 +472,30 @@ def test_identify_imports_neither_scipy_stats_nor_scipy_signal() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120, check=True, cwd=Path(__file__).parents[2])
     assert out.stdout.strip() == "[]", out.stdout
+
+
+def test_the_pure_axis_check_is_printed_and_kept_in_the_model(
+        protocol_b: Path, from_bag: Path, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """An axes log (native BlueROV2 Heavy, whose law is the model's): every DOF is checked,
+    the table shows the samples' and the model's laws, and the model file keeps them (the
+    surge law of the samples within 2 % of the plant's X_u|u|, R below 3). The protocol-B
+    model says no DOF was flown along its axis."""
+    bag = tmp_path / "axes"
+    assert main(["simulate", "--vehicle", "bluerov2_heavy", "--protocol", "axes",
+                 "--duration", "180", "--seed", "3", "--out", str(bag)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "axes.yaml"
+    assert main(["identify", str(bag), "--vehicle", "bluerov2_heavy", "--out",
+                 str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "pure-axis check: the damping along each axis" in text
+    assert "not flown" not in text
+    check = load_model(out).extra["axis_check"]
+    assert set(check) == {"u", "v", "w", "p", "q", "r"}
+    truth = load_vehicle("bluerov2_heavy")
+    x_uu = truth.theta[truth.damping.parameter_names.index("X_uu")]
+    np.testing.assert_allclose(check["u"]["data_ab"][1], x_uu, rtol=0.02)
+    assert all(c["samples"] >= 50 and c["birge_ratio"] < 3 for c in check.values())
+    b_check = load_model(from_bag).extra["axis_check"]
+    assert all(str(c).startswith("not flown") for c in b_check.values())
