@@ -11,10 +11,11 @@ directly and compares:
 - the samples near axis k: |ν_k| ≥ :data:`MOVING` of the DOF's range and the other DOFs'
   speeds, as shares of their ranges, within :data:`CONE` of |ν_k|'s share;
 - on them, the least-squares law of the target force y_k on X = [s, s|s|] (the same
-  low-pass and decimation as the fit's regression: :func:`iter_entries`), and the same law
-  of the model's force Φ_k θ on the same samples: δ = (XᵀX)⁻¹ Xᵀ (y_k − Φ_k θ);
-- δ's covariance: the direct law's residual variance times (XᵀX)⁻¹ and the samples'
-  redundancy (n / n_eff), plus the model law's J Σ Jᵀ (J = (XᵀX)⁻¹ XᵀΦ_k);
+  low-pass and decimation as the fit's regression: :func:`iter_entries`), and the model's
+  law exactly on the axis, the least-squares law of Φ_k(s e_k) θ at the same samples'
+  speeds: the coefficients the model reports, however its terms bend near the axis;
+- their difference δ; its covariance: the samples' law's residual variance times (XᵀX)⁻¹
+  and the samples' redundancy (n / n_eff), plus the model law's J Σ Jᵀ;
 - the Birge ratio R_k = √(δᵀ V⁻¹ δ / 2): above 1 the samples along the axis disagree with
   the model beyond its σ, and the covariance of the parameters of row k is scaled by R_k
   (the Particle Data Group's scale factor: the model form's error, as the data show it, in
@@ -58,10 +59,13 @@ class AxisStatistics:
         Σ x xᵀ, x = (s, s|s|) low-passed (m/s or rad/s, squared).
     Xy : ndarray, shape (6, 2)
         Σ x y_k (y the damping target force, N or N·m).
-    XPhi : ndarray, shape (6, 2, p)
-        Σ x Φ_k (Φ_k row k of the regressor).
     yy : ndarray, shape (6,)
         Σ y_k².
+    UU : ndarray, shape (6, 2, 2)
+        Σ u uᵀ, u = (s, s|s|) as sampled (no low-pass).
+    UAxis : ndarray, shape (6, 2, p)
+        Σ u Φ_k(s e_k): the model's regressor on the axis itself at the samples' speeds
+        (memory states at rest).
     n : ndarray, shape (6,)
         Samples.
     redundancy : float
@@ -70,8 +74,9 @@ class AxisStatistics:
 
     XX: FloatArray
     Xy: FloatArray
-    XPhi: FloatArray
     yy: FloatArray
+    UU: FloatArray
+    UAxis: FloatArray
     n: FloatArray
     redundancy: float
 
@@ -80,8 +85,9 @@ class AxisStatistics:
         """The statistics of all parts' samples."""
         return AxisStatistics(sum((x.XX for x in parts), np.zeros((6, 2, 2))),
                               sum((x.Xy for x in parts), np.zeros((6, 2))),
-                              np.sum([x.XPhi for x in parts], axis=0),
                               sum((x.yy for x in parts), np.zeros(6)),
+                              sum((x.UU for x in parts), np.zeros((6, 2, 2))),
+                              np.sum([x.UAxis for x in parts], axis=0),
                               sum((x.n for x in parts), np.zeros(6)),
                               max(x.redundancy for x in parts))
 
@@ -119,27 +125,33 @@ def axis_statistics(samples: Samples, model: DampingModel, body: RigidBody, cuto
     chunk : int
     """
     p = model.n_params
-    n_live = len(model.pattern[0])
-    out = AxisStatistics(np.zeros((6, 2, 2)), np.zeros((6, 2)), np.zeros((6, 2, p)),
-                         np.zeros(6), np.zeros(6), 1.0)
+    out = AxisStatistics(np.zeros((6, 2, 2)), np.zeros((6, 2)), np.zeros(6),
+                         np.zeros((6, 2, 2)), np.zeros((6, 2, p)), np.zeros(6), 1.0)
+    rest = len(model.memory_rates)
 
     def columns(nu: FloatArray, states: FloatArray | None) -> FloatArray:
-        # Φ's entries, then s and s|s| of every DOF: low-passed alike
-        return np.concatenate([model.regressor_entries(nu, states), nu, nu * np.abs(nu)],
-                              axis=1)
+        # s and s|s| of every DOF, low-passed as the target is
+        return np.concatenate([nu, nu * np.abs(nu)], axis=1)
 
     for rows, E, y in iter_entries(samples, model, body, chunk, cutoff, decimate=True,
                                    entries=columns):
-        near = along_axes(samples.nu[rows], limits)
-        Phi = model.scatter(E[:, :n_live])
+        nu = samples.nu[rows]
+        near = along_axes(nu, limits)
         for k in np.flatnonzero(near.any(axis=0)):
             m = near[:, k]
-            X = E[m][:, [n_live + k, n_live + 6 + k]]
+            X = E[m][:, [k, 6 + k]]
             out.XX[k] += X.T @ X
             out.Xy[k] += X.T @ y[m, k]
-            out.XPhi[k] += X.T @ Phi[m, k]
             out.yy[k] += y[m, k] @ y[m, k]
             out.n[k] += m.sum()
+            # the model along the axis itself: ν = s e_k at the samples' s
+            speed = nu[m, k]
+            on_axis = np.zeros((len(speed), 6))
+            on_axis[:, k] = speed
+            U = np.c_[speed, speed * np.abs(speed)]
+            out.UU[k] += U.T @ U
+            out.UAxis[k] += U.T @ model.regressor(
+                on_axis, np.zeros((len(speed), rest)) if rest else None)[:, k]
     if cutoff > 0:
         # decimated rows come every step samples; the low-pass leaves 2·cutoff per second
         step = decimation_step(samples, cutoff, True)
@@ -157,7 +169,7 @@ class AxisCheck:
         Samples near the axis.
     measured, modelled : ndarray, shape (6, 2)
         (a, b) of a s + b s|s| from the samples' target force and from the model's force on
-        the same samples; NaN where the DOF is not :attr:`flown`.
+        the axis at the samples' speeds; NaN where the DOF is not :attr:`flown`.
     std : ndarray, shape (6, 2)
         Standard deviation of their difference.
     ratio : ndarray, shape (6,)
@@ -208,9 +220,9 @@ def axis_check(stats: AxisStatistics, theta: FloatArray, cov: FloatArray) -> Axi
     sigma = np.nan_to_num(cov)
     for k in np.flatnonzero(out.flown):
         inv = np.linalg.pinv(stats.XX[k])
-        # the samples' law: (XᵀX)⁻¹ Xᵀy; the model's on the same samples: J θ
+        # the samples' law: (XᵀX)⁻¹ Xᵀy; the model's on the axis: J θ, J = (UᵀU)⁻¹ UᵀΦ_k(s e_k)
         direct = inv @ stats.Xy[k]
-        J = inv @ stats.XPhi[k]
+        J = np.linalg.pinv(stats.UU[k]) @ stats.UAxis[k]
         out.measured[k], out.modelled[k] = direct, J @ theta
         # residual variance of the samples' own law, over the effective samples
         s2 = max(stats.yy[k] - direct @ stats.Xy[k], 0.0) / max(stats.n[k] - 2, 1.0)

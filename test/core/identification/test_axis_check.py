@@ -127,7 +127,7 @@ def test_statistics_of_parts_join_to_those_of_the_whole(vehicle: Vehicle) -> Non
     joined = AxisStatistics.join([axis_statistics(part(sl), vehicle.damping, vehicle.body,
                                                   0.0, lim)
                                   for sl in (slice(0, half), slice(half, None))])
-    for name in ("XX", "Xy", "XPhi", "yy", "n"):
+    for name in ("XX", "Xy", "yy", "UU", "UAxis", "n"):
         np.testing.assert_allclose(getattr(joined, name), getattr(whole, name), rtol=1e-9,
                                    atol=1e-9, err_msg=name)
     check = axis_check(whole, vehicle.theta, np.zeros((len(vehicle.theta),) * 2))
