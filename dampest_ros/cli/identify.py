@@ -569,8 +569,8 @@ def axis_text(result: Fit) -> str:
                      f"σ × {axes.scale[k]:.2g}" if axes.scale[k] > 1 else "agrees"))
     head = (f"pure-axis check: the damping along each axis, a s + b s|s|, from the samples "
             f"flown along it (other DOFs within {CONE:.0%} of its speed share) against the "
-            "model's on the same samples; where they differ beyond σ (Birge ratio R > 1) the "
-            "σ of that row's parameters is scaled by R")
+            "model's on the axis itself at the same speeds; where they differ beyond σ "
+            "(Birge ratio R > 1) the σ of that row's parameters is scaled by R")
     return "\n".join([head, table(("dof", "samples", "a data", "b data", "a model",
                                     "b model", "R", "σ"), rows)])
 
