@@ -227,7 +227,7 @@ def axis_check(stats: AxisStatistics, theta: FloatArray, cov: FloatArray) -> Axi
         # residual variance of the samples' own law, over the effective samples
         s2 = max(stats.yy[k] - direct @ stats.Xy[k], 0.0) / max(stats.n[k] - 2, 1.0)
         V = s2 * stats.redundancy * inv + J @ sigma @ J.T
-        delta = direct - J @ theta
+        delta = direct - out.modelled[k]
         out.std[k] = np.sqrt(np.diag(V))
         # χ² of δ on its 2 components, over 2: the squared Birge ratio
         out.ratio[k] = np.sqrt(max(float(delta @ np.linalg.pinv(V) @ delta), 0.0) / 2.0)
